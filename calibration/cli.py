@@ -591,8 +591,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
         print(f"{cam}: reprojection {c['rms_px']:.3f} px rms over {c['views']} views, corners over "
               f"{c['coverage']:.0%} of the image, f {c['K'][0][0]:.1f} px")
     p, lv = r["pair"], r["levelling"]
+    held = "" if p["board_distance_m"] is None else \
+        f", the board held a median {p['board_distance_m']:.2f} m from {names[0]}"  # the scale check's figure
     print(f"pair: reprojection {p['rms_px']:.3f} px rms over {p['views']} views, baseline {1000 * p['baseline_m']:.1f} mm, "
-          f"convergence {p['convergence_deg']:.2f} deg")
+          f"convergence {p['convergence_deg']:.2f} deg{held}")
     how = "the height and tilt given" if lv["method"] == "measured" else lv["method"]
     print(f"levelled by {how}: {lv['camera']} {lv['camera_height_m']:.3f} m above the floor, "
           f"pitch {lv['pitch_deg']:.2f} deg, roll {lv['roll_deg']:.2f} deg")

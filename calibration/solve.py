@@ -35,7 +35,8 @@ from ghnerf_runtime.rig_file import principal_point_problem
 
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
            "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "fold_warning", "MIN_VIEWS", "MAX_PAIR_PX",
-           "USUAL_PITCH_DEG", "typed_pitch_warning"]
+           "USUAL_PITCH_DEG", "typed_pitch_warning", "BOARD_DISTANCE_SLACK", "median_board_distance_m",
+           "board_distance_warning"]
 
 #: Lens models: OpenCV flags and what they suit.
 LENS_MODELS = {
@@ -62,6 +63,12 @@ WARN_FOCAL_STD_SHARE = 0.02
 #: The first camera's pitch (degrees below the horizon) usual for a rig filming people; outside it the report
 #: warns (a floor view of a board not lying flat, or a --pitch read from the vertical).
 USUAL_PITCH_DEG = (-15.0, 60.0)
+#: The board's median distance from the first camera over the pair's views is expected within the working
+#: volume's depth range widened by this factor either way (default volume 0.5-5 m: 0.25-10 m). Every length the
+#: solve gives scales with the board's square_m, and a square_m off by 10x (8 mm typed for 80, 0.8 m for 0.08)
+#: gives a rig as consistent as the true one: the distance the board was held at is the figure that shows it (a
+#: body-capture rig is calibrated with the board where people will stand, not 10 cm or 20 m away).
+BOARD_DISTANCE_SLACK = 2.0
 
 
 @dataclass(frozen=True)
@@ -441,6 +448,44 @@ def floor_from_pair(board: BoardSpec, first: BoardView, second: BoardView, tool_
     return Floor(down=down, height_m=height, pitch_deg=pitch, roll_deg=roll, rms_px=rms)
 
 
+def board_distance_m(board: BoardSpec, view: BoardView, intr: Intrinsics) -> float:
+    """How far the board's found corners' centre is from the camera (metres, in the board's scale)."""
+    obj = _object_points(board, view)
+    ok, rvec, tvec = cv2.solvePnP(obj, _image_points(view), intr.K, intr.dist)
+    if not ok:
+        return math.nan
+    R, _ = cv2.Rodrigues(rvec)
+    centre = R @ obj.reshape(-1, 3).mean(axis=0).astype(np.float64) + np.asarray(tvec, float).reshape(3)
+    return float(np.linalg.norm(centre))
+
+
+def median_board_distance_m(board: BoardSpec, views: Mapping[str, BoardView], intr: Intrinsics) -> float:
+    """The median of :func:`board_distance_m` over ``views`` (NaN for none)."""
+    distances = [d for d in (board_distance_m(board, v, intr) for v in views.values()) if math.isfinite(d)]
+    return float(np.median(distances)) if distances else math.nan
+
+
+def board_distance_warning(distance_m: float, volume: WorkingVolume, board: BoardSpec, baseline_m: float,
+                           camera: str) -> str | None:
+    """The warning for a board held, by the solve's scale, far nearer or farther than the working volume's depth
+    range (:data:`BOARD_DISTANCE_SLACK`): most likely a ``square_m`` off by a factor (None where it is within)."""
+    near = float(volume.min_corner[2]) / BOARD_DISTANCE_SLACK
+    far = float(volume.max_corner[2]) * BOARD_DISTANCE_SLACK
+    if not math.isfinite(distance_m) or near <= distance_m <= far:
+        return None
+    side = "nearer than" if distance_m < near else "farther than"
+    return (f"scale: by the board's square_m ({1e3 * board.square_m:g} mm) the board was held a median "
+            f"{distance_m:.2f} m from camera {camera!r}, {side} the {near:g}-{far:g} m expected for a working volume "
+            f"{volume.min_corner[2]:g}-{volume.max_corner[2]:g} m ahead, and the cameras are {1e3 * baseline_m:.0f} mm "
+            "apart: every length in the rig scales with square_m. Measure a printed square with a ruler: is square_m "
+            "its side in metres (80 mm is 0.08)? If it is, check the baseline against a tape measure")
+
+
+def _round_or_none(value: float, digits: int) -> float | None:
+    """``value`` rounded, None where it is not finite (the report is JSON: no NaN in it)."""
+    return round(value, digits) if math.isfinite(value) else None
+
+
 def _round(a: np.ndarray, digits: int = 6) -> list:
     return np.round(np.asarray(a, float), digits).tolist()
 
@@ -529,6 +574,8 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
         **rig.metadata, "calibration": {"tool": "ghcal", "board": board.to_dict(), "floor_view": floor_view,
                                         "board_thickness_m": board_thickness_m, "lens_model": lens,
                                         "tangential": tangential}})
+    pair_views = {n: kept[a][n] for n in pose.per_view_px}
+    board_distance = median_board_distance_m(board, pair_views, intr[a])
     axes = [rig.camera(n).R[2] for n in names]
     convergence = math.degrees(math.acos(float(np.clip(axes[0] @ axes[1], -1.0, 1.0))))
     report: dict[str, Any] = {
@@ -544,10 +591,13 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
             for cam in names},
         "pair": {"views": len(pose.per_view_px), "dropped_views": list(pose.dropped), "rms_px": round(pose.rms_px, 4),
                  "baseline_m": round(float(np.linalg.norm(pose.T)), 5),
-                 "convergence_deg": round(convergence, 3), "per_view_px": pose.per_view_px},
+                 "convergence_deg": round(convergence, 3), "board_distance_m": _round_or_none(board_distance, 3),
+                 "per_view_px": pose.per_view_px},
         "levelling": levelling,
     }
     report["warnings"] = _warnings(report)
+    if warning := board_distance_warning(board_distance, volume or LEVEL_VOLUME, board, tool_rig.baseline, a):
+        report["warnings"].append(warning)
     for cam in rig.pair:
         if cam.fold_inside_image():
             report["warnings"].append(fold_warning(cam))

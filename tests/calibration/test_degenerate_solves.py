@@ -128,3 +128,34 @@ def test_a_pair_solved_too_far_apart_names_the_boards_square():
     with pytest.raises(SolveError, match=r"cameras 'left' and 'right' came out 12\.\d+ m apart \(at most 10 m "
                                          r"accepted\): is the board's square_m \(2\)"):
         solve_rig(huge, {"left": left, "right": right}, ("left", "right"), camera_height_m=1.4)
+
+
+@pytest.mark.parametrize("square_m, side", [(0.008, "nearer than"), (0.8, "farther than")])
+def test_a_square_size_off_by_ten_is_warned_about_by_the_board_s_distance(square_m, side):
+    # an 8 cm board held 1.2-1.8 m away, solved with 8 mm or 0.8 m typed: every length scales with it (the pair
+    # 50 mm or 5 m apart, both within what the reader takes), so only the distance the board was held at shows it
+    tilts = [(a, b) for a in (-30, 0, 30) for b in (-25, 25)]
+    left, right = _views(tilts, seed=1), _views(tilts, seed=1, t_offset=(-0.5, 0.0, 0.0))
+    views = {"left": left, "right": right}
+    true = solve_rig(BOARD, views, ("left", "right"), camera_height_m=1.4).report
+    assert 1.2 < true["pair"]["board_distance_m"] < 1.8
+    assert not [w for w in true["warnings"] if w.startswith("scale:")]
+    wrong = BoardSpec(squares_x=7, squares_y=5, square_m=square_m, marker_m=0.75 * square_m)
+    report = solve_rig(wrong, views, ("left", "right"), camera_height_m=1.4).report
+    scale = square_m / BOARD.square_m
+    assert report["pair"]["board_distance_m"] == pytest.approx(scale * true["pair"]["board_distance_m"], rel=0.01)
+    [warning] = [w for w in report["warnings"] if w.startswith("scale:")]
+    assert f"square_m ({1e3 * square_m:g} mm)" in warning and side in warning
+    assert "0.25-10 m expected for a working volume 0.5-5 m ahead" in warning and "80 mm is 0.08" in warning
+
+
+def test_the_board_s_expected_distance_follows_the_working_volume():
+    # a rig for a small space (0.2-1.5 m ahead) calibrated with the board 1.2-1.8 m away: within 0.1-3 m
+    tilts = [(a, b) for a in (-30, 0, 30) for b in (-25, 25)]
+    views = {"left": _views(tilts, seed=1), "right": _views(tilts, seed=1, t_offset=(-0.5, 0.0, 0.0))}
+    small = WorkingVolume(np.array([-1.0, -2.3, 0.2]), np.array([1.0, 0.1, 1.5]))
+    report = solve_rig(BOARD, views, ("left", "right"), camera_height_m=1.4, volume=small).report
+    assert not [w for w in report["warnings"] if w.startswith("scale:")]
+    far = BoardSpec(squares_x=7, squares_y=5, square_m=0.2, marker_m=0.15)  # 2.5 times: 3-4.5 m
+    report = solve_rig(far, views, ("left", "right"), camera_height_m=1.4, volume=small).report
+    assert [w for w in report["warnings"] if "farther than the 0.1-3 m expected" in w]
