@@ -215,6 +215,19 @@ def _cameras(text: str | None) -> list[str] | None:
     return names
 
 
+def _refuse_reversed_order(cameras: list[str] | None, recorded: list[str] | None, images: str) -> None:
+    """Refuse ``--cameras`` naming the capture's two cameras in the other order than its ``cameras.json``. The rig
+    file's first camera is the one the rig source opens first (``opencv://?first=``), so the reversed order bound
+    each camera's lens and pose to the other one's images, and the rig file loaded without a word."""
+    if cameras is None or recorded is None or cameras == recorded or sorted(cameras) != sorted(recorded):
+        return
+    raise UsageError(f"--cameras {','.join(cameras)} reverses the order {Path(images) / CAMERAS_FILE} records "
+                     f"({','.join(recorded)}: {recorded[0]!r} is the camera the rig source opened first, "
+                     f"opencv://?first=), so the rig file would give each camera the other's lens and pose. Leave "
+                     "--cameras out; to make the other camera the first on purpose, swap first= and second= in the "
+                     f"rig URL and edit {CAMERAS_FILE} to match")
+
+
 # ------------------------------------------------------------------ board
 def cmd_board(args: argparse.Namespace) -> int:
     board = _board(args.board)
@@ -547,7 +560,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
     _check_kept_apart(previous, {"--out": out, "--report": report_path})
     _stream_name(args.rig_id, MAX_RIG_ID_LEN, "--rig-id")
     cameras = _cameras(args.cameras)
-    ordered = cameras is not None or read_camera_order(args.images) is not None
+    recorded = read_camera_order(args.images)
+    _refuse_reversed_order(cameras, recorded, args.images)
+    ordered = cameras is not None or recorded is not None
     board, where = _measuring_board(args.board, args.images)
     cameras = list(camera_folders(args.images, cameras))  # the order, read once
     for name in cameras:  # before the detection, which takes a while

@@ -240,3 +240,18 @@ def test_the_view_bound_itself_is_taken():
     args = cli.build_parser().parse_args(["synth", "--out", "s", "--count", str(cli.MAX_VIEWS),
                                           "--edge-count", "0"])
     assert (args.count, args.edge_count) == (cli.MAX_VIEWS, 0)
+
+
+def test_cameras_given_against_the_recorded_order_are_refused(image, tmp_path, capsys):
+    # the capture recorded left as the camera opened first (opencv://?first=); --cameras right,left made 'right'
+    # the rig file's first camera, which the driver binds to first=: each camera got the other's lens and pose,
+    # and the rig file loaded without a word
+    images = _folders(tmp_path / "views", {"left": {f"{k:03d}": image for k in range(4)},
+                                           "right": {f"{k:03d}": image for k in range(4)}})
+    (images / "cameras.json").write_text(json.dumps({"cameras": ["left", "right"]}))
+    rc = cli.main(["solve", "--board", _board_file(tmp_path), "--images", str(images), "--cameras", "right,left",
+                   "--camera-height", "1.4", "--out", str(tmp_path / "rig.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--cameras right,left reverses the order" in err and "(left,right: 'left' is the camera" in err
+    assert "swap first= and second= in the rig URL and edit cameras.json" in err
+    assert not (tmp_path / "rig.json").exists()
