@@ -455,7 +455,8 @@ def _check_resumable(cfg: PretrainConfig, last: Path, ck: dict) -> None:
     if old:
         now = json.loads(json.dumps(asdict(cfg)))
         was = {**now, **json.loads(json.dumps(old))}  # keys added since read as the new run's
-        refuse_another_config(last, was, now, RESUME_MAY_CHANGE)
+        # the model overrides are compared by the encoder they build (a restated preset value is the same one)
+        refuse_another_config(last, was, now, RESUME_MAY_CHANGE, ("model",) if "model_config" in ck else ())
     if "model_config" in ck:
         refuse_another_model(last, ck["model_config"], cfg.model_config())
 

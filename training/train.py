@@ -908,11 +908,14 @@ def checkpoint_world_size(ck: dict) -> int:
     return len(extra["rng_ranks"]) if "rng_ranks" in extra else 1
 
 
-def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[str, ...]) -> None:
+def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[str, ...],
+                          compared_elsewhere: tuple[str, ...] = ()) -> None:
     """Refuse to resume ``last`` (whose run had config ``was``) under ``now``: the rest of the run would
-    silently mix two. Only the keys in ``may_change`` may differ."""
-    differ = [f"{p} {a!r} in the run, {b!r} now" for k in sorted(set(was) | set(now)) if k not in may_change
-              for p, a, b in _differences(was.get(k), now.get(k), k)]
+    silently mix two. Only the keys in ``may_change`` may differ; those in ``compared_elsewhere`` are left to
+    another check (``model``: by the model it builds, :func:`refuse_another_model`)."""
+    skip = (*may_change, *compared_elsewhere)
+    differ = [f"{p} {a!r} in the run, {b!r} now" for k in sorted(set(was) | set(now)) if k not in skip
+              for p, a, b in _differences(was.get(k, _UNSET), now.get(k, _UNSET), k)]
     if differ:
         raise ConfigError(f"{last}: resuming under another config ({'; '.join(differ)}); "
                           "resume changes only " + ", ".join(may_change) + ": start a new run (--out) "
@@ -935,19 +938,25 @@ def require_resume_keys(ck: Any, path: Path, keys: tuple[str, ...] = RESUME_KEYS
                           "last.pt, or start a new run (another --out)")
 
 
+class _Unset:
+    """A key one of two configs does not give: shown as ``unset``, not as ``None`` (a value it could hold)."""
+
+    def __repr__(self) -> str:
+        return "unset"
+
+
+_UNSET = _Unset()
+
+
 def _differences(was: Any, now: Any, path: str = "") -> list[tuple[str, Any, Any]]:
-    """``(dotted path, was, now)`` where two JSON-like trees differ (``levels[0].samples``)."""
+    """``(dotted path, was, now)`` where two JSON-like trees differ (``levels[0].samples``); a key only one of
+    them has is ``_UNSET`` in the other."""
     if isinstance(was, dict) and isinstance(now, dict):
         return [d for k in sorted(set(was) | set(now), key=str)
-                for d in _differences(was.get(k), now.get(k), f"{path}.{k}" if path else str(k))]
+                for d in _differences(was.get(k, _UNSET), now.get(k, _UNSET), f"{path}.{k}" if path else str(k))]
     if isinstance(was, list) and isinstance(now, list) and len(was) == len(now):
         return [d for i, (a, b) in enumerate(zip(was, now)) for d in _differences(a, b, f"{path}[{i}]")]
     return [] if was == now else [(path or "(root)", was, now)]
-
-
-def _differing_paths(was: Any, now: Any, path: str = "") -> list[str]:
-    """Dotted paths (``levels[0].samples``) where two JSON-like trees differ."""
-    return [p for p, _, _ in _differences(was, now, path)]
 
 
 def refuse_another_model(last: Path, stored: Any, now: ModelConfig) -> None:
@@ -957,10 +966,12 @@ def refuse_another_model(last: Path, stored: Any, now: ModelConfig) -> None:
         was = ModelConfig.from_dict(stored, "model_config").to_dict()  # keys added since read as their defaults
     except ConfigError as e:
         raise ConfigError(f"{last}: its stored model config does not read: {e}") from e
-    differ = _differing_paths(json.loads(json.dumps(was)), json.loads(json.dumps(now.to_dict())))
+    differ = _differences(json.loads(json.dumps(was)), json.loads(json.dumps(now.to_dict())))
     if differ:
-        raise ConfigError(f"{last}: resuming under another model config ({', '.join(differ)} differ from the "
-                          "model the checkpoint holds); start a new run (another --out) for another model")
+        named = "; ".join(f"{p} {a!r} in the checkpoint, {b!r} now" for p, a, b in differ)
+        raise ConfigError(f"{last}: resuming under another model config ({named}: the preset and the model "
+                          "overrides build another model than the checkpoint holds); start a new run (another --out) "
+                          "for another model")
 
 
 def check_resumable(cfg: TrainConfig, last: Path, world: int | None = None) -> None:
@@ -978,8 +989,10 @@ def check_resumable(cfg: TrainConfig, last: Path, world: int | None = None) -> N
         was = json.loads(json.dumps(asdict(build_config(ck["config"]))))  # keys added since read as their defaults
     except ConfigError as e:
         raise ConfigError(f"{last}: its stored train config does not read: {e}") from e
-    refuse_another_config(last, was, json.loads(json.dumps(asdict(cfg))), RESUME_MAY_CHANGE)
-    if "model_config" in ck:
+    # the model overrides are compared by the model they build: restating a preset's own value is the same model
+    by_model = ("model",) if "model_config" in ck else ()
+    refuse_another_config(last, was, json.loads(json.dumps(asdict(cfg))), RESUME_MAY_CHANGE, by_model)
+    if by_model:
         refuse_another_model(last, ck["model_config"], cfg.model_config())
 
 

@@ -426,6 +426,32 @@ def test_resume_refuses_another_model_config_and_a_weights_only_file(data64, tmp
     assert (run / "config.json").read_text() == before
 
 
+def test_resume_takes_model_overrides_that_build_the_same_model(data64, tmp_path):
+    """``--set model.use_human_encoder=true`` on a ``tiny`` run restates the preset: the same model, yet the
+    resume was refused (``model.use_human_encoder None in the run, True now``), and the other way round."""
+    run, _ = _resume_run(data64, tmp_path)
+    same = {"use_human_encoder": True, "heatmap_stride": 4}
+    assert train(tiny_cfg(data64, iterations=2, pck_every=0, model=same), run, resume=True, quiet=True)[0]["steps"] == 2
+    assert train(tiny_cfg(data64, iterations=3, pck_every=0), run, resume=True, quiet=True)[0]["steps"] == 3
+
+
+def test_resume_under_other_model_overrides_names_the_setting_with_both_values(data64, tmp_path):
+    """A baseline override on a model run: named with the checkpoint's value and the new one, not ``None``."""
+    run, before = _resume_run(data64, tmp_path)
+    with pytest.raises(ConfigError) as e:
+        train(tiny_cfg(data64, pck_every=0, model={"use_human_encoder": False}), run, resume=True, quiet=True)
+    assert "resuming under another model config (use_human_encoder True in the checkpoint, False now" in str(e.value)
+    assert "None" not in str(e.value)
+    assert (run / "config.json").read_text() == before
+
+
+def test_a_key_one_config_lacks_is_named_unset_not_none(tmp_path):
+    from training.train import refuse_another_config
+
+    with pytest.raises(ConfigError, match=r"\(pretrain_human\.iterations unset in the run, 5 now\)"):
+        refuse_another_config(tmp_path / "last.pt", {"pretrain_human": {}}, {"pretrain_human": {"iterations": 5}}, ())
+
+
 def test_resume_drops_the_log_records_past_the_checkpoint(data64, tmp_path):
     import shutil
 
