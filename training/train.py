@@ -1084,10 +1084,13 @@ def load_init_weights(model: GHNeRF, path: str) -> None:
     ConfigError naming it (torch's errors came out as a traceback)."""
     if model.human is None:
         raise ConfigError("init: the preset has no human encoder")
-    from training.model.human_encoder import load_torchvision_resnet18
+    from training.model.human_encoder import ResNet18WeightsError, load_torchvision_resnet18
 
     try:
         load_torchvision_resnet18(model.human.trunk, path)
+    except ResNet18WeightsError as e:  # named by key and shape, whole: torch's message was cut before them
+        raise ConfigError(f"init: {path}: not torchvision resnet18 weights this encoder takes ({e}); give "
+                          "torchvision's resnet18 state dict (resnet18-f37072fd.pth)") from e
     except Exception as e:  # noqa: BLE001 - torch raises several types (zip, EOF, a key or shape mismatch)
         if holds_more_than_weights(e):
             raise ConfigError(f"init: {path}: holds more than weights (a training run's last.pt or ckpt_*.pt?); "

@@ -141,6 +141,25 @@ def _a_training_checkpoint(path):
     return path
 
 
+def _resnet18_file(path, change):
+    """torchvision's resnet18 state dict (random, named as torchvision names it), each ``(key, tensor)`` through
+    ``change``, saved at ``path``."""
+    import torch
+
+    from tests.training.test_resnet18_names import fake_state_dict
+
+    torch.save(dict(change(k, v) for k, v in fake_state_dict().items()), path)
+    return path
+
+
+def _a_list_file(path):
+    """A file torch loads that holds no mapping."""
+    import torch
+
+    torch.save([1, 2], path)
+    return path
+
+
 @pytest.mark.parametrize(("key", "make", "words"), [
     # a traceback (torch's zip reader) after run/config.json was written
     ("init", lambda p: p.write_bytes(b"PK\x03\x04 cut short") and p,
@@ -153,6 +172,15 @@ def _a_training_checkpoint(path):
      "human_init: cannot read {f}: UnpicklingError: not a file torch.save wrote, or a damaged one"),
     ("init", lambda p: p.write_bytes(b"") or p, "init: {f}: not torchvision resnet18 weights this encoder takes "
                                                 "(EOFError: the file ends before its first record (empty?))"),
+    # torch's strict-load message, cut at 200 characters before the shapes ("torch.Size([64, 3,)") or the key
+    ("init", lambda p: _resnet18_file(p, lambda k, v: (k, v[:, :1] if k == "conv1.weight" else v)),
+     "init: {f}: not torchvision resnet18 weights this encoder takes ('conv1.weight' has shape [64, 1, 7, 7], "
+     "resnet18 [64, 3, 7, 7]); give torchvision's"),
+    ("init", lambda p: _resnet18_file(p, lambda k, v: (f"backbone.{k}", v)),
+     "init: {f}: not torchvision resnet18 weights this encoder takes (no key 'conv1.weight' and 59 more; "
+     "unexpected key 'backbone.conv1.weight' and 121 more)"),
+    ("init", _a_list_file,
+     "init: {f}: not torchvision resnet18 weights this encoder takes (holds a list, not a state dict)"),
     # one line, but torch's page of advice cut to its first line, and after run/config.json was written
     ("human_init", _a_training_checkpoint,
      "human_init: {f} is not a human-encoder checkpoint (it holds more than weights: a training run's last.pt"),
