@@ -818,6 +818,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
             if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
                 raise ConfigError(f"{key}: {getattr(cfg, key)}: no such file")
         check_start_weights(cfg)
+    check_model_human_init(cfg.model_config())
     if info.main:
         refuse_live_lock(out_dir / "train.pid")  # a folder in use is named first, whatever else is wrong
     # a missing dataset or split, or one of another resolution: named before anything is written
@@ -1084,19 +1085,38 @@ def load_init_weights(model: GHNeRF, path: str) -> None:
     ConfigError naming it (torch's errors came out as a traceback)."""
     if model.human is None:
         raise ConfigError("init: the preset has no human encoder")
+    load_resnet18_into(model.human.trunk, path, "init")
+
+
+def load_resnet18_into(trunk: torch.nn.Module, path: str, key: str) -> None:
+    """torchvision's resnet18 weights at ``path`` into ``trunk``; a file that is not such weights is a ConfigError
+    naming ``key`` (the setting that gave the file) and the file."""
     from training.model.human_encoder import ResNet18WeightsError, load_torchvision_resnet18
 
     try:
-        load_torchvision_resnet18(model.human.trunk, path)
+        load_torchvision_resnet18(trunk, path)
     except ResNet18WeightsError as e:  # named by key and shape, whole: torch's message was cut before them
-        raise ConfigError(f"init: {path}: not torchvision resnet18 weights this encoder takes ({e}); give "
+        raise ConfigError(f"{key}: {path}: not torchvision resnet18 weights this encoder takes ({e}); give "
                           "torchvision's resnet18 state dict (resnet18-f37072fd.pth)") from e
     except Exception as e:  # noqa: BLE001 - torch raises several types (zip, EOF, a key or shape mismatch)
         if holds_more_than_weights(e):
-            raise ConfigError(f"init: {path}: holds more than weights (a training run's last.pt or ckpt_*.pt?); "
-                              "init takes torchvision's resnet18 state dict (resnet18-f37072fd.pth)") from e
-        raise ConfigError(f"init: {path}: not torchvision resnet18 weights this encoder takes "
+            raise ConfigError(f"{key}: {path}: holds more than weights (a training run's last.pt or ckpt_*.pt?); "
+                              f"{key} takes torchvision's resnet18 state dict (resnet18-f37072fd.pth)") from e
+        raise ConfigError(f"{key}: {path}: not torchvision resnet18 weights this encoder takes "
                           f"({load_error_words(e)})") from e
+
+
+def check_model_human_init(mcfg: ModelConfig) -> None:
+    """``model.human.init`` (torchvision's resnet18 weights, read as the model is built, resumed or not) loaded
+    into a throwaway trunk: a missing or foreign file was a traceback after ``config.json`` was written."""
+    if not (mcfg.use_human_encoder and mcfg.human.init):
+        return
+    from training.model.human_encoder import ResNet18Trunk
+
+    path = mcfg.human.init
+    if not Path(path).is_file():
+        raise ConfigError(f"model.human.init: {path}: no such file")
+    load_resnet18_into(ResNet18Trunk(mcfg.human.num_layers), path, "model.human.init")
 
 
 def load_start_weights(model: GHNeRF, cfg: TrainConfig) -> None:

@@ -215,6 +215,30 @@ def test_train_refuses_a_human_pt_of_another_encoder_before_writing(data64, tmp_
     assert not run.exists()  # its config.json was written first
 
 
+@pytest.mark.parametrize("tool", ["training.train", "training.pretrain_human"])
+@pytest.mark.parametrize(("make", "words"), [
+    (lambda p: p, "model.human.init: {f}: no such file"),
+    (lambda p: _resnet18_file(p, lambda k, v: (k, v[:, :1] if k == "conv1.weight" else v)),
+     "model.human.init: {f}: not torchvision resnet18 weights this encoder takes ('conv1.weight' has shape "
+     "[64, 1, 7, 7], resnet18 [64, 3, 7, 7]); give torchvision's"),
+])
+def test_a_model_human_init_that_is_not_resnet18_weights_is_named_before_writing(data64, tmp_path, capsys, tool,
+                                                                                  make, words):
+    """``model.human.init`` (the pretraining's way to start from ImageNet weights) is read as the model is built:
+    a missing or foreign file was a traceback (FileNotFoundError, torch's cut load message) after config.json."""
+    import importlib
+
+    weights = make(tmp_path / "resnet18.pth")
+    run = tmp_path / "run"
+    main = importlib.import_module(tool).main
+    args = ["--data", str(data64), "--out", str(run), "--iterations", "1", "--set",
+            f"model.human.init={json.dumps(str(weights))}"]
+    args += ["--preset", "tiny"] if tool == "training.train" else ["--set", 'preset="tiny"', "--set", "eval_every=0"]
+    assert main(args) == 2
+    assert words.format(f=weights) in capsys.readouterr().err
+    assert not run.exists()
+
+
 def test_train_ctrl_c_exits_130_and_says_how_to_resume(tmp_path, capsys, monkeypatch):
     import training.train as tr
 
