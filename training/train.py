@@ -849,6 +849,8 @@ RESUME_MAY_CHANGE = ("iterations", "data", "threads", "device", "max_minutes", "
 #: What to do about a damaged checkpoint of a run folder (``--resume``'s advice).
 RESUME_HINT = ("delete it (--resume then continues from the newest ckpt_*.pt), or restore one of the run's "
                "ckpt_*.pt as last.pt")
+#: ... and about a damaged ckpt_*.pt that --resume passes over (last.pt's advice, "delete it", misled there).
+SKIP_HINT = "passed over: --resume tries the next older ckpt_*.pt"
 #: ... and about a damaged model file given to be read (evaluation, export): no run to resume.
 READ_HINT = "give another checkpoint (a run's last.pt or ckpt_*.pt, or a model folder's <variant>.pt)"
 
@@ -887,7 +889,7 @@ def resume_checkpoint(out_dir: Path, verbose: bool = True) -> Path | None:
     ckpts = _step_checkpoints(out_dir)
     for ck in ckpts:
         try:
-            load_checkpoint(ck)
+            load_checkpoint(ck, hint=SKIP_HINT)
         except ConfigError as e:
             if verbose:
                 print(f"ghnerf-train: skipping {e}", file=sys.stderr)

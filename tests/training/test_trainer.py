@@ -263,6 +263,23 @@ def test_resume_refuses_another_config_and_names_a_damaged_checkpoint(data64, tm
         train(tiny_cfg(data64), tmp_path / "r", resume=True, quiet=True)
 
 
+def test_resume_without_last_pt_passes_over_a_damaged_ckpt_for_the_next_older(data64, tmp_path, capsys):
+    """The newest ckpt_*.pt that loads is taken; the one passed over was named with last.pt's advice ("delete it
+    (--resume then continues from the newest ckpt_*.pt)"), which it was already doing."""
+    run = tmp_path / "r"
+    train(tiny_cfg(data64, iterations=3, pck_every=0), run, quiet=True)
+    (run / "last.pt").unlink()
+    newest = run / "ckpt_0000003.pt"
+    newest.write_bytes(newest.read_bytes()[:1000])
+    summary, _ = train(tiny_cfg(data64, iterations=3, pck_every=0), run, resume=True, quiet=True)
+    err = capsys.readouterr().err
+    assert f"skipping {newest}: unreadable checkpoint (" in err
+    assert "; passed over: --resume tries the next older ckpt_*.pt\n" in err
+    assert "delete it" not in err
+    assert f"{run / 'last.pt'} is missing: resuming from ckpt_0000002.pt" in err
+    assert summary["steps"] == 3 and torch.load(run / "last.pt", weights_only=False)["step"] == 3
+
+
 def test_two_iterations_with_every_view_and_mirrored_encoder_images(data64, tmp_path):
     cfg = tiny_cfg(data64, encoder_views="all", encoder_flip=True, loss={"coord_weight": 0.01, "mask_weight": 0.1,
                                                                                          "depth_weight": 0.1})

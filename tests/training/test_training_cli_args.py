@@ -38,6 +38,18 @@ def test_an_out_that_is_a_models_checkpoint_is_refused_before_the_work(tmp_path,
     assert ckpt.read_bytes() == b"weights"
 
 
+def test_a_model_spec_that_is_a_file_not_named_pt_is_named_as_a_file():
+    """A checkpoint saved as ``.pth`` was "no such model folder", as if the file were not there."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        ckpt = Path(d) / "run.pth"
+        ckpt.write_bytes(b"weights")
+        with pytest.raises(evaluate.EvalInputError, match=rf"^{ckpt}: a file, not a model folder; a checkpoint is "
+                                                          r"read by its name ending \.pt"):
+            evaluate.make_renderer(str(ckpt))
+
+
 def test_two_models_with_one_label_are_refused_before_the_work(tmp_path, capsys, monkeypatch):
     """Two runs' ``last.pt`` are both labelled "last": the second's scores replaced the first's in the JSON."""
     monkeypatch.setattr(evaluate, "prepare", lambda *a: pytest.fail("the models were loaded"))
