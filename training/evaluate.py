@@ -682,6 +682,9 @@ def make_renderer(spec: str, threads: int = 2) -> tuple[Renderer, dict]:
     precision = precision or "fp32"
     if precision not in ("fp32", "int8"):
         raise EvalInputError(f"{spec}: precision must be fp32 or int8, got {precision!r}")
+    if p.is_file():  # a checkpoint saved as .pth, say: "no such model folder" said it was not there
+        raise EvalInputError(f"{p}: a file, not a model folder; a checkpoint is read by its name ending .pt "
+                             "(a spec is x.pt, a folder of graphs, or folder#int8)")
     if not p.is_dir():
         raise EvalInputError(f"{p}: no such model folder (a spec is x.pt, a folder of graphs, or folder#int8)")
     r = OnnxRenderer(p, precision, threads)

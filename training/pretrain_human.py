@@ -57,8 +57,9 @@ from training import pretrain_checkpoint
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
 from training.train import HEATMAP_SIGMA_HM_PX, CheckpointWriteError, DistInfo, Progress, apply_overrides, \
     encoder_views_images, holds_more_than_weights, learning_rate, load_config_file, load_error_words, mirrored, \
-    model_config_of, padding_config, refuse_another_config, refuse_another_model, refuse_existing_run, \
-    refuse_live_lock, require_resume_keys, save_atomic, scene_order, seed_everything, take_lock, truncate_log
+    check_model_human_init, model_config_of, padding_config, refuse_another_config, refuse_another_model, \
+    refuse_existing_run, refuse_live_lock, require_resume_keys, save_atomic, scene_order, seed_everything, take_lock, \
+    truncate_log
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -455,7 +456,8 @@ def _check_resumable(cfg: PretrainConfig, last: Path, ck: dict) -> None:
     if old:
         now = json.loads(json.dumps(asdict(cfg)))
         was = {**now, **json.loads(json.dumps(old))}  # keys added since read as the new run's
-        refuse_another_config(last, was, now, RESUME_MAY_CHANGE)
+        # the model overrides are compared by the encoder they build (a restated preset value is the same one)
+        refuse_another_config(last, was, now, RESUME_MAY_CHANGE, ("model",) if "model_config" in ck else ())
     if "model_config" in ck:
         refuse_another_model(last, ck["model_config"], cfg.model_config())
 
@@ -490,6 +492,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     elif not resume:
         _refuse_existing_pretraining(out)  # a new run never overwrites another's config.json and last.pt
     mcfg = cfg.model_config()
+    check_model_human_init(mcfg)  # read as the model is built, after config.json: named before it
     targets = TargetConfig(heatmap_stride=mcfg.heatmap_stride, **padding_config(cfg.frame_padding, cfg.edge_cut))
     # the dataset and its splits are opened (a missing one named) before anything is written
     ds = dataset or MultiViewDataset(cfg.data, cfg.split, targets)

@@ -818,6 +818,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
             if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
                 raise ConfigError(f"{key}: {getattr(cfg, key)}: no such file")
         check_start_weights(cfg)
+    check_model_human_init(cfg.model_config())
     if info.main:
         refuse_live_lock(out_dir / "train.pid")  # a folder in use is named first, whatever else is wrong
     # a missing dataset or split, or one of another resolution: named before anything is written
@@ -848,6 +849,8 @@ RESUME_MAY_CHANGE = ("iterations", "data", "threads", "device", "max_minutes", "
 #: What to do about a damaged checkpoint of a run folder (``--resume``'s advice).
 RESUME_HINT = ("delete it (--resume then continues from the newest ckpt_*.pt), or restore one of the run's "
                "ckpt_*.pt as last.pt")
+#: ... and about a damaged ckpt_*.pt that --resume passes over (last.pt's advice, "delete it", misled there).
+SKIP_HINT = "passed over: --resume tries the next older ckpt_*.pt"
 #: ... and about a damaged model file given to be read (evaluation, export): no run to resume.
 READ_HINT = "give another checkpoint (a run's last.pt or ckpt_*.pt, or a model folder's <variant>.pt)"
 
@@ -886,7 +889,7 @@ def resume_checkpoint(out_dir: Path, verbose: bool = True) -> Path | None:
     ckpts = _step_checkpoints(out_dir)
     for ck in ckpts:
         try:
-            load_checkpoint(ck)
+            load_checkpoint(ck, hint=SKIP_HINT)
         except ConfigError as e:
             if verbose:
                 print(f"ghnerf-train: skipping {e}", file=sys.stderr)
@@ -908,11 +911,14 @@ def checkpoint_world_size(ck: dict) -> int:
     return len(extra["rng_ranks"]) if "rng_ranks" in extra else 1
 
 
-def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[str, ...]) -> None:
+def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[str, ...],
+                          compared_elsewhere: tuple[str, ...] = ()) -> None:
     """Refuse to resume ``last`` (whose run had config ``was``) under ``now``: the rest of the run would
-    silently mix two. Only the keys in ``may_change`` may differ."""
-    differ = [f"{p} {a!r} in the run, {b!r} now" for k in sorted(set(was) | set(now)) if k not in may_change
-              for p, a, b in _differences(was.get(k), now.get(k), k)]
+    silently mix two. Only the keys in ``may_change`` may differ; those in ``compared_elsewhere`` are left to
+    another check (``model``: by the model it builds, :func:`refuse_another_model`)."""
+    skip = (*may_change, *compared_elsewhere)
+    differ = [f"{p} {a!r} in the run, {b!r} now" for k in sorted(set(was) | set(now)) if k not in skip
+              for p, a, b in _differences(was.get(k, _UNSET), now.get(k, _UNSET), k)]
     if differ:
         raise ConfigError(f"{last}: resuming under another config ({'; '.join(differ)}); "
                           "resume changes only " + ", ".join(may_change) + ": start a new run (--out) "
@@ -935,19 +941,25 @@ def require_resume_keys(ck: Any, path: Path, keys: tuple[str, ...] = RESUME_KEYS
                           "last.pt, or start a new run (another --out)")
 
 
+class _Unset:
+    """A key one of two configs does not give: shown as ``unset``, not as ``None`` (a value it could hold)."""
+
+    def __repr__(self) -> str:
+        return "unset"
+
+
+_UNSET = _Unset()
+
+
 def _differences(was: Any, now: Any, path: str = "") -> list[tuple[str, Any, Any]]:
-    """``(dotted path, was, now)`` where two JSON-like trees differ (``levels[0].samples``)."""
+    """``(dotted path, was, now)`` where two JSON-like trees differ (``levels[0].samples``); a key only one of
+    them has is ``_UNSET`` in the other."""
     if isinstance(was, dict) and isinstance(now, dict):
         return [d for k in sorted(set(was) | set(now), key=str)
-                for d in _differences(was.get(k), now.get(k), f"{path}.{k}" if path else str(k))]
+                for d in _differences(was.get(k, _UNSET), now.get(k, _UNSET), f"{path}.{k}" if path else str(k))]
     if isinstance(was, list) and isinstance(now, list) and len(was) == len(now):
         return [d for i, (a, b) in enumerate(zip(was, now)) for d in _differences(a, b, f"{path}[{i}]")]
     return [] if was == now else [(path or "(root)", was, now)]
-
-
-def _differing_paths(was: Any, now: Any, path: str = "") -> list[str]:
-    """Dotted paths (``levels[0].samples``) where two JSON-like trees differ."""
-    return [p for p, _, _ in _differences(was, now, path)]
 
 
 def refuse_another_model(last: Path, stored: Any, now: ModelConfig) -> None:
@@ -957,10 +969,12 @@ def refuse_another_model(last: Path, stored: Any, now: ModelConfig) -> None:
         was = ModelConfig.from_dict(stored, "model_config").to_dict()  # keys added since read as their defaults
     except ConfigError as e:
         raise ConfigError(f"{last}: its stored model config does not read: {e}") from e
-    differ = _differing_paths(json.loads(json.dumps(was)), json.loads(json.dumps(now.to_dict())))
+    differ = _differences(json.loads(json.dumps(was)), json.loads(json.dumps(now.to_dict())))
     if differ:
-        raise ConfigError(f"{last}: resuming under another model config ({', '.join(differ)} differ from the "
-                          "model the checkpoint holds); start a new run (another --out) for another model")
+        named = "; ".join(f"{p} {a!r} in the checkpoint, {b!r} now" for p, a, b in differ)
+        raise ConfigError(f"{last}: resuming under another model config ({named}: the preset and the model "
+                          "overrides build another model than the checkpoint holds); start a new run (another --out) "
+                          "for another model")
 
 
 def check_resumable(cfg: TrainConfig, last: Path, world: int | None = None) -> None:
@@ -978,8 +992,10 @@ def check_resumable(cfg: TrainConfig, last: Path, world: int | None = None) -> N
         was = json.loads(json.dumps(asdict(build_config(ck["config"]))))  # keys added since read as their defaults
     except ConfigError as e:
         raise ConfigError(f"{last}: its stored train config does not read: {e}") from e
-    refuse_another_config(last, was, json.loads(json.dumps(asdict(cfg))), RESUME_MAY_CHANGE)
-    if "model_config" in ck:
+    # the model overrides are compared by the model they build: restating a preset's own value is the same model
+    by_model = ("model",) if "model_config" in ck else ()
+    refuse_another_config(last, was, json.loads(json.dumps(asdict(cfg))), RESUME_MAY_CHANGE, by_model)
+    if by_model:
         refuse_another_model(last, ck["model_config"], cfg.model_config())
 
 
@@ -1071,16 +1087,38 @@ def load_init_weights(model: GHNeRF, path: str) -> None:
     ConfigError naming it (torch's errors came out as a traceback)."""
     if model.human is None:
         raise ConfigError("init: the preset has no human encoder")
-    from training.model.human_encoder import load_torchvision_resnet18
+    load_resnet18_into(model.human.trunk, path, "init")
+
+
+def load_resnet18_into(trunk: torch.nn.Module, path: str, key: str) -> None:
+    """torchvision's resnet18 weights at ``path`` into ``trunk``; a file that is not such weights is a ConfigError
+    naming ``key`` (the setting that gave the file) and the file."""
+    from training.model.human_encoder import ResNet18WeightsError, load_torchvision_resnet18
 
     try:
-        load_torchvision_resnet18(model.human.trunk, path)
+        load_torchvision_resnet18(trunk, path)
+    except ResNet18WeightsError as e:  # named by key and shape, whole: torch's message was cut before them
+        raise ConfigError(f"{key}: {path}: not torchvision resnet18 weights this encoder takes ({e}); give "
+                          "torchvision's resnet18 state dict (resnet18-f37072fd.pth)") from e
     except Exception as e:  # noqa: BLE001 - torch raises several types (zip, EOF, a key or shape mismatch)
         if holds_more_than_weights(e):
-            raise ConfigError(f"init: {path}: holds more than weights (a training run's last.pt or ckpt_*.pt?); "
-                              "init takes torchvision's resnet18 state dict (resnet18-f37072fd.pth)") from e
-        raise ConfigError(f"init: {path}: not torchvision resnet18 weights this encoder takes "
+            raise ConfigError(f"{key}: {path}: holds more than weights (a training run's last.pt or ckpt_*.pt?); "
+                              f"{key} takes torchvision's resnet18 state dict (resnet18-f37072fd.pth)") from e
+        raise ConfigError(f"{key}: {path}: not torchvision resnet18 weights this encoder takes "
                           f"({load_error_words(e)})") from e
+
+
+def check_model_human_init(mcfg: ModelConfig) -> None:
+    """``model.human.init`` (torchvision's resnet18 weights, read as the model is built, resumed or not) loaded
+    into a throwaway trunk: a missing or foreign file was a traceback after ``config.json`` was written."""
+    if not (mcfg.use_human_encoder and mcfg.human.init):
+        return
+    from training.model.human_encoder import ResNet18Trunk
+
+    path = mcfg.human.init
+    if not Path(path).is_file():
+        raise ConfigError(f"model.human.init: {path}: no such file")
+    load_resnet18_into(ResNet18Trunk(mcfg.human.num_layers), path, "model.human.init")
 
 
 def load_start_weights(model: GHNeRF, cfg: TrainConfig) -> None:

@@ -595,6 +595,18 @@ def test_when_neither_checkpoint_reads_the_error_names_both_before_anything_is_w
         pretrain(tiny_pretrain(data64, eval_every=0), run, quiet=True)
 
 
+def test_resume_takes_model_overrides_that_build_the_same_encoder(data64, tmp_path):
+    """``model.human.num_layers=2`` on a ``tiny`` pretraining restates the preset: the same encoder, yet the resume
+    was refused (``model.human None in the run, {'num_layers': 2} now``); another value is named with both."""
+    run = tmp_path / "p"
+    pretrain(tiny_pretrain(data64, iterations=1, eval_every=0), run, quiet=True)
+    pretrain(tiny_pretrain(data64, eval_every=0, model={"human": {"num_layers": 2}}), run, resume=True, quiet=True)
+    assert torch.load(run / "last.pt", weights_only=False)["step"] == 2
+    with pytest.raises(ConfigError, match=r"another model config \(human\.num_layers 2 in the checkpoint, 3 now"):
+        pretrain(tiny_pretrain(data64, iterations=3, eval_every=0, model={"human": {"num_layers": 3}}), run,
+                 resume=True, quiet=True)
+
+
 def test_resume_refuses_a_checkpoint_of_another_model_before_anything_is_written(data64, tmp_path, monkeypatch):
     """The preset changed since the checkpoint (same config, another encoder size): named by setting, not a
     load_state_dict traceback after config.json was rewritten; a checkpoint from before model_config was stored

@@ -96,3 +96,21 @@ def test_wrong_shape_fails():
     state["layer1.0.conv1.weight"] = torch.zeros(64, 64, 1, 1)
     with pytest.raises(RuntimeError, match="layer1.0.conv1.weight"):
         load_torchvision_resnet18(ResNet18Trunk(2), state)
+
+
+def test_a_mismatch_is_named_by_its_first_key_whole():
+    """torch's strict-load message lists every key and was cut at 200 characters by the trainer, before the shapes
+    of a mis-shaped key or the name of a missing one behind a long list of others."""
+    from training.model.human_encoder import ResNet18WeightsError
+
+    state = fake_state_dict()
+    state["layer1.0.conv1.weight"] = torch.zeros(64, 64, 1, 1)
+    with pytest.raises(ResNet18WeightsError, match=r"^'layer1\.0\.conv1\.weight' has shape \[64, 64, 1, 1\], "
+                                                   r"resnet18 \[64, 64, 3, 3\]$"):
+        load_torchvision_resnet18(ResNet18Trunk(2), state)
+    prefixed = {f"net.{k}": v for k, v in fake_state_dict().items()}
+    with pytest.raises(ResNet18WeightsError, match=r"^no key 'conv1\.weight' and 59 more; unexpected key "
+                                                   r"'net\.conv1\.weight' and 121 more$"):
+        load_torchvision_resnet18(ResNet18Trunk(2), prefixed)
+    with pytest.raises(ResNet18WeightsError, match="^holds a list, not a state dict$"):
+        load_torchvision_resnet18(ResNet18Trunk(2), [1, 2])

@@ -263,6 +263,23 @@ def test_resume_refuses_another_config_and_names_a_damaged_checkpoint(data64, tm
         train(tiny_cfg(data64), tmp_path / "r", resume=True, quiet=True)
 
 
+def test_resume_without_last_pt_passes_over_a_damaged_ckpt_for_the_next_older(data64, tmp_path, capsys):
+    """The newest ckpt_*.pt that loads is taken; the one passed over was named with last.pt's advice ("delete it
+    (--resume then continues from the newest ckpt_*.pt)"), which it was already doing."""
+    run = tmp_path / "r"
+    train(tiny_cfg(data64, iterations=3, pck_every=0), run, quiet=True)
+    (run / "last.pt").unlink()
+    newest = run / "ckpt_0000003.pt"
+    newest.write_bytes(newest.read_bytes()[:1000])
+    summary, _ = train(tiny_cfg(data64, iterations=3, pck_every=0), run, resume=True, quiet=True)
+    err = capsys.readouterr().err
+    assert f"skipping {newest}: unreadable checkpoint (" in err
+    assert "; passed over: --resume tries the next older ckpt_*.pt\n" in err
+    assert "delete it" not in err
+    assert f"{run / 'last.pt'} is missing: resuming from ckpt_0000002.pt" in err
+    assert summary["steps"] == 3 and torch.load(run / "last.pt", weights_only=False)["step"] == 3
+
+
 def test_two_iterations_with_every_view_and_mirrored_encoder_images(data64, tmp_path):
     cfg = tiny_cfg(data64, encoder_views="all", encoder_flip=True, loss={"coord_weight": 0.01, "mask_weight": 0.1,
                                                                                          "depth_weight": 0.1})
@@ -424,6 +441,32 @@ def test_resume_refuses_another_model_config_and_a_weights_only_file(data64, tmp
     with pytest.raises(ConfigError, match=rf"^{last}: not a training checkpoint .*no optimizer, config, rng"):
         train(tiny_cfg(data64, pck_every=0, lr=0.1), run, resume=True, quiet=True)
     assert (run / "config.json").read_text() == before
+
+
+def test_resume_takes_model_overrides_that_build_the_same_model(data64, tmp_path):
+    """``--set model.use_human_encoder=true`` on a ``tiny`` run restates the preset: the same model, yet the
+    resume was refused (``model.use_human_encoder None in the run, True now``), and the other way round."""
+    run, _ = _resume_run(data64, tmp_path)
+    same = {"use_human_encoder": True, "heatmap_stride": 4}
+    assert train(tiny_cfg(data64, iterations=2, pck_every=0, model=same), run, resume=True, quiet=True)[0]["steps"] == 2
+    assert train(tiny_cfg(data64, iterations=3, pck_every=0), run, resume=True, quiet=True)[0]["steps"] == 3
+
+
+def test_resume_under_other_model_overrides_names_the_setting_with_both_values(data64, tmp_path):
+    """A baseline override on a model run: named with the checkpoint's value and the new one, not ``None``."""
+    run, before = _resume_run(data64, tmp_path)
+    with pytest.raises(ConfigError) as e:
+        train(tiny_cfg(data64, pck_every=0, model={"use_human_encoder": False}), run, resume=True, quiet=True)
+    assert "resuming under another model config (use_human_encoder True in the checkpoint, False now" in str(e.value)
+    assert "None" not in str(e.value)
+    assert (run / "config.json").read_text() == before
+
+
+def test_a_key_one_config_lacks_is_named_unset_not_none(tmp_path):
+    from training.train import refuse_another_config
+
+    with pytest.raises(ConfigError, match=r"\(pretrain_human\.iterations unset in the run, 5 now\)"):
+        refuse_another_config(tmp_path / "last.pt", {"pretrain_human": {}}, {"pretrain_human": {"iterations": 5}}, ())
 
 
 def test_resume_drops_the_log_records_past_the_checkpoint(data64, tmp_path):

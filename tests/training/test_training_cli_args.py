@@ -38,6 +38,18 @@ def test_an_out_that_is_a_models_checkpoint_is_refused_before_the_work(tmp_path,
     assert ckpt.read_bytes() == b"weights"
 
 
+def test_a_model_spec_that_is_a_file_not_named_pt_is_named_as_a_file():
+    """A checkpoint saved as ``.pth`` was "no such model folder", as if the file were not there."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        ckpt = Path(d) / "run.pth"
+        ckpt.write_bytes(b"weights")
+        with pytest.raises(evaluate.EvalInputError, match=rf"^{ckpt}: a file, not a model folder; a checkpoint is "
+                                                          r"read by its name ending \.pt"):
+            evaluate.make_renderer(str(ckpt))
+
+
 def test_two_models_with_one_label_are_refused_before_the_work(tmp_path, capsys, monkeypatch):
     """Two runs' ``last.pt`` are both labelled "last": the second's scores replaced the first's in the JSON."""
     monkeypatch.setattr(evaluate, "prepare", lambda *a: pytest.fail("the models were loaded"))
@@ -141,6 +153,25 @@ def _a_training_checkpoint(path):
     return path
 
 
+def _resnet18_file(path, change):
+    """torchvision's resnet18 state dict (random, named as torchvision names it), each ``(key, tensor)`` through
+    ``change``, saved at ``path``."""
+    import torch
+
+    from tests.training.test_resnet18_names import fake_state_dict
+
+    torch.save(dict(change(k, v) for k, v in fake_state_dict().items()), path)
+    return path
+
+
+def _a_list_file(path):
+    """A file torch loads that holds no mapping."""
+    import torch
+
+    torch.save([1, 2], path)
+    return path
+
+
 @pytest.mark.parametrize(("key", "make", "words"), [
     # a traceback (torch's zip reader) after run/config.json was written
     ("init", lambda p: p.write_bytes(b"PK\x03\x04 cut short") and p,
@@ -153,6 +184,15 @@ def _a_training_checkpoint(path):
      "human_init: cannot read {f}: UnpicklingError: not a file torch.save wrote, or a damaged one"),
     ("init", lambda p: p.write_bytes(b"") or p, "init: {f}: not torchvision resnet18 weights this encoder takes "
                                                 "(EOFError: the file ends before its first record (empty?))"),
+    # torch's strict-load message, cut at 200 characters before the shapes ("torch.Size([64, 3,)") or the key
+    ("init", lambda p: _resnet18_file(p, lambda k, v: (k, v[:, :1] if k == "conv1.weight" else v)),
+     "init: {f}: not torchvision resnet18 weights this encoder takes ('conv1.weight' has shape [64, 1, 7, 7], "
+     "resnet18 [64, 3, 7, 7]); give torchvision's"),
+    ("init", lambda p: _resnet18_file(p, lambda k, v: (f"backbone.{k}", v)),
+     "init: {f}: not torchvision resnet18 weights this encoder takes (no key 'conv1.weight' and 59 more; "
+     "unexpected key 'backbone.conv1.weight' and 121 more)"),
+    ("init", _a_list_file,
+     "init: {f}: not torchvision resnet18 weights this encoder takes (holds a list, not a state dict)"),
     # one line, but torch's page of advice cut to its first line, and after run/config.json was written
     ("human_init", _a_training_checkpoint,
      "human_init: {f} is not a human-encoder checkpoint (it holds more than weights: a training run's last.pt"),
@@ -185,6 +225,30 @@ def test_train_refuses_a_human_pt_of_another_encoder_before_writing(data64, tmp_
                  "--set", f"human_init={json.dumps(str(human))}"]) == 2
     assert f"human_init: {human} was pretrained with human.num_layers=3, this model has 2" in capsys.readouterr().err
     assert not run.exists()  # its config.json was written first
+
+
+@pytest.mark.parametrize("tool", ["training.train", "training.pretrain_human"])
+@pytest.mark.parametrize(("make", "words"), [
+    (lambda p: p, "model.human.init: {f}: no such file"),
+    (lambda p: _resnet18_file(p, lambda k, v: (k, v[:, :1] if k == "conv1.weight" else v)),
+     "model.human.init: {f}: not torchvision resnet18 weights this encoder takes ('conv1.weight' has shape "
+     "[64, 1, 7, 7], resnet18 [64, 3, 7, 7]); give torchvision's"),
+])
+def test_a_model_human_init_that_is_not_resnet18_weights_is_named_before_writing(data64, tmp_path, capsys, tool,
+                                                                                  make, words):
+    """``model.human.init`` (the pretraining's way to start from ImageNet weights) is read as the model is built:
+    a missing or foreign file was a traceback (FileNotFoundError, torch's cut load message) after config.json."""
+    import importlib
+
+    weights = make(tmp_path / "resnet18.pth")
+    run = tmp_path / "run"
+    main = importlib.import_module(tool).main
+    args = ["--data", str(data64), "--out", str(run), "--iterations", "1", "--set",
+            f"model.human.init={json.dumps(str(weights))}"]
+    args += ["--preset", "tiny"] if tool == "training.train" else ["--set", 'preset="tiny"', "--set", "eval_every=0"]
+    assert main(args) == 2
+    assert words.format(f=weights) in capsys.readouterr().err
+    assert not run.exists()
 
 
 def test_train_ctrl_c_exits_130_and_says_how_to_resume(tmp_path, capsys, monkeypatch):

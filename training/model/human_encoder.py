@@ -133,6 +133,38 @@ def used_keys_filter(state_dict: Mapping[str, Tensor], num_layers: int) -> dict[
     return {k: v for k, v in state_dict.items() if not k.startswith(dropped)}
 
 
+class ResNet18WeightsError(RuntimeError):
+    """A state dict that is not torchvision's resnet18 as the trunk takes it; the message names the first
+    missing, unexpected or mis-shaped key (torch's strict-load message lists them all and was cut short
+    before the key's shapes or the missing key's name)."""
+
+
+def _first_and_count(keys: list[str]) -> str:
+    """``'conv1.weight'`` or ``'conv1.weight' and 41 more``."""
+    more = f" and {len(keys) - 1} more" if len(keys) > 1 else ""
+    return f"{keys[0]!r}{more}"
+
+
+def weights_mismatch(expected: Mapping[str, Tensor], given: Mapping[str, Tensor]) -> str | None:
+    """Why ``given`` does not load strictly where ``expected`` (a ``state_dict()``) is (None: it does): the
+    missing keys, then the unexpected ones (with the first of ``given``'s, to show a prefix), then the first
+    shape that differs."""
+    problems = []
+    missing = [k for k in expected if k not in given]
+    unexpected = [k for k in given if k not in expected]
+    if missing:
+        problems.append(f"no key {_first_and_count(missing)}")
+    if unexpected:
+        problems.append(f"unexpected key {_first_and_count(unexpected)}")
+    shapes = [(k, tuple(given[k].shape), tuple(v.shape)) for k, v in expected.items()
+              if k in given and hasattr(given[k], "shape") and tuple(given[k].shape) != tuple(v.shape)]
+    if shapes:
+        key, got, want = shapes[0]
+        more = f" (and {len(shapes) - 1} more keys)" if len(shapes) > 1 else ""
+        problems.append(f"{key!r} has shape {list(got)}, resnet18 {list(want)}{more}")
+    return "; ".join(problems) or None
+
+
 def load_torchvision_resnet18(trunk: ResNet18Trunk, source: str | Path | Mapping[str, Tensor]) -> list[str]:
     """Load torchvision resnet18 weights into ``trunk`` with strict key matching for the used layers.
 
@@ -145,17 +177,21 @@ def load_torchvision_resnet18(trunk: ResNet18Trunk, source: str | Path | Mapping
         The keys that were dropped because the trunk does not use them (``fc.*``, deeper layers).
 
     Raises:
-        KeyError / RuntimeError: a used key is missing, unexpected or mis-shaped (torch's strict load message).
+        ResNet18WeightsError: not a mapping, or a used key is missing, unexpected or mis-shaped (named).
     """
     if isinstance(source, (str, Path)):
         state = torch.load(str(source), map_location="cpu", weights_only=True)
     else:
-        state = dict(source)
+        state = source
+    if not isinstance(state, Mapping):
+        raise ResNet18WeightsError(f"holds a {type(state).__name__}, not a state dict")
     for wrapper in ("state_dict", "model"):
         if wrapper in state and isinstance(state[wrapper], Mapping):
-            state = dict(state[wrapper])
-    state = {k.removeprefix("module."): v for k, v in state.items()}
+            state = state[wrapper]
+    state = {str(k).removeprefix("module."): v for k, v in state.items()}
     used = used_keys_filter(state, trunk.num_layers)
+    if problem := weights_mismatch(trunk.state_dict(), used):
+        raise ResNet18WeightsError(problem)
     trunk.load_state_dict(used, strict=True)
     return sorted(set(state) - set(used))
 
@@ -237,4 +273,5 @@ class HumanEncoder(nn.Module):
 HumanEncoderConfig._target = HumanEncoder
 
 __all__ = ["HumanEncoderConfig", "HumanEncoder", "ResNet18Trunk", "BasicBlock", "load_torchvision_resnet18",
+           "ResNet18WeightsError",
            "used_keys_filter", "TRUNK_LEVELS"]
