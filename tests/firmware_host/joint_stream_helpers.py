@@ -87,7 +87,7 @@ def queued_datagrams(sock: socket.socket) -> list[bytes]:
 
 
 def mask_rules_packet() -> bytes:
-    """A JOINTS packet no encoder makes, for the mask rules of docs/protocol.md ("JOINTS"): 3 joints, joint 1's
+    """A JOINTS packet no encoder makes, for the mask rules of docs/protocol.md, "JOINTS (0x10)": 3 joints, joint 1's
     mask bit set over non-zero coordinates, padding bits 3-7 of the mask byte set, joint 2 present with
     confidence 0. Decoders take the mask bit as it is and ignore the padding."""
     from firmware_host.protocol.encoder import seal
