@@ -860,8 +860,26 @@ def load_checkpoint(path: str | Path, map_location="cpu", hint: str = RESUME_HIN
     try:
         return torch.load(str(path), map_location=map_location, weights_only=False)
     except Exception as e:  # torch's zip reader, pickle, EOF...
-        raise ConfigError(f"{path}: unreadable checkpoint ({type(e).__name__}: {' '.join(str(e).split())[:200]}); "
-                          f"{hint}") from e
+        raise ConfigError(f"{path}: unreadable checkpoint ({type(e).__name__}: {error_words(e)}); {hint}") from e
+
+
+#: About where :func:`error_words` shortens an error's text (torch's run to a page of advice).
+ERROR_WORDS_LIMIT = 200
+
+
+def error_words(e: BaseException, limit: int = ERROR_WORDS_LIMIT) -> str:
+    """The first line of ``e``'s text, kept whole up to ``limit`` characters; a longer one is cut after its last
+    sentence (else clause) that ends within ``limit``: a cut mid-sentence read "...your checkpoint file is)".
+    A first line with no such boundary is kept whole (complete beats short)."""
+    lines = str(e).strip().splitlines()
+    first = " ".join(lines[0].split()) if lines else ""
+    if len(first) <= limit:
+        return first
+    for mark in (". ", "; ", ", "):
+        end = first.rfind(mark, 0, limit + 1)
+        if end > 0:
+            return first[:end + (mark == ". ")]  # a sentence keeps its full stop, a clause drops its comma
+    return first
 
 
 def _step_checkpoints(out_dir: Path) -> list[Path]:
@@ -992,8 +1010,9 @@ def check_resumable(cfg: TrainConfig, last: Path, world: int | None = None) -> N
         was = json.loads(json.dumps(asdict(build_config(ck["config"]))))  # keys added since read as their defaults
     except ConfigError as e:
         raise ConfigError(f"{last}: its stored train config does not read: {e}") from e
-    # the model overrides are compared by the model they build: restating a preset's own value is the same model
-    by_model = ("model",) if "model_config" in ck else ()
+    # the preset and the model overrides are compared by the model they build: restating a preset's own value, or
+    # naming another preset that builds the same model (edge128 without its encoder: edge128_baseline), is the same
+    by_model = ("preset", "model") if "model_config" in ck else ()
     refuse_another_config(last, was, json.loads(json.dumps(asdict(cfg))), RESUME_MAY_CHANGE, by_model)
     if by_model:
         refuse_another_model(last, ck["model_config"], cfg.model_config())
@@ -1077,7 +1096,7 @@ def load_error_words(e: BaseException) -> str:
     advice on ``weights_only`` to torch, which says nothing of the file."""
     if isinstance(e, pickle.UnpicklingError):
         return "UnpicklingError: not a file torch.save wrote, or a damaged one"
-    words = " ".join(str(e).split())[:200] or ("the file ends before its first record (empty?)"
+    words = error_words(e) or ("the file ends before its first record (empty?)"
                                                if isinstance(e, EOFError) else "no message")
     return f"{type(e).__name__}: {words}"
 
