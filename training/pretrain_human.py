@@ -494,7 +494,8 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     elif not resume:
         _refuse_existing_pretraining(out)  # a new run never overwrites another's config.json and last.pt
     mcfg = cfg.model_config()
-    check_model_human_init(mcfg)  # read as the model is built, after config.json: named before it
+    if start is None:  # read as the model is built, after config.json: named before it (a resume reads it not)
+        check_model_human_init(mcfg)
     targets = TargetConfig(heatmap_stride=mcfg.heatmap_stride, **padding_config(cfg.frame_padding, cfg.edge_cut))
     # the dataset and its splits are opened (a missing one named) before anything is written
     ds = dataset or MultiViewDataset(cfg.data, cfg.split, targets)
@@ -527,7 +528,7 @@ def _pretrain(cfg: PretrainConfig, out: Path, start: tuple[Path, dict] | None, q
         torch.set_flush_denormal(True)
 
     seed_everything(cfg.seed)  # same initial weights as the joint run of the same seed
-    model = GHNeRF(mcfg).to(device).train()
+    model = GHNeRF(mcfg, read_init=start is None).to(device).train()  # a resume's last.pt holds the weights
     # Channels-last convolutions: 0.165 s per 16-image step against 0.189 (2-core EPYC, two threads, the
     # 300-step run of docs/training.md "Lanes"); the same weights and updates, another memory layout.
     model.human.to(memory_format=torch.channels_last)

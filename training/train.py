@@ -737,7 +737,7 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu",
         mcfg = default_config
     else:
         raise ConfigError(f"{path}: no 'model_config' in the checkpoint; {READ_HINT}")
-    model = GHNeRF(mcfg)
+    model = GHNeRF(mcfg, read_init=False)  # the file's weights replace model.human.init's, which may have moved
     try:
         model.load_state_dict(ck.get("model", ck))
     except RuntimeError as e:  # missing or mis-shaped tensors
@@ -818,7 +818,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
             if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
                 raise ConfigError(f"{key}: {getattr(cfg, key)}: no such file")
         check_start_weights(cfg)
-    check_model_human_init(cfg.model_config())
+        check_model_human_init(cfg.model_config())
     if info.main:
         refuse_live_lock(out_dir / "train.pid")  # a folder in use is named first, whatever else is wrong
     # a missing dataset or split, or one of another resolution: named before anything is written
@@ -1128,8 +1128,9 @@ def load_resnet18_into(trunk: torch.nn.Module, path: str, key: str) -> None:
 
 
 def check_model_human_init(mcfg: ModelConfig) -> None:
-    """``model.human.init`` (torchvision's resnet18 weights, read as the model is built, resumed or not) loaded
-    into a throwaway trunk: a missing or foreign file was a traceback after ``config.json`` was written."""
+    """``model.human.init`` (torchvision's resnet18 weights, read as a new run's model is built; a resume takes
+    the checkpoint's) loaded into a throwaway trunk: a missing or foreign file was a traceback after
+    ``config.json`` was written."""
     if not (mcfg.use_human_encoder and mcfg.human.init):
         return
     from training.model.human_encoder import ResNet18Trunk
@@ -1165,8 +1166,9 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     ds = dataset
 
     seed_everything(cfg.seed)  # same initial weights on every rank
-    model = GHNeRF(mcfg).to(device).train()
-    if start is None:  # (a resume's checkpoint holds the weights these files gave its start)
+    # a resume's checkpoint holds the weights model.human.init, init and human_init gave its start
+    model = GHNeRF(mcfg, read_init=start is None).to(device).train()
+    if start is None:
         load_start_weights(model, cfg)
     if not cfg.human_init and cfg.pretrain_human and info.main and not resume:
         print("warning: the config has a pretrain_human block but no human_init: the human encoder starts from "

@@ -498,6 +498,29 @@ def test_resume_under_another_preset_name_that_builds_the_same_model(data64, tmp
     assert "another model config (use_human_encoder False in the checkpoint, True now" in str(e.value)
 
 
+def test_resume_does_not_read_a_model_human_init_moved_since_the_run_began(data64, tmp_path):
+    """The checkpoint holds the weights ``model.human.init`` gave the run's start: a resume built the model by
+    reading the file again, so one moved since stopped it (``model.human.init: ...: no such file``)."""
+    from tests.training.test_resnet18_names import fake_state_dict
+    from training.train import load_model
+
+    weights = tmp_path / "resnet18.pth"
+    torch.save(fake_state_dict(), weights)
+    cfg = tiny_cfg(data64, pck_every=0, model={"human": {"init": str(weights)}})
+    _, m_straight = train(cfg, tmp_path / "a", quiet=True)
+    train(tiny_cfg(data64, iterations=1, pck_every=0, model={"human": {"init": str(weights)}}), tmp_path / "b",
+          quiet=True)
+    weights.rename(tmp_path / "moved.pth")
+    summary, m_resumed = train(cfg, tmp_path / "b", resume=True, quiet=True)
+    assert summary["steps"] == 2
+    a, b = m_straight.state_dict(), m_resumed.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    ck = torch.load(tmp_path / "b" / "last.pt", weights_only=False)  # the run's model config, unchanged
+    assert ck["model_config"]["human"]["init"] == str(weights)
+    loaded, _ = load_model(tmp_path / "b" / "last.pt")  # evaluation reads the checkpoint's weights alone too
+    assert all(torch.equal(a[k], v) for k, v in loaded.state_dict().items())
+
+
 def test_resume_under_other_model_overrides_names_the_setting_with_both_values(data64, tmp_path):
     """A baseline override on a model run: named with the checkpoint's value and the new one, not ``None``."""
     run, before = _resume_run(data64, tmp_path)
