@@ -56,8 +56,8 @@ from training.model_card import write_atomic
 from training import pretrain_checkpoint
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
 from training.train import HEATMAP_SIGMA_HM_PX, CheckpointWriteError, DistInfo, Progress, apply_overrides, \
-    encoder_views_images, holds_more_than_weights, learning_rate, load_config_file, load_error_words, mirrored, \
-    check_model_human_init, model_config_of, padding_config, refuse_another_config, refuse_another_model, \
+    encoder_views_images, error_words, holds_more_than_weights, learning_rate, load_config_file, load_error_words, \
+    mirrored, check_model_human_init, model_config_of, padding_config, refuse_another_config, refuse_another_model, \
     refuse_existing_run, refuse_live_lock, require_resume_keys, save_atomic, scene_order, seed_everything, take_lock, \
     truncate_log
 
@@ -456,8 +456,10 @@ def _check_resumable(cfg: PretrainConfig, last: Path, ck: dict) -> None:
     if old:
         now = json.loads(json.dumps(asdict(cfg)))
         was = {**now, **json.loads(json.dumps(old))}  # keys added since read as the new run's
-        # the model overrides are compared by the encoder they build (a restated preset value is the same one)
-        refuse_another_config(last, was, now, RESUME_MAY_CHANGE, ("model",) if "model_config" in ck else ())
+        # the preset and the model overrides are compared by the encoder they build (a restated preset value, or
+        # another preset building the same model, is the same one)
+        by_model = ("preset", "model") if "model_config" in ck else ()
+        refuse_another_config(last, was, now, RESUME_MAY_CHANGE, by_model)
     if "model_config" in ck:
         refuse_another_model(last, ck["model_config"], cfg.model_config())
 
@@ -492,7 +494,8 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     elif not resume:
         _refuse_existing_pretraining(out)  # a new run never overwrites another's config.json and last.pt
     mcfg = cfg.model_config()
-    check_model_human_init(mcfg)  # read as the model is built, after config.json: named before it
+    if start is None:  # read as the model is built, after config.json: named before it (a resume reads it not)
+        check_model_human_init(mcfg)
     targets = TargetConfig(heatmap_stride=mcfg.heatmap_stride, **padding_config(cfg.frame_padding, cfg.edge_cut))
     # the dataset and its splits are opened (a missing one named) before anything is written
     ds = dataset or MultiViewDataset(cfg.data, cfg.split, targets)
@@ -525,7 +528,7 @@ def _pretrain(cfg: PretrainConfig, out: Path, start: tuple[Path, dict] | None, q
         torch.set_flush_denormal(True)
 
     seed_everything(cfg.seed)  # same initial weights as the joint run of the same seed
-    model = GHNeRF(mcfg).to(device).train()
+    model = GHNeRF(mcfg, read_init=start is None).to(device).train()  # a resume's last.pt holds the weights
     # Channels-last convolutions: 0.165 s per 16-image step against 0.189 (2-core EPYC, two threads, the
     # 300-step run of docs/training.md "Lanes"); the same weights and updates, another memory layout.
     model.human.to(memory_format=torch.channels_last)
@@ -542,7 +545,7 @@ def _pretrain(cfg: PretrainConfig, out: Path, start: tuple[Path, dict] | None, q
             model.human.load_state_dict(ck["human"])
         except RuntimeError as e:  # a checkpoint from before model_config was stored, of another architecture
             raise ConfigError(f"{path}: its encoder weights do not fit the {cfg.preset!r} model of this config "
-                              f"({' '.join(str(e).split())[:200]}); start a new run (another --out)") from e
+                              f"({error_words(e)}); start a new run (another --out)") from e
         opt.load_state_dict(ck["optimizer"])
         step = int(ck["step"])
     clock = RunClock.resumed(ck, step, torch.get_num_threads())

@@ -737,7 +737,7 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu",
         mcfg = default_config
     else:
         raise ConfigError(f"{path}: no 'model_config' in the checkpoint; {READ_HINT}")
-    model = GHNeRF(mcfg)
+    model = GHNeRF(mcfg, read_init=False)  # the file's weights replace model.human.init's, which may have moved
     try:
         model.load_state_dict(ck.get("model", ck))
     except RuntimeError as e:  # missing or mis-shaped tensors
@@ -818,7 +818,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
             if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
                 raise ConfigError(f"{key}: {getattr(cfg, key)}: no such file")
         check_start_weights(cfg)
-    check_model_human_init(cfg.model_config())
+        check_model_human_init(cfg.model_config())
     if info.main:
         refuse_live_lock(out_dir / "train.pid")  # a folder in use is named first, whatever else is wrong
     # a missing dataset or split, or one of another resolution: named before anything is written
@@ -860,8 +860,26 @@ def load_checkpoint(path: str | Path, map_location="cpu", hint: str = RESUME_HIN
     try:
         return torch.load(str(path), map_location=map_location, weights_only=False)
     except Exception as e:  # torch's zip reader, pickle, EOF...
-        raise ConfigError(f"{path}: unreadable checkpoint ({type(e).__name__}: {' '.join(str(e).split())[:200]}); "
-                          f"{hint}") from e
+        raise ConfigError(f"{path}: unreadable checkpoint ({type(e).__name__}: {error_words(e)}); {hint}") from e
+
+
+#: About where :func:`error_words` shortens an error's text (torch's run to a page of advice).
+ERROR_WORDS_LIMIT = 200
+
+
+def error_words(e: BaseException, limit: int = ERROR_WORDS_LIMIT) -> str:
+    """The first line of ``e``'s text, kept whole up to ``limit`` characters; a longer one is cut after its last
+    sentence (else clause) that ends within ``limit``: a cut mid-sentence read "...your checkpoint file is)".
+    A first line with no such boundary is kept whole (complete beats short)."""
+    lines = str(e).strip().splitlines()
+    first = " ".join(lines[0].split()) if lines else ""
+    if len(first) <= limit:
+        return first
+    for mark in (". ", "; ", ", "):
+        end = first.rfind(mark, 0, limit + 1)
+        if end > 0:
+            return first[:end + (mark == ". ")]  # a sentence keeps its full stop, a clause drops its comma
+    return first
 
 
 def _step_checkpoints(out_dir: Path) -> list[Path]:
@@ -992,8 +1010,9 @@ def check_resumable(cfg: TrainConfig, last: Path, world: int | None = None) -> N
         was = json.loads(json.dumps(asdict(build_config(ck["config"]))))  # keys added since read as their defaults
     except ConfigError as e:
         raise ConfigError(f"{last}: its stored train config does not read: {e}") from e
-    # the model overrides are compared by the model they build: restating a preset's own value is the same model
-    by_model = ("model",) if "model_config" in ck else ()
+    # the preset and the model overrides are compared by the model they build: restating a preset's own value, or
+    # naming another preset that builds the same model (edge128 without its encoder: edge128_baseline), is the same
+    by_model = ("preset", "model") if "model_config" in ck else ()
     refuse_another_config(last, was, json.loads(json.dumps(asdict(cfg))), RESUME_MAY_CHANGE, by_model)
     if by_model:
         refuse_another_model(last, ck["model_config"], cfg.model_config())
@@ -1077,7 +1096,7 @@ def load_error_words(e: BaseException) -> str:
     advice on ``weights_only`` to torch, which says nothing of the file."""
     if isinstance(e, pickle.UnpicklingError):
         return "UnpicklingError: not a file torch.save wrote, or a damaged one"
-    words = " ".join(str(e).split())[:200] or ("the file ends before its first record (empty?)"
+    words = error_words(e) or ("the file ends before its first record (empty?)"
                                                if isinstance(e, EOFError) else "no message")
     return f"{type(e).__name__}: {words}"
 
@@ -1109,8 +1128,9 @@ def load_resnet18_into(trunk: torch.nn.Module, path: str, key: str) -> None:
 
 
 def check_model_human_init(mcfg: ModelConfig) -> None:
-    """``model.human.init`` (torchvision's resnet18 weights, read as the model is built, resumed or not) loaded
-    into a throwaway trunk: a missing or foreign file was a traceback after ``config.json`` was written."""
+    """``model.human.init`` (torchvision's resnet18 weights, read as a new run's model is built; a resume takes
+    the checkpoint's) loaded into a throwaway trunk: a missing or foreign file was a traceback after
+    ``config.json`` was written."""
     if not (mcfg.use_human_encoder and mcfg.human.init):
         return
     from training.model.human_encoder import ResNet18Trunk
@@ -1146,8 +1166,9 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     ds = dataset
 
     seed_everything(cfg.seed)  # same initial weights on every rank
-    model = GHNeRF(mcfg).to(device).train()
-    if start is None:  # (a resume's checkpoint holds the weights these files gave its start)
+    # a resume's checkpoint holds the weights model.human.init, init and human_init gave its start
+    model = GHNeRF(mcfg, read_init=start is None).to(device).train()
+    if start is None:
         load_start_weights(model, cfg)
     if not cfg.human_init and cfg.pretrain_human and info.main and not resume:
         print("warning: the config has a pretrain_human block but no human_init: the human encoder starts from "

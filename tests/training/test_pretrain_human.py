@@ -607,6 +607,33 @@ def test_resume_takes_model_overrides_that_build_the_same_encoder(data64, tmp_pa
                  resume=True, quiet=True)
 
 
+def test_resume_under_another_preset_name_that_builds_the_same_encoder(data64, tmp_path, monkeypatch):
+    """Another preset's name building the same model was refused on ``preset``; it is compared by the model."""
+    from training.configs import PRESETS, tiny
+
+    monkeypatch.setitem(PRESETS, "tiny_again", tiny)
+    run = tmp_path / "p"
+    pretrain(tiny_pretrain(data64, iterations=1, eval_every=0), run, quiet=True)
+    pretrain(tiny_pretrain(data64, eval_every=0, preset="tiny_again"), run, resume=True, quiet=True)
+    assert torch.load(run / "last.pt", weights_only=False)["step"] == 2
+
+
+def test_resume_does_not_read_a_model_human_init_moved_since_the_run_began(data64, tmp_path):
+    """``last.pt`` holds the encoder's weights: a resume read ``model.human.init`` again, and stopped on a file
+    moved since the run began; it now gives the weights of an uninterrupted run."""
+    from tests.training.test_resnet18_names import fake_state_dict
+
+    weights = tmp_path / "resnet18.pth"
+    torch.save(fake_state_dict(), weights)
+    model = {"human": {"init": str(weights)}}
+    pretrain(tiny_pretrain(data64, eval_every=0, model=model), tmp_path / "a", quiet=True)
+    pretrain(tiny_pretrain(data64, iterations=1, eval_every=0, model=model), tmp_path / "b", quiet=True)
+    weights.rename(tmp_path / "moved.pth")
+    pretrain(tiny_pretrain(data64, eval_every=0, model=model), tmp_path / "b", resume=True, quiet=True)
+    a, b = (torch.load(tmp_path / r / "last.pt", weights_only=False)["human"] for r in ("a", "b"))
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
 def test_resume_refuses_a_checkpoint_of_another_model_before_anything_is_written(data64, tmp_path, monkeypatch):
     """The preset changed since the checkpoint (same config, another encoder size): named by setting, not a
     load_state_dict traceback after config.json was rewritten; a checkpoint from before model_config was stored

@@ -263,6 +263,35 @@ def test_resume_refuses_another_config_and_names_a_damaged_checkpoint(data64, tm
         train(tiny_cfg(data64), tmp_path / "r", resume=True, quiet=True)
 
 
+def test_an_unreadable_checkpoint_is_named_with_torchs_words_cut_after_a_sentence(tmp_path):
+    """torch's text was cut at 200 characters, mid-sentence: "...there is a high likelihood that your checkpoint
+    file is)". It now ends after the last sentence that fits, and still names the file."""
+    from training.train import load_checkpoint
+
+    damaged = tmp_path / "last.pt"
+    torch.save({"w": torch.zeros(3)}, damaged)
+    damaged.write_bytes(damaged.read_bytes()[:-10])  # the zip's central directory lost
+    with pytest.raises(ConfigError) as e:
+        load_checkpoint(damaged)
+    said = str(e.value)
+    assert said.startswith(f"{damaged}: unreadable checkpoint (RuntimeError: ")
+    words = said.split("(RuntimeError: ", 1)[1].split("); ", 1)[0]
+    assert words.endswith("."), words
+    assert "failed finding central directory." in words and len(words) <= 200
+
+
+@pytest.mark.parametrize("text, said", [
+    ("short and whole", "short and whole"),
+    ("first line\nsecond line", "first line"),
+    ("a clause, " + "x" * 250, "a clause"),  # no sentence ends within the limit: the last clause that does
+    ("y" * 250, "y" * 250),  # no boundary at all: kept whole rather than cut mid-word
+])
+def test_error_words_keep_a_complete_first_line_or_sentence(text, said):
+    from training.train import error_words
+
+    assert error_words(RuntimeError(text)) == said
+
+
 def test_resume_without_last_pt_passes_over_a_damaged_ckpt_for_the_next_older(data64, tmp_path, capsys):
     """The newest ckpt_*.pt that loads is taken; the one passed over was named with last.pt's advice ("delete it
     (--resume then continues from the newest ckpt_*.pt)"), which it was already doing."""
@@ -450,6 +479,46 @@ def test_resume_takes_model_overrides_that_build_the_same_model(data64, tmp_path
     same = {"use_human_encoder": True, "heatmap_stride": 4}
     assert train(tiny_cfg(data64, iterations=2, pck_every=0, model=same), run, resume=True, quiet=True)[0]["steps"] == 2
     assert train(tiny_cfg(data64, iterations=3, pck_every=0), run, resume=True, quiet=True)[0]["steps"] == 3
+
+
+def test_resume_under_another_preset_name_that_builds_the_same_model(data64, tmp_path, monkeypatch):
+    """``--preset edge128 --set model.use_human_encoder=false`` on an ``edge128_baseline`` run builds the same
+    model, yet was refused on ``preset``: the preset is compared by the model it builds, as the overrides are."""
+    from dataclasses import replace
+
+    from training.configs import PRESETS, tiny
+
+    monkeypatch.setitem(PRESETS, "tiny_baseline", lambda: replace(tiny(), use_human_encoder=False))
+    run = tmp_path / "r"
+    train(tiny_cfg(data64, preset="tiny_baseline", iterations=1, pck_every=0), run, quiet=True)
+    same = tiny_cfg(data64, iterations=2, pck_every=0, model={"use_human_encoder": False})
+    assert train(same, run, resume=True, quiet=True)[0]["steps"] == 2
+    with pytest.raises(ConfigError) as e:  # a preset building another model: named by the setting that differs
+        train(tiny_cfg(data64, iterations=3, pck_every=0), run, resume=True, quiet=True)
+    assert "another model config (use_human_encoder False in the checkpoint, True now" in str(e.value)
+
+
+def test_resume_does_not_read_a_model_human_init_moved_since_the_run_began(data64, tmp_path):
+    """The checkpoint holds the weights ``model.human.init`` gave the run's start: a resume built the model by
+    reading the file again, so one moved since stopped it (``model.human.init: ...: no such file``)."""
+    from tests.training.test_resnet18_names import fake_state_dict
+    from training.train import load_model
+
+    weights = tmp_path / "resnet18.pth"
+    torch.save(fake_state_dict(), weights)
+    cfg = tiny_cfg(data64, pck_every=0, model={"human": {"init": str(weights)}})
+    _, m_straight = train(cfg, tmp_path / "a", quiet=True)
+    train(tiny_cfg(data64, iterations=1, pck_every=0, model={"human": {"init": str(weights)}}), tmp_path / "b",
+          quiet=True)
+    weights.rename(tmp_path / "moved.pth")
+    summary, m_resumed = train(cfg, tmp_path / "b", resume=True, quiet=True)
+    assert summary["steps"] == 2
+    a, b = m_straight.state_dict(), m_resumed.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    ck = torch.load(tmp_path / "b" / "last.pt", weights_only=False)  # the run's model config, unchanged
+    assert ck["model_config"]["human"]["init"] == str(weights)
+    loaded, _ = load_model(tmp_path / "b" / "last.pt")  # evaluation reads the checkpoint's weights alone too
+    assert all(torch.equal(a[k], v) for k, v in loaded.state_dict().items())
 
 
 def test_resume_under_other_model_overrides_names_the_setting_with_both_values(data64, tmp_path):

@@ -156,13 +156,15 @@ class ModelConfig(Config):
 class GHNeRF(nn.Module):
     """The model. See the module docstring for the data flow; shapes in each method."""
 
-    def __init__(self, config: ModelConfig):
+    def __init__(self, config: ModelConfig, read_init: bool = True):
+        """``read_init`` False builds the human encoder without reading ``human.init`` (the weights come from a
+        checkpoint next); ``config`` still names it, so the checkpoints saved keep the run's model config."""
         super().__init__()
         config.validate()
         self.config = config
         self.H, self.W = config.height, config.width
         self.feature_net = FeatureNet(config.features)
-        self.human = HumanEncoder(config.human) if config.use_human_encoder else None
+        self.human = HumanEncoder(config.human, read_init) if config.use_human_encoder else None
         chans = self.feature_net.out_channels
         self.regularizers = nn.ModuleList(
             Regularizer(lv.regularizer, config.cost_volume.groups, with_logits=lv.sampling == "interval")

@@ -199,7 +199,9 @@ def load_torchvision_resnet18(trunk: ResNet18Trunk, source: str | Path | Mapping
 class HumanEncoder(nn.Module):
     """ResNet18 trunk + per-level 1x1 projections summed at ``out_stride``."""
 
-    def __init__(self, config: HumanEncoderConfig):
+    def __init__(self, config: HumanEncoderConfig, read_init: bool = True):
+        """``read_init`` False leaves ``config.init`` unread: for a model whose weights come from a checkpoint
+        next (a resume), where the file may have moved since the run began."""
         super().__init__()
         self.config = config
         self.trunk = ResNet18Trunk(config.num_layers)
@@ -213,7 +215,7 @@ class HumanEncoder(nn.Module):
         }) if config.decoder == "fpn" else None
         self.heat_head = nn.Conv2d(config.out_channels, 25, 1) if config.aux_heatmaps else None
         self.frozen = False
-        if config.init:
+        if config.init and read_init:
             load_torchvision_resnet18(self.trunk, config.init)
 
     def freeze(self) -> "HumanEncoder":
