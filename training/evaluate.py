@@ -245,7 +245,9 @@ def _session(path: Path, threads: int):
 
 
 def _short(e: BaseException) -> str:
-    return f"{type(e).__name__}: {' '.join(str(e).split())[:200]}"
+    from training.train import error_words  # (as load_model: train imports this module)
+
+    return f"{type(e).__name__}: {error_words(e)}"
 
 
 @torch.no_grad()

@@ -713,7 +713,7 @@ def save_atomic(state: Any, path: Path, keep_previous: Path | None = None) -> No
             raise
         kept = f"the previous {path.name} is as it was" if path.exists() else f"no {path.name} was written"
         raise CheckpointWriteError(f"{path}: cannot write the checkpoint ({type(e).__name__}: "
-                                   f"{' '.join(str(e).split())[:200]}); {kept}. Free space and run again with "
+                                   f"{error_words(e)}); {kept}. Free space and run again with "
                                    "--resume") from e
 
 
@@ -741,7 +741,7 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu",
     try:
         model.load_state_dict(ck.get("model", ck))
     except RuntimeError as e:  # missing or mis-shaped tensors
-        raise ConfigError(f"{path}: its weights do not fit its model config ({' '.join(str(e).split())[:200]})") from e
+        raise ConfigError(f"{path}: its weights do not fit its model config ({error_words(e)})") from e
     return model.eval(), ck
 
 
@@ -870,9 +870,12 @@ ERROR_WORDS_LIMIT = 200
 def error_words(e: BaseException, limit: int = ERROR_WORDS_LIMIT) -> str:
     """The first line of ``e``'s text, kept whole up to ``limit`` characters; a longer one is cut after its last
     sentence (else clause) that ends within ``limit``: a cut mid-sentence read "...your checkpoint file is)".
-    A first line with no such boundary is kept whole (complete beats short)."""
+    A first line with no such boundary is kept whole (complete beats short). A first line that heads the rest
+    (ends in ":", as torch's "Error(s) in loading state_dict for GHNeRF:") is read with the lines after it:
+    alone it names no key."""
     lines = str(e).strip().splitlines()
-    first = " ".join(lines[0].split()) if lines else ""
+    heading = bool(lines) and lines[0].rstrip().endswith(":")
+    first = " ".join((" ".join(lines) if heading else lines[0] if lines else "").split())
     if len(first) <= limit:
         return first
     for mark in (". ", "; ", ", "):

@@ -285,6 +285,9 @@ def test_an_unreadable_checkpoint_is_named_with_torchs_words_cut_after_a_sentenc
     ("first line\nsecond line", "first line"),
     ("a clause, " + "x" * 250, "a clause"),  # no sentence ends within the limit: the last clause that does
     ("y" * 250, "y" * 250),  # no boundary at all: kept whole rather than cut mid-word
+    # torch's load_state_dict error: its first line alone ("...for GHNeRF:") named no key
+    ("Error(s) in loading state_dict for GHNeRF:\n\tMissing key(s) in state_dict: \"a.weight\".",
+     'Error(s) in loading state_dict for GHNeRF: Missing key(s) in state_dict: "a.weight".'),
 ])
 def test_error_words_keep_a_complete_first_line_or_sentence(text, said):
     from training.train import error_words
