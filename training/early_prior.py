@@ -48,7 +48,9 @@ def export_keypoint_graph(train_config: dict, data: str | Path, calib_scenes: in
     tc = build_config(train_config)
     if not tc.human_init:
         raise ValueError("the train config has no human_init: there is no pretrained encoder to export")
-    model = GHNeRF(tc.model_config()).eval()
+    # human_init's weights replace every encoder weight model.human.init would give (the joint run's, which may
+    # have moved since the pretraining read it); the human graph reads the encoder alone
+    model = GHNeRF(tc.model_config(), read_init=False).eval()
     load_human(model, tc.human_init)
     out = Path(out_dir)
     # the contract's frame padding as the export stage will write it from the joint run's checkpoint (the same

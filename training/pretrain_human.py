@@ -651,7 +651,8 @@ def score_human(path: str | Path, data: str | Path, split: str = "val", scenes: 
         mc = torch.load(str(path), map_location="cpu", weights_only=True).get("model_config")
     except Exception:  # noqa: BLE001 - load_human below reports the unreadable file by name
         mc = None
-    model = GHNeRF(ModelConfig.from_dict(mc) if mc else model_config_of("edge128", {}))
+    # the file's weights replace every encoder weight model.human.init would give, and that file may have moved
+    model = GHNeRF(ModelConfig.from_dict(mc) if mc else model_config_of("edge128", {}), read_init=False)
     step = load_human(model, path, "--score")
     ds = MultiViewDataset(data, split, TargetConfig(heatmap_stride=model.config.heatmap_stride))
     n = min(scenes, len(ds)) if scenes else len(ds)

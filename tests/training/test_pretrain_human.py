@@ -431,6 +431,23 @@ def test_score_reports_the_heatmap_pck_of_a_human_pt(data64, tmp_path, capsys):
     assert "junk.pt" in capsys.readouterr().err
 
 
+def test_score_does_not_read_a_model_human_init_moved_since_the_pretraining(data64, tmp_path, capsys):
+    """``human.pt`` holds every encoder weight: ``--score`` built the model by reading the ``model.human.init`` its
+    model config names, and a file moved since the pretraining stopped it (``model.human.init: ...``)."""
+    from tests.training.test_resnet18_names import fake_state_dict
+
+    weights = tmp_path / "resnet18.pth"
+    torch.save(fake_state_dict(), weights)
+    model = {"human": {"init": str(weights)}}
+    pretrain(tiny_pretrain(data64, iterations=1, eval_every=0, model=model), tmp_path / "a", quiet=True)
+    argv = ["--score", str(tmp_path / "a" / "human.pt"), "--data", str(data64), "--split", "val", "--scenes", "1"]
+    assert main(argv) == 0
+    before = json.loads(capsys.readouterr().out)
+    weights.rename(tmp_path / "moved.pth")
+    assert main(argv) == 0, capsys.readouterr().err
+    assert json.loads(capsys.readouterr().out) == before  # the same weights scored
+
+
 def test_heatmap_scores_of_the_true_heatmaps(data64):
     """A head that answers the training targets themselves: PCK 1 and a 2D error of the decoder's own (well
     under a model pixel), the p90 no smaller than the median."""
