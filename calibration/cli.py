@@ -761,6 +761,7 @@ def _declared_units(path: Path) -> float | None:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
+    from calibration.common_view import common_view_warning
     from calibration.formats import read_anipose_toml, read_opencv_rig
     from calibration.level import level_rig
 
@@ -804,6 +805,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     print(f"{source} ({fmt}): cameras {a.name!r} {a.width}x{a.height} and {b.name!r} {b.width}x{b.height}, "
           f"baseline {1000 * float(np.linalg.norm(a.center - b.center)):.1f} mm"
           + (f" (file units x {units:g} m)" if units is not None else ""))
+    # a unit the file does not show (stereo_calib's board squares read as metres) leaves a pair sharing no view
+    if warning := common_view_warning(rig):
+        print(f"warning: {warning}")
     recorded = rig.metadata.get("levelled")
     if args.camera_height is not None:
         print(f"levelled: {a.name} {args.camera_height:g} m above the floor, pitch {args.pitch or 0.0:g} deg, "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -284,3 +285,75 @@ def test_import_of_an_anipose_camera_named_by_a_number_takes_the_number_as_its_n
     assert cli.main(["import", str(foreign), "--out", str(tmp_path / "back.json"), "--units-to-metres", "1"]) == 0
     names = [camera["name"] for camera in json.loads((tmp_path / "back.json").read_text())["cameras"]]
     assert "5" in names and "left" not in names
+
+
+def _write_stereo_calib_of(rig: Rig, folder, square_m: float):
+    """``rig``'s pair as OpenCV's stereo_calib writes it (intrinsics.yml + extrinsics.yml, camera 1 -> camera 2)
+    after a calibration without ``-s``: the translation in board squares of ``square_m``."""
+    import cv2
+
+    a, b = rig.pair
+    R = b.R @ a.R.T
+    T = (b.t - R @ a.t) / square_m
+    fs = cv2.FileStorage(str(folder / "intrinsics.yml"), cv2.FILE_STORAGE_WRITE)
+    for key, value in (("M1", a.K), ("D1", a.dist.reshape(1, -1)), ("M2", b.K), ("D2", b.dist.reshape(1, -1))):
+        fs.write(key, value)
+    fs.release()
+    fs = cv2.FileStorage(str(folder / "extrinsics.yml"), cv2.FILE_STORAGE_WRITE)
+    fs.write("R", R)
+    fs.write("T", T.reshape(3, 1))
+    fs.release()
+    return folder / "intrinsics.yml", folder / "extrinsics.yml"
+
+
+@pytest.mark.parametrize("level", [[], ["--camera-height", "1.4", "--pitch", repr(PITCH_DEG)]])
+def test_a_stereo_calib_pair_in_board_squares_read_as_metres_is_warned_about(tmp_path, capsys, level):
+    """stereo_calib without ``-s`` writes T in squares: the 0.6 m pair on 80 mm squares, read with units 1, came
+    out 7.5 m apart (under the 10 m bound) and was taken without a word; it now warns, naming the baseline, the
+    volume and the unit. Read in the square's side it imports as before, no warning."""
+    intrinsics, extrinsics = _write_stereo_calib_of(example_rig(), tmp_path, square_m=0.08)
+    args = ["import", str(intrinsics), "--extrinsics", str(extrinsics), "--image-size", "960x600", *level]
+    assert cli.main([*args, "--units-to-metres", "1", "--out", str(tmp_path / "squares.json")]) == 0
+    out = capsys.readouterr().out
+    assert "baseline 7500.0 mm" in out
+    warning = next(line for line in out.splitlines() if line.startswith("warning: cameras 'left' and 'right'"))
+    assert "% of the working volume [" in warning and "7.50 m apart, farther than the volume reaches" in warning
+    assert "--units-to-metres the square's side in metres" in warning
+    assert load_rig(tmp_path / "squares.json").baseline == pytest.approx(7.5)  # written all the same: a warning
+    assert cli.main([*args, "--units-to-metres", "0.08", "--out", str(tmp_path / "metres.json")]) == 0
+    out = capsys.readouterr().out
+    assert "baseline 600.0 mm" in out and "% of the working volume" not in out
+
+
+def test_a_volume_the_pair_does_not_face_is_warned_about_as_such(tmp_path, capsys):
+    """A pair in the right unit given a working volume off to its side: the same warning, the cause the volume."""
+    intrinsics, extrinsics = _write_stereo_calib_of(example_rig(), tmp_path, square_m=0.08)
+    assert cli.main(["import", str(intrinsics), "--extrinsics", str(extrinsics), "--image-size", "960x600",
+                     "--units-to-metres", "0.08", "--volume", "6,-1,1,8,1,3", "--out", str(tmp_path / "rig.json")]) == 0
+    warning = next(line for line in capsys.readouterr().out.splitlines() if "% of the working volume" in line)
+    assert "both see 0.0 % of the working volume [6.0, -1.0, 1.0] to [8.0, 1.0, 3.0] m" in warning
+    assert "0.60 m apart" in warning and "not where the pair looks" in warning and "--volume" in warning
+    assert "--units-to-metres" not in warning
+
+
+def test_the_real_rigs_pass_the_common_view_check():
+    """The rigs of the repo and the simulator see far more than MIN_COMMON_SHARE of their working volume in both
+    views, as they are and imported from stereo_calib in the right unit (the tool's frame, and levelled)."""
+    from calibration.common_view import MIN_COMMON_SHARE, common_view_share, common_view_warning
+    from calibration.formats import default_working_volume
+    from calibration.level import level_rig
+    from drivers.sim.placement import RigPlacement
+    from tests.calibration.test_level import as_stereo_calib
+
+    repo_rig = load_rig(Path(__file__).parents[2] / "docs" / "examples" / "rig.json")
+    rigs = {"docs/examples/rig.json": repo_rig, "ghcal example": example_rig(), "sim": RigPlacement().build()}
+    for name, rig in list(rigs.items()):
+        tools = as_stereo_calib(rig)
+        rigs[f"{name} imported"] = Rig(tools.cameras, default_working_volume(tools.cameras))
+        height = -rig.cameras[0].center[1]  # each is levelled already: its own height, its pitch from its axis
+        pitch = math.degrees(math.asin(rig.cameras[0].R[2, 1]))
+        rigs[f"{name} imported, levelled"] = level_rig(rigs[f"{name} imported"], camera_height_m=height,
+                                                      pitch_deg=pitch)
+    shares = {name: common_view_share(rig) for name, rig in rigs.items()}
+    assert all(common_view_warning(rig) is None for rig in rigs.values())
+    assert min(shares.values()) >= 2 * MIN_COMMON_SHARE  # a margin: half the volume, not a quarter
