@@ -128,35 +128,32 @@ class DatagramLink:
         self._use(family, addr)
 
     def _use(self, family: int, addr: Any) -> None:
-        """Send to ``addr`` from now on, with a new socket if its family differs."""
-        if self._sock is None or family != self._family:
-            sock = self._new_socket(family)
-            self.close()
+        """Send to ``addr`` from now on, with a new socket when it is another address: a UDP socket keeps the
+        source address its first connect chose, which may be another interface's than the new route's."""
+        if self._sock is None or family != self._family or addr != self._addr:
+            sock = self._connected_socket(family, addr)
+            self.close()  # (and the refusals of the old address, which say nothing of this one)
             self._sock, self._family = sock, family
-        self._connect_to(addr)
         self._addr = addr
 
-    def _new_socket(self, family: int) -> socket.socket:
+    def _connected_socket(self, family: int, addr: Any) -> socket.socket:
+        """A non-blocking socket connected to ``addr`` (a UDP connect sends nothing): the network's refusals of
+        what goes there come back as errors, which an unconnected socket never hears of."""
         try:
             sock = socket.socket(family, socket.SOCK_DGRAM)
         except OSError as e:
             raise SinkUnavailableError(self.url, f"cannot open a socket to {self.host}:{self.port}: {e}") from e
-        sock.setblocking(False)  # a full send buffer must drop, not stall the worker
-        if family == socket.AF_INET:
-            # a broadcast address (192.168.1.255) reaches every console on the subnet; without this
-            # flag the kernel refuses each datagram (EACCES) and the sink would reconnect forever
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
-        return sock
-
-    def _connect_to(self, addr: Any) -> None:
-        """Connect the socket to ``addr`` (a UDP connect sends nothing): the network's refusals of what goes
-        there come back as errors; an unconnected socket never hears of them."""
-        assert self._sock is not None
         try:
-            self._sock.connect(addr)
+            sock.setblocking(False)  # a full send buffer must drop, not stall the worker
+            if family == socket.AF_INET:
+                # a broadcast address (192.168.1.255) reaches every console on the subnet; without this
+                # flag the kernel refuses each datagram (EACCES) and the sink would reconnect forever
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+            sock.connect(addr)
         except OSError as e:  # no route to it now: retried with the backoff, as a failed send was
+            sock.close()
             raise SinkUnavailableError(self.url, f"cannot send to {self.host}:{self.port}: {e}") from e
-        self._refusal = None  # those of another address say nothing of this one
+        return sock
 
     def close(self) -> None:
         sock, self._sock = self._sock, None
@@ -224,20 +221,29 @@ class DatagramLink:
             if fresh is not None and generation == self._generation:
                 self._fresh = fresh
 
+    def _send_past_a_pending_error(self, datagram: bytes) -> None:
+        """Send ``datagram``; an error an ICMP answer to an earlier one left on the socket fails this send unsent,
+        so it is sent again, and the error kept (:meth:`refusing`). One the second send meets too is its own (no
+        route now, such as after the device's own address changed: the socket keeps the source address of its
+        connect) and is raised."""
+        assert self._sock is not None
+        try:
+            self._sock.send(datagram)
+            return
+        except OSError as e:
+            if e.errno not in _ICMP_ERRNOS:
+                raise
+            pending = e
+        self._sock.send(datagram)
+        self._note_refusal(pending)
+
     def send(self, datagram: bytes) -> None:
         if self._sock is None:
             raise SinkUnavailableError(self.url, "socket not open")
         self._refresh()
         self._end_refusal_if_quiet(time.monotonic())
         try:
-            try:
-                self._sock.send(datagram)
-            except OSError as e:
-                if e.errno not in _ICMP_ERRNOS:
-                    raise
-                # an earlier datagram's refusal, reported by this send, which it failed unsent: send it again
-                self._note_refusal(e)
-                self._sock.send(datagram)
+            self._send_past_a_pending_error(datagram)
         except BlockingIOError as e:
             raise SinkWriteError(self.url, "socket send buffer full") from e
         except ConnectionRefusedError as e:  # refused again at once: this datagram is lost, the link is not

@@ -7,12 +7,15 @@ frame, and the first frame after a receiver starts reaches it.
 """
 from __future__ import annotations
 
+import errno
 import logging
+import os
 import socket
 import time
 
 import pytest
 
+from firmware_host.errors import SinkUnavailableError
 from firmware_host.protocol import Joints, StreamDecoder
 from firmware_host.sinks import open_sink, udp_sink
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, wait_until
@@ -109,3 +112,44 @@ def test_the_refusal_waiting_on_the_socket_does_not_cost_the_datagram_it_fails()
     finally:
         link.close()
         rx.close()
+
+
+class _ScriptedSocket:
+    """Stands in for the link's socket: each send raises the next error of ``errors`` (None: sent)."""
+
+    def __init__(self, errors: list) -> None:
+        self.errors, self.sent = list(errors), []
+
+    def send(self, datagram: bytes) -> int:
+        error = self.errors.pop(0) if self.errors else None
+        if error is not None:
+            raise OSError(error, os.strerror(error))
+        self.sent.append(datagram)
+        return len(datagram)
+
+    def close(self) -> None:
+        pass
+
+
+def _scripted_link(errors: list) -> tuple[udp_sink.DatagramLink, _ScriptedSocket]:
+    link = udp_sink.DatagramLink("udp://192.0.2.7:9870", "192.0.2.7", 9870)
+    sock = _ScriptedSocket(errors)
+    link._sock, link._family, link._addr = sock, socket.AF_INET, ("192.0.2.7", 9870)
+    return link, sock
+
+
+def test_a_host_unreachable_an_icmp_answer_left_is_kept_and_the_datagram_sent() -> None:
+    link, sock = _scripted_link([errno.EHOSTUNREACH])
+    link.send(b"frame\x00")
+    assert sock.sent == [b"frame\x00"]
+    refusing = link.refusing(time.monotonic())
+    assert refusing is not None and refusing[1].startswith("192.0.2.7:9870 is unreachable: No route to host")
+
+
+def test_no_route_on_the_send_itself_is_a_link_lost_not_a_refusal() -> None:
+    # the device's own address changed under the connected socket: every send fails the same way; the sink
+    # reopens its socket (SinkUnavailableError), and no ICMP answer is claimed
+    link, sock = _scripted_link([errno.ENETUNREACH, errno.ENETUNREACH])
+    with pytest.raises(SinkUnavailableError, match="Network is unreachable"):
+        link.send(b"frame\x00")
+    assert sock.sent == [] and link.refusing(time.monotonic()) is None
