@@ -78,6 +78,7 @@ from firmware_host.daemon.health import Health, State, write_status_file
 from firmware_host.daemon.memory import pin_mmap_threshold, return_freed_memory
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
 from firmware_host.daemon.sandbox import rig_url_hint, service_hint
+from firmware_host.daemon.status_claim import StatusFileClaim, StatusFileTaken
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame
 from firmware_host.protocol.constants import Fault, Flags
@@ -206,6 +207,22 @@ def check_estimator(session: "ModelSession", config: DaemonConfig) -> None:
                                 key="estimator") from None
 
 
+def _claim_status_file(path: Optional[str], error: type[Exception]) -> StatusFileClaim:
+    """This daemon's claim on ``path`` (an empty claim for no status file).
+
+    :raises error: (DaemonStartError at start, DaemonConfigError keyed ``health.status_file`` at a reload)
+        another daemon writes it.
+    """
+    if not path:
+        return StatusFileClaim("", None)
+    try:
+        return StatusFileClaim.take(path)
+    except StatusFileTaken as e:
+        if error is DaemonConfigError:
+            raise DaemonConfigError(str(e), key="health.status_file") from None
+        raise error(f"health.status_file: {e}") from None
+
+
 class Daemon:
     """Run :class:`DaemonConfig` until ``stop`` is set; see the module docstring.
 
@@ -255,6 +272,7 @@ class Daemon:
         # at 0 again), reloads and reopened sinks, so a receiver's gap means lost after the daemon.
         self._frame_numbers = FrameNumbers()
         self._status_file_failing = False
+        self._status_claim: Optional[StatusFileClaim] = None  # held while running: one status file, one daemon
         self._closed_sink_stats: dict[str, Any] = {}  # the last counters of sinks already closed
         self._carried_gaps: dict[str, int] = {}  # gap flags a closed sink could not report, by URL
         self._carried_totals: dict[str, tuple[int, int]] = {}  # (dropped, decimated) of closed sinks, by URL
@@ -276,6 +294,14 @@ class Daemon:
     # ------------------------------------------------------------------ run
     def run(self, stop: threading.Event) -> int:
         """The main loop; returns the exit status (0). :raises DaemonStartError: cannot start."""
+        # First: a status file another daemon writes must not get this one's reports, nor its last "stopping"
+        self._status_claim = _claim_status_file(self.config.health.status_file, DaemonStartError)
+        try:
+            return self._run_claimed(stop)
+        finally:
+            self._status_claim.release()
+
+    def _run_claimed(self, stop: threading.Event) -> int:
         self._load_model()
         self._check_estimator()
         self._check_sinks()
@@ -709,7 +735,7 @@ class Daemon:
         """Read, check and apply the config file again; returns the parts that changed (``_PARTS``).
 
         Everything that can fail is done first, while nothing of the running daemon has changed: the
-        file and its checks, the rig URL, the model (loaded again only when the session's settings or
+        file and its checks, the claim on a new status file (another daemon may write it), the rig URL, the model (loaded again only when the session's settings or
         graphs change) and the new estimator, built for the open rig, else the rig the estimator was
         last built for, else a stand-in; the added sinks, built for the rig's id and camera names when
         one has been open. The swap after that cannot fail, so a refusal leaves the daemon as it was.
@@ -721,6 +747,19 @@ class Daemon:
         old, new = self.config, self._reload_config()
         check_sink_urls(new.sinks, **self._sink_kwargs)
         changed = [name for name in _PARTS if _part(old, name) != _part(new, name)]
+        claim = None
+        if new.health.status_file != old.health.status_file:
+            claim = _claim_status_file(new.health.status_file, DaemonConfigError)
+        try:
+            return self._reload_checked(rig, old, new, changed, claim)
+        except BaseException:
+            if claim is not None:
+                claim.release()
+            raise
+
+    def _reload_checked(self, rig: Optional[Rig], old: DaemonConfig, new: DaemonConfig, changed: list[str],
+                        claim: Optional[StatusFileClaim]) -> list[str]:
+        """The rest of :meth:`_reload`, with the claim on a new status file taken (``claim``; None: the same)."""
         if "rig.url" in changed:
             try:
                 drivers.create_rig_source(new.rig.url, **self._rig_kwargs)  # parses the URL; opens nothing
@@ -779,6 +818,10 @@ class Daemon:
             self._sync_calibration()
             self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
             self._next_status = 0.0
+            if claim is not None:  # the new file is this daemon's now; the old one is no longer written
+                if self._status_claim is not None:
+                    self._status_claim.release()
+                self._status_claim = claim
             if old_status_file and old_status_file != new.health.status_file:
                 # left in place it would read "running" for ever, frozen, to a monitor still watching it
                 try:

@@ -20,7 +20,10 @@ through for ``options.stall_s`` since a write first failed, or once one write
 has been in progress that long; ``stalled_s`` says for how long. The first frame
 that gets through makes it ``up`` again, and so does an idle write that does
 (``_on_idle`` says it wrote: a STATUS while no frame comes, the rig down). The
-journal hears of a stall once (a WARNING) and of its end once (INFO).
+journal hears of a stall once (a WARNING) and of its end once (INFO). So is a
+link whose writes go out but whose receiver's side says nothing takes them (a
+UDP port no program has open: ``_receiver_refusing``), counted from the first
+refusal of the stretch; the backend logs those.
 
 Backend hooks: ``_connect``, ``_disconnect``, ``_deliver`` and optionally
 ``_on_connected`` and ``link_capacity_fps``.
@@ -148,6 +151,12 @@ class Sink(ABC):
         reads, so a stall ends as at a frame that gets through (False: nothing was due, or a part was cut)."""
         return False
 
+    def _receiver_refusing(self, now: float) -> Optional[tuple[float, str]]:
+        """``(since, why)`` while the writes go out but the receiver's side refuses them (udp://, vmc://: an ICMP
+        port unreachable), None otherwise: the link is as good as stalled. Called with _cond held, from any
+        thread: must not block."""
+        return None
+
     def link_capacity_fps(self) -> Optional[float]:
         """Highest frame rate the link carries, or None when it is not the bottleneck."""
         return None
@@ -236,11 +245,13 @@ class Sink(ABC):
 
     def _stalled_s(self, now: float) -> Optional[float]:
         """How long the open link has delivered nothing, once that is ``stall_s`` or more; else None. Counted
-        from the first failed write since a frame got through, or from the start of a write still in progress
-        (a blocking write that never returns fails nothing): the earlier of the two. Call with _cond held."""
+        from the first failed write since a frame got through, from the start of a write still in progress
+        (a blocking write that never returns fails nothing), or from the first refusal of the receiver's side
+        still going on: the earliest. Call with _cond held."""
         if not self._connected:
             return None
-        starts = [t for t in (self._failing_since, self._writing_since) if t is not None]
+        refusing = self._receiver_refusing(now)
+        starts = [t for t in (self._failing_since, self._writing_since, refusing and refusing[0]) if t is not None]
         if not starts:
             return None
         stalled = now - min(starts)
@@ -407,6 +418,13 @@ class Sink(ABC):
         else:
             _log.info("%s: %s get through again after a stall", self.shown, what_got_through)
 
+    def _keep_refusal_as_last_error(self) -> None:
+        """After a write: a refusal the receiver's side gave meanwhile is the last error (why the sink reads
+        stalled, and what was last wrong once it no longer does). Call with _cond held."""
+        refusing = self._receiver_refusing(time.monotonic())
+        if refusing is not None:
+            self._last_error = refusing[1]
+
     def _log_link_lost(self, e: SinkUnavailableError) -> None:
         # the error's own text starts with the URL too: the line named it twice
         _log.warning("%s: link lost (%s); reconnecting", self.shown, e.reason)
@@ -435,6 +453,7 @@ class Sink(ABC):
         finally:
             with self._cond:
                 self._writing_since = None
+                self._keep_refusal_as_last_error()
                 if wrote:  # the receiver reads again: with no frame to send (the rig down) nothing else ends it
                     self._failing_since = None
         if wrote or failed:  # with no frame to send the idle writes are what tells of a stall, and of its end
@@ -472,6 +491,7 @@ class Sink(ABC):
                 _log.exception("%s: frame %d could not be delivered", self.shown, frame.sequence)
             with self._cond:
                 self._writing_since = None
+                self._keep_refusal_as_last_error()
                 if error is None:
                     self._sent += 1
                     self._failing_since = None  # the receiver reads: no longer stalled

@@ -6,6 +6,14 @@ on the network show up only as sequence gaps at the receiver; the sender
 counts what it could not send (full socket buffer, unreachable network). An IPv4
 broadcast address (``udp://192.168.1.255:9000``) sends to every receiver on the subnet.
 
+The socket is connected to the receiver's address, so the one answer the network gives, an ICMP port (or
+host) unreachable for an earlier datagram, comes back as the error of the next send: nothing listens there
+(a receiver not started, or a typo in the port). That error fails the send it comes with, sending nothing,
+so the datagram is sent again at once: frames keep going out, and a receiver that starts gets the next one.
+The refusals are kept as the link's state: a WARNING once, the sink ``stalled`` (after its ``stall_s``) with
+the refusal as ``last_error``, and an INFO once no datagram was refused for ``REFUSAL_QUIET_S``. Before,
+the socket was unconnected and such a sink read ``up``, every frame ``sent``, with nobody receiving.
+
 A host name is resolved to its IPv4 address when it has one (a receiver bound to
 0.0.0.0 never hears ::1, which glibc may list first for ``localhost``), to IPv6
 when that is all it has or the host is an IPv6 literal. The name is looked up
@@ -16,6 +24,7 @@ of the answer (round-robin DNS, a host on two networks).
 """
 from __future__ import annotations
 
+import errno
 import ipaddress
 import logging
 import socket
@@ -40,6 +49,14 @@ RESOLVE_S = 30.0
 #: Shortest ``resolve_s``: a lookup a second finds a moved robot soon enough, and a name server is not asked once
 #: per frame (``resolve_s=1e-9`` was accepted: a lookup for every frame sent).
 MIN_RESOLVE_S = 1.0
+#: Seconds with no datagram refused after which the receiver counts as there again: Linux answers a host's
+#: datagrams to a closed port with at most about one ICMP port unreachable a second (``icmp_ratelimit``), so
+#: while nothing listens a refusal comes well within this.
+REFUSAL_QUIET_S = 3.0
+#: What an ICMP answer to an earlier datagram leaves on a connected UDP socket for its next send: port, host
+#: or network unreachable. Host and network unreachable may also be the send's own (no route): the send
+#: repeated tells them apart.
+_ICMP_ERRNOS = frozenset({errno.ECONNREFUSED, errno.EHOSTUNREACH, errno.EHOSTDOWN, errno.ENETUNREACH})
 
 
 def take_resolve_s(u: SinkUrl, kw: dict) -> float:
@@ -79,7 +96,8 @@ def _is_ip_literal(host: str) -> bool:
 
 
 class DatagramLink:
-    """An unconnected UDP socket to one address; shared by the udp and vmc sinks.
+    """A UDP socket connected to one address (for the network's refusals: module docstring); shared by the
+    udp and vmc sinks.
 
     Only the sink's worker calls open/send/close; the lookup thread hands its answer over through
     ``_fresh`` and the worker applies it on its next send."""
@@ -98,6 +116,9 @@ class DatagramLink:
         self._generation = 0
         self._looking_up = False
         self._resolved_at = 0.0
+        # (first, last, why) of the current stretch of refused datagrams, monotonic seconds; replaced whole, as
+        # stats() reads it from another thread. None: none refused within REFUSAL_QUIET_S.
+        self._refusal: Optional[tuple[float, float, str]] = None
 
     def open(self) -> None:
         family, addr = resolve(self.url, self.host, self.port)
@@ -107,25 +128,67 @@ class DatagramLink:
         self._use(family, addr)
 
     def _use(self, family: int, addr: Any) -> None:
-        """Send to ``addr`` from now on, with a new socket if its family differs."""
-        if self._sock is None or family != self._family:
-            try:
-                sock = socket.socket(family, socket.SOCK_DGRAM)
-            except OSError as e:
-                raise SinkUnavailableError(self.url, f"cannot open a socket to {self.host}:{self.port}: {e}") from e
+        """Send to ``addr`` from now on, with a new socket when it is another address: a UDP socket keeps the
+        source address its first connect chose, which may be another interface's than the new route's."""
+        if self._sock is None or family != self._family or addr != self._addr:
+            sock = self._connected_socket(family, addr)
+            self.close()  # (and the refusals of the old address, which say nothing of this one)
+            self._sock, self._family = sock, family
+        self._addr = addr
+
+    def _connected_socket(self, family: int, addr: Any) -> socket.socket:
+        """A non-blocking socket connected to ``addr`` (a UDP connect sends nothing): the network's refusals of
+        what goes there come back as errors, which an unconnected socket never hears of."""
+        try:
+            sock = socket.socket(family, socket.SOCK_DGRAM)
+        except OSError as e:
+            raise SinkUnavailableError(self.url, f"cannot open a socket to {self.host}:{self.port}: {e}") from e
+        try:
             sock.setblocking(False)  # a full send buffer must drop, not stall the worker
             if family == socket.AF_INET:
                 # a broadcast address (192.168.1.255) reaches every console on the subnet; without this
                 # flag the kernel refuses each datagram (EACCES) and the sink would reconnect forever
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
-            self.close()
-            self._sock, self._family = sock, family
-        self._addr = addr
+            sock.connect(addr)
+        except OSError as e:  # no route to it now: retried with the backoff, as a failed send was
+            sock.close()
+            raise SinkUnavailableError(self.url, f"cannot send to {self.host}:{self.port}: {e}") from e
+        return sock
 
     def close(self) -> None:
         sock, self._sock = self._sock, None
+        self._refusal = None
         if sock is not None:
             sock.close()
+
+    def refusing(self, now: float) -> Optional[tuple[float, str]]:
+        """``(since, why)`` while the receiver's side refuses the datagrams (one refused within
+        ``REFUSAL_QUIET_S``); None otherwise. Safe from any thread."""
+        refusal = self._refusal
+        if refusal is None or now - refusal[1] > REFUSAL_QUIET_S:
+            return None
+        return refusal[0], refusal[2]
+
+    def _note_refusal(self, error: OSError) -> None:
+        """Keep the refusal an ICMP answer left on the socket; a WARNING at the first of a stretch."""
+        now = time.monotonic()
+        if error.errno == errno.ECONNREFUSED:
+            why = (f"nothing receives at {self.host}:{self.port}: its host refused a datagram (ICMP port "
+                   "unreachable: no program has that UDP port open there)")
+        else:
+            why = f"{self.host}:{self.port} is unreachable: {error.strerror} (an ICMP answer to a datagram)"
+        refusal = self._refusal
+        first = now if refusal is None or now - refusal[1] > REFUSAL_QUIET_S else refusal[0]
+        self._refusal = (first, now, why)
+        if first == now:
+            _log.warning("%s: %s; still sending, so a receiver that starts gets the next frame", self.shown, why)
+
+    def _end_refusal_if_quiet(self, now: float) -> None:
+        refusal = self._refusal
+        if refusal is not None and now - refusal[1] > REFUSAL_QUIET_S:
+            self._refusal = None
+            _log.info("%s: no datagram refused for %g s: a receiver is at %s:%s again", self.shown,
+                      REFUSAL_QUIET_S, self.host, self.port)
 
     def _refresh(self) -> None:
         """Apply a finished lookup; start the next one when due, in its own thread: a slow DNS or mDNS
@@ -158,16 +221,36 @@ class DatagramLink:
             if fresh is not None and generation == self._generation:
                 self._fresh = fresh
 
+    def _send_past_a_pending_error(self, datagram: bytes) -> None:
+        """Send ``datagram``; an error an ICMP answer to an earlier one left on the socket fails this send unsent,
+        so it is sent again, and the error kept (:meth:`refusing`). One the second send meets too is its own (no
+        route now, such as after the device's own address changed: the socket keeps the source address of its
+        connect) and is raised."""
+        assert self._sock is not None
+        try:
+            self._sock.send(datagram)
+            return
+        except OSError as e:
+            if e.errno not in _ICMP_ERRNOS:
+                raise
+            pending = e
+        self._sock.send(datagram)
+        self._note_refusal(pending)
+
     def send(self, datagram: bytes) -> None:
         if self._sock is None:
             raise SinkUnavailableError(self.url, "socket not open")
         self._refresh()
+        self._end_refusal_if_quiet(time.monotonic())
         try:
-            self._sock.sendto(datagram, self._addr)
+            self._send_past_a_pending_error(datagram)
         except BlockingIOError as e:
             raise SinkWriteError(self.url, "socket send buffer full") from e
+        except ConnectionRefusedError as e:  # refused again at once: this datagram is lost, the link is not
+            self._note_refusal(e)
+            raise SinkWriteError(self.url, self._refusal[2] if self._refusal else str(e)) from e
         except OSError as e:  # network down, route gone: recreate the socket after backoff
-            raise SinkUnavailableError(self.url, f"sendto {self.host}:{self.port} failed: {e}") from e
+            raise SinkUnavailableError(self.url, f"send to {self.host}:{self.port} failed: {e}") from e
 
 
 class UdpSink(ProtocolSink):
@@ -192,6 +275,9 @@ class UdpSink(ProtocolSink):
 
     def _disconnect(self) -> None:
         self._link.close()
+
+    def _receiver_refusing(self, now: float) -> Optional[tuple[float, str]]:
+        return self._link.refusing(now)
 
     def _write_messages(self, messages: list[Message]) -> bool:
         frame_types = (MsgType.JOINTS, MsgType.JOINTS_2D)

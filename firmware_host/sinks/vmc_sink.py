@@ -81,6 +81,9 @@ class VmcSink(Sink):
     def _disconnect(self) -> None:
         self._link.close()
 
+    def _receiver_refusing(self, now: float) -> Optional[tuple[float, str]]:
+        return self._link.refusing(now)
+
     def _deliver(self, frame: JointFrame, flags: int) -> None:
         if self._t0_us is None:
             self._t0_us = frame.capture_time_us

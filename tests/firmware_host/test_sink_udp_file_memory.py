@@ -78,8 +78,9 @@ def test_udp_to_a_broadcast_address() -> None:
 
 @pytest.mark.parametrize("host", ["127.0.0.1", "[::1]"])
 def test_udp_to_a_port_nobody_listens_on_keeps_sending(host: str) -> None:
-    # Each datagram draws an ICMP port unreachable. On a connected socket the next send would fail with
-    # ECONNREFUSED; the sink's socket is unconnected, so the receiver that is not up yet costs nothing.
+    # Each datagram draws an ICMP port unreachable, which the next send on the sink's connected socket reports
+    # (ECONNREFUSED) and fails unsent: the sink sends that datagram again, so the receiver that is not up yet
+    # costs no frame and no reconnect (it reads stalled: test_sink_udp_refused.py).
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     probe = socket.socket(family, socket.SOCK_DGRAM)
     probe.bind(("::1" if ":" in host else "127.0.0.1", 0))

@@ -1,0 +1,155 @@
+"""udp:// and vmc:// to a port no program has open: the refusals the network gives back are the sink's state.
+
+Each datagram to a closed port on 127.0.0.1 draws an ICMP port unreachable. The sink's socket used to be
+unconnected, which never hears of it: the sink read ``up``, every frame ``sent``, with nobody receiving (a
+receiver not started, a typo in the port). Now it reads ``stalled`` naming the refusal, still sending every
+frame, and the first frame after a receiver starts reaches it.
+"""
+from __future__ import annotations
+
+import errno
+import logging
+import os
+import socket
+import time
+
+import pytest
+
+from firmware_host.errors import SinkUnavailableError
+from firmware_host.protocol import Joints, StreamDecoder
+from firmware_host.sinks import open_sink, udp_sink
+from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, wait_until
+
+STALL_S = 0.2
+
+
+def _closed_port() -> int:
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    return port
+
+
+def _send_for(sink, seconds: float, first_seq: int) -> int:
+    """Frames every 10 ms for ``seconds``; returns the next seq."""
+    seq, end = first_seq, time.monotonic() + seconds
+    while time.monotonic() < end:
+        sink.send(make_frame(seq))
+        seq += 1
+        time.sleep(0.01)
+    return seq
+
+
+@pytest.mark.parametrize("scheme", ["udp", "vmc"])
+def test_a_port_nobody_listens_on_reads_stalled_naming_the_refusal_and_every_frame_goes_out(
+        scheme: str, caplog: pytest.LogCaptureFixture) -> None:
+    port = _closed_port()
+    caplog.set_level(logging.INFO, logger="firmware_host.sinks.udp_sink")
+    sink = open_sink(f"{scheme}://127.0.0.1:{port}?stall_s={STALL_S}", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        seq = _send_for(sink, STALL_S + 0.3, 0)
+        assert sink.wait_drained(5)
+        stats = sink.stats()
+    finally:
+        sink.close()
+    assert stats.state == "stalled" and stats.stalled_s is not None and stats.stalled_s >= STALL_S
+    assert stats.last_error is not None
+    assert f"nothing receives at 127.0.0.1:{port}" in stats.last_error and "ICMP port unreachable" in stats.last_error
+    # the refusals cost no frame: each is an earlier datagram's, and the one it failed is sent again
+    assert stats.sent == seq and stats.dropped == 0 and stats.disconnects == 0
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1 and "nothing receives at" in warnings[0]  # once, not per datagram
+
+
+def test_a_receiver_that_starts_gets_the_next_frame_and_the_sink_reads_up_again(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    monkeypatch.setattr(udp_sink, "REFUSAL_QUIET_S", 0.3)
+    port = _closed_port()
+    caplog.set_level(logging.INFO, logger="firmware_host.sinks.udp_sink")
+    sink = open_sink(f"udp://127.0.0.1:{port}?stall_s={STALL_S}", backoff=FAST_BACKOFF)
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        assert sink.wait_connected(5)
+        seq = _send_for(sink, STALL_S + 0.2, 0)
+        assert sink.wait_drained(5)
+        assert sink.stats().state == "stalled"
+        # the last datagram's refusal waits on the socket for the next send: it must not cost that frame
+        rx.bind(("127.0.0.1", port))
+        rx.settimeout(5)
+        first_after = seq
+        sink.send(make_frame(first_after))
+        received = [e.message for e in StreamDecoder().feed(rx.recv(2048))]
+        while not any(isinstance(m, Joints) for m in received):
+            received += [e.message for e in StreamDecoder().feed(rx.recv(2048))]
+        assert [m.header.seq for m in received if isinstance(m, Joints)] == [first_after]
+        _send_for(sink, 0.5, first_after + 1)  # past REFUSAL_QUIET_S with none refused
+        wait_until(lambda: sink.stats().state == "up", 5, "the sink up again")
+    finally:
+        stats = sink.close()
+        rx.close()
+    assert stats.dropped == 0
+    assert any("no datagram refused" in r.getMessage() for r in caplog.records if r.levelno == logging.INFO)
+
+
+def test_the_refusal_waiting_on_the_socket_does_not_cost_the_datagram_it_fails() -> None:
+    # the refusal of one datagram is reported by the next send, which it fails unsent: a receiver that starts
+    # in between must still get that next one (sent again at once)
+    port = _closed_port()
+    link = udp_sink.DatagramLink(f"udp://127.0.0.1:{port}", "127.0.0.1", port)
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        link.open()
+        link.send(b"refused\x00")
+        time.sleep(0.05)  # the ICMP answer is on the socket
+        rx.bind(("127.0.0.1", port))
+        rx.settimeout(5)
+        link.send(b"received\x00")
+        assert rx.recv(64) == b"received\x00"
+        refusing = link.refusing(time.monotonic())
+        assert refusing is not None and "ICMP port unreachable" in refusing[1]
+    finally:
+        link.close()
+        rx.close()
+
+
+class _ScriptedSocket:
+    """Stands in for the link's socket: each send raises the next error of ``errors`` (None: sent)."""
+
+    def __init__(self, errors: list) -> None:
+        self.errors, self.sent = list(errors), []
+
+    def send(self, datagram: bytes) -> int:
+        error = self.errors.pop(0) if self.errors else None
+        if error is not None:
+            raise OSError(error, os.strerror(error))
+        self.sent.append(datagram)
+        return len(datagram)
+
+    def close(self) -> None:
+        pass
+
+
+def _scripted_link(errors: list) -> tuple[udp_sink.DatagramLink, _ScriptedSocket]:
+    link = udp_sink.DatagramLink("udp://192.0.2.7:9870", "192.0.2.7", 9870)
+    sock = _ScriptedSocket(errors)
+    link._sock, link._family, link._addr = sock, socket.AF_INET, ("192.0.2.7", 9870)
+    return link, sock
+
+
+def test_a_host_unreachable_an_icmp_answer_left_is_kept_and_the_datagram_sent() -> None:
+    link, sock = _scripted_link([errno.EHOSTUNREACH])
+    link.send(b"frame\x00")
+    assert sock.sent == [b"frame\x00"]
+    refusing = link.refusing(time.monotonic())
+    assert refusing is not None and refusing[1].startswith("192.0.2.7:9870 is unreachable: No route to host")
+
+
+def test_no_route_on_the_send_itself_is_a_link_lost_not_a_refusal() -> None:
+    # the device's own address changed under the connected socket: every send fails the same way; the sink
+    # reopens its socket (SinkUnavailableError), and no ICMP answer is claimed
+    link, sock = _scripted_link([errno.ENETUNREACH, errno.ENETUNREACH])
+    with pytest.raises(SinkUnavailableError, match="Network is unreachable"):
+        link.send(b"frame\x00")
+    assert sock.sent == [] and link.refusing(time.monotonic()) is None
