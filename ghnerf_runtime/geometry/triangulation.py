@@ -55,6 +55,15 @@ MIN_RAY_ANGLE_FLOOR_DEG = 1e-9
 #: Camera centres closer than this share of their distance from the origin are one centre: views from one
 #: point give no depth, and the solvers' point for their (diverging) rays is that centre, a hair in front.
 CENTRE_TOLERANCE = 1e-9
+#: Smallest volume the rows of a projection matrix's left 3x3 block span, once conditioned as the solvers
+#: condition it and each row scaled to unit length (:func:`block_volume`), for the matrix to be solved in. It is
+#: 1 for any pinhole camera with square pixels and no skew, whatever its focal length, principal point or
+#: units, and ``fy/fx`` for non-square pixels; below this the block is singular to rounding (camera at infinity).
+MIN_BLOCK_VOLUME = 1e-12
+#: Smallest share of a left-block row's terms that its conditioned row may keep (:func:`block_volume`): less is
+#: rounding (a third row that is the first over a focal length, rows 1e10 focal lengths off centre: the
+#: conditioned row's digits are gone, yet scaled to unit length it spanned a volume).
+MIN_ROW_SHARE = 1e-10
 
 __all__ = [
     "TriangulationResult",
@@ -69,6 +78,9 @@ __all__ = [
     "MIN_DEPTH",
     "MIN_RAY_ANGLE_FLOOR_DEG",
     "CENTRE_TOLERANCE",
+    "MIN_BLOCK_VOLUME",
+    "MIN_ROW_SHARE",
+    "block_volume",
 ]
 
 
@@ -175,10 +187,11 @@ def _as_cameras(cameras) -> tuple[np.ndarray, tuple]:
             raise ShapeError(f"cameras[{i}] projection matrix must have shape (3, 4), got {P.shape}")
         if not np.all(np.isfinite(P)):
             raise GeometryError(f"cameras[{i}] projection matrix must be finite, got {P.tolist()}")
-        M = P[:, :3]
-        scale = np.linalg.norm(M)
-        if scale == 0 or abs(np.linalg.det(M)) <= 1e-12 * scale**3:
-            raise GeometryError(f"cameras[{i}] projection matrix has a singular left 3x3 block (camera at infinity)")
+        volume = float(block_volume(P[None])[0])
+        if not volume > MIN_BLOCK_VOLUME:
+            raise GeometryError(f"cameras[{i}] projection matrix has a singular left 3x3 block (camera at infinity): "
+                                f"its conditioned rows span a volume of {volume:.3g}, at least {MIN_BLOCK_VOLUME:g} "
+                                "needed")
         matrices.append(P)
         objects.append(None)
     return np.stack(matrices), tuple(objects)
@@ -375,6 +388,33 @@ def _conditioning_similarity(P: np.ndarray) -> np.ndarray:
     T[:, 1, 2] = -s * cy
     T[:, 2, 2] = 1.0
     return T
+
+
+def block_volume(P: np.ndarray, T: np.ndarray | None = None) -> np.ndarray:
+    """``(C,)`` how far from singular each projection matrix's left 3x3 block is, in a measure that does not
+    depend on scale: ``|det|`` of the block conditioned by the solvers' similarity ``T``
+    (:func:`_conditioning_similarity`, computed here where not given) with each row scaled to unit length.
+
+    It is the volume the three unit rows span, in [0, 1]. Conditioning takes out the principal point and the
+    focal length (a block ``K R`` becomes about ``R``), and unit rows take out any row's scale, so a camera 10 px
+    or 1e6 px long, or with its principal point 1e7 px outside the image, gives 1; non-square pixels give about
+    ``min(fx, fy) / max(fx, fy)``, a skew ``s`` about ``fx / hypot(fx, s)``. The raw ``|det M| / |M|^3`` this
+    replaces fell with the principal point's distance and the focal length's scale, and refused cameras that
+    :class:`~ghnerf_runtime.geometry.camera.Camera` accepts and the solvers solve. NaN for a block whose third
+    row is zero (the conditioning has no principal point) or which has a zero row; 0 for one with a conditioned
+    row that rounding made (:data:`MIN_ROW_SHARE`).
+    """
+    with np.errstate(all="ignore"):
+        if T is None:
+            T = _conditioning_similarity(P)
+        M = P[:, :, :3]
+        block = T @ M
+        rows = np.sqrt(np.square(block).sum(axis=-1))  # (C, 3)
+        # What the conditioning subtracted: |T_i| |m_i| bounds each conditioned row's terms, and so its rounding.
+        terms = np.abs(T) @ np.sqrt(np.square(M).sum(axis=-1))[:, :, None]  # (C, 3, 1)
+        significant = np.all(rows > MIN_ROW_SHARE * terms[..., 0], axis=-1)
+        volume = np.abs(np.linalg.det(block / rows[..., None]))
+        return np.where(significant | np.isnan(volume), volume, 0.0)
 
 
 def _dlt_solve(views: _Views) -> tuple[np.ndarray, np.ndarray]:
@@ -666,11 +706,18 @@ class TwoViewCameras:
         if P.shape != (2, 3, 4):
             raise ShapeError(f"P (2, 3, 4) expected for two views' terms, got {P.shape}")
         M = P[:, :, :3]  # (a view, as the solver always took it: the same memory layout, the same matmul results)
-        det = np.linalg.det(M)
-        if not np.all(np.isfinite(P)) or np.any(np.abs(det) <= 1e-12 * np.linalg.norm(M, axis=(1, 2)) ** 3):
+        if not np.all(np.isfinite(P)):
             raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block, got {P.tolist()}")
         with np.errstate(all="ignore"):
             T = _conditioning_similarity(P)
+        volume = block_volume(P, T)
+        if not np.all(volume > MIN_BLOCK_VOLUME):
+            view = int(np.argmin(np.where(np.isnan(volume), -1.0, volume)))
+            raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block: view {view}'s "
+                                f"conditioned rows span a volume of {volume[view]:.3g}, at least {MIN_BLOCK_VOLUME:g} "
+                                f"needed, got {P.tolist()}")
+        det = np.linalg.det(M)
+        with np.errstate(all="ignore"):
             Pn = T @ P
             Pn /= np.sqrt(np.square(Pn).sum(axis=(1, 2)))[:, None, None]
             Minv = np.linalg.inv(M)

@@ -10,8 +10,10 @@ from hypothesis import strategies as st
 from ghnerf_runtime.errors import GeometryError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera, look_at
 from ghnerf_runtime.geometry.triangulation import (
+    MIN_BLOCK_VOLUME,
     TriangulationResult,
     TwoViewCameras,
+    block_volume,
     check_two_views,
     solve_two_views,
     triangulate_dlt,
@@ -813,3 +815,52 @@ def test_a_lens_folded_by_its_tangential_terms_gives_no_valid_joint_off_its_poin
     for res in (triangulate_dlt(uv, cams), triangulate_robust(uv, cams, max_reprojection_error=2.0)):
         assert res.valid.sum() > 20
         np.testing.assert_allclose(res.points[res.valid], points[res.valid], atol=1e-6)
+
+
+@pytest.mark.parametrize("fx, fy", [(10.0, 10.0), (1e6, 1e6), (10.0, 1e6), (1e6, 10.0)])
+@pytest.mark.parametrize("shift", [0.0, 1e5, 1e7])
+def test_every_camera_accepts_from_10_px_to_1e6_px_is_solved_from_its_matrices_too(fx, fy, shift):
+    """The matrices' singularity check is scale-invariant (block_volume): a Camera 10 px or 1e6 px long, with
+    pixels 1e5 times taller than wide, or its principal point 1e7 px outside the image, was refused as 'singular'
+    by TwoViewCameras.from_P and the general solvers' matrix path (|det M| <= 1e-12 |M|^3), while the solvers took
+    the Camera itself. Now both paths solve it, to the same points."""
+    K_ = np.array([[fx, 0.0, 319.5 + shift], [0.0, fy, 239.5 - shift], [0.0, 0.0, 1.0]])
+    cams = [Camera(n, 640, 480, K_, np.zeros(5), *look_at((x, 0.0, 0.0), (0.0, 0.0, 3.0))) for n, x in
+            (("a", -0.1), ("b", 0.1))]
+    points = np.array([0.0, 0.0, 3.0]) + np.random.default_rng(3).uniform(-0.3, 0.3, (25, 3))
+    uv = np.stack([c.project(points, distort=False)[0] for c in cams])
+    P = np.stack([c.P for c in cams])
+    assert np.all(block_volume(P) > MIN_BLOCK_VOLUME)
+    fast = triangulate_two_views(uv, P, np.ones((2, 25)))
+    general = triangulate_dlt(uv, list(P), undistorted=True)
+    of_cameras = triangulate_dlt(uv, cams)
+    for res in (fast, general, of_cameras):
+        assert res.valid.all()
+        np.testing.assert_allclose(res.points, points, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(fast.points, general.points, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("scale", [1e-8, 1.0, 1e8])
+def test_a_singular_block_is_refused_at_any_scale(scale):
+    """Truly degenerate matrices are still refused by both paths, by name: a zero block, a zero third row (a camera
+    at infinity), two parallel rows, and a third row that is the first over a focal length (rank 2: its conditioned
+    row is rounding; np.linalg.inv raised a bare LinAlgError on it before)."""
+    P = np.stack([c.P for c in generate_scene(2, 1)[0]]) * scale
+    bad = []
+    for change in ("zero", "row3", "parallel", "rank2"):
+        Q = P.copy()
+        if change == "zero":
+            Q[1, :, :3] = 0.0
+        elif change == "row3":
+            Q[1, 2, :3] = 0.0
+        elif change == "parallel":
+            Q[1, 1, :3] = Q[1, 0, :3] * (1 + 1e-14)
+        else:
+            Q[1, 2, :3] = Q[1, 0, :3] / 600.0
+        bad.append(Q)
+    for Q in bad:
+        assert not block_volume(Q)[1] > MIN_BLOCK_VOLUME
+        with pytest.raises(GeometryError, match="view 1's conditioned rows span a volume"):
+            TwoViewCameras.from_P(Q)
+        with pytest.raises(GeometryError, match=r"cameras\[1\] projection matrix has a singular left 3x3 block"):
+            triangulate_dlt(np.full((2, 1, 2), 300.0), list(Q), undistorted=True)
