@@ -442,7 +442,8 @@ class Camera:
         (within 0.0001 degrees of the camera plane) points count as outside too. Tangential or
         thin-prism terms that fold the model nearer (:func:`unfolded_radius`) bring the limit in to there."""
         xy = check_last_dim("xy", xy, 2)
-        return np.sum(xy * xy, axis=-1) < self.lens_limit ** 2
+        with np.errstate(over="ignore", invalid="ignore"):  # NaN, inf and overflowing points are outside
+            return np.sum(xy * xy, axis=-1) < self.lens_limit ** 2
 
     @property
     def lens_limit(self) -> float:
