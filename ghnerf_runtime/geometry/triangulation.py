@@ -176,7 +176,7 @@ def _as_cameras(cameras) -> tuple[np.ndarray, tuple]:
     matrices, objects = [], []
     for i, item in enumerate(items):
         if isinstance(item, Camera):
-            matrices.append(item.P)
+            matrices.append(_regular_matrix(item.P, f"cameras[{i}] (camera {item.name!r})"))
             objects.append(item)
             continue
         try:
@@ -185,16 +185,23 @@ def _as_cameras(cameras) -> tuple[np.ndarray, tuple]:
             raise ShapeError(f"cameras[{i}] must be a Camera or a (3, 4) projection matrix, got {type(item).__name__}") from None
         if P.shape != (3, 4):
             raise ShapeError(f"cameras[{i}] projection matrix must have shape (3, 4), got {P.shape}")
-        if not np.all(np.isfinite(P)):
-            raise GeometryError(f"cameras[{i}] projection matrix must be finite, got {P.tolist()}")
-        volume = float(block_volume(P[None])[0])
-        if not volume > MIN_BLOCK_VOLUME:
-            raise GeometryError(f"cameras[{i}] projection matrix has a singular left 3x3 block (camera at infinity): "
-                                f"its conditioned rows span a volume of {volume:.3g}, at least {MIN_BLOCK_VOLUME:g} "
-                                "needed")
-        matrices.append(P)
+        matrices.append(_regular_matrix(P, f"cameras[{i}]"))
         objects.append(None)
     return np.stack(matrices), tuple(objects)
+
+
+def _regular_matrix(P: np.ndarray, where: str) -> np.ndarray:
+    """``P`` ``(3, 4)``, if finite with a regular left block (:func:`block_volume`); else GeometryError naming it.
+
+    A :class:`Camera` is checked too: its K may be finite and yet lose its focal length to rounding in ``P``
+    (fx = 1e-20 px beside a principal point at 320 px), which np.linalg.inv refused with a bare LinAlgError."""
+    if not np.all(np.isfinite(P)):
+        raise GeometryError(f"{where} projection matrix must be finite, got {P.tolist()}")
+    volume = float(block_volume(P[None])[0])
+    if not volume > MIN_BLOCK_VOLUME:
+        raise GeometryError(f"{where} projection matrix has a singular left 3x3 block (camera at infinity): its "
+                            f"conditioned rows span a volume of {volume:.3g}, at least {MIN_BLOCK_VOLUME:g} needed")
+    return P
 
 
 def _prepare(uv, cameras, weights, undistorted: bool | None) -> _Views:
@@ -400,9 +407,9 @@ def block_volume(P: np.ndarray, T: np.ndarray | None = None) -> np.ndarray:
     or 1e6 px long, or with its principal point 1e7 px outside the image, gives 1; non-square pixels give about
     ``min(fx, fy) / max(fx, fy)``, a skew ``s`` about ``fx / hypot(fx, s)``. The raw ``|det M| / |M|^3`` this
     replaces fell with the principal point's distance and the focal length's scale, and refused cameras that
-    :class:`~ghnerf_runtime.geometry.camera.Camera` accepts and the solvers solve. NaN for a block whose third
-    row is zero (the conditioning has no principal point) or which has a zero row; 0 for one with a conditioned
-    row that rounding made (:data:`MIN_ROW_SHARE`).
+    :class:`~ghnerf_runtime.geometry.camera.Camera` accepts and the solvers solve. 0 for a block with a zero row
+    (a zero third row: a camera at infinity), one whose conditioning overflowed (focal lengths of 1e300 px), and
+    one with a conditioned row that rounding made (:data:`MIN_ROW_SHARE`).
     """
     with np.errstate(all="ignore"):
         if T is None:
@@ -414,7 +421,7 @@ def block_volume(P: np.ndarray, T: np.ndarray | None = None) -> np.ndarray:
         terms = np.abs(T) @ np.sqrt(np.square(M).sum(axis=-1))[:, :, None]  # (C, 3, 1)
         significant = np.all(rows > MIN_ROW_SHARE * terms[..., 0], axis=-1)
         volume = np.abs(np.linalg.det(block / rows[..., None]))
-        return np.where(significant | np.isnan(volume), volume, 0.0)
+        return np.where(significant & np.isfinite(volume), volume, 0.0)
 
 
 def _dlt_solve(views: _Views) -> tuple[np.ndarray, np.ndarray]:
