@@ -143,6 +143,7 @@ class _Views:
     P: np.ndarray           # (C, 3, 4)
     cameras: tuple          # (C,) Camera or None
     lens: np.ndarray        # (C,) bool: the input pixels of camera c are distorted
+    T: np.ndarray           # (C, 3, 3) the conditioning similarities (_conditioning_similarity of P)
     batch_shape: tuple
 
 
@@ -156,8 +157,9 @@ def _check_thresholds(min_ray_angle_deg, max_reprojection_error=None) -> None:
         raise GeometryError(f"max_reprojection_error must be a positive number of pixels, got {max_reprojection_error!r}")
 
 
-def _as_cameras(cameras) -> tuple[np.ndarray, tuple]:
-    """Projection matrices ``(C, 3, 4)`` and the Camera objects (or None) they came from."""
+def _as_cameras(cameras) -> tuple[np.ndarray, tuple, np.ndarray]:
+    """Projection matrices ``(C, 3, 4)``, the Camera objects (or None) they came from and the matrices'
+    conditioning similarities ``(C, 3, 3)`` (:func:`_conditioning_similarity`, which their check needs too)."""
     if isinstance(cameras, Camera):
         raise ShapeError("cameras must be a sequence of Camera objects or projection matrices, got one Camera")
     if isinstance(cameras, np.ndarray) and cameras.dtype != object:
@@ -173,11 +175,12 @@ def _as_cameras(cameras) -> tuple[np.ndarray, tuple]:
             ) from None
     if not items:
         raise ShapeError("cameras must not be empty")
-    matrices, objects = [], []
+    matrices, objects, names = [], [], []
     for i, item in enumerate(items):
         if isinstance(item, Camera):
-            matrices.append(_regular_matrix(item.P, f"cameras[{i}] (camera {item.name!r})"))
+            matrices.append(item.P)
             objects.append(item)
+            names.append(f"cameras[{i}] (camera {item.name!r})")
             continue
         try:
             P = np.asarray(item, dtype=np.float64)
@@ -185,27 +188,33 @@ def _as_cameras(cameras) -> tuple[np.ndarray, tuple]:
             raise ShapeError(f"cameras[{i}] must be a Camera or a (3, 4) projection matrix, got {type(item).__name__}") from None
         if P.shape != (3, 4):
             raise ShapeError(f"cameras[{i}] projection matrix must have shape (3, 4), got {P.shape}")
-        matrices.append(_regular_matrix(P, f"cameras[{i}]"))
+        matrices.append(P)
         objects.append(None)
-    return np.stack(matrices), tuple(objects)
+        names.append(f"cameras[{i}]")
+    P = np.stack(matrices)
+    return P, tuple(objects), _check_regular(P, names)
 
 
-def _regular_matrix(P: np.ndarray, where: str) -> np.ndarray:
-    """``P`` ``(3, 4)``, if finite with a regular left block (:func:`block_volume`); else GeometryError naming it.
+def _check_regular(P: np.ndarray, names: Sequence[str]) -> np.ndarray:
+    """The conditioning similarities ``(C, 3, 3)`` of the ``(C, 3, 4)`` matrices ``P``; GeometryError naming the
+    first that is not finite or whose left block is singular (:func:`block_volume`).
 
-    A :class:`Camera` is checked too: its K may be finite and yet lose its focal length to rounding in ``P``
+    :class:`Camera` objects are checked too: a finite K can lose its focal length to rounding in ``P``
     (fx = 1e-20 px beside a principal point at 320 px), which np.linalg.inv refused with a bare LinAlgError."""
-    if not np.all(np.isfinite(P)):
-        raise GeometryError(f"{where} projection matrix must be finite, got {P.tolist()}")
-    volume = float(block_volume(P[None])[0])
-    if not volume > MIN_BLOCK_VOLUME:
-        raise GeometryError(f"{where} projection matrix has a singular left 3x3 block (camera at infinity): its "
-                            f"conditioned rows span a volume of {volume:.3g}, at least {MIN_BLOCK_VOLUME:g} needed")
-    return P
+    finite = np.isfinite(P).all(axis=(1, 2))
+    for c in np.flatnonzero(~finite):
+        raise GeometryError(f"{names[c]} projection matrix must be finite, got {P[c].tolist()}")
+    with np.errstate(all="ignore"):
+        T = _conditioning_similarity(P)
+    volume = block_volume(P, T)
+    for c in np.flatnonzero(~(volume > MIN_BLOCK_VOLUME)):
+        raise GeometryError(f"{names[c]} projection matrix has a singular left 3x3 block (camera at infinity): its "
+                            f"conditioned rows span a volume of {volume[c]:.3g}, at least {MIN_BLOCK_VOLUME:g} needed")
+    return T
 
 
 def _prepare(uv, cameras, weights, undistorted: bool | None) -> _Views:
-    P, objects = _as_cameras(cameras)
+    P, objects, T = _as_cameras(cameras)
     C = len(objects)
     uv = np.asarray(uv, dtype=np.float64)
     if uv.ndim < 3 or uv.shape[-1] != 2:
@@ -252,7 +261,7 @@ def _prepare(uv, cameras, weights, undistorted: bool | None) -> _Views:
         )
     w, used = _relative_weights(np.where(used, w, 0.0), used, axis=1)
     x = np.where(used[..., None], x, 0.0)
-    return _Views(uv=uv, x=x, w=w, used=used, P=P, cameras=objects, lens=lens, batch_shape=batch_shape)
+    return _Views(uv=uv, x=x, w=w, used=used, P=P, cameras=objects, lens=lens, T=T, batch_shape=batch_shape)
 
 
 def _relative_weights(w: np.ndarray, used: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
@@ -426,7 +435,7 @@ def block_volume(P: np.ndarray, T: np.ndarray | None = None) -> np.ndarray:
 
 def _dlt_solve(views: _Views) -> tuple[np.ndarray, np.ndarray]:
     """Batched homogeneous DLT. Returns points ``(N, J, 3)`` and a "finite" mask ``(N, J)``."""
-    T = _conditioning_similarity(views.P)
+    T = views.T
     xn = views.x * T[None, :, None, [0, 1], [0, 1]] + T[None, :, None, [0, 1], 2]
     Pn = T @ views.P  # (C, 3, 4)
     Pn = Pn / np.linalg.norm(Pn, axis=(-2, -1), keepdims=True)
