@@ -57,8 +57,8 @@ MIN_RAY_ANGLE_FLOOR_DEG = 1e-9
 CENTRE_TOLERANCE = 1e-9
 #: Smallest volume the rows of a projection matrix's left 3x3 block span, once conditioned as the solvers
 #: condition it and each row scaled to unit length (:func:`block_volume`), for the matrix to be solved in. It is
-#: 1 for any pinhole camera with square pixels and no skew, whatever its focal length, principal point or
-#: units, and ``fy/fx`` for non-square pixels; below this the block is singular to rounding (camera at infinity).
+#: 1 for any pinhole camera without skew, whatever its focal lengths (fx and fy apart too), principal point or
+#: units, and ``fx / hypot(fx, skew)`` with one; below this the block is singular to rounding (camera at infinity).
 MIN_BLOCK_VOLUME = 1e-12
 #: Smallest share of a left-block row's terms that its conditioned row may keep (:func:`block_volume`): less is
 #: rounding (a third row that is the first over a focal length, rows 1e10 focal lengths off centre: the
@@ -413,8 +413,8 @@ def block_volume(P: np.ndarray, T: np.ndarray | None = None) -> np.ndarray:
 
     It is the volume the three unit rows span, in [0, 1]. Conditioning takes out the principal point and the
     focal length (a block ``K R`` becomes about ``R``), and unit rows take out any row's scale, so a camera 10 px
-    or 1e6 px long, or with its principal point 1e7 px outside the image, gives 1; non-square pixels give about
-    ``min(fx, fy) / max(fx, fy)``, a skew ``s`` about ``fx / hypot(fx, s)``. The raw ``|det M| / |M|^3`` this
+    or 1e6 px long, with pixels 1e5 times taller than wide, or with its principal point 1e7 px outside the image,
+    gives 1 (to rounding); a skew ``s`` gives ``fx / hypot(fx, s)``. The raw ``|det M| / |M|^3`` this
     replaces fell with the principal point's distance and the focal length's scale, and refused cameras that
     :class:`~ghnerf_runtime.geometry.camera.Camera` accepts and the solvers solve. 0 for a block with a zero row
     (a zero third row: a camera at infinity), one whose conditioning overflowed (focal lengths of 1e300 px), and
