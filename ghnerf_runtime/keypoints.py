@@ -561,11 +561,12 @@ def model_to_image_pixels(uv: np.ndarray, camera: Camera, roi: Roi, model_size: 
     crop = crop_camera(camera, roi, model_size, roll_deg)
     safe = uv if valid is None else np.where(np.asarray(valid, bool)[..., None], uv, 0.0)
     xy = camera_normalized(crop.pixels_to_normalized(safe), crop, camera)
-    mapped = camera.normalized_to_pixels(xy, distort=distort)
     if distort:
         inside = camera.within_lens(xy)
-        if not inside.all():
-            valid = inside if valid is None else _valid_like(valid, mapped) & inside
+        if not inside.all():  # (the lens model of a far or non-finite point overflowed, with numpy warnings)
+            xy = np.where(inside[..., None], xy, 0.0)
+            valid = inside if valid is None else _valid_like(valid, xy) & inside
+    mapped = camera.normalized_to_pixels(xy, distort=distort)
     return _keep_fill(mapped, valid)
 
 

@@ -58,7 +58,8 @@ from ghnerf_runtime.geometry.camera import REACH_RIM_POINTS, UNDISTORT_POLISH
 from ghnerf_runtime.geometry.orbit import AXES_PIVOT_DROP_M, AXES_PIVOT_HOLD_M, PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
 from ghnerf_runtime.geometry.raycast import RASTER_CHUNK
 from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M
-from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_RAY_ANGLE_FLOOR_DEG
+from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_BLOCK_VOLUME, MIN_RAY_ANGLE_FLOOR_DEG, \
+    MIN_ROW_SHARE
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
 from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
@@ -116,6 +117,8 @@ def _doc(name: str) -> str:
     ("docs/geometry.md", f"The default `min_ray_angle_deg = {SOLVER_RAY:g}`"),
     ("docs/geometry.md", f"`MIN_RAY_ANGLE_FLOOR_DEG` = {_exp(MIN_RAY_ANGLE_FLOOR_DEG)} degrees"),
     ("docs/geometry.md", f"(`CENTRE_TOLERANCE`: centres within {_exp(CENTRE_TOLERANCE)} of their distance"),
+    ("docs/geometry.md", f"`MIN_BLOCK_VOLUME` = {_exp(MIN_BLOCK_VOLUME)}, or where"),
+    ("docs/geometry.md", f"`MIN_ROW_SHARE` = {_exp(MIN_ROW_SHARE)} of the terms"),
     ("docs/geometry.md", f"`UNDISTORT_POLISH` = {_exp(UNDISTORT_POLISH)}, so"),
     ("docs/geometry.md", f"in {REACH_RIM_POINTS} points (`REACH_RIM_POINTS`)"),
     ("docs/protocol.md", f"at most {LATE_WINDOW} (`LATE_WINDOW`) behind the newest"),

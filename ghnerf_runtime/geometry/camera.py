@@ -442,7 +442,8 @@ class Camera:
         (within 0.0001 degrees of the camera plane) points count as outside too. Tangential or
         thin-prism terms that fold the model nearer (:func:`unfolded_radius`) bring the limit in to there."""
         xy = check_last_dim("xy", xy, 2)
-        return np.sum(xy * xy, axis=-1) < self.lens_limit ** 2
+        with np.errstate(over="ignore", invalid="ignore"):  # NaN, inf and overflowing points are outside
+            return np.sum(xy * xy, axis=-1) < self.lens_limit ** 2
 
     @property
     def lens_limit(self) -> float:
@@ -464,12 +465,21 @@ class Camera:
         return fold_radius(tuple(self.dist.tolist())) if self.has_distortion else math.inf
 
     def pixels_to_normalized(self, uv: np.ndarray) -> np.ndarray:
-        """Distorted pixel coordinates ``(..., 2)`` -> undistorted normalised coordinates."""
+        """Distorted pixel coordinates ``(..., 2)`` -> undistorted normalised coordinates.
+
+        A pixel with a NaN or infinite coordinate, or one whose normalised coordinates overflow float64, gives
+        ``(NaN, NaN)``, as one the lens model cannot reach does (:meth:`undistort_normalized`): a pinhole camera
+        returned ``inf`` (or NaN, with a numpy warning, for an infinite pixel times a skew of 0)."""
         uv = check_last_dim("uv", uv, 2)
         fx, fy, cx, cy, skew = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2], self.K[0, 1]
-        y = (uv[..., 1] - cy) / fy
-        x = (uv[..., 0] - cx - skew * y) / fx
-        return self.undistort_normalized(np.stack([x, y], axis=-1))
+        with np.errstate(all="ignore"):  # non-finite results are flagged below
+            y = (uv[..., 1] - cy) / fy
+            x = (uv[..., 0] - cx - skew * y) / fx
+            xy = np.stack([x, y], axis=-1)
+        lost = ~np.isfinite(xy).all(axis=-1)
+        if lost.any():
+            xy[lost] = np.nan
+        return self.undistort_normalized(xy)
 
     def normalized_to_pixels(self, xy: np.ndarray, distort: bool = True) -> np.ndarray:
         """Normalised coordinates ``(..., 2)`` -> pixel coordinates, optionally through the lens."""
@@ -529,12 +539,18 @@ class Camera:
         """Rays through distorted pixel coordinates ``(..., 2)``.
 
         Returns ``origins`` ``(..., 3)`` (the camera centre) and unit ``directions`` ``(..., 3)``,
-        both in the rig frame.
+        both in the rig frame. The direction is NaN where :meth:`pixels_to_normalized` is (a non-finite pixel, or
+        one the lens model cannot reach); a pixel far off the image (1e300 px) has its direction, nearly square
+        to the optical axis (its length overflowed: NaN, with numpy warnings).
         """
         xy = self.pixels_to_normalized(uv)
         d_cam = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
-        d = d_cam @ self.R  # R^T d for row vectors
-        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        with np.errstate(invalid="ignore"):  # NaN rows stay NaN
+            # a huge one over its largest component first, so that its length cannot overflow
+            big = np.abs(d_cam).max(axis=-1, keepdims=True)
+            d_cam = np.where(big > 1e150, d_cam / np.where(big > 1e150, big, 1.0), d_cam)
+            d = d_cam @ self.R  # R^T d for row vectors
+            d /= np.linalg.norm(d, axis=-1, keepdims=True)
         return np.broadcast_to(self.center, d.shape).copy(), d
 
     def pixel_grid(self, stride: int = 1) -> np.ndarray:

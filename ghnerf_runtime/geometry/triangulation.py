@@ -55,6 +55,15 @@ MIN_RAY_ANGLE_FLOOR_DEG = 1e-9
 #: Camera centres closer than this share of their distance from the origin are one centre: views from one
 #: point give no depth, and the solvers' point for their (diverging) rays is that centre, a hair in front.
 CENTRE_TOLERANCE = 1e-9
+#: Smallest volume the rows of a projection matrix's left 3x3 block span, once conditioned as the solvers
+#: condition it and each row scaled to unit length (:func:`block_volume`), for the matrix to be solved in. It is
+#: 1 for any pinhole camera without skew, whatever its focal lengths (fx and fy apart too), principal point or
+#: units, and ``fx / hypot(fx, skew)`` with one; below this the block is singular to rounding (camera at infinity).
+MIN_BLOCK_VOLUME = 1e-12
+#: Smallest share of a left-block row's terms that its conditioned row may keep (:func:`block_volume`): less is
+#: rounding (a third row that is the first over a focal length, rows 1e10 focal lengths off centre: the
+#: conditioned row's digits are gone, yet scaled to unit length it spanned a volume).
+MIN_ROW_SHARE = 1e-10
 
 __all__ = [
     "TriangulationResult",
@@ -69,6 +78,9 @@ __all__ = [
     "MIN_DEPTH",
     "MIN_RAY_ANGLE_FLOOR_DEG",
     "CENTRE_TOLERANCE",
+    "MIN_BLOCK_VOLUME",
+    "MIN_ROW_SHARE",
+    "block_volume",
 ]
 
 
@@ -131,6 +143,7 @@ class _Views:
     P: np.ndarray           # (C, 3, 4)
     cameras: tuple          # (C,) Camera or None
     lens: np.ndarray        # (C,) bool: the input pixels of camera c are distorted
+    T: np.ndarray           # (C, 3, 3) the conditioning similarities (_conditioning_similarity of P)
     batch_shape: tuple
 
 
@@ -144,8 +157,9 @@ def _check_thresholds(min_ray_angle_deg, max_reprojection_error=None) -> None:
         raise GeometryError(f"max_reprojection_error must be a positive number of pixels, got {max_reprojection_error!r}")
 
 
-def _as_cameras(cameras) -> tuple[np.ndarray, tuple]:
-    """Projection matrices ``(C, 3, 4)`` and the Camera objects (or None) they came from."""
+def _as_cameras(cameras) -> tuple[np.ndarray, tuple, np.ndarray]:
+    """Projection matrices ``(C, 3, 4)``, the Camera objects (or None) they came from and the matrices'
+    conditioning similarities ``(C, 3, 3)`` (:func:`_conditioning_similarity`, which their check needs too)."""
     if isinstance(cameras, Camera):
         raise ShapeError("cameras must be a sequence of Camera objects or projection matrices, got one Camera")
     if isinstance(cameras, np.ndarray) and cameras.dtype != object:
@@ -161,11 +175,12 @@ def _as_cameras(cameras) -> tuple[np.ndarray, tuple]:
             ) from None
     if not items:
         raise ShapeError("cameras must not be empty")
-    matrices, objects = [], []
+    matrices, objects, names = [], [], []
     for i, item in enumerate(items):
         if isinstance(item, Camera):
             matrices.append(item.P)
             objects.append(item)
+            names.append(f"cameras[{i}] (camera {item.name!r})")
             continue
         try:
             P = np.asarray(item, dtype=np.float64)
@@ -173,19 +188,33 @@ def _as_cameras(cameras) -> tuple[np.ndarray, tuple]:
             raise ShapeError(f"cameras[{i}] must be a Camera or a (3, 4) projection matrix, got {type(item).__name__}") from None
         if P.shape != (3, 4):
             raise ShapeError(f"cameras[{i}] projection matrix must have shape (3, 4), got {P.shape}")
-        if not np.all(np.isfinite(P)):
-            raise GeometryError(f"cameras[{i}] projection matrix must be finite, got {P.tolist()}")
-        M = P[:, :3]
-        scale = np.linalg.norm(M)
-        if scale == 0 or abs(np.linalg.det(M)) <= 1e-12 * scale**3:
-            raise GeometryError(f"cameras[{i}] projection matrix has a singular left 3x3 block (camera at infinity)")
         matrices.append(P)
         objects.append(None)
-    return np.stack(matrices), tuple(objects)
+        names.append(f"cameras[{i}]")
+    P = np.stack(matrices)
+    return P, tuple(objects), _check_regular(P, names)
+
+
+def _check_regular(P: np.ndarray, names: Sequence[str]) -> np.ndarray:
+    """The conditioning similarities ``(C, 3, 3)`` of the ``(C, 3, 4)`` matrices ``P``; GeometryError naming the
+    first that is not finite or whose left block is singular (:func:`block_volume`).
+
+    :class:`Camera` objects are checked too: a finite K can lose its focal length to rounding in ``P``
+    (fx = 1e-20 px beside a principal point at 320 px), which np.linalg.inv refused with a bare LinAlgError."""
+    finite = np.isfinite(P).all(axis=(1, 2))
+    for c in np.flatnonzero(~finite):
+        raise GeometryError(f"{names[c]} projection matrix must be finite, got {P[c].tolist()}")
+    with np.errstate(all="ignore"):
+        T = _conditioning_similarity(P)
+    volume = block_volume(P, T)
+    for c in np.flatnonzero(~(volume > MIN_BLOCK_VOLUME)):
+        raise GeometryError(f"{names[c]} projection matrix has a singular left 3x3 block (camera at infinity): its "
+                            f"conditioned rows span a volume of {volume[c]:.3g}, at least {MIN_BLOCK_VOLUME:g} needed")
+    return T
 
 
 def _prepare(uv, cameras, weights, undistorted: bool | None) -> _Views:
-    P, objects = _as_cameras(cameras)
+    P, objects, T = _as_cameras(cameras)
     C = len(objects)
     uv = np.asarray(uv, dtype=np.float64)
     if uv.ndim < 3 or uv.shape[-1] != 2:
@@ -232,7 +261,7 @@ def _prepare(uv, cameras, weights, undistorted: bool | None) -> _Views:
         )
     w, used = _relative_weights(np.where(used, w, 0.0), used, axis=1)
     x = np.where(used[..., None], x, 0.0)
-    return _Views(uv=uv, x=x, w=w, used=used, P=P, cameras=objects, lens=lens, batch_shape=batch_shape)
+    return _Views(uv=uv, x=x, w=w, used=used, P=P, cameras=objects, lens=lens, T=T, batch_shape=batch_shape)
 
 
 def _relative_weights(w: np.ndarray, used: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
@@ -377,9 +406,36 @@ def _conditioning_similarity(P: np.ndarray) -> np.ndarray:
     return T
 
 
+def block_volume(P: np.ndarray, T: np.ndarray | None = None) -> np.ndarray:
+    """``(C,)`` how far from singular each projection matrix's left 3x3 block is, in a measure that does not
+    depend on scale: ``|det|`` of the block conditioned by the solvers' similarity ``T``
+    (:func:`_conditioning_similarity`, computed here where not given) with each row scaled to unit length.
+
+    It is the volume the three unit rows span, in [0, 1]. Conditioning takes out the principal point and the
+    focal length (a block ``K R`` becomes about ``R``), and unit rows take out any row's scale, so a camera 10 px
+    or 1e6 px long, with pixels 1e5 times taller than wide, or with its principal point 1e7 px outside the image,
+    gives 1 (to rounding); a skew ``s`` gives ``fx / hypot(fx, s)``. The raw ``|det M| / |M|^3`` this
+    replaces fell with the principal point's distance and the focal length's scale, and refused cameras that
+    :class:`~ghnerf_runtime.geometry.camera.Camera` accepts and the solvers solve. 0 for a block with a zero row
+    (a zero third row: a camera at infinity), one whose conditioning overflowed (focal lengths of 1e300 px), and
+    one with a conditioned row that rounding made (:data:`MIN_ROW_SHARE`).
+    """
+    with np.errstate(all="ignore"):
+        if T is None:
+            T = _conditioning_similarity(P)
+        M = P[:, :, :3]
+        block = T @ M
+        rows = np.sqrt(np.square(block).sum(axis=-1))  # (C, 3)
+        # What the conditioning subtracted: |T_i| |m_i| bounds each conditioned row's terms, and so its rounding.
+        terms = np.abs(T) @ np.sqrt(np.square(M).sum(axis=-1))[:, :, None]  # (C, 3, 1)
+        significant = np.all(rows > MIN_ROW_SHARE * terms[..., 0], axis=-1)
+        volume = np.abs(np.linalg.det(block / rows[..., None]))
+        return np.where(significant & np.isfinite(volume), volume, 0.0)
+
+
 def _dlt_solve(views: _Views) -> tuple[np.ndarray, np.ndarray]:
     """Batched homogeneous DLT. Returns points ``(N, J, 3)`` and a "finite" mask ``(N, J)``."""
-    T = _conditioning_similarity(views.P)
+    T = views.T
     xn = views.x * T[None, :, None, [0, 1], [0, 1]] + T[None, :, None, [0, 1], 2]
     Pn = T @ views.P  # (C, 3, 4)
     Pn = Pn / np.linalg.norm(Pn, axis=(-2, -1), keepdims=True)
@@ -666,11 +722,18 @@ class TwoViewCameras:
         if P.shape != (2, 3, 4):
             raise ShapeError(f"P (2, 3, 4) expected for two views' terms, got {P.shape}")
         M = P[:, :, :3]  # (a view, as the solver always took it: the same memory layout, the same matmul results)
-        det = np.linalg.det(M)
-        if not np.all(np.isfinite(P)) or np.any(np.abs(det) <= 1e-12 * np.linalg.norm(M, axis=(1, 2)) ** 3):
+        if not np.all(np.isfinite(P)):
             raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block, got {P.tolist()}")
         with np.errstate(all="ignore"):
             T = _conditioning_similarity(P)
+        volume = block_volume(P, T)
+        if not np.all(volume > MIN_BLOCK_VOLUME):
+            view = int(np.argmin(np.where(np.isnan(volume), -1.0, volume)))
+            raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block: view {view}'s "
+                                f"conditioned rows span a volume of {volume[view]:.3g}, at least {MIN_BLOCK_VOLUME:g} "
+                                f"needed, got {P.tolist()}")
+        det = np.linalg.det(M)
+        with np.errstate(all="ignore"):
             Pn = T @ P
             Pn /= np.sqrt(np.square(Pn).sum(axis=(1, 2)))[:, None, None]
             Minv = np.linalg.inv(M)

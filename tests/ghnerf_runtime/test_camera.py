@@ -496,3 +496,33 @@ def test_a_lens_whose_reach_misses_the_image_or_covers_it_twice_folds_inside_it(
     far = Camera("far", 640, 480, [[320.0, 0.0, 3000.0], [0.0, 320.0, 239.5], [0.0, 0.0, 1.0]],
                  [0.0, 0.0, 0.3, 0.0])  # its principal point far right of the image: the image beyond the reach
     assert far.fold_inside_image() and np.isnan(far.pixels_to_normalized(far.pixel_grid(8))).all()
+
+
+@pytest.mark.parametrize("dist", [np.zeros(5), np.array([-0.2, 0.05, 0.001, -0.001, 0.0])], ids=["pinhole", "lens"])
+def test_rays_of_extreme_pixels_are_a_direction_or_nan_and_silent(dist):
+    """Back-projection at the extremes, as projection: a non-finite pixel gives NaN normalised coordinates and a NaN
+    ray (a pinhole camera gave inf coordinates, and numpy warnings: inf times a skew of 0, inf times R), and a far
+    but finite pixel (1e300 px) of a pinhole camera its true direction, nearly square to the axis (its length
+    overflowed: a NaN ray, with an overflow warning)."""
+    import warnings
+
+    cam = make_camera(dist)
+    pixels = np.array([[np.inf, 0.0], [-np.inf, np.inf], [np.nan, 100.0], [1e300, 1e300], [1e308, -1e308],
+                       [100.0, 200.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        xy = cam.pixels_to_normalized(pixels)
+        _, d = cam.rays(pixels)
+        undistorted = cam.undistort_pixels(pixels)
+    assert np.all(np.isnan(xy[:3])) and np.all(np.isnan(d[:3])) and np.all(np.isnan(undistorted[:3]))
+    assert np.all(np.isfinite(xy[5])) and np.all(np.isfinite(d[5]))
+    if cam.has_distortion:  # past the lens model's reach
+        assert np.all(np.isnan(d[3:5]))
+    else:
+        np.testing.assert_allclose(np.linalg.norm(d[3:5], axis=-1), 1.0)
+        axis = cam.R[2]
+        assert np.all(np.abs(d[3:5] @ axis) < 1e-6)  # square to the optical axis, to 1e-300 px / f
+        # the direction of a big pixel is the limit of those towards it
+        np.testing.assert_allclose(d[3], cam.rays(np.array([[1e12, 1e12]]))[1][0], atol=1e-9)
+    _, d_regular = cam.rays(np.array([[100.0, 200.0]]))
+    assert np.array_equal(d[5], d_regular[0])

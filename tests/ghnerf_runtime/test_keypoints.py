@@ -366,6 +366,23 @@ def test_a_peak_past_the_lens_fold_is_missing_not_mirrored():
     assert np.all(np.isfinite(model_to_image_pixels(uv, cam, roi, size, distort=False)))  # a ray still
 
 
+@pytest.mark.parametrize("dist", [np.zeros(5), np.array([-0.2, 0.05, 0.001, -0.001, 0.0])], ids=["pinhole", "lens"])
+@pytest.mark.parametrize("roll_deg", [0.0, 30.0])
+def test_non_finite_or_far_model_pixels_map_to_the_fill_without_numpy_warnings(dist, roll_deg):
+    """Model pixels no frame pixel shows (NaN, inf, 1e300 px: past the lens model's reach) come back as the
+    fill, as a point past the fold does; they went through the lens model first, which overflowed with a dozen
+    numpy warnings (and within_lens' square of 1e300 one more). The other pixels keep their values to the bit."""
+    cam = Camera("c", 640, 480, [[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]], dist)
+    roi, size = Roi(100, 50, 256), 256
+    uv = np.array([[0.0, 0.0], [np.nan, 1.0], [np.inf, 0.0], [1e300, 1e300], [255.0, 255.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mapped = model_to_image_pixels(uv, cam, roi, size, roll_deg=roll_deg)
+    np.testing.assert_array_equal(mapped[1:4], MISSING_FILL)
+    np.testing.assert_array_equal(mapped[[0, 4]], model_to_image_pixels(uv[[0, 4]], cam, roi, size,
+                                                                        roll_deg=roll_deg))
+
+
 def test_values_outside_zero_one_never_give_a_confidence_outside_it():
     """A model straying outside [0, 1]: a block of 3.4e38 once overflowed the filter to an infinite confidence."""
     yy, xx = np.mgrid[:32, :32]

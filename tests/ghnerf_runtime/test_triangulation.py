@@ -1,6 +1,8 @@
 """Triangulation, kornia-style: smoke, shapes, exceptions, accuracy, degenerate cases, solver agreement."""
 from __future__ import annotations
 
+import itertools
+
 import cv2
 import numpy as np
 import pytest
@@ -10,8 +12,10 @@ from hypothesis import strategies as st
 from ghnerf_runtime.errors import GeometryError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera, look_at
 from ghnerf_runtime.geometry.triangulation import (
+    MIN_BLOCK_VOLUME,
     TriangulationResult,
     TwoViewCameras,
+    block_volume,
     check_two_views,
     solve_two_views,
     triangulate_dlt,
@@ -764,8 +768,9 @@ def test_extreme_rigs_give_finite_answers_and_valid_joints_only_where_the_geomet
     640x480 image, baselines 1e-9..10 m, points 1e-3..1e4 m away (near-parallel rays included). Every solver
     answers finitely; a joint it calls valid is where the noise-free rays meet, to rounding magnified by the
     rays' angle (the pixels' rounding, 1e-16 of a pixel 1e7 px off centre, is 1e-6 focal lengths of 1e-3 px);
-    the estimator's two-view solver on the projection matrices equals the general DLT on them, or
-    both refuse those matrices by name (GeometryError: a left 3x3 block that is singular to its scale)."""
+    the estimator's two-view solver on the projection matrices equals the general DLT on them, or every solver
+    refuses those cameras by name, Camera objects and matrices alike (GeometryError: a left 3x3 block singular
+    to rounding, block_volume: a focal length of 1e-3 px 1e7 px off centre)."""
     rng = np.random.default_rng(int(focal_px * 1000) % 2**32)
     for shift in (0.0, 1e4, 1e7):
         K_ = np.array([[focal_px, 0.0, 320.0 + shift], [0.0, focal_px, 240.0 - shift], [0.0, 0.0, 1.0]])
@@ -777,6 +782,14 @@ def test_extreme_rigs_give_finite_answers_and_valid_joints_only_where_the_geomet
                 points = aim + rng.uniform(-0.3, 0.3, (25, 3)) * distance
                 uv = np.stack([c.project(points, distort=False)[0] for c in cams])
                 case = (focal_px, shift, baseline, distance)
+                P = np.stack([c.P for c in cams])
+                if not np.all(block_volume(P) > MIN_BLOCK_VOLUME):  # 1e-3 px 1e7 px off centre: rounding
+                    for solve in (triangulate_dlt, triangulate_midpoint, triangulate_robust):
+                        with pytest.raises(GeometryError, match="singular left 3x3 block"):
+                            solve(uv, cams)
+                    with pytest.raises(GeometryError, match="regular left 3x3 block"):
+                        triangulate_two_views(uv, P, np.ones((2, 25)))
+                    continue
                 for res in (triangulate_dlt(uv, cams), triangulate_midpoint(uv, cams),
                             triangulate_robust(uv, cams, max_reprojection_error=5.0)):
                     assert_finite(res)
@@ -787,14 +800,7 @@ def test_extreme_rigs_give_finite_answers_and_valid_joints_only_where_the_geomet
                     # the pixels' own rounding (eps * |uv|, in focal lengths) and the solve's, over the rays' angle
                     rounding = np.finfo(float).eps * np.abs(uv).max() / focal_px + 1e-12
                     assert np.all(error <= 1e3 * rounding / np.sin(np.radians(res.ray_angle_deg[ok]))), case
-                P = np.stack([c.P for c in cams])
-                try:
-                    fast = triangulate_two_views(uv, P, np.ones((2, 25)))
-                except GeometryError as e:
-                    assert "regular left 3x3 block" in str(e), case
-                    with pytest.raises(GeometryError, match="singular left 3x3 block"):
-                        triangulate_dlt(uv, list(P), undistorted=True)
-                    continue
+                fast = triangulate_two_views(uv, P, np.ones((2, 25)))
                 assert_finite(fast)
                 ref = triangulate_dlt(uv, list(P), undistorted=True)
                 assert np.array_equal(fast.valid, ref.valid), case
@@ -813,3 +819,75 @@ def test_a_lens_folded_by_its_tangential_terms_gives_no_valid_joint_off_its_poin
     for res in (triangulate_dlt(uv, cams), triangulate_robust(uv, cams, max_reprojection_error=2.0)):
         assert res.valid.sum() > 20
         np.testing.assert_allclose(res.points[res.valid], points[res.valid], atol=1e-6)
+
+
+@pytest.mark.parametrize("fx, fy", [(10.0, 10.0), (1e6, 1e6), (10.0, 1e6), (1e6, 10.0)])
+@pytest.mark.parametrize("shift", [0.0, 1e5, 1e7])
+def test_every_camera_accepts_from_10_px_to_1e6_px_is_solved_from_its_matrices_too(fx, fy, shift):
+    """The matrices' singularity check is scale-invariant (block_volume): a Camera 10 px or 1e6 px long, with
+    pixels 1e5 times taller than wide, or its principal point 1e7 px outside the image, was refused as 'singular'
+    by TwoViewCameras.from_P and the general solvers' matrix path (|det M| <= 1e-12 |M|^3), while the solvers took
+    the Camera itself. Now both paths solve it, to the same points: on 1x1 to 20000x20000 px images, baselines of
+    1 mm to 100 m, points 1 cm to 1 km away."""
+    rng = np.random.default_rng(3)
+    for (W, H), (baseline, distance) in itertools.product([(1, 1), (640, 480), (20000, 20000)],
+                                                          [(1e-3, 0.01), (0.2, 3.0), (100.0, 1000.0)]):
+        K_ = np.array([[fx, 0.0, (W - 1) / 2 + shift], [0.0, fy, (H - 1) / 2 - shift], [0.0, 0.0, 1.0]])
+        aim = np.array([0.0, 0.0, distance])
+        cams = [Camera(n, W, H, K_, np.zeros(5), *look_at((x, 0.0, 0.0), aim)) for n, x in
+                (("a", -baseline / 2), ("b", baseline / 2))]
+        points = aim + rng.uniform(-0.1, 0.1, (25, 3)) * distance
+        uv = np.stack([c.project(points, distort=False)[0] for c in cams])
+        P = np.stack([c.P for c in cams])
+        case = (W, baseline, distance)
+        assert np.all(block_volume(P) > MIN_BLOCK_VOLUME), case
+        fast = triangulate_two_views(uv, P, np.ones((2, 25)))
+        general = triangulate_dlt(uv, list(P), undistorted=True)
+        of_cameras = triangulate_dlt(uv, cams)
+        for res in (fast, general, of_cameras):
+            assert res.valid.all(), case
+            np.testing.assert_allclose(res.points, points, rtol=0, atol=1e-4 * distance, err_msg=str(case))
+        np.testing.assert_allclose(fast.points, general.points, rtol=1e-9, atol=1e-12, err_msg=str(case))
+
+
+@pytest.mark.parametrize("scale", [1e-8, 1.0, 1e8])
+def test_a_singular_block_is_refused_at_any_scale(scale):
+    """Truly degenerate matrices are still refused by both paths, by name: a zero block, a zero third row (a camera
+    at infinity), two parallel rows, and a third row that is the first over a focal length (rank 2: its conditioned
+    row is rounding; np.linalg.inv raised a bare LinAlgError on it before)."""
+    P = np.stack([c.P for c in generate_scene(2, 1)[0]]) * scale
+    bad = []
+    for change in ("zero", "row3", "parallel", "rank2"):
+        Q = P.copy()
+        if change == "zero":
+            Q[1, :, :3] = 0.0
+        elif change == "row3":
+            Q[1, 2, :3] = 0.0
+        elif change == "parallel":
+            Q[1, 1, :3] = Q[1, 0, :3] * (1 + 1e-14)
+        else:
+            Q[1, 2, :3] = Q[1, 0, :3] / 600.0
+        bad.append(Q)
+    for Q in bad:
+        assert not block_volume(Q)[1] > MIN_BLOCK_VOLUME
+        with pytest.raises(GeometryError, match="view 1's conditioned rows span a volume"):
+            TwoViewCameras.from_P(Q)
+        with pytest.raises(GeometryError, match=r"cameras\[1\] projection matrix has a singular left 3x3 block"):
+            triangulate_dlt(np.full((2, 1, 2), 300.0), list(Q), undistorted=True)
+
+
+@pytest.mark.parametrize("fx, skew, cx", [(1e-20, 0.0, 320.0), (500.0, 0.0, 1e300), (500.0, 1e20, 320.0)])
+def test_a_camera_whose_matrix_is_singular_to_rounding_is_refused_by_name(fx, skew, cx):
+    """Camera takes any finite K with fx, fy > 0, so its P can lose the focal length to rounding (1e-20 px beside a
+    principal point at 320 px, or a principal point at 1e300 px) or have its pixel axes nearly parallel (a skew of
+    1e20): the general solvers took the Camera unchecked and np.linalg.inv raised a bare LinAlgError (or every joint
+    came back invalid), while the same matrices were refused by name. Now every solver refuses the camera, by name."""
+    K_ = np.array([[fx, skew, cx], [0.0, fx, 240.0], [0.0, 0.0, 1.0]])
+    cams = [Camera(n, 640, 480, K_, np.zeros(5), *look_at((x, 0.0, 0.0), (0.0, 0.0, 3.0))) for n, x in
+            (("left", -0.1), ("right", 0.1))]
+    uv = np.full((2, 3, 2), 300.0)
+    for solve in (triangulate_dlt, triangulate_midpoint, triangulate_robust):
+        with pytest.raises(GeometryError, match=r"cameras\[0\] \(camera 'left'\) projection matrix has a singular"):
+            solve(uv, cams)
+    with pytest.raises(GeometryError, match="regular left 3x3 block"):
+        triangulate_two_views(uv, np.stack([c.P for c in cams]), np.ones((2, 3)))
