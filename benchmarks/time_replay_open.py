@@ -12,8 +12,9 @@ camera writes it (``--format exif-jpg``: quality 95, an APP1 EXIF segment holdin
 opens the take too), or as other tools write TIFF (``--format tiff``: OpenCV's, LZW) and WebP (``--format webp``:
 OpenCV's, lossy, quality 90). Then prints the median over ``--rounds`` of: ``ReplayRigSource.open()`` of the take
 (each in a fresh process, so no run warms the next one's Python caches; only the open is timed), for this tree and,
-with ``--baseline``, the other tree's code, the opens taken in turn; every image's ``header_size``, and its
-``payload_is_whole`` (what a take not closed cleanly checks too), both this tree's; and, once, decoding every image
+with ``--baseline``, the other tree's code, the opens taken in turn; every image's ``payload_is_whole`` (what a take
+not closed cleanly checks too), in a fresh process too, for each tree in turn; every image's ``header_size``, this
+tree's; and, once, decoding every image
 (what checking every image's size by decoding would cost). The files are in the page cache (just written or read):
 a cold disk adds a read of each file's first block to the header pass. One host, whatever else runs on it.
 """
@@ -35,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from drivers.backends.recording_format import (  # noqa: E402
-    FRAMES, FrameRow, Manifest, encode_image, header_size, load_image, payload_is_whole, write_manifest,
+    FRAMES, FrameRow, Manifest, encode_image, header_size, load_image, write_manifest,
 )
 from drivers.sim.placement import RigPlacement  # noqa: E402
 
@@ -48,6 +49,19 @@ start = time.perf_counter()
 source.open()
 print(time.perf_counter() - start)
 source.close()
+"""
+
+#: Run in a child process whose PYTHONPATH is the tree timed: prints the seconds its payload_is_whole took for every
+#: image named on stdin.
+_TIMED_WHOLE = """
+import sys, time
+from pathlib import Path
+from drivers.backends.recording_format import payload_is_whole
+images = [Path(line) for line in sys.stdin.read().splitlines()]
+start = time.perf_counter()
+for path in images:
+    payload_is_whole(path)
+print(time.perf_counter() - start)
 """
 
 
@@ -111,6 +125,14 @@ def timed_open(code: Path, take: Path) -> float:
     return float(out.split()[-1])
 
 
+def timed_wholes(code: Path, images: list[Path]) -> float:
+    """Seconds ``code``'s payload_is_whole took for every one of ``images``, in a fresh process."""
+    env = {**os.environ, "PYTHONPATH": str(code)}
+    out = subprocess.run([sys.executable, "-c", _TIMED_WHOLE], input="\n".join(map(str, images)), env=env, cwd=code,
+                         check=True, capture_output=True, text=True).stdout
+    return float(out.split()[-1])
+
+
 def timed(action) -> float:
     start = time.perf_counter()
     action()
@@ -140,12 +162,13 @@ def main() -> None:
     print(f"take {take} ({args.format}): {len(images)} images of {width}x{height}, {args.rounds} rounds")
     trees = {"this tree": ROOT} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
     opens: dict[str, list[float]] = {name: [] for name in trees}
-    headers, wholes = [], []
+    wholes: dict[str, list[float]] = {name: [] for name in trees}
+    headers = []
     for _ in range(args.rounds):
         for name, code in trees.items():
             opens[name].append(timed_open(code, take))
+            wholes[name].append(timed_wholes(code, images))
         headers.append(timed(lambda: [header_size(path) for path in images]))
-        wholes.append(timed(lambda: [payload_is_whole(path) for path in images]))
     for name, code in trees.items():
         print(f"open ({name}, {code}): median {statistics.median(opens[name]):.3f} s "
               f"(min {min(opens[name]):.3f}, max {max(opens[name]):.3f})")
@@ -154,8 +177,13 @@ def main() -> None:
         print(f"open, this tree / baseline: {ratio:.2f}")
     print(f"header_size of every image: median {statistics.median(headers):.3f} s "
           f"({1e6 * statistics.median(headers) / len(images):.1f} us an image)")
-    print(f"payload_is_whole of every image (a take cut short's check): median {statistics.median(wholes):.3f} s "
-          f"({1e6 * statistics.median(wholes) / len(images):.1f} us an image)")
+    for name in trees:
+        print(f"payload_is_whole of every image (a take cut short's check; {name}): median "
+              f"{statistics.median(wholes[name]):.3f} s ({1e6 * statistics.median(wholes[name]) / len(images):.1f} us "
+              "an image)")
+    if args.baseline:
+        ratio = statistics.median(wholes["this tree"]) / statistics.median(wholes["baseline"])
+        print(f"payload_is_whole, this tree / baseline: {ratio:.2f}")
     decode = timed(lambda: [load_image(path) for path in images])
     print(f"decoding every image (once): {decode:.3f} s ({1e6 * decode / len(images):.0f} us an image)")
 

@@ -10,7 +10,9 @@ A TIFF's own Orientation tag (274) turns it too: OpenCV's TIFF decoder (5.0, lib
 read flags, IMREAD_IGNORE_ORIENTATION and IMREAD_UNCHANGED included, where a JPEG's, PNG's or WebP's EXIF
 orientation is ignored. So a TIFF whose first directory's tag is not 1 is decoded from a copy of its bytes with the
 tag set to 1 (``ghnerf_runtime.tiff_header.orientation_reset``): its stored pixels, whatever the decoder does with
-a tag, rather than an undoing of the turn that OpenCV's next version may no longer make.
+a tag, rather than an undoing of the turn that OpenCV's next version may no longer make. An AVIF's rotate and
+mirror properties (``irot``, ``imir``) are made "no turn" the same way (``ghnerf_runtime.avif_header``): OpenCV 5.0
+applies neither, a later decoder might.
 
 ``cv2.imread`` answers None for a file it cannot read, but raises a ``cv2.error`` for one whose header gives a size
 beyond its limits (CV_IO_MAX_IMAGE_WIDTH/HEIGHT/PIXELS: a corrupt or hostile BMP, for one): each caller's error
@@ -21,23 +23,26 @@ from __future__ import annotations
 
 import io
 import os
+from typing import BinaryIO
 
 import cv2
 import numpy as np
 
-from ghnerf_runtime import tiff_header
+from ghnerf_runtime import avif_header, tiff_header
 
 __all__ = ["AS_STORED", "decode_image_or_none", "read_image_or_none"]
 
 #: The decode flag that keeps an image's pixels as stored (IMREAD_UNCHANGED never turns them anyway), a JPEG's,
-#: PNG's or WebP's EXIF orientation ignored; a TIFF's Orientation tag needs more (:func:`_tiff_as_stored`).
+#: PNG's or WebP's EXIF orientation ignored; a TIFF's Orientation tag and an AVIF's irot and imir need more
+#: (:func:`_as_stored`).
 AS_STORED = cv2.IMREAD_IGNORE_ORIENTATION
 
 
 def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None:
-    """``cv2.imread(path, flags)`` as stored (:data:`AS_STORED` added; a TIFF's Orientation tag ignored too), or
-    None where OpenCV cannot read the file, a size beyond its limits included."""
-    if _tiff_orientation_reset_of(path) is not None:
+    """``cv2.imread(path, flags)`` as stored (:data:`AS_STORED` added; a TIFF's Orientation tag and an AVIF's
+    rotate and mirror properties ignored too), or None where OpenCV cannot read the file, a size beyond its limits
+    included."""
+    if _turn_resets_of(path):
         try:
             data = np.fromfile(os.fspath(path), dtype=np.uint8)
         except OSError:
@@ -53,30 +58,45 @@ def decode_image_or_none(data: np.ndarray, flags: int) -> np.ndarray | None:
     """``cv2.imdecode(data, flags)`` (``data`` a file's bytes as uint8) as stored, as :func:`read_image_or_none`
     reads a file; None where OpenCV cannot decode it, a size beyond its limits included."""
     try:
-        return cv2.imdecode(_tiff_as_stored(data), flags | AS_STORED)
+        return cv2.imdecode(_as_stored(data), flags | AS_STORED)
     except cv2.error:
         return None
 
 
-def _tiff_orientation_reset_of(path: str | os.PathLike) -> tuple[int, bytes] | None:
-    """A TIFF file's :func:`ghnerf_runtime.tiff_header.orientation_reset` (its header only read); None for
-    another file, or one that cannot be opened (its read says so)."""
+def _turn_resets_of(path: str | os.PathLike) -> list[tuple[int, bytes]]:
+    """A file's :func:`_turn_resets` (its header only read); none for one that cannot be opened (its read says
+    so)."""
     try:
         with open(path, "rb") as f:
-            return tiff_header.orientation_reset(f)
+            return _turn_resets(f)
     except OSError:
-        return None
+        return []
 
 
-def _tiff_as_stored(data: np.ndarray) -> np.ndarray:
-    """``data``, or where it is a TIFF whose Orientation tag is not 1, a copy with the tag set to 1: OpenCV then
-    decodes its pixels as stored. Other formats are told by their first four bytes, and not copied."""
-    if data[:4].tobytes() not in tiff_header.LAYOUTS:
+def _turn_resets(f: BinaryIO) -> list[tuple[int, bytes]]:
+    """Where to write what (offset, bytes) in a file (``f`` at its start) so that a decoder delivers its pixels as
+    stored: a TIFF's Orientation tag set to 1, an AVIF's rotate and mirror properties made "no turn". Other formats
+    are told by their first 8 bytes, and need none."""
+    head = f.read(8)
+    f.seek(0)
+    if head[:4] in tiff_header.LAYOUTS:
+        reset = tiff_header.orientation_reset(f)
+        return [] if reset is None else [reset]
+    if avif_header.is_isobmff(head):
+        return avif_header.transforms_reset(f)
+    return []
+
+
+def _as_stored(data: np.ndarray) -> np.ndarray:
+    """``data``, or a copy with its :func:`_turn_resets` written: OpenCV then decodes its pixels as stored. Only a
+    TIFF's or an ISOBMFF file's bytes are read further, and copied."""
+    head = data[:8].tobytes()
+    if head[:4] not in tiff_header.LAYOUTS and not avif_header.is_isobmff(head):
         return data
-    reset = tiff_header.orientation_reset(io.BytesIO(data.tobytes()))
-    if reset is None:
+    resets = _turn_resets(io.BytesIO(data.tobytes()))
+    if not resets:
         return data
-    offset, upright = reset
     patched = data.copy()
-    patched[offset:offset + len(upright)] = np.frombuffer(upright, np.uint8)
+    for offset, replacement in resets:
+        patched[offset:offset + len(replacement)] = np.frombuffer(replacement, np.uint8)
     return patched

@@ -1,20 +1,22 @@
 """A TIFF's first image file directory, read without decoding the image (the page OpenCV decodes).
 
-One walk of the header for its two readers: ``ghnerf_runtime.image_files`` (which sets the Orientation tag to 1
-before OpenCV decodes a file, as OpenCV's TIFF decoder turns the image by it whatever the read flags) and
-``drivers.backends.recording_format.header_size`` (a replayed take's image sizes, read at open). Classic TIFF and
+One walk of the header for its readers: ``ghnerf_runtime.image_files`` (which sets the Orientation tag to 1
+before OpenCV decodes a file, as OpenCV's TIFF decoder turns the image by it whatever the read flags),
+``drivers.backends.recording_format.header_size`` (a replayed take's image sizes, read at open) and its
+``payload_is_whole`` (whether a take cut short holds a TIFF whole: :func:`first_directory_end`). Classic TIFF and
 BigTIFF, either byte order. Offsets and counts are read within the file's length: a corrupt header's may be beyond
 any file (a BigTIFF's are 64-bit), and nothing here raises for them.
 """
 from __future__ import annotations
 
+import operator
 import struct
 from dataclasses import dataclass
 from typing import BinaryIO
 
 __all__ = [
     "BITS_PER_SAMPLE", "COMPRESSION", "HEIGHT", "LAYOUTS", "ORIENTATION", "UPRIGHT", "TiffEntry", "TiffLayout", "WIDTH",
-    "first_directory", "orientation_reset",
+    "first_directory", "first_directory_end", "orientation_reset",
 ]
 
 #: The tags read here: ImageWidth, ImageLength, BitsPerSample, Compression, Orientation.
@@ -24,6 +26,12 @@ UPRIGHT = 1
 #: The most values read of one tag (BitsPerSample has one a sample: RGB with alpha and a few extra channels).
 MOST_VALUES = 16
 _SHORT, _LONG, _LONG8 = 3, 4, 16
+#: Where the first directory's image data is: its strips' offsets and byte counts, or its tiles'.
+_IMAGE_DATA_TAGS = ((273, 279), (324, 325))  # (StripOffsets, StripByteCounts), (TileOffsets, TileByteCounts)
+_IMAGE_DATA_TAG_SET = frozenset(tag for pair in _IMAGE_DATA_TAGS for tag in pair)
+#: The size of one value of each entry type (TIFF 6.0's twelve, BigTIFF's LONG8, SLONG8 and IFD8): an entry of
+#: another type is skipped by libtiff, so where its values would be does not matter.
+_TYPE_SIZES = {1: 1, 2: 1, 3: 2, 4: 4, 5: 8, 6: 1, 7: 1, 8: 2, 9: 4, 10: 8, 11: 4, 12: 8, 13: 4, 16: 8, 17: 8, 18: 8}
 _CLASSIC_INTEGERS = {_SHORT: "H", _LONG: "I"}
 _BIG_INTEGERS = {**_CLASSIC_INTEGERS, _LONG8: "Q"}
 
@@ -77,6 +85,63 @@ def first_directory(f: BinaryIO, layout: TiffLayout, tags: frozenset[int]) -> di
     """The entries of ``tags`` in the first image file directory (``f`` just past the byte order and version);
     ``None`` where the directory or a value is cut short, or one of those tags is repeated or not of unsigned
     integers (SHORT or LONG; in a BigTIFF, LONG8 too)."""
+    directory = _first_directory_entries(f, layout)
+    if directory is None:
+        return None
+    entries_at, entries = directory
+    found: dict[int, TiffEntry] = {}
+    for at in range(0, len(entries), layout.entry_size):
+        tag, kind, number = struct.unpack(layout.order + layout.entry_head, entries[at:at + layout.entry_head_size])
+        if tag not in tags:
+            continue
+        field_at = at + layout.entry_head_size
+        values = _integers(f, layout, kind, number, entries[field_at:at + layout.entry_size])
+        if values is None or tag in found:
+            return None
+        found[tag] = TiffEntry(kind, values, entries_at + field_at)
+    return found
+
+
+def first_directory_end(f: BinaryIO, layout: TiffLayout) -> int | None:
+    """How far into the file the first image file directory reaches (``f`` just past the byte order and version):
+    the end of the directory itself (its next directory's offset included), of the values its entries hold
+    elsewhere, and of its image data (each strip's or tile's offset plus byte count). A file shorter than that was
+    cut short: libtiff writes the image data first, then the directory and its values. ``None`` where the directory
+    cannot be read (cut short itself, or malformed: no strips nor tiles, offsets and counts not paired, repeated)."""
+    directory = _first_directory_entries(f, layout)
+    if directory is None:
+        return None
+    entries_at, entries = directory
+    end = entries_at + len(entries) + struct.calcsize(layout.offset)
+    image_data: dict[int, tuple[int, ...]] = {}
+    field_size = layout.entry_size - layout.entry_head_size
+    offset_code = layout.order + layout.offset
+    for tag, kind, number, field in struct.iter_unpack(f"{layout.order}{layout.entry_head}{field_size}s", entries):
+        values_size = _TYPE_SIZES.get(kind, 0) * number
+        if values_size > field_size:  # held elsewhere: the field is their offset
+            end = max(end, struct.unpack(offset_code, field)[0] + values_size)
+        if tag in _IMAGE_DATA_TAG_SET:
+            values = _integers(f, layout, kind, number, field, most=None)
+            if values is None or tag in image_data:
+                return None
+            image_data[tag] = values
+    data_end = _image_data_end(image_data)
+    return None if data_end is None else max(end, data_end)
+
+
+def _image_data_end(image_data: dict[int, tuple[int, ...]]) -> int | None:
+    """Where the last strip's or tile's bytes end; ``None`` without strips or tiles whose offsets and byte counts
+    pair up (libtiff refuses such a directory)."""
+    for offsets_tag, counts_tag in _IMAGE_DATA_TAGS:
+        offsets, counts = image_data.get(offsets_tag), image_data.get(counts_tag)
+        if offsets is not None and counts is not None and len(offsets) == len(counts):
+            return max(map(operator.add, offsets, counts))
+    return None
+
+
+def _first_directory_entries(f: BinaryIO, layout: TiffLayout) -> tuple[int, bytes] | None:
+    """Where the first directory's entries start, and their bytes (``f`` just past the byte order and version);
+    ``None`` where the file ends before them."""
     head = f.read(layout.first_ifd_at - 4)
     if len(head) < layout.first_ifd_at - 4 or head[:len(layout.preamble)] != layout.preamble:
         return None
@@ -89,17 +154,7 @@ def first_directory(f: BinaryIO, layout: TiffLayout, tags: frozenset[int]) -> di
     entries = _read_at(f, entries_at, count * layout.entry_size)
     if len(entries) < count * layout.entry_size:
         return None  # a directory past the end of a file cut short
-    found: dict[int, TiffEntry] = {}
-    for at in range(0, len(entries), layout.entry_size):
-        tag, kind, number = struct.unpack(layout.order + layout.entry_head, entries[at:at + layout.entry_head_size])
-        if tag not in tags:
-            continue
-        field_at = at + layout.entry_head_size
-        values = _integers(f, layout, kind, number, entries[field_at:at + layout.entry_size])
-        if values is None or tag in found:
-            return None
-        found[tag] = TiffEntry(kind, values, entries_at + field_at)
-    return found
+    return entries_at, entries
 
 
 def orientation_reset(f: BinaryIO) -> tuple[int, bytes] | None:
@@ -116,18 +171,20 @@ def orientation_reset(f: BinaryIO) -> tuple[int, bytes] | None:
     return entry.field_at, struct.pack(layout.order + layout.integer_types[entry.kind], UPRIGHT)
 
 
-def _integers(f: BinaryIO, layout: TiffLayout, kind: int, number: int, field: bytes) -> tuple[int, ...] | None:
+def _integers(f: BinaryIO, layout: TiffLayout, kind: int, number: int, field: bytes,
+              most: int | None = MOST_VALUES) -> tuple[int, ...] | None:
     """An entry's unsigned integers: in the entry's value field where they fit (left-justified), else at the
-    offset it holds; ``None`` for another type, more than :data:`MOST_VALUES`, or values cut short."""
+    offset it holds; ``None`` for another type, more than ``most`` (no limit where None: a strip's offsets, one a
+    strip, are read within the file's length), or values cut short."""
     code = layout.integer_types.get(kind)
-    if code is None or not 1 <= number <= MOST_VALUES:
+    if code is None or number < 1 or (most is not None and number > most):
         return None
-    codes = layout.order + code * number
-    if struct.calcsize(codes) > len(field):
-        field = _read_at(f, struct.unpack(layout.order + layout.offset, field)[0], struct.calcsize(codes))
-        if len(field) < struct.calcsize(codes):
+    size = number * struct.calcsize(code)  # counted, not asked of struct: a corrupt count can be 2**64 - 1
+    if size > len(field):
+        field = _read_at(f, struct.unpack(layout.order + layout.offset, field)[0], size)
+        if len(field) < size:
             return None
-    return struct.unpack_from(codes, field)
+    return struct.unpack_from(f"{layout.order}{number}{code}", field)
 
 
 def _read_at(f: BinaryIO, offset: int, length: int) -> bytes:

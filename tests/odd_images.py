@@ -121,3 +121,61 @@ def webp_extended(simple: bytes, *, flags: int = 0, canvas: tuple[int, int] | No
                       + (canvas[1] - 1).to_bytes(3, "little"))
     body = b"WEBP" + vp8x + simple[12:] + after
     return b"RIFF" + struct.pack("<I", len(body)) + body
+
+
+def isobmff_boxes(data: bytes, start: int, stop: int) -> dict[bytes, tuple[int, int]]:
+    """The boxes from ``start`` to ``stop`` of an ISOBMFF file as OpenCV writes an AVIF (32-bit sizes, each type
+    once): type -> (where the box starts, its size)."""
+    boxes, at = {}, start
+    while at < stop:
+        size, kind = struct.unpack_from(">I4s", data, at)
+        boxes[kind] = (at, size)
+        at += size
+    return boxes
+
+
+def avif_transform(kind: bytes, value: int) -> bytes:
+    """An ``irot`` (``value``: quarter turns anticlockwise) or ``imir`` (``value``: the axis) property box."""
+    return struct.pack(">I4sB", 9, kind, value)
+
+
+def avif_with_properties(data: bytes, properties: list[bytes]) -> bytes:
+    """An AVIF OpenCV wrote (one item, meta before mdat) with ``properties`` (boxes) added to its ``ipco`` and
+    associated, as essential, with its item in ``ipma``; its sizes and ``iloc``'s data offsets moved to match.
+    Built byte by byte: OpenCV writes no rotate or mirror property."""
+    out = bytearray(data)
+    meta = isobmff_boxes(out, 0, len(out))[b"meta"]
+    inside_meta = isobmff_boxes(out, meta[0] + 12, meta[0] + meta[1])  # meta is a full box: 4 more bytes
+    iprp = inside_meta[b"iprp"]
+    ipco, ipma = (isobmff_boxes(out, iprp[0] + 8, iprp[0] + iprp[1])[kind] for kind in (b"ipco", b"ipma"))
+    known = len(isobmff_boxes(out, ipco[0] + 8, ipco[0] + ipco[1]))
+    version, flags, entries = out[ipma[0] + 8], out[ipma[0] + 11], struct.unpack_from(">I", out, ipma[0] + 12)[0]
+    assert (version, flags & 1, entries) == (0, 0, 1)  # 16-bit item ids, one-byte associations, one item
+    count_at = ipma[0] + 16 + 2  # past the item id
+    associations = bytes(0x80 | (known + n + 1) for n in range(len(properties)))  # essential, 1-based index
+    grow = len(associations) + sum(len(box) for box in properties)
+    out[count_at + 1 + out[count_at]:count_at + 1 + out[count_at]] = associations
+    out[count_at] += len(properties)
+    struct.pack_into(">I", out, ipma[0], ipma[1] + len(associations))
+    out[ipco[0] + ipco[1]:ipco[0] + ipco[1]] = b"".join(properties)  # before ipma: insert it after ipma's edits
+    for box, more in ((ipco, grow - len(associations)), (iprp, grow), (meta, grow)):
+        struct.pack_into(">I", out, box[0], box[1] + more)
+    _move_item_data(out, inside_meta[b"iloc"][0], grow)
+    return bytes(out)
+
+
+def _move_item_data(out: bytearray, iloc_at: int, shift: int) -> None:
+    """Add ``shift`` to each extent offset of an ``iloc`` box (version 0 or 1, no base offsets)."""
+    version = out[iloc_at + 8]
+    offset_size, length_size = out[iloc_at + 12] >> 4, out[iloc_at + 12] & 15
+    base_size, index_size = out[iloc_at + 13] >> 4, (out[iloc_at + 13] & 15) if version == 1 else 0
+    assert version in (0, 1) and base_size == 0 and offset_size in (4, 8)
+    (items,), at = struct.unpack_from(">H", out, iloc_at + 14), iloc_at + 16
+    code = ">I" if offset_size == 4 else ">Q"
+    for _ in range(items):
+        at += 2 + (2 if version == 1 else 0) + 2  # item id, construction method, data reference index
+        (extents,), at = struct.unpack_from(">H", out, at), at + 2
+        for _ in range(extents):
+            at += index_size
+            struct.pack_into(code, out, at, struct.unpack_from(code, out, at)[0] + shift)
+            at += offset_size + length_size

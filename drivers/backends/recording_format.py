@@ -288,7 +288,7 @@ def file_is_whole(path: Path) -> bool:
 
 #: How each payload file ends, and how far from its end that starts: PNG's IEND chunk (empty: its length, type
 #: and CRC), JPEG's end-of-image marker, the npz's zip end-of-central-directory record (no archive comment is
-#: written). A BMP has no end mark: its header says how long it is (:func:`_bmp_is_as_long_as_its_header_says`).
+#: written). A BMP, TIFF or WebP has no end mark: its header says how long it is (:data:`_WALKS`).
 _PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
 _TRAILERS = {".png": (_PNG_END, len(_PNG_END)), ".jpg": (b"\xff\xd9", 2), ".jpeg": (b"\xff\xd9", 2),
              ".npz": (b"PK\x05\x06", 22)}
@@ -301,9 +301,10 @@ def payload_is_whole(path: Path) -> bool:
     would fail on it mid-take; a few bytes read from its end tell. A PNG or JPEG another tool wrote may hold bytes
     after its end (a trailer, padding, an MPF second image): it is whole where its chunks, or segments and scans,
     walked from its start reach that end (:data:`_WALKS`), which a file cut before it cannot. A JPEG ending at its
-    end marker is whole where its segments also reach its first scan (:data:`_END_CONFIRMS`): one cut at the end
-    of an EXIF thumbnail ends at the same marker. A BMP is whole when it is as long as its header says. The suffix
-    is matched whatever its case (``.JPG``).
+    end marker is whole where its segments also reach its first scan, and where more scans follow its scans reach
+    it too (:data:`_END_CONFIRMS`): one cut at the end of an EXIF thumbnail, or in a segment between a progressive
+    JPEG's scans, may end on the same bytes. A BMP, TIFF or WebP is whole when it is as long as its header
+    says. The suffix is matched whatever its case (``.JPG``).
     """
     suffix = path.suffix.lower()
     trailer, walk = _TRAILERS.get(suffix), _WALKS.get(suffix)
@@ -350,25 +351,60 @@ def _png_reaches_its_end(f: BinaryIO, size: int) -> bool:
         f.seek(length + 4, 1)  # the data and its CRC
 
 
-def _jpeg_segments_reach_a_scan(f: BinaryIO, size: int) -> bool:
-    """Whether a JPEG's marker segments, walked by their lengths from its start (only their headers read), reach its
-    first scan. A file ending at an end-of-image marker may be one cut at the end of an EXIF thumbnail, inside the
-    APP1 segment holding it: that segment then runs past the file's end. Past the first scan a cut cannot end at
-    the marker: in entropy-coded data a 0xFF byte is followed only by 0x00 or a restart marker."""
-    if f.read(len(_JPEG_START)) != _JPEG_START:
+def _jpeg_ending_at_its_marker_is_whole(f: BinaryIO, size: int) -> bool:
+    """Whether a JPEG whose last bytes are an end-of-image marker's (FF D9) ends at its own. Its marker segments,
+    walked by their lengths from its start (only their headers read), must reach its first scan: one cut at the end
+    of an EXIF thumbnail, inside the APP1 segment holding it, ends on those bytes too. Where that scan is its only
+    one, that is all: a cut cannot end on them in entropy-coded data (a 0xFF byte there is followed only by 0x00 or
+    a restart marker). Where more scans follow (a progressive JPEG's, or a sequential one's of one component at a
+    time), a cut inside a segment between two scans (the next scan's tables, a comment) may end on them too: the
+    file is then walked to its end, its scans' data included (:func:`_jpeg_reaches_its_end`)."""
+    first_scan = _jpeg_first_scan(f, size)
+    if first_scan is None:
         return False
+    if first_scan.is_the_only_one:
+        return True
+    f.seek(0)
+    return _jpeg_reaches_its_end(f.read())
+
+
+@dataclass(frozen=True)
+class _JpegFirstScan:
+    """What a JPEG's frame header and first scan header say of how many scans it has."""
+
+    frame_marker: int | None  # None: no frame header before the first scan
+    frame_components: int
+    scan_components: int
+
+    @property
+    def is_the_only_one(self) -> bool:
+        """A sequential frame's scan holding every component is its only one (each component is in one scan)."""
+        return (self.frame_marker is not None and self.frame_marker not in _JPEG_PROGRESSIVE_FRAMES
+                and self.scan_components == self.frame_components)
+
+
+def _jpeg_first_scan(f: BinaryIO, size: int) -> _JpegFirstScan | None:
+    """A JPEG's frame and first scan headers, its marker segments walked by their lengths from its start;
+    ``None`` where they do not reach a scan (a segment running past the end: cut short; or malformed)."""
+    if f.read(len(_JPEG_START)) != _JPEG_START:
+        return None
+    frame_marker, frame_components = None, 0
     while True:  # each pass moves on by at least a marker: it ends at a scan or the end of the file
         marker = _jpeg_marker(f)
-        if marker == _JPEG_SOS:
-            return True
         if marker is None or marker in (0x00, 0xD8, 0xD9):
-            return False  # the end of the file before any scan, or malformed
+            return None  # the end of the file before any scan, or malformed
         if marker == _JPEG_TEM or marker in _JPEG_RST:
             continue  # standalone: no length
         length = _jpeg_segment_length(f)
         if length is None or f.tell() + length > size:
-            return False  # the segment runs past the end: cut short
-        f.seek(length, 1)
+            return None  # the segment runs past the end: cut short
+        if marker == _JPEG_SOS:
+            return _JpegFirstScan(frame_marker, frame_components, f.read(1)[0] if length else 0)
+        if marker in _JPEG_FRAMES:
+            body = f.read(length)  # precision, height, width, then the number of components
+            frame_marker, frame_components = marker, body[5] if len(body) > 5 else 0
+        else:
+            f.seek(length, 1)
 
 
 def _jpeg_file_reaches_its_end(f: BinaryIO, size: int) -> bool:
@@ -401,6 +437,32 @@ def _bmp_pixel_bytes(head: bytes, info_size: int) -> int:
     if compression not in (0, _BMP_BITFIELDS):
         return image_size  # run-length coded (or JPEG, PNG inside): only the header's image size tells
     return (abs(width) * bits + 31) // 32 * 4 * abs(height)  # rows padded to 4 bytes, as OpenCV reads them
+
+
+def _tiff_holds_its_first_directory(f: BinaryIO, size: int) -> bool:
+    """Whether a TIFF holds its first directory (the page OpenCV decodes), the values it points at and its image
+    data, each strip or tile to its last byte (:func:`ghnerf_runtime.tiff_header.first_directory_end`); only
+    the directory and the strips' offsets and byte counts are read."""
+    layout = tiff_header.LAYOUTS.get(f.read(4))
+    if layout is None:
+        return False
+    end = tiff_header.first_directory_end(f, layout)
+    return end is not None and end <= size
+
+
+#: A WebP's RIFF size counts its bytes after the RIFF header (8 bytes); libwebp refuses one below 12 (the
+#: ``WEBP`` tag and one chunk header).
+_RIFF_HEADER_SIZE, _WEBP_SMALLEST_RIFF_SIZE = 8, 12
+
+
+def _webp_holds_its_riff_size(f: BinaryIO, size: int) -> bool:
+    """Whether a WebP holds as many bytes as its RIFF header says (libwebp decodes none of one holding fewer);
+    bytes after them (another tool's trailer) do not matter, as libwebp does not read them."""
+    head = f.read(_RIFF_HEADER_SIZE + 4)
+    if len(head) < _RIFF_HEADER_SIZE + 4 or head[:4] != b"RIFF" or head[8:] != b"WEBP":
+        return False
+    riff_size = struct.unpack("<I", head[4:8])[0]
+    return _WEBP_SMALLEST_RIFF_SIZE <= riff_size and _RIFF_HEADER_SIZE + riff_size <= size
 
 
 def _jpeg_reaches_its_end(data: bytes) -> bool:
@@ -442,11 +504,13 @@ def _jpeg_scan_end(data: bytes, pos: int) -> int:
 
 
 #: What a payload file ending at its format's end mark must also show to be whole: a JPEG's segments reach its
-#: first scan (an EXIF thumbnail inside APP1 ends with the same marker as the image).
-_END_CONFIRMS = {".jpg": _jpeg_segments_reach_a_scan, ".jpeg": _jpeg_segments_reach_a_scan}
+#: first scan (an EXIF thumbnail inside APP1 ends with the same marker as the image), and its later scans, if any,
+#: its end (a segment between two scans may hold the same bytes).
+_END_CONFIRMS = {".jpg": _jpeg_ending_at_its_marker_is_whole, ".jpeg": _jpeg_ending_at_its_marker_is_whole}
 #: How a payload file not ending at its format's end mark is walked from its start to tell whether it is whole.
 _WALKS = {".png": _png_reaches_its_end, ".jpg": _jpeg_file_reaches_its_end, ".jpeg": _jpeg_file_reaches_its_end,
-          ".bmp": _bmp_is_as_long_as_its_header_says}
+          ".bmp": _bmp_is_as_long_as_its_header_says, ".tif": _tiff_holds_its_first_directory,
+          ".tiff": _tiff_holds_its_first_directory, ".webp": _webp_holds_its_riff_size}
 
 
 # ------------------------------------------------------------------ payloads
@@ -492,6 +556,8 @@ _PNG_SIZE_CHANGERS = (b"acTL",)
 #: JPEG start-of-frame markers (SOF0-SOF15 but DHT, JPG and DAC, which share the range), where the size is.
 _JPEG_FRAMES = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
 _JPEG_SOS, _JPEG_TEM, _JPEG_EOI = 0xDA, 0x01, 0xD9
+#: Progressive frames (SOF2, SOF6, SOF10, SOF14): their image is spread over several scans.
+_JPEG_PROGRESSIVE_FRAMES = frozenset({0xC2, 0xC6, 0xCA, 0xCE})
 _JPEG_RST = range(0xD0, 0xD8)
 #: BMP info headers OpenCV reads the size from (BITMAPINFOHEADER, 40 bytes, and its longer versions up to V5's
 #: 124; the 12-byte OS/2 core header is decoded instead), and the pixel layouts it decodes: (bits, compression).

@@ -34,7 +34,7 @@ from drivers.backends.recording_format import (
 )
 from benchmarks import time_replay_open
 from drivers.url import RigUrl
-from tests.odd_images import bmp_built
+from tests.odd_images import bmp_built, riff_chunk, tiff_entries, tiff_laid_out, webp_extended
 
 SIM = "sim://?width=40&height=30&jitter_ms=1.5&offset_ms=2&drop=0.1&seed=8&policy=all"
 
@@ -715,6 +715,117 @@ def test_another_tool_s_suffixes_are_checked_whatever_their_case(tmp_path, name)
         assert payload_is_whole(path) == whole, (len(cut), len(data))
 
 
+def tiffs_and_webps_another_tool_writes() -> dict[str, bytes]:
+    """A 40x30 image as TIFF: as OpenCV writes it (LZW; its directory, then the values it holds elsewhere, after
+    the image data), uncompressed in four strips, laid out again as a big-endian BigTIFF, and a 16x16 one in one
+    tile (BGRA: OpenCV 5.0 reads other tiled layouts wrong); and as WebP: lossy, lossless, and extended (VP8X)
+    with an EXIF chunk after its image."""
+    image = np.random.default_rng(9).integers(0, 256, (30, 40, 3), np.uint8)
+    lzw = cv2.imencode(".tiff", image)[1].tobytes()
+    strips = cv2.imencode(".tiff", image, [cv2.IMWRITE_TIFF_COMPRESSION, 1])[1].tobytes()
+    lossy = cv2.imencode(".webp", image, [cv2.IMWRITE_WEBP_QUALITY, 90])[1].tobytes()
+    return {"tiff": lzw, "tiff in strips": strips, "bigtiff": tiff_laid_out(lzw, ">", big=True),
+            "tiff in a tile": tiled_tiff(), "webp": lossy,
+            "webp lossless": cv2.imencode(".webp", image, [cv2.IMWRITE_WEBP_QUALITY, 101])[1].tobytes(),
+            "webp with exif": webp_extended(lossy, flags=0x08, after=riff_chunk(b"EXIF", b"II*\x00" + bytes(4)))}
+
+
+def tiled_tiff() -> bytes:
+    """A 16x16 BGRA TIFF in one 16x16 tile: OpenCV's uncompressed single strip, its strip tags made tile tags."""
+    image = np.random.default_rng(10).integers(0, 256, (16, 16, 4), np.uint8)
+    data = cv2.imencode(".tiff", image, [cv2.IMWRITE_TIFF_COMPRESSION, 1])[1].tobytes()
+    entries = tiff_entries(data)
+    assert len(entries[273][1]) == 1
+    tiled = tiff_laid_out(data, changed={273: None, 278: None, 279: None, 322: (3, (16,)), 323: (3, (16,)),
+                                         324: (4, entries[273][1]), 325: (4, entries[279][1])})
+    assert np.array_equal(cv2.imdecode(np.frombuffer(tiled, np.uint8), cv2.IMREAD_UNCHANGED), image)
+    return tiled
+
+
+@pytest.mark.parametrize("kind", sorted(tiffs_and_webps_another_tool_writes()))
+@pytest.mark.parametrize("after", sorted(AFTER_THE_END))
+def test_a_tiff_or_webp_with_bytes_after_its_end_is_whole_and_one_cut_before_its_end_is_not(tmp_path, kind, after):
+    """Cut after every byte: whole (and decoded as the image) exactly where the cut is past the TIFF's first
+    directory, the values it points at and its strips or tiles, or past the WebP's RIFF size. Before session 63
+    every cut was whole (not empty): played, then a corrupt frame mid-take."""
+    suffix = ".webp" if kind.startswith("webp") else ".tiff"
+    assert_whole_exactly_past_its_end(tmp_path / f"image{suffix}", tiffs_and_webps_another_tool_writes()[kind],
+                                      AFTER_THE_END[after])
+
+
+@pytest.mark.parametrize("name", ["image.tif", "image.TIF", "image.TIFF", "image.WEBP"])
+def test_tiff_and_webp_suffixes_are_checked_whatever_their_case(tmp_path, name):
+    kind = "webp" if name.lower().endswith(".webp") else "tiff"
+    data = tiffs_and_webps_another_tool_writes()[kind]
+    path = tmp_path / name
+    for cut, whole in ((data, True), (data + AFTER_THE_END["trailer"], True), (data[:-1], False)):
+        path.write_bytes(cut)
+        assert payload_is_whole(path) == whole, (len(cut), len(data))
+
+
+def test_a_tiff_whose_directory_or_image_data_cannot_be_located_is_not_whole(tmp_path):
+    """No strips nor tiles, offsets without byte counts or of another number, offsets beyond any file: libtiff
+    decodes none of these; nothing raises."""
+    data = tiffs_and_webps_another_tool_writes()["tiff"]
+    path = tmp_path / "image.tiff"
+    for changed in ({273: None, 279: None}, {279: None}, {279: (4, (1, 2))}, {273: (4, (2**32 - 1,))}):
+        path.write_bytes(tiff_laid_out(data, changed=changed))
+        assert not payload_is_whole(path), changed
+    huge_strips = b"II+\x00" + struct.pack("<HHQQHHQQ", 8, 0, 16, 1, 273, 16, 2**64 - 1, 0)  # 2**64 - 1 offsets
+    for name, broken in (("image.tiff", b"II*\x00" + struct.pack("<I", 2**32 - 1)), ("image.tif", b"MM\x00*"),
+                         ("image.tiff", huge_strips),
+                         ("image.webp", b"RIFF" + bytes(8)), ("image.webp", b"RIFF\x04\x00\x00\x00WEBP")):
+        (tmp_path / name).write_bytes(broken)
+        assert not payload_is_whole(tmp_path / name), broken
+
+
+def progressive_jpeg_with_a_comment_between_its_scans() -> tuple[bytes, int]:
+    """A 40x30 progressive JPEG as OpenCV writes it, with a comment holding the bytes FF D9 before its second scan
+    (a segment allowed there, as the next scan's tables are); and how far in those bytes end."""
+    image = np.random.default_rng(11).integers(0, 256, (30, 40, 3), np.uint8)
+    data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 90, cv2.IMWRITE_JPEG_PROGRESSIVE, 1])[1].tobytes()
+    second_scan = data.index(b"\xff\xda", data.index(b"\xff\xda") + 2)
+    comment = time_replay_open.jpeg_segment(0xFE, b"cut here: \xff\xd9, and on")
+    with_comment = data[:second_scan] + comment + data[second_scan:]
+    decoded = cv2.imdecode(np.frombuffer(with_comment, np.uint8), cv2.IMREAD_COLOR)
+    assert np.array_equal(decoded, cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR))
+    return with_comment, second_scan + comment.index(b"\xff\xd9", 4) + 2
+
+
+@pytest.mark.parametrize("after", sorted(AFTER_THE_END))
+def test_a_progressive_jpeg_cut_between_its_scans_on_the_bytes_ff_d9_is_not_whole(tmp_path, after):
+    """Cut right after FF D9 in a segment between two scans, the file ends as a JPEG ends, and its segments reach
+    its first scan: before session 63 it was whole (played, then a corrupt frame). Its scans are walked to its end
+    now; cut after every byte, it is whole exactly past its end."""
+    image, cut = progressive_jpeg_with_a_comment_between_its_scans()
+    path = tmp_path / "progressive.jpg"
+    path.write_bytes(image[:cut])
+    assert not payload_is_whole(path)
+    assert_whole_exactly_past_its_end(path, image, AFTER_THE_END[after])
+
+
+def test_a_sequential_jpeg_of_one_component_a_scan_is_walked_to_its_end_too(tmp_path):
+    """A sequential frame of three components whose first scan holds one: more scans follow, and a cut between
+    them may end on FF D9 (headers only, built by hand: OpenCV writes no such file). One scan holding every
+    component is the only one: its file ending on FF D9 ends at its marker, and is not walked."""
+    frame = time_replay_open.jpeg_segment(0xC0, struct.pack(">BHHB", 8, 30, 40, 3) + bytes([1, 0x11, 0, 2, 0x11, 0,
+                                                                                                 3, 0x11, 0]))
+    comment = time_replay_open.jpeg_segment(0xFE, b"tables: \xff\xd9, and on")
+    path = tmp_path / "sequential.jpg"
+
+    def scan(*components: int) -> bytes:
+        return time_replay_open.jpeg_segment(0xDA, bytes([len(components)]) + b"".join(
+            bytes([c, 0]) for c in components) + bytes([0, 63, 0])) + b"\x12\x34\xff\x00\x56"
+
+    cut_between_scans = b"\xff\xd8" + frame + scan(1) + comment
+    path.write_bytes(cut_between_scans[:cut_between_scans.rindex(b"\xff\xd9") + 2])
+    assert not payload_is_whole(path)
+    path.write_bytes(b"\xff\xd8" + frame + scan(1) + scan(2) + scan(3) + b"\xff\xd9")
+    assert payload_is_whole(path)
+    path.write_bytes(b"\xff\xd8" + frame + scan(1, 2, 3) + b"\xff\xd9")
+    assert payload_is_whole(path)
+
+
 def as_take_of(take, suffix: str, encode):
     """``take``'s PNG images as another tool's files (``suffix``, bytes from ``encode(image)``), the journal naming
     them."""
@@ -724,7 +835,7 @@ def as_take_of(take, suffix: str, encode):
     (take / FRAMES).write_text((take / FRAMES).read_text().replace(".png", suffix))
 
 
-@pytest.mark.parametrize("suffix", [".png", ".bmp", ".jpeg"])
+@pytest.mark.parametrize("suffix", [".png", ".bmp", ".jpeg", ".tiff", ".webp"])
 def test_an_interrupted_take_plays_other_tools_files_with_a_trailer_and_drops_one_cut_short(copy_of_take, caplog,
                                                                                             suffix):
     if suffix != ".png":

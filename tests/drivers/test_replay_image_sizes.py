@@ -24,9 +24,13 @@ from drivers.backends.recording_format import (
 )
 from drivers.sim.placement import RigPlacement
 from tests.exif_images import exif_orientation, jpeg_segment, jpeg_turned, png_turned
+from ghnerf_runtime import image_files
 from tests.odd_images import (
+    avif_transform,
+    avif_with_properties,
     bmp_beyond_opencv_s_limits,
     bmp_built,
+    isobmff_boxes,
     riff_chunk,
     tiff_laid_out,
     webp_extended,
@@ -558,3 +562,91 @@ def test_a_header_cut_anywhere_or_corrupt_never_raises_and_never_gives_a_size_op
                 continue
             assert size == (decoded.shape[1], decoded.shape[0])
     assert header_size(tmp_path / "missing.png") is None
+
+
+def avif_of(image: np.ndarray, properties: list[bytes]) -> bytes:
+    """``image`` as a lossless AVIF (OpenCV's) with rotate or mirror ``properties`` added to its item."""
+    return avif_with_properties(cv2.imencode(".avif", image, [cv2.IMWRITE_AVIF_QUALITY, 100])[1].tobytes(), properties)
+
+
+def turning_properties(data: bytes) -> list[tuple[bytes, int]]:
+    """The rotate and mirror property boxes of an AVIF built by ``avif_with_properties`` that turn its image: (type,
+    value) of each ``imir``, and of each ``irot`` of an angle other than 0."""
+    meta = isobmff_boxes(data, 0, len(data))[b"meta"]
+    iprp = isobmff_boxes(data, meta[0] + 12, meta[0] + meta[1])[b"iprp"]
+    at, size = isobmff_boxes(data, iprp[0] + 8, iprp[0] + iprp[1])[b"ipco"]
+    found, box = [], at + 8
+    while box < at + size:
+        length, kind = struct.unpack_from(">I4s", data, box)
+        if kind == b"imir" or (kind == b"irot" and data[box + 8] & 3):
+            found.append((kind, data[box + 8]))
+        box += length
+    return found
+
+
+AVIF_TURNS = {"a quarter turn": [avif_transform(b"irot", 1)], "half a turn": [avif_transform(b"irot", 2)],
+              "three quarters": [avif_transform(b"irot", 3)], "mirrored": [avif_transform(b"imir", 0)],
+              "flipped": [avif_transform(b"imir", 1)],
+              "turned and mirrored": [avif_transform(b"irot", 1), avif_transform(b"imir", 1)]}
+
+
+@pytest.mark.parametrize("turn", sorted(AVIF_TURNS))
+def test_an_avif_s_rotate_and_mirror_properties_are_not_handed_to_the_decoder(tmp_path, monkeypatch, turn):
+    """An AVIF's irot and imir are a display hint, as a JPEG's EXIF orientation is: its frame is delivered as
+    stored. OpenCV 5.0 applies neither; the bytes handed to it say "no turn" (each irot of angle 0, each imir made
+    one), so a decoder that applied them would deliver the stored pixels too. Before session 63 the file's bytes
+    went to the decoder as they were."""
+    image = np.random.default_rng(12).integers(0, 256, (HEIGHT, WIDTH, 3), np.uint8)
+    stored = cv2.imdecode(np.frombuffer(avif_of(image, []), np.uint8), cv2.IMREAD_COLOR)
+    path = tmp_path / "image.avif"
+    path.write_bytes(avif_of(image, AVIF_TURNS[turn]))
+    assert turning_properties(path.read_bytes()) != []
+    handed = []
+    real_imdecode = cv2.imdecode
+    monkeypatch.setattr(image_files.cv2, "imdecode", lambda data, flags: handed.append(data.tobytes())
+                        or real_imdecode(data, flags))
+    assert np.array_equal(load_image(path), stored)
+    assert [turning_properties(data) for data in handed] == [[]]
+    assert image_size(path) == (WIDTH, HEIGHT)
+
+
+def test_an_avif_without_a_turn_is_handed_to_the_decoder_as_it_is(tmp_path, monkeypatch):
+    """An irot of angle 0, or no property at all: nothing to reset, no copy."""
+    image = np.random.default_rng(13).integers(0, 256, (HEIGHT, WIDTH, 3), np.uint8)
+    path = tmp_path / "image.avif"
+    real_imdecode, handed = cv2.imdecode, []
+    monkeypatch.setattr(image_files.cv2, "imdecode", lambda data, flags: handed.append(data.tobytes())
+                        or real_imdecode(data, flags))
+    for properties in ([], [avif_transform(b"irot", 0)]):
+        path.write_bytes(avif_of(image, properties))
+        load_image(path)
+        assert handed.pop() == path.read_bytes()
+
+
+def test_an_avif_whose_boxes_cannot_be_followed_is_decoded_or_refused_and_raises_nothing_else(tmp_path):
+    """Every cut of an AVIF marked as turned up to its meta box's end (the boxes the walk follows), and each of those
+    bytes set to 0x00 or 0xFF: decoded, or a corrupt frame (RigOperationError); never another exception."""
+    data = avif_of(np.random.default_rng(14).integers(0, 256, (HEIGHT, WIDTH, 3), np.uint8),
+                   AVIF_TURNS["turned and mirrored"])
+    meta_end = sum(isobmff_boxes(data, 0, len(data))[b"meta"])
+    damaged = [data[:n] for n in range(meta_end + 1)]
+    damaged += [data[:i] + bytes([value]) + data[i + 1:] for i in range(meta_end) for value in (0x00, 0xFF)]
+    path, decoded = tmp_path / "image.avif", 0
+    for content in damaged:
+        path.write_bytes(content)
+        try:
+            load_image(path)
+            decoded += 1
+        except RigOperationError:
+            continue
+    assert decoded > 0
+
+
+def test_a_take_of_avifs_marked_as_turned_opens_and_plays_as_stored(tmp_path):
+    """Each frame's size is decoded at open (no AVIF header reader), as stored: the rig's, not turned."""
+    take = write_take(tmp_path / "take", "jpg", frames=3)
+    for path in take.glob("images/*/*.jpg"):
+        path.with_suffix(".avif").write_bytes(avif_of(cv2.imread(str(path)), AVIF_TURNS["turned and mirrored"]))
+        path.unlink()
+    (take / FRAMES).write_text((take / FRAMES).read_text().replace(".jpg", ".avif"))
+    assert play(take) == (3, [])

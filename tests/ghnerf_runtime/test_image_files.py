@@ -1,14 +1,15 @@
 """ghnerf_runtime.image_files reads an image's pixels as stored, whatever orientation its file is tagged with: EXIF in
 a JPEG, PNG or WebP (OpenCV ignores it given IMREAD_IGNORE_ORIENTATION), and a TIFF's own Orientation tag (OpenCV's
-TIFF decoder turns the image by it whatever the flags: the tag is set to 1 in a copy of the bytes first)."""
+TIFF decoder turns the image by it whatever the flags: the tag is set to 1 in a copy of the bytes first), and an
+AVIF's rotate and mirror properties (made "no turn" in a copy the same way, though OpenCV 5.0 applies neither)."""
 import cv2
 import numpy as np
 import pytest
 
-from ghnerf_runtime import tiff_header
+from ghnerf_runtime import avif_header, image_files, tiff_header
 from ghnerf_runtime.image_files import AS_STORED, decode_image_or_none, read_image_or_none
 from tests.exif_images import exif_orientation, jpeg_turned, png_turned
-from tests.odd_images import riff_chunk, tiff_laid_out, webp_extended
+from tests.odd_images import avif_transform, avif_with_properties, riff_chunk, tiff_laid_out, webp_extended
 
 #: 7 wide, 5 high: a transpose changes the shape, a flip the pixels (random, so no flip leaves them as they were).
 STORED_SHAPE = (5, 7)
@@ -147,3 +148,29 @@ def test_a_file_that_cannot_be_read_or_decoded_is_still_none(tmp_path):
     path.write_bytes(cut)
     assert read_image_or_none(path, cv2.IMREAD_COLOR) is None
     assert decode_image_or_none(as_array(cut), cv2.IMREAD_COLOR) is None
+
+
+def test_an_avif_s_rotate_and_mirror_properties_never_reach_the_decoder_whichever_reader(tmp_path, monkeypatch):
+    """A file read by its path (ghnerf-run's stills, ghcal's views) as by its bytes (replay): the decoder is handed
+    an irot of angle 0 where the file has an irot of a quarter turn and an imir, and the user's file is left as it
+    was. Before session 63 cv2.imread read the file as it was."""
+    image = stored_image(3)
+    plain = cv2.imencode(".avif", image, [cv2.IMWRITE_AVIF_QUALITY, 100])[1].tobytes()
+    data = avif_with_properties(plain, [avif_transform(b"irot", 1), avif_transform(b"imir", 0)])
+    path = tmp_path / "view.avif"
+    path.write_bytes(data)
+    handed = []
+    real_imdecode, real_imread = cv2.imdecode, cv2.imread
+    monkeypatch.setattr(image_files.cv2, "imdecode", lambda buf, flags: handed.append(buf.tobytes())
+                        or real_imdecode(buf, flags))
+    monkeypatch.setattr(image_files.cv2, "imread", lambda name, flags: handed.append(open(name, "rb").read())
+                        or real_imread(name, flags))
+    expected = real_imdecode(as_array(plain), cv2.IMREAD_COLOR)
+    assert np.array_equal(read_image_or_none(path, cv2.IMREAD_COLOR), expected)
+    assert np.array_equal(decode_image_or_none(as_array(data), cv2.IMREAD_COLOR), expected)
+    no_turn = avif_with_properties(plain, [avif_transform(b"irot", 1), avif_transform(b"irot", 0)])
+    no_turn = no_turn.replace(avif_transform(b"irot", 1), avif_transform(b"irot", 0), 1)
+    assert handed == [no_turn, no_turn] and path.read_bytes() == data
+    with open(path, "rb") as f:
+        resets = avif_header.transforms_reset(f)
+    assert resets == [(data.index(b"irot"), b"irot\x00"), (data.index(b"imir"), b"irot\x00")]
