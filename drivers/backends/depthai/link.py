@@ -223,17 +223,29 @@ def check_cameras(request: StereoRequest, device_id: str, features: list[dai.Cam
 
 
 class DaiDeviceLink:
-    """:class:`DeviceLink` on a real OAK device through depthai 3.x."""
+    """:class:`DeviceLink` on a real OAK device through depthai 3.x.
 
-    def __init__(self) -> None:
+    Args:
+        connect: opens the device for a request (default :func:`open_device`).
+        pipeline_for: makes the pipeline that runs on a device (default ``dai.Pipeline``). Both are
+            parameters so that tests run this class on stand-ins checked against depthai's stubs.
+    """
+
+    def __init__(
+        self,
+        connect: Callable[[StereoRequest], dai.Device] | None = None,
+        pipeline_for: Callable[[dai.Device], dai.Pipeline] = dai.Pipeline,
+    ) -> None:
+        self._connect = connect or open_device
+        self._pipeline_for = pipeline_for
         self._device: dai.Device | None = None
         self._pipeline: dai.Pipeline | None = None
         self._queue: dai.MessageQueue | None = None
 
     def start(self, request: StereoRequest) -> None:
-        self._device = open_device(request)
+        self._device = self._connect(request)
         check_cameras(request, self._device.getDeviceId(), self._device.getConnectedCameraFeatures())
-        pipeline = dai.Pipeline(self._device)
+        pipeline = self._pipeline_for(self._device)
         self._pipeline = pipeline
         outputs = []
         for socket in (request.left, request.right):
