@@ -89,3 +89,31 @@ def test_open_device_calls_fit_the_stubs():
     assert made[0].called("setMaxReconnectionAttempts") == [((0,), {})]
     open_device(StereoRequest(None, "CAM_B", "CAM_C", 30.0, 640, 400, 11.0, 4), device_class, lambda: [])
     open_device(request, device_class, lambda: [])  # by id, depthai's own search
+
+
+# ----------------------------------------------------------------- what 3.12 changed or leaves to the device
+def test_frames_are_asked_for_as_the_lens_gives_them_not_undistorted_by_the_device():
+    """The rig carries the EEPROM's distortion coefficients and the runtime undistorts with them: a frame the
+    device had already undistorted would be undistorted twice. requestOutput's enableUndistortion defaults to
+    None (the device decides; a wide-FOV OAK has been undistorted automatically), so it is asked as False."""
+    rig = Rig()
+    with open_rig(URL, link_factory=rig.link) as source:
+        source.read(timeout_s=3.0)
+    for camera in rig.pipeline.cameras:
+        (_, kwargs), = camera.called("requestOutput")
+        assert kwargs.get("enableUndistortion") is False
+
+
+def test_a_device_lost_while_its_pipeline_still_runs_is_a_disconnect_not_a_timeout():
+    """depthai 3.12: a lost device's streams go idle and its pipeline may keep running (permissive mode);
+    the device's state says DISCONNECTED/RECONNECTING/FAILED. Strict mode is asked for, and a read that
+    times out asks the device's state too."""
+    rig = Rig()
+    with open_rig(URL, link_factory=rig.link) as source:
+        source.read(timeout_s=3.0)
+        assert rig.pipeline.real.getStopOnDeviceLoss()
+        rig.pipeline.silence()
+        rig.device.state = dai.DeviceState.DISCONNECTED
+        with pytest.raises(RigDisconnectedError, match="both cameras stopped"):
+            for _ in range(20):  # the queue may still hold a group or two
+                source.read(timeout_s=0.3)
