@@ -4,8 +4,12 @@ Two ThreadedHostNodes play the cameras: they send real ``dai.ImgFrame``s (GRAY8,
 like OAK mono sensors) stamped on depthai's host clock, through the production
 Sync stage (:func:`drivers.backends.depthai.pipeline.build_sync_stage`), into a
 real ``dai.MessageQueue``. The calibration is a real ``dai.CalibrationHandler``
-loaded from a JSON EEPROM dump. What cannot run without hardware is only
-``Camera.build()`` (depthai: "Device pointer is not valid") and reading an EEPROM.
+loaded from a JSON EEPROM dump. What cannot run without hardware: a ``dai.Device``, the
+``Camera`` nodes (depthai 3.12 refuses to create a device node in a pipeline without a device:
+"Pipeline is host only, cannot create device node") and reading an EEPROM. For those,
+:class:`StandInDevice` and :class:`HostBackedPipeline` run the production
+:class:`~drivers.backends.depthai.link.DaiDeviceLink` with every call on them checked against
+depthai's stubs (tests/drivers/depthai_stubs.py).
 Test-only: lives in tests/, never in production code.
 """
 from __future__ import annotations
@@ -20,6 +24,7 @@ import numpy as np
 
 from drivers.backends.depthai.link import StereoRequest
 from drivers.backends.depthai.pipeline import build_sync_stage
+from tests.drivers.depthai_stubs import StandIn, check_call
 
 CALIBRATION = Path(__file__).parent / "fixtures" / "oak_d_calibration.json"
 
@@ -43,6 +48,7 @@ class CameraNode(dai.node.ThreadedHostNode):
         self.rng = np.random.default_rng(seed)
         self.sent: list[tuple[int, int]] = []  # (index, timestamp_ns) actually sent
         self.finished = threading.Event()
+        self.silent = threading.Event()  # set: sends nothing more, as a camera on a lost device
 
     def run(self) -> None:
         try:
@@ -58,7 +64,7 @@ class CameraNode(dai.node.ThreadedHostNode):
                 time.sleep(min(0.005, max(due - time.monotonic_ns(), 0) / 1e9))
             if not self.isRunning():
                 return
-            if self.rng.random() >= self.drop:
+            if self.rng.random() >= self.drop and not self.silent.is_set():
                 frame = dai.ImgFrame()
                 frame.setCvFrame(np.full((self.size[1], self.size[0]), k % 256, np.uint8), dai.ImgFrame.Type.GRAY8)
                 stamp(frame, due)
@@ -172,3 +178,116 @@ class ScriptedLink:
 
     def close(self) -> None:
         self.closed += 1
+
+
+# ----------------------------------------------------------------- stand-ins for what needs a device
+DEVICE_ID = "14442C10D13EABCE00"
+
+
+def camera_features(socket: str, sensor: str, size: tuple[int, int], max_fps: float) -> dai.CameraFeatures:
+    """A camera as ``getConnectedCameraFeatures()`` describes it (depthai's own types)."""
+    features = dai.CameraFeatures()
+    features.socket, features.sensorName = dai.CameraBoardSocket.__members__[socket], sensor
+    features.width, features.height = size
+    config = dai.CameraSensorConfig()
+    config.width, config.height, config.minFps, config.maxFps = size[0], size[1], 1.0, max_fps
+    features.configs = [config]
+    return features
+
+
+OAK_D = [camera_features("CAM_A", "IMX378", (4056, 3040), 60.0),
+         camera_features("CAM_B", "OV9282", (1280, 800), 120.0),
+         camera_features("CAM_C", "OV9282", (1280, 800), 120.0)]
+
+
+class StandInDevice(StandIn):
+    """A connected OAK-D as ``dai.Device`` answers, calls checked against the stubs. ``state`` is what
+    ``getDeviceState()`` says (a test sets ``DISCONNECTED`` to drop it off the bus)."""
+
+    stands_for = dai.Device
+
+    def __init__(self, device_id: str = DEVICE_ID, speed: dai.UsbSpeed = dai.UsbSpeed.SUPER) -> None:
+        self.state = dai.DeviceState.RUNNING
+        self.closed = False
+        info = dai.DeviceInfo("1.3", device_id, dai.XLinkDeviceState.X_LINK_BOOTED, dai.XLinkProtocol.X_LINK_USB_VSC,
+                              dai.XLinkPlatform.X_LINK_MYRIAD_X, dai.XLinkError_t.X_LINK_SUCCESS)
+        super().__init__({
+            "getDeviceId": device_id,
+            "getDeviceInfo": info,
+            "getConnectedCameraFeatures": OAK_D,
+            "readCalibration": lambda: dai.CalibrationHandler(CALIBRATION),
+            "getDeviceState": lambda: self.state,
+            "isClosed": lambda: self.closed,
+            "close": self._close,
+            "setMaxReconnectionAttempts": lambda *args, **kwargs: None,
+            "getUsbSpeed": speed,
+        })
+
+    def _close(self) -> None:
+        self.closed = True
+
+
+class StandInCamera(StandIn):
+    """``dai.node.Camera`` on a host pipeline: ``build`` is checked and recorded, each ``requestOutput`` is
+    checked and answered with the output of a host node sending GRAY8 frames of the size and fps asked."""
+
+    stands_for = dai.node.Camera
+
+    def __init__(self, pipeline: "HostBackedPipeline") -> None:
+        self._pipeline = pipeline
+        super().__init__({"build": lambda *args, **kwargs: self, "requestOutput": self._output})
+
+    def _output(self, size: tuple[int, int], type=None, resizeMode=None, fps=None, enableUndistortion=None,
+                alphaScaling=None) -> dai.Node.Output:
+        node = self._pipeline.real.create(CameraNode, fps or 30.0, tuple(size), self._pipeline.start_ns, 0.0, 0.0,
+                                          len(self._pipeline.sources))
+        self._pipeline.sources.append(node)
+        return node.out
+
+
+class HostBackedPipeline(StandIn):
+    """``dai.Pipeline(device)`` with a real host-only pipeline beneath: the Sync stage, its queue, start, stop and
+    isRunning are depthai's own; only ``create(dai.node.Camera)`` gives a :class:`StandInCamera`. Every call is
+    checked against the stubs, the constructor's too."""
+
+    stands_for = dai.Pipeline
+
+    def __init__(self, device: StandInDevice) -> None:
+        check_call(dai.Pipeline, "__init__", (device,))
+        self.device = device
+        self.real = dai.Pipeline(False)
+        self.start_ns = time.monotonic_ns() + 50_000_000
+        self.sources: list[CameraNode] = []
+        self.cameras: list[StandInCamera] = []
+        self.started = False
+        super().__init__({
+            "create": self._create,
+            "setStopOnDeviceLoss": self.real.setStopOnDeviceLoss,
+            "start": self._start,
+            "isRunning": self.real.isRunning,
+            "stop": self._stop,
+        })
+
+    def _create(self, node_class: type, *args, **kwargs):
+        if node_class is dai.node.Camera:
+            self.cameras.append(StandInCamera(self))
+            return self.cameras[-1]
+        return self.real.create(node_class, *args, **kwargs)
+
+    def _start(self) -> None:
+        self.real.start()
+        self.started = True
+
+    def silence(self) -> None:
+        """The cameras send nothing more, the pipeline still running: a lost device's streams go idle."""
+        for node in self.sources:
+            node.silent.set()
+
+    def _stop(self) -> None:
+        self.real.stop()
+        if not self.started:
+            return
+        # As HostPipelineLink.close: the host nodes need the GIL to finish, the pipeline's destructor holds it.
+        for node in self.sources:
+            if not node.finished.wait(60.0):
+                raise RuntimeError("a host camera node did not stop within 60 s of pipeline.stop()")

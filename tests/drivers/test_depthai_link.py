@@ -8,6 +8,8 @@ import pytest
 
 from drivers import RigInitializationError
 from drivers.backends.depthai.link import StereoRequest, check_cameras, open_device
+from tests.drivers.depthai_host import OAK_D
+from tests.drivers.depthai_host import camera_features as camera
 
 ID_A, ID_B, ID_C = "14442C10D13EABCE00", "18443010D116631200", "1844301011F4C51200"
 FREE, IN_USE = dai.XLinkDeviceState.X_LINK_UNBOOTED, dai.XLinkDeviceState.X_LINK_BOOTED
@@ -167,21 +169,6 @@ def test_without_an_id_the_first_free_device_is_opened_and_the_others_named(capl
 
 
 # ----------------------------------------------------------------- what the sensors can give
-def camera(socket: str, sensor: str, size: tuple[int, int], max_fps: float) -> dai.CameraFeatures:
-    """A camera as ``getConnectedCameraFeatures()`` describes it (depthai's own types)."""
-    features = dai.CameraFeatures()
-    features.socket, features.sensorName = dai.CameraBoardSocket.__members__[socket], sensor
-    features.width, features.height = size
-    config = dai.CameraSensorConfig()
-    config.width, config.height, config.minFps, config.maxFps = size[0], size[1], 1.0, max_fps
-    features.configs = [config]
-    return features
-
-
-OAK_D = [camera("CAM_A", "IMX378", (4056, 3040), 60.0), camera("CAM_B", "OV9282", (1280, 800), 120.0),
-         camera("CAM_C", "OV9282", (1280, 800), 120.0)]
-
-
 def test_a_stream_the_sensors_can_give_passes():
     check_cameras(request(width=1280, height=800, fps=120.0), ID_A, OAK_D)
     check_cameras(StereoRequest(None, "CAM_A", "CAM_B", 30.0, 640, 400, 11.0, 4), ID_A, OAK_D)

@@ -223,24 +223,42 @@ def check_cameras(request: StereoRequest, device_id: str, features: list[dai.Cam
 
 
 class DaiDeviceLink:
-    """:class:`DeviceLink` on a real OAK device through depthai 3.x."""
+    """:class:`DeviceLink` on a real OAK device through depthai 3.x.
 
-    def __init__(self) -> None:
+    Args:
+        connect: opens the device for a request (default :func:`open_device`).
+        pipeline_for: makes the pipeline that runs on a device (default ``dai.Pipeline``). Both are
+            parameters so that tests run this class on stand-ins checked against depthai's stubs.
+    """
+
+    def __init__(
+        self,
+        connect: Callable[[StereoRequest], dai.Device] | None = None,
+        pipeline_for: Callable[[dai.Device], dai.Pipeline] = dai.Pipeline,
+    ) -> None:
+        self._connect = connect or open_device
+        self._pipeline_for = pipeline_for
         self._device: dai.Device | None = None
         self._pipeline: dai.Pipeline | None = None
         self._queue: dai.MessageQueue | None = None
 
     def start(self, request: StereoRequest) -> None:
-        self._device = open_device(request)
+        self._device = self._connect(request)
         check_cameras(request, self._device.getDeviceId(), self._device.getConnectedCameraFeatures())
-        pipeline = dai.Pipeline(self._device)
+        pipeline = self._pipeline_for(self._device)
         self._pipeline = pipeline
+        # depthai 3.12 keeps a pipeline running when one of its devices is lost ("permissive mode") unless
+        # it was the last one; strict mode says what we mean: a lost device ends this stream.
+        pipeline.setStopOnDeviceLoss(True)
         outputs = []
         for socket in (request.left, request.right):
             cam = pipeline.create(dai.node.Camera).build(board_socket(socket), sensorFps=request.fps)
-            outputs.append(
-                cam.requestOutput((request.width, request.height), resizeMode=dai.ImgResizeMode.CROP, fps=request.fps)
-            )
+            outputs.append(cam.requestOutput(
+                (request.width, request.height), resizeMode=dai.ImgResizeMode.CROP, fps=request.fps,
+                # The rig carries the EEPROM's distortion and undistorts itself: the frames must be the
+                # lens's own. Left unset (None), the device decides, and an OAK's wide lens may be undistorted.
+                enableUndistortion=False,
+            ))
         self._queue = build_sync_stage(
             pipeline, outputs[0], outputs[1], tolerance_ms=request.tolerance_ms, queue_size=request.queue_size
         )
@@ -262,8 +280,13 @@ class DaiDeviceLink:
         return self._queue.get(datetime.timedelta(seconds=max(timeout_s, 0.0)))
 
     def is_running(self) -> bool:
+        """The pipeline runs and its device is connected. ``getDeviceState()`` (thread-safe) also sees a device
+        that dropped off while the pipeline still runs, which ``isClosed()`` (thread-unsafe, "may return outdated
+        values") need not."""
         pipeline, device = self._pipeline, self._device
-        return pipeline is not None and device is not None and pipeline.isRunning() and not device.isClosed()
+        if pipeline is None or device is None or not pipeline.isRunning() or device.isClosed():
+            return False
+        return device.getDeviceState() == dai.DeviceState.RUNNING
 
     def close(self) -> None:
         pipeline, device = self._pipeline, self._device
