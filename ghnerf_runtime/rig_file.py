@@ -63,6 +63,13 @@ PRINCIPAL_POINT_TOLERANCE = 0.1
 #: lies: 0.01 is a 179-degree view through the pinhole part (fisheyes are modelled by their distortion), 100 a
 #: 0.6-degree one. Past them a file holds a typo or another unit (1e308 loaded and gave NaN pixels).
 FOCAL_RANGE = (0.01, 100.0)
+#: Largest skew ``|K[0][1]|`` as a share of ``fx``. The skew is ``-fx cot(theta)``, theta the angle between the
+#: sensor's pixel axes, which lithography makes square: OpenCV (so ``ghcal``) has no skew term, and the tools that
+#: have one (MATLAB's ``EstimateSkew``, Bouguet's ``alpha_c``) fit it only when asked. 0.1 is pixel axes 5.7
+#: degrees off square, far past any sensor; the solvers' ``block_volume`` (``fx / hypot(fx, s)``)
+#: is still 0.995 there. Past it a file holds a typo: a skew of 1e14 fx loaded, and every pair was refused by the
+#: triangulation (``block_volume`` below ``MIN_BLOCK_VOLUME``), naming the camera but not the file.
+MAX_SKEW_SHARE = 0.1
 #: Largest magnitude of a distortion coefficient. A lens's are small numbers (the example rig's below 0.05; a wide
 #: lens's rational model, numerator and denominator nearly cancelling, runs larger, which this leaves room for).
 #: Past it a file holds a typo or a fit that diverged: k1 = 1e308 loaded (the lens fold check only warned), and
@@ -94,11 +101,13 @@ __all__ = [
     "write_bytes_atomic",
     "principal_point_problem",
     "focal_length_problem",
+    "skew_problem",
     "distortion_problem",
     "volume_reach_problem",
     "lens_fold_warning",
     "PRINCIPAL_POINT_TOLERANCE",
     "MAX_DISTORTION",
+    "MAX_SKEW_SHARE",
     "MAX_RIG_FILE_BYTES",
 ]
 
@@ -203,6 +212,19 @@ def focal_length_problem(K: Any, width: int, height: int) -> str | None:
                     f"{FOCAL_RANGE[1]:g} times the {width}x{height} image's longer side; a {fov:.3g}-degree view): a "
                     f"typo, or a focal length in other units?")
     return None
+
+
+def skew_problem(K: Any) -> str | None:
+    """Why ``K``'s skew ``K[0][1]`` is not a sensor's (beyond ``MAX_SKEW_SHARE`` of ``fx`` in magnitude); None when
+    it is."""
+    K = np.asarray(K, dtype=np.float64)
+    fx, skew = float(K[0, 0]), float(K[0, 1])
+    if abs(skew) <= MAX_SKEW_SHARE * fx:
+        return None
+    off_square = 90.0 - math.degrees(math.atan2(fx, abs(skew)))  # how far the pixel axes are from square
+    return (f"its skew K[0][1] = {skew:g} px is {abs(skew) / fx:.3g} times fx = {fx:g} px (pixel axes {off_square:.3g} "
+            f"degrees off square; a sensor's: at most {MAX_SKEW_SHARE:g} times fx, 0 from OpenCV): a typo, or a matrix "
+            "in another layout?")
 
 
 def distortion_problem(dist: Any) -> str | None:
@@ -388,7 +410,7 @@ def _camera_from_dict(chk: _Checker, raw: Any, field: str) -> Camera:
             f"{field}.K",
             f"must be a pinhole matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {K.tolist()}",
         )
-    problem = principal_point_problem(K, width, height) or focal_length_problem(K, width, height)
+    problem = principal_point_problem(K, width, height) or focal_length_problem(K, width, height) or skew_problem(K)
     if problem:
         chk._raise(f"{field}.K", f"camera {name!r}: {problem}")
 

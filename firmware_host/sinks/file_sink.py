@@ -19,6 +19,11 @@ and counted, the sink ``stalled`` once that lasts ``stall_s``; a line cut short 
 next write's leading newline. (Blocking writes held the worker for as long as the reader stayed away, the sink
 reading ``up``.) A regular file's write is never cut short by it.
 
+One sink writes a regular file at a time: the sink holds an exclusive ``flock`` on it while open
+(``file_claim``), and a second sink on that file, in this process or another (two daemons on a ``sim://`` rig with
+their own status files), is ``down`` naming the file and the holder's pid, retried until the first lets go. (Until
+session 63 both appended, their lines interleaved.) A pipe or terminal is not claimed: its reader takes the lines.
+
 The file grows for as long as the sink runs (about 650 bytes per JOINTS line); rotate it with
 logrotate's ``copytruncate``: every write is O_APPEND, so it lands at the end of the truncated file.
 """
@@ -35,6 +40,7 @@ from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWrit
 from firmware_host.protocol.messages import Message
 from firmware_host.service_unit import read_only_hint  # the sandbox's EROFS: what to do
 from firmware_host.sinks.fd_write import write_within
+from firmware_host.sinks.file_claim import FileTaken, claim_file
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink, frame_messages
 from firmware_host.sinks.url import SinkUrl, int_in, parse_url
@@ -83,8 +89,13 @@ class FileSink(ProtocolSink):
         try:
             self._fd = _open_append(self.path)
             self._opened = _regular_file_id(self._fd)
+            if self._opened is not None:  # before a byte is written, the cut line's newline included
+                claim_file(self._fd, self.path)
             self._cut_line = False  # a new reader of a pipe starts at the next line; a file is checked below
             self._end_cut_line()
+        except FileTaken as e:  # another writer: down, retried, as a USB interface another program holds
+            self._disconnect()
+            raise SinkUnavailableError(self.url, str(e)) from None
         except OSError as e:
             self._disconnect()
             raise SinkUnavailableError(self.url, f"cannot open {self.path}: {e}{read_only_hint(e)}"

@@ -651,3 +651,23 @@ def test_the_simulated_rigs_volume_stays_within_the_models_depth_range(options):
     rig = SimOptions.from_url(RigUrl.parse(f"sim://?{options}&cache=off")).placement.build()
     assert volume_reach_problem(rig) is None
     assert rig_from_dict(rig_to_dict(rig)).volume.max_corner[2] <= 10.0  # and the loader takes it as saved
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("share, shown", [(1e14, "1e+14 times fx"), (-0.5, "0.5 times fx"), (0.101, "0.101 times fx")])
+def test_a_skew_no_sensor_has_is_refused_naming_the_camera(example_dict, share, shown):
+    # a skew of 1e14 fx loaded, and then the triangulation refused every pair (block_volume) without naming the file
+    cam = example_dict["cameras"][1]
+    cam["K"][0][1] = share * cam["K"][0][0]
+    with pytest.raises(RigFileError, match=re.escape(shown) + r" .*degrees off square") as info:
+        rig_from_dict(example_dict, path="rig.json")
+    assert info.value.field == "cameras[1].K" and info.value.path == "rig.json"
+    assert "camera 'right': its skew K[0][1]" in str(info.value)
+
+
+@pytest.mark.parametrize("share", [0.0, 1e-3, -0.05, 0.1])
+def test_skews_of_real_sensors_load(example_dict, share):
+    for cam in example_dict["cameras"]:
+        cam["K"][0][1] = share * cam["K"][0][0]
+    rig = rig_from_dict(example_dict, path="rig.json")
+    assert rig.cameras[0].K[0, 1] == example_dict["cameras"][0]["K"][0][1]
