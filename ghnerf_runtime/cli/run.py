@@ -38,7 +38,7 @@ from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
     load_config, read_json_file
-from ghnerf_runtime.errors import ConfigError, FrameError, ModelLoadError, RuntimeErrorBase
+from ghnerf_runtime.errors import ConfigError, FrameError, GeometryError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult
 from ghnerf_runtime.image_files import read_image_or_none
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
@@ -145,6 +145,17 @@ def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
         args.novel_alpha = 0.5
     if args.novel_overlay is None:
         args.novel_overlay = "none"
+    if args.novel_view:
+        _check_novel_alpha(ap, args.novel_alpha)
+
+
+def _check_novel_alpha(ap: argparse.ArgumentParser, alpha: float) -> None:
+    """The request's own check, said before the model loads and naming the flag: --novel-alpha 3 (or nan) was
+    refused only at the first pair, as NovelViewRequest.alpha."""
+    try:
+        NovelViewRequest(alpha=alpha)
+    except GeometryError as e:
+        ap.error(f"--novel-alpha {alpha}: {e}")
 
 
 def _config(args) -> EstimatorConfig:

@@ -276,6 +276,11 @@ def test_a_corrupt_graph_the_config_does_not_run_is_not_loaded_nor_checked(sim_p
     (["--rig", "r.json", "--images", "a", "b", "--novel-view", "n.png", "--novel-path", "arc"], ["--novel-path",
                                                                                                 "invalid choice"]),
     (["--rig", "r.json", "--images", "a", "b", "--max-frames", "3"], ["--max-frames applies to --videos"]),
+    # refused before the rig and the model are read, by the flag's name: it was NovelViewRequest.alpha at the first pair
+    (["--rig", "r.json", "--images", "a", "b", "--novel-view", "n.png", "--novel-alpha", "3"],
+     ["--novel-alpha 3.0: ", "in [-1, 2]"]),
+    (["--rig", "r.json", "--images", "a", "b", "--novel-view", "n.png", "--novel-alpha", "nan"],
+     ["--novel-alpha nan: ", "in [-1, 2]"]),
     (["--rig", "r.json", "--videos", "a", "b", "--max-frames", "0"], ["at least 1"]),
 ])
 def test_flags_that_would_be_ignored_are_refused(extra, words, capsys):
