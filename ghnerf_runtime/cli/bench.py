@@ -44,6 +44,7 @@ from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_MATTE_STAGE, NOVEL_
 from ghnerf_runtime.metrics import finite_or_none
 from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.pipeline import NovelViewPipeline
+from ghnerf_runtime.rig_file import write_text_atomic
 from ghnerf_runtime.tracking import track_from_joints
 
 log = logging.getLogger("ghnerf-bench")
@@ -563,9 +564,9 @@ def main(argv: list[str] | None = None) -> int:
             ready_output(args.cache, "--cache", "folder")
         print(f"load average {os.getloadavg()}, {os.cpu_count()} CPUs; model {args.model_dir}", flush=True)
         report = run_runtime_bench(args)
-        if args.json:
-            with open(args.json, "w", encoding="utf-8") as fh:
-                json.dump(finite_or_none(report), fh, indent=2, default=float)  # strict JSON: NaN becomes null
+        if args.json:  # whole or not at all (an earlier report left as it was): a Ctrl-C in the write cut it short
+            text = json.dumps(finite_or_none(report), indent=2, default=float)  # strict JSON: NaN becomes null
+            write_text_atomic(args.json, text + "\n")
         return 0
     except (RuntimeErrorBase, OSError, OutputPathError) as e:
         print(f"ghnerf-bench: error: {e}", file=sys.stderr)

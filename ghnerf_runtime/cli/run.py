@@ -35,10 +35,10 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output, same_file
-from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
     load_config, read_json_file
-from ghnerf_runtime.errors import ConfigError, FrameError, ModelLoadError, RuntimeErrorBase
+from ghnerf_runtime.errors import ConfigError, FrameError, GeometryError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult
 from ghnerf_runtime.image_files import read_image_or_none
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
@@ -145,6 +145,17 @@ def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
         args.novel_alpha = 0.5
     if args.novel_overlay is None:
         args.novel_overlay = "none"
+    if args.novel_view:
+        _check_novel_alpha(ap, args.novel_alpha)
+
+
+def _check_novel_alpha(ap: argparse.ArgumentParser, alpha: float) -> None:
+    """The request's own check, said before the model loads and naming the flag: --novel-alpha 3 (or nan) was
+    refused only at the first pair, as NovelViewRequest.alpha."""
+    try:
+        NovelViewRequest(alpha=alpha)
+    except GeometryError as e:
+        ap.error(f"--novel-alpha {alpha}: {e}")
 
 
 def _config(args) -> EstimatorConfig:
@@ -372,13 +383,14 @@ def _run(args) -> int:
             overlay.add(overlay_image(images, result))
         log.info("pair %d: %d/25 joints, %.1f ms", result.sequence, result.num_found, result.timing_ms["total"])
 
+    pairs = _pairs(args)
     try:
         # Each pair's novel view is finished while the next pair is estimated (the same numbers, more pairs per
         # second: docs/runtime.md, "The novel view alongside the keypoints"); without one, a pair comes out at once.
         with NovelViewPipeline(estimator) as pipe:
             try:
                 t = None
-                for seq, images in enumerate(_pairs(args)):
+                for seq, images in enumerate(pairs):
                     held[seq] = images
                     # the frames' own presentation time where the video gives one after the last pair's: a variable
                     # frame rate (a phone's video), or a container whose rate reads 1000 fps, made seq / fps a wrong
@@ -395,22 +407,36 @@ def _run(args) -> int:
                         emit(result)
             except (Exception, KeyboardInterrupt) as e:
                 if not isinstance(e, BrokenPipeError):
-                    _emit_in_flight(pipe, held, emit)
+                    with stop_signals_deferred(then_raise=False):  # the stop (or error) on its way is the one said
+                        _emit_in_flight(pipe, held, emit)
                 raise
             for result in pipe.flush():
                 emit(result)
         done = True
     finally:
-        try:
-            if as_list:
-                _write_list(out_path, frames, done)
-            elif out is not None and not to_stdout:
-                out.close()
-        finally:
-            for sink in (novel, overlay):
-                if sink is not None:
-                    sink.close()
+        # a Ctrl-C pressed again while the outputs are written is held back (a stop already on its way is the one
+        # reported; after a finished run, it is raised once they are whole)
+        with stop_signals_deferred(then_raise=done):
+            _close_outputs(pairs, as_list, out_path, frames, done, None if to_stdout else out, (novel, overlay))
     return 0
+
+
+def _close_outputs(pairs, as_list: bool, out_path: str | None, frames: list[dict], done: bool, out_file,
+                   sinks) -> None:
+    """The inputs released and the outputs written whole: the ``.json`` list or the ``.jsonl`` file, then the
+    videos and images (closed whatever the joints' write raised)."""
+    close_pairs = getattr(pairs, "close", None)  # _pairs' generator; any iterator of pairs will do
+    if close_pairs is not None:
+        close_pairs()  # the videos' captures released now, not when the generator is collected later
+    try:
+        if as_list:
+            _write_list(out_path, frames, done)
+        elif out_file is not None:
+            out_file.close()
+    finally:
+        for sink in sinks:
+            if sink is not None:
+                sink.close()
 
 
 def _emit_in_flight(pipe: NovelViewPipeline, held: dict, emit) -> None:

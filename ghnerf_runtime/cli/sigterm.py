@@ -7,7 +7,8 @@ and nothing is said. Inside :func:`sigterm_as_interrupt` the signal raises :clas
 :class:`KeyboardInterrupt`, in the main thread, where Ctrl-C raises its own: every ``except KeyboardInterrupt``
 and ``finally`` a tool has for Ctrl-C handles SIGTERM too, and :func:`stop_signal` tells the two apart for the
 exit status (128 + the signal's number: 130, 143, the shell's figures) and the message (:func:`stop_words`). :func:`sigterm_deferred`
-holds one back over a close that must finish (a recorder rewriting its manifest ``complete: true``).
+holds one back over a close that must finish (a recorder rewriting its manifest ``complete: true``), and
+:func:`stop_signals_deferred` holds back Ctrl-C too (a second one pressed while a stopped run writes its outputs).
 
 The daemon does not use it: a handler that raises can land anywhere in its loop, inside a lock its threads share
 (``firmware_host.daemon.cli._StopOnSignal`` says why), and it must close its sinks in order and tell systemd it
@@ -80,14 +81,37 @@ def sigterm_deferred() -> Iterator[None]:
     handler before it put back first. Outside the main thread nothing is installed, as for
     :func:`sigterm_as_interrupt`.
     """
+    with _signals_held((signal.SIGTERM,), then_raise=True):
+        yield
+
+
+@contextlib.contextmanager
+def stop_signals_deferred(*, then_raise: bool = True) -> Iterator[None]:
+    """:func:`sigterm_deferred` for Ctrl-C too: within the block SIGINT and SIGTERM are noted, not raised, so
+    that the outputs a stopped run closes are written whole when the user presses Ctrl-C again (a second Ctrl-C
+    landing in ``ghnerf-run``'s write of its ``.json`` list lost every pair of it). With ``then_raise`` the first
+    signal noted is raised once the block has ended (:class:`KeyboardInterrupt` or :class:`Terminated`); pass
+    False where the block runs while a stop or an error is already on its way, which is then the one reported.
+    """
+    with _signals_held((signal.SIGINT, signal.SIGTERM), then_raise=then_raise):
+        yield
+
+
+@contextlib.contextmanager
+def _signals_held(signums: tuple[signal.Signals, ...], *, then_raise: bool) -> Iterator[None]:
+    """``signums`` noted, not raised, within the block; their handlers before it put back as it ends, however it
+    ends; the first noted raised after a block that ended normally when ``then_raise``. Nothing is installed
+    outside the main thread (:func:`sigterm_as_interrupt`)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     noted: list[int] = []
-    previous = signal.signal(signal.SIGTERM, lambda signum, _frame: noted.append(signum))
+    previous = {signum: signal.signal(signum, lambda got, _frame: noted.append(got)) for signum in signums}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
-    if noted:  # after the block, not in its finally: an error the block raised is the one reported
-        raise Terminated(signal.Signals(noted[0]).name)
+        for signum, handler in previous.items():
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+    if noted and then_raise:  # after the block, not in its finally: an error the block raised is the one reported
+        name = signal.Signals(noted[0]).name
+        raise Terminated(name) if noted[0] == signal.SIGTERM else KeyboardInterrupt(name)

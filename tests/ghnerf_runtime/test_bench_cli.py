@@ -77,6 +77,22 @@ def test_ctrl_c_exits_130_without_a_traceback_or_a_report(tmp_path, capsys, monk
     assert not (tmp_path / "r.json").exists()
 
 
+def test_ctrl_c_while_the_report_is_written_leaves_no_half_report(tmp_path, capsys, monkeypatch):
+    """The --json report is written as the bench ends: a Ctrl-C landing in that write left the file cut short (an
+    earlier report truncated too), while the bench said no report was written."""
+    class _PressedNow:
+        def __float__(self):  # json's default=float reaches it halfway through the report
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(bench, "run_runtime_bench", lambda args: {"rows": [1.0, 2.0], "late": _PressedNow()})
+    report = tmp_path / "r.json"
+    report.write_text('{"earlier": true}\n')
+    rc = bench.main(["runtime", "--sequences", "1", "--frames", "2", "--warmup", "0", "--cache", "off",
+                     "--json", str(report)])
+    assert rc == 130 and "no report written" in capsys.readouterr().err
+    assert report.read_text() == '{"earlier": true}\n' and [p.name for p in tmp_path.iterdir()] == ["r.json"]
+
+
 def test_runtime_help_names_the_defaults_the_docs_rely_on(capsys):
     # README's command leaves --precisions and --modes out: the help must say that this makes a row of each
     with pytest.raises(SystemExit):

@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import time
 from pathlib import Path
 
 import cv2
@@ -276,6 +277,11 @@ def test_a_corrupt_graph_the_config_does_not_run_is_not_loaded_nor_checked(sim_p
     (["--rig", "r.json", "--images", "a", "b", "--novel-view", "n.png", "--novel-path", "arc"], ["--novel-path",
                                                                                                 "invalid choice"]),
     (["--rig", "r.json", "--images", "a", "b", "--max-frames", "3"], ["--max-frames applies to --videos"]),
+    # refused before the rig and the model are read, by the flag's name: it was NovelViewRequest.alpha at the first pair
+    (["--rig", "r.json", "--images", "a", "b", "--novel-view", "n.png", "--novel-alpha", "3"],
+     ["--novel-alpha 3.0: ", "in [-1, 2]"]),
+    (["--rig", "r.json", "--images", "a", "b", "--novel-view", "n.png", "--novel-alpha", "nan"],
+     ["--novel-alpha nan: ", "in [-1, 2]"]),
     (["--rig", "r.json", "--videos", "a", "b", "--max-frames", "0"], ["at least 1"]),
 ])
 def test_flags_that_would_be_ignored_are_refused(extra, words, capsys):
@@ -930,3 +936,43 @@ def test_the_novel_alpha_help_names_the_path_and_the_orbit_s_limit():
     text = " ".join(action.help.split())
     assert "novel_view.path" in text and "distance to its pivot" in text
     assert set(NOVEL_PATHS) == {"line", "orbit", "auto"}  # the two paths the help names, and the rule choosing
+
+
+@pytest.mark.parametrize("suffix", [".json", ".jsonl"])
+def test_ctrl_c_pressed_again_while_the_outputs_are_written_leaves_them_whole(monkeypatch, tmp_path, capsys, suffix):
+    """A stopped run writes the pairs it finished; a second Ctrl-C landing in that write (an impatient user, a
+    long run's list taking a while) raised in it: the .json list was never written, and the message still said
+    the outputs held the pairs finished."""
+    import os
+    import signal
+
+    out = tmp_path / f"joints{suffix}"
+    real_write, real_close = cli_run.write_text_atomic, cli_run._Sink.close
+
+    def pressed_again() -> None:
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)  # the handler runs here, in the main thread
+
+    def write_text_atomic(path, text):
+        pressed_again()
+        real_write(path, text)
+
+    def sink_close(sink):
+        pressed_again()
+        real_close(sink)
+
+    monkeypatch.setattr(cli_run, "write_text_atomic", write_text_atomic)
+    monkeypatch.setattr(cli_run._Sink, "close", sink_close)
+    monkeypatch.setattr(cli_run.Estimator, "from_config",
+                        lambda rig, cfg: _ViewStub(fail_at=2, fail=KeyboardInterrupt()))
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * 4))
+    before = signal.getsignal(signal.SIGINT)
+    rc = cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(out),
+                       "--novel-view", str(tmp_path / "novel.png")])
+    assert rc == 130 and "stopped (SIGINT)" in capsys.readouterr().err
+    text = out.read_text()
+    got = json.loads(text) if suffix == ".json" else [json.loads(line) for line in text.splitlines()]
+    assert [p["sequence"] for p in got] == [0, 1]
+    assert (tmp_path / "novel.png").is_file()  # the view's image written as well
+    assert signal.getsignal(signal.SIGINT) is before  # put back

@@ -9,7 +9,7 @@ import time
 import pytest
 
 from ghnerf_runtime.cli.sigterm import Terminated, exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal, \
-    stop_words
+    stop_signals_deferred, stop_words
 
 
 def _outer(signum, frame):  # stands for whatever handler the caller had (the default would end pytest)
@@ -91,3 +91,33 @@ def test_a_deferred_sigterm_lets_the_block_finish_then_raises():
     finally:
         signal.signal(signal.SIGTERM, previous)
     assert finished == ["block"]
+
+
+def _outer_int(signum, frame):
+    raise AssertionError("SIGINT reached the handler outside the block")
+
+
+@pytest.mark.parametrize(("first", "raised"), [(signal.SIGINT, KeyboardInterrupt), (signal.SIGTERM, Terminated)])
+def test_stop_signals_deferred_holds_ctrl_c_and_sigterm_over_the_block(first, raised):
+    """A stopped run's outputs are written under it: a Ctrl-C pressed again lands there and is held, not raised
+    into the write; the first held is raised after the block, or not at all with then_raise=False."""
+    previous = {signal.SIGINT: signal.signal(signal.SIGINT, _outer_int),
+                signal.SIGTERM: signal.signal(signal.SIGTERM, _outer)}
+    finished = []
+    try:
+        with pytest.raises(raised) as e:
+            with stop_signals_deferred():
+                for signum in (first, signal.SIGINT, signal.SIGTERM):
+                    os.kill(os.getpid(), signum)
+                    time.sleep(0.1)  # each handler runs here: noted, not raised
+                finished.append("block")
+        assert stop_signal(e.value) == first
+        with stop_signals_deferred(then_raise=False):  # a stop already on its way: nothing more raised
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.1)
+            finished.append("quiet")
+        assert signal.getsignal(signal.SIGINT) is _outer_int and signal.getsignal(signal.SIGTERM) is _outer
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    assert finished == ["block", "quiet"]
