@@ -75,7 +75,7 @@ from firmware_host.sinks.file_sink import FileSink
 from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
 from ghnerf_runtime.cli.output_path import output_clash
-from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal, stop_words
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
 from ghnerf_runtime.errors import ConfigError, ModelError
@@ -381,6 +381,8 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     print(f"opening {redact_url(args.url)}"
           + (" (the first open pre-renders the motion loop; later opens use the cache)" if scheme == "sim" else ""))
     source = drivers.create_rig_source(args.url)
+    stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
+    read_to_its_end = False  # the reading ended without an error or a stop on its way out (the close's raise)
     try:
         estimator = None
         if cfg is not None:
@@ -402,7 +404,6 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         delivered, skipped, skews = 0, 0, []
         read_failed, failed_reads, first_failure = False, 0, ""  # a failed read since the last pair; all of them
         last_pair, last_result = None, None
-        stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
         rig_failed: str | None = None  # a camera that vanished or fell silent mid-run: what the rig said of it
         stats_at_pair = source.stats  # the pairing counters at the open, then at the last pair (why_no_pair)
         numbers = FrameNumbers()  # the stream's seq: frames sent, not the pairs the rig skipped (a gap: lost)
@@ -474,16 +475,25 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                 skews.append(pair.skew_ns / 1e6)
                 last_pair = pair
             elapsed = max(time.monotonic() - start, 1e-9)
+            # the sink delivers what it holds queued as it closes (up to a second: a file:// sink's last lines, a
+            # slow serial link): a second Ctrl-C pressed there cut it short and ended the run without its summary,
+            # 130 for a run the first Ctrl-C ended with 0. Raised after the close only when it is the first stop
+            with stop_signals_deferred(then_raise=stopped is None):
+                sink.close()  # (the with's own close then has nothing left to do)
         sink_stats = sink.stats()
         stats = source.stats
         # under LATEST the rig hands out the newest pair and drops (counts) the older ones; an OAK's count
         # also holds the pairs lost whole from its host queue (drivers' pairs_dropped)
         skipped = stats.pairs_dropped
         delivered += skipped
+        read_to_its_end = True
     finally:
-        # a SIGTERM that lands in the close (timeout's, as --seconds ran out) waits for it: a recorder writes what
-        # it holds queued and rewrites its manifest complete: true, which the signal raised there tore
-        with sigterm_deferred():
+        # a Ctrl-C or SIGTERM that lands in the close waits for it: a recorder writes what it holds queued and
+        # rewrites its manifest complete: true, which the signal raised there tore (timeout's SIGTERM as --seconds
+        # ran out, a second Ctrl-C pressed after the one that stopped the run). A stop that lands there is raised
+        # once the take is whole only when it is the first: a stop caught above, or an error on its way, is the one
+        # reported (its summary and exit status)
+        with stop_signals_deferred(then_raise=read_to_its_end and stopped is None):
             source.close()
 
     rate = delivered / elapsed

@@ -8,7 +8,8 @@ and nothing is said. Inside :func:`sigterm_as_interrupt` the signal raises :clas
 and ``finally`` a tool has for Ctrl-C handles SIGTERM too, and :func:`stop_signal` tells the two apart for the
 exit status (128 + the signal's number: 130, 143, the shell's figures) and the message (:func:`stop_words`). :func:`sigterm_deferred`
 holds one back over a close that must finish (a recorder rewriting its manifest ``complete: true``), and
-:func:`stop_signals_deferred` holds back Ctrl-C too (a second one pressed while a stopped run writes its outputs).
+:func:`stop_signals_deferred` holds back Ctrl-C too (a second one pressed while a stopped run writes its outputs:
+``ghnerf-run``'s files, ``ghnerf-demo``'s sink and take, ``ghcal capture``'s cameras).
 
 The daemon does not use it: a handler that raises can land anywhere in its loop, inside a lock its threads share
 (``firmware_host.daemon.cli._StopOnSignal`` says why), and it must close its sinks in order and tell systemd it

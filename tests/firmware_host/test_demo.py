@@ -18,6 +18,7 @@ import pytest
 
 import drivers
 from firmware_host import demo
+from ghnerf_runtime.cli.sigterm import Terminated
 from ghnerf_runtime.estimator import Estimator
 
 REPO = Path(__file__).resolve().parents[2]
@@ -752,3 +753,98 @@ def test_a_sigterm_in_the_recorder_s_close_waits_for_the_take_to_be_complete(tmp
     manifest = json.loads((take / "manifest.json").read_text())
     assert manifest["complete"] is True
     assert manifest["counters"]["frames_written"] == len((take / "frames.jsonl").read_text().splitlines()) > 0
+
+
+_FIRST_STOPS = {  # the stop that ended the reading: (exception, exit status, stderr)
+    "Ctrl-C": (KeyboardInterrupt, 0, []),
+    "SIGTERM": (lambda: Terminated("SIGTERM"), 143,
+                [f"{demo.prog_name()}: stopped (SIGTERM); the summary above is of the pairs read until then"]),
+}
+
+
+@pytest.mark.parametrize("first", sorted(_FIRST_STOPS))
+@pytest.mark.parametrize("closing", ["the recorder", "the sink"])
+def test_a_second_ctrl_c_while_a_stopped_run_closes_leaves_the_take_whole_and_the_first_stop_reported(
+        tmp_path, capsys, monkeypatch, first, closing):
+    """The first Ctrl-C (or SIGTERM) ends the reading; a second Ctrl-C pressed while the run closes its outputs
+    raised there: in the recorder's close it left the take ``complete: false``, in the sink's (which delivers what
+    it holds queued, up to a second) it cut that short, and either way the run ended without its summary, 130 in
+    place of the first stop's 0 or 143. Now it waits for the close and the first stop is the one reported."""
+    import os
+    import signal
+
+    from drivers.backends import record
+    from firmware_host.sinks import base
+
+    raise_first, status, err = _FIRST_STOPS[first]
+    real_frame, frames = demo.truth_frame, []
+
+    def stopped_at_the_third_pair(*args, **kwargs):
+        frames.append(1)
+        if len(frames) == 3:
+            raise raise_first()
+        return real_frame(*args, **kwargs)
+
+    pressed = []
+
+    def pressed_again_in(real_close):
+        def close(self, *args, **kwargs):
+            if not pressed:
+                pressed.append(1)
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.3)  # the handler runs here, in the main thread, before the close's work
+            return real_close(self, *args, **kwargs)
+        return close
+
+    monkeypatch.setattr(demo, "truth_frame", stopped_at_the_third_pair)
+    if closing == "the recorder":
+        monkeypatch.setattr(record.RecordingWriter, "close", pressed_again_in(record.RecordingWriter.close))
+    else:
+        monkeypatch.setattr(base.Sink, "close", pressed_again_in(base.Sink.close))
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert pressed == [1]
+    assert rc == status and captured.err.splitlines() == err, captured.err
+    assert f"stopping: {first}" in captured.out and "the rig delivered" in captured.out  # the summary
+    manifest = json.loads((take / "manifest.json").read_text())
+    assert manifest["complete"] is True
+    assert manifest["counters"]["frames_written"] == len((take / "frames.jsonl").read_text().splitlines()) > 0
+    assert len((tmp_path / "out" / "joints.jsonl").read_text().splitlines()) >= 2  # the sink's frames delivered
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
+def test_an_error_on_its_way_is_reported_when_a_sigterm_lands_in_the_recorder_s_close(tmp_path, capsys,
+                                                                                      monkeypatch):
+    """A run that failed closes its take on the way out; a SIGTERM landing in that close (timeout's) was raised
+    after it in place of the error: "stopped (SIGTERM)", 143, for a run that failed (2, the error said)."""
+    import os
+    import signal
+
+    from drivers.backends import record
+
+    real_close = record.RecordingWriter.close
+
+    def close(self, counters):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.3)  # the handler runs here, in the main thread, before the take is closed
+        real_close(self, counters)
+
+    def failed(*args, **kwargs):
+        raise OSError(5, "Input/output error")
+
+    monkeypatch.setattr(record.RecordingWriter, "close", close)
+    monkeypatch.setattr(demo, "truth_frame", failed)
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    previous = signal.signal(signal.SIGTERM, _outer_sigterm_handler)
+    try:
+        rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
+    except _Escaped:
+        pytest.fail("SIGTERM was left to the default action: the demo died without a word")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert rc == 2 and capsys.readouterr().err.splitlines() == [
+        f"{demo.prog_name()}: error: [Errno 5] Input/output error"]
+    assert json.loads((take / "manifest.json").read_text())["complete"] is True
