@@ -45,7 +45,7 @@ from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import existing_ancestor, unwritable_reason
-from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal, stop_words
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
 from ghnerf_runtime.rig_file import load_rig, save_rig, write_bytes_atomic, write_text_atomic
@@ -389,6 +389,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
                          "capture into a new folder, or pass --append to add to them (the cameras not moved since)")
     source = drivers.create_rig_source(args.url)
     shown_url = redact_url(args.url)  # a camera URL may carry a password (rtsp://user:pass@..., token=)
+    read_to_its_end = False  # the capture ended without a stop (caught below) or an error on its way out
     try:
         source.open()
         cams = [check_camera_name(c.name) for c in source.rig.pair]
@@ -516,6 +517,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
             kept += 1
             last_kept_at = now
             print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
+        read_to_its_end = True
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (main): the cameras are closed below either way
         how = "" if stop_signal(e) == signal.SIGINT else f" ({stop_words(e)})"
         if kept == 0:  # stopping a capture is its normal end, but one that kept nothing did not succeed
@@ -524,9 +526,12 @@ def cmd_capture(args: argparse.Namespace) -> int:
         print(f"stopped{how}: kept {kept} view(s) in {out}{_skipped_note(skipped)}")
         return 0
     finally:
-        # a SIGTERM that lands in the close (timeout's, as --max-seconds ran out) waits for it, as ghnerf-demo's
-        # does: raised there it tore the close, a depthai device or a record+ take's manifest left half-closed
-        with sigterm_deferred():
+        # a Ctrl-C or SIGTERM that lands in the close waits for it, as ghnerf-demo's does: raised there it tore the
+        # close, a depthai device or a record+ take's manifest left half-closed (timeout's SIGTERM as --max-seconds
+        # ran out, a second Ctrl-C pressed after the one that stopped the capture). It is raised once the close is
+        # done only when it is the first stop: one caught above (the views kept said, 0) or an error on its way
+        # is the one reported
+        with stop_signals_deferred(then_raise=read_to_its_end):
             source.close()
     if kept < count:
         why = ("the stream ended" if ended else "--max-seconds ran out") + ("" if board_seen else

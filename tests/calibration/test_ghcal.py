@@ -969,6 +969,53 @@ def test_a_sigterm_in_the_capture_s_close_waits_for_the_close(truth, tmp_path, c
     assert rc == 143 and "ghcal: stopped (SIGTERM); the capture did not finish" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("second", ["SIGINT", "SIGTERM"])
+def test_a_second_stop_in_the_close_of_a_stopped_capture_waits_for_it_and_the_first_is_reported(
+        truth, tmp_path, capsys, monkeypatch, second):
+    """Ctrl-C ends a hand-held capture; a second Ctrl-C pressed while it closes its source (a depthai device, a
+    record+ take rewriting its manifest) raised in that close and tore it, and it replaced the first stop's end:
+    "the capture did not finish", 130, for a capture that had kept its views (0). Now the close finishes and the
+    first stop is the one reported; a SIGTERM there (timeout's) likewise."""
+    import os
+    import signal
+    import time
+
+    import drivers
+
+    take, board = _one_view_take(tmp_path, truth)
+    real, closed = drivers.create_rig_source, []
+
+    def create(url, **kwargs):
+        source = real(url, **kwargs)
+        read, close, calls = source.read, source.close, []
+
+        def read_then_interrupt(*args, **kw):
+            calls.append(1)
+            if len(calls) > 2:  # the first stop: one view kept by then
+                raise KeyboardInterrupt
+            return read(*args, **kw)
+
+        def close_under_a_second_stop():
+            os.kill(os.getpid(), signal.Signals[second])
+            time.sleep(0.3)  # the signal's Python handler runs here, in the main thread, before the close's work
+            close()
+            closed.append(1)
+        source.read, source.close = read_then_interrupt, close_under_a_second_stop
+        return source
+
+    monkeypatch.setattr(drivers, "create_rig_source", create)
+    before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+    try:
+        rc = cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--count", "5",
+                       "--interval-s", "0", "--still-s", "0", "--out", str(tmp_path / "views")])
+    except KeyboardInterrupt:
+        pytest.fail("the second stop escaped ghcal")
+    captured = capsys.readouterr()
+    assert closed == [1]  # the close ran to its end
+    assert rc == 0 and "stopped: kept 1 view(s)" in captured.out and "did not finish" not in captured.err
+    assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before  # put back
+
+
 def test_a_floor_view_the_rig_records_that_is_no_name_is_refused(truth, capture, tmp_path, capsys):
     # a number (or a list) there fell back to 'floor' without a word: the levelling was checked on a view the
     # rig was not levelled from, or not at all
