@@ -25,7 +25,7 @@ from typing import Optional
 
 from firmware_host.errors import FirmwareHostError
 
-__all__ = ["StatusFileTaken", "StatusFileClaim", "claim_name"]
+__all__ = ["StatusFileTaken", "StatusFileClaim", "claim_name", "names_one_file"]
 
 #: How long finding the holder's pid may take: it only words the message.
 _ASK_TIMEOUT_S = 0.5
@@ -52,6 +52,16 @@ def claim_name(path: str) -> Optional[bytes]:
         return None
     digest = hashlib.sha256(os.fsencode(target.name)).hexdigest()[:24]
     return f"\0ghnerf-daemon-status:{folder.st_dev}:{folder.st_ino}:{digest}".encode()
+
+
+def names_one_file(first: Optional[str], second: Optional[str]) -> bool:
+    """Whether two status file paths name one file (the same claim): spelled alike, or through a link or ``..``
+    to the same folder. A reload from one to the other keeps this daemon's claim: taken again, it was refused as
+    another daemon's, naming this one's pid."""
+    if first == second:
+        return True
+    name = claim_name(first) if first and second else None
+    return name is not None and name == claim_name(second)
 
 
 def _holder_pid(name: bytes) -> Optional[int]:
