@@ -896,6 +896,8 @@ class Daemon:
         if not force and now < self._next_status:
             return
         self._next_status = now + self.config.health.status_every_s
+        if self._status_claim is not None:
+            self._status_claim.let_askers_go()  # a refused daemon's question for the pid, answered: its queue freed
         if tell_systemd:
             self.notifier.notify(status=self.health.status_line(self.sink_stats()))
         path = self.config.health.status_file

@@ -97,13 +97,26 @@ class StatusFileClaim:
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
             sock.bind(name)
-            sock.listen(8)  # never accepted: the queue only answers a second daemon's question for the pid
+            sock.listen(8)  # a second daemon's connection asks for the pid; closed by let_askers_go
+            sock.setblocking(False)
         except OSError as e:
             sock.close()
             if e.errno == errno.EADDRINUSE:
                 raise StatusFileTaken(path, _holder_pid(name)) from None
             return cls(path, None)
         return cls(path, sock)
+
+    def let_askers_go(self) -> None:
+        """Close the connections other daemons made to learn this one's pid (:func:`_holder_pid`), without
+        waiting. Left queued, the listen backlog filled after nine refused starts, and every later one was told
+        of "another ghnerf-daemon" without its pid. The daemon calls it at each status write."""
+        sock = self._sock
+        while sock is not None:
+            try:
+                asker, _ = sock.accept()
+            except OSError:  # none waiting (BlockingIOError), or released meanwhile
+                return
+            asker.close()
 
     def release(self) -> None:
         sock, self._sock = self._sock, None

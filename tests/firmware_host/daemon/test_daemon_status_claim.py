@@ -141,3 +141,19 @@ def test_a_reload_onto_the_same_status_file_spelled_another_way_keeps_the_claim(
     finally:
         daemon._status_claim.release()
     StatusFileClaim.take(str(status)).release()
+
+
+def test_every_refused_start_learns_the_holders_pid_however_many_there_were(tmp_path):
+    # each refused start's connection (asking for the pid) stayed queued at the holder, never accepted: from the
+    # tenth on (the listen backlog full) the refusal named no pid. The daemon's status writes let them go.
+    status = tmp_path / "status.json"
+    daemon = Daemon(_config(tmp_path, status), notifier=SystemdNotifier({}))
+    daemon._status_claim = StatusFileClaim.take(str(status))
+    try:
+        for _ in range(12):
+            with pytest.raises(StatusFileTaken) as taken:
+                StatusFileClaim.take(str(status))
+            assert taken.value.pid == os.getpid()
+            daemon._tick(force=True)
+    finally:
+        daemon._status_claim.release()
