@@ -40,7 +40,7 @@ from firmware_host.protocol.constants import MAX_JOINTS, NO_FRAME_SEQ
 from firmware_host.sinks.options import MAX_QUEUE, MAX_STALL_S, MAX_STATUS_S, MIN_STALL_S, MIN_STATUS_S, SinkOptions
 from firmware_host.sinks.rate import MIN_MAX_FPS
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
-from firmware_host.sinks.udp_sink import MIN_RESOLVE_S, RESOLVE_S
+from firmware_host.sinks.udp_sink import MIN_RESOLVE_S, REFUSAL_QUIET_S, RESOLVE_S
 from firmware_host.sinks.url import MAX_HOST_NAME
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
@@ -61,7 +61,7 @@ from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M
 from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_BLOCK_VOLUME, MIN_RAY_ANGLE_FLOOR_DEG, \
     MIN_ROW_SHARE
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
-from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
+from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES, MAX_SKEW_SHARE
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
 from ghnerf_runtime.proxy_matte import BONE_M
 from ghnerf_runtime.two_people import BODY_RADIUS_M, BONE_SLACK_M, MAX_LIMB_M, MIN_APART_M, MIXED_TORSO_SLACK_M, \
@@ -118,6 +118,12 @@ def _doc(name: str) -> str:
     ("docs/geometry.md", f"`MIN_RAY_ANGLE_FLOOR_DEG` = {_exp(MIN_RAY_ANGLE_FLOOR_DEG)} degrees"),
     ("docs/geometry.md", f"(`CENTRE_TOLERANCE`: centres within {_exp(CENTRE_TOLERANCE)} of their distance"),
     ("docs/geometry.md", f"`MIN_BLOCK_VOLUME` = {_exp(MIN_BLOCK_VOLUME)}, or where"),
+    # the largest skew a rig file holds, and the block volume it gives (fx / hypot(fx, s))
+    ("docs/geometry.md", f"{MAX_SKEW_SHARE:g} `fx` (`MAX_SKEW_SHARE`), gives {1 / math.hypot(1, MAX_SKEW_SHARE):.3f}"),
+    ("docs/rig-file.md", f"at most {MAX_SKEW_SHARE:g} `fx` (`MAX_SKEW_SHARE`;"),
+    ("docs/rig-file.md", f"{MAX_SKEW_SHARE:g} is axes {90 - math.degrees(math.atan2(1, MAX_SKEW_SHARE)):.1f} degrees off"),
+    ("docs/protocol.md", f"`REFUSAL_QUIET_S` ({REFUSAL_QUIET_S:g} s)"),
+    ("docs/protocol.md", f"no datagram refused for {REFUSAL_QUIET_S:g} s: a receiver"),
     ("docs/geometry.md", f"`MIN_ROW_SHARE` = {_exp(MIN_ROW_SHARE)} of the terms"),
     ("docs/geometry.md", f"`UNDISTORT_POLISH` = {_exp(UNDISTORT_POLISH)}, so"),
     ("docs/geometry.md", f"in {REACH_RIM_POINTS} points (`REACH_RIM_POINTS`)"),

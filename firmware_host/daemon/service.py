@@ -78,7 +78,7 @@ from firmware_host.daemon.health import Health, State, write_status_file
 from firmware_host.daemon.memory import pin_mmap_threshold, return_freed_memory
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
 from firmware_host.daemon.sandbox import rig_url_hint, service_hint
-from firmware_host.daemon.status_claim import StatusFileClaim, StatusFileTaken
+from firmware_host.daemon.status_claim import StatusFileClaim, StatusFileTaken, names_one_file
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame
 from firmware_host.protocol.constants import Fault, Flags
@@ -748,7 +748,7 @@ class Daemon:
         check_sink_urls(new.sinks, **self._sink_kwargs)
         changed = [name for name in _PARTS if _part(old, name) != _part(new, name)]
         claim = None
-        if new.health.status_file != old.health.status_file:
+        if not names_one_file(old.health.status_file, new.health.status_file):  # (this daemon holds that one)
             claim = _claim_status_file(new.health.status_file, DaemonConfigError)
         try:
             return self._reload_checked(rig, old, new, changed, claim)
@@ -822,7 +822,7 @@ class Daemon:
                 if self._status_claim is not None:
                     self._status_claim.release()
                 self._status_claim = claim
-            if old_status_file and old_status_file != new.health.status_file:
+            if old_status_file and not names_one_file(old_status_file, new.health.status_file):
                 # left in place it would read "running" for ever, frozen, to a monitor still watching it
                 try:
                     os.unlink(old_status_file)
@@ -896,6 +896,8 @@ class Daemon:
         if not force and now < self._next_status:
             return
         self._next_status = now + self.config.health.status_every_s
+        if self._status_claim is not None:
+            self._status_claim.let_askers_go()  # a refused daemon's question for the pid, answered: its queue freed
         if tell_systemd:
             self.notifier.notify(status=self.health.status_line(self.sink_stats()))
         path = self.config.health.status_file

@@ -25,7 +25,7 @@ from typing import Optional
 
 from firmware_host.errors import FirmwareHostError
 
-__all__ = ["StatusFileTaken", "StatusFileClaim", "claim_name"]
+__all__ = ["StatusFileTaken", "StatusFileClaim", "claim_name", "names_one_file"]
 
 #: How long finding the holder's pid may take: it only words the message.
 _ASK_TIMEOUT_S = 0.5
@@ -52,6 +52,16 @@ def claim_name(path: str) -> Optional[bytes]:
         return None
     digest = hashlib.sha256(os.fsencode(target.name)).hexdigest()[:24]
     return f"\0ghnerf-daemon-status:{folder.st_dev}:{folder.st_ino}:{digest}".encode()
+
+
+def names_one_file(first: Optional[str], second: Optional[str]) -> bool:
+    """Whether two status file paths name one file (the same claim): spelled alike, or through a link or ``..``
+    to the same folder. A reload from one to the other keeps this daemon's claim: taken again, it was refused as
+    another daemon's, naming this one's pid."""
+    if first == second:
+        return True
+    name = claim_name(first) if first and second else None
+    return name is not None and name == claim_name(second)
 
 
 def _holder_pid(name: bytes) -> Optional[int]:
@@ -87,13 +97,26 @@ class StatusFileClaim:
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
             sock.bind(name)
-            sock.listen(8)  # never accepted: the queue only answers a second daemon's question for the pid
+            sock.listen(8)  # a second daemon's connection asks for the pid; closed by let_askers_go
+            sock.setblocking(False)
         except OSError as e:
             sock.close()
             if e.errno == errno.EADDRINUSE:
                 raise StatusFileTaken(path, _holder_pid(name)) from None
             return cls(path, None)
         return cls(path, sock)
+
+    def let_askers_go(self) -> None:
+        """Close the connections other daemons made to learn this one's pid (:func:`_holder_pid`), without
+        waiting. Left queued, the listen backlog filled after nine refused starts, and every later one was told
+        of "another ghnerf-daemon" without its pid. The daemon calls it at each status write."""
+        sock = self._sock
+        while sock is not None:
+            try:
+                asker, _ = sock.accept()
+            except OSError:  # none waiting (BlockingIOError), or released meanwhile
+                return
+            asker.close()
 
     def release(self) -> None:
         sock, self._sock = self._sock, None

@@ -11,7 +11,8 @@ host) unreachable for an earlier datagram, comes back as the error of the next s
 (a receiver not started, or a typo in the port). That error fails the send it comes with, sending nothing,
 so the datagram is sent again at once: frames keep going out, and a receiver that starts gets the next one.
 The refusals are kept as the link's state: a WARNING once, the sink ``stalled`` (after its ``stall_s``) with
-the refusal as ``last_error``, and an INFO once no datagram was refused for ``REFUSAL_QUIET_S``. Before,
+the refusal as ``last_error``, and an INFO once a datagram sent ``REFUSAL_QUIET_S`` after the last refusal
+drew none (counted in datagrams, not in time: a sink sending every few seconds, its rig down, is no quieter). Before,
 the socket was unconnected and such a sink read ``up``, every frame ``sent``, with nobody receiving.
 
 A host name is resolved to its IPv4 address when it has one (a receiver bound to
@@ -49,9 +50,9 @@ RESOLVE_S = 30.0
 #: Shortest ``resolve_s``: a lookup a second finds a moved robot soon enough, and a name server is not asked once
 #: per frame (``resolve_s=1e-9`` was accepted: a lookup for every frame sent).
 MIN_RESOLVE_S = 1.0
-#: Seconds with no datagram refused after which the receiver counts as there again: Linux answers a host's
-#: datagrams to a closed port with at most about one ICMP port unreachable a second (``icmp_ratelimit``), so
-#: while nothing listens a refusal comes well within this.
+#: Seconds after the last refusal from which a datagram that draws none shows the receiver there again: Linux
+#: answers a host's datagrams to a closed port with at most about one ICMP port unreachable a second
+#: (``icmp_ratelimit``), so while nothing listens a datagram sent that long after the last refusal draws one.
 REFUSAL_QUIET_S = 3.0
 #: What an ICMP answer to an earlier datagram leaves on a connected UDP socket for its next send: port, host
 #: or network unreachable. Host and network unreachable may also be the send's own (no route): the send
@@ -119,6 +120,7 @@ class DatagramLink:
         # (first, last, why) of the current stretch of refused datagrams, monotonic seconds; replaced whole, as
         # stats() reads it from another thread. None: none refused within REFUSAL_QUIET_S.
         self._refusal: Optional[tuple[float, float, str]] = None
+        self._last_sent: Optional[float] = None  # when the last datagram went out (monotonic), on this socket
 
     def open(self) -> None:
         family, addr = resolve(self.url, self.host, self.port)
@@ -157,17 +159,15 @@ class DatagramLink:
 
     def close(self) -> None:
         sock, self._sock = self._sock, None
-        self._refusal = None
+        self._refusal, self._last_sent = None, None
         if sock is not None:
             sock.close()
 
-    def refusing(self, now: float) -> Optional[tuple[float, str]]:
-        """``(since, why)`` while the receiver's side refuses the datagrams (one refused within
-        ``REFUSAL_QUIET_S``); None otherwise. Safe from any thread."""
+    def refusing(self) -> Optional[tuple[float, str]]:
+        """``(since, why)`` from the first refusal of the receiver's side until a datagram sent ``REFUSAL_QUIET_S``
+        after the last one draws none (:meth:`_end_refusal_if_answered`); None otherwise. Safe from any thread."""
         refusal = self._refusal
-        if refusal is None or now - refusal[1] > REFUSAL_QUIET_S:
-            return None
-        return refusal[0], refusal[2]
+        return None if refusal is None else (refusal[0], refusal[2])
 
     def _note_refusal(self, error: OSError) -> None:
         """Keep the refusal an ICMP answer left on the socket; a WARNING at the first of a stretch."""
@@ -178,14 +178,18 @@ class DatagramLink:
         else:
             why = f"{self.host}:{self.port} is unreachable: {error.strerror} (an ICMP answer to a datagram)"
         refusal = self._refusal
-        first = now if refusal is None or now - refusal[1] > REFUSAL_QUIET_S else refusal[0]
+        first = now if refusal is None else refusal[0]
         self._refusal = (first, now, why)
         if first == now:
             _log.warning("%s: %s; still sending, so a receiver that starts gets the next frame", self.shown, why)
 
-    def _end_refusal_if_quiet(self, now: float) -> None:
+    def _end_refusal_if_answered(self, previous_sent: Optional[float]) -> None:
+        """End the refusals once the datagram sent at ``previous_sent``, ``REFUSAL_QUIET_S`` or more after the last
+        refusal, drew none (the send after it found none pending). Judged by a datagram, not by the time passed:
+        the idle STATUS of a sink whose rig is down goes out every ``status_s``, and at ``status_s=5`` each gap
+        ended the stretch, a WARNING and an INFO at every datagram, and the sink never read ``stalled``."""
         refusal = self._refusal
-        if refusal is not None and now - refusal[1] > REFUSAL_QUIET_S:
+        if refusal is not None and previous_sent is not None and previous_sent - refusal[1] >= REFUSAL_QUIET_S:
             self._refusal = None
             _log.info("%s: no datagram refused for %g s: a receiver is at %s:%s again", self.shown,
                       REFUSAL_QUIET_S, self.host, self.port)
@@ -221,29 +225,29 @@ class DatagramLink:
             if fresh is not None and generation == self._generation:
                 self._fresh = fresh
 
-    def _send_past_a_pending_error(self, datagram: bytes) -> None:
+    def _send_past_a_pending_error(self, datagram: bytes) -> bool:
         """Send ``datagram``; an error an ICMP answer to an earlier one left on the socket fails this send unsent,
         so it is sent again, and the error kept (:meth:`refusing`). One the second send meets too is its own (no
         route now, such as after the device's own address changed: the socket keeps the source address of its
-        connect) and is raised."""
+        connect) and is raised. True: an earlier datagram was refused."""
         assert self._sock is not None
         try:
             self._sock.send(datagram)
-            return
+            return False
         except OSError as e:
             if e.errno not in _ICMP_ERRNOS:
                 raise
             pending = e
         self._sock.send(datagram)
         self._note_refusal(pending)
+        return True
 
     def send(self, datagram: bytes) -> None:
         if self._sock is None:
             raise SinkUnavailableError(self.url, "socket not open")
         self._refresh()
-        self._end_refusal_if_quiet(time.monotonic())
         try:
-            self._send_past_a_pending_error(datagram)
+            refused = self._send_past_a_pending_error(datagram)
         except BlockingIOError as e:
             raise SinkWriteError(self.url, "socket send buffer full") from e
         except ConnectionRefusedError as e:  # refused again at once: this datagram is lost, the link is not
@@ -251,6 +255,9 @@ class DatagramLink:
             raise SinkWriteError(self.url, self._refusal[2] if self._refusal else str(e)) from e
         except OSError as e:  # network down, route gone: recreate the socket after backoff
             raise SinkUnavailableError(self.url, f"send to {self.host}:{self.port} failed: {e}") from e
+        if not refused:
+            self._end_refusal_if_answered(self._last_sent)
+        self._last_sent = time.monotonic()
 
 
 class UdpSink(ProtocolSink):
@@ -277,7 +284,7 @@ class UdpSink(ProtocolSink):
         self._link.close()
 
     def _receiver_refusing(self, now: float) -> Optional[tuple[float, str]]:
-        return self._link.refusing(now)
+        return self._link.refusing()
 
     def _write_messages(self, messages: list[Message]) -> bool:
         frame_types = (MsgType.JOINTS, MsgType.JOINTS_2D)

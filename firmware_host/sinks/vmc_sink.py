@@ -82,7 +82,7 @@ class VmcSink(Sink):
         self._link.close()
 
     def _receiver_refusing(self, now: float) -> Optional[tuple[float, str]]:
-        return self._link.refusing(now)
+        return self._link.refusing()
 
     def _deliver(self, frame: JointFrame, flags: int) -> None:
         if self._t0_us is None:

@@ -93,6 +93,35 @@ def test_a_receiver_that_starts_gets_the_next_frame_and_the_sink_reads_up_again(
     assert any("no datagram refused" in r.getMessage() for r in caplog.records if r.levelno == logging.INFO)
 
 
+def test_datagrams_further_apart_than_the_quiet_time_keep_the_refusal_and_read_stalled(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    # the rig down: only the idle STATUS goes out, every status_s. Each is refused, but with status_s past
+    # REFUSAL_QUIET_S the time between them ended the refusal: a WARNING and an INFO at every datagram, and the
+    # sink never read stalled. The quiet is judged by a datagram that draws no refusal, not by the time passed.
+    monkeypatch.setattr(udp_sink, "REFUSAL_QUIET_S", 0.3)
+    sent_at: list[float] = []
+    real_send = udp_sink.DatagramLink.send
+
+    def send(link, datagram: bytes) -> None:
+        real_send(link, datagram)
+        sent_at.append(time.monotonic())
+
+    monkeypatch.setattr(udp_sink.DatagramLink, "send", send)
+    port = _closed_port()
+    caplog.set_level(logging.INFO, logger="firmware_host.sinks.udp_sink")
+    sink = open_sink(f"udp://127.0.0.1:{port}?status_s=0.5&stall_s={STALL_S}", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        # three idle writes (a HELLO and a STATUS each), whatever the load: the gaps between them pass 0.3 s
+        wait_until(lambda: len(sent_at) >= 6 and sent_at[-1] - sent_at[0] > 0.9, 10, "three idle writes")
+        stats = sink.stats()
+    finally:
+        sink.close()
+    assert stats.state == "stalled" and "nothing receives at" in (stats.last_error or "")
+    said = [r.getMessage() for r in caplog.records if r.name == "firmware_host.sinks.udp_sink"]
+    assert len(said) == 1 and "nothing receives at" in said[0]  # one WARNING, no "receiver ... again"
+
+
 def test_the_refusal_waiting_on_the_socket_does_not_cost_the_datagram_it_fails() -> None:
     # the refusal of one datagram is reported by the next send, which it fails unsent: a receiver that starts
     # in between must still get that next one (sent again at once)
@@ -107,7 +136,7 @@ def test_the_refusal_waiting_on_the_socket_does_not_cost_the_datagram_it_fails()
         rx.settimeout(5)
         link.send(b"received\x00")
         assert rx.recv(64) == b"received\x00"
-        refusing = link.refusing(time.monotonic())
+        refusing = link.refusing()
         assert refusing is not None and "ICMP port unreachable" in refusing[1]
     finally:
         link.close()
@@ -142,7 +171,7 @@ def test_a_host_unreachable_an_icmp_answer_left_is_kept_and_the_datagram_sent() 
     link, sock = _scripted_link([errno.EHOSTUNREACH])
     link.send(b"frame\x00")
     assert sock.sent == [b"frame\x00"]
-    refusing = link.refusing(time.monotonic())
+    refusing = link.refusing()
     assert refusing is not None and refusing[1].startswith("192.0.2.7:9870 is unreachable: No route to host")
 
 
@@ -152,4 +181,4 @@ def test_no_route_on_the_send_itself_is_a_link_lost_not_a_refusal() -> None:
     link, sock = _scripted_link([errno.ENETUNREACH, errno.ENETUNREACH])
     with pytest.raises(SinkUnavailableError, match="Network is unreachable"):
         link.send(b"frame\x00")
-    assert sock.sent == [] and link.refusing(time.monotonic()) is None
+    assert sock.sent == [] and link.refusing() is None

@@ -120,3 +120,40 @@ def test_a_reload_onto_a_free_status_file_moves_the_claim(tmp_path):
         StatusFileClaim.take(str(status)).release()  # the old file is free again
     finally:
         daemon._status_claim.release()
+
+
+def test_a_reload_onto_the_same_status_file_spelled_another_way_keeps_the_claim(tmp_path):
+    # the claim is the file's, however spelled (a link to its folder): taken again, the daemon's own claim refused
+    # the reload as another daemon's, naming this daemon's pid; and the old spelling's file was removed
+    (tmp_path / "run").mkdir()
+    os.symlink(tmp_path / "run", tmp_path / "link")
+    status = tmp_path / "run" / "status.json"
+    status.write_text('{"pid": 1}\n')
+    daemon = Daemon(_config(tmp_path, status), notifier=SystemdNotifier({}),
+                    reload_config=lambda: _config(tmp_path, tmp_path / "link" / "status.json"))
+    daemon._status_claim = StatusFileClaim.take(str(status))
+    try:
+        assert "health" in daemon._reload(None)
+        assert daemon.config.health.status_file == str(tmp_path / "link" / "status.json")
+        assert status.exists()  # the file this daemon still writes, not an old one to remove
+        with pytest.raises(StatusFileTaken):  # still held
+            StatusFileClaim.take(str(status))
+    finally:
+        daemon._status_claim.release()
+    StatusFileClaim.take(str(status)).release()
+
+
+def test_every_refused_start_learns_the_holders_pid_however_many_there_were(tmp_path):
+    # each refused start's connection (asking for the pid) stayed queued at the holder, never accepted: from the
+    # tenth on (the listen backlog full) the refusal named no pid. The daemon's status writes let them go.
+    status = tmp_path / "status.json"
+    daemon = Daemon(_config(tmp_path, status), notifier=SystemdNotifier({}))
+    daemon._status_claim = StatusFileClaim.take(str(status))
+    try:
+        for _ in range(12):
+            with pytest.raises(StatusFileTaken) as taken:
+                StatusFileClaim.take(str(status))
+            assert taken.value.pid == os.getpid()
+            daemon._tick(force=True)
+    finally:
+        daemon._status_claim.release()
