@@ -197,19 +197,26 @@ def _as_cameras(cameras) -> tuple[np.ndarray, tuple, np.ndarray]:
 
 def _check_regular(P: np.ndarray, names: Sequence[str]) -> np.ndarray:
     """The conditioning similarities ``(C, 3, 3)`` of the ``(C, 3, 4)`` matrices ``P``; GeometryError naming the
-    first that is not finite or whose left block is singular (:func:`block_volume`).
+    first that is not finite or whose left block is singular (:func:`block_volume`), by ``names[c]``, and its
+    matrix. The one check of the general solvers and :meth:`TwoViewCameras.from_P`, so that both refuse the same
+    matrices in the same words.
 
     :class:`Camera` objects are checked too: a finite K can lose its focal length to rounding in ``P``
     (fx = 1e-20 px beside a principal point at 320 px), which np.linalg.inv refused with a bare LinAlgError."""
+    # (all() first, the first False by argmin only on a refusal: the two-view solver's terms are built per crop)
     finite = np.isfinite(P).all(axis=(1, 2))
-    for c in np.flatnonzero(~finite):
+    if not finite.all():
+        c = int(np.argmin(finite))
         raise GeometryError(f"{names[c]} projection matrix must be finite, got {P[c].tolist()}")
     with np.errstate(all="ignore"):
         T = _conditioning_similarity(P)
     volume = block_volume(P, T)
-    for c in np.flatnonzero(~(volume > MIN_BLOCK_VOLUME)):
+    regular = volume > MIN_BLOCK_VOLUME
+    if not regular.all():
+        c = int(np.argmin(regular))
         raise GeometryError(f"{names[c]} projection matrix has a singular left 3x3 block (camera at infinity): its "
-                            f"conditioned rows span a volume of {volume[c]:.3g}, at least {MIN_BLOCK_VOLUME:g} needed")
+                            f"conditioned rows span a volume of {volume[c]:.3g}, at least {MIN_BLOCK_VOLUME:g} "
+                            f"needed, got {P[c].tolist()}")
     return T
 
 
@@ -690,6 +697,10 @@ def triangulate_robust(
     return result
 
 
+#: How :func:`_check_regular` names the two-view solver's matrices: the argument ``P``'s index, and the view.
+_TWO_VIEW_NAMES = ("P[0] (view 0)", "P[1] (view 1)")
+
+
 @dataclass(frozen=True, eq=False)
 class TwoViewCameras:
     """What the two-view solver derives from its two ``(2, 3, 4)`` projection matrices alone (read-only arrays):
@@ -716,22 +727,14 @@ class TwoViewCameras:
         """The terms of ``P`` (the operations :func:`triangulate_two_views` ran on every call before).
 
         Raises:
-            ShapeError: ``P`` is not ``(2, 3, 4)``. GeometryError: a non-finite matrix or a singular left 3x3 block.
+            ShapeError: ``P`` is not ``(2, 3, 4)``. GeometryError: a non-finite matrix or a singular left 3x3 block
+            (:func:`_check_regular`, as the general solvers: the view and its matrix named).
         """
         P = np.array(P, dtype=np.float64)  # (a copy: the caller's array may change later; these terms may not)
         if P.shape != (2, 3, 4):
             raise ShapeError(f"P (2, 3, 4) expected for two views' terms, got {P.shape}")
         M = P[:, :, :3]  # (a view, as the solver always took it: the same memory layout, the same matmul results)
-        if not np.all(np.isfinite(P)):
-            raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block, got {P.tolist()}")
-        with np.errstate(all="ignore"):
-            T = _conditioning_similarity(P)
-        volume = block_volume(P, T)
-        if not np.all(volume > MIN_BLOCK_VOLUME):
-            view = int(np.argmin(np.where(np.isnan(volume), -1.0, volume)))
-            raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block: view {view}'s "
-                                f"conditioned rows span a volume of {volume[view]:.3g}, at least {MIN_BLOCK_VOLUME:g} "
-                                f"needed, got {P.tolist()}")
+        T = _check_regular(P, _TWO_VIEW_NAMES)
         det = np.linalg.det(M)
         with np.errstate(all="ignore"):
             Pn = T @ P

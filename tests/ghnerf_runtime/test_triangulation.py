@@ -460,7 +460,7 @@ def test_two_view_solver_is_exact_and_checks_its_arguments():
         triangulate_two_views(uv, P[:, :2], np.ones((2, 25)))
     singular = P.copy()
     singular[1, :, :3] = 0.0
-    with pytest.raises(GeometryError, match="regular"):
+    with pytest.raises(GeometryError, match=r"P\[1\] \(view 1\) projection matrix has a singular left 3x3 block"):
         triangulate_two_views(uv, singular, np.ones((2, 25)))
 
 
@@ -679,7 +679,7 @@ def test_two_view_terms_are_those_of_the_matrices_not_of_the_array():
     singular = P.copy()
     singular[1, :, :3] = 0.0
     for _ in range(2):
-        with pytest.raises(GeometryError, match="regular"):
+        with pytest.raises(GeometryError, match=r"P\[1\] \(view 1\) projection matrix has a singular left 3x3 block"):
             triangulate_two_views(uv, singular, np.ones((2, 25)))
     with pytest.raises(ShapeError, match=r"\(2, 3, 4\)"):
         TwoViewCameras.from_P(P[:1])
@@ -784,10 +784,11 @@ def test_extreme_rigs_give_finite_answers_and_valid_joints_only_where_the_geomet
                 case = (focal_px, shift, baseline, distance)
                 P = np.stack([c.P for c in cams])
                 if not np.all(block_volume(P) > MIN_BLOCK_VOLUME):  # 1e-3 px 1e7 px off centre: rounding
+                    v = int(np.argmin(block_volume(P) > MIN_BLOCK_VOLUME))  # the first view refused
                     for solve in (triangulate_dlt, triangulate_midpoint, triangulate_robust):
-                        with pytest.raises(GeometryError, match="singular left 3x3 block"):
+                        with pytest.raises(GeometryError, match=rf"cameras\[{v}\] .* has a singular left 3x3 block"):
                             solve(uv, cams)
-                    with pytest.raises(GeometryError, match="regular left 3x3 block"):
+                    with pytest.raises(GeometryError, match=rf"P\[{v}\] \(view {v}\) projection matrix has a singular"):
                         triangulate_two_views(uv, P, np.ones((2, 25)))
                     continue
                 for res in (triangulate_dlt(uv, cams), triangulate_midpoint(uv, cams),
@@ -870,7 +871,8 @@ def test_a_singular_block_is_refused_at_any_scale(scale):
         bad.append(Q)
     for Q in bad:
         assert not block_volume(Q)[1] > MIN_BLOCK_VOLUME
-        with pytest.raises(GeometryError, match="view 1's conditioned rows span a volume"):
+        with pytest.raises(GeometryError, match=r"P\[1\] \(view 1\) projection matrix has a singular left 3x3 block "
+                                                r"\(camera at infinity\): its conditioned rows span a volume of"):
             TwoViewCameras.from_P(Q)
         with pytest.raises(GeometryError, match=r"cameras\[1\] projection matrix has a singular left 3x3 block"):
             triangulate_dlt(np.full((2, 1, 2), 300.0), list(Q), undistorted=True)
@@ -889,5 +891,31 @@ def test_a_camera_whose_matrix_is_singular_to_rounding_is_refused_by_name(fx, sk
     for solve in (triangulate_dlt, triangulate_midpoint, triangulate_robust):
         with pytest.raises(GeometryError, match=r"cameras\[0\] \(camera 'left'\) projection matrix has a singular"):
             solve(uv, cams)
-    with pytest.raises(GeometryError, match="regular left 3x3 block"):
+    with pytest.raises(GeometryError, match=r"P\[0\] \(view 0\) projection matrix has a singular left 3x3 block"):
         triangulate_two_views(uv, np.stack([c.P for c in cams]), np.ones((2, 3)))
+
+
+@pytest.mark.parametrize("change", ["nan", "inf", "zero block", "zero third row"])
+@pytest.mark.parametrize("view", [0, 1])
+def test_the_two_view_terms_and_the_general_solvers_refuse_a_matrix_in_one_message(change, view):
+    """TwoViewCameras.from_P repeated the general solvers' finite and block_volume check with messages of its own
+    ('projection matrices must be finite with a regular left 3x3 block', naming no view when one was not finite).
+    Now both run one check: the same words, the view named (P[v] there, cameras[v] here), why, and its matrix."""
+    P = np.stack([c.P for c in generate_scene(2, 1)[0]])
+    if change == "nan":
+        P[view, 1, 3] = np.nan
+    elif change == "inf":
+        P[view, 0, 0] = -np.inf
+    elif change == "zero block":
+        P[view, :, :3] = 0.0
+    else:
+        P[view, 2, :3] = 0.0
+    with pytest.raises(GeometryError) as two_view:
+        TwoViewCameras.from_P(P)
+    with pytest.raises(GeometryError) as general:
+        triangulate_dlt(np.full((2, 1, 2), 300.0), list(P), undistorted=True)
+    message = str(two_view.value)
+    assert message == str(general.value).replace(f"cameras[{view}]", f"P[{view}] (view {view})"), message
+    why = "must be finite" if change in ("nan", "inf") else "has a singular left 3x3 block"
+    assert message.startswith(f"P[{view}] (view {view}) projection matrix {why}"), message
+    assert message.endswith(f"got {P[view].tolist()}"), message
