@@ -58,6 +58,8 @@ REFUSAL_QUIET_S = 3.0
 #: or network unreachable. Host and network unreachable may also be the send's own (no route): the send
 #: repeated tells them apart.
 _ICMP_ERRNOS = frozenset({errno.ECONNREFUSED, errno.EHOSTUNREACH, errno.EHOSTDOWN, errno.ENETUNREACH})
+#: Those of ``_ICMP_ERRNOS`` a send may meet on its own (no route now); a port refusal is always an answer.
+_ROUTE_ERRNOS = _ICMP_ERRNOS - {errno.ECONNREFUSED}
 
 
 def take_resolve_s(u: SinkUrl, kw: dict) -> float:
@@ -86,6 +88,12 @@ def resolve(url: str, host: str, port: int, keep: Any = None) -> tuple[int, Any]
         return ipv4_first(infos, keep)
     except ValueError as e:
         raise SinkUnavailableError(url, f"cannot resolve {host}:{port}: {e}") from e
+
+
+def _no_route_twice(pending: OSError, again: OSError) -> bool:
+    """Whether a send and its repeat both met host or network unreachable: the sends' own (no route now), not an
+    ICMP answer to an earlier datagram."""
+    return pending.errno in _ROUTE_ERRNOS and again.errno in _ROUTE_ERRNOS
 
 
 def _is_ip_literal(host: str) -> bool:
@@ -180,7 +188,7 @@ class DatagramLink:
         refusal = self._refusal
         first = now if refusal is None else refusal[0]
         self._refusal = (first, now, why)
-        if first == now:
+        if refusal is None:  # (not first == now: one send may note twice within a clock tick)
             _log.warning("%s: %s; still sending, so a receiver that starts gets the next frame", self.shown, why)
 
     def _end_refusal_if_answered(self, previous_sent: Optional[float]) -> None:
@@ -227,9 +235,11 @@ class DatagramLink:
 
     def _send_past_a_pending_error(self, datagram: bytes) -> bool:
         """Send ``datagram``; an error an ICMP answer to an earlier one left on the socket fails this send unsent,
-        so it is sent again, and the error kept (:meth:`refusing`). One the second send meets too is its own (no
-        route now, such as after the device's own address changed: the socket keeps the source address of its
-        connect) and is raised. True: an earlier datagram was refused."""
+        so it is sent again, and the error kept (:meth:`refusing`) whatever the repeat meets: a full send buffer
+        loses this datagram, yet the earlier one was refused all the same (before, that refusal went unrecorded and
+        the sink named the full buffer only). An error the second send meets is raised; host or network unreachable
+        met by both sends is their own (no route now, such as after the device's own address changed: the socket
+        keeps the source address of its connect), not a refusal. True: an earlier datagram was refused."""
         assert self._sock is not None
         try:
             self._sock.send(datagram)
@@ -238,9 +248,19 @@ class DatagramLink:
             if e.errno not in _ICMP_ERRNOS:
                 raise
             pending = e
-        self._sock.send(datagram)
+        try:
+            self._sock.send(datagram)
+        except OSError as again:
+            if not _no_route_twice(pending, again):
+                self._note_refusal(pending)
+            raise
         self._note_refusal(pending)
         return True
+
+    def _naming_the_refusal(self, reason: str) -> str:
+        """``reason`` a write failed for, and the refusals going on (why the sink reads stalled), if any."""
+        refusal = self._refusal
+        return reason if refusal is None else f"{reason}; {refusal[2]}"
 
     def send(self, datagram: bytes) -> None:
         if self._sock is None:
@@ -249,7 +269,7 @@ class DatagramLink:
         try:
             refused = self._send_past_a_pending_error(datagram)
         except BlockingIOError as e:
-            raise SinkWriteError(self.url, "socket send buffer full") from e
+            raise SinkWriteError(self.url, self._naming_the_refusal("socket send buffer full")) from e
         except ConnectionRefusedError as e:  # refused again at once: this datagram is lost, the link is not
             self._note_refusal(e)
             raise SinkWriteError(self.url, self._refusal[2] if self._refusal else str(e)) from e

@@ -15,7 +15,7 @@ import time
 
 import pytest
 
-from firmware_host.errors import SinkUnavailableError
+from firmware_host.errors import SinkUnavailableError, SinkWriteError
 from firmware_host.protocol import Joints, StreamDecoder
 from firmware_host.sinks import open_sink, udp_sink
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, wait_until
@@ -182,3 +182,68 @@ def test_no_route_on_the_send_itself_is_a_link_lost_not_a_refusal() -> None:
     with pytest.raises(SinkUnavailableError, match="Network is unreachable"):
         link.send(b"frame\x00")
     assert sock.sent == [] and link.refusing() is None
+
+
+@pytest.mark.parametrize(("again", "raised"), [
+    (errno.EAGAIN, SinkWriteError),  # the send buffer full: this datagram lost, the link up
+    (errno.ECONNREFUSED, SinkWriteError),  # refused again at once
+    (errno.ENETUNREACH, SinkUnavailableError),  # the route gone meanwhile: the socket is made again
+    (errno.EPERM, SinkUnavailableError),  # a firewall's refusal of this datagram
+])
+def test_a_refusal_is_kept_whatever_the_datagram_sent_again_meets(
+        again: int, raised: type, caplog: pytest.LogCaptureFixture) -> None:
+    # The ICMP port unreachable an earlier datagram drew fails this send unsent; the send repeated met a full
+    # buffer (or another error): the error was raised and the refusal never recorded, so the sink named only
+    # the full buffer and counted no refusal. It is recorded now, whatever the repeat meets, and said once.
+    caplog.set_level(logging.INFO, logger="firmware_host.sinks.udp_sink")
+    link, sock = _scripted_link([errno.ECONNREFUSED, again])
+    with pytest.raises(raised) as failed:
+        link.send(b"frame\x00")
+    assert sock.sent == []
+    refusing = link.refusing()
+    assert refusing is not None and refusing[1].startswith("nothing receives at 192.0.2.7:9870"), refusing
+    assert "ICMP port unreachable" in refusing[1]
+    if raised is SinkWriteError:  # the sink's last error for this datagram names the refusal too
+        assert "nothing receives at 192.0.2.7:9870" in str(failed.value)
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1 and "nothing receives at" in warnings[0], warnings
+
+
+def test_a_host_unreachable_met_by_both_sends_is_no_refusal_whatever_its_kind() -> None:
+    # host unreachable, then network unreachable: the sends' own (no route now), no ICMP answer claimed
+    link, sock = _scripted_link([errno.EHOSTUNREACH, errno.ENETUNREACH])
+    with pytest.raises(SinkUnavailableError, match="Network is unreachable"):
+        link.send(b"frame\x00")
+    assert sock.sent == [] and link.refusing() is None
+
+
+def test_refusals_within_one_clock_tick_warn_once(monkeypatch: pytest.MonkeyPatch,
+                                                  caplog: pytest.LogCaptureFixture) -> None:
+    # The WARNING was given when a refusal's time equalled its stretch's first: a second refusal read in the same
+    # tick of a coarse clock (or the two a send with a refused repeat notes) warned again.
+    monkeypatch.setattr(udp_sink.time, "monotonic", lambda: 100.0)
+    caplog.set_level(logging.INFO, logger="firmware_host.sinks.udp_sink")
+    link, sock = _scripted_link([errno.ECONNREFUSED, None, errno.ECONNREFUSED, None])
+    link.send(b"one\x00")
+    link.send(b"two\x00")
+    assert sock.sent == [b"one\x00", b"two\x00"] and link.refusing()[0] == 100.0
+    assert len([r for r in caplog.records if r.levelno == logging.WARNING]) == 1
+
+
+def test_a_sink_whose_refused_datagrams_meet_a_full_buffer_reads_stalled_naming_the_refusal(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # every send: an earlier datagram's ICMP port unreachable, then a full send buffer on the repeat. The sink
+    # read stalled (its writes failing) naming only "socket send buffer full": nobody told it nothing listens.
+    script = [errno.ECONNREFUSED, errno.EAGAIN] * 1000
+    monkeypatch.setattr(udp_sink.DatagramLink, "_connected_socket", lambda link, family, addr: _ScriptedSocket(script))
+    sink = open_sink(f"udp://192.0.2.7:9870?stall_s={STALL_S}", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        seq = _send_for(sink, STALL_S + 0.2, 0)
+        assert sink.wait_drained(5)
+        stats = sink.stats()
+    finally:
+        sink.close()
+    assert stats.state == "stalled" and stats.stalled_s is not None and stats.stalled_s >= STALL_S
+    assert "nothing receives at 192.0.2.7:9870" in (stats.last_error or ""), stats.last_error
+    assert stats.sent == 0 and stats.dropped_error == seq and stats.disconnects == 0
