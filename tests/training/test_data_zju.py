@@ -585,3 +585,72 @@ def test_an_image_or_mask_whose_header_is_beyond_opencv_s_size_limits_is_named(t
         with pytest.raises(DatasetError, match="unreadable") as err:
             read(0, 0)
         assert err.value.path == str(path)
+
+
+def _stop_between_the_renames(monkeypatch, out, split, signum):
+    """Send ``signum`` to this process right after the conversion renames the old split away (the first of its
+    two renames), where a stop used to leave no split at all."""
+    import os
+    import signal
+    import time
+
+    real_replace = os.replace
+
+    def replace(src, dst):
+        real_replace(src, dst)
+        if str(src) == str(out / split) and ".old-" in str(dst):
+            os.kill(os.getpid(), signum)
+            time.sleep(0.05)  # (a handler that raises does so here, between the renames)
+
+    monkeypatch.setattr(os, "replace", replace)
+    return signal
+
+
+@pytest.mark.parametrize("signum_name,status,words", [("SIGINT", 130, "Ctrl-C"), ("SIGTERM", 143, "SIGTERM")])
+def test_a_stop_between_the_two_renames_of_the_swap_loses_no_split_and_is_said_truly(
+        tmp_path, subject, caplog, monkeypatch, signum_name, status, words):
+    """Review 63: a Ctrl-C (or SIGTERM) landing between the swap's two renames left no split; the next run deleted
+    the old one as a leftover, while the message said the split was as it was."""
+    import logging
+    import signal
+
+    from training.data.convert_zju import main
+
+    out = tmp_path / "ds"
+    argv = [str(subject[0]), "--out", str(out), "--split", "s", "--res", str(RES), "--view-set", "0,1",
+            "--shard-size", "1"]
+    assert main(argv) == 0
+    _stop_between_the_renames(monkeypatch, out, "s", getattr(signal, signum_name))
+    caplog.clear()
+    with caplog.at_level(logging.ERROR):
+        assert main([*argv, "--margin", "1.0"]) == status
+    assert f"stopped by {words} once the conversion was done: split 's' of {out} is the new one" in caplog.text
+    monkeypatch.undo()
+    split = ShardedSplit(out, "s")  # whole, with its entry: the new one, as said
+    assert len(split) == 2
+    entry = json.loads((out / "dataset.json").read_text())["splits"]["s"]
+    assert entry["source_config"]["zju"]["margin_frac"] == 1.0
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "dataset.lock", "s"]
+
+
+def test_a_split_half_swapped_by_a_killed_conversion_is_put_back_not_deleted(tmp_path, subject, caplog):
+    """A conversion killed outright between its two renames (SIGKILL, a power cut: nothing can hold those) left the
+    old split as ``<split>.old-<pid>`` alone; the next run deleted it as a leftover. It is put back, so a next
+    conversion that fails leaves it on disk as it was."""
+    import logging
+    import os
+    import shutil
+
+    root = tmp_path / "subject"
+    shutil.copytree(subject[0], root)
+    out = tmp_path / "ds"
+    config = ZjuConfig(resolution=RES, view_sets=((0, 1),))
+    assert convert_zju(root, out, config, split="s", shard_size=1) == 2
+    shards = sorted(p.name for p in (out / "s").iterdir())
+    os.replace(out / "s", out / "s.old-99999")  # the state the kill left
+    (root / "mask" / "Camera_B2" / "000001.png").unlink()  # this conversion fails after its first shard
+    with caplog.at_level(logging.WARNING), pytest.raises(DatasetError, match="mask"):
+        convert_zju(root, out, config, split="s", shard_size=1)
+    assert "s.old-99999, left by a conversion killed between its two renames: put back" in caplog.text
+    assert sorted(p.name for p in (out / "s").iterdir()) == shards
+    assert not list(out.glob("s.*"))
