@@ -633,12 +633,43 @@ def test_a_stop_between_the_two_renames_of_the_swap_loses_no_split_and_is_said_t
     assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "dataset.lock", "s"]
 
 
-def test_a_split_half_swapped_by_a_killed_conversion_is_put_back_not_deleted(tmp_path, subject, caplog):
-    """A conversion killed outright between its two renames (SIGKILL, a power cut: nothing can hold those) left the
-    old split as ``<split>.old-<pid>`` alone; the next run deleted it as a leftover. It is put back, so a next
-    conversion that fails leaves it on disk as it was."""
-    import logging
+class _Killed(BaseException):
+    """A kill (SIGKILL, a power cut) at one point of the swap: nothing after it runs, no handler, no clean-up."""
+
+
+def _kill_the_conversion_at(monkeypatch, out, point):
+    """Make the conversion stop dead at ``point`` of its swap: right after the manifest without the split's entry
+    is written, after the old split is renamed away, or after the new one is renamed in."""
     import os
+    from pathlib import Path
+
+    from training.data import zju_samples
+
+    real_replace, real_write = os.replace, zju_samples.write_manifest
+
+    def replace(src, dst):
+        real_replace(src, dst)
+        if (point == "between the renames" and Path(src) == out / "s") or (
+                point == "after both renames" and Path(dst) == out / "s"):
+            raise _Killed
+
+    def write_manifest(root, manifest):
+        real_write(root, manifest)
+        if point == "after the entry was set aside":
+            raise _Killed
+
+    monkeypatch.setattr(os, "replace", replace)
+    monkeypatch.setattr(zju_samples, "write_manifest", write_manifest)
+
+
+@pytest.mark.parametrize("point", ["after the entry was set aside", "between the renames", "after both renames"])
+def test_a_split_half_swapped_by_a_killed_conversion_is_put_back_not_deleted(tmp_path, subject, caplog, monkeypatch,
+                                                                             point):
+    """A conversion killed outright during its swap (SIGKILL, a power cut: nothing can hold those) left the split's
+    entry out of the manifest, and between the two renames the old shards as ``<split>.old-<pid>`` alone, which
+    the next run deleted as a leftover. The next run puts the split back as it was before the killed one, shards and
+    entry, so that a failure of its own leaves it so."""
+    import logging
     import shutil
 
     root = tmp_path / "subject"
@@ -646,11 +677,20 @@ def test_a_split_half_swapped_by_a_killed_conversion_is_put_back_not_deleted(tmp
     out = tmp_path / "ds"
     config = ZjuConfig(resolution=RES, view_sets=((0, 1),))
     assert convert_zju(root, out, config, split="s", shard_size=1) == 2
-    shards = sorted(p.name for p in (out / "s").iterdir())
-    os.replace(out / "s", out / "s.old-99999")  # the state the kill left
+    before = [ShardedSplit(out, "s").arrays(i)["roi"].tolist() for i in range(2)]
+    manifest = json.loads((out / "dataset.json").read_text())
+
+    _kill_the_conversion_at(monkeypatch, out, point)
+    with pytest.raises(_Killed):
+        convert_zju(root, out, ZjuConfig(resolution=RES, view_sets=((0, 1),), margin_frac=1.0), split="s",
+                    shard_size=2)
+    monkeypatch.undo()
+    assert "s" not in json.loads((out / "dataset.json").read_text())["splits"]  # the state the kill left
+
     (root / "mask" / "Camera_B2" / "000001.png").unlink()  # this conversion fails after its first shard
     with caplog.at_level(logging.WARNING), pytest.raises(DatasetError, match="mask"):
         convert_zju(root, out, config, split="s", shard_size=1)
-    assert "s.old-99999, left by a conversion killed between its two renames: put back" in caplog.text
-    assert sorted(p.name for p in (out / "s").iterdir()) == shards
-    assert not list(out.glob("s.*"))
+    assert json.loads((out / "dataset.json").read_text()) == manifest
+    assert [ShardedSplit(out, "s").arrays(i)["roi"].tolist() for i in range(2)] == before
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "dataset.lock", "s"]
+    assert "left half-swapped by a conversion killed during its swap: the split before it put back" in caplog.text

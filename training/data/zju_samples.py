@@ -326,7 +326,7 @@ def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig
     else:
         manifest = new_manifest(resolution=config.resolution, view_names=config.view_names, source="zju",
                                 source_config=source_config)
-    _recover_a_half_swapped_split(out, split)
+    _recover_a_half_swapped_split(out, manifest, split)
     # leftovers of an interrupted conversion of this split (split names have no dot: no other split matches)
     for stale in [*out.glob(f"{split}.tmp-*"), *out.glob(f"{split}.old-*")]:
         log.info("removing %s, left by an interrupted conversion", stale)
@@ -380,34 +380,60 @@ def split_replaced(stop: KeyboardInterrupt) -> bool:
     return getattr(stop, _SPLIT_REPLACED, False)
 
 
+#: The manifest's key for the entries of splits being swapped: taken out of ``splits`` (a loader never pairs the
+#: old entry with new shards) and kept here until the new entry is written, for the next run to put back with the
+#: old shards when a conversion was killed during the swap.
+REPLACING = "replacing_splits"
+
+
 def _swap_in(out: Path, split: str, tmp: Path, old: Path, manifest: dict, entry: dict, source_config: dict) -> None:
     """Put the converted shards ``tmp`` in place of split ``split``, and ``entry`` in its manifest; the old split
     goes to ``old``, for the caller to delete."""
     split_dir = out / split
     if split in manifest["splits"]:
-        # a crash during the swap then leaves the split absent from the manifest, never old entry + new shards
-        del manifest["splits"][split]
+        # a crash during the swap then leaves the split absent from the splits, never old entry + new shards; its
+        # entry is kept aside for the next run (_recover_a_half_swapped_split)
+        manifest.setdefault(REPLACING, {})[split] = manifest["splits"].pop(split)
         write_manifest(out, manifest)
     if split_dir.exists():
         os.replace(split_dir, old)
     os.replace(tmp, split_dir)
     manifest["splits"][split] = entry
+    _drop_aside(manifest, split)
     if manifest.get("source") == "zju":  # (another source's top-level settings are its own: generate checks them)
         manifest["source_config"] = source_config
     write_manifest(out, manifest)
 
 
-def _recover_a_half_swapped_split(out: Path, split: str) -> None:
-    """Put back the old split a killed conversion (SIGKILL, a power cut) left as ``<split>.old-<pid>`` with no
-    ``<split>`` beside it, rather than delete it as a leftover: a failure of this conversion then leaves it as it
-    was on disk. Its manifest entry, removed before the swap, is not restored (a conversion that succeeds writes
-    one)."""
+def _drop_aside(manifest: dict, split: str) -> dict | None:
+    """Take ``split``'s entry kept aside during a swap out of ``manifest``; None where there is none."""
+    aside = manifest.get(REPLACING, {})
+    entry = aside.pop(split, None) if isinstance(aside, dict) else None
+    if not aside:
+        manifest.pop(REPLACING, None)
+    return entry
+
+
+def _recover_a_half_swapped_split(out: Path, manifest: dict, split: str) -> None:
+    """Put back the split a conversion killed during its swap (SIGKILL, a power cut: no signal hold stops those)
+    left half-swapped, rather than delete its old shards as a leftover: the old shards (``<split>.old-<pid>``, or
+    ``<split>`` where the kill came before the first rename) with the entry kept aside. A failure of this
+    conversion then leaves the split as it was before the killed one. Without an entry kept aside (the split was
+    not in the manifest), an old folder with no ``<split>`` beside it is put back alone."""
     olds = sorted(out.glob(f"{split}.old-*"), key=lambda p: p.stat().st_mtime)
-    if (out / split).exists() or not olds:
+    entry = _drop_aside(manifest, split)
+    if entry is None and ((out / split).exists() or not olds):
         return
-    log.warning("%s: no split folder but %s, left by a conversion killed between its two renames: put back",
-                out / split, olds[-1].name)
-    os.replace(olds[-1], out / split)
+    if olds:
+        if (out / split).exists():  # the new shards, renamed in before the kill, have no entry: the old ones stay
+            shutil.rmtree(out / split)
+        os.replace(olds[-1], out / split)
+    if entry is not None:
+        if (out / split).is_dir():
+            manifest["splits"][split] = entry
+        write_manifest(out, manifest)
+    log.warning("%s: left half-swapped by a conversion killed during its swap: the split before it put back%s",
+                out / split, "" if entry is not None else " (it had no manifest entry)")
 
 
 __all__ = ["split_replaced", "ZjuConfig", "SamplePlan", "zju_sample", "zju_view", "plan_zju_samples", "iter_zju_samples", "check_folders",
