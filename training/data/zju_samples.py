@@ -352,13 +352,15 @@ def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig
              "spec": {"name": split, "source": "zju", "subject": str(subject)}, "source_config": source_config,
              **({"skipped_missing_masks": len(plan.skipped)} if config.skip_missing_masks else {})}
     old = out / f"{split}.old-{os.getpid()}"
+    swapped = False
     try:
         # a stop landing between the two renames left no split at all, and the next run deleted the old one
         # (taken for a leftover): held until the new split and its entry are in place, then raised
         with raising_stop_signals_deferred():
             _swap_in(out, split, tmp, old, manifest, entry, source_config)
+            swapped = True
     except KeyboardInterrupt as e:
-        if (out / split).is_dir() and not tmp.exists():  # raised after the swap: the new split is the one kept
+        if swapped:  # raised after the swap: the new split is the one kept
             setattr(e, _SPLIT_REPLACED, True)
             shutil.rmtree(old, ignore_errors=True)
         raise
