@@ -342,7 +342,8 @@ def _largest_move_px(view: BoardView | None, last: BoardView | None) -> float | 
 def _write_view(folders: list[Path], name: str, images: Sequence[np.ndarray]) -> None:
     """Both images of a view as ``FOLDER/NAME.png``, each written aside and renamed into place only once both
     are: a capture stopped (Ctrl-C) or killed while writing left half a pair, or a cut-off PNG that stopped the
-    solve ("not a readable image")."""
+    solve ("not a readable image"). The caller holds the stop signals over it (the two renames are two steps); a
+    kill between them leaves one camera's image, which the solve names ("no namesake in the other folder")."""
     staged: list[tuple[Path, Path]] = []
     try:
         for folder, image in zip(folders, images):
@@ -509,12 +510,15 @@ def cmd_capture(args: argparse.Namespace) -> int:
                 last_views = found
             name = FLOOR_VIEW if args.floor else f"{number:03d}"
             number += 1
-            _write_view(folders, name, pair.images)  # both, so a view one camera missed stays a pair
-            if args.floor:  # --force: the view replaced may have been a .jpg; two floors stop the solve
-                for folder in folders:
-                    for stale in (folder / f"{name}{suffix}" for suffix in IMAGE_SUFFIXES if suffix != ".png"):
-                        stale.unlink(missing_ok=True)
-            kept += 1
+            # a stop landing between the two renames left one camera's image of the view (half a pair, which the
+            # solve counts for that lens alone): held until the pair is in place and counted, then raised
+            with stop_signals_deferred():
+                _write_view(folders, name, pair.images)  # both, so a view one camera missed stays a pair
+                if args.floor:  # --force: the view replaced may have been a .jpg; two floors stop the solve
+                    for folder in folders:
+                        for stale in (folder / f"{name}{suffix}" for suffix in IMAGE_SUFFIXES if suffix != ".png"):
+                            stale.unlink(missing_ok=True)
+                kept += 1
             last_kept_at = now
             print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
         read_to_its_end = True

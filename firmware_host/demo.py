@@ -49,12 +49,13 @@ ground-truth joints are streamed and printed instead, every one labelled ground 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import signal
 import statistics
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -70,7 +71,7 @@ from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame, truth_frame
 from firmware_host.protocol.constants import MAX_RIG_ID_LEN
-from firmware_host.sinks import open_sink
+from firmware_host.sinks import Sink, open_sink
 from firmware_host.sinks.file_sink import FileSink
 from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
@@ -361,6 +362,22 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+@contextlib.contextmanager
+def _closed_on_the_way_out(sink: Sink) -> Iterator[Sink]:
+    """``sink``, closed as the block ends. A run that ends without an error closes it itself (its stop said); one
+    stopped by an error closes it here with the stop signals held: a Ctrl-C or SIGTERM landing in that close (it
+    delivers what it holds queued, up to a second) was raised there in place of the error, its message and exit
+    status lost. That error is the one reported; a stop noted there is dropped."""
+    try:
+        yield sink
+    except BaseException:
+        with stop_signals_deferred(then_raise=False):
+            sink.close()
+        raise
+    with stop_signals_deferred():
+        sink.close()
+
+
 def _run(args: argparse.Namespace, prog: str) -> int:
     cfg = None
     if not args.truth_only:
@@ -414,7 +431,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         if ("rig_id" not in parse_url(sink_url).query and 0 < len(rig_id) <= MAX_RIG_ID_LEN and rig_id.isascii()
                 and rig_id.isprintable()):
             sink_kw["rig_id"] = rig_id
-        with open_sink(sink_url, **sink_kw) as sink:
+        with _closed_on_the_way_out(open_sink(sink_url, **sink_kw)) as sink:
             start = time.monotonic()
             deadline = start + args.seconds
             while time.monotonic() < deadline:
@@ -479,7 +496,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
             # slow serial link): a second Ctrl-C pressed there cut it short and ended the run without its summary,
             # 130 for a run the first Ctrl-C ended with 0. Raised after the close only when it is the first stop
             with stop_signals_deferred(then_raise=stopped is None):
-                sink.close()  # (the with's own close then has nothing left to do)
+                sink.close()  # (_closed_on_the_way_out's close then has nothing left to do)
         sink_stats = sink.stats()
         stats = source.stats
         # under LATEST the rig hands out the newest pair and drops (counts) the older ones; an OAK's count

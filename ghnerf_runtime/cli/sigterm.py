@@ -1,5 +1,6 @@
 """SIGTERM stops a command-line tool as Ctrl-C does: one helper for ``ghnerf-run``, ``ghnerf-listen``, ``ghcal``,
-``ghnerf-demo``, ``ghnerf-train``, the human-encoder pretraining, ``ghnerf-eval`` and the dataset generator.
+``ghnerf-demo``, ``ghnerf-train``, the human-encoder pretraining, ``ghnerf-eval``, the dataset generator and the
+ZJU-MoCap conversion.
 
 SIGTERM's default action (``timeout``, ``kill``, a wrapper's stop button, systemd) kills the process outright:
 no ``finally`` runs, so a tool's outputs are left half-written (a ``record+`` take stays ``complete: false``)
@@ -95,6 +96,19 @@ def stop_signals_deferred(*, then_raise: bool = True) -> Iterator[None]:
     False where the block runs while a stop or an error is already on its way, which is then the one reported.
     """
     with _signals_held((signal.SIGINT, signal.SIGTERM), then_raise=then_raise):
+        yield
+
+
+@contextlib.contextmanager
+def raising_stop_signals_deferred() -> Iterator[None]:
+    """:func:`stop_signals_deferred` for a library's step that must finish (a dataset split's two renames): only
+    the stop signals that would raise now are held, Ctrl-C under Python's own handler and SIGTERM inside
+    :func:`sigterm_as_interrupt`; a caller's own handling of either (SIGTERM's default kill) is left alone. The
+    first noted is raised once the block has ended normally."""
+    raising = tuple(signum for signum, raises in (
+        (signal.SIGINT, signal.getsignal(signal.SIGINT) is signal.default_int_handler),
+        (signal.SIGTERM, sigterm_raises())) if raises)
+    with _signals_held(raising, then_raise=True):
         yield
 
 

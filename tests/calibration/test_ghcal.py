@@ -1136,3 +1136,36 @@ def test_solve_refuses_to_keep_the_previous_rig_on_its_report_or_in_a_folder(tmp
     assert f"is kept as {tmp_path / 'rig.prev.json'} before it is replaced, but that is a folder" in \
         capsys.readouterr().err
     assert rig_path.read_text() == "{}"
+
+
+@pytest.mark.parametrize("signum_name,how", [("SIGINT", ""), ("SIGTERM", " (SIGTERM)")])
+def test_a_stop_between_the_two_renames_of_a_view_leaves_the_pair_whole_and_counted(
+        truth, tmp_path, capsys, monkeypatch, signum_name, how):
+    """Review 63: a Ctrl-C (or SIGTERM) landing between ``_write_view``'s two renames left one camera's image of
+    the view, half a pair. The pair is now written whole before the stop is raised, and counted in its line."""
+    import os
+    import signal
+    import time
+
+    take, board = _one_view_take(tmp_path, truth)
+    out = tmp_path / "views"
+    real_replace = os.replace
+
+    def replace(src, dst):
+        real_replace(src, dst)
+        if str(dst).endswith(".png") and Path(dst).parent.parent == out:  # the first camera's image in place
+            os.kill(os.getpid(), signal.Signals[signum_name])
+            time.sleep(0.05)  # a handler that raises does so here, before the second rename
+
+    monkeypatch.setattr(os, "replace", replace)
+    try:
+        rc = cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--count", "5",
+                       "--interval-s", "0", "--still-s", "0", "--out", str(out)])
+    except KeyboardInterrupt:
+        pytest.fail("the stop escaped ghcal")
+    monkeypatch.undo()
+    pngs = sorted(str(p.relative_to(out)) for p in out.rglob("*.png"))
+    cams = sorted(p.name for p in out.iterdir() if p.is_dir())
+    assert pngs == [f"{cam}/000.png" for cam in cams] and len(cams) == 2  # both images of the view, no half pair
+    assert not list(out.rglob(".*.tmp"))
+    assert rc == 0 and f"stopped{how}: kept 1 view(s)" in capsys.readouterr().out

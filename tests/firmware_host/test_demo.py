@@ -848,3 +848,41 @@ def test_an_error_on_its_way_is_reported_when_a_sigterm_lands_in_the_recorder_s_
     assert rc == 2 and capsys.readouterr().err.splitlines() == [
         f"{demo.prog_name()}: error: [Errno 5] Input/output error"]
     assert json.loads((take / "manifest.json").read_text())["complete"] is True
+
+
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+def test_an_error_on_its_way_is_reported_when_a_stop_lands_in_the_sink_s_close(tmp_path, capsys, monkeypatch,
+                                                                                signum):
+    """Review 63: a run stopped by an error closed its sink on the way out without the stop signals held (the
+    with's own close): a Ctrl-C or SIGTERM landing there (the sink delivers what it holds queued, up to a second)
+    was raised in place of the error, "stopped", 130 or 143, for a run that failed (2, the error said)."""
+    import os
+    import signal
+
+    from firmware_host.sinks import base
+
+    real_close, closed = base.Sink.close, []
+
+    def close(self, *args, **kwargs):
+        if not closed:
+            os.kill(os.getpid(), signal.Signals[signum])
+            time.sleep(0.3)  # a handler that raises does so here, in the main thread, before the close's work
+        closed.append(1)
+        return real_close(self, *args, **kwargs)
+
+    def failed(*args, **kwargs):
+        raise OSError(5, "Input/output error")
+
+    monkeypatch.setattr(base.Sink, "close", close)
+    monkeypatch.setattr(demo, "truth_frame", failed)
+    url = f"sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}"
+    previous = signal.signal(signal.SIGTERM, _outer_sigterm_handler)
+    try:
+        rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
+    except _Escaped:
+        pytest.fail("SIGTERM was left to the default action: the demo died without a word")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert rc == 2 and capsys.readouterr().err.splitlines() == [
+        f"{demo.prog_name()}: error: [Errno 5] Input/output error"]
+    assert len(closed) >= 1

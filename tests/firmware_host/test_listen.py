@@ -531,3 +531,57 @@ def test_the_readme_s_receiver_names_the_ipv6_socket_a_udp_sink_to_an_ipv6_host_
         while not joints:
             joints = [e.message for e in decoder.feed(rx.recv(2048) + b"\0") if isinstance(e.message, Joints)]
     assert joints[0].xyz_mm.shape == (25, 3)
+
+
+_LISTEN_INTO_A_STALLED_PIPE = """
+import os, sys
+from firmware_host import listen
+from firmware_host.sinks import open_sink
+from ghnerf_runtime.cli.sigterm import sigterm_as_interrupt
+from tests.firmware_host.joint_stream_helpers import make_frame
+
+class Port:  # a frame on every read: the pipe fills at once and the listener blocks in a write
+    seq = 0
+    def read(self, timeout):
+        sink = open_sink("memory://", rig_id="pipe")
+        sink.send(make_frame(self.seq))
+        sink.close()
+        self.seq += 1
+        return sink.read()
+
+with sigterm_as_interrupt():
+    listen.listen(Port(), seconds=None, as_json=True, out=sys.stdout)
+print("stopped", file=sys.stderr, flush=True)
+if sys.argv[1] == "killed":  # as SIGKILL would after the stop: the exit's flush of the line held back never runs
+    os._exit(0)
+"""
+
+
+@pytest.mark.parametrize("end", ["exits", "killed"])
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+def test_a_stop_inside_a_write_blocked_on_a_full_pipe_leaves_no_half_json_line(signum, end):
+    """Review 63: could a first Ctrl-C (or SIGTERM) landing in a write blocked on a full pipe leave half a JSON
+    line? No: each line is flushed alone and is shorter than PIPE_BUF, so the pipe takes it whole or not at all;
+    the one the stop interrupted stays in Python's buffer and the exit's flush writes it whole, or (killed before)
+    nothing of it. Pinned here with a reader that stalls, then reads everything."""
+    import json
+    import select
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    child = subprocess.Popen([sys.executable, "-c", _LISTEN_INTO_A_STALLED_PIPE, end], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, cwd=os.getcwd())
+    time.sleep(1.5)  # the pipe full, the listener blocked in a write
+    child.send_signal(getattr(signal, signum))
+    try:
+        assert child.stderr.readline() == b"stopped\n"  # the stop came while its write was blocked
+        data = child.stdout.read()
+    finally:
+        child.kill()
+        child.wait()
+    lines = data.split(b"\n")
+    assert lines[-1] == b"" and len(lines) > 2  # ends at a line's end
+    assert all(len(line) < select.PIPE_BUF for line in lines)
+    assert [json.loads(line)["type"] for line in lines[:-1]][:3] == ["HELLO", "STATUS", "JOINTS"]

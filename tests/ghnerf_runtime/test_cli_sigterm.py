@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from ghnerf_runtime.cli.sigterm import Terminated, exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal, \
-    stop_signals_deferred, stop_words
+from ghnerf_runtime.cli.sigterm import Terminated, exit_status, raising_stop_signals_deferred, sigterm_as_interrupt, \
+    sigterm_deferred, stop_signal, stop_signals_deferred, stop_words
 
 
 def _outer(signum, frame):  # stands for whatever handler the caller had (the default would end pytest)
@@ -121,3 +121,40 @@ def test_stop_signals_deferred_holds_ctrl_c_and_sigterm_over_the_block(first, ra
         for signum, handler in previous.items():
             signal.signal(signum, handler)
     assert finished == ["block", "quiet"]
+
+
+class _OuterTerm(Exception):
+    """The caller's own SIGTERM handler ran: the block left it alone."""
+
+
+def _outer_term(signum, frame):
+    raise _OuterTerm
+
+
+def test_raising_stop_signals_deferred_holds_only_the_stops_that_would_raise():
+    """A library's step that must finish (convert_zju's swap) holds Ctrl-C under Python's own handler and SIGTERM
+    inside sigterm_as_interrupt, raised after the block; a caller's own SIGTERM handling is left in place."""
+    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
+    previous_term = signal.signal(signal.SIGTERM, _outer_term)
+    finished = []
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with raising_stop_signals_deferred():
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.1)  # noted, not raised
+                finished.append("held")
+        with pytest.raises(_OuterTerm):
+            with raising_stop_signals_deferred():
+                assert signal.getsignal(signal.SIGTERM) is _outer_term
+                _deliver_sigterm()
+        with sigterm_as_interrupt(), pytest.raises(Terminated):
+            with raising_stop_signals_deferred():
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(0.1)
+                finished.append("held too")
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        assert signal.getsignal(signal.SIGTERM) is _outer_term
+    finally:
+        signal.signal(signal.SIGINT, previous_int)
+        signal.signal(signal.SIGTERM, previous_term)
+    assert finished == ["held", "held too"]

@@ -585,3 +585,112 @@ def test_an_image_or_mask_whose_header_is_beyond_opencv_s_size_limits_is_named(t
         with pytest.raises(DatasetError, match="unreadable") as err:
             read(0, 0)
         assert err.value.path == str(path)
+
+
+def _stop_between_the_renames(monkeypatch, out, split, signum):
+    """Send ``signum`` to this process right after the conversion renames the old split away (the first of its
+    two renames), where a stop used to leave no split at all."""
+    import os
+    import signal
+    import time
+
+    real_replace = os.replace
+
+    def replace(src, dst):
+        real_replace(src, dst)
+        if str(src) == str(out / split) and ".old-" in str(dst):
+            os.kill(os.getpid(), signum)
+            time.sleep(0.05)  # (a handler that raises does so here, between the renames)
+
+    monkeypatch.setattr(os, "replace", replace)
+    return signal
+
+
+@pytest.mark.parametrize("signum_name,status,words", [("SIGINT", 130, "Ctrl-C"), ("SIGTERM", 143, "SIGTERM")])
+def test_a_stop_between_the_two_renames_of_the_swap_loses_no_split_and_is_said_truly(
+        tmp_path, subject, caplog, monkeypatch, signum_name, status, words):
+    """Review 63: a Ctrl-C (or SIGTERM) landing between the swap's two renames left no split; the next run deleted
+    the old one as a leftover, while the message said the split was as it was."""
+    import logging
+    import signal
+
+    from training.data.convert_zju import main
+
+    out = tmp_path / "ds"
+    argv = [str(subject[0]), "--out", str(out), "--split", "s", "--res", str(RES), "--view-set", "0,1",
+            "--shard-size", "1"]
+    assert main(argv) == 0
+    _stop_between_the_renames(monkeypatch, out, "s", getattr(signal, signum_name))
+    caplog.clear()
+    with caplog.at_level(logging.ERROR):
+        assert main([*argv, "--margin", "1.0"]) == status
+    assert f"stopped by {words} once the conversion was done: split 's' of {out} is the new one" in caplog.text
+    monkeypatch.undo()
+    split = ShardedSplit(out, "s")  # whole, with its entry: the new one, as said
+    assert len(split) == 2
+    entry = json.loads((out / "dataset.json").read_text())["splits"]["s"]
+    assert entry["source_config"]["zju"]["margin_frac"] == 1.0
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "dataset.lock", "s"]
+
+
+class _Killed(BaseException):
+    """A kill (SIGKILL, a power cut) at one point of the swap: nothing after it runs, no handler, no clean-up."""
+
+
+def _kill_the_conversion_at(monkeypatch, out, point):
+    """Make the conversion stop dead at ``point`` of its swap: right after the manifest without the split's entry
+    is written, after the old split is renamed away, or after the new one is renamed in."""
+    import os
+    from pathlib import Path
+
+    from training.data import zju_samples
+
+    real_replace, real_write = os.replace, zju_samples.write_manifest
+
+    def replace(src, dst):
+        real_replace(src, dst)
+        if (point == "between the renames" and Path(src) == out / "s") or (
+                point == "after both renames" and Path(dst) == out / "s"):
+            raise _Killed
+
+    def write_manifest(root, manifest):
+        real_write(root, manifest)
+        if point == "after the entry was set aside":
+            raise _Killed
+
+    monkeypatch.setattr(os, "replace", replace)
+    monkeypatch.setattr(zju_samples, "write_manifest", write_manifest)
+
+
+@pytest.mark.parametrize("point", ["after the entry was set aside", "between the renames", "after both renames"])
+def test_a_split_half_swapped_by_a_killed_conversion_is_put_back_not_deleted(tmp_path, subject, caplog, monkeypatch,
+                                                                             point):
+    """A conversion killed outright during its swap (SIGKILL, a power cut: nothing can hold those) left the split's
+    entry out of the manifest, and between the two renames the old shards as ``<split>.old-<pid>`` alone, which
+    the next run deleted as a leftover. The next run puts the split back as it was before the killed one, shards and
+    entry, so that a failure of its own leaves it so."""
+    import logging
+    import shutil
+
+    root = tmp_path / "subject"
+    shutil.copytree(subject[0], root)
+    out = tmp_path / "ds"
+    config = ZjuConfig(resolution=RES, view_sets=((0, 1),))
+    assert convert_zju(root, out, config, split="s", shard_size=1) == 2
+    before = [ShardedSplit(out, "s").arrays(i)["roi"].tolist() for i in range(2)]
+    manifest = json.loads((out / "dataset.json").read_text())
+
+    _kill_the_conversion_at(monkeypatch, out, point)
+    with pytest.raises(_Killed):
+        convert_zju(root, out, ZjuConfig(resolution=RES, view_sets=((0, 1),), margin_frac=1.0), split="s",
+                    shard_size=2)
+    monkeypatch.undo()
+    assert "s" not in json.loads((out / "dataset.json").read_text())["splits"]  # the state the kill left
+
+    (root / "mask" / "Camera_B2" / "000001.png").unlink()  # this conversion fails after its first shard
+    with caplog.at_level(logging.WARNING), pytest.raises(DatasetError, match="mask"):
+        convert_zju(root, out, config, split="s", shard_size=1)
+    assert json.loads((out / "dataset.json").read_text()) == manifest
+    assert [ShardedSplit(out, "s").arrays(i)["roi"].tolist() for i in range(2)] == before
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "dataset.lock", "s"]
+    assert "left half-swapped by a conversion killed during its swap: the split before it put back" in caplog.text

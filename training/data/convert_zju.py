@@ -17,9 +17,10 @@ import logging
 from collections.abc import Sequence
 from pathlib import Path
 
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
 from training.data.errors import DataConfigError, DatasetError
 from training.data.zju import MASK_DIRS
-from training.data.zju_samples import ZjuConfig, convert_zju
+from training.data.zju_samples import ZjuConfig, convert_zju, split_replaced
 
 log = logging.getLogger("training.data.convert_zju")
 
@@ -80,7 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Exit 0 when converted; 2 for a bad option value or an unusable subject folder (the message names the option
-    or the file), 130 when interrupted (the previous split, if any, is left as it was)."""
+    or the file), 130 for Ctrl-C and 143 for a SIGTERM: the previous split, if any, is left as it was, or, where the
+    stop came during the swap (held over it), the new split is in place; the message says which."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(message)s")
@@ -92,13 +94,19 @@ def main(argv: Sequence[str] | None = None) -> int:
                            skip_missing_masks=args.skip_missing_masks)
         if not args.subject.is_dir():  # else "annots.npy: missing" under a folder that is not there either
             raise DatasetError(args.subject, "missing: no such subject folder")
-        count = convert_zju(args.subject, args.out, config, split=args.split, shard_size=args.shard_size)
+        with sigterm_as_interrupt():  # `timeout`, `kill`, a job scheduler: stopped as Ctrl-C stops it
+            count = convert_zju(args.subject, args.out, config, split=args.split, shard_size=args.shard_size)
     except (DataConfigError, DatasetError) as e:
         log.error("%s", e)
         return 2
-    except KeyboardInterrupt:
-        log.error("interrupted: split %r of %s is as it was before this conversion", args.split, args.out)
-        return 130
+    except KeyboardInterrupt as e:
+        if split_replaced(e):
+            log.error("stopped by %s once the conversion was done: split %r of %s is the new one", stop_words(e),
+                      args.split, args.out)
+        else:
+            log.error("stopped by %s: split %r of %s is as it was before this conversion", stop_words(e), args.split,
+                      args.out)
+        return exit_status(e)
     log.info("%s: %d samples converted into split %r of %s", args.subject, count, args.split, args.out)
     return 0
 

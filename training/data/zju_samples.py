@@ -38,6 +38,7 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.body25 import NUM_JOINTS
+from ghnerf_runtime.cli.sigterm import raising_stop_signals_deferred
 from ghnerf_runtime.geometry import Camera, triangulate_robust
 from ghnerf_runtime.preprocess import (
     Roi, apply_crop_maps, build_undistort_crop_maps, crop_camera, roi_from_joints,
@@ -325,6 +326,7 @@ def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig
     else:
         manifest = new_manifest(resolution=config.resolution, view_names=config.view_names, source="zju",
                                 source_config=source_config)
+    _recover_a_half_swapped_split(out, manifest, split)
     # leftovers of an interrupted conversion of this split (split names have no dot: no other split matches)
     for stale in [*out.glob(f"{split}.tmp-*"), *out.glob(f"{split}.old-*")]:
         log.info("removing %s, left by an interrupted conversion", stale)
@@ -346,22 +348,22 @@ def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig
         shutil.rmtree(tmp, ignore_errors=True)  # the old split (if any) was never touched
         raise
 
-    split_dir = out / split
-    if split in manifest["splits"]:
-        # a crash during the swap then leaves the split absent from the manifest, never old entry + new shards
-        del manifest["splits"][split]
-        write_manifest(out, manifest)
+    entry = {"count": count, "shard_size": shard_size,
+             "spec": {"name": split, "source": "zju", "subject": str(subject)}, "source_config": source_config,
+             **({"skipped_missing_masks": len(plan.skipped)} if config.skip_missing_masks else {})}
     old = out / f"{split}.old-{os.getpid()}"
-    if split_dir.exists():
-        os.replace(split_dir, old)
-    os.replace(tmp, split_dir)
-    manifest["splits"][split] = {"count": count, "shard_size": shard_size,
-                                 "spec": {"name": split, "source": "zju", "subject": str(subject)},
-                                 "source_config": source_config,
-                                 **({"skipped_missing_masks": len(plan.skipped)} if config.skip_missing_masks else {})}
-    if manifest.get("source") == "zju":  # (another source's top-level settings are its own: generate checks them)
-        manifest["source_config"] = source_config
-    write_manifest(out, manifest)
+    swapped = False
+    try:
+        # a stop landing between the two renames left no split at all, and the next run deleted the old one
+        # (taken for a leftover): held until the new split and its entry are in place, then raised
+        with raising_stop_signals_deferred():
+            _swap_in(out, split, tmp, old, manifest, entry, source_config)
+            swapped = True
+    except KeyboardInterrupt as e:
+        if swapped:  # raised after the swap: the new split is the one kept
+            setattr(e, _SPLIT_REPLACED, True)
+            shutil.rmtree(old, ignore_errors=True)
+        raise
     shutil.rmtree(old, ignore_errors=True)
     if plan.skipped:  # said last, after the shard lines, so it is not scrolled away
         frames = sorted({f for f, _, _ in plan.skipped})
@@ -371,5 +373,70 @@ def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig
     return count
 
 
-__all__ = ["ZjuConfig", "SamplePlan", "zju_sample", "zju_view", "plan_zju_samples", "iter_zju_samples", "check_folders",
+_SPLIT_REPLACED = "zju_split_replaced"  # set on a stop raised once the new split was in place
+
+
+def split_replaced(stop: KeyboardInterrupt) -> bool:
+    """Whether the Ctrl-C (or SIGTERM) that stopped :func:`convert_zju` came once its new split was in place (held
+    over the swap, raised after it): the split is then the new one, else the one before the conversion."""
+    return getattr(stop, _SPLIT_REPLACED, False)
+
+
+#: The manifest's key for the entries of splits being swapped: taken out of ``splits`` (a loader never pairs the
+#: old entry with new shards) and kept here until the new entry is written, for the next run to put back with the
+#: old shards when a conversion was killed during the swap.
+REPLACING = "replacing_splits"
+
+
+def _swap_in(out: Path, split: str, tmp: Path, old: Path, manifest: dict, entry: dict, source_config: dict) -> None:
+    """Put the converted shards ``tmp`` in place of split ``split``, and ``entry`` in its manifest; the old split
+    goes to ``old``, for the caller to delete."""
+    split_dir = out / split
+    if split in manifest["splits"]:
+        # a crash during the swap then leaves the split absent from the splits, never old entry + new shards; its
+        # entry is kept aside for the next run (_recover_a_half_swapped_split)
+        manifest.setdefault(REPLACING, {})[split] = manifest["splits"].pop(split)
+        write_manifest(out, manifest)
+    if split_dir.exists():
+        os.replace(split_dir, old)
+    os.replace(tmp, split_dir)
+    manifest["splits"][split] = entry
+    _drop_aside(manifest, split)
+    if manifest.get("source") == "zju":  # (another source's top-level settings are its own: generate checks them)
+        manifest["source_config"] = source_config
+    write_manifest(out, manifest)
+
+
+def _drop_aside(manifest: dict, split: str) -> dict | None:
+    """Take ``split``'s entry kept aside during a swap out of ``manifest``; None where there is none."""
+    aside = manifest.get(REPLACING, {})
+    entry = aside.pop(split, None) if isinstance(aside, dict) else None
+    if not aside:
+        manifest.pop(REPLACING, None)
+    return entry
+
+
+def _recover_a_half_swapped_split(out: Path, manifest: dict, split: str) -> None:
+    """Put back the split a conversion killed during its swap (SIGKILL, a power cut: no signal hold stops those)
+    left half-swapped, rather than delete its old shards as a leftover: the old shards (``<split>.old-<pid>``, or
+    ``<split>`` where the kill came before the first rename) with the entry kept aside. A failure of this
+    conversion then leaves the split as it was before the killed one. Without an entry kept aside (the split was
+    not in the manifest), an old folder with no ``<split>`` beside it is put back alone."""
+    olds = sorted(out.glob(f"{split}.old-*"), key=lambda p: p.stat().st_mtime)
+    entry = _drop_aside(manifest, split)
+    if entry is None and ((out / split).exists() or not olds):
+        return
+    if olds:
+        if (out / split).exists():  # the new shards, renamed in before the kill, have no entry: the old ones stay
+            shutil.rmtree(out / split)
+        os.replace(olds[-1], out / split)
+    if entry is not None:
+        if (out / split).is_dir():
+            manifest["splits"][split] = entry
+        write_manifest(out, manifest)
+    log.warning("%s: left half-swapped by a conversion killed during its swap: the split before it put back%s",
+                out / split, "" if entry is not None else " (it had no manifest entry)")
+
+
+__all__ = ["split_replaced", "ZjuConfig", "SamplePlan", "zju_sample", "zju_view", "plan_zju_samples", "iter_zju_samples", "check_folders",
            "convert_zju"]
