@@ -222,19 +222,28 @@ def _pair_time(cap) -> float | None:
     return t if math.isfinite(t) else None
 
 
+def _open_video(path: str):
+    """``path`` opened as a ``cv2.VideoCapture`` reading frames as stored; released again when it cannot be."""
+    cap = cv2.VideoCapture(path)
+    try:
+        if not cap.isOpened():  # why, checked only now: OpenCV also opens image-sequence patterns (left_%04d.png)
+            _check_input_file(path, "a video")
+            raise UsageError(f"{path}: cannot open the video (not a format OpenCV reads, or unreadable)")
+        read_as_stored(cap, path)  # a phone's rotation metadata ignored, as an image's EXIF orientation is
+    except BaseException:
+        cap.release()
+        raise
+    return cap
+
+
 def _pairs(args) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     if args.images:
         yield _read_image(args.images[0]), _read_image(args.images[1])
         return
     caps = []
-    for path in args.videos:
-        cap = cv2.VideoCapture(path)
-        if not cap.isOpened():  # why, checked only now: OpenCV also opens image-sequence patterns (left_%04d.png)
-            _check_input_file(path, "a video")
-            raise UsageError(f"{path}: cannot open the video (not a format OpenCV reads, or unreadable)")
-        read_as_stored(cap, path)  # a phone's rotation metadata ignored, as an image's EXIF orientation is
-        caps.append(cap)
-    try:
+    try:  # the first video's capture is released too when the second does not open (was left to the collector)
+        for path in args.videos:
+            caps.append(_open_video(path))
         n = 0
         while args.max_frames is None or n < args.max_frames:
             frames = [cap.read() for cap in caps]
