@@ -5,13 +5,14 @@ import argparse
 
 from training.cli import doc_of, parse_then_run
 from training.run_limits import MAX_THREADS
+from ghnerf_runtime.path_check import user_path
 
 
 def build_parser() -> argparse.ArgumentParser:
     doc = doc_of("training.evaluate")
     ap = argparse.ArgumentParser(prog="ghnerf-eval", description=doc.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=doc)
-    ap.add_argument("--data", default="data/edge128")
+    ap.add_argument("--data", type=user_path, default="data/edge128")
     ap.add_argument("--split", default="val", help="held-out split (default val: unseen bodies, motions, rigs)")
     ap.add_argument("--model", action="append", required=True, metavar="LABEL=SPEC",
                     help="x.pt (torch checkpoint) | folder (ONNX fp32) | folder#int8; repeatable, each "
@@ -19,7 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--limit", type=int, default=0, help="first N scenes only (0: all)")
     ap.add_argument("--no-novel", action="store_true", help="skip the novel-view PSNR/SSIM")
     ap.add_argument("--threads", type=int, default=2, help=f"torch and onnxruntime threads (1 to {MAX_THREADS})")
-    ap.add_argument("--out", help="write the JSON here (also printed)")
+    ap.add_argument("--out", type=user_path, help="write the JSON here (also printed)")
     return ap
 
 
