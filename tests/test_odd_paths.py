@@ -64,6 +64,7 @@ SCRIPTS = [
     ("calibration.cli", ["import", "P", "--out", "r.json"], "file"),
     ("training.cli.train", ["--config", "P", "--out", "o", "--validate-config"], "--config"),
     ("training.cli.evaluate", ["--data", "P", "--model", "a=b"], "--data"),
+    ("training.cli.evaluate", ["--model", "P"], "--model"),
     ("ghnerf_runtime.cli.run", ["--rig", "P", "--images", "a.png", "b.png"], "--rig"),
     ("ghnerf_runtime.cli.run", ["--rig", "r.json", "--videos", "P", "b.mp4"], "--videos"),
     ("ghnerf_runtime.cli.run", ["--rig", "r.json", "--images", "a.png", "b.png", "--overlay", "P"], "--overlay"),
