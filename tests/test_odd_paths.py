@@ -223,3 +223,24 @@ def test_an_image_path_with_a_nul_byte_is_not_read_up_to_it(tmp_path, monkeypatc
     monkeypatch.chdir(tmp_path)
     cv2.imwrite("a.png", np.zeros((3, 4, 3), np.uint8))
     assert read_image_or_none("a.png\x00b", cv2.IMREAD_COLOR) is None
+
+
+@pytest.mark.parametrize("data, said", [
+    ({"sinks": ["udp://127.0.0.1:9870"], "health": {"status_file": NUL}}, f"health.status_file: {NUL!r}: holds a NUL"),
+    ({"sinks": ["file:///tmp/a%00b"]}, "sinks[0]: '/tmp/a\\x00b': holds a NUL byte"),
+], ids=["status_file", "file sink"])
+def test_a_config_built_from_data_refuses_a_nul_before_the_outputs_apart_check(data, said):
+    """Not only a config file: ``daemon_config_from_dict`` (a reload's, a test's) reached ``os.path.realpath``."""
+    from firmware_host.daemon.config import DaemonConfigError, daemon_config_from_dict
+
+    with pytest.raises(DaemonConfigError) as e:
+        daemon_config_from_dict(data)
+    assert said in str(e.value)
+
+
+def test_the_daemon_refuses_a_nul_in_a_file_sink_of_its_config_file(tmp_path, capsys):
+    from firmware_host.daemon.cli import main
+
+    config = _daemon_config(tmp_path, sinks__=["file:///tmp/a%00b"])
+    assert main(["--config", str(config), "--validate-config", "--no-model"]) == 2
+    assert f"{config}: sinks[0]: '/tmp/a\\x00b': holds a NUL byte" in capsys.readouterr().err

@@ -172,6 +172,7 @@ class HealthConfig:
     def __post_init__(self) -> None:
         if self.status_file is not None and (not isinstance(self.status_file, str) or not self.status_file):
             _fail("status_file", "must be a file path or null", self.status_file)
+        _refuse_impossible("status_file", self.status_file)
         _seconds(self, "status_every_s", 0.05, 3600.0)
         _seconds(self, "open_allowance_s", 1.0, 3600.0)
         _seconds(self, "loop_allowance_s", 1.0, 3600.0)
@@ -209,6 +210,9 @@ class DaemonConfig:
         for k, url in enumerate(sinks):
             if not isinstance(url, str) or "://" not in url:
                 _fail(f"sinks[{k}]", "must be a sink URL such as 'serial:///dev/ttyACM0'", url)
+            place = _destination(url)
+            if place is not None and place[0] == "file":  # before the outputs-apart check reads it (realpath)
+                _refuse_impossible(f"sinks[{k}]", place[2])
         if len(set(sinks)) != len(sinks):
             _fail("sinks", "lists a URL twice", [redact_url(url) for url in sinks])  # the journal keeps no password
         _one_sink_per_destination(sinks)
@@ -224,6 +228,14 @@ class DaemonConfig:
             _fail("health.loop_allowance_s", f"must be at least rig.read_timeout_s + {LOOP_MARGIN_S:g} s "
                                              f"({self.rig.read_timeout_s + LOOP_MARGIN_S:g})",
                   self.health.loop_allowance_s)
+
+
+def _refuse_impossible(key: str, path: str | None) -> None:
+    """:class:`DaemonConfigError` keyed ``key`` for a ``path`` no file can have (a NUL byte, a name or path too long,
+    not UTF-8): ``os.path.realpath`` in the outputs-apart check raised ``ValueError`` for a NUL (a traceback)."""
+    problem = path_problem(path) if path else None
+    if problem is not None:
+        raise DaemonConfigError(f"{shown(path)}: {problem}", key=key)
 
 
 def _destination(url: str) -> tuple[str, str, str] | None:
