@@ -44,11 +44,12 @@ from calibration.detect import PATTERN_CHECK_MARKERS, BoardDetector, BoardView, 
 from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
-from ghnerf_runtime.cli.output_path import existing_ancestor, unwritable_reason
+from ghnerf_runtime.cli.output_path import dangling_link, existing_ancestor, unwritable_reason
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
 from ghnerf_runtime.rig_file import load_rig, save_rig, write_bytes_atomic, write_text_atomic
+from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser"]
 
@@ -185,6 +186,10 @@ def _output_folder(out: Path, what: str) -> None:
     """``--out`` of ``board``, ``synth`` and ``capture``: a folder that is, or can be made, and takes new files.
     Checked before the work (``synth`` renders for half a minute, ``capture`` opens the cameras), and said with
     the flag: a file given for it stopped them after that work with OSError's bare ``[Errno 17] File exists``."""
+    dangling = dangling_link(out)
+    if dangling is not None:  # mkdir said only "[Errno 17] File exists"
+        raise UsageError(f"--out {out}: {dangling} is a symbolic link to {os.readlink(dangling)}, which does not exist; "
+                         "make its target or give another folder")
     base = existing_ancestor(out)
     if not base.is_dir():
         raise UsageError(f"--out {out}: {base} is a file; give a folder for {what}")
@@ -1007,16 +1012,16 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("board", help="write the board to print and its definition")
-    p.add_argument("--out", required=True, help="folder for board.png and board.json")
-    p.add_argument("--board", help="a board definition to start from (default: 9x6 squares of 80 mm)")
+    p.add_argument("--out", type=user_path, required=True, help="folder for board.png and board.json")
+    p.add_argument("--board", type=user_path, help="a board definition to start from (default: 9x6 squares of 80 mm)")
     p.add_argument("--dpi", type=_positive_int, default=300, help="print resolution (default 300)")
     p.add_argument("--force", action="store_true", help="replace a board.json in --out that defines another board")
     p.set_defaults(run=cmd_board)
 
     p = sub.add_parser("synth", help="render the calibration views of a known rig (no cameras needed)")
-    p.add_argument("--out", required=True)
-    p.add_argument("--rig", help="the rig to film (default: a 0.6 m pair at 1.4 m, calibration.render.example_rig)")
-    p.add_argument("--board", help="the board to render (default: 9x6 squares of 80 mm); written to OUT/board.json")
+    p.add_argument("--out", type=user_path, required=True)
+    p.add_argument("--rig", type=user_path, help="the rig to film (default: a 0.6 m pair at 1.4 m, calibration.render.example_rig)")
+    p.add_argument("--board", type=user_path, help="the board to render (default: 9x6 squares of 80 mm); written to OUT/board.json")
     p.add_argument("--force", action="store_true",
                    help="write into a folder that already holds views, board.json or cameras.json")
     p.add_argument("--count", type=_view_count(1), default=15,
@@ -1028,9 +1033,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("capture", help="save image pairs in which a camera sees the board (both images)")
     p.add_argument("--url", required=True, help="rig URL (depthai://, replay://DIR, ...)")
-    p.add_argument("--board", help="the board to look for (default: 9x6 squares of 80 mm); solve and check "
+    p.add_argument("--board", type=user_path, help="the board to look for (default: 9x6 squares of 80 mm); solve and check "
                                    "still need its measured board.json")
-    p.add_argument("--out", required=True, help="folder: one subfolder per camera, and cameras.json, the order "
+    p.add_argument("--out", type=user_path, required=True, help="folder: one subfolder per camera, and cameras.json, the order "
                                                 "the rig source gives the cameras in (solve keeps it)")
     p.add_argument("--count", type=_view_count(1), default=20, help=f"views to keep (default 20, at most {MAX_VIEWS})")
     p.add_argument("--floor", action="store_true",
@@ -1048,11 +1053,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(run=cmd_capture)
 
     p = sub.add_parser("solve", help="solve the rig from a folder of views and write the rig file")
-    p.add_argument("--images", required=True, help="folder with one subfolder per camera")
-    p.add_argument("--board", help="the board's definition, measured on the print (default: IMAGES/board.json; "
+    p.add_argument("--images", type=user_path, required=True, help="folder with one subfolder per camera")
+    p.add_argument("--board", type=user_path, help="the board's definition, measured on the print (default: IMAGES/board.json; "
                                    "without either, an error)")
-    p.add_argument("--out", required=True, help="rig file to write (docs/rig-file.md)")
-    p.add_argument("--report", help="report JSON (default: OUT with .report.json; not OUT itself)")
+    p.add_argument("--out", type=user_path, required=True, help="rig file to write (docs/rig-file.md)")
+    p.add_argument("--report", type=user_path, help="report JSON (default: OUT with .report.json; not OUT itself)")
     p.add_argument("--cameras", help="FIRST,SECOND: the pair in rig order (default: the order IMAGES/cameras.json "
                                      "records, else the two subfolders, sorted)")
     p.add_argument("--lens", choices=sorted(LENS_MODELS), default="standard")
@@ -1069,10 +1074,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(run=cmd_solve)
 
     p = sub.add_parser("check", help="check a rig file against new views of the board")
-    p.add_argument("--rig", required=True)
-    p.add_argument("--board", help="the board's definition (default: IMAGES/board.json, else the board the rig "
+    p.add_argument("--rig", type=user_path, required=True)
+    p.add_argument("--board", type=user_path, help="the board's definition (default: IMAGES/board.json, else the board the rig "
                                    "records); its square size must be the one the rig was solved with")
-    p.add_argument("--images", required=True)
+    p.add_argument("--images", type=user_path, required=True)
     p.add_argument("--floor-view", help="the view of the board lying on the floor (default: the rig's, as given "
                                         "to solve, else 'floor')")
     p.add_argument("--board-thickness", type=_finite(0.0, 0.1),
@@ -1086,14 +1091,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(run=cmd_check)
 
     p = sub.add_parser("import", help="write a rig file from another tool's calibration (OpenCV, anipose)")
-    p.add_argument("file", help="OpenCV FileStorage .yml/.yaml/.xml/.json (our multi-camera layout or "
+    p.add_argument("file", type=user_path, help="OpenCV FileStorage .yml/.yaml/.xml/.json (our multi-camera layout or "
                                 "stereo_calib's intrinsics.yml) or anipose calibration.toml")
-    p.add_argument("--out", required=True, help="rig file to write (docs/rig-file.md)")
+    p.add_argument("--out", type=user_path, required=True, help="rig file to write (docs/rig-file.md)")
     p.add_argument("--format", choices=("opencv", "anipose"), help="default: from FILE's suffix")
     p.add_argument("--units-to-metres", type=_finite(1e-9, 1e9),
                    help="metres per unit of the file's translations (0.001: millimetres); required for anipose "
                         "and stereo_calib files, which do not say (an anipose file ghcal export wrote records it)")
-    p.add_argument("--extrinsics", help="stereo_calib's extrinsics.yml, when R and T are not in FILE")
+    p.add_argument("--extrinsics", type=user_path, help="stereo_calib's extrinsics.yml, when R and T are not in FILE")
     p.add_argument("--image-size", help="WIDTHxHEIGHT for cameras whose entry states no image size")
     p.add_argument("--camera-height", type=_finite(0.05, 10.0),
                    help="level the rig: the first camera's height above the floor, m (without it the rig keeps "
@@ -1105,8 +1110,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(run=cmd_import)
 
     p = sub.add_parser("export", help="write a rig file for another tool (OpenCV FileStorage, anipose)")
-    p.add_argument("--rig", required=True)
-    p.add_argument("--out", required=True, help=".yml/.yaml/.xml/.json (OpenCV FileStorage) or .toml (anipose)")
+    p.add_argument("--rig", type=user_path, required=True)
+    p.add_argument("--out", type=user_path, required=True, help=".yml/.yaml/.xml/.json (OpenCV FileStorage) or .toml (anipose)")
     p.add_argument("--format", choices=("opencv", "anipose"), help="default: from --out's suffix")
     p.add_argument("--units-to-metres", type=_finite(1e-9, 1e9),
                    help="metres per unit of the written translations (OpenCV: default 1, recorded in the file; "

@@ -9,6 +9,7 @@ import importlib
 from drivers.base import RigSource
 from drivers.errors import BackendNotAvailableError
 from drivers.url import RigUrl
+from drivers.url_paths import check_url_paths
 
 #: scheme -> (module, class name). Extend by adding an entry; nothing is imported until chosen.
 BACKENDS: dict[str, tuple[str, str]] = {
@@ -47,6 +48,7 @@ def open_rig(url: str, **kwargs) -> RigSource:
 
 def create_rig_source(url: str, **kwargs) -> RigSource:
     """Like :func:`open_rig` but returns the source unopened."""
+    check_url_paths(url)  # a NUL byte or a name too long: one line, not a traceback from the backend
     if url.startswith(RECORD_PREFIX):
         from drivers.backends.record import RecordingRigSource
 

@@ -17,8 +17,13 @@ from urllib.parse import quote, unquote
 
 from drivers.errors import RigConfigError
 from drivers.url import RigUrl
+from ghnerf_runtime.path_check import path_problem, shown
 
-__all__ = ["FileParts", "FILE_PARTS", "rig_url_from_folder", "url_files"]
+__all__ = ["FileParts", "FILE_PARTS", "check_url_paths", "rig_url_from_folder", "url_files"]
+
+#: What ``record+`` takes from the URL it wraps that names a file: the take's folder.
+RECORD_PREFIX = "record+"
+RECORD_FILE_OPTIONS = ("out",)
 
 
 def _any_path(value: str) -> bool:
@@ -76,6 +81,31 @@ def url_files(url: str) -> list[tuple[str, str]]:
     files = [("target", parsed.target)] if parts.target and parsed.target else []
     return files + [(name, value) for name, value in parsed.options.items()
                     if name in parts.options and value and parts.options[name](value)]
+
+
+def _files_of_any(url: str) -> list[tuple[str, str]]:
+    """:func:`url_files`, and for a ``record+`` URL also its ``out=`` folder."""
+    if not url.startswith(RECORD_PREFIX):
+        return url_files(url)
+    inner = url[len(RECORD_PREFIX):]
+    try:
+        options = RigUrl.parse(inner).options
+    except RigConfigError:
+        return []
+    recorded = [(name, options[name]) for name in RECORD_FILE_OPTIONS if options.get(name)]
+    return recorded + url_files(inner)
+
+
+def check_url_paths(url: str) -> None:
+    """:class:`RigConfigError` naming the part of ``url`` (the path after ``://``, or an option such as ``rig=``,
+    ``first=``, ``out=``) whose file path no file can have (:func:`ghnerf_runtime.path_check.path_problem`): said
+    before the backend opens it, where a NUL byte raised ``ValueError``, a name past 255 bytes ``ENAMETOOLONG``
+    (tracebacks) and a path that is not UTF-8 crashed OpenCV."""
+    for part, value in _files_of_any(url):
+        problem = path_problem(value)
+        if problem is not None:
+            where = "the path after ://" if part == "target" else f"option {part}="
+            raise RigConfigError(f"rig URL {shown(url)}: {where} {shown(value)}: {problem}")
 
 
 def _absolute(value: str, folder: Path) -> str | None:

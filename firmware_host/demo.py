@@ -75,12 +75,13 @@ from firmware_host.sinks import Sink, open_sink
 from firmware_host.sinks.file_sink import FileSink
 from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
-from ghnerf_runtime.cli.output_path import output_clash
+from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
 from ghnerf_runtime.errors import ConfigError, ModelError
 from ghnerf_runtime.estimator import Estimator, PairResult
+from ghnerf_runtime.path_check import user_path, user_path_as_path
 
 DEFAULT_URL = "sim://?fps=30&seed=0&motion=wave"
 #: How long the first pair is waited for, and each one after it: an OAK streams a second or two after its
@@ -349,14 +350,14 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
                                                             "simulated rig)")
     parser.add_argument("--seconds", type=_positive_seconds, default=3.0,
                         help="how long to read pairs (default: %(default)s)")
-    parser.add_argument("--out", type=Path, default=Path("out/demo"),
+    parser.add_argument("--out", type=user_path_as_path, default=Path("out/demo"),
                         help="output folder: sim_pair.png (the last pair, whatever the rig) and the default sink's joints.jsonl "
                              "(default: %(default)s)")
     parser.add_argument("--sink", default=None,
                         help="joint-stream sink URL (default: file://OUT/joints.jsonl, rewritten each run)")
-    parser.add_argument("--model-dir", default=None,
+    parser.add_argument("--model-dir", type=user_path, default=None,
                         help="model folder (default: the --config's session.model_dir, else ./models)")
-    parser.add_argument("--config", default=None, help="estimator config, JSON (docs/runtime.md)")
+    parser.add_argument("--config", type=user_path, default=None, help="estimator config, JSON (docs/runtime.md)")
     parser.add_argument("--truth-only", action="store_true",
                         help="no model: stream the simulator's ground-truth joints instead of estimates")
     return parser
@@ -385,7 +386,10 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         _check_model_dir(cfg.session.model_dir)
     if args.out.exists() and not args.out.is_dir():
         raise DemoError(f"--out {args.out}: is a file; give a folder for the demo's outputs")
-    args.out.mkdir(parents=True, exist_ok=True)
+    try:  # a path through a file or a link to nothing: was OSError's bare "[Errno 17] File exists"
+        ready_output(args.out, "--out", "folder")
+    except OutputPathError as e:
+        raise DemoError(str(e)) from None
     if args.sink:
         sink_url = args.sink
     else:

@@ -28,7 +28,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
-from ghnerf_runtime.config_paths import paths_from_file
+from ghnerf_runtime.config_paths import impossible_path, paths_from_file
 from ghnerf_runtime.contract import GRAPH_NAMES, MAX_NEAR_FAR_MARGIN_M
 from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
@@ -1067,6 +1067,9 @@ def load_config(path: str | os.PathLike) -> EstimatorConfig:
     """Read a JSON config file; errors name the file and the key. A relative ``session.model_dir`` in the
     file is read from the file's folder (:mod:`ghnerf_runtime.config_paths`)."""
     data = read_json_file(path, lambda message: ConfigError(message, key=str(path)))
+    impossible = impossible_path(data, PATH_KEYS)
+    if impossible is not None:
+        raise ConfigError(f"{impossible[0]}: {impossible[1]}", key=str(path))
     try:
         return config_from_dict(paths_from_file(data, PATH_KEYS, path))
     except ConfigError as e:

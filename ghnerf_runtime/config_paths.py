@@ -15,7 +15,9 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["config_folder", "paths_from_file", "values_from_file"]
+from ghnerf_runtime.path_check import path_problem, shown
+
+__all__ = ["config_folder", "impossible_path", "paths_from_file", "values_from_file"]
 
 
 def config_folder(path: str | os.PathLike) -> Path:
@@ -45,6 +47,21 @@ def values_from_file(data: Any, keys: Sequence[tuple[str, ...]], path: str | os.
     for key in keys:
         data = _replace(data, key, folder, convert)
     return data
+
+
+def impossible_path(data: Any, keys: Sequence[tuple[str, ...]]) -> tuple[str, str] | None:
+    """The first path string at ``keys`` in ``data`` (a config file's JSON, as written) that no file can have
+    (:func:`ghnerf_runtime.path_check.path_problem`), as ``(dotted key, "value: why")``; None when there is none.
+    Checked before :func:`paths_from_file` joins a relative one to the file's folder, so that a ``~`` is seen as
+    written, and before anything touches it (a NUL byte raised ``ValueError`` from ``os.path.realpath``)."""
+    for key in keys:
+        node: Any = data
+        for part in key:
+            node = node.get(part) if isinstance(node, Mapping) else None
+        problem = path_problem(node) if isinstance(node, str) and node else None
+        if problem is not None:
+            return ".".join(key), f"{shown(node)}: {problem}"
+    return None
 
 
 def _plain_path(value: str, folder: Path) -> str:

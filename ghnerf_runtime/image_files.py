@@ -42,16 +42,28 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
     """``cv2.imread(path, flags)`` as stored (:data:`AS_STORED` added; a TIFF's Orientation tag and an AVIF's
     rotate and mirror properties ignored too), or None where OpenCV cannot read the file, a size beyond its limits
     included."""
-    if _turn_resets_of(path):
+    if _turn_resets_of(path) or not _opencv_can_take(path):
         try:
             data = np.fromfile(os.fspath(path), dtype=np.uint8)
-        except OSError:
+        except (OSError, ValueError):
             return None
         return decode_image_or_none(data, flags)
     try:
         return cv2.imread(os.fspath(path), flags | AS_STORED)  # (IMREAD_UNCHANGED is -1: it stays itself)
     except cv2.error:
         return None
+
+
+def _opencv_can_take(path: str | os.PathLike) -> bool:
+    """Whether ``cv2.imread`` may be given ``path``: a name that is not UTF-8 (bytes kept as surrogates, as a
+    folder listing gives them) crashes OpenCV (a segmentation fault), and one holding a NUL byte is read only up to
+    it (another file); such a path is read as bytes (and a NUL byte refused by Python)."""
+    text = os.fspath(path)
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return "\x00" not in text
 
 
 def decode_image_or_none(data: np.ndarray, flags: int) -> np.ndarray | None:
@@ -69,7 +81,7 @@ def _turn_resets_of(path: str | os.PathLike) -> list[tuple[int, bytes]]:
     try:
         with open(path, "rb") as f:
             return _turn_resets(f)
-    except OSError:
+    except (OSError, ValueError):  # ValueError: a NUL byte in the path (the read then says it cannot)
         return []
 
 

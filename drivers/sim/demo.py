@@ -20,6 +20,7 @@ from drivers.sim.motions import MOTION_NAMES
 from drivers.sim.placement import RigPlacement
 from drivers.sim.scene import SceneConfig, SimScene
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
+from ghnerf_runtime.path_check import user_path
 
 
 def draw_truth(image: np.ndarray, truth: CameraTruth) -> np.ndarray:
@@ -42,9 +43,9 @@ def draw_truth(image: np.ndarray, truth: CameraTruth) -> np.ndarray:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ghnerf-sim-demo", description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="sim_pair.png", help="image file to write (.png or .jpg)")
+    parser.add_argument("--out", type=user_path, default="sim_pair.png", help="image file to write (.png or .jpg)")
     parser.add_argument("--seed", type=int, default=0, help="scene seed (body, clothes, room)")
-    parser.add_argument("--motion", default="wave", help=f"one of {', '.join(MOTION_NAMES)}, or a .bvh path")
+    parser.add_argument("--motion", type=user_path, default="wave", help=f"one of {', '.join(MOTION_NAMES)}, or a .bvh path")
     parser.add_argument("--t", type=float, default=0.3, help="scene time in seconds")
     args = parser.parse_args(argv)
     # said before the render, as a usage error: cv2.imwrite raised a cv2.error traceback for these

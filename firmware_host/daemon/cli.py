@@ -78,6 +78,7 @@ from ghnerf_runtime.novel_painter import NovelPainter
 from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.session import resolve_model_dir
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
+from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser", "check_config", "check_model", "read_checked_config", "EXAMPLE_CONFIG"]
 
@@ -95,7 +96,7 @@ EXAMPLE_CONFIG = {
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
                                  epilog="Config reference: docs/daemon.md")
-    ap.add_argument("--config", help="daemon config, JSON (docs/daemon.md)")
+    ap.add_argument("--config", type=user_path, help="daemon config, JSON (docs/daemon.md)")
     ap.add_argument("--validate-config", action="store_true",
                     help="check the config (keys, values, rig and sink URLs, the model loaded and the estimator "
                          "settings against it, as the start does; no camera or sink opened), print it in full, exit")

@@ -30,8 +30,9 @@ from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, 
 from drivers.errors import RigConfigError
 from drivers.url import RigUrl, redact_url
 from drivers.url_paths import rig_url_from_folder, url_files
-from ghnerf_runtime.config_paths import paths_from_file, values_from_file
+from ghnerf_runtime.config_paths import impossible_path, paths_from_file, values_from_file
 from ghnerf_runtime.errors import ConfigError
+from ghnerf_runtime.path_check import path_problem, shown
 
 __all__ = ["DaemonConfigError", "RigConfig", "HealthConfig", "DaemonConfig", "daemon_config_from_dict",
            "load_daemon_config", "load_daemon_config_noting_paths", "LOG_LEVELS"]
@@ -171,6 +172,7 @@ class HealthConfig:
     def __post_init__(self) -> None:
         if self.status_file is not None and (not isinstance(self.status_file, str) or not self.status_file):
             _fail("status_file", "must be a file path or null", self.status_file)
+        _refuse_impossible("status_file", self.status_file)
         _seconds(self, "status_every_s", 0.05, 3600.0)
         _seconds(self, "open_allowance_s", 1.0, 3600.0)
         _seconds(self, "loop_allowance_s", 1.0, 3600.0)
@@ -208,6 +210,9 @@ class DaemonConfig:
         for k, url in enumerate(sinks):
             if not isinstance(url, str) or "://" not in url:
                 _fail(f"sinks[{k}]", "must be a sink URL such as 'serial:///dev/ttyACM0'", url)
+            place = _destination(url)
+            if place is not None and place[0] == "file":  # before the outputs-apart check reads it (realpath)
+                _refuse_impossible(f"sinks[{k}]", place[2])
         if len(set(sinks)) != len(sinks):
             _fail("sinks", "lists a URL twice", [redact_url(url) for url in sinks])  # the journal keeps no password
         _one_sink_per_destination(sinks)
@@ -223,6 +228,14 @@ class DaemonConfig:
             _fail("health.loop_allowance_s", f"must be at least rig.read_timeout_s + {LOOP_MARGIN_S:g} s "
                                              f"({self.rig.read_timeout_s + LOOP_MARGIN_S:g})",
                   self.health.loop_allowance_s)
+
+
+def _refuse_impossible(key: str, path: str | None) -> None:
+    """:class:`DaemonConfigError` keyed ``key`` for a ``path`` no file can have (a NUL byte, a name or path too long,
+    not UTF-8): ``os.path.realpath`` in the outputs-apart check raised ``ValueError`` for a NUL (a traceback)."""
+    problem = path_problem(path) if path else None
+    if problem is not None:
+        raise DaemonConfigError(f"{shown(path)}: {problem}", key=key)
 
 
 def _destination(url: str) -> tuple[str, str, str] | None:
@@ -345,6 +358,10 @@ def load_daemon_config_noting_paths(path: str | os.PathLike) -> tuple[DaemonConf
     """:func:`load_daemon_config`, and the paths that were relative in the file, as read from its folder (absolute):
     an error naming one of them may say where it was read from, one naming a path written absolute must not."""
     written = read_json_file(path, lambda message: DaemonConfigError(message, key=str(path)), "the config file")
+    try:
+        refuse_impossible_paths(written)
+    except DaemonConfigError as e:
+        raise DaemonConfigError(str(e), key=str(path)) from None
     data = values_from_file(paths_from_file(written, DAEMON_PATH_KEYS, path), DAEMON_RIG_URL_KEYS, path,
                             rig_url_from_folder)
     try:
@@ -353,6 +370,24 @@ def load_daemon_config_noting_paths(path: str | os.PathLike) -> tuple[DaemonConf
     except DaemonConfigError as e:
         raise DaemonConfigError(str(e), key=str(path)) from None
     return config, _made_absolute(written, data)
+
+
+def refuse_impossible_paths(data: Any) -> None:
+    """:class:`DaemonConfigError` keyed with the first path in ``data`` (the file as written: before a relative
+    path is joined to the file's folder, so a ``~`` is seen as written) that no file can have
+    (:func:`ghnerf_runtime.path_check.path_problem`: a NUL byte, a name or path too long, not UTF-8, a leading
+    ``~``). Said here, once: further on such a value raised ``ValueError`` from ``os.path.realpath`` (a traceback)
+    or ``ENAMETOOLONG`` from wherever it was first touched."""
+    impossible = impossible_path(data, DAEMON_PATH_KEYS)
+    if impossible is not None:
+        raise DaemonConfigError(impossible[1], key=impossible[0])
+    for key in DAEMON_RIG_URL_KEYS:
+        url = _at(data, key)
+        for part, value in url_files(url) if isinstance(url, str) else []:
+            problem = path_problem(value)
+            if problem is not None:
+                where = "the path after ://" if part == "target" else f"option {part}="
+                raise DaemonConfigError(f"{where} {shown(value)}: {problem}", key=".".join(key))
 
 
 def _made_absolute(written: Any, read: Any) -> frozenset[str]:

@@ -44,6 +44,7 @@ from firmware_host.sinks.file_claim import FileTaken, claim_file
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink, frame_messages
 from firmware_host.sinks.url import SinkUrl, int_in, parse_url
+from ghnerf_runtime.path_check import path_problem
 
 #: Longest wait for room in a pipe whose reader stopped reading, as for serial:// (a joint line a minute late is
 #: of no use).
@@ -186,4 +187,7 @@ def _local_path(url: str, u: SinkUrl) -> str:
     path = unquote(u.path)
     if not path.startswith("/") or path == "/":
         raise SinkConfigError(url, "path", path, "expected file:///path/to/joints.jsonl")
+    problem = path_problem(path)  # a NUL byte or a name too long: said now, not as a traceback from os.open
+    if problem is not None:
+        raise SinkConfigError(url, "path", path, problem)
     return path

@@ -46,6 +46,7 @@ from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import write_text_atomic
 from ghnerf_runtime.tracking import track_from_joints
+from ghnerf_runtime.path_check import user_path
 
 log = logging.getLogger("ghnerf-bench")
 
@@ -423,7 +424,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="ghnerf-bench", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="command", required=True)
     rt = sub.add_parser("runtime", help="per-stage latency and accuracy of the estimator")
-    rt.add_argument("--model-dir", default="models", help="model folder (default: %(default)s)")
+    rt.add_argument("--model-dir", type=user_path, default="models", help="model folder (default: %(default)s)")
     rt.add_argument("--sequences", type=int, default=10, help="held-out-like sequences (one rig and subject each)")
     rt.add_argument("--frames", type=int, default=30, help="pairs per sequence (30 fps)")
     # the defaults are named: every precision and both modes make six rows a source, which a reader should expect
@@ -502,10 +503,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="place each crop from the previous pair's true joints (times the tracked path with an "
                          "untrained model; accuracy is then not the estimator's own)")
     rt.add_argument("--seen-motions", action="store_true", help="training motions instead of the held-out ones")
-    rt.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench; 'off')")
-    rt.add_argument("--json", help="write the full report here")
+    rt.add_argument("--cache", type=user_path, help="sequence cache folder (default ~/.cache/ghnerf-bench; 'off')")
+    rt.add_argument("--json", type=user_path, help="write the full report here")
     sp = sub.add_parser("sim-pair", help="write a simulated pair (or short clip) and its rig file")
-    sp.add_argument("--out", required=True)
+    sp.add_argument("--out", type=user_path, required=True)
     sp.add_argument("--frames", type=int, default=1, help="at least 1; >1 writes <camera>.mp4 clips instead of PNGs")
     sp.add_argument("--seed", type=int, default=3)
     sp.add_argument("--motion", default="wave")
@@ -521,6 +522,11 @@ def _sim_pair(args) -> int:
 
     if args.frames < 1:
         print(f"ghnerf-bench: error: --frames must be at least 1, got {args.frames}", file=sys.stderr)
+        return 2
+    try:  # a path through a file or a link to nothing: was OSError's bare "[Errno 17] File exists"
+        ready_output(args.out, "--out", "folder")
+    except OutputPathError as e:
+        print(f"ghnerf-bench: error: {e}", file=sys.stderr)
         return 2
     try:
         paths = write_sim_example(args.out, seed=args.seed, motion=args.motion, t=args.t, frames=args.frames)

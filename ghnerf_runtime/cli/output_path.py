@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from ghnerf_runtime.path_check import path_problem, shown
+
 
 class OutputPathError(ValueError):
     """An output path that cannot take what the tool will write (the message names the flag and path)."""
@@ -31,6 +33,9 @@ def ready_output(path: str | os.PathLike, flag: str, kind: Literal["file", "fold
         OutputPathError: a folder given for a file, a file given for a folder, or a folder that cannot be
             made or written into.
     """
+    problem = path_problem(os.fspath(path))  # a NUL byte made the checks below raise ValueError (a traceback)
+    if problem is not None:
+        raise OutputPathError(f"{flag} {shown(os.fspath(path))}: {problem}")
     p = Path(path)
     if suffix and p.suffix != suffix:
         p = p.with_name(p.name + suffix)
@@ -39,6 +44,7 @@ def ready_output(path: str | os.PathLike, flag: str, kind: Literal["file", "fold
         raise OutputPathError(f"{flag} {p}: is a folder; give the file's path")
     if kind == "folder" and p.exists() and not p.is_dir():
         raise OutputPathError(f"{flag} {p}: is a file; give a folder")
+    _refuse_unmakeable(p, flag, kind)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -49,6 +55,27 @@ def ready_output(path: str | os.PathLike, flag: str, kind: Literal["file", "fold
     if kind == "file" and p.exists() and not os.access(p, os.W_OK):
         raise OutputPathError(f"{flag} {p}: the file exists and is not writable")
     return p
+
+
+def _refuse_unmakeable(p: Path, flag: str, kind: str) -> None:
+    """Say why ``mkdir -p`` cannot make the folder of ``p`` in the user's terms: it said only "File exists" for
+    a path through a file (``a.json/x``) and for a folder that is a link to nothing."""
+    folder = p if kind == "folder" else p.parent
+    dangling = dangling_link(folder)
+    if dangling is not None:
+        raise OutputPathError(f"{flag} {p}: cannot make the folder {folder}: {dangling} is a symbolic link to "
+                              f"{os.readlink(dangling)}, which does not exist; make its target or give another path")
+    base = existing_ancestor(folder)
+    if not base.is_dir():
+        raise OutputPathError(f"{flag} {p}: cannot make the folder {folder}: {base} is a file, not a folder")
+
+
+def dangling_link(path: Path) -> Path | None:
+    """The first of ``path`` and its parents that is a symbolic link leading nowhere (None: there is none)."""
+    for candidate in (path, *path.parents):
+        if candidate.is_symlink() and not candidate.exists():
+            return candidate
+    return None
 
 
 def unwritable_reason(folder: Path) -> str | None:

@@ -45,6 +45,7 @@ from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import load_rig, write_text_atomic
 from ghnerf_runtime.video_files import read_as_stored
+from ghnerf_runtime.path_check import user_path
 
 log = logging.getLogger("ghnerf-run")
 
@@ -58,15 +59,15 @@ class UsageError(RuntimeErrorBase):
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="ghnerf-run", description=__doc__.split("\n\n")[0],
                                  epilog="Schema and examples: docs/runtime.md")
-    ap.add_argument("--rig", help="rig file (docs/rig-file.md); required unless --validate-config")
+    ap.add_argument("--rig", type=user_path, help="rig file (docs/rig-file.md); required unless --validate-config")
     src = ap.add_mutually_exclusive_group()
-    src.add_argument("--images", nargs=2, metavar=("FIRST", "SECOND"), help="one image per camera, rig order")
-    src.add_argument("--videos", nargs=2, metavar=("FIRST", "SECOND"), help="one video per camera, rig order")
-    ap.add_argument("--out", default="-", help="joints output: .json (a list, written atomically at the end; a run "
+    src.add_argument("--images", type=user_path, nargs=2, metavar=("FIRST", "SECOND"), help="one image per camera, rig order")
+    src.add_argument("--videos", type=user_path, nargs=2, metavar=("FIRST", "SECOND"), help="one video per camera, rig order")
+    ap.add_argument("--out", type=user_path, default="-", help="joints output: .json (a list, written atomically at the end; a run "
                                                "stopped early keeps the pairs it finished), .jsonl or - (stdout, "
                                                "one object per line as each pair is done); default -")
-    ap.add_argument("--config", help="estimator config (JSON, docs/runtime.md); flags below override it")
-    ap.add_argument("--model-dir", help="model folder (default: the config's, else ./models)")
+    ap.add_argument("--config", type=user_path, help="estimator config (JSON, docs/runtime.md); flags below override it")
+    ap.add_argument("--model-dir", type=user_path, help="model folder (default: the config's, else ./models)")
     ap.add_argument("--precision", choices=("auto", "fp32", "int8"), help="graph file precision")
     ap.add_argument("--method", choices=THREE_D_METHODS, help="3D joint method")
     ap.add_argument("--heatmap-source", choices=HEATMAP_SOURCES,
@@ -91,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "on by default (a still pair, a video's first pair; docs/runtime.md); "
                          "--no-refine-cold-start reports the working volume's crop")
     ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
-    ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
+    ap.add_argument("--novel-view", type=user_path, metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
     ap.add_argument("--novel-alpha", type=float, help="novel camera between the rig cameras: 0 = first, "
                                                       "1 = second (default 0.5), on the line between them or an "
                                                       "orbit round the subject (novel_view.path); -1..2 "
@@ -104,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                               "an orbit where the cameras' axes are over 60 "
                                                               "degrees apart, else the line)")
     ap.add_argument("--novel-stride", type=int, choices=(1, 2, 4), help="render every n-th novel-view pixel")
-    ap.add_argument("--overlay", metavar="PATH", help="both input frames with the 2D joints drawn: .png or .mp4")
+    ap.add_argument("--overlay", type=user_path, metavar="PATH", help="both input frames with the 2D joints drawn: .png or .mp4")
     ap.add_argument("--max-frames", type=int, help="stop after this many pairs (videos; at least 1)")
     ap.add_argument("--validate-config", action="store_true", help="check the config, print it, exit")
     ap.add_argument("-v", "--verbose", action="store_true")
@@ -222,19 +223,28 @@ def _pair_time(cap) -> float | None:
     return t if math.isfinite(t) else None
 
 
+def _open_video(path: str):
+    """``path`` opened as a ``cv2.VideoCapture`` reading frames as stored; released again when it cannot be."""
+    cap = cv2.VideoCapture(path)
+    try:
+        if not cap.isOpened():  # why, checked only now: OpenCV also opens image-sequence patterns (left_%04d.png)
+            _check_input_file(path, "a video")
+            raise UsageError(f"{path}: cannot open the video (not a format OpenCV reads, or unreadable)")
+        read_as_stored(cap, path)  # a phone's rotation metadata ignored, as an image's EXIF orientation is
+    except BaseException:
+        cap.release()
+        raise
+    return cap
+
+
 def _pairs(args) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     if args.images:
         yield _read_image(args.images[0]), _read_image(args.images[1])
         return
     caps = []
-    for path in args.videos:
-        cap = cv2.VideoCapture(path)
-        if not cap.isOpened():  # why, checked only now: OpenCV also opens image-sequence patterns (left_%04d.png)
-            _check_input_file(path, "a video")
-            raise UsageError(f"{path}: cannot open the video (not a format OpenCV reads, or unreadable)")
-        read_as_stored(cap, path)  # a phone's rotation metadata ignored, as an image's EXIF orientation is
-        caps.append(cap)
-    try:
+    try:  # the first video's capture is released too when the second does not open (was left to the collector)
+        for path in args.videos:
+            caps.append(_open_video(path))
         n = 0
         while args.max_frames is None or n < args.max_frames:
             frames = [cap.read() for cap in caps]

@@ -976,3 +976,34 @@ def test_ctrl_c_pressed_again_while_the_outputs_are_written_leaves_them_whole(mo
     assert [p["sequence"] for p in got] == [0, 1]
     assert (tmp_path / "novel.png").is_file()  # the view's image written as well
     assert signal.getsignal(signal.SIGINT) is before  # put back
+
+
+def test_the_first_video_is_released_when_the_second_does_not_open(monkeypatch, tmp_path):
+    """``_pairs`` opened the first video, then raised for the second and left the first capture to the garbage
+    collector (a file descriptor and a decoder thread held until then)."""
+    opened = []
+
+    class _Cap:
+        def __init__(self, path):
+            self.path, self.released = path, False
+            opened.append(self)
+
+        def isOpened(self):
+            return self.path.endswith("first.mp4")
+
+        def set(self, prop, value):
+            return True
+
+        def get(self, prop):
+            return 0.0
+
+        def release(self):
+            self.released = True
+
+    (tmp_path / "second.mp4").write_bytes(b"not a video")
+    monkeypatch.setattr(cli_run.cv2, "VideoCapture", _Cap)
+    args = cli_run.build_parser().parse_args(["--rig", "r.json", "--videos", str(tmp_path / "first.mp4"),
+                                              str(tmp_path / "second.mp4")])
+    with pytest.raises(cli_run.UsageError, match="second.mp4: cannot open the video"):
+        next(cli_run._pairs(args))
+    assert [cap.released for cap in opened] == [True, True]

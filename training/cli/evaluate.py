@@ -5,21 +5,30 @@ import argparse
 
 from training.cli import doc_of, parse_then_run
 from training.run_limits import MAX_THREADS
+from ghnerf_runtime.path_check import user_path
+
+
+def _model_item(item: str) -> str:
+    """A ``--model`` item whose file or folder (``training.evaluate._spec_path``: that module loads torch) is a path
+    a file can have: a name past 255 bytes there raised ``ENAMETOOLONG`` from the loader (a traceback)."""
+    _, sep, spec = item.partition("=")
+    user_path((spec if sep else item).partition("#")[0])
+    return item
 
 
 def build_parser() -> argparse.ArgumentParser:
     doc = doc_of("training.evaluate")
     ap = argparse.ArgumentParser(prog="ghnerf-eval", description=doc.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=doc)
-    ap.add_argument("--data", default="data/edge128")
+    ap.add_argument("--data", type=user_path, default="data/edge128")
     ap.add_argument("--split", default="val", help="held-out split (default val: unseen bodies, motions, rigs)")
-    ap.add_argument("--model", action="append", required=True, metavar="LABEL=SPEC",
+    ap.add_argument("--model", action="append", required=True, metavar="LABEL=SPEC", type=_model_item,
                     help="x.pt (torch checkpoint) | folder (ONNX fp32) | folder#int8; repeatable, each "
                          "LABEL its own (without LABEL=, the file's or folder's name)")
     ap.add_argument("--limit", type=int, default=0, help="first N scenes only (0: all)")
     ap.add_argument("--no-novel", action="store_true", help="skip the novel-view PSNR/SSIM")
     ap.add_argument("--threads", type=int, default=2, help=f"torch and onnxruntime threads (1 to {MAX_THREADS})")
-    ap.add_argument("--out", help="write the JSON here (also printed)")
+    ap.add_argument("--out", type=user_path, help="write the JSON here (also printed)")
     return ap
 
 

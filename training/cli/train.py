@@ -5,19 +5,20 @@ import argparse
 
 from training.cli import doc_of, parse_then_run
 from training.configs import PRESETS
+from ghnerf_runtime.path_check import user_path
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="ghnerf-train", description=doc_of("training.train").split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--config", help="JSON or TOML train config (training/train_configs/*.json)")
-    p.add_argument("--out", required=True, help="run folder: checkpoints, log.jsonl, config.json")
+    p.add_argument("--config", type=user_path, help="JSON or TOML train config (training/train_configs/*.json)")
+    p.add_argument("--out", type=user_path, required=True, help="run folder: checkpoints, log.jsonl, config.json")
     p.add_argument("--resume", action="store_true",
                    help="continue from OUT/last.pt (without it, the newest OUT/ckpt_*.pt) when it exists; "
                         "without --resume an OUT holding checkpoints is refused")
-    p.add_argument("--init", help="torchvision resnet18 state dict for the human encoder")
+    p.add_argument("--init", type=user_path, help="torchvision resnet18 state dict for the human encoder")
     p.add_argument("--preset", choices=sorted(PRESETS))
-    p.add_argument("--data")
+    p.add_argument("--data", type=user_path)
     p.add_argument("--iterations", type=int)
     p.add_argument("--threads", type=int)
     p.add_argument("--seed", type=int)

@@ -1,0 +1,74 @@
+"""Paths no file can have, refused where the user gives them: one line naming the option or key, not a traceback.
+
+A path holding a NUL byte makes ``os.path.realpath`` and ``open`` raise ``ValueError`` (not ``OSError``, so a
+tool's ``except OSError`` lets it through); a name past 255 bytes or a path past 4095 raises ``ENAMETOOLONG`` from
+wherever it is first touched; a path that is not UTF-8 (bytes Python keeps as surrogates in ``sys.argv``) crashes
+OpenCV outright (a segmentation fault in ``cv2.imread``, ``cv2.VideoCapture``, ``cv2.haveImageWriter``) and cannot
+be written into a JSON report or a URL; and a leading ``~`` that no shell expanded (a config file, a quoted
+argument, a URL) names a folder called ``~`` in the current one. :func:`path_problem` says which, before any of it
+is touched; :func:`shown` writes the value so that odd bytes can be read back (``repr``).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+__all__ = ["NAME_MAX", "PATH_MAX", "path_problem", "shown", "user_path", "user_path_as_path"]
+
+#: Linux's limits (``<linux/limits.h>``), in bytes: a name (one component) and a whole path with its NUL.
+NAME_MAX = 255
+PATH_MAX = 4096
+
+
+def _not_utf8(value: str) -> bool:
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        return True
+    return False
+
+
+def path_problem(value: str) -> str | None:
+    """Why ``value`` cannot name a file here (None: it can, whether or not one exists).
+
+    >>> path_problem("models/ghnerf")
+    >>> path_problem("a\\x00b")
+    'holds a NUL byte'
+    """
+    if "\x00" in value:
+        return "holds a NUL byte"
+    if _not_utf8(value):
+        return "is not UTF-8 (give the path in UTF-8, or rename the file)"
+    encoded = os.fsencode(value)
+    if len(encoded) >= PATH_MAX:
+        return f"is {len(encoded)} bytes long; a path has at most {PATH_MAX - 1}"
+    longest = max(encoded.split(b"/"), key=len)
+    if len(longest) > NAME_MAX:
+        return f"has a name of {len(longest)} bytes; a file or folder name has at most {NAME_MAX}"
+    if value == "~" or value.startswith("~/"):
+        return "starts with '~', which is not expanded here: write the home folder in full (or ./~ for a folder " \
+               "named ~)"
+    return None
+
+
+def shown(value: str) -> str:
+    """``value`` as a message shows it: as written, or ``repr`` when it holds bytes a terminal would hide or
+    mangle (a NUL, a control character, a byte that is not UTF-8)."""
+    if value.isprintable() and not _not_utf8(value):
+        return value
+    return repr(value)
+
+
+def user_path(value: str) -> str:
+    """An argparse ``type=`` for an option naming a file or folder: a value :func:`path_problem` refuses ends the
+    tool as argparse ends it (``argument --out: ...``, exit status 2)."""
+    problem = path_problem(value)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(f"{shown(value)}: {problem}")
+    return value
+
+
+def user_path_as_path(value: str) -> Path:
+    """:func:`user_path`, as a :class:`pathlib.Path` (for an option read as one)."""
+    return Path(user_path(value))
