@@ -542,6 +542,9 @@ def load_image(path: Path) -> np.ndarray:
         raise RigOperationError(f"recording image {path} cannot be read: {e.strerror or e}") from e
     image = decode_image_or_none(data, _DECODE_FLAGS) if data.size else None
     if image is None:
+        refusal = tiff_decoding_refusal(path)  # read only for one that failed
+        if refusal is not None:
+            raise RigOperationError(f"recording image {path} does not decode: it is {refusal}")
         raise RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it)")
     return image
 
@@ -573,9 +576,18 @@ _BMP_MAX_COLOURS_USED = 256
 #: OpenCV's default limits on a decoded image (CV_IO_MAX_IMAGE_WIDTH/HEIGHT/PIXELS): a header beyond them is
 #: decoded instead (refused there, or allowed by OPENCV_IO_MAX_IMAGE_* set higher), not taken as a size.
 _OPENCV_MAX_SIDE, _OPENCV_MAX_PIXELS = 1 << 20, 1 << 30
+#: A TIFF's SamplesPerPixel, TileWidth and TileLength (its tiles' size in bytes, with BitsPerSample).
+_TIFF_SAMPLES, _TIFF_TILE_WIDTH, _TIFF_TILE_LENGTH = 277, 322, 323
 #: The tags the size reader reads from a TIFF's first directory.
 _TIFF_SIZE_TAGS = frozenset({tiff_header.WIDTH, tiff_header.HEIGHT, tiff_header.BITS_PER_SAMPLE,
-                             tiff_header.COMPRESSION})
+                             tiff_header.COMPRESSION, _TIFF_SAMPLES, _TIFF_TILE_WIDTH, _TIFF_TILE_LENGTH})
+_TIFF_UNCOMPRESSED = 1
+#: OpenCV 5.0 decodes an 8-bit TIFF of one or three samples with libtiff's RGBA reader, which, reading from memory
+#: (cv2.imdecode, as load_image does; not a mapped file), refuses an uncompressed tile whose size in bytes is not a
+#: multiple of this ("Invalid tile byte count ... Expected 768, got 1024": its read buffer is rounded up to it, then
+#: compared with the tile's size). cv2.imread of the same file decodes it, and so do libtiff's own tools: the file
+#: is valid.
+_LIBTIFF_READ_BUFFER_STEP = 1024
 _TIFF_BITS_DECODED = frozenset({8, 16})
 #: The TIFF compressions this OpenCV build decodes (none, LZW, JPEG, Adobe and old deflate, PackBits): another one
 #: (CCITT fax, LZMA, ...) is decoded to tell, as a BMP layout OpenCV does not read is.
@@ -711,8 +723,8 @@ def _tiff_size(f: BinaryIO, layout: tiff_header.TiffLayout) -> tuple[int, int] |
     if entries is None:
         return None
     tags = {tag: entry.values for tag, entry in entries.items()}
-    if not _tiff_layout_decodable(tags):
-        return None
+    if not _tiff_layout_decodable(tags) or _tiff_tile_refusal(tags) is not None:
+        return None  # decoded to tell (image_size): a later OpenCV may read the tiles this one refuses
     width, height = tags[tiff_header.WIDTH][0], tags[tiff_header.HEIGHT][0]
     return (width, height) if _decodable(width, height) else None
 
@@ -725,6 +737,34 @@ def _tiff_layout_decodable(tags: dict[int, tuple[int, ...]]) -> bool:
     return (single and tiff_header.WIDTH in tags and tiff_header.HEIGHT in tags
             and tags.get(tiff_header.COMPRESSION, (1,))[0] in _TIFF_COMPRESSIONS
             and set(tags.get(tiff_header.BITS_PER_SAMPLE, (1,))) <= _TIFF_BITS_DECODED)
+
+
+def _tiff_tile_refusal(tags: dict[int, tuple[int, ...]]) -> str | None:
+    """Why OpenCV 5.0 may refuse to decode a TIFF of these tags from memory (:data:`_LIBTIFF_READ_BUFFER_STEP`):
+    uncompressed tiles whose size in bytes is not a multiple of 1024; ``None`` for any other layout."""
+    tile = tags.get(_TIFF_TILE_WIDTH, (0,))[0], tags.get(_TIFF_TILE_LENGTH, (0,))[0]
+    if not all(tile) or tags.get(tiff_header.COMPRESSION, (_TIFF_UNCOMPRESSED,))[0] != _TIFF_UNCOMPRESSED:
+        return None
+    samples = tags.get(_TIFF_SAMPLES, (1,))[0]
+    tile_bytes = tile[0] * tile[1] * samples * max(tags.get(tiff_header.BITS_PER_SAMPLE, (1,))) // 8
+    if tile_bytes % _LIBTIFF_READ_BUFFER_STEP == 0:
+        return None
+    return (f"an uncompressed tiled TIFF whose {tile[0]}x{tile[1]} tiles of {samples} sample(s) are {tile_bytes} "
+            f"bytes, not a multiple of {_LIBTIFF_READ_BUFFER_STEP}: OpenCV {cv2.__version__}'s libtiff refuses "
+            f"such tiles read from memory ('Invalid tile byte count'), though the file is valid; rewrite the take's "
+            f"TIFFs in strips, compressed (LZW), or with tiles of a multiple of {_LIBTIFF_READ_BUFFER_STEP} bytes")
+
+
+def tiff_decoding_refusal(path: Path) -> str | None:
+    """Why OpenCV may refuse to decode this image although it is valid (:func:`_tiff_tile_refusal`), from its
+    header; ``None`` for another format or layout, or a header that cannot be read."""
+    try:
+        with open(path, "rb") as f:
+            layout = tiff_header.LAYOUTS.get(f.read(4))
+            entries = None if layout is None else tiff_header.first_directory(f, layout, _TIFF_SIZE_TAGS)
+    except OSError:
+        return None
+    return None if entries is None else _tiff_tile_refusal({tag: e.values for tag, e in entries.items()})
 
 
 def _webp_size(f: BinaryIO) -> tuple[int, int] | None:
@@ -805,15 +845,27 @@ def _decodable(width: int, height: int) -> bool:
     return 0 < width <= _OPENCV_MAX_SIDE and 0 < height <= _OPENCV_MAX_SIDE and width * height <= _OPENCV_MAX_PIXELS
 
 
+class UndecodableImageError(RigInitializationError):
+    """A take's image that this OpenCV does not decode although it is valid (:func:`tiff_decoding_refusal`): its
+    frames would all be corrupt frames when read, so the take is refused at open, naming the file and the cause."""
+
+
 def image_size(path: Path) -> tuple[int, int] | None:
     """A recorded image's ``(width, height)``: from its header (:func:`header_size`), else decoded (another
-    format, a header it cannot read); ``None`` for one that does not decode (corrupt: its read names it)."""
+    format, a header it cannot read); ``None`` for one that does not decode (corrupt: its read names it).
+
+    Raises:
+        UndecodableImageError: a valid image of a layout this OpenCV refuses (:func:`tiff_decoding_refusal`).
+    """
     size = header_size(path)
     if size is not None:
         return size
     try:
         image = load_image(path)
     except RigOperationError:
+        refusal = tiff_decoding_refusal(path)
+        if refusal is not None:
+            raise UndecodableImageError(f"recording image {path} does not decode: {refusal}") from None
         return None
     return image.shape[1], image.shape[0]
 

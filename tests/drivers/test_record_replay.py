@@ -718,7 +718,7 @@ def test_another_tool_s_suffixes_are_checked_whatever_their_case(tmp_path, name)
 def tiffs_and_webps_another_tool_writes() -> dict[str, bytes]:
     """A 40x30 image as TIFF: as OpenCV writes it (LZW; its directory, then the values it holds elsewhere, after
     the image data), uncompressed in four strips, laid out again as a big-endian BigTIFF, and a 16x16 one in one
-    tile (BGRA: OpenCV 5.0 reads other tiled layouts wrong); and as WebP: lossy, lossless, and extended (VP8X)
+    tile (BGRA: 1024-byte tiles, which OpenCV 5.0 decodes from memory: test_replay_image_sizes.py); and as WebP: lossy, lossless, and extended (VP8X)
     with an EXIF chunk after its image."""
     image = np.random.default_rng(9).integers(0, 256, (30, 40, 3), np.uint8)
     lzw = cv2.imencode(".tiff", image)[1].tobytes()
