@@ -30,7 +30,7 @@ import numpy as np
 
 from drivers.errors import RigInitializationError, RigOperationError
 from drivers.frames import CameraTruth, Frame
-from ghnerf_runtime import tiff_header
+from ghnerf_runtime import avif_header, tiff_header
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.image_files import decode_image_or_none
@@ -465,6 +465,58 @@ def _webp_holds_its_riff_size(f: BinaryIO, size: int) -> bool:
     return _WEBP_SMALLEST_RIFF_SIZE <= riff_size and _RIFF_HEADER_SIZE + riff_size <= size
 
 
+#: A binary PBM's, PGM's or PPM's magic number and its samples a pixel (PBM: bits, its rows padded to a byte).
+_PNM_SAMPLES = {b"P4": 0, b"P5": 1, b"P6": 3}
+#: The ASCII ones (P1 to P3), whose length their header does not give.
+_PNM_ASCII = (b"P1", b"P2", b"P3")
+#: How much of a PNM's start is read for its header: longer (comments) is not checked (taken as whole).
+_PNM_HEADER_MOST = 4096
+_PNM_BYTES_16_BIT_MAXVAL = 256  # a maxval from this up: two bytes a sample
+#: A header number after whitespace and comments, and the one byte OpenCV reads after it (the pixels start after
+#: the last number's).
+_PNM_TOKEN = re.compile(rb"(?:\s|#[^\r\n]*[\r\n])*(\d+)[\s\S]")
+
+
+def _pnm_holds_its_pixels(f: BinaryIO, size: int) -> bool:
+    """Whether a binary PBM, PGM or PPM (P4, P5, P6) holds the pixel data its header gives the size of: width x
+    height samples (one or three, of two bytes where maxval is 256 or more; a PBM's rows of bits padded to a byte),
+    from right after the one whitespace byte ending its header, as OpenCV reads it. Numbers follow whitespace and
+    ``#`` comments. An ASCII one (P1 to P3), or one whose header runs past :data:`_PNM_HEADER_MOST`, is whole
+    where it is not empty: its length cannot be told from its header."""
+    head = f.read(_PNM_HEADER_MOST)
+    magic = head[:2]
+    if magic in _PNM_ASCII:
+        return size > 0
+    if magic not in _PNM_SAMPLES:
+        return False
+    numbers, at = [], 2
+    for _ in range(2 if magic == b"P4" else 3):  # width, height (and maxval, but for a PBM)
+        token = _PNM_TOKEN.match(head, at)
+        if token is None:
+            return len(head) == _PNM_HEADER_MOST  # cut in its header, unless too long a header to read
+        numbers.append(int(token.group(1)))
+        at = token.end()  # past the one whitespace byte after the number
+    return size >= at + _pnm_pixel_bytes(magic, numbers)
+
+
+def _pnm_pixel_bytes(magic: bytes, numbers: list[int]) -> int:
+    """The size of a binary PNM's pixel data from its header's width, height (and maxval)."""
+    width, height = numbers[:2]
+    if magic == b"P4":
+        return (width + 7) // 8 * height
+    sample_bytes = 2 if numbers[2] >= _PNM_BYTES_16_BIT_MAXVAL else 1
+    return width * height * _PNM_SAMPLES[magic] * sample_bytes
+
+
+def _avif_holds_its_item_data(f: BinaryIO, size: int) -> bool:
+    """Whether an AVIF holds its ``meta`` box and each item's data extents, from its box headers and item
+    locations (``iloc``) only (:func:`ghnerf_runtime.avif_header.item_data_end`); bytes after them do not matter."""
+    if not avif_header.is_isobmff(f.read(8)):
+        return False
+    end = avif_header.item_data_end(f)
+    return end is not None and end <= size
+
+
 def _jpeg_reaches_its_end(data: bytes) -> bool:
     """Whether a JPEG's marker segments, walked by their lengths (as :func:`_jpeg_size` walks them), and its scans'
     entropy-coded data, walked to the marker after each, reach an end-of-image marker. Searched for, one could be
@@ -510,7 +562,9 @@ _END_CONFIRMS = {".jpg": _jpeg_ending_at_its_marker_is_whole, ".jpeg": _jpeg_end
 #: How a payload file not ending at its format's end mark is walked from its start to tell whether it is whole.
 _WALKS = {".png": _png_reaches_its_end, ".jpg": _jpeg_file_reaches_its_end, ".jpeg": _jpeg_file_reaches_its_end,
           ".bmp": _bmp_is_as_long_as_its_header_says, ".tif": _tiff_holds_its_first_directory,
-          ".tiff": _tiff_holds_its_first_directory, ".webp": _webp_holds_its_riff_size}
+          ".tiff": _tiff_holds_its_first_directory, ".webp": _webp_holds_its_riff_size,
+          ".avif": _avif_holds_its_item_data,
+          **dict.fromkeys((".pbm", ".pgm", ".ppm", ".pnm", ".pxm"), _pnm_holds_its_pixels)}
 
 
 # ------------------------------------------------------------------ payloads
