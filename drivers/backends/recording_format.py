@@ -630,11 +630,14 @@ _BMP_MAX_COLOURS_USED = 256
 #: OpenCV's default limits on a decoded image (CV_IO_MAX_IMAGE_WIDTH/HEIGHT/PIXELS): a header beyond them is
 #: decoded instead (refused there, or allowed by OPENCV_IO_MAX_IMAGE_* set higher), not taken as a size.
 _OPENCV_MAX_SIDE, _OPENCV_MAX_PIXELS = 1 << 20, 1 << 30
-#: A TIFF's SamplesPerPixel, TileWidth and TileLength (its tiles' size in bytes, with BitsPerSample).
-_TIFF_SAMPLES, _TIFF_TILE_WIDTH, _TIFF_TILE_LENGTH = 277, 322, 323
+#: A TIFF's SamplesPerPixel, PlanarConfiguration, TileWidth and TileLength (its tiles' size in bytes, with
+#: BitsPerSample: a tile holds every sample, or one where the samples are in separate planes).
+_TIFF_SAMPLES, _TIFF_PLANAR, _TIFF_TILE_WIDTH, _TIFF_TILE_LENGTH = 277, 284, 322, 323
+_TIFF_SEPARATE_PLANES = 2
 #: The tags the size reader reads from a TIFF's first directory.
 _TIFF_SIZE_TAGS = frozenset({tiff_header.WIDTH, tiff_header.HEIGHT, tiff_header.BITS_PER_SAMPLE,
-                             tiff_header.COMPRESSION, _TIFF_SAMPLES, _TIFF_TILE_WIDTH, _TIFF_TILE_LENGTH})
+                             tiff_header.COMPRESSION, _TIFF_SAMPLES, _TIFF_PLANAR, _TIFF_TILE_WIDTH,
+                             _TIFF_TILE_LENGTH})
 _TIFF_UNCOMPRESSED = 1
 #: OpenCV 5.0 decodes an 8-bit TIFF of one or three samples with libtiff's RGBA reader, which, reading from memory
 #: (cv2.imdecode, as load_image does; not a mapped file), refuses an uncompressed tile whose size in bytes is not a
@@ -800,7 +803,8 @@ def _tiff_tile_refusal(tags: dict[int, tuple[int, ...]]) -> str | None:
     if not all(tile) or tags.get(tiff_header.COMPRESSION, (_TIFF_UNCOMPRESSED,))[0] != _TIFF_UNCOMPRESSED:
         return None
     samples = tags.get(_TIFF_SAMPLES, (1,))[0]
-    tile_bytes = tile[0] * tile[1] * samples * max(tags.get(tiff_header.BITS_PER_SAMPLE, (1,))) // 8
+    samples_a_tile = 1 if tags.get(_TIFF_PLANAR, (1,))[0] == _TIFF_SEPARATE_PLANES else samples
+    tile_bytes = tile[0] * tile[1] * samples_a_tile * max(tags.get(tiff_header.BITS_PER_SAMPLE, (1,))) // 8
     if tile_bytes % _LIBTIFF_READ_BUFFER_STEP == 0:
         return None
     return (f"an uncompressed tiled TIFF whose {tile[0]}x{tile[1]} tiles of {samples} sample(s) are {tile_bytes} "

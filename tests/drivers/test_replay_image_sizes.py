@@ -667,15 +667,16 @@ def retiled(take: Path, tile: tuple[int, int]) -> list[Path]:
     return tiffs
 
 
-@pytest.mark.parametrize(("tile", "samples"), [((16, 16), 3), ((48, 32), 3), ((16, 32), 1)])
+@pytest.mark.parametrize(("tile", "samples", "separate"),
+                         [((16, 16), 3, False), ((48, 32), 3, False), ((16, 32), 1, False), ((16, 16), 3, True)])
 def test_a_valid_tiled_tiff_opencv_refuses_from_memory_is_no_header_size_and_its_read_names_the_cause(
-        tmp_path, tile, samples):
-    """Uncompressed tiles of a byte size not a multiple of 1024: cv2.imread of the file decodes it as it is (the
-    file is valid), cv2.imdecode (load_image) does not ('Invalid tile byte count'). Before, its header gave a
-    size (the take opened, then every frame was 'corrupt')."""
+        tmp_path, tile, samples, separate):
+    """Uncompressed tiles of a byte size not a multiple of 1024 (a sample a tile where the samples are in separate
+    planes): cv2.imread of the file decodes it as it is (the file is valid), cv2.imdecode (load_image) does not
+    ('Invalid tile byte count'). Before, its header gave a size (the take opened, then every frame was 'corrupt')."""
     image = np.random.default_rng(12).integers(0, 256, (30, 40, samples)[:2 + (samples > 1)], np.uint8)
     path = tmp_path / "image.tiff"
-    path.write_bytes(tiff_tiled(image, tile))
+    path.write_bytes(tiff_tiled(image, tile, separate_planes=separate))
     assert np.array_equal(cv2.imread(str(path), cv2.IMREAD_UNCHANGED), image)
     assert cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_COLOR) is None
     assert header_size(path) is None
@@ -685,13 +686,15 @@ def test_a_valid_tiled_tiff_opencv_refuses_from_memory_is_no_header_size_and_its
         image_size(path)
 
 
-@pytest.mark.parametrize(("tile", "samples"), [((32, 32), 3), ((16, 16), 4), ((16, 64), 1)])
+@pytest.mark.parametrize(("tile", "samples", "separate"),
+                         [((32, 32), 3, False), ((16, 16), 4, False), ((16, 64), 1, False), ((32, 32), 3, True)])
 def test_a_tiled_tiff_of_tiles_of_a_multiple_of_1024_bytes_is_measured_from_its_header(tmp_path, no_decode, tile,
-                                                                                        samples):
+                                                                                        samples, separate):
     image = np.random.default_rng(13).integers(0, 256, (30, 40, samples)[:2 + (samples > 1)], np.uint8)
     path = tmp_path / "image.tiff"
-    path.write_bytes(tiff_tiled(image, tile))
+    path.write_bytes(tiff_tiled(image, tile, separate_planes=separate))
     assert header_size(path) == (40, 30) == image_size(path)
+    assert np.array_equal(load_image(path), cv2.imread(str(path), cv2.IMREAD_COLOR))
 
 
 def test_a_take_of_tiled_tiffs_opencv_refuses_is_refused_at_open_naming_the_file_and_the_cause(tmp_path):
