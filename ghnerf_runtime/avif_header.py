@@ -9,6 +9,9 @@ for a TIFF's tag, the bytes handed to it say "no turn" (:func:`transforms_reset`
 
 Only box headers and the transform boxes' one byte are read; a file whose boxes this walk cannot follow (cut short,
 malformed) is left as it is, for the decoder to decode or refuse.
+
+:func:`item_data_end` reads the item locations (``iloc``) too: how far into the file its ``meta`` box and its items'
+data reach, so that a replayed take cut short can tell an AVIF cut before its end without decoding it.
 """
 from __future__ import annotations
 
