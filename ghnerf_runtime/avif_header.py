@@ -9,13 +9,16 @@ for a TIFF's tag, the bytes handed to it say "no turn" (:func:`transforms_reset`
 
 Only box headers and the transform boxes' one byte are read; a file whose boxes this walk cannot follow (cut short,
 malformed) is left as it is, for the decoder to decode or refuse.
+
+:func:`item_data_end` reads the item locations (``iloc``) too: how far into the file its ``meta`` box and its items'
+data reach, so that a replayed take cut short can tell an AVIF cut before its end without decoding it.
 """
 from __future__ import annotations
 
 import struct
 from typing import BinaryIO, Iterator
 
-__all__ = ["is_isobmff", "transforms_reset"]
+__all__ = ["is_isobmff", "item_data_end", "transforms_reset"]
 
 #: Where an ISOBMFF file's first box's type is (its ``ftyp``): bytes 4 to 8, after the box's size.
 _FTYP_AT, FTYP = 4, b"ftyp"
@@ -28,6 +31,11 @@ _PROPERTY_PATH = ((b"meta", 4), (b"iprp", 0), (b"ipco", 0))
 _ROTATE, _MIRROR = b"irot", b"imir"
 _TRANSFORM_BODY_SIZE = 1
 _NO_TURN = _ROTATE + b"\x00"  # the box's type and its one byte: written over an irot's or imir's
+#: The item locations box (in ``meta``): where each item's data is (its extents).
+_ITEM_LOCATIONS = b"iloc"
+#: An item's data read from the file itself (construction method 0: file offsets), or from ``meta``'s ``idat``
+#: (1); libavif decodes no item of another method (2: in another item) nor in another file (a data reference).
+_FILE_OFFSETS, _IN_IDAT = 0, 1
 #: The most boxes walked at one level: each is at least a header long, but a hostile file could hold millions.
 _MOST_BOXES = 4096
 _HEADER, _LARGE_HEADER = 8, 16
@@ -86,3 +94,67 @@ def _boxes(f: BinaryIO, start: int, stop: int) -> Iterator[tuple[bytes, int, int
             return
         yield kind, body, at + size
         at += size
+
+
+def item_data_end(f: BinaryIO) -> int | None:
+    """How far into an ISOBMFF file (AVIF) the boxes and data its decoder reads reach, read from box headers and
+    the item locations (``iloc``) only: the end of its ``meta`` box (found among its top-level boxes, each before
+    it whole), and of each item's data extents. A file shorter than that was cut short: a writer may put the image
+    data (``mdat``) before ``meta`` or after it. ``None`` where no ``meta`` box with item locations is found
+    whole, or they cannot be read (cut short, malformed, an item of data libavif does not read)."""
+    size = f.seek(0, 2)
+    meta = next(((body, end) for kind, body, end in _boxes(f, 0, size) if kind == b"meta"), None)
+    if meta is None:
+        return None
+    iloc = next(((body, end) for kind, body, end in _boxes(f, meta[0] + 4, meta[1]) if kind == _ITEM_LOCATIONS),
+                None)
+    if iloc is None:
+        return None
+    f.seek(iloc[0])
+    extents_end = _extents_end(f.read(iloc[1] - iloc[0]))
+    return None if extents_end is None else max(meta[1], extents_end)
+
+
+def _extents_end(iloc: bytes) -> int | None:
+    """Where the last byte of the items' data in the file ends, from an ``iloc`` box's body (ISO/IEC 14496-12
+    8.11.3: versions 0 to 2); an extent of length 0 (to the end of the file) counts to its offset. ``None`` where
+    the box is cut short, of another version, or locates an item's data elsewhere than in this file."""
+    fields = _Fields(iloc)
+    version = fields.number(1)
+    fields.number(3)  # flags
+    sizes = fields.number(2)
+    offset_size, length_size, base_size = sizes >> 12, (sizes >> 8) & 15, (sizes >> 4) & 15
+    index_size = sizes & 15 if version in (1, 2) else 0
+    if version not in (0, 1, 2) or not {offset_size, length_size, base_size, index_size} <= {0, 4, 8}:
+        return None
+    end = 0
+    for _ in range(fields.number(4 if version == 2 else 2)):
+        fields.number(4 if version == 2 else 2)  # item ID
+        method = fields.number(2) & 15 if version in (1, 2) else _FILE_OFFSETS
+        reference, base = fields.number(2), fields.number(base_size)
+        if reference != 0 or method not in (_FILE_OFFSETS, _IN_IDAT):
+            return None
+        for _ in range(fields.number(2)):
+            fields.number(index_size)
+            offset, length = fields.number(offset_size), fields.number(length_size)
+            if method == _FILE_OFFSETS:
+                end = max(end, base + offset + length)
+        if fields.cut_short:
+            return None
+    return None if fields.cut_short else end
+
+
+class _Fields:
+    """Big-endian unsigned numbers read in turn from a box's body; past its end each is 0 and ``cut_short`` set
+    (each item's and extent's loop is bounded by the numbers read, so a short body ends them quickly)."""
+
+    def __init__(self, data: bytes) -> None:
+        self._data, self._at, self.cut_short = data, 0, False
+
+    def number(self, size: int) -> int:
+        if self._at + size > len(self._data):
+            self.cut_short = True
+            return 0
+        value = int.from_bytes(self._data[self._at:self._at + size], "big")
+        self._at += size
+        return value

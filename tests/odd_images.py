@@ -104,6 +104,32 @@ def tiff_laid_out(data: bytes, order: str = "<", big: bool = False, changed: dic
     return bytes(body + directory + bytes(field_size))
 
 
+def tiff_tiled(image: np.ndarray, tile: tuple[int, int], *, separate_planes: bool = False) -> bytes:
+    """An 8-bit ``image`` (gray, or BGR stored as RGB) as an uncompressed tiled TIFF laid out as libtiff writes one:
+    its header, its tiles (``tile``: width, height; those at the right and bottom edges padded; with
+    ``separate_planes``, each sample's tiles in turn, one sample a tile), then its directory. libtiff's own writer
+    (TIFFWriteTile) puts the same tiles in the same place (its directory giving the width, height and tile byte
+    counts as SHORT, not LONG)."""
+    height, width = image.shape[:2]
+    samples = 1 if image.ndim == 2 else image.shape[2]
+    stored = image.reshape(height, width, samples)[..., ::-1] if samples == 3 else image.reshape(height, width, samples)
+    planes = [stored[..., [n]] for n in range(samples)] if separate_planes else [stored]
+    tiles = []
+    for plane in planes:
+        for y in range(0, height, tile[1]):
+            for x in range(0, width, tile[0]):
+                padded = np.zeros((tile[1], tile[0], plane.shape[2]), np.uint8)
+                part = plane[y:y + tile[1], x:x + tile[0]]
+                padded[:part.shape[0], :part.shape[1]] = part
+                tiles.append(padded.tobytes())
+    offsets = tuple(8 + sum(len(t) for t in tiles[:n]) for n in range(len(tiles)))
+    bare = b"II*\x00" + struct.pack("<I", offsets[-1] + len(tiles[-1])) + b"".join(tiles) + bytes(2 + 4)
+    return tiff_laid_out(bare, changed={
+        256: (4, (width,)), 257: (4, (height,)), 258: (3, (8,) * samples), 259: (3, (1,)),
+        262: (3, (2 if samples >= 3 else 1,)), 277: (3, (samples,)), 284: (3, (2 if separate_planes else 1,)),
+        322: (3, (tile[0],)), 323: (3, (tile[1],)), 324: (4, offsets), 325: (4, tuple(len(t) for t in tiles))})
+
+
 def riff_chunk(kind: bytes, body: bytes) -> bytes:
     """One RIFF chunk: its kind, length and data, padded to an even length."""
     return kind + struct.pack("<I", len(body)) + body + b"\x00" * (len(body) % 2)

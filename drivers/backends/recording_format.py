@@ -30,7 +30,7 @@ import numpy as np
 
 from drivers.errors import RigInitializationError, RigOperationError
 from drivers.frames import CameraTruth, Frame
-from ghnerf_runtime import tiff_header
+from ghnerf_runtime import avif_header, tiff_header
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.image_files import decode_image_or_none
@@ -465,6 +465,58 @@ def _webp_holds_its_riff_size(f: BinaryIO, size: int) -> bool:
     return _WEBP_SMALLEST_RIFF_SIZE <= riff_size and _RIFF_HEADER_SIZE + riff_size <= size
 
 
+#: A binary PBM's, PGM's or PPM's magic number and its samples a pixel (PBM: bits, its rows padded to a byte).
+_PNM_SAMPLES = {b"P4": 0, b"P5": 1, b"P6": 3}
+#: The ASCII ones (P1 to P3), whose length their header does not give.
+_PNM_ASCII = (b"P1", b"P2", b"P3")
+#: How much of a PNM's start is read for its header: longer (comments) is not checked (taken as whole).
+_PNM_HEADER_MOST = 4096
+_PNM_BYTES_16_BIT_MAXVAL = 256  # a maxval from this up: two bytes a sample
+#: A header number after whitespace and comments, and the one byte OpenCV reads after it (the pixels start after
+#: the last number's).
+_PNM_TOKEN = re.compile(rb"(?:\s|#[^\r\n]*[\r\n])*(\d+)[\s\S]")
+
+
+def _pnm_holds_its_pixels(f: BinaryIO, size: int) -> bool:
+    """Whether a binary PBM, PGM or PPM (P4, P5, P6) holds the pixel data its header gives the size of: width x
+    height samples (one or three, of two bytes where maxval is 256 or more; a PBM's rows of bits padded to a byte),
+    from right after the one whitespace byte ending its header, as OpenCV reads it. Numbers follow whitespace and
+    ``#`` comments. An ASCII one (P1 to P3), or one whose header runs past :data:`_PNM_HEADER_MOST`, is whole
+    where it is not empty: its length cannot be told from its header."""
+    head = f.read(_PNM_HEADER_MOST)
+    magic = head[:2]
+    if magic in _PNM_ASCII:
+        return size > 0
+    if magic not in _PNM_SAMPLES:
+        return False
+    numbers, at = [], 2
+    for _ in range(2 if magic == b"P4" else 3):  # width, height (and maxval, but for a PBM)
+        token = _PNM_TOKEN.match(head, at)
+        if token is None:
+            return len(head) == _PNM_HEADER_MOST  # cut in its header, unless too long a header to read
+        numbers.append(int(token.group(1)))
+        at = token.end()  # past the one whitespace byte after the number
+    return size >= at + _pnm_pixel_bytes(magic, numbers)
+
+
+def _pnm_pixel_bytes(magic: bytes, numbers: list[int]) -> int:
+    """The size of a binary PNM's pixel data from its header's width, height (and maxval)."""
+    width, height = numbers[:2]
+    if magic == b"P4":
+        return (width + 7) // 8 * height
+    sample_bytes = 2 if numbers[2] >= _PNM_BYTES_16_BIT_MAXVAL else 1
+    return width * height * _PNM_SAMPLES[magic] * sample_bytes
+
+
+def _avif_holds_its_item_data(f: BinaryIO, size: int) -> bool:
+    """Whether an AVIF holds its ``meta`` box and each item's data extents, from its box headers and item
+    locations (``iloc``) only (:func:`ghnerf_runtime.avif_header.item_data_end`); bytes after them do not matter."""
+    if not avif_header.is_isobmff(f.read(8)):
+        return False
+    end = avif_header.item_data_end(f)
+    return end is not None and end <= size
+
+
 def _jpeg_reaches_its_end(data: bytes) -> bool:
     """Whether a JPEG's marker segments, walked by their lengths (as :func:`_jpeg_size` walks them), and its scans'
     entropy-coded data, walked to the marker after each, reach an end-of-image marker. Searched for, one could be
@@ -510,7 +562,9 @@ _END_CONFIRMS = {".jpg": _jpeg_ending_at_its_marker_is_whole, ".jpeg": _jpeg_end
 #: How a payload file not ending at its format's end mark is walked from its start to tell whether it is whole.
 _WALKS = {".png": _png_reaches_its_end, ".jpg": _jpeg_file_reaches_its_end, ".jpeg": _jpeg_file_reaches_its_end,
           ".bmp": _bmp_is_as_long_as_its_header_says, ".tif": _tiff_holds_its_first_directory,
-          ".tiff": _tiff_holds_its_first_directory, ".webp": _webp_holds_its_riff_size}
+          ".tiff": _tiff_holds_its_first_directory, ".webp": _webp_holds_its_riff_size,
+          ".avif": _avif_holds_its_item_data,
+          **dict.fromkeys((".pbm", ".pgm", ".ppm", ".pnm", ".pxm"), _pnm_holds_its_pixels)}
 
 
 # ------------------------------------------------------------------ payloads
@@ -542,6 +596,9 @@ def load_image(path: Path) -> np.ndarray:
         raise RigOperationError(f"recording image {path} cannot be read: {e.strerror or e}") from e
     image = decode_image_or_none(data, _DECODE_FLAGS) if data.size else None
     if image is None:
+        refusal = tiff_decoding_refusal(path)  # read only for one that failed
+        if refusal is not None:
+            raise RigOperationError(f"recording image {path} does not decode: it is {refusal}")
         raise RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it)")
     return image
 
@@ -573,9 +630,21 @@ _BMP_MAX_COLOURS_USED = 256
 #: OpenCV's default limits on a decoded image (CV_IO_MAX_IMAGE_WIDTH/HEIGHT/PIXELS): a header beyond them is
 #: decoded instead (refused there, or allowed by OPENCV_IO_MAX_IMAGE_* set higher), not taken as a size.
 _OPENCV_MAX_SIDE, _OPENCV_MAX_PIXELS = 1 << 20, 1 << 30
+#: A TIFF's SamplesPerPixel, PlanarConfiguration, TileWidth and TileLength (its tiles' size in bytes, with
+#: BitsPerSample: a tile holds every sample, or one where the samples are in separate planes).
+_TIFF_SAMPLES, _TIFF_PLANAR, _TIFF_TILE_WIDTH, _TIFF_TILE_LENGTH = 277, 284, 322, 323
+_TIFF_SEPARATE_PLANES = 2
 #: The tags the size reader reads from a TIFF's first directory.
 _TIFF_SIZE_TAGS = frozenset({tiff_header.WIDTH, tiff_header.HEIGHT, tiff_header.BITS_PER_SAMPLE,
-                             tiff_header.COMPRESSION})
+                             tiff_header.COMPRESSION, _TIFF_SAMPLES, _TIFF_PLANAR, _TIFF_TILE_WIDTH,
+                             _TIFF_TILE_LENGTH})
+_TIFF_UNCOMPRESSED = 1
+#: OpenCV 5.0 decodes an 8-bit TIFF of one or three samples with libtiff's RGBA reader, which, reading from memory
+#: (cv2.imdecode, as load_image does; not a mapped file), refuses an uncompressed tile whose size in bytes is not a
+#: multiple of this ("Invalid tile byte count ... Expected 768, got 1024": its read buffer is rounded up to it, then
+#: compared with the tile's size). cv2.imread of the same file decodes it, and so do libtiff's own tools: the file
+#: is valid.
+_LIBTIFF_READ_BUFFER_STEP = 1024
 _TIFF_BITS_DECODED = frozenset({8, 16})
 #: The TIFF compressions this OpenCV build decodes (none, LZW, JPEG, Adobe and old deflate, PackBits): another one
 #: (CCITT fax, LZMA, ...) is decoded to tell, as a BMP layout OpenCV does not read is.
@@ -711,8 +780,8 @@ def _tiff_size(f: BinaryIO, layout: tiff_header.TiffLayout) -> tuple[int, int] |
     if entries is None:
         return None
     tags = {tag: entry.values for tag, entry in entries.items()}
-    if not _tiff_layout_decodable(tags):
-        return None
+    if not _tiff_layout_decodable(tags) or _tiff_tile_refusal(tags) is not None:
+        return None  # decoded to tell (image_size): a later OpenCV may read the tiles this one refuses
     width, height = tags[tiff_header.WIDTH][0], tags[tiff_header.HEIGHT][0]
     return (width, height) if _decodable(width, height) else None
 
@@ -725,6 +794,35 @@ def _tiff_layout_decodable(tags: dict[int, tuple[int, ...]]) -> bool:
     return (single and tiff_header.WIDTH in tags and tiff_header.HEIGHT in tags
             and tags.get(tiff_header.COMPRESSION, (1,))[0] in _TIFF_COMPRESSIONS
             and set(tags.get(tiff_header.BITS_PER_SAMPLE, (1,))) <= _TIFF_BITS_DECODED)
+
+
+def _tiff_tile_refusal(tags: dict[int, tuple[int, ...]]) -> str | None:
+    """Why OpenCV 5.0 may refuse to decode a TIFF of these tags from memory (:data:`_LIBTIFF_READ_BUFFER_STEP`):
+    uncompressed tiles whose size in bytes is not a multiple of 1024; ``None`` for any other layout."""
+    tile = tags.get(_TIFF_TILE_WIDTH, (0,))[0], tags.get(_TIFF_TILE_LENGTH, (0,))[0]
+    if not all(tile) or tags.get(tiff_header.COMPRESSION, (_TIFF_UNCOMPRESSED,))[0] != _TIFF_UNCOMPRESSED:
+        return None
+    samples = tags.get(_TIFF_SAMPLES, (1,))[0]
+    samples_a_tile = 1 if tags.get(_TIFF_PLANAR, (1,))[0] == _TIFF_SEPARATE_PLANES else samples
+    tile_bytes = tile[0] * tile[1] * samples_a_tile * max(tags.get(tiff_header.BITS_PER_SAMPLE, (1,))) // 8
+    if tile_bytes % _LIBTIFF_READ_BUFFER_STEP == 0:
+        return None
+    return (f"an uncompressed tiled TIFF whose {tile[0]}x{tile[1]} tiles of {samples} sample(s) are {tile_bytes} "
+            f"bytes, not a multiple of {_LIBTIFF_READ_BUFFER_STEP}: OpenCV {cv2.__version__}'s libtiff refuses "
+            f"such tiles read from memory ('Invalid tile byte count'), though the file is valid; rewrite the take's "
+            f"TIFFs in strips, compressed (LZW), or with tiles of a multiple of {_LIBTIFF_READ_BUFFER_STEP} bytes")
+
+
+def tiff_decoding_refusal(path: Path) -> str | None:
+    """Why OpenCV may refuse to decode this image although it is valid (:func:`_tiff_tile_refusal`), from its
+    header; ``None`` for another format or layout, or a header that cannot be read."""
+    try:
+        with open(path, "rb") as f:
+            layout = tiff_header.LAYOUTS.get(f.read(4))
+            entries = None if layout is None else tiff_header.first_directory(f, layout, _TIFF_SIZE_TAGS)
+    except OSError:
+        return None
+    return None if entries is None else _tiff_tile_refusal({tag: e.values for tag, e in entries.items()})
 
 
 def _webp_size(f: BinaryIO) -> tuple[int, int] | None:
@@ -805,15 +903,27 @@ def _decodable(width: int, height: int) -> bool:
     return 0 < width <= _OPENCV_MAX_SIDE and 0 < height <= _OPENCV_MAX_SIDE and width * height <= _OPENCV_MAX_PIXELS
 
 
+class UndecodableImageError(RigInitializationError):
+    """A take's image that this OpenCV does not decode although it is valid (:func:`tiff_decoding_refusal`): its
+    frames would all be corrupt frames when read, so the take is refused at open, naming the file and the cause."""
+
+
 def image_size(path: Path) -> tuple[int, int] | None:
     """A recorded image's ``(width, height)``: from its header (:func:`header_size`), else decoded (another
-    format, a header it cannot read); ``None`` for one that does not decode (corrupt: its read names it)."""
+    format, a header it cannot read); ``None`` for one that does not decode (corrupt: its read names it).
+
+    Raises:
+        UndecodableImageError: a valid image of a layout this OpenCV refuses (:func:`tiff_decoding_refusal`).
+    """
     size = header_size(path)
     if size is not None:
         return size
     try:
         image = load_image(path)
     except RigOperationError:
+        refusal = tiff_decoding_refusal(path)
+        if refusal is not None:
+            raise UndecodableImageError(f"recording image {path} does not decode: {refusal}") from None
         return None
     return image.shape[1], image.shape[0]
 

@@ -55,6 +55,7 @@ from drivers.backends.recording_format import (
     MANIFEST,
     FrameRow,
     Manifest,
+    UndecodableImageError,
     drop_broken_rows,
     file_is_whole,
     image_size,
@@ -292,9 +293,11 @@ class ReplayRigSource(RigSource):
             raise size_error
         log.info("replaying %s: %d frames, speed %s", self.directory, len(self._rows), self.speed or "free")
 
-    def size_error(self) -> FrameSizeError | None:
+    def size_error(self) -> FrameSizeError | UndecodableImageError | None:
         """The error of a take whose images are not all its rig's size, else ``None``: the first camera (in the
-        rig's order) with an image of another size than its rig camera's.
+        rig's order) with an image of another size than its rig camera's; or the first valid image this OpenCV
+        does not decode (:class:`UndecodableImageError`: a tiled TIFF whose tiles its libtiff refuses read from
+        memory, which every frame of such a take would be).
 
         Every image is measured at :meth:`open`, from its header (:func:`image_size`: a PNG's, JPEG's (EXIF or
         not: its orientation is ignored, :func:`load_image`) or BMP's size read without decoding it; an image in
@@ -309,7 +312,10 @@ class ReplayRigSource(RigSource):
         order = recorded_order(self._rows)
         for cam in self.rig.cameras:
             mine = [self._rows[i].image for i in order.get(cam.name, [])]
-            wrong = self._images_of_another_size(mine, (cam.width, cam.height))
+            try:
+                wrong = self._images_of_another_size(mine, (cam.width, cam.height))
+            except UndecodableImageError as e:
+                return e
             if wrong:
                 return self._size_refusal(cam.name, (cam.width, cam.height), len(mine), wrong)
         return None

@@ -718,7 +718,7 @@ def test_another_tool_s_suffixes_are_checked_whatever_their_case(tmp_path, name)
 def tiffs_and_webps_another_tool_writes() -> dict[str, bytes]:
     """A 40x30 image as TIFF: as OpenCV writes it (LZW; its directory, then the values it holds elsewhere, after
     the image data), uncompressed in four strips, laid out again as a big-endian BigTIFF, and a 16x16 one in one
-    tile (BGRA: OpenCV 5.0 reads other tiled layouts wrong); and as WebP: lossy, lossless, and extended (VP8X)
+    tile (BGRA: 1024-byte tiles, which OpenCV 5.0 decodes from memory: test_replay_image_sizes.py); and as WebP: lossy, lossless, and extended (VP8X)
     with an EXIF chunk after its image."""
     image = np.random.default_rng(9).integers(0, 256, (30, 40, 3), np.uint8)
     lzw = cv2.imencode(".tiff", image)[1].tobytes()
@@ -777,6 +777,69 @@ def test_a_tiff_whose_directory_or_image_data_cannot_be_located_is_not_whole(tmp
                          ("image.webp", b"RIFF" + bytes(8)), ("image.webp", b"RIFF\x04\x00\x00\x00WEBP")):
         (tmp_path / name).write_bytes(broken)
         assert not payload_is_whole(tmp_path / name), broken
+
+
+def pnms_and_avifs_another_tool_writes() -> dict[str, bytes]:
+    """A 16x12 image as binary PPM, PGM (8 and 16 bits) and PBM as OpenCV writes them, and a PPM whose header holds
+    comments (as other tools write); a 40x30 one as AVIF: OpenCV's (ftyp, meta, mdat), and with alpha (a second
+    item)."""
+    image = np.random.default_rng(14).integers(0, 256, (30, 40, 3), np.uint8)
+    small = image[:12, :16]
+    ppm = cv2.imencode(".ppm", small)[1].tobytes()
+    pixels = ppm[len(b"P6\n16 12\n255\n"):]
+    return {"ppm": ppm, "ppm with comments": b"P6\n# by a tool\n16 # width\n12\n#\n255\r" + pixels,
+            "pgm": cv2.imencode(".pgm", small[:, :, 0])[1].tobytes(),
+            "pgm 16-bit": cv2.imencode(".pgm", small[:, :, 0].astype(np.uint16) * 257)[1].tobytes(),
+            "pbm": cv2.imencode(".pbm", image[:, :, 0])[1].tobytes(), "avif": cv2.imencode(".avif", image)[1].tobytes(),
+            "avif with alpha": cv2.imencode(".avif", np.dstack([image, image[:, :, :1]]))[1].tobytes()}
+
+
+@pytest.mark.parametrize("kind", sorted(pnms_and_avifs_another_tool_writes()))
+@pytest.mark.parametrize("after", sorted(AFTER_THE_END))
+def test_a_pnm_or_avif_with_bytes_after_its_end_is_whole_and_one_cut_before_its_end_is_not(tmp_path, kind, after):
+    """Cut after every byte: whole (and decoded as the image) exactly where the cut is past a PNM's pixel data
+    (the size its header gives) or past an AVIF's meta box and its items' data (its iloc extents). Before session
+    63 every cut was whole (not empty): played, then a corrupt frame mid-take."""
+    suffix = {"ppm": ".ppm", "pgm": ".pgm", "pbm": ".pbm", "avi": ".avif"}[kind[:3]]
+    assert_whole_exactly_past_its_end(tmp_path / f"image{suffix}", pnms_and_avifs_another_tool_writes()[kind],
+                                      AFTER_THE_END[after])
+
+
+@pytest.mark.parametrize("name", ["image.PPM", "image.pnm", "image.pxm", "image.AVIF"])
+def test_pnm_and_avif_suffixes_are_checked_whatever_their_case(tmp_path, name):
+    data = pnms_and_avifs_another_tool_writes()["avif" if name.lower().endswith(".avif") else "ppm"]
+    path = tmp_path / name
+    for cut, whole in ((data, True), (data + AFTER_THE_END["trailer"], True), (data[:-1], False)):
+        path.write_bytes(cut)
+        assert payload_is_whole(path) == whole, (len(cut), len(data))
+
+
+def test_an_ascii_pnm_is_whole_where_it_is_not_empty_and_a_header_too_long_to_read_is_not_checked(tmp_path):
+    """P1 to P3 give no length: cut or not, they are checked for being there and not empty only; so is a binary
+    one whose header (its comments) runs past the 4096 bytes read."""
+    path = tmp_path / "image.ppm"
+    long_header = b"P6\n" + b"#" * 5000 + b"\n40 30\n255\n"
+    for data in (b"P3\n2 1\n255\n0 0 0 255 255 255\n", b"P3\n2 1\n25", long_header, long_header[:4500]):
+        path.write_bytes(data)
+        assert payload_is_whole(path)
+
+
+def test_a_pnm_or_avif_whose_header_cannot_be_followed_is_not_whole_and_nothing_raises(tmp_path):
+    """Another magic number, a header cut short, an AVIF with no meta or iloc, an iloc of another version or
+    locating its data in another file or item, an iloc cut short or claiming 65535 items in a few bytes."""
+    avif = pnms_and_avifs_another_tool_writes()["avif"]
+    iloc_at = avif.index(b"iloc") + 4  # its version
+    def iloc_changed(at: int, new: bytes) -> bytes:
+        return avif[:iloc_at + at] + new + avif[iloc_at + at + len(new):]
+    broken = {"image.ppm": [b"P7\n16 12\n255\n" + bytes(576), b"PNG", b"P6\n16 x\n", b"P6\n16 12\n255\n" + bytes(575)],
+              "image.avif": [avif.replace(b"meta", b"free"), avif.replace(b"iloc", b"free"), iloc_changed(0, b"\x03"),
+                             iloc_changed(1 + 3 + 2 + 2 + 2, b"\x00\x01"),  # data reference index 1: another file
+                             iloc_changed(1 + 3 + 2, b"\xff\xff"), iloc_changed(1, b"\x00\x00\x00\xff\xff"),
+                             b"\x00\x00\x00\x10ftypavif" + bytes(4)]}
+    for name, datas in broken.items():
+        for data in datas:
+            (tmp_path / name).write_bytes(data)
+            assert not payload_is_whole(tmp_path / name), data[:40]
 
 
 def progressive_jpeg_with_a_comment_between_its_scans() -> tuple[bytes, int]:

@@ -1,5 +1,6 @@
 """``replay://`` measures every image of a take at open, from its header: a take resized in part is refused there,
 and a header cut short is left to its read (a corrupt frame). The size reader itself, against OpenCV's decoder."""
+import re
 import struct
 import zlib
 from pathlib import Path
@@ -8,7 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
-from drivers import EndOfStream, FrameSizeError, RigOperationError, create_rig_source, open_rig
+from drivers import (
+    EndOfStream, FrameSizeError, RigInitializationError, RigOperationError, create_rig_source, open_rig,
+)
 from drivers.backends import recording_format
 from drivers.backends.recording_format import (
     FRAMES,
@@ -33,6 +36,7 @@ from tests.odd_images import (
     isobmff_boxes,
     riff_chunk,
     tiff_laid_out,
+    tiff_tiled,
     webp_extended,
 )
 
@@ -649,4 +653,62 @@ def test_a_take_of_avifs_marked_as_turned_opens_and_plays_as_stored(tmp_path):
         path.with_suffix(".avif").write_bytes(avif_of(cv2.imread(str(path)), AVIF_TURNS["turned and mirrored"]))
         path.unlink()
     (take / FRAMES).write_text((take / FRAMES).read_text().replace(".jpg", ".avif"))
+    assert play(take) == (3, [])
+
+
+def retiled(take: Path, tile: tuple[int, int]) -> list[Path]:
+    """``take``'s JPEGs as uncompressed tiled TIFFs of ``tile`` (the journal naming those), in recorded order."""
+    tiffs = []
+    for path in sorted(take.glob("images/*/*.jpg")):
+        tiffs.append(path.with_suffix(".tiff"))
+        tiffs[-1].write_bytes(tiff_tiled(cv2.imread(str(path)), tile))
+        path.unlink()
+    (take / FRAMES).write_text((take / FRAMES).read_text().replace(".jpg", ".tiff"))
+    return tiffs
+
+
+@pytest.mark.parametrize(("tile", "samples", "separate"),
+                         [((16, 16), 3, False), ((48, 32), 3, False), ((16, 32), 1, False), ((16, 16), 3, True)])
+def test_a_valid_tiled_tiff_opencv_refuses_from_memory_is_no_header_size_and_its_read_names_the_cause(
+        tmp_path, tile, samples, separate):
+    """Uncompressed tiles of a byte size not a multiple of 1024 (a sample a tile where the samples are in separate
+    planes): cv2.imread of the file decodes it as it is (the file is valid), cv2.imdecode (load_image) does not
+    ('Invalid tile byte count'). Before, its header gave a size (the take opened, then every frame was 'corrupt')."""
+    image = np.random.default_rng(12).integers(0, 256, (30, 40, samples)[:2 + (samples > 1)], np.uint8)
+    path = tmp_path / "image.tiff"
+    path.write_bytes(tiff_tiled(image, tile, separate_planes=separate))
+    assert np.array_equal(cv2.imread(str(path), cv2.IMREAD_UNCHANGED), image)
+    assert cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_COLOR) is None
+    assert header_size(path) is None
+    with pytest.raises(RigOperationError, match=r"image\.tiff does not decode: it is an uncompressed tiled TIFF .*Invalid tile byte count"):
+        load_image(path)
+    with pytest.raises(recording_format.UndecodableImageError, match="Invalid tile byte count"):
+        image_size(path)
+
+
+@pytest.mark.parametrize(("tile", "samples", "separate"),
+                         [((32, 32), 3, False), ((16, 16), 4, False), ((16, 64), 1, False), ((32, 32), 3, True)])
+def test_a_tiled_tiff_of_tiles_of_a_multiple_of_1024_bytes_is_measured_from_its_header(tmp_path, no_decode, tile,
+                                                                                        samples, separate):
+    image = np.random.default_rng(13).integers(0, 256, (30, 40, samples)[:2 + (samples > 1)], np.uint8)
+    path = tmp_path / "image.tiff"
+    path.write_bytes(tiff_tiled(image, tile, separate_planes=separate))
+    assert header_size(path) == (40, 30) == image_size(path)
+    assert np.array_equal(load_image(path), cv2.imread(str(path), cv2.IMREAD_COLOR))
+
+
+def test_a_take_of_tiled_tiffs_opencv_refuses_is_refused_at_open_naming_the_file_and_the_cause(tmp_path):
+    """Before, the take opened (each size read from its header) and every read was a corrupt frame: nothing
+    played, and nothing said why."""
+    take = write_take(tmp_path / "take", "jpg", frames=3)
+    first = retiled(take, (16, 16))[0]
+    source = create_rig_source(f"replay://{take}?speed=free")
+    with pytest.raises(RigInitializationError, match=rf"{re.escape(str(first))}.*768 bytes, not a multiple of 1024.*Invalid tile"):
+        source.open()
+    assert isinstance(source.size_error(), recording_format.UndecodableImageError)
+
+
+def test_a_take_of_tiled_tiffs_opencv_decodes_opens_and_plays(tmp_path):
+    take = write_take(tmp_path / "take", "jpg", frames=3)
+    retiled(take, (32, 32))
     assert play(take) == (3, [])
