@@ -34,7 +34,8 @@ whose files are missing, empty or cut short
 validation: docs/recording-format.md.
 
 Image sizes: a take with any image of another size than its rig camera's (every image measured at
-:meth:`~ReplayRigSource.open`, from its PNG, JPEG or BMP header: :func:`~drivers.backends.recording_format.image_size`)
+:meth:`~ReplayRigSource.open`, from its header where the format gives one, else decoded:
+:func:`~drivers.backends.recording_format.image_size`; docs/recording-format.md, "Replay")
 is refused at open with :class:`~drivers.errors.FrameSizeError`, as the other backends refuse cameras delivering
 another size than their rig file's (:meth:`ReplayRigSource.size_error`). An image that does not decode (a header
 cut short or corrupt) is no size: it is a corrupt frame, as is an image whose size changed after the open:
