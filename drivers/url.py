@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from urllib.parse import parse_qsl, quote, unquote, urlsplit
 
 from drivers.errors import RigConfigError
+from ghnerf_runtime.path_check import NOT_UTF8
 
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
@@ -29,6 +30,38 @@ _DECIMAL = re.compile(r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?")
 _SECRET_KEY = re.compile(r"(.*[_-])?(password|passwd|pass|pwd|token|secret|api[_-]?key|access[_-]?key|auth|credentials?)")
 #: What a secret is shown as.
 REDACTED = "***"
+
+
+def unquote_keeping_bytes(text: str) -> str:
+    """``text`` with its %XX escapes decoded as UTF-8, a byte that is not UTF-8 kept as Python keeps one in
+    ``sys.argv`` (a surrogate, :func:`not_utf8_escapes` finds it): ``unquote``'s default turned it into U+FFFD, so
+    ``replay:///take%FF`` opened ``/take\ufffd`` and the error named a file the user never wrote."""
+    return unquote(text, errors="surrogateescape")
+
+
+def not_utf8_escapes(raw: str, decoded: str) -> str | None:
+    """Why ``decoded`` (``raw`` through :func:`unquote_keeping_bytes`) cannot be used: the %XX escapes of ``raw``
+    that are not UTF-8, written as escapes again (``holds %FF, which is not UTF-8 ...``); None when it has none.
+    A byte that ``raw`` holds itself, unescaped, is left to the checks that met it before (the path check)."""
+    bad = "".join(_escape_kept_byte(c) for c in decoded if _is_kept_byte(c))
+    if not bad or any(_is_kept_byte(c) for c in raw):
+        return None
+    return f"holds {bad}, which {NOT_UTF8}"
+
+
+def with_kept_bytes_escaped(decoded: str) -> str:
+    """``decoded`` (from :func:`unquote_keeping_bytes`) as a message shows it: each byte that is not UTF-8 written
+    back as its %XX escape, the rest as decoded."""
+    return "".join(_escape_kept_byte(c) if _is_kept_byte(c) else c for c in decoded)
+
+
+def _is_kept_byte(char: str) -> bool:
+    # how errors="surrogateescape" keeps the bytes 0x80-0xFF that are not UTF-8: U+DC80-U+DCFF
+    return "\udc80" <= char <= "\udcff"
+
+
+def _escape_kept_byte(char: str) -> str:
+    return f"%{ord(char) - 0xDC00:02X}"
 
 
 def redact_url(text: str) -> str:
@@ -139,6 +172,14 @@ def yes_no(raw: str) -> bool:
     raise ValueError(f"expected a boolean: 1/0, true/false, yes/no or on/off{spaces}")
 
 
+def _refuse_not_utf8(url: str, where: str, raw: str, decoded: str) -> None:
+    """:class:`RigConfigError` naming ``where`` in ``url`` when ``decoded`` holds escapes of bytes that are not UTF-8
+    (OpenCV crashes on such a path, and a JSON manifest cannot hold it)."""
+    problem = not_utf8_escapes(raw, decoded)
+    if problem is not None:
+        raise RigConfigError(f"rig URL {redact_url(url)!r}: {where} {problem}")
+
+
 @dataclass
 class RigUrl:
     """A parsed rig URL.
@@ -168,12 +209,15 @@ class RigUrl:
                 f"rig URL {redact_url(url)!r}: '#' starts a URL fragment ({'#' + parts.fragment!r}), which rig URLs do not "
                 "use; write a '#' in a path or option value as %23"
             )
-        target = unquote(parts.netloc + parts.path)
+        target = unquote_keeping_bytes(parts.netloc + parts.path)
+        _refuse_not_utf8(url, "the path after ://", parts.netloc + parts.path, target)
         options: dict[str, str] = {}
         # '+' is a plus here, as in the path (a form's '+' for a space turned out=/data/take+1 into '/data/take 1');
         # a space is %20
         for key, value in parse_qsl(parts.query.replace("+", "%2B"), keep_blank_values=True,
-                                    strict_parsing=False):
+                                    strict_parsing=False, errors="surrogateescape"):
+            _refuse_not_utf8(url, "an option name", parts.query, key)
+            _refuse_not_utf8(url, f"option {key}=", parts.query, value)
             if key in options:
                 raise RigConfigError(f"rig URL {redact_url(url)!r}: option {key!r} given twice")
             options[key] = value

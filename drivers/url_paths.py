@@ -16,7 +16,7 @@ from pathlib import Path
 from urllib.parse import quote, unquote
 
 from drivers.errors import RigConfigError
-from drivers.url import RigUrl
+from drivers.url import RigUrl, unquote_keeping_bytes
 from ghnerf_runtime.path_check import path_problem, shown
 
 __all__ = ["FileParts", "FILE_PARTS", "check_url_paths", "rig_url_from_folder", "url_files"]
@@ -116,6 +116,12 @@ def _absolute(value: str, folder: Path) -> str | None:
     return str(folder / value)
 
 
+def _requoted(path: str) -> str:
+    """``path`` percent-encoded for a rig URL, a byte that is not UTF-8 written back as the escape it came from
+    (``RigUrl.parse`` refuses it, naming it): it became ``%EF%BF%BD``, U+FFFD, another file's name."""
+    return quote(path, safe="/", errors="surrogateescape")
+
+
 def rig_url_from_folder(url: str, folder: str | os.PathLike) -> str:
     """``url`` with each relative file path in it (:data:`FILE_PARTS`) made absolute against ``folder``.
 
@@ -138,16 +144,16 @@ def rig_url_from_folder(url: str, folder: str | os.PathLike) -> str:
     folder = Path(os.path.abspath(folder))
     target, question, query = rest.partition("?")  # urlsplit's netloc + path: everything before the '?'
     if parts.target:
-        new = _absolute(unquote(target), folder)
+        new = _absolute(unquote_keeping_bytes(target), folder)
         if new is not None:  # absolute, so scheme:///path: an empty host, as replay:///data/take1
-            target = quote(new, safe="/")
+            target = _requoted(new)
     if query and parts.options:
         pieces = []
         for piece in query.split("&"):  # as parse_qsl splits it; '+' is a plus there (drivers.url)
             key, equals, value = piece.partition("=")
             names_file = parts.options.get(unquote(key))
-            plain = unquote(value)
+            plain = unquote_keeping_bytes(value)
             new = _absolute(plain, folder) if equals and names_file is not None and names_file(plain) else None
-            pieces.append(piece if new is None else f"{key}={quote(new, safe='/')}")
+            pieces.append(piece if new is None else f"{key}={_requoted(new)}")
         query = "&".join(pieces)
     return f"{scheme}://{target}{question}{query}"

@@ -14,11 +14,13 @@ import argparse
 import os
 from pathlib import Path
 
-__all__ = ["NAME_MAX", "PATH_MAX", "path_problem", "shown", "user_path", "user_path_as_path"]
+__all__ = ["NAME_MAX", "NOT_UTF8", "PATH_MAX", "path_problem", "shown", "user_path", "user_path_as_path"]
 
 #: Linux's limits (``<linux/limits.h>``), in bytes: a name (one component) and a whole path with its NUL.
 NAME_MAX = 255
 PATH_MAX = 4096
+#: What :func:`path_problem` says of a path that is not UTF-8 (URL parsers say it of a %XX escape that decodes to one).
+NOT_UTF8 = "is not UTF-8 (give the path in UTF-8, or rename the file)"
 
 
 def _not_utf8(value: str) -> bool:
@@ -39,7 +41,7 @@ def path_problem(value: str) -> str | None:
     if "\x00" in value:
         return "holds a NUL byte"
     if _not_utf8(value):
-        return "is not UTF-8 (give the path in UTF-8, or rename the file)"
+        return NOT_UTF8
     encoded = os.fsencode(value)
     if len(encoded) >= PATH_MAX:
         return f"is {len(encoded)} bytes long; a path has at most {PATH_MAX - 1}"

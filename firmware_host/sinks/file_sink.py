@@ -34,7 +34,6 @@ import json
 import os
 import stat
 from typing import Any, Optional
-from urllib.parse import unquote
 
 from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.messages import Message
@@ -43,7 +42,7 @@ from firmware_host.sinks.fd_write import write_within
 from firmware_host.sinks.file_claim import FileTaken, claim_file
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink, frame_messages
-from firmware_host.sinks.url import SinkUrl, int_in, parse_url
+from firmware_host.sinks.url import SinkUrl, int_in, parse_url, unquote_part
 from ghnerf_runtime.path_check import path_problem
 
 #: Longest wait for room in a pipe whose reader stopped reading, as for serial:// (a joint line a minute late is
@@ -184,7 +183,7 @@ def _local_path(url: str, u: SinkUrl) -> str:
         # file://rel/path once meant a relative path; now a host, and another machine's file is not ours to write
         raise SinkConfigError(url, "host", u.netloc, "file:// takes a local, absolute path: file:///path/to/"
                                                      "joints.jsonl (or file://localhost/path/to/joints.jsonl)")
-    path = unquote(u.path)
+    path = unquote_part(url, "path", u.path)
     if not path.startswith("/") or path == "/":
         raise SinkConfigError(url, "path", path, "expected file:///path/to/joints.jsonl")
     problem = path_problem(path)  # a NUL byte or a name too long: said now, not as a traceback from os.open

@@ -27,7 +27,6 @@ import os
 import termios
 import time
 from typing import Any, Optional
-from urllib.parse import unquote
 
 import serial
 
@@ -38,7 +37,7 @@ from firmware_host.sinks.fd_write import write_within
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink, frame_messages
 from firmware_host.sinks.rate import serial_capacity_fps
-from firmware_host.sinks.url import SinkUrl, int_in, parse_url
+from firmware_host.sinks.url import SinkUrl, int_in, parse_url, unquote_part
 
 _log = logging.getLogger(__name__)
 
@@ -74,7 +73,7 @@ class SerialSink(ProtocolSink):
             # from the daemon's working directory and retried forever: the path is absolute (as for file://)
             raise SinkConfigError(url, "port", port, f"expected an absolute path: serial:///{port.lstrip('/')}")
         # percent-decoded as file:// and rig URLs are: a '#' in a by-id name can only be written %23
-        port = unquote(port)
+        port = unquote_part(url, "port", port)
         baud = u.take("baud", int_in(MIN_BAUD, MAX_BAUD, "bits per second"), 115200, kw)
         timeout_ms = u.take("write_timeout_ms", int_in(1, MAX_WRITE_TIMEOUT_MS, "milliseconds"), 100, kw)
         options = SinkOptions.take(u, kw)

@@ -9,9 +9,10 @@ import math
 import socket
 from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
-from urllib.parse import SplitResult, parse_qs, unquote, urlsplit
+from urllib.parse import SplitResult, parse_qs, urlsplit
 
-from drivers.url import decimal_number, whole_number, yes_no
+from drivers.url import decimal_number, not_utf8_escapes, unquote_keeping_bytes, whole_number, \
+    with_kept_bytes_escaped, yes_no
 from firmware_host.errors import SinkConfigError
 from ghnerf_runtime.plain_values import plain_scalar
 
@@ -66,6 +67,25 @@ class SinkUrl:
             raise SinkConfigError(self.url, key, self.query[key], "unknown parameter")
 
 
+def _refuse_not_utf8(url: str, field: str, raw: str, decoded: str, value: str) -> None:
+    """:class:`SinkConfigError` naming ``field`` and its ``value`` when ``decoded`` (``raw`` percent-decoded) holds
+    escapes of bytes that are not UTF-8: decoded to U+FFFD, the sink wrote or opened another name than the one
+    given."""
+    problem = not_utf8_escapes(raw, decoded)
+    if problem is not None:
+        raise SinkConfigError(url, field, value, problem)
+
+
+def unquote_part(url: str, field: str, raw: str) -> str:
+    """The part ``raw`` of the sink URL ``url`` (a path, a port) percent-decoded as UTF-8.
+
+    :raises SinkConfigError: naming ``field`` and the escapes, for one that is no UTF-8 byte sequence.
+    """
+    decoded = unquote_keeping_bytes(raw)
+    _refuse_not_utf8(url, field, raw, decoded, raw)
+    return decoded
+
+
 def parse_url(url: str) -> SinkUrl:
     try:
         parts = urlsplit(url)
@@ -79,7 +99,10 @@ def parse_url(url: str) -> SinkUrl:
     query: dict[str, str] = {}
     # '+' is a plus, as in the path (a form's '+' for a space changed a value silently); a space is %20
     for key, values in parse_qs(parts.query.replace("+", "%2B"), keep_blank_values=True,
-                                strict_parsing=False).items():
+                                strict_parsing=False, errors="surrogateescape").items():
+        _refuse_not_utf8(url, "parameter name", parts.query, key, with_kept_bytes_escaped(key))
+        for value in values:
+            _refuse_not_utf8(url, key, parts.query, value, with_kept_bytes_escaped(value))
         if len(values) > 1:
             raise SinkConfigError(url, key, values, "given more than once")
         query[key] = values[0]
@@ -150,9 +173,12 @@ def location_host(parts: SplitResult, scheme: str) -> str:
     if parts.path not in ("", "/"):
         raise LocationError("path", parts.path, f"{scheme}:// takes host:port and no path")
     hostinfo = parts.netloc.rpartition("@")[2]
-    if hostinfo.startswith("["):
-        return unquote(hostinfo[1:hostinfo.index("]")])
-    return unquote(parts.hostname or "")
+    raw = hostinfo[1:hostinfo.index("]")] if hostinfo.startswith("[") else parts.hostname or ""
+    host = unquote_keeping_bytes(raw)
+    problem = not_utf8_escapes(raw, host)
+    if problem is not None:  # U+FFFD: a lookup of a name never given
+        raise LocationError("host", raw, problem)
+    return host
 
 
 #: Longest host name, written out without a trailing dot (RFC 1035: 255 octets on the wire).

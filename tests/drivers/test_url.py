@@ -270,3 +270,23 @@ def test_an_empty_rig_file_option_is_refused_by_the_backends():
     depthai_options = pytest.importorskip("drivers.backends.depthai.options")
     with pytest.raises(RigConfigError, match="option rig= is empty"):
         depthai_options.DepthaiOptions.from_url(RigUrl.parse("depthai://?rig="))
+
+
+@pytest.mark.parametrize(("url", "said"), [
+    # unquote's default made each U+FFFD: "recording directory /take\ufffd does not exist", a name never given
+    ("replay:///take%FF", "rig URL 'replay:///take%FF': the path after :// holds %FF, which is not UTF-8"),
+    ("opencv://?first=%FF.mp4&second=b.mp4", "option first= holds %FF, which is not UTF-8"),
+    ("opencv://?first=a.mp4&second=%C3%A9%FE%FF.mp4", "option second= holds %FE%FF, which is not UTF-8"),
+    ("sim://?%FF=1", "an option name holds %FF, which is not UTF-8"),
+])
+def test_an_escape_of_a_byte_that_is_not_utf8_is_refused_naming_the_part(url, said):
+    with pytest.raises(RigConfigError) as e:
+        RigUrl.parse(url)
+    assert said in str(e.value) and "(give the path in UTF-8, or rename the file)" in str(e.value)
+    with pytest.raises(RigConfigError, match="which is not UTF-8"):
+        create_rig_source(url)
+
+
+def test_escapes_of_utf8_text_are_decoded_as_before():
+    url = RigUrl.parse("replay:///data/t%C3%A9?out=%E2%82%AC")
+    assert url.target == "/data/t\u00e9" and url.options == {"out": "\u20ac"}

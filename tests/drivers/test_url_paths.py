@@ -46,3 +46,10 @@ def test_relative_files_are_read_from_the_folder_and_survive_the_encoding(url, t
 ])
 def test_other_urls_are_kept_byte_for_byte(url):
     assert rig_url_from_folder(url, ODD) == url
+
+
+def test_a_relative_path_with_a_byte_that_is_not_utf8_keeps_its_escape():
+    """Made absolute it read back as U+FFFD (%EF%BF%BD), another name, which no check then refused."""
+    assert rig_url_from_folder("replay://take%FF?loop=1", "/etc/g") == "replay:///etc/g/take%FF?loop=1"
+    assert rig_url_from_folder("opencv://?first=a%FF.mp4&second=0", "/etc/g") == \
+        "opencv://?first=/etc/g/a%FF.mp4&second=0"

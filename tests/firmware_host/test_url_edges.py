@@ -285,3 +285,21 @@ def test_listen_and_the_serial_sink_refuse_a_baud_that_is_not_plain_digits(capsy
     assert "baud must be a whole number: " in err and says in err
     e = _refused(f"serial:///dev/ttyACM0?baud={raw}")
     assert e.field == "baud" and says in str(e)
+
+
+@pytest.mark.parametrize(("url", "said"), [
+    # decoded to U+FFFD, the sink wrote (or opened, or looked up) another name than the one given
+    ("file:///tmp/joints%FF.jsonl", "invalid path='/tmp/joints%FF.jsonl': holds %FF, which is not UTF-8"),
+    ("serial:///dev/serial/by-id/usb-%FE", "invalid port='/dev/serial/by-id/usb-%FE': holds %FE, which is not UTF-8"),
+    ("udp://host%FF:9870", "invalid host='host%FF': holds %FF, which is not UTF-8"),
+    ("file:///tmp/joints.jsonl?queue=8%FF", "invalid queue='8%FF': holds %FF, which is not UTF-8"),
+])
+def test_a_sink_url_escape_of_a_byte_that_is_not_utf8_is_refused_naming_the_part(url, said, tmp_path):
+    e = _refused(url)
+    assert said in str(e) and "(give the path in UTF-8, or rename the file)" in str(e)
+
+
+def test_a_file_sink_path_of_utf8_escapes_is_decoded(tmp_path):
+    sink = open_sink(f"file://{tmp_path}/t%C3%A9.jsonl")
+    sink.close(0.5)
+    assert sink.path == f"{tmp_path}/t\u00e9.jsonl"
