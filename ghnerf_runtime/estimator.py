@@ -52,6 +52,7 @@ import time
 from collections import OrderedDict
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import cv2
@@ -79,7 +80,8 @@ from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, depth_centroid_join
 from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
     novel_pivot, novel_target, render_novel_view, skeleton_overlay
-from ghnerf_runtime.novel_painter import angle_from_sources_deg
+from ghnerf_runtime.novel_painter import FILE_NAME as PAINTER_FILE
+from ghnerf_runtime.novel_painter import NovelPainter, angle_from_sources_deg
 from ghnerf_runtime.plain_values import is_true_false, plain_scalar, whole_number_or_none
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
 from ghnerf_runtime.proxy_matte import proxy_matte
@@ -92,6 +94,7 @@ from ghnerf_runtime.preprocess import (
     preprocess_image,
     upright_roll_deg,
 )
+from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import PriorCameras, disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
@@ -100,7 +103,7 @@ from ghnerf_runtime.subject import STILL_SEVERAL_MIN_JOINTS, SubjectSelector, gu
     picks_subject
 from ghnerf_runtime.two_people import TORSO_LIMBS_M, reads_as_two_people, torso_excess
 
-__all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
+__all__ = ["Estimator", "PairResult", "check_crop", "check_model_files", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
            "NOVEL_MATTE_STAGE", "joints_shown_twice"]
 
@@ -2007,12 +2010,44 @@ class Estimator:
         return NovelView(image, nv.camera, nv.depth, nv.heat, nv.rays)
 
 
-def load_session(config: EstimatorConfig):
-    """The :class:`~ghnerf_runtime.session.ModelSession` of ``config.session`` with only the graphs the
-    configuration runs: the keypoint-only ``human`` graph when the model folder has one."""
+def _session_plan(config: EstimatorConfig) -> tuple[EstimatorConfig, tuple[str, ...]]:
+    """``config`` as the model folder's skeleton prior leaves it, and the graphs it runs: the keypoint-only ``human``
+    graph when the folder has one. Decided from the folder's file names, before anything is loaded."""
     from ghnerf_runtime.session import ModelSession  # local: keeps this module importable without a model
 
     config = config.beside_prior(ModelSession.has_skeleton_prior(config.session))
-    graphs = config.required_graphs(ModelSession.has_graph_file(config.session, "human"))
+    return config, config.required_graphs(ModelSession.has_graph_file(config.session, "human"))
+
+
+def load_session(config: EstimatorConfig):
+    """The :class:`~ghnerf_runtime.session.ModelSession` of ``config.session`` with only the graphs the
+    configuration runs: the keypoint-only ``human`` graph when the model folder has one."""
+    from ghnerf_runtime.session import ModelSession
+
+    config, graphs = _session_plan(config)
     return ModelSession.load(config.session, graphs, skeleton_prior=config.joints3d.uses_skeleton_prior(True),
                              novel_painter=config.novel_view.uses_painter(True))
+
+
+def check_model_files(config: EstimatorConfig) -> Path:
+    """That the model folder of ``config.session`` holds the files :func:`load_session` and the estimator would
+    need, loading none (``ghnerf-run --validate-config``): it is a folder, it has a file for each graph the settings
+    run (:meth:`~ghnerf_runtime.session.ModelSession.check_files`), and the skeleton prior or painter they turn
+    ``on``. Whether the files load and serve the settings is for the run (or ``ghnerf-daemon --validate-config``).
+
+    :returns: the resolved model folder.
+    :raises ModelError: naming the folder or the file, and the setting that needs a missing one.
+    """
+    from ghnerf_runtime.session import ModelSession
+
+    config, graphs = _session_plan(config)
+    folder = ModelSession.check_files(config.session, graphs)
+    if config.joints3d.skeleton_prior == "on" and not (folder / PRIOR_FILE).is_file():
+        raise ModelError(f"joints3d.skeleton_prior = 'on' but the folder has no {PRIOR_FILE} (make one with python "
+                         "-m training.skeleton_prior, or set joints3d.skeleton_prior = 'auto' or 'off')",
+                         path=str(folder))
+    nv = config.novel_view
+    if nv.enabled and nv.painter == "on" and NovelPainter.find(folder, config.session.precision) is None:
+        raise ModelError(f"novel_view.painter = 'on' but the folder has no {PAINTER_FILE} (make one with python -m "
+                         "training.learnt_fill export, or set novel_view.painter = 'auto' or 'off')", path=str(folder))
+    return folder

@@ -175,6 +175,26 @@ def _what_is(path: Path) -> str:
     return "no regular file (a device, a pipe or a socket)"
 
 
+def _check_is_folder(folder: Path) -> None:
+    """:class:`ModelLoadError` naming ``folder`` (``session.model_dir`` resolved) when it is no folder."""
+    if not folder.is_dir():
+        raise ModelLoadError("is not a folder (session.model_dir names the model folder, not a file)"
+                             if folder.exists() else
+                             # is_dir() and exists() are False for a link that leads nowhere, or in a loop
+                             "is a symbolic link that leads to no folder (dangling, or a loop)"
+                             if folder.is_symlink() else "model folder does not exist"
+                             + ("" if folder.is_absolute() else f" (read from the current directory {Path.cwd()})"),
+                             path=str(folder))
+
+
+def _wanted_precision(graph: str, config: SessionConfig) -> tuple[str, bool]:
+    """The precision ``config`` asks of ``graph``'s file, and whether only fp32 will do: fp32 asked for by name is
+    fp32 or an error; int8 falls back to fp32 where a graph has no int8 file."""
+    wanted = config.precision_overrides.get(
+        graph, AUTO_PRECISION.get(graph, "fp32") if config.precision == "auto" else config.precision)
+    return wanted, wanted == "fp32" and (graph in config.precision_overrides or config.precision == "fp32")
+
+
 def _file_name(graph: str, precision: str) -> str:
     return f"{graph}.int8.onnx" if precision == "int8" else f"{graph}.onnx"
 
@@ -328,14 +348,7 @@ class ModelSession:
         if not isinstance(config, SessionConfig):
             config = SessionConfig(model_dir=str(config))
         folder = resolve_model_dir(config.model_dir)
-        if not folder.is_dir():
-            raise ModelLoadError("is not a folder (session.model_dir names the model folder, not a file)"
-                                 if folder.exists() else
-                                 # is_dir() and exists() are False for a link that leads nowhere, or in a loop
-                                 "is a symbolic link that leads to no folder (dangling, or a loop)"
-                                 if folder.is_symlink() else "model folder does not exist"
-                                 + ("" if folder.is_absolute() else f" (read from the current directory {Path.cwd()})"),
-                                 path=str(folder))
+        _check_is_folder(folder)
         unknown = [g for g in graphs if g not in GRAPH_NAMES]
         if unknown:
             raise ModelError(f"unknown graph(s) {unknown}; graphs are {list(GRAPH_NAMES)}", path=str(folder))
@@ -353,27 +366,10 @@ class ModelSession:
         contract: ModelContract | None = None
         first: Path | None = None
         stamped: tuple[Path, str] | None = None  # the first file loaded that has a weights id, and the id
-        by_meta: dict[tuple[str, str], Path] | None = None
+        by_meta: dict[tuple[str, str], Path] = {}
         for graph in dict.fromkeys(graphs):
-            wanted = config.precision_overrides.get(
-                graph, AUTO_PRECISION.get(graph, "fp32") if config.precision == "auto" else config.precision)
-            # fp32 asked for by name is fp32 or an error; int8 falls back to fp32 where a graph has no int8 file
-            only_fp32 = wanted == "fp32" and (graph in config.precision_overrides or config.precision == "fp32")
-            path = cls._find(folder, graph, wanted)
-            if path is None:
-                by_meta = by_meta if by_meta is not None else cls._scan(folder, config)
-                path = by_meta.get((graph, wanted)) or by_meta.get((graph, "fp32")) or (
-                    None if only_fp32 else by_meta.get((graph, "int8")))
-            if path is None:
-                names = list(dict.fromkeys((_file_name(graph, wanted), _file_name(graph, "fp32"))))
-                # a folder (or a link to nowhere) under the graph's own name: "no file for graph" sent the user
-                # looking for a file that ls shows
-                odd = next((folder / n for n in names if (folder / n).exists() or (folder / n).is_symlink()), None)
-                if odd is not None:
-                    raise ModelLoadError(f"is not a graph file but {_what_is(odd)}: graph {graph!r} cannot be "
-                                         "loaded from it", path=str(odd))
-                raise ModelLoadError(f"no file for graph {graph!r} (looked for {', '.join(names)} and "
-                                     "ghnerf.graph metadata)", path=str(folder))
+            only_fp32 = _wanted_precision(graph, config)[1]
+            path = cls._locate(folder, graph, config, by_meta)
             t0 = time.perf_counter()
             sess = _open(path, config)
             load_ms = 1e3 * (time.perf_counter() - t0)
@@ -441,6 +437,51 @@ class ModelSession:
             config = SessionConfig(model_dir=str(config))
         folder = resolve_model_dir(config.model_dir)
         return any(cls._find(folder, graph, p) is not None for p in ("fp32", "int8"))
+
+    @classmethod
+    def check_files(cls, config: SessionConfig, graphs: Sequence[str]) -> Path:
+        """What :meth:`load` checks before it opens a graph: the model folder is a folder, and holds a file for each
+        of ``graphs`` (by its usual names; by ``ghnerf.graph`` metadata, which opens the folder's files, only for a
+        graph without one). Nothing else is loaded or checked: for ``ghnerf-run --validate-config``, which names a
+        missing folder, a file given as one, or a graph the settings run that the folder lacks, without loading
+        the model (docs/runtime.md, "The model folder; switching models": it checks the settings, not the files).
+
+        :returns: the resolved folder (:func:`resolve_model_dir`).
+        :raises ModelLoadError: naming the folder or file, in :meth:`load`'s words.
+        """
+        folder = resolve_model_dir(config.model_dir)
+        _check_is_folder(folder)
+        by_meta: dict[tuple[str, str], Path] = {}
+        for graph in dict.fromkeys(graphs):
+            cls._locate(folder, graph, config, by_meta)
+        return folder
+
+    @classmethod
+    def _locate(cls, folder: Path, graph: str, config: SessionConfig,
+                by_meta: dict[tuple[str, str], Path]) -> Path:
+        """The file :meth:`load` opens for ``graph``: by name, else by metadata (``by_meta``, filled on first need
+        by :meth:`_scan` and kept across graphs).
+
+        :raises ModelLoadError: naming the folder (no file) or what lies under the graph's name instead.
+        """
+        wanted, only_fp32 = _wanted_precision(graph, config)
+        path = cls._find(folder, graph, wanted)
+        if path is None:
+            if not by_meta:
+                by_meta.update(cls._scan(folder, config))
+            path = by_meta.get((graph, wanted)) or by_meta.get((graph, "fp32")) or (
+                None if only_fp32 else by_meta.get((graph, "int8")))
+        if path is not None:
+            return path
+        names = list(dict.fromkeys((_file_name(graph, wanted), _file_name(graph, "fp32"))))
+        # a folder (or a link to nowhere) under the graph's own name: "no file for graph" sent the user
+        # looking for a file that ls shows
+        odd = next((folder / n for n in names if (folder / n).exists() or (folder / n).is_symlink()), None)
+        if odd is not None:
+            raise ModelLoadError(f"is not a graph file but {_what_is(odd)}: graph {graph!r} cannot be "
+                                 "loaded from it", path=str(odd))
+        raise ModelLoadError(f"no file for graph {graph!r} (looked for {', '.join(names)} and "
+                             "ghnerf.graph metadata)", path=str(folder))
 
     @staticmethod
     def _find(folder: Path, graph: str, precision: str) -> Path | None:

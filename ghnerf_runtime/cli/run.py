@@ -38,14 +38,14 @@ from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
     load_config, read_json_file
-from ghnerf_runtime.errors import ConfigError, FrameError, GeometryError, ModelLoadError, RuntimeErrorBase
-from ghnerf_runtime.estimator import Estimator, PairResult
+from ghnerf_runtime.errors import ConfigError, FrameError, GeometryError, ModelError, ModelLoadError, RuntimeErrorBase
+from ghnerf_runtime.estimator import Estimator, PairResult, check_model_files
 from ghnerf_runtime.image_files import read_image_or_none
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import load_rig, write_text_atomic
 from ghnerf_runtime.video_files import read_as_stored
-from ghnerf_runtime.path_check import user_path
+from ghnerf_runtime.path_check import shown, user_path
 
 log = logging.getLogger("ghnerf-run")
 
@@ -107,7 +107,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--novel-stride", type=int, choices=(1, 2, 4), help="render every n-th novel-view pixel")
     ap.add_argument("--overlay", type=user_path, metavar="PATH", help="both input frames with the 2D joints drawn: .png or .mp4")
     ap.add_argument("--max-frames", type=int, help="stop after this many pairs (videos; at least 1)")
-    ap.add_argument("--validate-config", action="store_true", help="check the config, print it, exit")
+    ap.add_argument("--validate-config", action="store_true",
+                    help="check the config (and the model folder --model-dir or session.model_dir names: a folder "
+                         "holding the files the settings need, by name; none loaded), print it, exit")
     ap.add_argument("-v", "--verbose", action="store_true")
     return ap
 
@@ -330,9 +332,32 @@ def _config_names_model_dir(path: str | None) -> bool:
     return isinstance(session, dict) and "model_dir" in session
 
 
+def _check_named_model_folder(args, cfg: EstimatorConfig) -> None:
+    """``--validate-config``: the model folder that ``--model-dir`` or the config's ``session.model_dir`` names is a
+    folder holding the files the settings need (:func:`check_model_files`; nothing loaded). A ``--model-dir`` naming
+    a file or no folder passed, exit 0, and the run then stopped on it. The default ``./models``, named by neither,
+    is left to the run, which says which option names the folder: a config is checked on a machine without the
+    model too.
+
+    :raises UsageError: naming the option (or the config file's key) and its value.
+    """
+    if args.model_dir:
+        where = f"--model-dir {shown(args.model_dir)}"
+    elif _config_names_model_dir(args.config):
+        where = f"session.model_dir in {args.config} ({shown(cfg.session.model_dir)})"
+    else:
+        return
+    try:
+        check_model_files(cfg)
+    except ModelError as e:
+        named = f"{e.path}: " if e.path is not None and Path(e.path) == Path(cfg.session.model_dir) else ""
+        raise UsageError(f"{where}: {str(e).removeprefix(named)}") from None  # the folder said once
+
+
 def _run(args) -> int:
     cfg = _config(args)
     if args.validate_config:
+        _check_named_model_folder(args, cfg)
         print(json.dumps(config_to_dict(cfg), indent=2))
         return 0
     to_stdout = args.out == "-"

@@ -14,6 +14,7 @@ import pytest
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.cli import run as cli_run
 from ghnerf_runtime.config import NOVEL_PATHS, EstimatorConfig, config_to_dict
+from ghnerf_runtime.contract import GRAPH_NAMES
 from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.rig_file import load_rig
 from tests.exif_images import jpeg_turned
@@ -207,13 +208,22 @@ def test_the_default_model_folder_missing_under_a_config_naming_none_names_the_o
     assert str(tmp_path / "elsewhere") in err and "model folder does not exist" in err and "--model-dir" not in err
 
 
+def _graph_named_folder(folder: Path) -> Path:
+    """A folder with a file under each graph's name: what ``--validate-config`` looks for (it loads none)."""
+    folder.mkdir()
+    for graph in GRAPH_NAMES:
+        (folder / f"{graph}.onnx").write_bytes(b"")
+    return folder
+
+
 def test_validate_config_prints_the_resolved_tree(tmp_path, capsys):
     cfg = tmp_path / "cfg.json"
     cfg.write_text('{"joints3d": {"method": "volumetric"}}')
+    model = str(_graph_named_folder(tmp_path / "m"))
     assert cli_run.main(["--rig", "unused.json", "--images", "a", "b", "--config", str(cfg), "--validate-config",
-                         "--model-dir", "/opt/m"]) == 0
+                         "--model-dir", model]) == 0
     tree = json.loads(capsys.readouterr().out)
-    assert tree["joints3d"]["method"] == "volumetric" and tree["session"]["model_dir"] == "/opt/m"
+    assert tree["joints3d"]["method"] == "volumetric" and tree["session"]["model_dir"] == model
     assert tree["heatmaps"] == {"source": "encoder", "flip_test": True, "flip_test_skip_below": 0.1,
                                 "flip_test_side_by_side": True}  # the documented defaults
     assert cli_run.main(["--rig", "unused.json", "--images", "a", "b", "--validate-config", "--no-flip-test"]) == 0
@@ -241,6 +251,38 @@ def test_validate_config_needs_no_rig_or_images(tmp_path, capsys):
     cfg.write_bytes('{"session": {"model_dir": "mod\xe9ls"}}'.encode("latin-1"))
     assert cli_run.main(["--config", str(cfg), "--validate-config"]) == 2
     assert "not UTF-8" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("make", "said"), [
+    (lambda p: p.write_text("{}"), "is not a folder"),
+    (lambda p: None, "model folder does not exist"),
+    (lambda p: p.symlink_to(p.parent / "gone"), "is a symbolic link that leads to no folder"),
+    (lambda p: p.mkdir(), "no file for graph 'encoder'"),
+])
+def test_validate_config_refuses_a_model_dir_that_is_no_model_folder(tmp_path, capsys, make, said):
+    """It exited 0 and printed the tree; the run then stopped on the folder (docs/runtime.md, "The model folder")."""
+    folder = tmp_path / "models"
+    make(folder)
+    assert cli_run.main(["--model-dir", str(folder), "--validate-config"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and f"error: --model-dir {folder}: {said}" in captured.err, captured.err
+    cfg = tmp_path / "cfg.json"  # named by the config instead: its key and the file
+    cfg.write_text(json.dumps({"session": {"model_dir": str(folder)}}))
+    assert cli_run.main(["--config", str(cfg), "--validate-config"]) == 2
+    assert f"error: session.model_dir in {cfg} ({folder}): {said}" in capsys.readouterr().err
+
+
+def test_validate_config_names_a_file_the_settings_turn_on_that_the_folder_lacks(tmp_path, capsys):
+    folder = _graph_named_folder(tmp_path / "m")
+    assert cli_run.main(["--model-dir", str(folder), "--validate-config"]) == 0
+    capsys.readouterr()
+    assert cli_run.main(["--model-dir", str(folder), "--validate-config", "--skeleton-prior", "on"]) == 2
+    assert f"--model-dir {folder}: joints3d.skeleton_prior = 'on' but the folder has no skeleton_prior.onnx" in \
+        capsys.readouterr().err
+    (folder / "render_rgb.onnx").unlink()  # novel views run it
+    assert cli_run.main(["--model-dir", str(folder), "--validate-config", "--rig", "r.json", "--images", "a", "b",
+                         "--novel-view", "n.png"]) == 2
+    assert "no file for graph 'render_rgb'" in capsys.readouterr().err
 
 
 def test_a_corrupt_graph_the_config_does_not_run_is_not_loaded_nor_checked(sim_pair, tiny_model_dir, tmp_path,  # noqa: F811
