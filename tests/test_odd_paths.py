@@ -42,8 +42,21 @@ def test_path_problem_names_each_kind(kind, value, said):
 
 
 def test_ordinary_paths_pass():
-    for value in ("models", "/etc/ghnerf/daemon.json", "./~", "a~b", "café/rig.json", "x" * 255):
+    for value in ("models", "/etc/ghnerf/daemon.json", "./~", "a~b", "café/rig.json", "x" * 255, "-",
+                  "my takes/take 1.json", "~take", "../rig.json"):
         assert path_problem(value) is None
+
+
+def test_a_long_name_passes_where_its_file_system_takes_it(tmp_path, monkeypatch):
+    """A FAT, exFAT, NTFS or SMB folder counts 255 UTF-16 units (pathconf: 1530 bytes): 100 CJK characters (300
+    bytes) name a file there, which the fixed 255-byte limit refused. Where the file system says 255, refused."""
+    name = "\u5f71" * 100  # 300 bytes in UTF-8
+    limits = {"PC_NAME_MAX": 1530}
+    monkeypatch.setattr(os, "pathconf", lambda path, what: limits[what])
+    assert path_problem(str(tmp_path / name)) is None
+    assert path_problem(str(tmp_path / "new" / name / "x.json")) is None
+    limits["PC_NAME_MAX"] = 255
+    assert "a file or folder name has at most 255" in path_problem(str(tmp_path / name))
 
 
 def test_odd_bytes_are_shown_as_repr():
