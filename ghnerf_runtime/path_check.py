@@ -49,10 +49,16 @@ def path_problem(value: str) -> str | None:
         limit = name_max_at(value)
         if len(longest) > limit:
             return f"has a name of {len(longest)} bytes; a file or folder name has at most {limit}"
-    if value == "~" or value.startswith("~/"):
+    if _unexpanded_home(value):
         return "starts with '~', which is not expanded here: write the home folder in full (or ./~ for a folder " \
                "named ~)"
     return None
+
+
+def _unexpanded_home(value: str) -> bool:
+    """Whether ``value`` starts with a home folder a shell would have expanded: ``~``, ``~/``, or ``~USER`` of a
+    user this system has (``~pi/models`` on a Raspberry Pi); ``~take/x`` with no user ``take`` is a name."""
+    return value == "~" or value.startswith("~/") or (value.startswith("~") and os.path.expanduser(value) != value)
 
 
 def name_max_at(value: str) -> int:

@@ -47,6 +47,16 @@ def test_ordinary_paths_pass():
         assert path_problem(value) is None
 
 
+def test_a_user_s_home_folder_is_refused_as_the_own_one_is():
+    """``~root/models`` (``~pi/models`` on a Raspberry Pi) names a user's home folder to a shell; unexpanded, it was
+    read as a folder called ``~root`` beside the config file. A ``~name`` of no user stays a name."""
+    import pwd
+
+    user = pwd.getpwuid(0).pw_name
+    assert "which is not expanded here" in path_problem(f"~{user}/models")
+    assert path_problem("~no-such-user-here/models") is None
+
+
 def test_a_long_name_passes_where_its_file_system_takes_it(tmp_path, monkeypatch):
     """A FAT, exFAT, NTFS or SMB folder counts 255 UTF-16 units (pathconf: 1530 bytes): 100 CJK characters (300
     bytes) name a file there, which the fixed 255-byte limit refused. Where the file system says 255, refused."""
