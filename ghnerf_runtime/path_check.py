@@ -14,12 +14,18 @@ import argparse
 import os
 from pathlib import Path
 
-__all__ = ["NAME_MAX", "PATH_MAX", "name_max_at", "path_problem", "shown", "user_path", "user_path_as_path"]
+__all__ = ["NAME_MAX", "PATH_MAX", "is_utf8", "name_max_at", "path_problem", "shown", "user_path", "user_path_as_path"]
 
 #: Linux's limits (``<linux/limits.h>``), in bytes: a name (one component) and a whole path with its NUL. A name
 #: is refused past ``NAME_MAX`` only where its file system allows no longer one (:func:`name_max_at`).
 NAME_MAX = 255
 PATH_MAX = 4096
+
+
+def is_utf8(value: str) -> bool:
+    """Whether ``value`` encodes in UTF-8: not a name whose bytes are not UTF-8, which Python keeps as surrogates
+    (``sys.argv``, a folder listing) and OpenCV crashes on."""
+    return not _not_utf8(value)
 
 
 def _not_utf8(value: str) -> bool:
