@@ -16,7 +16,7 @@ from pathlib import Path
 from urllib.parse import quote, unquote
 
 from drivers.errors import RigConfigError
-from drivers.url import RigUrl
+from drivers.url import RigUrl, redact_url
 from ghnerf_runtime.path_check import path_problem, shown
 
 __all__ = ["FileParts", "FILE_PARTS", "check_url_paths", "rig_url_from_folder", "url_files", "url_path_problem"]
@@ -103,7 +103,8 @@ def check_url_paths(url: str) -> None:
     (tracebacks) and a path that is not UTF-8 crashed OpenCV."""
     problem = url_path_problem(url)
     if problem is not None:
-        raise RigConfigError(f"rig URL {shown(url)}: {problem}")
+        # redacted as every other rig URL error is: a stream's password beside the file would reach the log
+        raise RigConfigError(f"rig URL {shown(redact_url(url))}: {problem}")
 
 
 def url_path_problem(url: str) -> str | None:

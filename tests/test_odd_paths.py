@@ -267,3 +267,14 @@ def test_the_daemon_refuses_a_nul_in_a_file_sink_of_its_config_file(tmp_path, ca
     config = _daemon_config(tmp_path, sinks__=["file:///tmp/a%00b"])
     assert main(["--config", str(config), "--validate-config", "--no-model"]) == 2
     assert f"{config}: sinks[0]: '/tmp/a\\x00b': holds a NUL byte" in capsys.readouterr().err
+
+
+def test_a_rig_url_refused_for_its_path_shows_no_password():
+    """The refusal wrote the whole URL as given: a stream's password beside the odd file path reached the log,
+    where every other rig URL error redacts it (drivers.url.redact_url)."""
+    from drivers.errors import RigConfigError
+    from drivers.url_paths import check_url_paths
+
+    with pytest.raises(RigConfigError) as refused:
+        check_url_paths("opencv://?first=/v/a%00b.mp4&second=rtsp%3A%2F%2Fuser%3Asecret%40cam%2Fs&rig=/r.json")
+    assert "holds a NUL byte" in str(refused.value) and "secret" not in str(refused.value)
