@@ -44,7 +44,7 @@ from calibration.detect import PATTERN_CHECK_MARKERS, BoardDetector, BoardView, 
 from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
-from ghnerf_runtime.cli.output_path import dangling_link, existing_ancestor, unwritable_reason
+from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, unwritable_reason
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
@@ -186,10 +186,9 @@ def _output_folder(out: Path, what: str) -> None:
     """``--out`` of ``board``, ``synth`` and ``capture``: a folder that is, or can be made, and takes new files.
     Checked before the work (``synth`` renders for half a minute, ``capture`` opens the cameras), and said with
     the flag: a file given for it stopped them after that work with OSError's bare ``[Errno 17] File exists``."""
-    dangling = dangling_link(out)
+    dangling = dangling_link_words(out)
     if dangling is not None:  # mkdir said only "[Errno 17] File exists"
-        raise UsageError(f"--out {out}: {dangling} is a symbolic link to {os.readlink(dangling)}, which does not exist; "
-                         "make its target or give another folder")
+        raise UsageError(f"--out {out}: {dangling} or give another folder")
     base = existing_ancestor(out)
     if not base.is_dir():
         raise UsageError(f"--out {out}: {base} is a file; give a folder for {what}")

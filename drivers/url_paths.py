@@ -16,10 +16,10 @@ from pathlib import Path
 from urllib.parse import quote, unquote
 
 from drivers.errors import RigConfigError
-from drivers.url import RigUrl, unquote_keeping_bytes
+from drivers.url import RigUrl, redact_url, unquote_keeping_bytes
 from ghnerf_runtime.path_check import path_problem, shown
 
-__all__ = ["FileParts", "FILE_PARTS", "check_url_paths", "rig_url_from_folder", "url_files"]
+__all__ = ["FileParts", "FILE_PARTS", "check_url_paths", "rig_url_from_folder", "url_files", "url_path_problem"]
 
 #: What ``record+`` takes from the URL it wraps that names a file: the take's folder.
 RECORD_PREFIX = "record+"
@@ -101,11 +101,22 @@ def check_url_paths(url: str) -> None:
     ``first=``, ``out=``) whose file path no file can have (:func:`ghnerf_runtime.path_check.path_problem`): said
     before the backend opens it, where a NUL byte raised ``ValueError``, a name past 255 bytes ``ENAMETOOLONG``
     (tracebacks) and a path that is not UTF-8 crashed OpenCV."""
+    problem = url_path_problem(url)
+    if problem is not None:
+        # redacted as every other rig URL error is: a stream's password beside the file would reach the log
+        raise RigConfigError(f"rig URL {shown(redact_url(url))}: {problem}")
+
+
+def url_path_problem(url: str) -> str | None:
+    """Why a file path in ``url`` cannot be one (:func:`ghnerf_runtime.path_check.path_problem`), naming its part
+    and value (``option rig= 'a\\x00b': holds a NUL byte``): the first such, None where there is none. One
+    wording for a rig URL on a command line (:func:`check_url_paths`) and in the daemon's config file."""
     for part, value in _files_of_any(url):
         problem = path_problem(value)
         if problem is not None:
             where = "the path after ://" if part == "target" else f"option {part}="
-            raise RigConfigError(f"rig URL {shown(url)}: {where} {shown(value)}: {problem}")
+            return f"{where} {shown(value)}: {problem}"
+    return None
 
 
 def _absolute(value: str, folder: Path) -> str | None:

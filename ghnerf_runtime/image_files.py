@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime import avif_header, tiff_header
+from ghnerf_runtime.path_check import is_utf8
 
 __all__ = ["AS_STORED", "decode_image_or_none", "read_image_or_none"]
 
@@ -59,11 +60,7 @@ def _opencv_can_take(path: str | os.PathLike) -> bool:
     folder listing gives them) crashes OpenCV (a segmentation fault), and one holding a NUL byte is read only up to
     it (another file); such a path is read as bytes (and a NUL byte refused by Python)."""
     text = os.fspath(path)
-    try:
-        text.encode("utf-8")
-    except UnicodeEncodeError:
-        return False
-    return "\x00" not in text
+    return is_utf8(text) and "\x00" not in text
 
 
 def decode_image_or_none(data: np.ndarray, flags: int) -> np.ndarray | None:

@@ -14,13 +14,21 @@ import argparse
 import os
 from pathlib import Path
 
-__all__ = ["NAME_MAX", "NOT_UTF8", "PATH_MAX", "path_problem", "shown", "user_path", "user_path_as_path"]
+__all__ = ["NAME_MAX", "NOT_UTF8", "PATH_MAX", "is_utf8", "name_max_at", "path_problem", "shown", "user_path",
+           "user_path_as_path"]
 
-#: Linux's limits (``<linux/limits.h>``), in bytes: a name (one component) and a whole path with its NUL.
+#: Linux's limits (``<linux/limits.h>``), in bytes: a name (one component) and a whole path with its NUL. A name
+#: is refused past ``NAME_MAX`` only where its file system allows no longer one (:func:`name_max_at`).
 NAME_MAX = 255
 PATH_MAX = 4096
 #: What :func:`path_problem` says of a path that is not UTF-8 (URL parsers say it of a %XX escape that decodes to one).
 NOT_UTF8 = "is not UTF-8 (give the path in UTF-8, or rename the file)"
+
+
+def is_utf8(value: str) -> bool:
+    """Whether ``value`` encodes in UTF-8: not a name whose bytes are not UTF-8, which Python keeps as surrogates
+    (``sys.argv``, a folder listing) and OpenCV crashes on."""
+    return not _not_utf8(value)
 
 
 def _not_utf8(value: str) -> bool:
@@ -47,11 +55,35 @@ def path_problem(value: str) -> str | None:
         return f"is {len(encoded)} bytes long; a path has at most {PATH_MAX - 1}"
     longest = max(encoded.split(b"/"), key=len)
     if len(longest) > NAME_MAX:
-        return f"has a name of {len(longest)} bytes; a file or folder name has at most {NAME_MAX}"
-    if value == "~" or value.startswith("~/"):
+        limit = name_max_at(value)
+        if len(longest) > limit:
+            return f"has a name of {len(longest)} bytes; a file or folder name has at most {limit}"
+    if _unexpanded_home(value):
         return "starts with '~', which is not expanded here: write the home folder in full (or ./~ for a folder " \
                "named ~)"
     return None
+
+
+def _unexpanded_home(value: str) -> bool:
+    """Whether ``value`` starts with a home folder a shell would have expanded: ``~``, ``~/``, or ``~USER`` of a
+    user this system has (``~pi/models`` on a Raspberry Pi); ``~take/x`` with no user ``take`` is a name."""
+    return value == "~" or value.startswith("~/") or (value.startswith("~") and os.path.expanduser(value) != value)
+
+
+def name_max_at(value: str) -> int:
+    """The longest name in bytes the file system holding ``value`` (its deepest folder that exists) takes, at
+    least :data:`NAME_MAX`: 255 is ext4's, but a USB stick's FAT or exFAT and an NTFS or SMB share count 255
+    UTF-16 units (``pathconf`` says 1530 bytes there), so 100 CJK characters (300 bytes) name a file there."""
+    folder = os.path.dirname(value) or "."
+    while not os.path.isdir(folder):
+        parent = os.path.dirname(folder) or "."
+        if parent == folder:
+            return NAME_MAX
+        folder = parent
+    try:
+        return max(NAME_MAX, os.pathconf(folder, "PC_NAME_MAX"))
+    except (OSError, ValueError):  # (no pathconf here, or no answer: Linux's figure)
+        return NAME_MAX
 
 
 def shown(value: str) -> str:

@@ -42,8 +42,31 @@ def test_path_problem_names_each_kind(kind, value, said):
 
 
 def test_ordinary_paths_pass():
-    for value in ("models", "/etc/ghnerf/daemon.json", "./~", "a~b", "café/rig.json", "x" * 255):
+    for value in ("models", "/etc/ghnerf/daemon.json", "./~", "a~b", "café/rig.json", "x" * 255, "-",
+                  "my takes/take 1.json", "~take", "../rig.json"):
         assert path_problem(value) is None
+
+
+def test_a_user_s_home_folder_is_refused_as_the_own_one_is():
+    """``~root/models`` (``~pi/models`` on a Raspberry Pi) names a user's home folder to a shell; unexpanded, it was
+    read as a folder called ``~root`` beside the config file. A ``~name`` of no user stays a name."""
+    import pwd
+
+    user = pwd.getpwuid(0).pw_name
+    assert "which is not expanded here" in path_problem(f"~{user}/models")
+    assert path_problem("~no-such-user-here/models") is None
+
+
+def test_a_long_name_passes_where_its_file_system_takes_it(tmp_path, monkeypatch):
+    """A FAT, exFAT, NTFS or SMB folder counts 255 UTF-16 units (pathconf: 1530 bytes): 100 CJK characters (300
+    bytes) name a file there, which the fixed 255-byte limit refused. Where the file system says 255, refused."""
+    name = "\u5f71" * 100  # 300 bytes in UTF-8
+    limits = {"PC_NAME_MAX": 1530}
+    monkeypatch.setattr(os, "pathconf", lambda path, what: limits[what])
+    assert path_problem(str(tmp_path / name)) is None
+    assert path_problem(str(tmp_path / "new" / name / "x.json")) is None
+    limits["PC_NAME_MAX"] = 255
+    assert "a file or folder name has at most 255" in path_problem(str(tmp_path / name))
 
 
 def test_odd_bytes_are_shown_as_repr():
@@ -244,3 +267,14 @@ def test_the_daemon_refuses_a_nul_in_a_file_sink_of_its_config_file(tmp_path, ca
     config = _daemon_config(tmp_path, sinks__=["file:///tmp/a%00b"])
     assert main(["--config", str(config), "--validate-config", "--no-model"]) == 2
     assert f"{config}: sinks[0]: '/tmp/a\\x00b': holds a NUL byte" in capsys.readouterr().err
+
+
+def test_a_rig_url_refused_for_its_path_shows_no_password():
+    """The refusal wrote the whole URL as given: a stream's password beside the odd file path reached the log,
+    where every other rig URL error redacts it (drivers.url.redact_url)."""
+    from drivers.errors import RigConfigError
+    from drivers.url_paths import check_url_paths
+
+    with pytest.raises(RigConfigError) as refused:
+        check_url_paths("opencv://?first=/v/a%00b.mp4&second=rtsp%3A%2F%2Fuser%3Asecret%40cam%2Fs&rig=/r.json")
+    assert "holds a NUL byte" in str(refused.value) and "secret" not in str(refused.value)

@@ -714,12 +714,6 @@ def _label(item: str) -> str:
     return label if sep else Path(item).stem
 
 
-def _spec_path(item: str) -> str:
-    """The checkpoint file or graph folder a ``--model`` item reads (without its label and ``#int8``)."""
-    _, sep, spec = item.partition("=")
-    return (spec if sep else item).partition("#")[0]
-
-
 def prepare(specs: list[str], data: str, split: str, threads: int) -> list[tuple[str, Renderer, dict, object]]:
     """``(label, renderer, description, dataset)`` of every ``--model``: all loaded and checked before the first
     scene is rendered, so a bad spec fails in seconds, not after the models before it were scored."""
@@ -742,7 +736,7 @@ def _kept_words(finished: list[str], saved: list[str], out: str | None) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from training.cli.evaluate import build_parser  # noqa: PLC0415
+    from training.cli.evaluate import build_parser, spec_path  # noqa: PLC0415
 
     ap = build_parser()
     args = ap.parse_args(argv)
@@ -756,7 +750,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--model: the label {', '.join(dup)} is given twice; name each model, e.g. --model a=runs/a/last.pt")
     if args.out:  # written after minutes of evaluation: its place is settled first
         # --out x.pt beside --model x.pt replaced the checkpoint with the scores, after the evaluation
-        clash = output_clash({"--out": args.out}, {f"--model {item}": _spec_path(item) for item in args.model})
+        clash = output_clash({"--out": args.out}, {f"--model {item}": spec_path(item) for item in args.model})
         if clash:
             ap.error(clash)
         args.out = ready_output_arg(ap, args.out, "--out")

@@ -44,15 +44,12 @@ import math
 import os
 import pickle
 import random
-import signal
 import sys
-import threading
 import time
 import tomllib
-from contextlib import contextmanager, nullcontext
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, Callable, Iterator, Literal, Mapping
+from typing import Any, Callable, Literal, Mapping
 
 import numpy as np
 import torch
@@ -60,8 +57,7 @@ import torch.distributed as dist
 import torch.nn.functional as F
 from torch import Tensor
 
-from ghnerf_runtime.cli.sigterm import (exit_status, sigterm_as_interrupt, sigterm_deferred, sigterm_raises,
-                                        stop_words)
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signals_deferred, stop_words
 from ghnerf_runtime.config import read_json_file
 from ghnerf_runtime.contract import ray_grid
 from training.configs import PRESETS, preset
@@ -665,30 +661,6 @@ class CheckpointWriteError(OSError):
     left as it was."""
 
 
-@contextmanager
-def ctrl_c_after() -> Iterator[None]:
-    """Hold a Ctrl-C (SIGINT) or a SIGTERM that comes during the block until the block is done, then raise it.
-
-    A checkpoint write takes a second or so: a KeyboardInterrupt raised inside torch's writer came out as a
-    RuntimeError ("unexpected pos"), reported as a failed write with advice to free space, and the step's
-    checkpoint was lost. SIGINT only in the main thread with Python's own handler installed, SIGTERM only where
-    the command line made it raise (``sigterm_as_interrupt``); elsewhere no change.
-    """
-    hold_int = threading.current_thread() is threading.main_thread() \
-        and signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    caught: list[int] = []
-    if hold_int:
-        signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
-    try:
-        with sigterm_deferred() if sigterm_raises() else nullcontext():
-            yield
-    finally:
-        if hold_int:
-            signal.signal(signal.SIGINT, signal.default_int_handler)
-    if caught:
-        raise KeyboardInterrupt
-
-
 def save_atomic(state: Any, path: Path, keep_previous: Path | None = None) -> None:
     """``torch.save`` through ``<path>.tmp``, fsynced, then renamed: a crash or power cut leaves the old file or
     the new one, never a renamed empty or half-written ``last.pt``. A failed write (a full disk, Ctrl-C) removes
@@ -699,7 +671,9 @@ def save_atomic(state: Any, path: Path, keep_previous: Path | None = None) -> No
     between the two renames leaves it and no ``path``: a reader falls back to it)."""
     tmp = path.with_suffix(".tmp")
     try:
-        with ctrl_c_after():
+        # a Ctrl-C or SIGTERM raised inside torch's writer came out as a RuntimeError ("unexpected pos"), reported
+        # as a failed write, and the step's checkpoint was lost: held over the write and renames, raised after
+        with stop_signals_deferred(only_raising=True):
             with open(tmp, "wb") as fh:
                 torch.save(state, fh)
                 fh.flush()

@@ -33,7 +33,7 @@ from drivers.frames import CameraTruth, Frame
 from ghnerf_runtime import avif_header, tiff_header
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.image_files import decode_image_or_none
+from ghnerf_runtime.image_files import decode_image_or_none, read_image_or_none
 from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
 
@@ -598,8 +598,18 @@ def load_image(path: Path) -> np.ndarray:
     if image is None:
         refusal = tiff_decoding_refusal(path)  # read only for one that failed
         if refusal is not None:
-            raise RigOperationError(f"recording image {path} does not decode: it is {refusal}")
+            return _read_from_the_file(path, refusal)
         raise RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it)")
+    return image
+
+
+def _read_from_the_file(path: Path, refusal: str) -> np.ndarray:
+    """A valid image OpenCV refuses to decode from memory (``refusal``: :func:`tiff_decoding_refusal`), read
+    through its file reader, which takes those tiles (a mapped file), as stored; RigOperationError naming the
+    cause where that fails too (an Orientation tag to ignore, which is read from memory, or a name not UTF-8)."""
+    image = read_image_or_none(path, _DECODE_FLAGS)
+    if image is None:
+        raise RigOperationError(f"recording image {path} does not decode: it is {refusal}")
     return image
 
 
@@ -904,8 +914,9 @@ def _decodable(width: int, height: int) -> bool:
 
 
 class UndecodableImageError(RigInitializationError):
-    """A take's image that this OpenCV does not decode although it is valid (:func:`tiff_decoding_refusal`): its
-    frames would all be corrupt frames when read, so the take is refused at open, naming the file and the cause."""
+    """A take's image that this OpenCV does not decode although it is valid (:func:`tiff_decoding_refusal`), from
+    memory nor from the file (:func:`load_image`): its frames would all be corrupt frames when read, so the take
+    is refused at open, naming the file and the cause."""
 
 
 def image_size(path: Path) -> tuple[int, int] | None:

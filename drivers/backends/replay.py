@@ -298,7 +298,7 @@ class ReplayRigSource(RigSource):
         """The error of a take whose images are not all its rig's size, else ``None``: the first camera (in the
         rig's order) with an image of another size than its rig camera's; or the first valid image this OpenCV
         does not decode (:class:`UndecodableImageError`: a tiled TIFF whose tiles its libtiff refuses read from
-        memory, which every frame of such a take would be).
+        memory and that its file reader cannot read either, which every frame of such a take would be).
 
         Every image is measured at :meth:`open`, from its header (:func:`image_size`: a PNG's, JPEG's (EXIF or
         not: its orientation is ignored, :func:`load_image`) or BMP's size read without decoding it; an image in

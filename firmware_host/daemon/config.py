@@ -29,7 +29,7 @@ from ghnerf_runtime.cli.output_path import first_clash
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
 from drivers.errors import RigConfigError
 from drivers.url import RigUrl, redact_url
-from drivers.url_paths import rig_url_from_folder, url_files
+from drivers.url_paths import rig_url_from_folder, url_files, url_path_problem
 from ghnerf_runtime.config_paths import impossible_path, paths_from_file, values_from_file
 from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.path_check import path_problem, shown
@@ -383,11 +383,9 @@ def refuse_impossible_paths(data: Any) -> None:
         raise DaemonConfigError(impossible[1], key=impossible[0])
     for key in DAEMON_RIG_URL_KEYS:
         url = _at(data, key)
-        for part, value in url_files(url) if isinstance(url, str) else []:
-            problem = path_problem(value)
-            if problem is not None:
-                where = "the path after ://" if part == "target" else f"option {part}="
-                raise DaemonConfigError(f"{where} {shown(value)}: {problem}", key=".".join(key))
+        problem = url_path_problem(url) if isinstance(url, str) else None
+        if problem is not None:
+            raise DaemonConfigError(problem, key=".".join(key))
 
 
 def _made_absolute(written: Any, read: Any) -> frozenset[str]:

@@ -61,10 +61,9 @@ def _refuse_unmakeable(p: Path, flag: str, kind: str) -> None:
     """Say why ``mkdir -p`` cannot make the folder of ``p`` in the user's terms: it said only "File exists" for
     a path through a file (``a.json/x``) and for a folder that is a link to nothing."""
     folder = p if kind == "folder" else p.parent
-    dangling = dangling_link(folder)
+    dangling = dangling_link_words(folder)
     if dangling is not None:
-        raise OutputPathError(f"{flag} {p}: cannot make the folder {folder}: {dangling} is a symbolic link to "
-                              f"{os.readlink(dangling)}, which does not exist; make its target or give another path")
+        raise OutputPathError(f"{flag} {p}: cannot make the folder {folder}: {dangling} or give another path")
     base = existing_ancestor(folder)
     if not base.is_dir():
         raise OutputPathError(f"{flag} {p}: cannot make the folder {folder}: {base} is a file, not a folder")
@@ -76,6 +75,15 @@ def dangling_link(path: Path) -> Path | None:
         if candidate.is_symlink() and not candidate.exists():
             return candidate
     return None
+
+
+def dangling_link_words(path: Path) -> str | None:
+    """Why ``mkdir -p path`` fails with "File exists", in the user's terms: the first of ``path`` and its parents
+    that is a symbolic link leading nowhere, and its target (None: there is none). One wording for every tool."""
+    dangling = dangling_link(path)
+    if dangling is None:
+        return None
+    return f"{dangling} is a symbolic link to {os.readlink(dangling)}, which does not exist; make its target"
 
 
 def unwritable_reason(folder: Path) -> str | None:

@@ -7,10 +7,10 @@ no ``finally`` runs, so a tool's outputs are left half-written (a ``record+`` ta
 and nothing is said. Inside :func:`sigterm_as_interrupt` the signal raises :class:`Terminated`, a
 :class:`KeyboardInterrupt`, in the main thread, where Ctrl-C raises its own: every ``except KeyboardInterrupt``
 and ``finally`` a tool has for Ctrl-C handles SIGTERM too, and :func:`stop_signal` tells the two apart for the
-exit status (128 + the signal's number: 130, 143, the shell's figures) and the message (:func:`stop_words`). :func:`sigterm_deferred`
-holds one back over a close that must finish (a recorder rewriting its manifest ``complete: true``), and
-:func:`stop_signals_deferred` holds back Ctrl-C too (a second one pressed while a stopped run writes its outputs:
-``ghnerf-run``'s files, ``ghnerf-demo``'s sink and take, ``ghcal capture``'s cameras).
+exit status (128 + the signal's number: 130, 143, the shell's figures) and the message (:func:`stop_words`).
+:func:`stop_signals_deferred`, the one helper for work that must finish, holds both back over it (a second Ctrl-C
+pressed while a stopped run writes its outputs: ``ghnerf-run``'s files, ``ghnerf-demo``'s sink and take, ``ghcal
+capture``'s cameras; with ``only_raising``, a training checkpoint and a ZJU split's swap).
 
 The daemon does not use it: a handler that raises can land anywhere in its loop, inside a lock its threads share
 (``firmware_host.daemon.cli._StopOnSignal`` says why), and it must close its sinks in order and tell systemd it
@@ -76,40 +76,32 @@ def sigterm_as_interrupt() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def sigterm_deferred() -> Iterator[None]:
-    """Within the block a SIGTERM is noted, not raised: a close that must finish (a recorder fsyncing its take
-    and rewriting the manifest ``complete: true``) is not torn by one that lands in it, as ``timeout``'s does
-    when a run's own end comes at about its time. :class:`Terminated` is raised once the block has ended, the
-    handler before it put back first. Outside the main thread nothing is installed, as for
-    :func:`sigterm_as_interrupt`.
+def stop_signals_deferred(*, then_raise: bool = True, only_raising: bool = False) -> Iterator[None]:
+    """Within the block Ctrl-C (SIGINT) and SIGTERM are noted, not raised, so that what must finish is written
+    whole: the outputs a stopped run closes when the user presses Ctrl-C again (a second Ctrl-C landing in
+    ``ghnerf-run``'s write of its ``.json`` list lost every pair of it), a recorder's close rewriting its manifest
+    ``complete: true``. The handlers before it are put back as it ends, however it ends.
+
+    ``then_raise``: the first signal noted is raised once the block has ended normally (:class:`KeyboardInterrupt`
+    or :class:`Terminated`); pass False where the block runs while a stop or an error is already on its way, which
+    is then the one reported. ``only_raising``: for a library's step (a checkpoint write, a dataset split's two
+    renames), hold only the signals that would raise now, Ctrl-C under Python's own handler and SIGTERM inside
+    :func:`sigterm_as_interrupt`, leaving a caller's own handling of either (SIGTERM's default kill) alone.
+    Outside the main thread nothing is installed, as for :func:`sigterm_as_interrupt`.
     """
-    with _signals_held((signal.SIGTERM,), then_raise=True):
+    signums = (signal.SIGINT, signal.SIGTERM)
+    if only_raising:
+        signums = tuple(signum for signum in signums if _raises_now(signum))
+    with _signals_held(signums, then_raise=then_raise):
         yield
 
 
-@contextlib.contextmanager
-def stop_signals_deferred(*, then_raise: bool = True) -> Iterator[None]:
-    """:func:`sigterm_deferred` for Ctrl-C too: within the block SIGINT and SIGTERM are noted, not raised, so
-    that the outputs a stopped run closes are written whole when the user presses Ctrl-C again (a second Ctrl-C
-    landing in ``ghnerf-run``'s write of its ``.json`` list lost every pair of it). With ``then_raise`` the first
-    signal noted is raised once the block has ended (:class:`KeyboardInterrupt` or :class:`Terminated`); pass
-    False where the block runs while a stop or an error is already on its way, which is then the one reported.
-    """
-    with _signals_held((signal.SIGINT, signal.SIGTERM), then_raise=then_raise):
-        yield
-
-
-@contextlib.contextmanager
-def raising_stop_signals_deferred() -> Iterator[None]:
-    """:func:`stop_signals_deferred` for a library's step that must finish (a dataset split's two renames): only
-    the stop signals that would raise now are held, Ctrl-C under Python's own handler and SIGTERM inside
-    :func:`sigterm_as_interrupt`; a caller's own handling of either (SIGTERM's default kill) is left alone. The
-    first noted is raised once the block has ended normally."""
-    raising = tuple(signum for signum, raises in (
-        (signal.SIGINT, signal.getsignal(signal.SIGINT) is signal.default_int_handler),
-        (signal.SIGTERM, sigterm_raises())) if raises)
-    with _signals_held(raising, then_raise=True):
-        yield
+def _raises_now(signum: signal.Signals) -> bool:
+    """Whether ``signum`` would raise a :class:`KeyboardInterrupt` now (Python's own Ctrl-C handler, ours for
+    SIGTERM)."""
+    if signum == signal.SIGINT:
+        return signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    return sigterm_raises()
 
 
 @contextlib.contextmanager

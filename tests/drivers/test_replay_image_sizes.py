@@ -669,17 +669,22 @@ def retiled(take: Path, tile: tuple[int, int]) -> list[Path]:
 
 @pytest.mark.parametrize(("tile", "samples", "separate"),
                          [((16, 16), 3, False), ((48, 32), 3, False), ((16, 32), 1, False), ((16, 16), 3, True)])
-def test_a_valid_tiled_tiff_opencv_refuses_from_memory_is_no_header_size_and_its_read_names_the_cause(
-        tmp_path, tile, samples, separate):
+def test_a_valid_tiled_tiff_opencv_refuses_from_memory_is_no_header_size_and_is_read_from_the_file(
+        tmp_path, monkeypatch, tile, samples, separate):
     """Uncompressed tiles of a byte size not a multiple of 1024 (a sample a tile where the samples are in separate
     planes): cv2.imread of the file decodes it as it is (the file is valid), cv2.imdecode (load_image) does not
-    ('Invalid tile byte count'). Before, its header gave a size (the take opened, then every frame was 'corrupt')."""
+    ('Invalid tile byte count'). Before, its header gave a size (the take opened, then every frame was 'corrupt');
+    then (session 63) the take was refused. Read through OpenCV's file reader, it plays; the cause is named only
+    where that fails too."""
     image = np.random.default_rng(12).integers(0, 256, (30, 40, samples)[:2 + (samples > 1)], np.uint8)
     path = tmp_path / "image.tiff"
     path.write_bytes(tiff_tiled(image, tile, separate_planes=separate))
     assert np.array_equal(cv2.imread(str(path), cv2.IMREAD_UNCHANGED), image)
     assert cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_COLOR) is None
     assert header_size(path) is None
+    assert np.array_equal(load_image(path), cv2.imread(str(path), cv2.IMREAD_COLOR))
+    assert image_size(path) == (40, 30)
+    monkeypatch.setattr(recording_format, "read_image_or_none", lambda path, flags: None)  # the file reader fails
     with pytest.raises(RigOperationError, match=r"image\.tiff does not decode: it is an uncompressed tiled TIFF .*Invalid tile byte count"):
         load_image(path)
     with pytest.raises(recording_format.UndecodableImageError, match="Invalid tile byte count"):
@@ -697,11 +702,20 @@ def test_a_tiled_tiff_of_tiles_of_a_multiple_of_1024_bytes_is_measured_from_its_
     assert np.array_equal(load_image(path), cv2.imread(str(path), cv2.IMREAD_COLOR))
 
 
-def test_a_take_of_tiled_tiffs_opencv_refuses_is_refused_at_open_naming_the_file_and_the_cause(tmp_path):
-    """Before, the take opened (each size read from its header) and every read was a corrupt frame: nothing
-    played, and nothing said why."""
+def test_a_take_of_tiled_tiffs_opencv_refuses_from_memory_plays(tmp_path):
+    """Refused at open in session 63 (every frame would have been corrupt): read from the file, each decodes."""
+    take = write_take(tmp_path / "take", "jpg", frames=3)
+    retiled(take, (16, 16))
+    assert play(take) == (3, [])
+
+
+def test_a_take_of_tiled_tiffs_no_reader_decodes_is_refused_at_open_naming_the_file_and_the_cause(tmp_path,
+                                                                                                   monkeypatch):
+    """Where the file reader fails too, the take is refused at open: before session 63 it opened (each size read
+    from its header) and every read was a corrupt frame: nothing played, and nothing said why."""
     take = write_take(tmp_path / "take", "jpg", frames=3)
     first = retiled(take, (16, 16))[0]
+    monkeypatch.setattr(recording_format, "read_image_or_none", lambda path, flags: None)
     source = create_rig_source(f"replay://{take}?speed=free")
     with pytest.raises(RigInitializationError, match=rf"{re.escape(str(first))}.*768 bytes, not a multiple of 1024.*Invalid tile"):
         source.open()

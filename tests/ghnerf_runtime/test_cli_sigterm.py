@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from ghnerf_runtime.cli.sigterm import Terminated, exit_status, raising_stop_signals_deferred, sigterm_as_interrupt, \
-    sigterm_deferred, stop_signal, stop_signals_deferred, stop_words
+from ghnerf_runtime.cli.sigterm import Terminated, exit_status, sigterm_as_interrupt, stop_signal, \
+    stop_signals_deferred, stop_words
 
 
 def _outer(signum, frame):  # stands for whatever handler the caller had (the default would end pytest)
@@ -79,13 +79,13 @@ def test_a_deferred_sigterm_lets_the_block_finish_then_raises():
     try:
         with pytest.raises(Terminated):
             with sigterm_as_interrupt():
-                with sigterm_deferred():
+                with stop_signals_deferred():
                     os.kill(os.getpid(), signal.SIGTERM)
                     time.sleep(0.2)  # the handler runs here: noted, not raised
                     finished.append("block")
                 finished.append("after")  # not reached: raised as the block ended
         assert signal.getsignal(signal.SIGTERM) is _outer
-        with sigterm_deferred():  # no signal: nothing raised, the handler put back
+        with stop_signals_deferred():  # no signal: nothing raised, the handler put back
             pass
         assert signal.getsignal(signal.SIGTERM) is _outer
     finally:
@@ -131,7 +131,7 @@ def _outer_term(signum, frame):
     raise _OuterTerm
 
 
-def test_raising_stop_signals_deferred_holds_only_the_stops_that_would_raise():
+def test_only_raising_holds_only_the_stops_that_would_raise():
     """A library's step that must finish (convert_zju's swap) holds Ctrl-C under Python's own handler and SIGTERM
     inside sigterm_as_interrupt, raised after the block; a caller's own SIGTERM handling is left in place."""
     previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -139,16 +139,16 @@ def test_raising_stop_signals_deferred_holds_only_the_stops_that_would_raise():
     finished = []
     try:
         with pytest.raises(KeyboardInterrupt):
-            with raising_stop_signals_deferred():
+            with stop_signals_deferred(only_raising=True):
                 os.kill(os.getpid(), signal.SIGINT)
                 time.sleep(0.1)  # noted, not raised
                 finished.append("held")
         with pytest.raises(_OuterTerm):
-            with raising_stop_signals_deferred():
+            with stop_signals_deferred(only_raising=True):
                 assert signal.getsignal(signal.SIGTERM) is _outer_term
                 _deliver_sigterm()
         with sigterm_as_interrupt(), pytest.raises(Terminated):
-            with raising_stop_signals_deferred():
+            with stop_signals_deferred(only_raising=True):
                 os.kill(os.getpid(), signal.SIGTERM)
                 time.sleep(0.1)
                 finished.append("held too")

@@ -769,7 +769,7 @@ class _SigtermWhilePickled:
 
 def test_a_sigterm_during_a_checkpoint_write_stops_after_it_with_the_checkpoint_whole(tmp_path):
     # Under the command line's sigterm_as_interrupt it was raised inside the write, as Ctrl-C was before
-    # ctrl_c_after: the checkpoint was lost. The signal is held and raised once the file is in place.
+    # the checkpoint's signal hold: the checkpoint was lost. The signal is held and raised once the file is in place.
     import signal
 
     import torch
@@ -786,6 +786,34 @@ def test_a_sigterm_during_a_checkpoint_write_stops_after_it_with_the_checkpoint_
     assert saved["step"] == 7 and saved["w"].tolist() == [0.0, 1.0, 2.0, 3.0]
     assert not path.with_suffix(".tmp").exists()
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+class _CtrlCThenSigtermWhilePickled:
+    """Sends this process a Ctrl-C, then a SIGTERM, while torch.save pickles it."""
+
+    def __reduce__(self):
+        import os
+        import signal
+
+        os.kill(os.getpid(), signal.SIGINT)
+        os.kill(os.getpid(), signal.SIGTERM)
+        return (dict, ())
+
+
+def test_the_first_stop_held_over_a_checkpoint_write_is_the_one_raised(tmp_path):
+    # Ctrl-C then SIGTERM during the write: the Ctrl-C (exit 130) is raised after it, as every other held block
+    # raises the first; the checkpoint's own helper raised the SIGTERM (143), whichever came first
+    import torch
+
+    from ghnerf_runtime.cli.sigterm import Terminated, sigterm_as_interrupt
+    from training.train import save_atomic
+
+    path = tmp_path / "last.pt"
+    with sigterm_as_interrupt():
+        with pytest.raises(KeyboardInterrupt) as stopped:
+            save_atomic({"step": 3, "mark": _CtrlCThenSigtermWhilePickled()}, path)
+    assert not isinstance(stopped.value, Terminated)
+    assert torch.load(path, weights_only=False)["step"] == 3
 
 
 def test_a_sigterm_mid_run_leaves_whole_checkpoints_no_lock_and_a_run_that_resumes(data64, tmp_path):

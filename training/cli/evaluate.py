@@ -8,11 +8,17 @@ from training.run_limits import MAX_THREADS
 from ghnerf_runtime.path_check import user_path
 
 
-def _model_item(item: str) -> str:
-    """A ``--model`` item whose file or folder (``training.evaluate._spec_path``: that module loads torch) is a path
-    a file can have: a name past 255 bytes there raised ``ENAMETOOLONG`` from the loader (a traceback)."""
+def spec_path(item: str) -> str:
+    """The checkpoint file or graph folder a ``--model`` item reads (without its label and ``#int8``); here, not in
+    ``training.evaluate``, which loads torch, so that the parser checks it (:func:`_model_item`)."""
     _, sep, spec = item.partition("=")
-    user_path((spec if sep else item).partition("#")[0])
+    return (spec if sep else item).partition("#")[0]
+
+
+def _model_item(item: str) -> str:
+    """A ``--model`` item whose file or folder (:func:`spec_path`) is a path a file can have: a name past 255 bytes
+    there raised ``ENAMETOOLONG`` from the loader (a traceback)."""
+    user_path(spec_path(item))
     return item
 
 

@@ -38,7 +38,7 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.body25 import NUM_JOINTS
-from ghnerf_runtime.cli.sigterm import raising_stop_signals_deferred
+from ghnerf_runtime.cli.sigterm import stop_signals_deferred
 from ghnerf_runtime.geometry import Camera, triangulate_robust
 from ghnerf_runtime.preprocess import (
     Roi, apply_crop_maps, build_undistort_crop_maps, crop_camera, roi_from_joints,
@@ -356,7 +356,7 @@ def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig
     try:
         # a stop landing between the two renames left no split at all, and the next run deleted the old one
         # (taken for a leftover): held until the new split and its entry are in place, then raised
-        with raising_stop_signals_deferred():
+        with stop_signals_deferred(only_raising=True):
             _swap_in(out, split, tmp, old, manifest, entry, source_config)
             swapped = True
     except KeyboardInterrupt as e:
