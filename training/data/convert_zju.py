@@ -15,9 +15,9 @@ from __future__ import annotations
 import argparse
 import logging
 from collections.abc import Sequence
-from pathlib import Path
 
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
+from ghnerf_runtime.path_check import user_path_as_path
 from training.data.errors import DataConfigError, DatasetError
 from training.data.zju import MASK_DIRS
 from training.data.zju_samples import ZjuConfig, convert_zju, split_replaced
@@ -51,8 +51,8 @@ def _frames(text: str) -> tuple[int, int, int]:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training.data.convert_zju", description=__doc__.split("\n")[0])
-    p.add_argument("subject", type=Path, help="the ZJU-MoCap subject folder (holding annots.npy), e.g. CoreView_313")
-    p.add_argument("--out", required=True, type=Path, help="dataset folder (created, or a split added or rewritten)")
+    p.add_argument("subject", type=user_path_as_path, help="the ZJU-MoCap subject folder (holding annots.npy), e.g. CoreView_313")
+    p.add_argument("--out", required=True, type=user_path_as_path, help="dataset folder (created, or a split added or rewritten)")
     p.add_argument("--split", default="train", help="split name, e.g. train_313 (letters, digits, _; default train)")
     p.add_argument("--res", type=int, default=_DEFAULT.resolution, help="crop resolution S (multiple of 8 in 32..512)")
     p.add_argument("--view-set", dest="view_sets", type=_view_set, action="append", metavar="C,C[,C...]",

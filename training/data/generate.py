@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
+from ghnerf_runtime.path_check import user_path_as_path
 from training.data.cache import (
     MANIFEST, generator_version, new_manifest, read_manifest, remove_stale_temporaries, shard_is_complete, shard_name,
     shard_plan, stored_count, write_manifest, write_shard, writer_lock,
@@ -255,7 +256,7 @@ def _generate(out: Path, counts: Mapping[str, int], config: SyntheticConfig, dat
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m training.data.generate", description=__doc__.split("\n")[0])
-    p.add_argument("--out", required=True, type=Path, help="dataset folder (created, resumed or extended)")
+    p.add_argument("--out", required=True, type=user_path_as_path, help="dataset folder (created, resumed or extended)")
     p.add_argument("--train", type=int, default=0, help="samples in the train split")
     p.add_argument("--val", type=int, default=0, help="samples in the held-out val split (unseen bodies, motions, rigs)")
     p.add_argument("--val-seen-motions", type=int, default=0, help="samples of val_seen_motions (unseen bodies and rigs)")
