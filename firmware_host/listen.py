@@ -36,9 +36,9 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Optional, TextIO
-from urllib.parse import parse_qs, unquote, urlsplit
+from urllib.parse import parse_qs, urlsplit
 
-from drivers.url import redact_location, redact_url
+from drivers.url import not_utf8_escapes, redact_location, redact_url, unquote_keeping_bytes
 from firmware_host.addresses import ipv4_first
 from firmware_host.errors import shown_value
 from firmware_host.protocol.constants import NO_FRAME_SEQ, SCENE_FLAGS, Fault, Flags
@@ -170,6 +170,17 @@ def _refuse_repeats(shown: str, query: dict[str, list[str]]) -> None:
         raise ListenError(f"{shown}: {', '.join(repeated)} given more than once")
 
 
+def _serial_device(shown: str, device: str) -> str:
+    """The ``serial://`` device path, percent-decoded as the serial sink's is (a '#' in a udev by-id name can only
+    be written %23). An escape of a byte that is not UTF-8 is refused, as the sinks refuse it: decoded to U+FFFD,
+    the listener tried to open a device never named."""
+    decoded = unquote_keeping_bytes(device)
+    problem = not_utf8_escapes(device, decoded)
+    if problem is not None:
+        raise ListenError(f"{shown}: the device {device} {problem}")
+    return decoded
+
+
 def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
     """``udp://[HOST]:PORT`` (bound; HOST defaults to all interfaces, IPv4 and IPv6) or ``serial:///dev/DEVICE?baud=N``.
 
@@ -229,8 +240,7 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
             # past 2**31 - 1 pyserial's OverflowError escaped as a traceback; 0 asks termios to hang up the line
             raise ListenError(f"{shown}: baud must be in [{MIN_BAUD}, {MAX_BAUD}] (what termios can be asked for), "
                               f"got {baud}")
-        # percent-decoded as the serial sink's path is: a '#' in a udev by-id name can only be written %23
-        return _SerialPort(unquote(device), baud)
+        return _SerialPort(_serial_device(shown, device), baud)
     raise ListenError(f"{shown}: the listener reads udp:// or serial:// (file:// sinks write JSON lines already)")
 
 

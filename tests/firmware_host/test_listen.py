@@ -101,6 +101,8 @@ def test_serial_json_lines_over_a_pty():
     # name's '#' cut the device path short (the sinks refuse it too)
     ("serial:///dev/null#1?baud=9600", "a '#' ends the URL (the rest, '1?baud=9600', would be ignored)"),
     ("udp://127.0.0.1:9870#robot", "write a '#' in a device path as %23"),
+    # decoded to U+FFFD, the listener opened /dev/tty\ufffd, and "cannot open" named a device never given
+    ("serial:///dev/tty%FF?baud=9600", "the device /dev/tty%FF holds %FF, which is not UTF-8"),
 ])
 def test_bad_urls_are_one_line_exit_2(url, message, capsys):
     assert listen.main([url, "--seconds", "0.1"]) == 2
