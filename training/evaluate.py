@@ -82,6 +82,7 @@ from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, he
 from ghnerf_runtime.metrics import (capped_psnr, heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility,
                                     pck, scorable_images)
 from ghnerf_runtime.novel_painter import angle_from_centres_deg
+from training.cli.evaluate import split_model_item
 from training.model_card import strict_json, write_atomic
 from training.run_limits import threads_problem
 
@@ -709,9 +710,10 @@ def open_eval_dataset(data: str, split: str, renderer: Renderer, label: str):
 
 
 def _label(item: str) -> str:
-    """A ``--model`` item's label: before ``=``, else the spec's file or folder name."""
-    label, sep, _ = item.partition("=")
-    return label if sep else Path(item).stem
+    """A ``--model`` item's label: the one it gives (:func:`split_model_item`), else the spec's file or folder
+    name."""
+    label, spec = split_model_item(item)
+    return Path(spec).stem if label is None else label
 
 
 def prepare(specs: list[str], data: str, split: str, threads: int) -> list[tuple[str, Renderer, dict, object]]:
@@ -719,8 +721,7 @@ def prepare(specs: list[str], data: str, split: str, threads: int) -> list[tuple
     scene is rendered, so a bad spec fails in seconds, not after the models before it were scored."""
     out = []
     for item in specs:
-        _, sep, spec = item.partition("=")
-        label, spec = _label(item), spec if sep else item
+        label, spec = _label(item), split_model_item(item)[1]
         renderer, desc = make_renderer(spec, threads)
         out.append((label, renderer, desc, open_eval_dataset(data, split, renderer, label)))
     return out

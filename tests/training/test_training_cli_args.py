@@ -50,6 +50,38 @@ def test_a_model_spec_that_is_a_file_not_named_pt_is_named_as_a_file():
             evaluate.make_renderer(str(ckpt))
 
 
+def _prepared(monkeypatch, items: list[str]) -> list[tuple[str, str]]:
+    """``(label, spec)`` that :func:`evaluate.prepare` gives each ``--model`` item, nothing loaded."""
+    monkeypatch.setattr(evaluate, "make_renderer", lambda spec, threads: (spec, {}))
+    monkeypatch.setattr(evaluate, "open_eval_dataset", lambda *a: None)
+    return [(label, renderer) for label, renderer, _, _ in evaluate.prepare(items, "data", "val", 1)]
+
+
+def test_a_model_path_holding_an_equals_sign_is_read_whole(tmp_path, monkeypatch):
+    """``runs/lr=1e-3/x.pt`` was read as the label ``runs/lr`` and the checkpoint ``1e-3/x.pt``: a label is a name
+    (no ``/``), and an item that names a file or folder is that path, whatever it holds."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "lr=1e-3").mkdir()
+    (tmp_path / "lr=1e-3" / "x.pt").write_bytes(b"weights")
+    assert _prepared(monkeypatch, ["runs/lr=1e-3/x.pt", "lr=1e-3/x.pt", "lr=1e-3#int8", "a=b/c.pt",
+                                   "y=runs/lr=1e-3/x.pt"]) == [
+        ("x", "runs/lr=1e-3/x.pt"), ("x", "lr=1e-3/x.pt"), ("lr=1e-3#int8", "lr=1e-3#int8"), ("a", "b/c.pt"),
+        ("y", "runs/lr=1e-3/x.pt")]
+
+
+def test_an_out_that_is_a_checkpoint_whose_path_holds_an_equals_sign_is_refused(tmp_path, capsys, monkeypatch):
+    """The clash check read such a path from its ``=`` on, as the loader did, and let ``--out`` replace it."""
+    monkeypatch.setattr(evaluate, "prepare", lambda *a: pytest.fail("the models were loaded"))
+    ckpt = tmp_path / "lr=1e-3" / "last.pt"
+    ckpt.parent.mkdir()
+    ckpt.write_bytes(b"weights")
+    with pytest.raises(SystemExit) as e:
+        evaluate.main(["--data", str(tmp_path), "--model", str(ckpt), "--out", str(ckpt)])
+    assert e.value.code == 2
+    assert f"--out {ckpt} is the file --model {ckpt} reads" in capsys.readouterr().err
+    assert ckpt.read_bytes() == b"weights"
+
+
 def test_two_models_with_one_label_are_refused_before_the_work(tmp_path, capsys, monkeypatch):
     """Two runs' ``last.pt`` are both labelled "last": the second's scores replaced the first's in the JSON."""
     monkeypatch.setattr(evaluate, "prepare", lambda *a: pytest.fail("the models were loaded"))

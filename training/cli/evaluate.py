@@ -2,17 +2,33 @@
 from __future__ import annotations
 
 import argparse
+import os
 
 from training.cli import doc_of, parse_then_run
 from training.run_limits import MAX_THREADS
 from ghnerf_runtime.path_check import user_path
 
 
+def split_model_item(item: str) -> tuple[str | None, str]:
+    """A ``--model`` item's label (None where it gives none) and its spec. ``LABEL=SPEC`` is split at the first
+    ``=`` only where what comes before it is a name (no ``/``) and the whole item is no file or folder there: a path
+    holding ``=`` (``runs/lr=1e-3/x.pt``) was read as the label ``runs/lr`` and the spec ``1e-3/x.pt``. An explicit
+    label (``x=runs/lr=1e-3/x.pt``) always reads the rest as the spec."""
+    label, sep, spec = item.partition("=")
+    if not sep or "/" in label or _names_a_file(item):
+        return None, item
+    return label, spec
+
+
+def _names_a_file(spec: str) -> bool:
+    # os.path.exists, not Path.exists: False (not ValueError) for a NUL, which the path check then names
+    return os.path.exists(spec.partition("#")[0])
+
+
 def spec_path(item: str) -> str:
     """The checkpoint file or graph folder a ``--model`` item reads (without its label and ``#int8``); here, not in
     ``training.evaluate``, which loads torch, so that the parser checks it (:func:`_model_item`)."""
-    _, sep, spec = item.partition("=")
-    return (spec if sep else item).partition("#")[0]
+    return split_model_item(item)[1].partition("#")[0]
 
 
 def _model_item(item: str) -> str:
@@ -30,7 +46,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--split", default="val", help="held-out split (default val: unseen bodies, motions, rigs)")
     ap.add_argument("--model", action="append", required=True, metavar="LABEL=SPEC", type=_model_item,
                     help="x.pt (torch checkpoint) | folder (ONNX fp32) | folder#int8; repeatable, each "
-                         "LABEL its own (without LABEL=, the file's or folder's name)")
+                         "LABEL its own (without LABEL=, the file's or folder's name); a LABEL holds no '/', and "
+                         "an item naming a file or folder is read whole, so runs/lr=1e-3/x.pt is a path")
     ap.add_argument("--limit", type=int, default=0, help="first N scenes only (0: all)")
     ap.add_argument("--no-novel", action="store_true", help="skip the novel-view PSNR/SSIM")
     ap.add_argument("--threads", type=int, default=2, help=f"torch and onnxruntime threads (1 to {MAX_THREADS})")
