@@ -69,6 +69,22 @@ def test_a_model_path_holding_an_equals_sign_is_read_whole(tmp_path, monkeypatch
         ("y", "runs/lr=1e-3/x.pt")]
 
 
+def test_an_empty_label_is_a_usage_error_naming_the_item(tmp_path, capsys, monkeypatch):
+    """``--model =x.pt`` was scored under the label "" (a JSON key of nothing); a file named ``=x.pt`` there is
+    still that file, read whole."""
+    from training.cli.evaluate import build_parser, main as cli_main
+
+    monkeypatch.setattr(evaluate, "main", lambda argv: pytest.fail("the evaluation ran"))
+    with pytest.raises(SystemExit) as e:
+        cli_main(["--data", str(tmp_path), "--model", "=x.pt"])
+    assert e.value.code == 2
+    assert "argument --model: =x.pt: the LABEL before '=' is empty" in capsys.readouterr().err
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "=x.pt").write_bytes(b"weights")
+    assert build_parser().parse_args(["--model", "=x.pt"]).model == ["=x.pt"]
+    assert _prepared(monkeypatch, ["=x.pt"]) == [("=x", "=x.pt")]
+
+
 def test_an_out_that_is_a_checkpoint_whose_path_holds_an_equals_sign_is_refused(tmp_path, capsys, monkeypatch):
     """The clash check read such a path from its ``=`` on, as the loader did, and let ``--out`` replace it."""
     monkeypatch.setattr(evaluate, "prepare", lambda *a: pytest.fail("the models were loaded"))

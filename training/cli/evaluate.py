@@ -6,7 +6,7 @@ import os
 
 from training.cli import doc_of, parse_then_run
 from training.run_limits import MAX_THREADS
-from ghnerf_runtime.path_check import user_path
+from ghnerf_runtime.path_check import shown, user_path
 
 
 def split_model_item(item: str) -> tuple[str | None, str]:
@@ -32,8 +32,12 @@ def spec_path(item: str) -> str:
 
 
 def _model_item(item: str) -> str:
-    """A ``--model`` item whose file or folder (:func:`spec_path`) is a path a file can have: a name past 255 bytes
-    there raised ``ENAMETOOLONG`` from the loader (a traceback)."""
+    """A ``--model`` item with no empty label whose file or folder (:func:`spec_path`) is a path a file can have: a
+    name past 255 bytes there raised ``ENAMETOOLONG`` from the loader (a traceback)."""
+    if split_model_item(item)[0] == "":
+        # "=x.pt" was scored under the label "", a key no reader of the JSON expects
+        raise argparse.ArgumentTypeError(f"{shown(item)}: the LABEL before '=' is empty; write LABEL=SPEC or the "
+                                         "spec alone")
     user_path(spec_path(item))
     return item
 
