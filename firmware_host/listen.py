@@ -46,6 +46,7 @@ from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
 from firmware_host.sinks.url import LocationError, host_name_problem, integer, ipv6_hint, location_host
 from ghnerf_runtime.cli.sigterm import sigterm_as_interrupt
+from ghnerf_runtime.path_check import path_problem, shown as shown_path
 
 __all__ = ["main", "open_port", "Tally", "ListenError"]
 
@@ -173,11 +174,15 @@ def _refuse_repeats(shown: str, query: dict[str, list[str]]) -> None:
 def _serial_device(shown: str, device: str) -> str:
     """The ``serial://`` device path, percent-decoded as the serial sink's is (a '#' in a udev by-id name can only
     be written %23). An escape of a byte that is not UTF-8 is refused, as the sinks refuse it: decoded to U+FFFD,
-    the listener tried to open a device never named."""
+    the listener tried to open a device never named. A device no file can be (a NUL byte, a name too long) is
+    refused in :func:`ghnerf_runtime.path_check.path_problem`'s words: pyserial's ValueError read "cannot open"."""
     decoded = unquote_keeping_bytes(device)
     problem = not_utf8_escapes(device, decoded)
     if problem is not None:
         raise ListenError(f"{shown}: the device {device} {problem}")
+    problem = path_problem(decoded)
+    if problem is not None:
+        raise ListenError(f"{shown}: the device {shown_path(decoded)}: {problem}")
     return decoded
 
 

@@ -103,6 +103,9 @@ def test_serial_json_lines_over_a_pty():
     ("udp://127.0.0.1:9870#robot", "write a '#' in a device path as %23"),
     # decoded to U+FFFD, the listener opened /dev/tty\ufffd, and "cannot open" named a device never given
     ("serial:///dev/tty%FF?baud=9600", "the device /dev/tty%FF holds %FF, which is not UTF-8"),
+    # pyserial's ValueError ("embedded null byte") was caught as "cannot open": refused as other odd paths are
+    ("serial:///dev/tty%00", "the device '/dev/tty\\x00': holds a NUL byte"),
+    ("serial:///dev/" + "t" * 256, "has a name of 256 bytes; a file or folder name has at most 255"),
 ])
 def test_bad_urls_are_one_line_exit_2(url, message, capsys):
     assert listen.main([url, "--seconds", "0.1"]) == 2
