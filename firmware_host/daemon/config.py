@@ -18,17 +18,16 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import posixpath
 import typing
 from dataclasses import dataclass, field
 from typing import Any, Mapping
-from urllib.parse import unquote, urlsplit
+from urllib.parse import urlsplit
 
 from firmware_host.errors import FirmwareHostError
 from ghnerf_runtime.cli.output_path import first_clash
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
 from drivers.errors import RigConfigError
-from drivers.url import RigUrl, redact_url
+from drivers.url import RigUrl, redact_url, unquote_keeping_bytes, with_kept_bytes_escaped
 from drivers.url_paths import rig_url_from_folder, url_files, url_path_problem
 from ghnerf_runtime.config_paths import impossible_path, paths_from_file, values_from_file
 from ghnerf_runtime.errors import ConfigError
@@ -234,21 +233,30 @@ def _refuse_impossible(key: str, path: str | None) -> None:
     """:class:`DaemonConfigError` keyed ``key`` for a ``path`` no file can have (a NUL byte, a name or path too long,
     not UTF-8): ``os.path.realpath`` in the outputs-apart check raised ``ValueError`` for a NUL (a traceback)."""
     problem = path_problem(path) if path else None
-    if problem is not None:
-        raise DaemonConfigError(f"{shown(path)}: {problem}", key=key)
+    if problem is not None:  # a byte that is not UTF-8 shown as the %XX escape the URL gave it
+        raise DaemonConfigError(f"{shown(with_kept_bytes_escaped(path))}: {problem}", key=key)
 
 
 def _destination(url: str) -> tuple[str, str, str] | None:
     """Where a sink URL sends: its scheme, location and path, without its options (None: it names no place, as
-    ``memory://``, or does not parse, which the sink's own check reports)."""
+    ``memory://``, or does not parse, which the sink's own check reports). The path is decoded as the sinks decode
+    it (:func:`drivers.url.unquote_keeping_bytes`): ``unquote`` made both ``%FF`` and ``%FE`` U+FFFD, one place."""
     try:
         parts = urlsplit(url)
     except ValueError:
         return None
-    path = posixpath.normpath(unquote(parts.path)) if parts.path else ""
+    path = _spelling_apart(unquote_keeping_bytes(parts.path))
     if not parts.netloc and not path:
         return None
     return parts.scheme.lower(), parts.netloc.lower(), path
+
+
+def _spelling_apart(path: str) -> str:
+    """``path`` without what only spells it another way (``//``, ``/./``, a trailing ``/``). A ``..`` is kept:
+    ``link/..`` is the folder above the link's target, not the link's own folder (``posixpath.normpath`` made two
+    files one); the outputs-apart check (``realpath``) sees where it leads."""
+    names = [name for name in path.split("/") if name not in ("", ".")]
+    return ("/" if path.startswith("/") else "") + "/".join(names)
 
 
 def _one_sink_per_destination(sinks: typing.Sequence[str]) -> None:

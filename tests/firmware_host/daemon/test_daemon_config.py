@@ -64,6 +64,11 @@ def test_minimal_config_takes_the_defaults():
     ({"sinks": ["file:///tmp/j.jsonl", SINK, "file:///tmp//j.jsonl?queue=9"]}, "sinks[2]: sends where sinks[0]"),
     ({"sinks": ["file:///tmp/a%20b.jsonl", "file:///tmp/a b.jsonl"]}, "sinks[1]: sends where sinks[0]"),
     ({"sinks": ["serial:///dev/ttyACM0", "serial:///dev/ttyACM0?baud=115200"]}, "sinks[1]: sends where sinks[0]"),
+    ({"sinks": ["file:///tmp/a%2Eb", "file:///tmp/./a.b/"]}, "sinks[1]: sends where sinks[0]"),
+    ({"sinks": ["serial:///dev/tty%41CM0", "serial:///dev//ttyACM0"]}, "sinks[1]: sends where sinks[0]"),
+    # decoded as the sinks decode it: unquote made %FF and %FE both U+FFFD, "sinks[1]: sends where sinks[0]"
+    ({"sinks": ["file:///tmp/a%FFb.jsonl", "file:///tmp/a%FEb.jsonl"]},
+     "sinks[0]: /tmp/a%FFb.jsonl: is not UTF-8 (give the path in UTF-8, or rename the file)"),
 ])
 def test_errors_name_the_key(data, key):
     assert _error(data).startswith(key)
@@ -92,6 +97,18 @@ def test_a_sink_url_refused_for_its_duplicate_is_shown_without_its_password(sink
 ])
 def test_sinks_to_different_destinations_are_kept(sinks):
     assert daemon_config_from_dict({"sinks": sinks}).sinks == tuple(sinks)
+
+
+def test_a_file_sink_through_a_link_and_up_is_the_file_it_reaches(tmp_path):
+    """``link/../j.jsonl`` is ``j.jsonl`` beside the link's target, not beside the link: ``posixpath.normpath``
+    made it the other sink's file and refused two sinks that write two files."""
+    (tmp_path / "elsewhere" / "in").mkdir(parents=True)
+    (tmp_path / "link").symlink_to(tmp_path / "elsewhere" / "in")
+    sinks = [f"file://{tmp_path}/j.jsonl", f"file://{tmp_path}/link/../j.jsonl"]
+    assert daemon_config_from_dict({"sinks": sinks}).sinks == tuple(sinks)
+    (tmp_path / "plain").mkdir()  # through a folder, one file: refused, naming the other sink
+    with pytest.raises(DaemonConfigError, match=r"^sinks\[1\]: is where sinks\[0\] writes too"):
+        daemon_config_from_dict({"sinks": [sinks[0], f"file://{tmp_path}/plain/../j.jsonl"]})
 
 
 @pytest.mark.parametrize("change, said", [
