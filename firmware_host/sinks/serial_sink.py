@@ -38,6 +38,7 @@ from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink, frame_messages
 from firmware_host.sinks.rate import serial_capacity_fps
 from firmware_host.sinks.url import SinkUrl, int_in, parse_url, unquote_part
+from ghnerf_runtime.path_check import path_problem
 
 _log = logging.getLogger(__name__)
 
@@ -74,6 +75,9 @@ class SerialSink(ProtocolSink):
             raise SinkConfigError(url, "port", port, f"expected an absolute path: serial:///{port.lstrip('/')}")
         # percent-decoded as file:// and rig URLs are: a '#' in a by-id name can only be written %23
         port = unquote_part(url, "port", port)
+        problem = path_problem(port)  # a NUL byte or a name too long: said now, not "cannot open" retried for ever
+        if problem is not None:
+            raise SinkConfigError(url, "port", port, problem)
         baud = u.take("baud", int_in(MIN_BAUD, MAX_BAUD, "bits per second"), 115200, kw)
         timeout_ms = u.take("write_timeout_ms", int_in(1, MAX_WRITE_TIMEOUT_MS, "milliseconds"), 100, kw)
         options = SinkOptions.take(u, kw)

@@ -299,6 +299,14 @@ def test_a_sink_url_escape_of_a_byte_that_is_not_utf8_is_refused_naming_the_part
     assert said in str(e) and "(give the path in UTF-8, or rename the file)" in str(e)
 
 
+def test_listen_and_the_serial_sink_refuse_a_device_no_file_can_be(capsys):
+    """A NUL reached pyserial: its ValueError was "cannot open" (the sink retried it for ever)."""
+    url = "serial:///dev/tty%00"
+    assert "the device '/dev/tty\\x00': holds a NUL byte" in _listen_fails(capsys, url, "--seconds", "0.1")
+    e = _refused(url)
+    assert e.field == "port" and "holds a NUL byte" in str(e)
+
+
 def test_a_file_sink_path_of_utf8_escapes_is_decoded(tmp_path):
     sink = open_sink(f"file://{tmp_path}/t%C3%A9.jsonl")
     sink.close(0.5)
