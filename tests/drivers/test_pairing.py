@@ -1,5 +1,6 @@
 """FramePairer frame by frame: tolerance, offset cameras, drops, LATEST vs ALL, gaps and unpaired counts."""
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -450,3 +451,18 @@ def test_stamps_at_the_int64_extremes_pair_exactly(origin):
     pairer, pairs = run(PairingConfig(policy=DropPolicy.ALL, max_ready=64),
                         [frame(c, k, origin + k * PERIOD) for k in range(20) for c in "ab"])
     assert [x.timestamp_ns - origin for _, x, _ in pairs] == [k * PERIOD for k in range(20)]
+
+
+def test_numpy_int64_stamps_across_a_wrap_pair_as_python_integers():
+    """A backend's np.int64 stamps: across a clock wrapping from the int64 top to its bottom, the pairer's
+    differences overflowed (a RuntimeWarning, then wrapped values). A Frame holds them as Python integers."""
+    top, bottom = 2**63 - 1 - 5 * PERIOD, -(2**63)
+    stamps = [np.int64(top + k * PERIOD) for k in range(5)] + [np.int64(bottom + k * PERIOD) for k in range(5)]
+    assert type(frame("a", 0, 0).timestamp_ns) is int
+    events = [Frame(camera=c, image=IMG, timestamp_ns=t, index=k) for k, t in enumerate(stamps) for c in "ab"]
+    assert all(type(f.timestamp_ns) is int for f in events)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pairer, pairs = run(PairingConfig(policy=DropPolicy.ALL, max_ready=64), events)
+    assert [x.timestamp_ns for _, x, _ in pairs] == [int(t) for t in stamps]
+    assert pairer.stats.unpaired == {"a": 0, "b": 0}
