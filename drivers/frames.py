@@ -49,6 +49,12 @@ class Frame:
     scene_time_s: float | None = None
     joints_3d: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        # a NumPy integer stamp (a backend's int64 array) held as Python's: the pairer's differences of two int64
+        # stamps far apart (a clock that wrapped, one camera's reset) overflowed, warning and pairing on wrapped values
+        if isinstance(self.timestamp_ns, np.integer):
+            object.__setattr__(self, "timestamp_ns", int(self.timestamp_ns))
+
 
 @dataclass(frozen=True, eq=False)
 class FramePair:

@@ -12,9 +12,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 
-from drivers.errors import RigConfigError
+from drivers.errors import RigConfigError, RigOperationError
 from drivers.frames import Frame
-from ghnerf_runtime.plain_values import is_real_number, is_true_false
+from ghnerf_runtime.plain_values import is_finite_number, is_real_number, is_true_false
 
 
 class DropPolicy(str, Enum):
@@ -148,6 +148,7 @@ class FramePairer:
         if frame.camera not in self._pending:
             raise RigConfigError(f"frame from unknown camera {frame.camera!r}; pairing {list(self.cameras)}")
         cam = frame.camera
+        _check_stamp(frame)
         self.stats.frames_in[cam] += 1
         last = self._last_index.get(cam)
         if last is not None and frame.index > last + 1:
@@ -340,6 +341,15 @@ class FramePairer:
         self._newest_ns.clear()
         for intervals in self._intervals.values():
             intervals.clear()
+
+
+def _check_stamp(frame: Frame) -> None:
+    """Refuse a capture time that is no finite number. NaN compares false with every stamp, so a NaN frame paired
+    with whatever came next (a pair with no capture time went out as valid); None raised a bare TypeError from a
+    comparison deep in the pairer; inf never paired and no counter said why."""
+    if not is_finite_number(frame.timestamp_ns):
+        raise RigOperationError(f"frame {frame.index} of camera {frame.camera!r} has capture time timestamp_ns="
+                                f"{frame.timestamp_ns!r}: a finite number of nanoseconds expected")
 
 
 def frames_since(before: PairingStats, after: PairingStats) -> dict[str, int]:

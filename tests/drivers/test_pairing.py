@@ -1,5 +1,6 @@
 """FramePairer frame by frame: tolerance, offset cameras, drops, LATEST vs ALL, gaps and unpaired counts."""
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -7,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drivers import DropPolicy, PairingConfig, RigConfigError
+from drivers.errors import RigOperationError
 from drivers.frames import Frame
 from drivers.pairing import FramePairer, PairingStats, why_no_pair
 
@@ -424,3 +426,43 @@ def test_cameras_that_do_not_capture_together_are_told_from_a_lagging_one():
     assert why_no_pair(before, pairer.stats, config) == (
         "frames came from both cameras (left 60, right 59) but none paired within the pairing tolerance of 11 ms: "
         "the cameras do not capture together")
+
+
+@pytest.mark.parametrize("stamp", [float("nan"), float("inf"), -float("inf"), None, "5", True])
+def test_a_frame_whose_capture_time_is_no_finite_number_is_refused_naming_it(stamp):
+    """A NaN stamp compared false with every other: the frame paired with whatever came next, a pair with no
+    capture time going out as valid. None raised a bare TypeError; inf went unpaired with no word why."""
+    pairer = FramePairer(("a", "b"), PairingConfig(policy=DropPolicy.ALL))
+    pairer.push(frame("a", 0, 0))
+    pairer.push(frame("b", 0, 0))
+    bad = Frame(camera="a", image=IMG, timestamp_ns=stamp, index=1)
+    with pytest.raises(RigOperationError, match=rf"frame 1 of camera 'a' .*timestamp_ns={re.escape(repr(stamp))}"):
+        pairer.push(bad)
+    assert pairer.stats.frames_in == {"a": 1, "b": 1}  # refused before it touched the state
+    pairer.push(frame("a", 1, PERIOD))
+    pairer.push(frame("b", 1, PERIOD))
+    pairer.flush()
+    assert [(x.timestamp_ns, y.timestamp_ns) for _, x, y in drain(pairer)] == [(0, 0), (PERIOD, PERIOD)]
+
+
+@pytest.mark.parametrize("origin", [10**18, 2**63 - 1 - 20 * PERIOD, -(10**18)])
+def test_stamps_at_the_int64_extremes_pair_exactly(origin):
+    """Stamps near 1e18 ns and the int64 limit (year 2262) stay Python integers: no float rounding merges frames."""
+    pairer, pairs = run(PairingConfig(policy=DropPolicy.ALL, max_ready=64),
+                        [frame(c, k, origin + k * PERIOD) for k in range(20) for c in "ab"])
+    assert [x.timestamp_ns - origin for _, x, _ in pairs] == [k * PERIOD for k in range(20)]
+
+
+def test_numpy_int64_stamps_across_a_wrap_pair_as_python_integers():
+    """A backend's np.int64 stamps: across a clock wrapping from the int64 top to its bottom, the pairer's
+    differences overflowed (a RuntimeWarning, then wrapped values). A Frame holds them as Python integers."""
+    top, bottom = 2**63 - 1 - 5 * PERIOD, -(2**63)
+    stamps = [np.int64(top + k * PERIOD) for k in range(5)] + [np.int64(bottom + k * PERIOD) for k in range(5)]
+    assert type(frame("a", 0, 0).timestamp_ns) is int
+    events = [Frame(camera=c, image=IMG, timestamp_ns=t, index=k) for k, t in enumerate(stamps) for c in "ab"]
+    assert all(type(f.timestamp_ns) is int for f in events)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pairer, pairs = run(PairingConfig(policy=DropPolicy.ALL, max_ready=64), events)
+    assert [x.timestamp_ns for _, x, _ in pairs] == [int(t) for t in stamps]
+    assert pairer.stats.unpaired == {"a": 0, "b": 0}
