@@ -31,7 +31,7 @@ import numpy as np
 from ghnerf_runtime import avif_header, tiff_header
 from ghnerf_runtime.path_check import is_utf8
 
-__all__ = ["AS_STORED", "decode_image_or_none", "read_image_or_none"]
+__all__ = ["AS_STORED", "decode_image_or_none", "read_image_or_none", "samples_not_8_bit"]
 
 #: The decode flag that keeps an image's pixels as stored (IMREAD_UNCHANGED never turns them anyway), a JPEG's,
 #: PNG's or WebP's EXIF orientation ignored; a TIFF's Orientation tag and an AVIF's irot and imir need more
@@ -53,6 +53,19 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
         return cv2.imread(os.fspath(path), flags | AS_STORED)  # (IMREAD_UNCHANGED is -1: it stays itself)
     except cv2.error:
         return None
+
+
+def samples_not_8_bit(path: str | os.PathLike) -> str | None:
+    """Why an image that failed to decode as 8-bit BGR (IMREAD_COLOR) did, where OpenCV reads it as stored: its
+    samples' type, e.g. "float32 samples (640x480, 3 channels): only 8- or 16-bit images decode to 8 bits" (a TIFF
+    of 32- or 64-bit samples, float or integer, whose range 0-1 or 0-255 no header says); None where OpenCV cannot
+    read it at all. It decodes the file a second time: call it only once the first decode failed."""
+    image = read_image_or_none(path, cv2.IMREAD_UNCHANGED)
+    if image is None or image.size == 0:
+        return None
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    return (f"{image.dtype.name} samples ({image.shape[1]}x{image.shape[0]}, {channels} channel"
+            f"{'' if channels == 1 else 's'}): only 8- or 16-bit images decode to 8 bits")
 
 
 def _opencv_can_take(path: str | os.PathLike) -> bool:
