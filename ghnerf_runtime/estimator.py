@@ -49,7 +49,7 @@ import logging
 import math
 import numbers
 import time
-from collections import OrderedDict
+from collections import OrderedDict, abc
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -550,6 +550,19 @@ def _finds_better(q: "_Pass", p: "_Pass") -> bool:
         not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN)
 
 
+
+def _is_image_sequence(images: object) -> bool:
+    """Whether ``images`` holds the pair's images in order: a list, tuple or array, not text or a mapping."""
+    return isinstance(images, (abc.Sequence, np.ndarray)) and not isinstance(images, (str, bytes))
+
+
+def _as_array_or_none(image: object) -> np.ndarray | None:
+    """``np.asarray(image)``, or None where numpy cannot make one array of it (nested lists of unequal lengths)."""
+    try:
+        return np.asarray(image)
+    except ValueError:
+        return None
+
 class Estimator:
     """Frame pair -> joints, with an injected :class:`~ghnerf_runtime.session.ModelSession`.
 
@@ -805,11 +818,17 @@ class Estimator:
         return self._crop_terms
 
     def _check_images(self, images: Sequence[np.ndarray]) -> None:
+        if not _is_image_sequence(images):  # a dict gave its keys' "<U4 ()"; None or a generator a TypeError
+            raise FrameError(f"expected 2 images in the rig's camera order {list(self.camera_names)} (a list, "
+                             f"tuple or array), got {type(images).__name__}")
         if len(images) != 2:
             raise FrameError(f"expected 2 images (cameras {list(self.camera_names)}), got {len(images)}")
         for img, st in zip(images, self._cams):
-            arr = np.asarray(img)
+            arr = _as_array_or_none(img)
             w, h = st.camera.size
+            if arr is None:  # ragged nested lists: numpy's ValueError named no camera
+                raise FrameError(f"camera {st.camera.name!r}: expected a ({h}, {w}, 3) uint8 BGR image (the rig "
+                                 f"file's {w}x{h}), got a {type(img).__name__} that is no array (ragged)")
             if arr.dtype != np.uint8 or arr.shape != (h, w, 3):
                 # (a missing frame read "got object ()"; a camera reconfigured to another size names both sizes)
                 got = "None (no frame)" if img is None else f"{arr.dtype} {arr.shape}"

@@ -31,7 +31,7 @@ import numpy as np
 from ghnerf_runtime import avif_header, tiff_header
 from ghnerf_runtime.path_check import is_utf8
 
-__all__ = ["AS_STORED", "decode_image_or_none", "read_image_or_none"]
+__all__ = ["AS_STORED", "decode_image_or_none", "read_image_or_none", "samples_not_8_bit"]
 
 #: The decode flag that keeps an image's pixels as stored (IMREAD_UNCHANGED never turns them anyway), a JPEG's,
 #: PNG's or WebP's EXIF orientation ignored; a TIFF's Orientation tag and an AVIF's irot and imir need more
@@ -43,6 +43,8 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
     """``cv2.imread(path, flags)`` as stored (:data:`AS_STORED` added; a TIFF's Orientation tag and an AVIF's
     rotate and mirror properties ignored too), or None where OpenCV cannot read the file, a size beyond its limits
     included."""
+    if _decodes_to_8_bits(flags) and _tiff_samples_wider_than(path, 16):
+        return None  # OpenCV fails on it too, printing libtiff's "Sorry, can not handle images with 32-bit samples"
     if _turn_resets_of(path) or not _opencv_can_take(path):
         try:
             data = np.fromfile(os.fspath(path), dtype=np.uint8)
@@ -53,6 +55,43 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
         return cv2.imread(os.fspath(path), flags | AS_STORED)  # (IMREAD_UNCHANGED is -1: it stays itself)
     except cv2.error:
         return None
+
+
+def _decodes_to_8_bits(flags: int) -> bool:
+    """Whether a read with ``flags`` makes 8-bit samples (IMREAD_COLOR, IMREAD_GRAYSCALE), not the file's own."""
+    return flags != cv2.IMREAD_UNCHANGED and not flags & cv2.IMREAD_ANYDEPTH
+
+
+def _tiff_samples_wider_than(path: str | os.PathLike, bits: int) -> bool:
+    """:func:`_tiff_header_samples_wider_than` of a file; False for one that cannot be opened (its read says so)."""
+    try:
+        with open(path, "rb") as f:
+            return _tiff_header_samples_wider_than(f, bits)
+    except (OSError, ValueError):  # ValueError: a NUL byte in the path
+        return False
+
+
+def _tiff_header_samples_wider_than(f: BinaryIO, bits: int) -> bool:
+    """Whether ``f`` (at its start) is a TIFF whose first directory gives samples of more than ``bits`` bits, read
+    from its header; False for another format, or a header that cannot be read."""
+    layout = tiff_header.LAYOUTS.get(f.read(4))
+    entries = None if layout is None else tiff_header.first_directory(f, layout,
+                                                                      frozenset({tiff_header.BITS_PER_SAMPLE}))
+    sample_bits = (entries or {}).get(tiff_header.BITS_PER_SAMPLE)
+    return sample_bits is not None and max(sample_bits.values, default=0) > bits
+
+
+def samples_not_8_bit(path: str | os.PathLike) -> str | None:
+    """Why an image that failed to decode as 8-bit BGR (IMREAD_COLOR) did, where OpenCV reads it as stored: its
+    samples' type, e.g. "float32 samples (640x480, 3 channels): only 8- or 16-bit images decode to 8 bits" (a TIFF
+    of 32- or 64-bit samples, float or integer, whose range 0-1 or 0-255 no header says); None where OpenCV cannot
+    read it at all. It decodes the file a second time: call it only once the first decode failed."""
+    image = read_image_or_none(path, cv2.IMREAD_UNCHANGED)
+    if image is None or image.size == 0:
+        return None
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    return (f"{image.dtype.name} samples ({image.shape[1]}x{image.shape[0]}, {channels} channel"
+            f"{'' if channels == 1 else 's'}): only 8- or 16-bit images decode to 8 bits")
 
 
 def _opencv_can_take(path: str | os.PathLike) -> bool:
@@ -66,6 +105,9 @@ def _opencv_can_take(path: str | os.PathLike) -> bool:
 def decode_image_or_none(data: np.ndarray, flags: int) -> np.ndarray | None:
     """``cv2.imdecode(data, flags)`` (``data`` a file's bytes as uint8) as stored, as :func:`read_image_or_none`
     reads a file; None where OpenCV cannot decode it, a size beyond its limits included."""
+    if (_decodes_to_8_bits(flags) and data[:4].tobytes() in tiff_header.LAYOUTS
+            and _tiff_header_samples_wider_than(io.BytesIO(data.tobytes()), 16)):
+        return None  # as read_image_or_none: OpenCV fails on it too, and prints libtiff's complaint
     try:
         return cv2.imdecode(_as_stored(data), flags | AS_STORED)
     except cv2.error:

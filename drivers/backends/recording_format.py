@@ -33,7 +33,7 @@ from drivers.frames import CameraTruth, Frame
 from ghnerf_runtime import avif_header, tiff_header
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.image_files import decode_image_or_none, read_image_or_none
+from ghnerf_runtime.image_files import decode_image_or_none, read_image_or_none, samples_not_8_bit
 from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
 
@@ -599,6 +599,9 @@ def load_image(path: Path) -> np.ndarray:
         refusal = tiff_decoding_refusal(path)  # read only for one that failed
         if refusal is not None:
             return _read_from_the_file(path, refusal)
+        samples = samples_not_8_bit(path)  # a valid float TIFF was called corrupt
+        if samples is not None:
+            raise RigOperationError(f"recording image {path} does not decode: it has {samples}")
         raise RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it)")
     return image
 

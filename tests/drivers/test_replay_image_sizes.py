@@ -366,6 +366,20 @@ def test_an_image_beyond_opencv_s_size_limits_is_no_size_and_a_corrupt_frame(tmp
         load_image(path)
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.int32])
+def test_a_tiff_of_samples_that_do_not_decode_to_8_bits_is_named_by_its_sample_type_not_corrupt(tmp_path, capfd,
+                                                                                                   dtype):
+    """A valid float or 32-bit integer TIFF in a take was "corrupt" (under libtiff's "Sorry, can not handle images
+    with 32-bit samples"): its frame's error now names its samples, with nothing from libtiff."""
+    path = tmp_path / "image.tiff"
+    assert cv2.imwrite(str(path), np.zeros((6, 8), dtype))
+    said = f"recording image {path} does not decode: it has {np.dtype(dtype).name} samples (8x6, 1 channel)"
+    with pytest.raises(RigOperationError, match=re.escape(said)):
+        load_image(path)
+    captured = capfd.readouterr()
+    assert "Sorry" not in captured.err + captured.out
+
+
 def test_another_format_is_decoded(tmp_path):
     path = tmp_path / "image.ppm"
     assert cv2.imwrite(str(path), np.zeros((30, 40, 3), np.uint8))

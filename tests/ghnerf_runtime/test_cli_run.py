@@ -146,6 +146,22 @@ def test_an_image_whose_header_is_beyond_opencv_s_size_limits_is_named_as_unread
         cli_run._read_image(str(path))
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.int32])
+def test_an_image_of_samples_that_do_not_decode_to_8_bits_is_named_by_its_sample_type(tmp_path, capfd, dtype):
+    # a float TIFF (NaN and values outside 0-1 in it) was "not a format OpenCV reads", which it is, under libtiff's
+    # "[ WARN:0@0.2] ... Sorry, can not handle images with 32-bit samples": the error now names its sample type
+    image = np.full((6, 8, 3), 0.5).astype(dtype)
+    if np.issubdtype(dtype, np.floating):
+        image[0, 0], image[1, 1], image[2, 2] = np.nan, np.inf, -3.0
+    path = tmp_path / "float.tiff"
+    assert cv2.imwrite(str(path), image)
+    said = f"{path}: cannot take the image, of {np.dtype(dtype).name} samples (8x6, 3 channels): only 8- or 16-bit"
+    with pytest.raises(cli_run.UsageError, match=re.escape(said)):
+        cli_run._read_image(str(path))
+    captured = capfd.readouterr()
+    assert "Sorry" not in captured.err + captured.out
+
+
 def test_a_missing_or_unreadable_image_is_named_without_opencv_s_warning(tmp_path, capfd):
     """A mistyped image path gave OpenCV's own "[ WARN:0@0.5] global loadsave.cpp ... findDecoder imread_" line
     above ghnerf-run's error, and the error said "missing file or unknown format" without saying which: a missing

@@ -320,6 +320,22 @@ def test_wrong_frames_and_missing_graphs_are_errors(full_session, tiny_model_dir
         Estimator(small, rig, EstimatorConfig(joints3d=Joints3DConfig(method="volumetric")))
 
 
+def test_a_pair_that_is_no_list_or_a_ragged_image_is_a_frame_error_naming_what_came(full_session, scene_rig):
+    """A dict of the cameras' images was read by its keys ("got <U4 ()"), None or a generator of images raised
+    len()'s TypeError, and an image of ragged nested lists numpy's ValueError naming no camera."""
+    rig, frames = scene_rig
+    est = Estimator(full_session, rig)
+    left, right = frames[0]
+    not_lists = ((dict(zip(rig.names, frames[0])), "dict"), (None, "NoneType"),
+                 (iter(list(frames[0])), "list_iterator"), ("ab", "str"))
+    for pair, got in not_lists:
+        with pytest.raises(FrameError, match=rf"expected 2 images in the rig's camera order.*got {got}$"):
+            est.estimate(pair)
+    with pytest.raises(FrameError, match=rf"camera {rig.names[1]!r}: .*got a list that is no array \(ragged\)"):
+        est.estimate((left, [[1, 2], [3]]))
+    assert est.estimate(np.stack([left, right])).sequence == 0  # an array of the two images is still a pair
+
+
 def test_a_refused_call_leaves_the_running_count_as_it_was(full_session, scene_rig):
     """A bad image, time or novel-view request is refused before the pair is read: the next pair keeps the number
     it would have had (the count was advanced before the checks, so a refused call left a gap in the sequence)."""
