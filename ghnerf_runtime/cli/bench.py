@@ -371,18 +371,40 @@ def _percent(share: float, digits: int) -> str:
     return f"{100 * share:.{digits}f} %" if np.isfinite(share) else "n/a"
 
 
+def _refuse_repeats(items: list, text: str) -> list:
+    """A comma list's items, refused when one comes twice: each item is a row (or a set of rows), and a repeated
+    one ran the same rows again under the same label, a table of lookalike rows at twice the cost."""
+    if repeated := sorted({_as_typed(v) for v in items if items.count(v) > 1}):
+        raise argparse.ArgumentTypeError(f"{text!r}: {', '.join(repeated)} given twice: each value is a row, "
+                                         "give it once")
+    return items
+
+
+def _as_typed(value) -> str:
+    """An item as the help spells it: on/off for a boolean (``on,1`` repeats on)."""
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    return str(value)
+
+
+def _word_list(text: str) -> list[str]:
+    """A comma list of words; empty items (``int8,,fp32``) are left out."""
+    return _refuse_repeats([p for p in text.split(",") if p], text)
+
+
 def _on_off_list(text: str) -> list[bool]:
     words = {"1": True, "on": True, "0": False, "off": False}
     if bad := [p for p in text.split(",") if p and p not in words]:
         raise argparse.ArgumentTypeError(f"{bad}: expected on, off, 1 or 0")
-    return [words[p] for p in text.split(",") if p]
+    return _refuse_repeats([words[p] for p in text.split(",") if p], text)
 
 
 def _int_list(text: str) -> list[int]:
     try:
-        return [int(p) for p in text.split(",") if p]
+        values = [int(p) for p in text.split(",") if p]
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a comma list of integers") from None
+    return _refuse_repeats(values, text)
 
 
 # the options that set only the novel rows: given without a novel mode, nothing would use them
@@ -428,16 +450,16 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--sequences", type=int, default=10, help="held-out-like sequences (one rig and subject each)")
     rt.add_argument("--frames", type=int, default=30, help="pairs per sequence (30 fps)")
     # the defaults are named: every precision and both modes make six rows a source, which a reader should expect
-    rt.add_argument("--precisions", default="fp32,int8,auto", type=lambda s: [p for p in s.split(",") if p],
+    rt.add_argument("--precisions", default="fp32,int8,auto", type=_word_list,
                     help="comma list of graph precisions, one row each (default: %(default)s)")
-    rt.add_argument("--modes", default="keypoints,novel", type=lambda s: [p for p in s.split(",") if p],
+    rt.add_argument("--modes", default="keypoints,novel", type=_word_list,
                     help="comma list of keypoints (keypoints alone), novel (keypoints and the novel view), one row "
                          "each (default: %(default)s)")
     rt.add_argument("--method", choices=THREE_D_METHODS,
                     help=f"3D method (default: each source's best, {_best_methods()}; the runtime's "
                          f"joints3d.method is {runtime.joints3d.method})")
     rt.add_argument("--heatmap-sources", default=runtime.heatmaps.source,
-                    type=lambda s: [p for p in s.split(",") if p],
+                    type=_word_list,
                     help=f"comma list of {','.join(HEATMAP_SOURCES)}, one set of rows each (default: %(default)s, "
                          "the runtime's heatmaps.source, what the device runs; rendered scores the heatmaps "
                          "rendered through the depth volume)")

@@ -141,3 +141,23 @@ def test_a_cache_that_is_a_file_is_named_before_anything_runs(tmp_path, capsys, 
                      "--cache", str(tmp_path / "afile")])
     # was "[Errno 20] Not a directory: '<it>/seq-...'" after the model had loaded, naming no flag
     assert rc == 2 and f"--cache {tmp_path / 'afile'}: is a file; give a folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("option", "value", "repeated"), [
+    ("--precisions", "int8,fp32,int8", "int8"), ("--modes", "keypoints,,keypoints", "keypoints"),
+    ("--heatmap-sources", "encoder,encoder", "encoder"), ("--smoothing", "on,1", "on"),
+    ("--flip-tests", "off,0,on", "off"), ("--novel-interior-strides", "2,2", "2"),
+])
+def test_a_value_given_twice_in_a_comma_list_is_refused(capsys, no_render, monkeypatch, option, value, repeated):
+    """``--precisions int8,int8`` ran every int8 row twice under one label: a table of lookalike rows, twice the
+    time, nothing to tell them apart. Refused as the options are parsed, before the model loads."""
+    monkeypatch.setattr(bench, "load_session", lambda cfg: pytest.fail("the model was loaded"))
+    with pytest.raises(SystemExit) as stop:
+        bench.main(["runtime", "--modes", "keypoints,novel", option, value, "--cache", "off"])
+    assert stop.value.code == 2
+    assert f"argument {option}: {value!r}: {repeated} given twice" in capsys.readouterr().err
+
+
+def test_empty_items_of_a_comma_list_are_left_out():
+    args = bench.build_parser().parse_args(["runtime", "--precisions", "int8,,fp32", "--smoothing", ",off,"])
+    assert (args.precisions, args.smoothing) == (["int8", "fp32"], [False])
