@@ -30,6 +30,7 @@ import itertools
 import json
 import logging
 import os
+import shutil
 import sys
 import time
 from dataclasses import replace
@@ -161,6 +162,45 @@ def row_base_config(args, precision: str, source: str) -> EstimatorConfig:
         novel_view=replace(runtime.novel_view, enabled=True, stride=args.novel_stride or runtime.novel_view.stride))
 
 
+class RenderPlanError(ValueError):
+    """The sequences to render would not fit where they go (the cache's disk, or memory without a cache)."""
+
+
+def announce_rendering(args) -> None:
+    """Say what rendering the uncached sequences costs before it starts (``--sequences 10000`` was hours of
+    silence, then a full disk), and refuse when they cannot fit: the cache's free disk, or with ``--cache off``
+    (every image held in memory) the free memory."""
+    from ghnerf_runtime.cli.simdata import sequence_bytes, sequence_cache_folder, sequences_to_render
+
+    folder = sequence_cache_folder(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
+    count = sequences_to_render(folder, args.sequences)
+    if count == 0:
+        return
+    needed = count * sequence_bytes(args.frames)
+    where = f"in {folder}" if folder is not None else "in memory (--cache off)"
+    print(f"rendering {count} of {args.sequences} sequences x {args.frames} pairs first: about "
+          f"{count * args.frames * RENDER_S_PER_PAIR / 60:.1f} min, {needed / 1e9:.2f} GB {where}", flush=True)
+    free = _free_bytes(folder)
+    if needed > free:
+        raise RenderPlanError(f"--sequences {args.sequences} --frames {args.frames}: {needed / 1e9:.1f} GB of "
+                              f"images to render {where}, but {free / 1e9:.1f} GB is free there; fewer or "
+                              "shorter sequences, or --cache on a bigger disk")
+
+
+#: seconds to render one pair (two 640x480 views): 0.03-0.04 s on session 63's host (-v logs each sequence's)
+RENDER_S_PER_PAIR = 0.04
+
+
+def _free_bytes(folder) -> int:
+    """Free space where the sequences go: the cache folder's disk (its nearest existing parent), else memory."""
+    if folder is None:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    return shutil.disk_usage(existing).free
+
+
 def run_runtime_bench(args) -> dict:
     """Every (precision, heatmap source, mode) row, interleaved sequence by sequence.
 
@@ -239,6 +279,7 @@ def run_runtime_bench(args) -> dict:
                              "painter_label": paint is not None,
                              "pipeline": bool(piped), "pipeline_label": piped is not None,
                              "lanes_label": lanes is not None})
+    announce_rendering(args)
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
     depth_per_px = [1000 * depth_per_disparity_px(s.rig, s.info["distance_m"]) for s in sequences]
     baselines = [s.rig.baseline for s in sequences]
@@ -596,7 +637,7 @@ def main(argv: list[str] | None = None) -> int:
             text = json.dumps(finite_or_none(report), indent=2, default=float)  # strict JSON: NaN becomes null
             write_text_atomic(args.json, text + "\n")
         return 0
-    except (RuntimeErrorBase, OSError, OutputPathError) as e:
+    except (RuntimeErrorBase, OSError, OutputPathError, RenderPlanError) as e:
         print(f"ghnerf-bench: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # the --json report is written only when the bench ends: nothing half-written

@@ -111,25 +111,41 @@ def _render_sequence(k: int, frames: int, fps: float, width: int, height: int, m
     return Sequence(rig, imgs, j3, j2, vis, info)
 
 
+def sequence_cache_folder(num_sequences: int, frames: int, *, fps: float = 30.0, width: int = 640,
+                          height: int = 480, seen_motions: bool = False, cache_dir: str | os.PathLike | None = None,
+                          seed_base: int = SEED_BASE) -> Path | None:
+    """Where :func:`load_sequences` caches these sequences (None for ``cache_dir="off"``)."""
+    motions = SEEN_MOTIONS if seen_motions else HELD_OUT_MOTIONS
+    key = json.dumps([RECIPE_VERSION, num_sequences, frames, fps, width, height, motions, seed_base])
+    digest = hashlib.sha1(key.encode()).hexdigest()[:12]
+    return None if str(cache_dir) == "off" else Path(cache_dir or default_cache_dir()) / f"seq-{digest}"
+
+
+def sequences_to_render(folder: Path | None, num_sequences: int) -> int:
+    """How many of the sequences :func:`load_sequences` would render (all of them without a cache)."""
+    if folder is None:
+        return num_sequences
+    return sum(not (folder / f"{k:03d}" / "done").is_file() for k in range(num_sequences))
+
+
+def sequence_bytes(frames: int, width: int = 640, height: int = 480) -> int:
+    """One sequence's images (two cameras, 8-bit RGB): what it takes on disk, or in memory without a cache."""
+    return frames * 2 * height * width * 3
+
+
 def load_sequences(num_sequences: int = 10, frames: int = 30, *, fps: float = 30.0, width: int = 640,
                    height: int = 480, seen_motions: bool = False, cache_dir: str | os.PathLike | None = None,
                    seed_base: int = SEED_BASE) -> list[Sequence]:
     """Held-out-like sequences, rendered on first use and cached (``cache_dir``, default
     ``~/.cache/ghnerf-bench``; ``"off"`` disables). About 0.1-0.3 s per frame to render."""
     motions = SEEN_MOTIONS if seen_motions else HELD_OUT_MOTIONS
-    key = json.dumps([RECIPE_VERSION, num_sequences, frames, fps, width, height, motions, seed_base])
-    digest = hashlib.sha1(key.encode()).hexdigest()[:12]
-    folder = None if str(cache_dir) == "off" else Path(cache_dir or default_cache_dir()) / f"seq-{digest}"
+    folder = sequence_cache_folder(num_sequences, frames, fps=fps, width=width, height=height,
+                                   seen_motions=seen_motions, cache_dir=cache_dir, seed_base=seed_base)
     out = []
     for k in range(num_sequences):
         path = folder / f"{k:03d}" if folder else None
         if path is not None and (path / "done").is_file():
-            arrays = {n: np.load(path / f"{n}.npy", mmap_mode="r") for n in ("images", "joints_3d", "joints_2d",
-                                                                              "visible")}
-            rig = loads_rig((path / "rig.json").read_text())
-            out.append(Sequence(rig, arrays["images"], np.asarray(arrays["joints_3d"]),
-                                np.asarray(arrays["joints_2d"]), np.asarray(arrays["visible"]),
-                                json.loads((path / "info.json").read_text())))
+            out.append(_load_cached_sequence(path))
             continue
         t = time.perf_counter()
         seq = _render_sequence(k, frames, fps, width, height, motions, seed_base)
@@ -142,8 +158,18 @@ def load_sequences(num_sequences: int = 10, frames: int = 30, *, fps: float = 30
             (path / "rig.json").write_text(dumps_rig(seq.rig))
             (path / "info.json").write_text(json.dumps(seq.info))
             (path / "done").write_text("ok")
+            # read back mapped, not held: a long run's images stay on disk, not all in memory at once
+            seq = _load_cached_sequence(path)
         out.append(seq)
     return out
+
+
+def _load_cached_sequence(path: Path) -> Sequence:
+    """A cached sequence, its images memory-mapped (read from disk as each pair runs)."""
+    arrays = {n: np.load(path / f"{n}.npy", mmap_mode="r") for n in ("images", "joints_3d", "joints_2d", "visible")}
+    rig = loads_rig((path / "rig.json").read_text())
+    return Sequence(rig, arrays["images"], np.asarray(arrays["joints_3d"]), np.asarray(arrays["joints_2d"]),
+                    np.asarray(arrays["visible"]), json.loads((path / "info.json").read_text()))
 
 
 # ------------------------------------------------------------------ accuracy

@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import replace
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from ghnerf_runtime.cli import bench, simdata
@@ -161,3 +162,25 @@ def test_a_value_given_twice_in_a_comma_list_is_refused(capsys, no_render, monke
 def test_empty_items_of_a_comma_list_are_left_out():
     args = bench.build_parser().parse_args(["runtime", "--precisions", "int8,,fp32", "--smoothing", ",off,"])
     assert (args.precisions, args.smoothing) == (["int8", "fp32"], [False])
+
+
+def test_sequences_that_cannot_fit_are_refused_before_they_are_rendered(capsys, no_render, monkeypatch):
+    """``--sequences 10000`` (553 GB of images) rendered in silence for hours, then filled the disk (or, with
+    ``--cache off``, memory). Its size and where it goes are said first, and it is refused when it cannot fit."""
+    monkeypatch.setattr(bench, "_free_bytes", lambda folder: 10**9)
+    rc = bench.main(["runtime", "--sequences", "10000", "--cache", "off", "--precisions", "fp32",
+                     "--modes", "keypoints"])
+    out, err = capsys.readouterr()
+    assert rc == 2
+    assert "rendering 10000 of 10000 sequences x 30 pairs first" in out and "about 200.0 min, 552.96 GB in memory" in out
+    assert ("--sequences 10000 --frames 30: 553.0 GB of images to render in memory (--cache off), but 1.0 GB is "
+            "free there" in err)
+
+
+def test_freshly_rendered_sequences_are_read_back_mapped_not_held(tmp_path):
+    """A first run held every rendered sequence's images in memory, cache or not (--sequences 10000: 553 GB);
+    a cached one is mapped from its file, as a later run's is."""
+    sequences = simdata.load_sequences(2, 2, cache_dir=tmp_path)
+    assert all(isinstance(s.images, np.memmap) for s in sequences)
+    again = simdata.load_sequences(2, 2, cache_dir=tmp_path)
+    assert all(np.array_equal(a.images, b.images) for a, b in zip(sequences, again))
