@@ -137,7 +137,7 @@ def load_sequences(num_sequences: int = 10, frames: int = 30, *, fps: float = 30
                    height: int = 480, seen_motions: bool = False, cache_dir: str | os.PathLike | None = None,
                    seed_base: int = SEED_BASE) -> list[Sequence]:
     """Held-out-like sequences, rendered on first use and cached (``cache_dir``, default
-    ``~/.cache/ghnerf-bench``; ``"off"`` disables). About 0.1-0.3 s per frame to render."""
+    ``~/.cache/ghnerf-bench``; ``"off"`` disables). About 0.03-0.04 s a pair to render on session 63's host (``-v`` logs each sequence's time)."""
     motions = SEEN_MOTIONS if seen_motions else HELD_OUT_MOTIONS
     folder = sequence_cache_folder(num_sequences, frames, fps=fps, width=width, height=height,
                                    seen_motions=seen_motions, cache_dir=cache_dir, seed_base=seed_base)
