@@ -347,6 +347,8 @@ def _check_stamp(frame: Frame) -> None:
     """Refuse a capture time that is no finite number. NaN compares false with every stamp, so a NaN frame paired
     with whatever came next (a pair with no capture time went out as valid); None raised a bare TypeError from a
     comparison deep in the pairer; inf never paired and no counter said why."""
+    if type(frame.timestamp_ns) is int:  # every backend's stamp: skip the ABC checks, a fifth of push's time
+        return
     if not is_finite_number(frame.timestamp_ns):
         raise RigOperationError(f"frame {frame.index} of camera {frame.camera!r} has capture time timestamp_ns="
                                 f"{frame.timestamp_ns!r}: a finite number of nanoseconds expected")

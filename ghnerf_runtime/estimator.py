@@ -550,10 +550,12 @@ def _finds_better(q: "_Pass", p: "_Pass") -> bool:
         not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN)
 
 
-
 def _is_image_sequence(images: object) -> bool:
-    """Whether ``images`` holds the pair's images in order: a list, tuple or array, not text or a mapping."""
-    return isinstance(images, (abc.Sequence, np.ndarray)) and not isinstance(images, (str, bytes))
+    """Whether ``images`` holds the pair's images in order: a list, tuple or array (of one dimension or more: a
+    0-d array has no length), not text or a mapping."""
+    if isinstance(images, np.ndarray):
+        return images.ndim > 0
+    return isinstance(images, abc.Sequence) and not isinstance(images, (str, bytes))
 
 
 def _as_array_or_none(image: object) -> np.ndarray | None:
@@ -562,6 +564,7 @@ def _as_array_or_none(image: object) -> np.ndarray | None:
         return np.asarray(image)
     except ValueError:
         return None
+
 
 class Estimator:
     """Frame pair -> joints, with an injected :class:`~ghnerf_runtime.session.ModelSession`.

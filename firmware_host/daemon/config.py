@@ -246,6 +246,8 @@ def _destination(url: str) -> tuple[str, str, str] | None:
     except ValueError:
         return None
     path = _spelling_apart(unquote_keeping_bytes(parts.path))
+    if parts.netloc and path == "/":  # udp://h:1/ is udp://h:1, as the sinks read it (a lone '/' is no path)
+        path = ""
     if not parts.netloc and not path:
         return None
     return parts.scheme.lower(), parts.netloc.lower(), path

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from drivers import DropPolicy, PairingConfig, RigConfigError
 from drivers.errors import RigOperationError
 from drivers.frames import Frame
+from drivers import pairing as pairing_module
 from drivers.pairing import FramePairer, PairingStats, why_no_pair
 
 MS = 1_000_000
@@ -466,3 +467,17 @@ def test_numpy_int64_stamps_across_a_wrap_pair_as_python_integers():
         pairer, pairs = run(PairingConfig(policy=DropPolicy.ALL, max_ready=64), events)
     assert [x.timestamp_ns for _, x, _ in pairs] == [int(t) for t in stamps]
     assert pairer.stats.unpaired == {"a": 0, "b": 0}
+
+
+def test_an_int_stamp_skips_the_number_check_and_other_finite_stamps_still_pair(monkeypatch):
+    """push runs for every frame: an int stamp (every backend's) took the ABC checks of is_finite_number, a fifth
+    of push's time (2.4 -> 2.85 us a frame). Floats, NumPy floats and negative stamps are still checked, and pair."""
+    checked = []
+    real_check = pairing_module.is_finite_number
+    monkeypatch.setattr(pairing_module, "is_finite_number", lambda v: checked.append(v) or real_check(v))
+    run(PairingConfig(policy=DropPolicy.ALL), [frame(c, k, -10**9 + k * PERIOD) for k in range(3) for c in "ab"])
+    assert checked == []
+    float_stamps = [Frame(camera=c, image=IMG, timestamp_ns=kind(1.5e9 + k * PERIOD), index=k)
+                    for k, kind in enumerate((float, np.float64, np.float32)) for c in "ab"]
+    _, pairs = run(PairingConfig(policy=DropPolicy.ALL), float_stamps)
+    assert len(pairs) == 3 and len(checked) == 6

@@ -336,6 +336,20 @@ def test_a_pair_that_is_no_list_or_a_ragged_image_is_a_frame_error_naming_what_c
     assert est.estimate(np.stack([left, right])).sequence == 0  # an array of the two images is still a pair
 
 
+def test_a_0d_array_is_no_pair_and_a_deque_or_object_array_of_two_images_is_one(full_session, scene_rig):
+    """A 0-d array passed the sequence check and then len() raised a bare TypeError; a deque and a NumPy object
+    array of the two images are pairs in the rig's camera order."""
+    import collections
+    rig, frames = scene_rig
+    est = Estimator(full_session, rig)
+    with pytest.raises(FrameError, match=r"expected 2 images in the rig's camera order.*got ndarray$"):
+        est.estimate(np.array(None, dtype=object))
+    as_objects = np.empty(2, dtype=object)
+    as_objects[:] = list(frames[0])
+    assert est.estimate(collections.deque(frames[0])).sequence == 0
+    assert est.estimate(as_objects).sequence == 1
+
+
 def test_a_refused_call_leaves_the_running_count_as_it_was(full_session, scene_rig):
     """A bad image, time or novel-view request is refused before the pair is read: the next pair keeps the number
     it would have had (the count was advanced before the checks, so a refused call left a gap in the sequence)."""

@@ -694,3 +694,28 @@ def test_a_split_half_swapped_by_a_killed_conversion_is_put_back_not_deleted(tmp
     assert [ShardedSplit(out, "s").arrays(i)["roi"].tolist() for i in range(2)] == before
     assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "dataset.lock", "s"]
     assert "left half-swapped by a conversion killed during its swap: the split before it put back" in caplog.text
+
+
+def test_an_entry_whose_shards_were_gone_is_not_put_back_with_a_killed_conversions_shards(tmp_path, subject,
+                                                                                           monkeypatch):
+    """A split in the manifest whose folder was deleted had its entry kept aside all the same: a conversion killed
+    after renaming its new shards in left them there with no old ones, and the next run put the old entry back
+    with the new shards (shard_size 1 over shards of 2), the pairing the swap exists to prevent."""
+    import shutil
+
+    root = tmp_path / "subject"
+    shutil.copytree(subject[0], root)
+    out = tmp_path / "ds"
+    config = ZjuConfig(resolution=RES, view_sets=((0, 1),))
+    assert convert_zju(root, out, config, split="s", shard_size=1) == 2
+    shutil.rmtree(out / "s")  # the shards deleted by hand, the entry left
+
+    _kill_the_conversion_at(monkeypatch, out, "after both renames")
+    with pytest.raises(_Killed):
+        convert_zju(root, out, config, split="s", shard_size=2)
+    monkeypatch.undo()
+
+    (root / "mask" / "Camera_B2" / "000001.png").unlink()  # the next conversion fails before its swap
+    with pytest.raises(DatasetError, match="mask"):
+        convert_zju(root, out, config, split="s", shard_size=1)
+    assert "s" not in json.loads((out / "dataset.json").read_text())["splits"]

@@ -395,7 +395,9 @@ def _swap_in(out: Path, split: str, tmp: Path, old: Path, manifest: dict, entry:
     if split in manifest["splits"]:
         # a crash during the swap then leaves the split absent from the splits, never old entry + new shards; its
         # entry is kept aside for the next run (_recover_a_half_swapped_split)
-        manifest.setdefault(REPLACING, {})[split] = manifest["splits"].pop(split)
+        entry_before = manifest["splits"].pop(split)
+        if split_dir.exists():  # shards gone: kept aside, a kill after the rename-in paired it with the new ones
+            manifest.setdefault(REPLACING, {})[split] = entry_before
         write_manifest(out, manifest)
     if split_dir.exists():
         os.replace(split_dir, old)

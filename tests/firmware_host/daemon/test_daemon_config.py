@@ -61,6 +61,9 @@ def test_minimal_config_takes_the_defaults():
     # one destination twice, its URLs told apart by their options, case or spelling: each frame went out twice
     ({"sinks": [SINK, SINK + "?queue=8"]}, f"sinks[1]: sends where sinks[0] ({SINK!r}) does"),
     ({"sinks": [SINK, "UDP://127.0.0.1:9870"]}, "sinks[1]: sends where sinks[0]"),
+    # the udp sink takes a lone '/' as no path: one port, each frame sent twice (kept apart until session 63's review)
+    ({"sinks": [SINK, "udp://127.0.0.1:9870/"]}, "sinks[1]: sends where sinks[0]"),
+    ({"sinks": ["vmc://127.0.0.1:9870/", "vmc://127.0.0.1:9870"]}, "sinks[1]: sends where sinks[0]"),
     ({"sinks": ["file:///tmp/j.jsonl", SINK, "file:///tmp//j.jsonl?queue=9"]}, "sinks[2]: sends where sinks[0]"),
     ({"sinks": ["file:///tmp/a%20b.jsonl", "file:///tmp/a b.jsonl"]}, "sinks[1]: sends where sinks[0]"),
     ({"sinks": ["serial:///dev/ttyACM0", "serial:///dev/ttyACM0?baud=115200"]}, "sinks[1]: sends where sinks[0]"),
