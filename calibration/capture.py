@@ -77,10 +77,22 @@ def earlier_size(folder: Path, *, skip: Iterable[str] = ()) -> tuple[Path, tuple
     for name, path in images.items():
         if name in skip:
             continue
-        image = read_image_or_none(path, cv2.IMREAD_UNCHANGED)
-        if image is not None:  # an unreadable one is the solve's to name
-            return path, (int(image.shape[1]), int(image.shape[0]))
+        size = _stored_size(path)
+        if size is not None:  # an unreadable one is the solve's to name
+            return path, size
     return None
+
+
+def _stored_size(path: Path) -> tuple[int, int] | None:
+    """An image's ``(width, height)`` as stored: from its header where it gives one (a camera's 8000x6000 still
+    was decoded whole, about 400 MB, for its size alone), else decoded; None for one that does not decode."""
+    from drivers.backends.recording_format import header_size  # replay's header reader: one reader of sizes
+
+    size = header_size(path)
+    if size is not None:
+        return int(size[0]), int(size[1])
+    image = read_image_or_none(path, cv2.IMREAD_UNCHANGED)
+    return None if image is None else (int(image.shape[1]), int(image.shape[0]))
 
 
 def write_camera_order(root: str | os.PathLike, names: Iterable[str], *, replace: bool = False) -> None:

@@ -25,7 +25,8 @@ import math
 import numpy as np
 
 from ghnerf_runtime.config import SmoothingConfig
-from ghnerf_runtime.errors import ShapeError
+from ghnerf_runtime.errors import FrameError, ShapeError
+from ghnerf_runtime.plain_values import is_real_number, plain_scalar
 
 __all__ = ["OneEuroJoints", "smoothing_alpha"]
 
@@ -56,7 +57,8 @@ class OneEuroJoints:
         """The smoothed joints at time ``t_s``: ``points`` where a joint restarts, filtered elsewhere.
 
         Args:
-            t_s: capture time of the pair, seconds (any origin; increasing).
+            t_s: capture time of the pair, seconds (any origin; increasing); ``None``: no capture time, as the
+                estimator's ``timestamp_s=None`` (a still image): ``points`` come back raw and every joint restarts.
             points: ``(J, 3)`` joints, metres.
             valid: ``(J,)`` the joints reported in this pair; the others keep no state.
 
@@ -65,12 +67,18 @@ class OneEuroJoints:
 
         Raises:
             ShapeError: ``points`` is not ``(J, 3)`` or ``valid`` not ``(J,)``.
+            FrameError: ``t_s`` is neither None nor a number (a string, True).
         """
         cfg = self.config
         x = np.asarray(points, np.float64)
         valid = np.asarray(valid, bool)
         if x.ndim != 2 or x.shape[-1] != 3 or valid.shape != x.shape[:1]:  # (3,) points came back (3, 3)
             raise ShapeError(f"points (J, 3) and valid (J,) expected, got {x.shape} and {valid.shape}")
+        if t_s is None:  # nothing to filter on: raw, as the estimator reports a pair given no capture time
+            self.reset()
+            return x.copy()
+        if not is_real_number(plain_scalar(t_s)):  # was a bare TypeError (None, a string) or True read as 1 s
+            raise FrameError(f"t_s must be a capture time in seconds (a number) or None, got {t_s!r}")
         # a non-finite joint is not reported: it must not enter (and poison) the state
         valid = valid & np.isfinite(x).all(axis=-1)
         dt = None if self._t is None else float(t_s) - self._t

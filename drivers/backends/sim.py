@@ -27,7 +27,8 @@ URL options (every one validated; unknown ones are rejected by name)::
 * ``latency_ms`` (0, at most 10000): the second camera's frames reach the host this long after
   their capture, stamped with their capture time (a slower transport, such as a
   USB hub). A latency of ``max_pending`` frames or more never pairs unless ``max_pending``
-  is raised (below).
+  is raised (below); one past the most it takes (256 frames: ``latency_ms=10000`` at 30 fps)
+  is a ``RigConfigError`` naming the largest latency that pairs.
 * ``drop`` (0): probability that a camera loses a frame (per camera, per frame).
 * ``unplug_after_s``: the second camera vanishes this long after open:
   ``read()`` then raises :class:`RigDisconnectedError`, now and on every later call.
@@ -98,7 +99,7 @@ from drivers.base import RigSource
 from drivers.clock import Clock
 from drivers.errors import RigConfigError, RigDisconnectedError, RigOperationError
 from drivers.frames import Frame
-from drivers.pairing import PairingConfig, PairingStats
+from drivers.pairing import MAX_HELD, PairingConfig, PairingStats
 from drivers.pairing_options import take_pairing_options
 from drivers.sim import MOTION_NAMES, MotionParams, RigPlacement, SceneConfig, SensorModel, SimScene
 from drivers.url import RigUrl
@@ -190,6 +191,7 @@ class SimOptions:
         )
         unplug = url.take_float("unplug_after_s", -1.0, lo=0.0, hi=1e6) if "unplug_after_s" in url.options else None
         pairing = take_pairing_options(url, max_tolerance_ms=1000.0)
+        _check_latency_can_pair(url, timing, pairing.config())
         cache = url.take_str("cache")
         if cache not in (None, "off"):
             _check_cache_folder(url, Path(cache))
@@ -214,6 +216,23 @@ class SimOptions:
             workers=workers,
             max_loop_mb=max_loop_mb,
         )
+
+
+def _check_latency_can_pair(url: RigUrl, timing: TimingModel, pairing: PairingConfig) -> None:
+    """Refuses a ``latency_ms`` that no ``max_pending`` pairs: the first camera holds every frame it captures while
+    the second's frame of the same instant is on its way (about ``latency_ms * fps`` of them), and the pairer holds
+    at most :data:`~drivers.pairing.MAX_HELD`. Such a URL opened (after rendering its loop) and timed out on every
+    read. Only a lag past what the pair's tolerance and a frame of jitter could bridge is refused."""
+    period_ms = 1000.0 / timing.fps
+    lag_frames = (timing.latency_ms - pairing.tolerance_ms - period_ms) / period_ms
+    if lag_frames < MAX_HELD:
+        return
+    largest_ms = MAX_HELD * period_ms
+    raise RigConfigError(
+        f"rig URL {url.url!r}: latency_ms={timing.latency_ms:g} at fps={timing.fps:g} puts the second camera "
+        f"{timing.latency_ms / period_ms:.0f} frames behind the first: it never pairs, max_pending holding at most "
+        f"{MAX_HELD} frames per camera; the largest latency that pairs is under {largest_ms:.0f} ms at this fps "
+        f"(with max_pending={MAX_HELD})")
 
 
 def _check_cache_folder(url: RigUrl, folder: Path) -> None:

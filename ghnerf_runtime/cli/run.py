@@ -29,7 +29,7 @@ import os
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Sequence
 
 import cv2
 import numpy as np
@@ -40,6 +40,7 @@ from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS,
     load_config, read_json_file
 from ghnerf_runtime.errors import ConfigError, FrameError, GeometryError, ModelError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult, check_model_files
+from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.image_files import read_image_or_none, samples_not_8_bit
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
@@ -216,6 +217,30 @@ def _read_image(path: str) -> np.ndarray:
     return img
 
 
+def _check_still_sizes(paths: Sequence[str], cameras: Sequence[Camera]) -> None:
+    """``--images``: each still whose header gives another size than its camera's is refused before any decode
+    (:func:`_check_header_size`); a missing file or a folder is named first, as its read would."""
+    for path, camera in zip(paths, cameras):
+        _check_input_file(path, "an image")
+        _check_header_size(path, camera)
+
+
+def _check_header_size(path: str, camera: Camera) -> None:
+    """Refuses an image whose header gives another size than the rig file's for ``camera``, read without decoding
+    it: an 8000x6000 still was decoded whole (about 400 MB) only for the estimator to refuse its size. A header that
+    gives no size (another format, a malformed one) is left to the decode and the estimator.
+
+    :raises UsageError: naming the file, the camera and both sizes, in the estimator's words.
+    """
+    from drivers.backends.recording_format import header_size  # tool only: the runtime library never imports drivers
+
+    size = header_size(Path(path))
+    w, h = camera.size
+    if size is not None and tuple(size) != (w, h):
+        raise UsageError(f"{path}: camera {camera.name!r}: expected a ({h}, {w}, 3) uint8 BGR image (the rig file's "
+                         f"{w}x{h}), its header gives {size[0]}x{size[1]} (not decoded)")
+
+
 class _TimedPair(tuple):
     """Two frames and ``time_s``, the first video's presentation time of them (seconds; ``None``: unknown)."""
 
@@ -366,6 +391,8 @@ def _run(args) -> int:
     to_stdout = args.out == "-"
     out_path = None if to_stdout else _ready(args.out, "--out")
     rig = load_rig(args.rig)
+    if args.images:  # before the model loads, as the outputs' places are checked
+        _check_still_sizes(args.images, rig.pair)
     try:
         estimator = Estimator.from_config(rig, cfg)
     except ModelLoadError as e:

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
+from calibration import capture
 from calibration.board import BoardSpec
 from calibration.capture import detect_folder, earlier_size
 from calibration.detect import BoardDetector, fixes_a_pose, grey8
@@ -208,3 +209,15 @@ def test_a_row_and_one_corner_is_no_view(camera):
 ])
 def test_which_corners_fix_a_pose(ids, fixes):
     assert fixes_a_pose(BOARD, np.array(ids)) is fixes
+
+
+def test_an_earlier_view_s_size_is_read_from_its_header_without_decoding_it(tmp_path, monkeypatch):
+    # ghcal capture --append decoded a whole earlier view (400 MB for an 8000x6000 still) for its size alone
+    (tmp_path / "left").mkdir()
+    assert cv2.imwrite(str(tmp_path / "left" / "000.png"), np.zeros((60, 80), np.uint8))
+
+    def no_decode(path, flags):
+        raise AssertionError(f"{path} decoded")
+
+    monkeypatch.setattr(capture, "read_image_or_none", no_decode)
+    assert earlier_size(tmp_path / "left") == (tmp_path / "left" / "000.png", (80, 60))

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from drivers import ManualClock, RigDisconnectedError, RigTimeoutError, open_rig, why_no_pair
+from drivers import ManualClock, RigConfigError, RigDisconnectedError, RigTimeoutError, open_rig, why_no_pair
 from drivers.backends.sim_timing import CaptureSchedule, TimingModel
 
 START = 5_000_000_000
@@ -225,3 +225,17 @@ def test_a_camera_lagging_ten_frames_never_pairs_at_the_default_max_pending_and_
     assert why.startswith("frames came from both cameras (left 61, right 50) but none paired: camera 'left' held "
                           "max_pending=8 frames waiting for 'right''s")
     assert "raise the rig URL's max_pending" in why
+
+
+def test_a_latency_no_max_pending_can_hold_is_refused_naming_latency_fps_and_the_largest_that_pairs(sim_cache):
+    # 10 s at 30 fps is 300 frames of lag, past the 256 frames max_pending holds at most: it opened, then timed out
+    with pytest.raises(RigConfigError, match=r"latency_ms=10000 at fps=30 .* 300 frames .*max_pending holding at "
+                                             r"most 256 .*largest latency that pairs is under 8533 ms"):
+        open_rig(f"sim://?width=32&height=24&cache={sim_cache}&latency_ms=10000")
+
+
+def test_a_latency_just_under_what_max_pending_holds_still_opens_and_pairs(sim_cache):
+    source, _ = sim(sim_cache, "latency_ms=8520&max_pending=256")  # 255.6 frames: the first camera holds 256
+    with source:
+        pair = source.read(timeout_s=12.0)
+    assert pair.frames[0].index == pair.frames[1].index == 0

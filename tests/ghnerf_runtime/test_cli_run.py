@@ -178,6 +178,25 @@ def test_a_missing_or_unreadable_image_is_named_without_opencv_s_warning(tmp_pat
     assert "findDecoder" not in captured.err + captured.out
 
 
+def test_a_still_of_another_size_than_the_rig_s_is_refused_from_its_header_without_decoding_it(
+        sim_pair, tiny_model_dir, tmp_path, capsys, monkeypatch):  # noqa: F811
+    """An 8000x6000 still was decoded whole (about 400 MB) before the estimator refused its size: the header's
+    size is compared with the rig file's first, the decoder never called for it."""
+    big = tmp_path / "big.png"
+    assert cv2.imwrite(str(big), np.zeros((60, 80, 3), np.uint8))
+
+    def no_decode(path, flags):
+        raise AssertionError(f"{path} decoded")
+
+    monkeypatch.setattr(cli_run, "read_image_or_none", no_decode)
+    args = ["--rig", sim_pair["rig"], "--model-dir", str(tiny_model_dir), "--images", str(big), sim_pair["right"]]
+    assert cli_run.main(args) == 2
+    err = capsys.readouterr().err
+    first = load_rig(sim_pair["rig"]).names[0]
+    assert (f"{big}: camera {first!r}: expected a (480, 640, 3) uint8 BGR image (the rig file's 640x480), its header "
+            "gives 80x60 (not decoded)") in err
+
+
 def test_errors_exit_2_and_name_the_problem(sim_pair, tiny_model_dir, tmp_path, capsys):  # noqa: F811
     args = ["--rig", sim_pair["rig"], "--model-dir", str(tiny_model_dir)]
     assert cli_run.main(args + ["--images", sim_pair["left"], str(tmp_path / "absent.png")]) == 2

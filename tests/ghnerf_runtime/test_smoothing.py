@@ -4,6 +4,7 @@ smooths what is reported and leaves the tracker on the raw joints."""
 from __future__ import annotations
 
 import math
+import re
 import warnings
 
 import numpy as np
@@ -11,7 +12,7 @@ import pytest
 
 from ghnerf_runtime.config import MIN_CUTOFF_HZ, ConfigError, EstimatorConfig, Joints3DConfig, SmoothingConfig, \
     TrackingConfig, config_from_dict
-from ghnerf_runtime.errors import ShapeError
+from ghnerf_runtime.errors import FrameError, ShapeError
 from ghnerf_runtime.smoothing import OneEuroJoints, smoothing_alpha
 
 FPS = 30.0
@@ -354,3 +355,20 @@ def test_a_hostile_stream_never_poisons_the_state_and_a_clean_one_recovers(seed)
                 out = f(t, still, np.ones(5, bool))
         np.testing.assert_allclose(out, still, atol=1e-4)
         assert np.isfinite(f._x).all() and np.isfinite(f._dx).all() and math.isfinite(f._t)
+
+
+def test_no_capture_time_reports_the_joints_raw_and_restarts_the_filter():
+    """``t_s=None`` is the estimator's "no capture time" (a still image): raw joints, every joint restarted; it
+    was a bare TypeError from ``float(None)``."""
+    f = OneEuroJoints(SmoothingConfig())
+    ok = np.ones(2, bool)
+    f(0.0, np.zeros((2, 3)), ok)
+    jumped = np.full((2, 3), 0.05)
+    np.testing.assert_array_equal(f(None, jumped, ok), jumped)
+    np.testing.assert_array_equal(f(1 / FPS, np.zeros((2, 3)), ok), np.zeros((2, 3)))  # restarted: raw again
+
+
+@pytest.mark.parametrize("bad", ["0.5", True, b"1", [0.1]])
+def test_a_time_that_is_no_number_is_a_frame_error_naming_it(bad):
+    with pytest.raises(FrameError, match=re.escape(repr(bad))):
+        OneEuroJoints(SmoothingConfig())(bad, np.zeros((2, 3)), np.ones(2, bool))
