@@ -35,23 +35,28 @@ __all__ = ["AS_STORED", "decode_image_or_none", "read_image_or_none", "samples_n
 
 #: The decode flag that keeps an image's pixels as stored (IMREAD_UNCHANGED never turns them anyway), a JPEG's,
 #: PNG's or WebP's EXIF orientation ignored; a TIFF's Orientation tag and an AVIF's irot and imir need more
-#: (:func:`_as_stored`).
+#: (:func:`_with_resets`).
 AS_STORED = cv2.IMREAD_IGNORE_ORIENTATION
 
 
 def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None:
     """``cv2.imread(path, flags)`` as stored (:data:`AS_STORED` added; a TIFF's Orientation tag and an AVIF's
     rotate and mirror properties ignored too), or None where OpenCV cannot read the file, a size beyond its limits
-    included."""
-    if _decodes_to_8_bits(flags) and _tiff_samples_wider_than(path, 16):
-        return None  # OpenCV fails on it too, printing libtiff's "Sorry, can not handle images with 32-bit samples"
-    if _turn_resets_of(path) or not _opencv_can_take(path):
-        try:
-            data = np.fromfile(os.fspath(path), dtype=np.uint8)
-        except (OSError, ValueError):
-            return None
-        return decode_image_or_none(data, flags)
+    included. The file is opened once: its header read there serves the sample check, the turn resets and, where
+    the bytes must be decoded from memory, the read of the rest."""
     try:
+        with open(path, "rb") as f:
+            if _decodes_to_8_bits(flags) and _tiff_header_samples_wider_than(f, 16):
+                # OpenCV fails on it too, printing libtiff's "Sorry, can not handle images with 32-bit samples"
+                return None
+            f.seek(0)
+            resets = _turn_resets(f)
+            if resets or not _opencv_can_take(path):
+                f.seek(0)
+                return _decoded_with(np.fromfile(f, dtype=np.uint8), resets, flags)
+    except (OSError, ValueError):  # ValueError: a NUL byte in the path
+        return None
+    try:  # cv2.imread's own file reader: a tiled TIFF it refuses from memory decodes here (recording_format)
         return cv2.imread(os.fspath(path), flags | AS_STORED)  # (IMREAD_UNCHANGED is -1: it stays itself)
     except cv2.error:
         return None
@@ -60,15 +65,6 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
 def _decodes_to_8_bits(flags: int) -> bool:
     """Whether a read with ``flags`` makes 8-bit samples (IMREAD_COLOR, IMREAD_GRAYSCALE), not the file's own."""
     return flags != cv2.IMREAD_UNCHANGED and not flags & cv2.IMREAD_ANYDEPTH
-
-
-def _tiff_samples_wider_than(path: str | os.PathLike, bits: int) -> bool:
-    """:func:`_tiff_header_samples_wider_than` of a file; False for one that cannot be opened (its read says so)."""
-    try:
-        with open(path, "rb") as f:
-            return _tiff_header_samples_wider_than(f, bits)
-    except (OSError, ValueError):  # ValueError: a NUL byte in the path
-        return False
 
 
 def _tiff_header_samples_wider_than(f: BinaryIO, bits: int) -> bool:
@@ -108,20 +104,16 @@ def decode_image_or_none(data: np.ndarray, flags: int) -> np.ndarray | None:
     if (_decodes_to_8_bits(flags) and data[:4].tobytes() in tiff_header.LAYOUTS
             and _tiff_header_samples_wider_than(io.BytesIO(data.tobytes()), 16)):
         return None  # as read_image_or_none: OpenCV fails on it too, and prints libtiff's complaint
+    return _decoded_with(data, _turn_resets_in(data), flags)
+
+
+def _decoded_with(data: np.ndarray, resets: list[tuple[int, bytes]], flags: int) -> np.ndarray | None:
+    """``cv2.imdecode`` of ``data`` with ``resets`` (its :func:`_turn_resets`) written to a copy; None where OpenCV
+    cannot decode it."""
     try:
-        return cv2.imdecode(_as_stored(data), flags | AS_STORED)
+        return cv2.imdecode(_with_resets(data, resets), flags | AS_STORED)
     except cv2.error:
         return None
-
-
-def _turn_resets_of(path: str | os.PathLike) -> list[tuple[int, bytes]]:
-    """A file's :func:`_turn_resets` (its header only read); none for one that cannot be opened (its read says
-    so)."""
-    try:
-        with open(path, "rb") as f:
-            return _turn_resets(f)
-    except (OSError, ValueError):  # ValueError: a NUL byte in the path (the read then says it cannot)
-        return []
 
 
 def _turn_resets(f: BinaryIO) -> list[tuple[int, bytes]]:
@@ -138,13 +130,16 @@ def _turn_resets(f: BinaryIO) -> list[tuple[int, bytes]]:
     return []
 
 
-def _as_stored(data: np.ndarray) -> np.ndarray:
-    """``data``, or a copy with its :func:`_turn_resets` written: OpenCV then decodes its pixels as stored. Only a
-    TIFF's or an ISOBMFF file's bytes are read further, and copied."""
+def _turn_resets_in(data: np.ndarray) -> list[tuple[int, bytes]]:
+    """The :func:`_turn_resets` of a file's bytes. Only a TIFF's or an ISOBMFF file's bytes are read further."""
     head = data[:8].tobytes()
     if head[:4] not in tiff_header.LAYOUTS and not avif_header.is_isobmff(head):
-        return data
-    resets = _turn_resets(io.BytesIO(data.tobytes()))
+        return []
+    return _turn_resets(io.BytesIO(data.tobytes()))
+
+
+def _with_resets(data: np.ndarray, resets: list[tuple[int, bytes]]) -> np.ndarray:
+    """``data``, or a copy with ``resets`` written: OpenCV then decodes its pixels as stored."""
     if not resets:
         return data
     patched = data.copy()

@@ -2,6 +2,8 @@
 a JPEG, PNG or WebP (OpenCV ignores it given IMREAD_IGNORE_ORIENTATION), and a TIFF's own Orientation tag (OpenCV's
 TIFF decoder turns the image by it whatever the flags: the tag is set to 1 in a copy of the bytes first), and an
 AVIF's rotate and mirror properties (made "no turn" in a copy the same way, though OpenCV 5.0 applies neither)."""
+import builtins
+import os
 import cv2
 import numpy as np
 import pytest
@@ -174,3 +176,34 @@ def test_an_avif_s_rotate_and_mirror_properties_never_reach_the_decoder_whicheve
     with open(path, "rb") as f:
         resets = avif_header.transforms_reset(f)
     assert resets == [(data.index(b"irot"), b"irot\x00"), (data.index(b"imir"), b"irot\x00")]
+
+
+@pytest.mark.parametrize("kind", ["jpg", "png", "tiff", "tagged-tiff", "turned-avif"])
+def test_a_read_opens_the_file_once_whatever_its_format(tmp_path, monkeypatch, kind):
+    """One open of the file serves the TIFF sample check, the turn resets and (where the bytes are decoded from
+    memory) the read of the rest; cv2.imread's own C-level open, for a file needing no reset, is not Python's.
+    Before session 63's change a read opened it two (JPEG, PNG, plain TIFF) or three times (a tagged TIFF, a
+    turned AVIF), and gave the same pixels."""
+    image = stored_image(3)
+    if kind == "tagged-tiff":
+        data = tagged_tiff(image, 6)
+    elif kind == "turned-avif":
+        plain = cv2.imencode(".avif", image, [cv2.IMWRITE_AVIF_QUALITY, 100])[1].tobytes()
+        data = avif_with_properties(plain, [avif_transform(b"irot", 1), avif_transform(b"imir", 0)])
+    else:
+        data = cv2.imencode(f".{kind}", image)[1].tobytes()
+    path = tmp_path / f"view.{kind.split('-')[-1]}"
+    path.write_bytes(data)
+    expected = decode_image_or_none(as_array(data), cv2.IMREAD_COLOR)
+    opened = []
+    real_open = builtins.open
+
+    def counting_open(file, *args, **kwargs):
+        opened.append(os.fspath(file) if isinstance(file, (str, os.PathLike)) else file)
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", counting_open)
+    image_read = read_image_or_none(path, cv2.IMREAD_COLOR)
+    monkeypatch.undo()
+    assert opened.count(str(path)) == 1, opened
+    assert image_read is not None and np.array_equal(image_read, expected)
