@@ -191,10 +191,25 @@ def announce_rendering(args) -> None:
 RENDER_S_PER_PAIR = 0.04
 
 
+def available_memory_bytes(meminfo: str = "/proc/meminfo") -> int:
+    """Memory a new allocation can have: Linux's ``MemAvailable``, which counts the page cache the kernel gives
+    back. Free pages alone (``SC_AVPHYS_PAGES``) leave that cache out, so a host whose files fill its memory (a
+    Raspberry Pi after a take was copied) read a few hundred MB free and ``--cache off`` was refused; they are
+    the answer only where ``meminfo`` has no such line."""
+    try:
+        with open(meminfo, encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024  # (kB)
+    except (OSError, ValueError, IndexError):
+        pass
+    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+
+
 def _free_bytes(folder) -> int:
     """Free space where the sequences go: the cache folder's disk (its nearest existing parent), else memory."""
     if folder is None:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        return available_memory_bytes()
     existing = folder
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent

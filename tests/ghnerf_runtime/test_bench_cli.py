@@ -1,6 +1,7 @@
 """``ghnerf-bench runtime``'s argument errors and Ctrl-C, without a model or a rendered sequence."""
 from __future__ import annotations
 
+import os
 from dataclasses import replace
 from types import SimpleNamespace
 
@@ -175,6 +176,17 @@ def test_sequences_that_cannot_fit_are_refused_before_they_are_rendered(capsys, 
     assert "rendering 10000 of 10000 sequences x 30 pairs first" in out and "about 200.0 min, 552.96 GB in memory" in out
     assert ("--sequences 10000 --frames 30: 553.0 GB of images to render in memory (--cache off), but 1.0 GB is "
             "free there" in err)
+
+
+def test_memory_free_for_cache_off_counts_the_page_cache_the_kernel_gives_back(tmp_path):
+    """``--cache off`` holds every image in memory; the room for them is ``MemAvailable`` (the page cache included),
+    not the free pages alone, which a host whose files fill its memory reads as a few hundred MB."""
+    meminfo = tmp_path / "meminfo"
+    meminfo.write_text("MemTotal:        8000000 kB\nMemFree:          300000 kB\nMemAvailable:    6000000 kB\n")
+    assert bench.available_memory_bytes(str(meminfo)) == 6000000 * 1024
+    meminfo.write_text("MemTotal:        8000000 kB\nMemFree:          300000 kB\n")  # (an old kernel: no such line)
+    assert bench.available_memory_bytes(str(meminfo)) == os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    assert bench._free_bytes(None) == bench.available_memory_bytes()
 
 
 def test_freshly_rendered_sequences_are_read_back_mapped_not_held(tmp_path):
