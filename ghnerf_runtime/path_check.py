@@ -28,15 +28,11 @@ NOT_UTF8 = "is not UTF-8 (give the path in UTF-8, or rename the file)"
 def is_utf8(value: str) -> bool:
     """Whether ``value`` encodes in UTF-8: not a name whose bytes are not UTF-8, which Python keeps as surrogates
     (``sys.argv``, a folder listing) and OpenCV crashes on."""
-    return not _not_utf8(value)
-
-
-def _not_utf8(value: str) -> bool:
     try:
         value.encode("utf-8")
     except UnicodeEncodeError:
-        return True
-    return False
+        return False
+    return True
 
 
 def path_problem(value: str) -> str | None:
@@ -48,7 +44,7 @@ def path_problem(value: str) -> str | None:
     """
     if "\x00" in value:
         return "holds a NUL byte"
-    if _not_utf8(value):
+    if not is_utf8(value):
         return NOT_UTF8
     encoded = os.fsencode(value)
     if len(encoded) >= PATH_MAX:
@@ -89,7 +85,7 @@ def name_max_at(value: str) -> int:
 def shown(value: str) -> str:
     """``value`` as a message shows it: as written, or ``repr`` when it holds bytes a terminal would hide or
     mangle (a NUL, a control character, a byte that is not UTF-8)."""
-    if value.isprintable() and not _not_utf8(value):
+    if value.isprintable() and is_utf8(value):
         return value
     return repr(value)
 

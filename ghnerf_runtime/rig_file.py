@@ -42,6 +42,7 @@ from ghnerf_runtime.geometry.camera import (DISTORTION_NAMES, Camera, fold_terms
                                             nearest_rotation)
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.json_keys import JsonTextError, loads_remembering, remember_repeats
+from ghnerf_runtime.path_check import is_utf8
 
 log = logging.getLogger(__name__)
 
@@ -152,7 +153,7 @@ class _Checker:
     def string(self, value: Any, field: str) -> str:
         if not isinstance(value, str) or not value:
             self._raise(field, f"must be a non-empty string, got {_show(value)}")
-        if not _utf8(value):  # a lone surrogate escape ("\ud800"): the file could not be saved again
+        if not is_utf8(value):  # a lone surrogate escape ("\ud800"): the file could not be saved again
             self._raise(field, f"must be UTF-8 text (no lone surrogate escapes), got {_show(value)}")
         return value
 
@@ -236,14 +237,6 @@ def distortion_problem(dist: Any) -> str | None:
             return (f"its distortion coefficient {name} = {value!r} is beyond any lens's (|coefficient| at most "
                     f"{MAX_DISTORTION:g}): a typo, or a calibration that diverged?")
     return None
-
-
-def _utf8(text: str) -> bool:
-    try:
-        text.encode("utf-8")
-    except UnicodeEncodeError:
-        return False
-    return True
 
 
 def _join(parent: str, key: str) -> str:
@@ -340,7 +333,7 @@ def _rig_from_dict(data: Any, *, path: str | os.PathLike | None, warn: bool) -> 
         metadata_text = json.dumps(metadata, allow_nan=False, ensure_ascii=False)
     except ValueError:
         chk._raise("metadata", f"must contain only finite numbers, got {_show(metadata)}")
-    if not _utf8(metadata_text):
+    if not is_utf8(metadata_text):
         chk._raise("metadata", f"must be UTF-8 text (no lone surrogate escapes), got {_show(metadata)}")
     try:
         rig = Rig(tuple(cameras), WorkingVolume(lo, hi), rig_id=rig_id, metadata=_plain(metadata))

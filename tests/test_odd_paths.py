@@ -98,14 +98,24 @@ SCRIPTS = [
 ]
 
 
+#: (module CLI run as ``python -m``, its arguments with P where the odd path goes, the option named): not console
+#: scripts, so the table above does not list them; their path options took any value (a NUL raised from ``mkdir``).
+MODULE_CLIS = [
+    ("training.data.generate", ["--out", "P", "--val", "1"], "--out"),
+    ("training.data.convert_zju", ["P", "--out", "o"], "subject"),
+    ("training.data.convert_zju", ["subject", "--out", "P"], "--out"),
+]
+
+
 @pytest.mark.parametrize("kind, value, said", [ODD[0], ODD[1], ODD[2], ODD[4]], ids=["nul", "not_utf8", "long_name",
                                                                                    "tilde"])
-@pytest.mark.parametrize("module, argv, option", SCRIPTS, ids=[f"{m.split('.')[-2]}.{m.split('.')[-1]} {o}"
-                                                               for m, _, o in SCRIPTS])
+@pytest.mark.parametrize("module, argv, option", SCRIPTS + MODULE_CLIS,
+                         ids=[f"{m.split('.')[-2]}.{m.split('.')[-1]} {o}" for m, _, o in SCRIPTS + MODULE_CLIS])
 def test_each_console_script_refuses_an_odd_path_as_a_usage_error(capsys, module, argv, option, kind, value, said):
-    """In process, as argparse parses: nothing is opened, rendered or loaded before the refusal (a path that is not
-    UTF-8 reaching OpenCV killed the process: a crash here would end the test run)."""
-    if module.startswith("training"):
+    """In process, as argparse parses: nothing is opened, rendered, loaded or made (a folder, a subject read) before
+    the refusal (a path that is not UTF-8 reaching OpenCV killed the process: a crash here would end the test run).
+    The ``python -m`` module CLIs too."""
+    if module.startswith("training.cli"):  # (the module CLIs under training.data need no torch)
         pytest.importorskip("torch")
     main = importlib.import_module(module).main
     with pytest.raises(SystemExit) as e:
@@ -123,27 +133,6 @@ def test_the_scripts_table_covers_every_console_script():
     assert modules - listened == {m for m, _, _ in SCRIPTS}
 
 
-#: (module CLI run as ``python -m``, its arguments with P where the odd path goes, the option named): not console
-#: scripts, so the table above does not list them; their path options took any value (a NUL raised from ``mkdir``).
-MODULE_CLIS = [
-    ("training.data.generate", ["--out", "P", "--val", "1"], "--out"),
-    ("training.data.convert_zju", ["P", "--out", "o"], "subject"),
-    ("training.data.convert_zju", ["subject", "--out", "P"], "--out"),
-]
-
-
-@pytest.mark.parametrize("kind, value, said", [ODD[0], ODD[1], ODD[2], ODD[4]], ids=["nul", "not_utf8", "long_name",
-                                                                                   "tilde"])
-@pytest.mark.parametrize("module, argv, option", MODULE_CLIS, ids=[f"{m.split('.')[-1]} {o}"
-                                                                   for m, _, o in MODULE_CLIS])
-def test_each_module_cli_refuses_an_odd_path_as_a_usage_error(capsys, module, argv, option, kind, value, said):
-    """As for the console scripts: refused while argparse parses, before a folder is made or a subject read."""
-    main = importlib.import_module(module).main
-    with pytest.raises(SystemExit) as e:
-        main([value if a == "P" else a for a in argv])
-    assert e.value.code == 2
-    err = capsys.readouterr().err
-    assert f"argument {option}: {shown(value)}: " in err and said in err and "Traceback" not in err
 
 
 # ------------------------------------------------------------------ the daemon's config file
