@@ -18,12 +18,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import stat
 import typing
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 from urllib.parse import urlsplit
 
 from firmware_host.errors import FirmwareHostError
+from firmware_host.sinks.usb_sink import claimed_interface
 from ghnerf_runtime.cli.output_path import first_clash
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
 from drivers.errors import RigConfigError
@@ -264,16 +266,80 @@ def _spelling_apart(path: str) -> str:
 def _one_sink_per_destination(sinks: typing.Sequence[str]) -> None:
     """Two URLs that differ only in their options (``?queue=8``), the case of the scheme or a ``//`` in a path name
     one destination: two sinks on it would send each frame twice to one UDP port, interleave two writers in one
-    file, or leave the second serial sink down for ever behind the first one's lock."""
-    seen: dict[tuple[str, str, str], int] = {}
+    file, or leave the second serial sink down for ever behind the first one's lock. So do two serial paths to one
+    device and two ``usb://`` URLs that may claim one interface (:func:`_sink_place`, :func:`_one_place`). Two
+    ``file://`` paths to one file are the outputs-apart check's (``realpath``)."""
+    earlier: list[tuple[int, tuple[str, str, Any]]] = []
     for k, url in enumerate(sinks):
-        place = _destination(url)
-        if place is not None and place in seen:
-            j = seen[place]
-            _fail(f"sinks[{k}]", f"sends where sinks[{j}] ({redact_url(sinks[j])!r}) does: one URL per destination, "
-                                 "with all its options", redact_url(url))  # shown as the sinks show it: no password
-        if place is not None:
-            seen[place] = k
+        place = _sink_place(url)
+        if place is None:
+            continue
+        for j, other in earlier:
+            if _one_place(place, other):
+                _fail(f"sinks[{k}]", f"sends where sinks[{j}] ({redact_url(sinks[j])!r}) does"
+                                     f"{_how_one(place, other, url, sinks[j])}: one URL per destination, with all its "
+                                     "options", redact_url(url))  # shown as the sinks show it: no password
+        earlier.append((k, place))
+
+
+def _sink_place(url: str) -> tuple[str, str, Any] | None:
+    """:func:`_destination`, with a serial port that exists named by the device it is (:func:`_serial_device`):
+    ``/dev/serial/by-id/usb-...-if00`` is a link to ``/dev/ttyACM0``, and the second sink on it sat behind the first
+    one's lock for ever. A port not there at load keeps its spelling: a board not plugged in at boot is no error.
+    A ``usb://`` sink is the interface it claims (:func:`claimed_interface`): the options dropped, two boards of one
+    VID:PID told apart by ``serial=`` or ``port=`` were refused as one destination."""
+    place = _destination(url)
+    if place is not None and place[0] == "usb":
+        claim = claimed_interface(url)
+        return place if claim is None else ("usb", claim[0], claim[1:])
+    if place is None or place[0] != "serial" or place[1]:
+        return place
+    device = _serial_device(place[2])
+    return place if device is None else (place[0], place[1], device)
+
+
+def _one_place(place: tuple[str, str, Any], other: tuple[str, str, Any]) -> bool:
+    """Whether two sinks' places (:func:`_sink_place`) may be one. A ``usb://`` sink with no ``serial=`` or
+    ``port=`` takes whichever board of its VID:PID libusb lists first: that may be the one another sink names."""
+    if place[0] == other[0] == "usb" and isinstance(place[2], tuple) and isinstance(other[2], tuple):
+        (which, interface), (other_which, other_interface) = place[2], other[2]
+        return place[1] == other[1] and interface == other_interface and \
+            (which == other_which or which is None or other_which is None)
+    return place == other
+
+
+def _how_one(place: tuple[str, str, Any], other: tuple[str, str, Any], url: str, other_url: str) -> str:
+    """For the refusal, how two URLs spelled apart were found one destination: two serial paths one device, two
+    ``usb://`` URLs one interface ("" for one place spelled twice)."""
+    if place[0] == "usb" and isinstance(place[2], tuple):
+        (which, interface), other_which = place[2], other[2][0]
+        if which == other_which:
+            board = f"with {which}" if which else "listed first"
+            return f" (both claim interface {interface} of the {place[1]} board {board})"
+        named = which or other_which
+        return f" (both claim interface {interface} of {place[1]}, and the one with no serial= or port= takes the " \
+               f"board listed first, which may be {named}: name each sink's board)"
+    if place[0] != "serial" or not isinstance(place[2], tuple) or _destination(url) == _destination(other_url):
+        return ""
+    kind, major_or_dev, minor_or_ino = place[2]
+    if kind == "character device":
+        return f" (both paths lead to character device {major_or_dev}:{minor_or_ino})"
+    return " (both paths lead to one file)"
+
+
+def _serial_device(path: str) -> tuple[str, int, int] | None:
+    """What the node at ``path`` opens, through links (None: there is none to ``stat``, or it cannot be read).
+    A character device is its device number (``st_rdev``), not its inode: two nodes of one device (a copy made with
+    ``mknod``, a second ``/dev`` in a container) write one port, and do not even share pyserial's ``flock``, which
+    is the node's. ``stat`` opens nothing: no port sees its DTR raised by a config check. Anything else (a file
+    standing in for a port) is its inode."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):  # missing, unreadable folder, a NUL: the spelling stands, the sink says the rest
+        return None
+    if stat.S_ISCHR(st.st_mode):
+        return "character device", os.major(st.st_rdev), os.minor(st.st_rdev)
+    return "inode", st.st_dev, st.st_ino
 
 
 def _outputs(config: "DaemonConfig") -> list[tuple[str, str]]:

@@ -74,6 +74,20 @@ def _out_endpoint(raw: str) -> int:
     return ep
 
 
+def claimed_interface(url: str) -> tuple[str, str | None, int] | None:
+    """What a ``usb://`` URL claims, as far as the URL tells: ``("1209:0001", "serial='A'", 0)``, its VID:PID, which
+    board of them (``serial=``, ``port=``; None: the first libusb lists) and the interface; None for a URL the sink
+    refuses (its own check says why). Two URLs that give one tuple claim one interface whatever their spelling
+    (``usb://1209:1`` is ``usb://0x1209:0x0001``) or ``ep``: the second claim fails. Two selectors may still name
+    one board (its serial and its port), which only the bus tells, at connect."""
+    try:
+        sink = UsbSink.from_url(url)
+    except (SinkConfigError, ValueError):
+        return None
+    which = f"serial={sink.serial!r}" if sink.serial is not None else f"port={sink.port}" if sink.port else None
+    return f"{sink.vid:04x}:{sink.pid:04x}", which, sink.interface
+
+
 class UsbSink(ProtocolSink):
     scheme = "usb"
 

@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import json
+import os
 import re
+import stat
 from pathlib import Path
 
 import pytest
@@ -112,6 +114,84 @@ def test_a_file_sink_through_a_link_and_up_is_the_file_it_reaches(tmp_path):
     (tmp_path / "plain").mkdir()  # through a folder, one file: refused, naming the other sink
     with pytest.raises(DaemonConfigError, match=r"^sinks\[1\]: is where sinks\[0\] writes too"):
         daemon_config_from_dict({"sinks": [sinks[0], f"file://{tmp_path}/plain/../j.jsonl"]})
+
+
+@pytest.mark.parametrize("sinks", [
+    # two identical boards, each named (docs/protocol.md, "Two boards of one VID:PID"): refused as one destination,
+    # the options that tell them apart dropped
+    ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01&serial=XYZ789"],
+    ["usb://1209:0001?ep=0x01&port=1-1.4", "usb://1209:0001?ep=0x01&port=1-2"],
+    ["usb://1209:0001?ep=0x01&interface=0", "usb://1209:0001?ep=0x02&interface=1"],  # one board, two interfaces
+    ["usb://1209:0001?ep=0x01", "usb://1209:0002?ep=0x01&serial=ABC123"],  # another PID
+])
+def test_usb_sinks_that_claim_different_interfaces_are_kept(sinks):
+    assert daemon_config_from_dict({"sinks": sinks}).sinks == tuple(sinks)
+
+
+@pytest.mark.parametrize("sinks, said", [
+    # one VID:PID spelled two ways, told apart only by the endpoint: the second claim of the interface fails
+    (["usb://1209:1?ep=0x01", "usb://0x1209:0x0001?ep=0x02"],
+     "sinks[1]: sends where sinks[0] ('usb://1209:1?ep=0x01') does (both claim interface 0 of the 1209:0001 board "
+     "listed first): one URL per destination"),
+    (["usb://1209:0001?ep=0x01&port=1-1.4", "usb://1209:0001?ep=0x01&port=1-01.4&queue=8"],
+     "sinks[1]: sends where sinks[0] ('usb://1209:0001?ep=0x01&port=1-1.4') does (both claim interface 0 of the "
+     "1209:0001 board with port=1-1.4)"),
+    # no selector takes the board libusb lists first: it may be the named one
+    (["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01"],
+     "sinks[1]: sends where sinks[0] ('usb://1209:0001?ep=0x01&serial=ABC123') does (both claim interface 0 of "
+     "1209:0001, and the one with no serial= or port= takes the board listed first, which may be serial='ABC123': "
+     "name each sink's board)"),
+])
+def test_usb_sinks_that_may_claim_one_interface_are_refused(sinks, said):
+    assert _error({"sinks": sinks}).startswith(said)
+
+
+@pytest.fixture
+def pty_slave():
+    """A pty's slave path (a character device, as /dev/ttyACM0 is), open while the test runs."""
+    master, slave = os.openpty()
+    yield os.ttyname(slave)
+    os.close(slave)
+    os.close(master)
+
+
+def test_two_serial_sinks_on_one_device_by_two_names_are_refused(tmp_path, pty_slave):
+    """``/dev/serial/by-id/...`` is a link to ``/dev/ttyACM0``: the second sink sat behind the first one's lock
+    for ever, retrying, as the spellings were all that was compared."""
+    (tmp_path / "by-id").mkdir()
+    (tmp_path / "by-id" / "usb-Foo-if00").symlink_to(pty_slave)
+    sinks = [f"serial://{pty_slave}", f"serial://{tmp_path}/by-id/usb-Foo-if00?baud=921600"]
+    number = os.stat(pty_slave).st_rdev
+    assert _error({"sinks": sinks}) == (
+        f"sinks[1]: sends where sinks[0] ('serial://{pty_slave}') does (both paths lead to character device "
+        f"{os.major(number)}:{os.minor(number)}): one URL per destination, with all its options, got '{sinks[1]}'")
+
+
+def test_a_second_node_of_one_serial_device_is_one_destination(tmp_path, pty_slave):
+    """Two nodes of one device (a second /dev) do not share pyserial's flock, which is the node's: the device's
+    number is compared, not the node's inode."""
+    try:
+        os.mknod(tmp_path / "ttyCopy", stat.S_IFCHR | 0o600, os.stat(pty_slave).st_rdev)
+    except PermissionError:
+        pytest.skip("mknod needs CAP_MKNOD")
+    with pytest.raises(DaemonConfigError, match=r"^sinks\[1\]: sends where sinks\[0\]"):
+        daemon_config_from_dict({"sinks": [f"serial://{pty_slave}", f"serial://{tmp_path}/ttyCopy"]})
+
+
+def test_serial_ports_not_there_at_load_are_told_apart_by_their_spelling(tmp_path, pty_slave):
+    """A by-id port not plugged in at boot (its link missing, or left leading nowhere) is no error: the config loads
+    and the sink waits for it."""
+    (tmp_path / "usb-Gone-if00").symlink_to(tmp_path / "ttyACM9")
+    sinks = [f"serial://{pty_slave}", f"serial://{tmp_path}/usb-Foo-if00", f"serial://{tmp_path}/usb-Gone-if00"]
+    assert daemon_config_from_dict({"sinks": sinks}).sinks == tuple(sinks)
+
+
+def test_a_file_sink_through_a_link_to_another_sinks_file_is_refused(tmp_path):
+    """Two ``file://`` names of one file are the outputs-apart check's (``realpath``), not told twice."""
+    (tmp_path / "j.jsonl").touch()
+    (tmp_path / "link.jsonl").symlink_to(tmp_path / "j.jsonl")
+    with pytest.raises(DaemonConfigError, match=r"^sinks\[1\]: is where sinks\[0\] writes too"):
+        daemon_config_from_dict({"sinks": [f"file://{tmp_path}/j.jsonl", f"file://{tmp_path}/link.jsonl"]})
 
 
 @pytest.mark.parametrize("change, said", [
