@@ -20,7 +20,7 @@ from typing import Optional
 
 from firmware_host.errors import FirmwareHostError
 
-__all__ = ["FileTaken", "claim_file", "holder_pid"]
+__all__ = ["FileTaken", "claim_file", "holder_pid", "holder_text"]
 
 #: ``flock`` errors that mean the file system keeps no such locks (some FUSE and network ones): no claim is made.
 _NO_LOCKS = (errno.ENOLCK, errno.EOPNOTSUPP, errno.EINVAL)
@@ -30,7 +30,7 @@ class FileTaken(FirmwareHostError):
     """Another open file (another sink, in this process or another) holds the claim on ``path``."""
 
     def __init__(self, path: str, pid: Optional[int]) -> None:
-        super().__init__(f"{path} is being written by {_holder_text(pid)}: two writers would interleave their lines "
+        super().__init__(f"{path} is being written by {holder_text(pid)}: two writers would interleave their lines "
                          "in it; stop that one, or give this sink another file (retried until that one lets go)")
         self.path, self.pid = path, pid
 
@@ -104,7 +104,7 @@ def _has_open(pid: int, st_dev: int, st_ino: int) -> bool:
     return False
 
 
-def _holder_text(pid: Optional[int]) -> str:
+def holder_text(pid: Optional[int]) -> str:
     """"pid 1234 (ghnerf-daemon)", "another sink of this process", or "another program" when not learnt."""
     if pid is None:
         return "another program"

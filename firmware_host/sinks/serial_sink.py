@@ -22,6 +22,7 @@ tty's ``closing_wait`` (30 s), past the unit's ``TimeoutStopSec``.
 """
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import termios
@@ -33,6 +34,7 @@ import serial
 from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.encoder import encode
 from firmware_host.protocol.messages import Message
+from firmware_host.sinks.file_claim import holder_pid, holder_text
 from firmware_host.sinks.fd_write import write_within
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink, frame_messages
@@ -51,6 +53,9 @@ MAX_WRITE_TIMEOUT_MS = 60_000
 #: How long a closing port may take to send what its tty still holds (TIOCOUTQ) before the rest is
 #: discarded: a few frames at 115200 baud; a stop or reload must not wait on a receiver that stopped reading.
 CLOSE_DRAIN_S = 0.25
+#: What pyserial's ``exclusive=True`` open raises (its ``flock(LOCK_EX | LOCK_NB)``) when another open file holds the
+#: port's lock (it keeps the errno); its O_NONBLOCK open of the tty, which waits for no carrier, does not say it.
+_LOCK_HELD = (errno.EAGAIN, errno.EWOULDBLOCK)
 
 
 class SerialSink(ProtocolSink):
@@ -96,6 +101,8 @@ class SerialSink(ProtocolSink):
             os.set_blocking(self._ser.fileno(), False)  # a full buffer must return EAGAIN, not block
         except (serial.SerialException, OSError, ValueError) as e:
             self._disconnect()
+            if getattr(e, "errno", None) in _LOCK_HELD:
+                raise SinkUnavailableError(self.url, _lock_held_reason(self.port)) from e
             raise SinkUnavailableError(self.url, f"cannot open {self.port}: {e}") from e
 
     def _disconnect(self) -> None:
@@ -149,6 +156,24 @@ class SerialSink(ProtocolSink):
             return write_within(self._ser.fileno(), data, timeout_s)
         except OSError as e:
             raise SinkUnavailableError(self.url, f"write to {self.port} failed: {e}") from e
+
+
+def _lock_held_reason(port: str) -> str:
+    """Why ``port`` did not open when its exclusive ``flock`` is held: by whom (``/proc/locks``) and, when ``port``
+    is a link (``/dev/serial/by-id/...``), the node it leads to. pyserial said only "Could not exclusively lock
+    port ...: Resource temporarily unavailable", which read as a fault of the port rather than another writer."""
+    where = port
+    holder = "another program"
+    try:
+        node = os.path.realpath(port)
+        st = os.stat(node)
+    except (OSError, ValueError):  # gone since the open: the retry will say so
+        pass
+    else:
+        where = port if node == port else f"{port} (which is {node})"
+        holder = holder_text(holder_pid(st.st_dev, st.st_ino))
+    return (f"cannot open {where}: {holder} holds its exclusive lock: one writer per port, as two would interleave "
+            "their frames; stop that one, or give this sink another port (retried until that one lets go)")
 
 
 def _drain_then_discard(ser: serial.Serial, drain_s: float) -> bool:

@@ -10,6 +10,8 @@ from __future__ import annotations
 import logging
 import os
 import select
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -442,3 +444,33 @@ def test_a_receiver_that_stops_reading_makes_the_port_read_stalled_then_up(link:
     finally:
         sink.close()
         port.unplug()
+
+
+HOLD_LOCK = """
+import fcntl, os, sys, time
+fd = os.open(sys.argv[1], os.O_RDWR | os.O_NOCTTY)
+fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # what another sink's pyserial exclusive=True takes
+print("held", flush=True)
+time.sleep(60)
+"""
+
+
+def test_a_port_another_process_holds_names_that_process_and_the_node_the_link_leads_to(link: Path) -> None:
+    """pyserial said only "Could not exclusively lock port ...: Resource temporarily unavailable", retried for ever:
+    the message now says another writer holds the port, which one, and where a by-id link leads."""
+    port = PtyPort(link)
+    holder = subprocess.Popen([sys.executable, "-c", HOLD_LOCK, port.slave_name], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "held\n"
+        sink = open_sink(f"serial://{link}?baud=921600", backoff=FAST_BACKOFF)
+        sink.send(make_frame(0))
+        wait_until(lambda: sink.stats().connect_failures >= 1, what="a refused open")
+        said = sink.stats().last_error or ""
+        assert f"cannot open {link} (which is {port.slave_name}): pid {holder.pid}" in said
+        assert "holds its exclusive lock: one writer per port" in said
+    finally:
+        holder.kill()
+        holder.wait()
+    wait_until(lambda: sink.stats().connects >= 1, what="the open once the holder let go")
+    sink.close()
+    port.unplug()
