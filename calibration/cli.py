@@ -40,7 +40,8 @@ from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, c
                                  earlier_size, earlier_views, list_images, next_view_number, read_camera_order,
                                  write_camera_order)
 from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, floor_unmeasured
-from calibration.detect import PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view
+from calibration.detect import (PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view,
+                               mirrored_corners, mirrored_words)
 from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
@@ -475,6 +476,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
                 for cam, image in zip(cams, pair.images):
                     if (error := board_mismatch(board, image)) is not None:
                         raise CaptureError(f"{shown_url}, camera {cam!r}: {_board_source(args.board)}: {error}") from error
+                    if corners := mirrored_corners(board, image):  # the camera's mistake, not the board file's
+                        raise CaptureError(f"{shown_url}, camera {cam!r}: {mirrored_words(corners)}")
                     markers = 0 if markers_said else markers_in_view(board, image)
                     if markers >= PATTERN_CHECK_MARKERS:
                         # a board file with another number of squares than the print (8x6 for 9x6) finds
