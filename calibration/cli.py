@@ -39,7 +39,7 @@ from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
                                  earlier_size, earlier_views, list_images, next_view_number, read_camera_order,
                                  write_camera_order)
-from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, floor_unmeasured
+from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, exchanged_fit, floor_unmeasured
 from calibration.detect import (PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view,
                                mirrored_corners, mirrored_words)
 from calibration.errors import BoardError, CalibrationError, CaptureError
@@ -936,11 +936,25 @@ def cmd_check(args: argparse.Namespace) -> int:
              if report["untriangulated"] else ""))
     limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
     reasons = check_failures(report, limits)
+    if reasons and (exchanged := exchanged_fit(rig, board, views, limits, board_thickness_m=thickness,
+                                               floor_view=floor_view)) is not None:
+        print(f"{PROG}: the rig does not fit these views: {'; '.join(reasons)}. " + _exchanged_words(
+            exchanged, Path(args.images), names), file=sys.stderr)
+        return 1
     if reasons:
         print(f"{PROG}: the rig does not fit these views: {'; '.join(reasons)}. A camera moved, or the views are "
               "of another rig: calibrate again", file=sys.stderr)
         return 1
     return 0
+
+
+def _exchanged_words(report: dict, images: Path, names: Sequence[str]) -> str:
+    """What to do where the rig fits the views with its two cameras' images exchanged (:func:`exchanged_fit`)."""
+    a, b = names
+    return (f"It fits them with the two cameras' images exchanged (reprojection {report['reprojection_px_rms']:.3f} "
+            f"px rms, scale {report['scale']:.4f}): {images / a} holds the images of camera {b!r}, and {images / b} "
+            f"those of {a!r}. Exchange the two folders' images (a tool that named the cameras the other way round), then "
+            "check again; solved from them as they are, the rig would give each camera the other's lens and pose")
 
 
 # ------------------------------------------------------------------ main

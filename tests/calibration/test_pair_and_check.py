@@ -14,7 +14,7 @@ import pytest
 
 from calibration import cli
 from calibration.board import BoardSpec, load_board
-from calibration.check import CheckLimits, check_failures, check_rig, floor_unmeasured
+from calibration.check import CheckLimits, check_failures, check_rig, exchanged_fit, floor_unmeasured
 from calibration.detect import BoardView
 from calibration.render import board_poses_both_see, example_rig
 from calibration.errors import SolveError
@@ -416,3 +416,41 @@ def test_the_floor_view_is_the_one_named(level_rig, level_views):
     assert "floor" not in check_rig(level_rig, BOARD, renamed)
     report = check_rig(level_rig, BOARD, renamed, floor_view="ground")
     assert report["floor"]["view"] == "ground" and abs(report["floor"]["height_mm_median"]) < 1.0
+
+
+def _exchanged(views: dict) -> dict:
+    return {"left": views["right"], "right": views["left"]}
+
+
+def test_views_whose_cameras_are_exchanged_are_said_to_fit_so(level_rig, level_views):
+    # each camera's images in the other's folder fail every figure, and the check said "calibrate again"
+    limits = CheckLimits()
+    assert check_failures(check_rig(level_rig, BOARD, _exchanged(level_views)), limits)
+    fit = exchanged_fit(level_rig, BOARD, _exchanged(level_views), limits)
+    assert fit is not None and fit["reprojection_px_rms"] < 0.01 and abs(fit["floor"]["height_mm_median"]) < 1.0
+    assert exchanged_fit(level_rig, BOARD, level_views, limits) is None  # named right: no such fit
+    small = {cam: {n: BoardView(v.ids, v.corners, (640, 400)) for n, v in named.items()}
+             for cam, named in _exchanged(level_views).items()}
+    assert exchanged_fit(level_rig, BOARD, small, limits) is None  # another size than the rig's: not exchanged
+
+
+def test_check_names_the_exchanged_folders_instead_of_calibrating_again(level_rig, level_views, tmp_path, capsys,
+                                                                        monkeypatch):
+    from ghnerf_runtime.rig_file import save_rig
+
+    images = tmp_path / "capture"
+    for cam in ("left", "right"):
+        (images / cam).mkdir(parents=True)
+    (tmp_path / "board.json").write_text(json.dumps(BOARD.to_dict()))
+    save_rig(level_rig, tmp_path / "rig.json")
+    missed = {"left": [], "right": []}
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (_exchanged(level_views), missed))
+    rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
+                   "--images", str(images)])
+    err = capsys.readouterr().err
+    assert rc == 1 and "It fits them with the two cameras' images exchanged (reprojection 0.000 px rms" in err
+    assert f"{images / 'left'} holds the images of camera 'right', and {images / 'right'} those of 'left'" in err
+    assert "Exchange the two folders' images" in err and "calibrate again" not in err
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (level_views, missed))
+    assert cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
+                     "--images", str(images)]) == 0
