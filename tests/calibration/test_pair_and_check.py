@@ -5,6 +5,7 @@ case runs in well under a second and the truth is known to the digit.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -454,3 +455,44 @@ def test_check_names_the_exchanged_folders_instead_of_calibrating_again(level_ri
     monkeypatch.setattr(cli, "detect_folder", lambda *args: (level_views, missed))
     assert cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
                      "--images", str(images)]) == 0
+
+
+@pytest.mark.parametrize("exchanged", [False, True])
+def test_a_left_camera_solved_on_the_right_is_warned_about(level_rig, exchanged):
+    # each folder holding the other camera's images solves as well as the right ones (the rig file then gives each
+    # camera the other's lens and pose), and nothing was said
+    poses = _facing_poses(level_rig, 10, seed=7)
+    views = _views(level_rig, poses, noise_px=0.1)
+    solution = solve.solve_rig(BOARD, _exchanged(views) if exchanged else views, ("left", "right"),
+                               camera_height_m=1.4, pitch_deg=9.0)
+    said = [w for w in solution.report["warnings"] if w.startswith("sides:")]
+    if not exchanged:
+        assert said == []
+        return
+    assert len(said) == 1 and said[0].startswith("sides: camera 'left' came out 0.60")
+    assert "m to the right of 'right'" in said[0] and "exchange the two folders' images and solve again" in said[0]
+
+
+def test_cameras_not_named_for_their_sides_are_not_warned_about(level_rig):
+    left, right = level_rig.pair
+    assert solve.sides_warning(Rig((right, left), level_rig.volume)) is None  # the rig's order is not a side
+    named = Rig((dataclasses.replace(right, name="first"), dataclasses.replace(left, name="second")), level_rig.volume)
+    assert solve.sides_warning(named) is None
+    # one above the other, a hair to the left: no side to check
+    above = dataclasses.replace(left, name="right").with_pose(left.R, left.t - left.R @ np.array([-0.01, 0.5, 0.0]))
+    assert solve.sides_warning(Rig((left, above), level_rig.volume)) is None
+
+
+def test_too_few_views_besides_the_floor_view_are_said_so(level_views):
+    # "the board found in 4 of 4 images", then "found in 3 image(s); at least 4 are needed": the floor view
+    # levels the rig and is not one of the lens's views, and nothing said so
+    few = {cam: {n: v for n, v in named.items() if n in ("000", "001", "002", "floor")}
+           for cam, named in level_views.items()}
+    with pytest.raises(SolveError, match=r"camera 'left': the board was found in 3 image\(s\) besides the floor view "
+                                         r"'floor' \(which levels the rig and does not enter the lens model\); at "
+                                         r"least 4 are needed"):
+        solve.solve_rig(BOARD, few, ("left", "right"), floor_view="floor")
+    with pytest.raises(SolveError, match=r"camera 'left': the board was found in 3 image\(s\); at least 4"):
+        # levelled by height, without the floor image: said as before
+        solve.solve_rig(BOARD, {cam: {n: v for n, v in named.items() if n != "floor"} for cam, named in few.items()},
+                        ("left", "right"), camera_height_m=1.4)
