@@ -600,6 +600,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          "squares_x counts them along board.png's width)? Is the board in "
                          "view, sharp, and without glare?")
     _check_pairing(args.images, names, views, missed, args.floor_view)
+    _drop_repeated_images(args.images, views, args.floor_view)  # after the pairing: a copy is no lonely image
     if args.floor_view is not None and not any(args.floor_view in views[c] for c in names):
         if any(args.floor_view in missed[c] for c in names):  # taken, and the board not found in it
             raise UsageError(f"--floor-view {args.floor_view!r}: neither camera found the board in that view (lying "
@@ -640,6 +641,36 @@ def _say_kept(kept: dict[Path, Path | None]) -> None:
     for path, prev in kept.items():
         if prev is not None:
             print(f"kept the previous {path} as {prev}")
+
+
+def _repeated_views(views: dict[str, BoardView], skip: str | None) -> dict[str, str]:
+    """View name -> the earlier view (by name) whose corners it repeats to the last bit: the same image under two
+    names (a copy, or a tool that saved a frame twice), which no two exposures give. ``skip`` (the floor view) is
+    neither."""
+    first_of: dict[bytes, str] = {}
+    repeats = {}
+    for name in sorted(n for n in views if n != skip):
+        key = views[name].ids.tobytes() + views[name].corners.tobytes()
+        if key in first_of:
+            repeats[name] = first_of[key]
+        else:
+            first_of[key] = name
+    return repeats
+
+
+def _drop_repeated_images(images: str, views: dict, floor_view: str | None) -> None:
+    """Count an image given twice once, saying so: each copy weighed its pose once more in the lens's fit, and one
+    copied into a single camera's folder made a pair "not taken at the same instant", not said as a copy."""
+    for cam, named in views.items():
+        repeats = _repeated_views(named, floor_view)
+        if not repeats:
+            continue
+        files = list_images(Path(images) / cam)
+        said = [f"{files[name].name} (as {files[same].name})" for name, same in repeats.items()]
+        print(f"note: {Path(images) / cam}: {len(said)} image(s) show the board exactly as an earlier one does, the "
+              f"same image under two names: {', '.join(said[:4])}{', ...' if len(said) > 4 else ''}; the image counted once")
+        for name in repeats:
+            del named[name]
 
 
 def _check_pairing(images: str, names: Sequence[str], views: dict, missed: dict, floor_view: str | None) -> None:

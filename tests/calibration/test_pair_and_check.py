@@ -496,3 +496,28 @@ def test_too_few_views_besides_the_floor_view_are_said_so(level_views):
         # levelled by height, without the floor image: said as before
         solve.solve_rig(BOARD, {cam: {n: v for n, v in named.items() if n != "floor"} for cam, named in few.items()},
                         ("left", "right"), camera_height_m=1.4)
+
+
+def test_an_image_given_twice_is_counted_once(level_rig, tmp_path, capsys, monkeypatch):
+    # a copy weighed its pose twice in the lens's fit without a word; one copied into a single camera's folder made
+    # a pair "not taken at the same instant?"
+    views = _views(level_rig, _facing_poses(level_rig, 8, seed=3), noise_px=0.1)
+    views["left"]["100"] = views["left"]["003"]  # left/100.png a copy of left/003.png
+    views["right"]["100"] = views["right"]["004"]  # right/100.png a copy of right/004.png, so the pair is one
+    images = tmp_path / "capture"
+    for cam, named in views.items():
+        (images / cam).mkdir(parents=True)
+        for name in named:
+            (images / cam / f"{name}.png").touch()  # listed by name; the detection is stood in for
+    (tmp_path / "board.json").write_text(json.dumps(BOARD.to_dict()))
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {"left": [], "right": []}))
+    rc = cli.main(["solve", "--board", str(tmp_path / "board.json"), "--images", str(images), "--cameras", "left,right",
+                   "--camera-height", "1.4", "--pitch", "9", "--roll", "0", "--out", str(tmp_path / "rig.json")])
+    out = capsys.readouterr().out
+    assert rc == 0
+    for cam, copied in (("left", "003"), ("right", "004")):
+        assert (f"note: {images / cam}: 1 image(s) show the board exactly as an earlier one does, the same image under "
+                f"two names: 100.png (as {copied}.png); the image counted once") in out
+    report = json.loads((tmp_path / "rig.report.json").read_text())
+    assert report["cameras"]["left"]["views"] == report["cameras"]["right"]["views"] == 8
+    assert "100" not in report["pair"]["per_view_px"] and report["pair"]["dropped_views"] == []
