@@ -23,7 +23,7 @@ from typing import Iterable
 import cv2
 
 from calibration.board import BoardSpec
-from calibration.detect import BoardDetector, BoardView, board_mismatch
+from calibration.detect import BoardDetector, BoardView, board_mismatch, mirrored_corners, mirrored_words
 from calibration.errors import BoardError, CaptureError
 from ghnerf_runtime.image_files import read_image_or_none
 from ghnerf_runtime.rig_file import write_text_atomic
@@ -226,13 +226,20 @@ MISMATCH_TRIES = 3
 
 
 def _name_board_mismatch(board: BoardSpec, paths: list[Path]) -> None:
-    """Raise naming the board file's mistake if the images show the board with another dictionary's markers.
+    """Raise naming the mistake if the images show the board with another dictionary's markers (the board
+    file's), or mirrored (the camera's).
 
-    :raises CaptureError: the image and the key to set (:func:`~calibration.detect.board_mismatch`).
+    :raises CaptureError: the image and the key to set (:func:`~calibration.detect.board_mismatch`), or the
+        mirroring to turn off (:func:`~calibration.detect.mirrored_corners`).
     """
     step = max(1, len(paths) // MISMATCH_TRIES)
     for path in paths[::step][:MISMATCH_TRIES]:
         image = read_image_or_none(path, READ_GREY)
-        error = None if image is None else board_mismatch(board, image)
+        if image is None:
+            continue
+        error = board_mismatch(board, image)
         if error is not None:
             raise CaptureError(f"{path}: {error}") from error
+        corners = mirrored_corners(board, image)
+        if corners:
+            raise CaptureError(f"{path}: {mirrored_words(corners)}")

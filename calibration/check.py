@@ -25,7 +25,7 @@ from calibration.detect import MIN_CORNERS, BoardView
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.geometry.triangulation import triangulate_dlt
 
-__all__ = ["check_rig", "check_failures", "floor_unmeasured", "CheckLimits", "FLOOR_VIEW"]
+__all__ = ["check_rig", "check_failures", "floor_unmeasured", "exchanged_fit", "CheckLimits", "FLOOR_VIEW"]
 
 FLOOR_VIEW = "floor"
 
@@ -139,6 +139,25 @@ def check_failures(report: Mapping[str, Any], limits: CheckLimits = CheckLimits(
         reasons.append(f"the floor view lies {floor['height_mm_median']:+.1f} mm off the floor, over "
                        f"{limits.max_floor_mm:g} mm (the rig tilted or moved on its mount)")
     return reasons
+
+
+def exchanged_fit(rig: Rig, board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]],
+                  limits: CheckLimits = CheckLimits(), *, board_thickness_m: float = 0.0,
+                  floor_view: str = FLOOR_VIEW) -> dict[str, Any] | None:
+    """:func:`check_rig`'s report with the pair's two cameras' views exchanged, where the rig fits them so; None
+    where it does not (or the views cannot be exchanged: images of another size than the other camera's).
+
+    Meant for views the rig does not fit as named: each camera's images in the other's folder (another tool's
+    capture that named the cameras the other way round, two folders renamed) fail every figure, and the check
+    said "a camera moved: calibrate again", from which the solve gave a rig whose cameras are each other's.
+    """
+    a, b = rig.pair
+    if any(v.image_size != b.size for v in views.get(a.name, {}).values()) or \
+            any(v.image_size != a.size for v in views.get(b.name, {}).values()):
+        return None
+    exchanged = {a.name: views.get(b.name, {}), b.name: views.get(a.name, {})}
+    report = check_rig(rig, board, exchanged, board_thickness_m=board_thickness_m, floor_view=floor_view)
+    return report if report["pairs"] and not check_failures(report, limits) else None
 
 
 def _expected_image(root: str | os.PathLike | None, camera: str, other: str, name: str) -> str:

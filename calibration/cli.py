@@ -39,8 +39,9 @@ from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
                                  earlier_size, earlier_views, list_images, next_view_number, read_camera_order,
                                  write_camera_order)
-from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, floor_unmeasured
-from calibration.detect import PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view
+from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, exchanged_fit, floor_unmeasured
+from calibration.detect import (PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view,
+                               mirrored_corners, mirrored_words)
 from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
@@ -475,6 +476,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
                 for cam, image in zip(cams, pair.images):
                     if (error := board_mismatch(board, image)) is not None:
                         raise CaptureError(f"{shown_url}, camera {cam!r}: {_board_source(args.board)}: {error}") from error
+                    if corners := mirrored_corners(board, image):  # the camera's mistake, not the board file's
+                        raise CaptureError(f"{shown_url}, camera {cam!r}: {mirrored_words(corners)}")
                     markers = 0 if markers_said else markers_in_view(board, image)
                     if markers >= PATTERN_CHECK_MARKERS:
                         # a board file with another number of squares than the print (8x6 for 9x6) finds
@@ -597,6 +600,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          "squares_x counts them along board.png's width)? Is the board in "
                          "view, sharp, and without glare?")
     _check_pairing(args.images, names, views, missed, args.floor_view)
+    _drop_repeated_images(args.images, views, args.floor_view)  # after the pairing: a copy is no lonely image
     if args.floor_view is not None and not any(args.floor_view in views[c] for c in names):
         if any(args.floor_view in missed[c] for c in names):  # taken, and the board not found in it
             raise UsageError(f"--floor-view {args.floor_view!r}: neither camera found the board in that view (lying "
@@ -637,6 +641,36 @@ def _say_kept(kept: dict[Path, Path | None]) -> None:
     for path, prev in kept.items():
         if prev is not None:
             print(f"kept the previous {path} as {prev}")
+
+
+def _repeated_views(views: dict[str, BoardView], skip: str | None) -> dict[str, str]:
+    """View name -> the earlier view (by name) whose corners it repeats to the last bit: the same image under two
+    names (a copy, or a tool that saved a frame twice), which no two exposures give. ``skip`` (the floor view) is
+    neither."""
+    first_of: dict[bytes, str] = {}
+    repeats = {}
+    for name in sorted(n for n in views if n != skip):
+        key = views[name].ids.tobytes() + views[name].corners.tobytes()
+        if key in first_of:
+            repeats[name] = first_of[key]
+        else:
+            first_of[key] = name
+    return repeats
+
+
+def _drop_repeated_images(images: str, views: dict, floor_view: str | None) -> None:
+    """Count an image given twice once, saying so: each copy weighed its pose once more in the lens's fit, and one
+    copied into a single camera's folder made a pair "not taken at the same instant", not said as a copy."""
+    for cam, named in views.items():
+        repeats = _repeated_views(named, floor_view)
+        if not repeats:
+            continue
+        files = list_images(Path(images) / cam)
+        said = [f"{files[name].name} (as {files[same].name})" for name, same in repeats.items()]
+        print(f"note: {Path(images) / cam}: {len(said)} image(s) show the board exactly as an earlier one does, the "
+              f"same image under two names: {', '.join(said[:4])}{', ...' if len(said) > 4 else ''}; the image counted once")
+        for name in repeats:
+            del named[name]
 
 
 def _check_pairing(images: str, names: Sequence[str], views: dict, missed: dict, floor_view: str | None) -> None:
@@ -933,11 +967,25 @@ def cmd_check(args: argparse.Namespace) -> int:
              if report["untriangulated"] else ""))
     limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
     reasons = check_failures(report, limits)
+    if reasons and (exchanged := exchanged_fit(rig, board, views, limits, board_thickness_m=thickness,
+                                               floor_view=floor_view)) is not None:
+        print(f"{PROG}: the rig does not fit these views: {'; '.join(reasons)}. " + _exchanged_words(
+            exchanged, Path(args.images), names), file=sys.stderr)
+        return 1
     if reasons:
         print(f"{PROG}: the rig does not fit these views: {'; '.join(reasons)}. A camera moved, or the views are "
               "of another rig: calibrate again", file=sys.stderr)
         return 1
     return 0
+
+
+def _exchanged_words(report: dict, images: Path, names: Sequence[str]) -> str:
+    """What to do where the rig fits the views with its two cameras' images exchanged (:func:`exchanged_fit`)."""
+    a, b = names
+    return (f"It fits them with the two cameras' images exchanged (reprojection {report['reprojection_px_rms']:.3f} "
+            f"px rms, scale {report['scale']:.4f}): {images / a} holds the images of camera {b!r}, and {images / b} "
+            f"those of {a!r}. Exchange the two folders' images (a tool that named the cameras the other way round), then "
+            "check again; solved from them as they are, the rig would give each camera the other's lens and pose")
 
 
 # ------------------------------------------------------------------ main

@@ -10,7 +10,8 @@ import numpy as np
 from calibration.board import DICTIONARIES, MIN_CORNERS, BoardSpec
 from calibration.errors import BoardError, CaptureError
 
-__all__ = ["BoardView", "BoardDetector", "MIN_CORNERS", "grey8", "fixes_a_pose", "board_mismatch", "markers_in_view"]
+__all__ = ["BoardView", "BoardDetector", "MIN_CORNERS", "grey8", "fixes_a_pose", "board_mismatch", "markers_in_view",
+           "mirrored_corners", "mirrored_words"]
 
 #: Markers seen, with no corners found, before the detector tries the board's other chessboard pattern
 #: (a print from OpenCV before 4.6, or from it since, read with the other ``legacy_pattern``).
@@ -208,6 +209,27 @@ def board_mismatch(board: BoardSpec, image: np.ndarray, *, min_corners: int = MI
                           f"({found}), not {board.dictionary}'s: set \"dictionary\": \"{spec.dictionary}\" in the "
                           f"board file{also}", key="dictionary")
     return None
+
+
+def mirrored_corners(board: BoardSpec, image: np.ndarray, *, min_corners: int = MIN_CORNERS) -> int:
+    """How many of ``board``'s corners ``image`` shows once turned back left to right; 0 where it shows none.
+
+    A mirrored board (a webcam's "mirror" or "horizontal flip" setting, a selfie camera, a tool that saved the
+    preview) has every marker reversed, and no reversed marker is in the dictionary: each image was "no board",
+    and the solve asked whether the board file described the print. Mirrored top to bottom is the same reversal
+    turned half a turn, so one flip finds both. Meant, as :func:`board_mismatch`, for a camera that found the
+    board in none of its images (one detection).
+    """
+    view = BoardDetector(board, min_corners=min_corners).detect(np.ascontiguousarray(grey8(image)[:, ::-1]))
+    return 0 if view is None else len(view)
+
+
+def mirrored_words(corners: int) -> str:
+    """What a mirrored image is and what to do: :func:`mirrored_corners` found ``corners`` in it turned back."""
+    return (f"the board in view is mirrored ({corners} corners found in the image flipped left to right, none as "
+            "it is): the camera, or the tool that saved its images, mirrors them (a webcam's mirror or horizontal "
+            "flip setting, a selfie preview). No lens gives a mirrored image, so it cannot be calibrated: turn the "
+            "mirroring off and capture again")
 
 
 def markers_in_view(board: BoardSpec, image: np.ndarray) -> int:

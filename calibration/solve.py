@@ -36,7 +36,7 @@ from ghnerf_runtime.rig_file import principal_point_problem
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
            "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "fold_warning", "MIN_VIEWS", "MAX_PAIR_PX",
            "USUAL_PITCH_DEG", "typed_pitch_warning", "BOARD_DISTANCE_SLACK", "median_board_distance_m",
-           "board_distance_warning"]
+           "board_distance_warning", "SIDE_NAMES", "sides_warning"]
 
 #: Lens models: OpenCV flags and what they suit.
 LENS_MODELS = {
@@ -69,6 +69,11 @@ USUAL_PITCH_DEG = (-15.0, 60.0)
 #: gives a rig as consistent as the true one: the distance the board was held at is the figure that shows it (a
 #: body-capture rig is calibrated with the board where people will stand, not 10 cm or 20 m away).
 BOARD_DISTANCE_SLACK = 2.0
+#: Camera names that say a side (``opencv://``'s nominal rig, docs/calibration.md): a pair so named that solves with
+#: its "left" camera on the right, by more than this share of the baseline along the rig's x, is warned about
+#: (each folder holding the other camera's images); a pair stacked one above the other has no side to check.
+SIDE_NAMES = ("left", "right")
+SIDES_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -490,6 +495,20 @@ def _round(a: np.ndarray, digits: int = 6) -> list:
     return np.round(np.asarray(a, float), digits).tolist()
 
 
+def _enough_besides_the_floor(camera: str, views: Mapping[str, BoardView], calib: Mapping[str, BoardView],
+                              floor_view: str | None) -> None:
+    """Refuse a camera with too few views once its floor view is set apart, saying so: the floor view levels the rig
+    and does not enter the lens, and "found in 3 image(s); at least 4" read against "the board found in 4 of 4
+    images" printed just before.
+
+    :raises SolveError: fewer than :data:`MIN_VIEWS` views besides a floor view the camera found the board in.
+    """
+    if floor_view in views and len(calib) < MIN_VIEWS:
+        raise SolveError(f"camera {camera!r}: the board was found in {len(calib)} image(s) besides the floor view "
+                         f"{floor_view!r} (which levels the rig and does not enter the lens model); at least "
+                         f"{MIN_VIEWS} are needed (15-30 is usual: near and far, tilted, reaching the image corners)")
+
+
 def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], names: tuple[str, str], *,
               lens: str = "standard", floor_view: str | None = None, board_thickness_m: float = 0.0,
               camera_height_m: float | None = None, pitch_deg: float = 0.0, roll_deg: float = 0.0,
@@ -516,6 +535,8 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     if not (math.isfinite(board_thickness_m) and 0.0 <= board_thickness_m <= 0.1):
         raise SolveError(f"the board's thickness must be between 0 and 0.1 m, got {board_thickness_m!r}")
     calib = {cam: {n: v for n, v in views[cam].items() if n != floor_view} for cam in names}
+    for cam in names:
+        _enough_besides_the_floor(cam, views[cam], calib[cam], floor_view)
     intr = {cam: calibrate_intrinsics(board, calib[cam], lens=lens, camera=cam, tangential=tangential)
             for cam in names}
     for cam in names:  # the rig file refuses such a camera: say why here, not when it is read
@@ -598,6 +619,8 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     report["warnings"] = _warnings(report)
     if warning := board_distance_warning(board_distance, volume or LEVEL_VOLUME, board, tool_rig.baseline, a):
         report["warnings"].append(warning)
+    if warning := sides_warning(rig):
+        report["warnings"].append(warning)
     for cam in rig.pair:
         if cam.fold_inside_image():
             report["warnings"].append(fold_warning(cam))
@@ -616,6 +639,24 @@ def fold_warning(cam: Camera) -> str:
         return (f"{where}, by its tangential or thin-prism terms ({fold_terms_text(terms)}): the fit went wrong; "
                 f"capture views that cover the whole frame, corners too, and solve again{hold}")
     return f"{where}: views did not reach the image corners; capture some there, or use --lens narrow"
+
+
+def sides_warning(rig: Rig) -> str | None:
+    """The warning for a levelled pair named ``left`` and ``right`` (:data:`SIDE_NAMES`) whose ``left`` camera came
+    out to the right of the other (None otherwise): the images of each in the other's folder (another tool that
+    named the cameras the other way round) solve as well as the right ones, and the rig file gave each camera
+    the other's lens and pose without a word."""
+    named = {cam.name.lower(): cam for cam in rig.pair}
+    if set(named) != set(SIDE_NAMES):
+        return None
+    left, right = (named[side] for side in SIDE_NAMES)
+    across = float(left.center[0] - right.center[0])  # the rig's x: to the right, as seen from behind the cameras
+    if not across > SIDES_SHARE * rig.baseline:
+        return None
+    return (f"sides: camera {left.name!r} came out {across:.3f} m to the right of {right.name!r} (seen from behind the "
+            f"cameras): if each camera's folder holds the other's images (a tool that named them the other way "
+            "round), exchange the two folders' images and solve again; if the cameras are named against their "
+            "sides (opencv://?first= names its camera 'left'), the rig is right as it is")
 
 
 def typed_pitch_warning(pitch_deg: float, camera: str) -> str | None:

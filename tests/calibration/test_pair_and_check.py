@@ -5,6 +5,7 @@ case runs in well under a second and the truth is known to the digit.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -14,7 +15,7 @@ import pytest
 
 from calibration import cli
 from calibration.board import BoardSpec, load_board
-from calibration.check import CheckLimits, check_failures, check_rig, floor_unmeasured
+from calibration.check import CheckLimits, check_failures, check_rig, exchanged_fit, floor_unmeasured
 from calibration.detect import BoardView
 from calibration.render import board_poses_both_see, example_rig
 from calibration.errors import SolveError
@@ -416,3 +417,107 @@ def test_the_floor_view_is_the_one_named(level_rig, level_views):
     assert "floor" not in check_rig(level_rig, BOARD, renamed)
     report = check_rig(level_rig, BOARD, renamed, floor_view="ground")
     assert report["floor"]["view"] == "ground" and abs(report["floor"]["height_mm_median"]) < 1.0
+
+
+def _exchanged(views: dict) -> dict:
+    return {"left": views["right"], "right": views["left"]}
+
+
+def test_views_whose_cameras_are_exchanged_are_said_to_fit_so(level_rig, level_views):
+    # each camera's images in the other's folder fail every figure, and the check said "calibrate again"
+    limits = CheckLimits()
+    assert check_failures(check_rig(level_rig, BOARD, _exchanged(level_views)), limits)
+    fit = exchanged_fit(level_rig, BOARD, _exchanged(level_views), limits)
+    assert fit is not None and fit["reprojection_px_rms"] < 0.01 and abs(fit["floor"]["height_mm_median"]) < 1.0
+    assert exchanged_fit(level_rig, BOARD, level_views, limits) is None  # named right: no such fit
+    small = {cam: {n: BoardView(v.ids, v.corners, (640, 400)) for n, v in named.items()}
+             for cam, named in _exchanged(level_views).items()}
+    assert exchanged_fit(level_rig, BOARD, small, limits) is None  # another size than the rig's: not exchanged
+
+
+def test_check_names_the_exchanged_folders_instead_of_calibrating_again(level_rig, level_views, tmp_path, capsys,
+                                                                        monkeypatch):
+    from ghnerf_runtime.rig_file import save_rig
+
+    images = tmp_path / "capture"
+    for cam in ("left", "right"):
+        (images / cam).mkdir(parents=True)
+    (tmp_path / "board.json").write_text(json.dumps(BOARD.to_dict()))
+    save_rig(level_rig, tmp_path / "rig.json")
+    missed = {"left": [], "right": []}
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (_exchanged(level_views), missed))
+    rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
+                   "--images", str(images)])
+    err = capsys.readouterr().err
+    assert rc == 1 and "It fits them with the two cameras' images exchanged (reprojection 0.000 px rms" in err
+    assert f"{images / 'left'} holds the images of camera 'right', and {images / 'right'} those of 'left'" in err
+    assert "Exchange the two folders' images" in err and "calibrate again" not in err
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (level_views, missed))
+    assert cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
+                     "--images", str(images)]) == 0
+
+
+@pytest.mark.parametrize("exchanged", [False, True])
+def test_a_left_camera_solved_on_the_right_is_warned_about(level_rig, exchanged):
+    # each folder holding the other camera's images solves as well as the right ones (the rig file then gives each
+    # camera the other's lens and pose), and nothing was said
+    poses = _facing_poses(level_rig, 10, seed=7)
+    views = _views(level_rig, poses, noise_px=0.1)
+    solution = solve.solve_rig(BOARD, _exchanged(views) if exchanged else views, ("left", "right"),
+                               camera_height_m=1.4, pitch_deg=9.0)
+    said = [w for w in solution.report["warnings"] if w.startswith("sides:")]
+    if not exchanged:
+        assert said == []
+        return
+    assert len(said) == 1 and said[0].startswith("sides: camera 'left' came out 0.60")
+    assert "m to the right of 'right'" in said[0] and "exchange the two folders' images and solve again" in said[0]
+
+
+def test_cameras_not_named_for_their_sides_are_not_warned_about(level_rig):
+    left, right = level_rig.pair
+    assert solve.sides_warning(Rig((right, left), level_rig.volume)) is None  # the rig's order is not a side
+    named = Rig((dataclasses.replace(right, name="first"), dataclasses.replace(left, name="second")), level_rig.volume)
+    assert solve.sides_warning(named) is None
+    # one above the other, a hair to the left: no side to check
+    above = dataclasses.replace(left, name="right").with_pose(left.R, left.t - left.R @ np.array([-0.01, 0.5, 0.0]))
+    assert solve.sides_warning(Rig((left, above), level_rig.volume)) is None
+
+
+def test_too_few_views_besides_the_floor_view_are_said_so(level_views):
+    # "the board found in 4 of 4 images", then "found in 3 image(s); at least 4 are needed": the floor view
+    # levels the rig and is not one of the lens's views, and nothing said so
+    few = {cam: {n: v for n, v in named.items() if n in ("000", "001", "002", "floor")}
+           for cam, named in level_views.items()}
+    with pytest.raises(SolveError, match=r"camera 'left': the board was found in 3 image\(s\) besides the floor view "
+                                         r"'floor' \(which levels the rig and does not enter the lens model\); at "
+                                         r"least 4 are needed"):
+        solve.solve_rig(BOARD, few, ("left", "right"), floor_view="floor")
+    with pytest.raises(SolveError, match=r"camera 'left': the board was found in 3 image\(s\); at least 4"):
+        # levelled by height, without the floor image: said as before
+        solve.solve_rig(BOARD, {cam: {n: v for n, v in named.items() if n != "floor"} for cam, named in few.items()},
+                        ("left", "right"), camera_height_m=1.4)
+
+
+def test_an_image_given_twice_is_counted_once(level_rig, tmp_path, capsys, monkeypatch):
+    # a copy weighed its pose twice in the lens's fit without a word; one copied into a single camera's folder made
+    # a pair "not taken at the same instant?"
+    views = _views(level_rig, _facing_poses(level_rig, 8, seed=3), noise_px=0.1)
+    views["left"]["100"] = views["left"]["003"]  # left/100.png a copy of left/003.png
+    views["right"]["100"] = views["right"]["004"]  # right/100.png a copy of right/004.png, so the pair is one
+    images = tmp_path / "capture"
+    for cam, named in views.items():
+        (images / cam).mkdir(parents=True)
+        for name in named:
+            (images / cam / f"{name}.png").touch()  # listed by name; the detection is stood in for
+    (tmp_path / "board.json").write_text(json.dumps(BOARD.to_dict()))
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {"left": [], "right": []}))
+    rc = cli.main(["solve", "--board", str(tmp_path / "board.json"), "--images", str(images), "--cameras", "left,right",
+                   "--camera-height", "1.4", "--pitch", "9", "--roll", "0", "--out", str(tmp_path / "rig.json")])
+    out = capsys.readouterr().out
+    assert rc == 0
+    for cam, copied in (("left", "003"), ("right", "004")):
+        assert (f"note: {images / cam}: 1 image(s) show the board exactly as an earlier one does, the same image under "
+                f"two names: 100.png (as {copied}.png); the image counted once") in out
+    report = json.loads((tmp_path / "rig.report.json").read_text())
+    assert report["cameras"]["left"]["views"] == report["cameras"]["right"]["views"] == 8
+    assert "100" not in report["pair"]["per_view_px"] and report["pair"]["dropped_views"] == []

@@ -18,7 +18,7 @@ import pytest
 from calibration import cli
 from calibration.board import BoardSpec
 from calibration.capture import detect_folder
-from calibration.detect import BoardDetector, board_mismatch
+from calibration.detect import BoardDetector, board_mismatch, mirrored_corners
 from calibration.errors import BoardError, CaptureError
 from calibration.render import board_pose_facing, example_rig, render_board
 
@@ -150,10 +150,10 @@ def test_hidden_files_beside_the_images_are_not_views(image, tmp_path):
     assert sorted(views["left"]) == ["000"] and missed == {"left": [], "right": []}
 
 
-def _capture_a_7x5_print(tmp_path: Path, **board_file) -> tuple[int, Path, Path]:
+def _capture_a_7x5_print(tmp_path: Path, mirrored: tuple[str, ...] = (), **board_file) -> tuple[int, Path, Path]:
     """``ghcal capture`` of a replay take that shows one view of a 7x5 DICT_5X5_100 print, with a board file that
-    differs from the print by ``board_file`` (BoardSpec fields): its exit status, the board file, the capture
-    folder."""
+    differs from the print by ``board_file`` (BoardSpec fields), the cameras named in ``mirrored`` delivering it
+    flipped left to right: its exit status, the board file, the capture folder."""
     from calibration.render import calibration_views
     from ghnerf_runtime.geometry.rig import Rig
     from tests.calibration.test_ghcal_user_flows import _take
@@ -162,6 +162,8 @@ def _capture_a_7x5_print(tmp_path: Path, **board_file) -> tuple[int, Path, Path]
     truth = Rig(tuple(c.resized(800, 500) for c in rig.cameras), rig.volume, rig_id="truth")
     printed = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
     one_view = calibration_views(truth, printed, count=1, edge_count=0, seed=5, floor_view=False)
+    for cam in mirrored:
+        one_view[cam] = {name: image[:, ::-1].copy() for name, image in one_view[cam].items()}
     take = _take(tmp_path / "take", truth, one_view)
     board = tmp_path / "board.json"
     board.write_text(json.dumps(dataclasses.replace(printed, **board_file).to_dict()))
@@ -191,6 +193,32 @@ def test_a_capture_with_another_number_of_squares_says_so_and_why_nothing_was_ke
     assert re.match(rf"ghcal: camera 'left' sees 1[0-7] DICT_5X5_100 markers but not the board {re.escape(str(board))} "
                     r"describes \(8x5 squares of 120 mm", said[0])  # 17 on the print, a few may be missed
     assert "kept 0 of 1 views: the stream ended, and the board was in no image" in err
+
+
+def test_a_capture_from_a_mirroring_camera_says_so_at_once(tmp_path, capsys):
+    # both webcams set to mirror: no marker is found reversed, and the capture ran its --max-seconds without a word
+    # (one camera mirrored, the other's views are kept, and the solve names the mirrored camera's images)
+    rc, _, out = _capture_a_7x5_print(tmp_path, mirrored=("left", "right"))
+    err = capsys.readouterr().err
+    assert rc == 2 and "camera 'left': the board in view is mirrored (" in err
+    assert "turn the mirroring off and capture again" in err and not list(out.glob("*/*.png"))
+
+
+def test_a_camera_whose_images_are_mirrored_is_said_so(camera, image, tmp_path, capsys):
+    # the solve asked whether the board file described the print, and whether the board was in view and sharp
+    mirrored = np.ascontiguousarray(image[:, ::-1])
+    assert BoardDetector(BOARD).detect(mirrored) is None and mirrored_corners(BOARD, image) == 0
+    assert mirrored_corners(BOARD, mirrored) == BOARD.corner_count
+    assert mirrored_corners(BOARD, np.ascontiguousarray(image[::-1])) == BOARD.corner_count  # top to bottom too
+    images = _folders(tmp_path / "views", {"left": {f"{k:03d}": image for k in range(4)},
+                                           "right": {f"{k:03d}": mirrored for k in range(4)}})
+    rc = cli.main(["solve", "--board", _board_file(tmp_path), "--images", str(images), "--cameras", "left,right",
+                   "--camera-height", "1.4", "--out", str(tmp_path / "rig.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and re.search(r"right[/\\]000\.png: the board in view is mirrored \(\d+ corners found in the image "
+                                 r"flipped left to right, none as it is\)", err)
+    assert "turn the mirroring off and capture again" in err and "describe the print" not in err
+    assert not (tmp_path / "rig.json").exists()
 
 
 @pytest.mark.parametrize("text, says", [
