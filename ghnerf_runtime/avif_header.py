@@ -7,6 +7,12 @@ calibration is of the sensor's pixel grid (``ghnerf_runtime.image_files`` says w
 OpenCV 5.0's AVIF decoder (libavif 1.4) applies neither box, but nothing promises its next version will not: as
 for a TIFF's tag, the bytes handed to it say "no turn" (:func:`transforms_reset`) rather than relying on that.
 
+A clean aperture (``clap``, a crop) is not looked at, on purpose: OpenCV 5.0 ignores it too (libavif leaves it to
+the application) and decodes the whole stored image, the sensor's pixel grid (checked with crops centred and off
+centre in session 64; tests/drivers/test_replay_image_sizes.py). A decoder applying it could not misread a replayed
+frame without a word: replay measures an AVIF by decoding it (no size is read from its boxes), so a crop of another
+size than the rig's would be refused at open, and the cut-short check (:func:`item_data_end`) reads no size.
+
 Only box headers and the transform boxes' one byte are read; a file whose boxes this walk cannot follow (cut short,
 malformed) is left as it is, for the decoder to decode or refuse.
 

@@ -31,7 +31,8 @@ import numpy as np
 from ghnerf_runtime import avif_header, tiff_header
 from ghnerf_runtime.path_check import is_utf8
 
-__all__ = ["AS_STORED", "decode_image_or_none", "read_image_or_none", "samples_not_8_bit"]
+__all__ = ["AS_STORED", "decode_image_or_none", "decoded_from_memory_because", "read_image_or_none",
+           "samples_not_8_bit"]
 
 #: The decode flag that keeps an image's pixels as stored (IMREAD_UNCHANGED never turns them anyway), a JPEG's,
 #: PNG's or WebP's EXIF orientation ignored; a TIFF's Orientation tag and an AVIF's irot and imir need more
@@ -88,6 +89,23 @@ def samples_not_8_bit(path: str | os.PathLike) -> str | None:
     channels = 1 if image.ndim == 2 else image.shape[2]
     return (f"{image.dtype.name} samples ({image.shape[1]}x{image.shape[0]}, {channels} channel"
             f"{'' if channels == 1 else 's'}): only 8- or 16-bit images decode to 8 bits")
+
+
+def decoded_from_memory_because(path: str | os.PathLike) -> str | None:
+    """Why :func:`read_image_or_none` decodes ``path`` from a copy of its bytes rather than through
+    ``cv2.imread``'s file reader (which decodes some layouts that OpenCV refuses from memory), e.g. "its name is
+    not UTF-8"; None where the file reader reads it (or the file cannot be opened)."""
+    if not _opencv_can_take(path):
+        return "its name is not UTF-8 or holds a NUL byte, which OpenCV's file reader cannot be given"
+    try:
+        with open(path, "rb") as f:
+            resets = _turn_resets(f)
+    except OSError:
+        return None
+    if resets:
+        return ("its orientation (a TIFF's Orientation tag, an AVIF's irot or imir) is not 'as stored', and is "
+                "reset in a copy of its bytes that OpenCV then decodes from memory")
+    return None
 
 
 def _opencv_can_take(path: str | os.PathLike) -> bool:

@@ -6,6 +6,12 @@ before OpenCV decodes a file, as OpenCV's TIFF decoder turns the image by it wha
 ``payload_is_whole`` (whether a take cut short holds a TIFF whole: :func:`first_directory_end`). Classic TIFF and
 BigTIFF, either byte order. Offsets and counts are read within the file's length: a corrupt header's may be beyond
 any file (a BigTIFF's are 64-bit), and nothing here raises for them.
+
+Later pages (directories) are not read, on purpose: OpenCV 5.0 decodes a multi-page TIFF's first page only
+(cv2.imread and cv2.imdecode alike), whatever the later ones hold, and decodes it still where a later page is cut
+short or corrupt (checked with cv2.imwritemulti's files in session 64: a second page of another size, a file cut in
+its last directory; tests/drivers/test_replay_image_sizes.py). So the size read here, the turn reset and the
+cut-short check are of the page decoded, and a later page cannot make an image read wrong.
 """
 from __future__ import annotations
 

@@ -33,7 +33,12 @@ from drivers.frames import CameraTruth, Frame
 from ghnerf_runtime import avif_header, tiff_header
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.image_files import decode_image_or_none, read_image_or_none, samples_not_8_bit
+from ghnerf_runtime.image_files import (
+    decode_image_or_none,
+    decoded_from_memory_because,
+    read_image_or_none,
+    samples_not_8_bit,
+)
 from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
 
@@ -583,11 +588,18 @@ def encode_image(image: np.ndarray, image_format: str, jpeg_quality: int) -> byt
 _DECODE_FLAGS = cv2.IMREAD_COLOR
 
 
+class RefusedLayoutError(RigOperationError):
+    """A recorded image that is valid, but of a layout this OpenCV does not decode from memory
+    (:func:`tiff_decoding_refusal`), which its file reader cannot be given either (:func:`load_image`); raised by
+    its read, a corrupt frame as any image that does not decode, its message naming the cause and the remedy."""
+
+
 def load_image(path: Path) -> np.ndarray:
     """Decode a recorded image as ``(H, W, 3)`` uint8 BGR, its pixels as stored (its orientation ignored:
     ``ghnerf_runtime.image_files.decode_image_or_none``).
 
     Raises:
+        RefusedLayoutError: a valid image this OpenCV does not decode (:func:`_read_from_the_file`).
         RigOperationError: naming the file when it is missing or cannot be decoded.
     """
     try:
@@ -607,13 +619,21 @@ def load_image(path: Path) -> np.ndarray:
 
 
 def _read_from_the_file(path: Path, refusal: str) -> np.ndarray:
-    """A valid image OpenCV refuses to decode from memory (``refusal``: :func:`tiff_decoding_refusal`), read
-    through its file reader, which takes those tiles (a mapped file), as stored; RigOperationError naming the
-    cause where that fails too (an Orientation tag to ignore, which is read from memory, or a name not UTF-8)."""
+    """An image of a layout OpenCV refuses to decode from memory (``refusal``: :func:`tiff_decoding_refusal`), read
+    through its file reader, which takes those tiles (a mapped file), as stored. Where that fails too: a
+    :class:`RefusedLayoutError` naming the cause where the file reader was not used (an orientation to ignore,
+    which is reset in memory, or a name not UTF-8: the image may well be valid); else the file reader failed on
+    the file itself, which is corrupt (a RigOperationError: the layout's refusal would call a corrupt file
+    valid)."""
     image = read_image_or_none(path, _DECODE_FLAGS)
-    if image is None:
-        raise RigOperationError(f"recording image {path} does not decode: it is {refusal}")
-    return image
+    if image is not None:
+        return image
+    memory_only = decoded_from_memory_because(path)
+    if memory_only is not None:
+        raise RefusedLayoutError(f"recording image {path} does not decode: it is {refusal}; OpenCV's file reader, "
+                                 f"which decodes such tiles, is not used for it: {memory_only}")
+    raise RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it, from memory nor through "
+                            f"its file reader)")
 
 
 #: The first bytes of the formats :func:`header_size` reads: the two the recorder writes (IMAGE_FORMATS), and BMP.
@@ -917,27 +937,24 @@ def _decodable(width: int, height: int) -> bool:
 
 
 class UndecodableImageError(RigInitializationError):
-    """A take's image that this OpenCV does not decode although it is valid (:func:`tiff_decoding_refusal`), from
-    memory nor from the file (:func:`load_image`): its frames would all be corrupt frames when read, so the take
-    is refused at open, naming the file and the cause."""
+    """A take whose images of one camera all fail to decode at open (``replay``'s ``size_error``), one at least
+    valid but of a layout this OpenCV does not decode (:class:`RefusedLayoutError`): its message names the file
+    and the cause."""
 
 
-def image_size(path: Path) -> tuple[int, int] | None:
+def image_size(path: Path) -> tuple[int, int] | RefusedLayoutError | None:
     """A recorded image's ``(width, height)``: from its header (:func:`header_size`), else decoded (another
-    format, a header it cannot read); ``None`` for one that does not decode (corrupt: its read names it).
-
-    Raises:
-        UndecodableImageError: a valid image of a layout this OpenCV refuses (:func:`tiff_decoding_refusal`).
-    """
+    format, a header it cannot read); for one that does not decode, the :class:`RefusedLayoutError` of a valid
+    image this OpenCV refuses (:func:`load_image`), else ``None`` (corrupt: its read names it). Each is a
+    corrupt frame when read; the caller decides what a take of them is."""
     size = header_size(path)
     if size is not None:
         return size
     try:
         image = load_image(path)
+    except RefusedLayoutError as e:
+        return e
     except RigOperationError:
-        refusal = tiff_decoding_refusal(path)
-        if refusal is not None:
-            raise UndecodableImageError(f"recording image {path} does not decode: {refusal}") from None
         return None
     return image.shape[1], image.shape[0]
 

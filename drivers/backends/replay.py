@@ -38,8 +38,9 @@ Image sizes: a take with any image of another size than its rig camera's (every 
 :func:`~drivers.backends.recording_format.image_size`; docs/recording-format.md, "Replay")
 is refused at open with :class:`~drivers.errors.FrameSizeError`, as the other backends refuse cameras delivering
 another size than their rig file's (:meth:`ReplayRigSource.size_error`). An image that does not decode (a header
-cut short or corrupt) is no size: it is a corrupt frame, as is an image whose size changed after the open:
-``read()`` raises :class:`~drivers.errors.RigOperationError` naming it once, and the next read goes on.
+cut short or corrupt, or a valid layout this OpenCV refuses) is no size: it is a corrupt frame, as is an image whose
+size changed after the open: ``read()`` raises :class:`~drivers.errors.RigOperationError` naming it once, and the
+next read goes on. A camera none of whose images decode at open would play nothing: the take is refused at open.
 """
 from __future__ import annotations
 
@@ -56,6 +57,7 @@ from drivers.backends.recording_format import (
     MANIFEST,
     FrameRow,
     Manifest,
+    RefusedLayoutError,
     UndecodableImageError,
     drop_broken_rows,
     file_is_whole,
@@ -294,16 +296,17 @@ class ReplayRigSource(RigSource):
             raise size_error
         log.info("replaying %s: %d frames, speed %s", self.directory, len(self._rows), self.speed or "free")
 
-    def size_error(self) -> FrameSizeError | UndecodableImageError | None:
+    def size_error(self) -> FrameSizeError | RigInitializationError | None:
         """The error of a take whose images are not all its rig's size, else ``None``: the first camera (in the
-        rig's order) with an image of another size than its rig camera's; or the first valid image this OpenCV
-        does not decode (:class:`UndecodableImageError`: a tiled TIFF whose tiles its libtiff refuses read from
-        memory and that its file reader cannot read either, which every frame of such a take would be).
+        rig's order) none of whose images decode (:meth:`_undecodable_refusal`), or with an image of another size
+        than its rig camera's.
 
         Every image is measured at :meth:`open`, from its header (:func:`image_size`: a PNG's, JPEG's (EXIF or
         not: its orientation is ignored, :func:`load_image`) or BMP's size read without decoding it; an image in
         another format, or whose header cannot be read, decoded instead).
-        An image that does not decode is no size: left to its read, a corrupt frame. Images of another size are
+        An image that does not decode is no size: left to its read, a corrupt frame, whatever the cause (corrupt,
+        or valid but of a layout this OpenCV refuses, :class:`RefusedLayoutError`: its read names the cause); a
+        camera none of whose images decode would play nothing, and is refused. Images of another size are
         a take recorded at another size than the rig it carries, its images (all or some) resized by a tool
         after, or its manifest's rig replaced: refused, as each such frame would fail its read (a take resized
         in part played with every such frame skipped; one resized throughout played nothing, and the daemon,
@@ -313,19 +316,29 @@ class ReplayRigSource(RigSource):
         order = recorded_order(self._rows)
         for cam in self.rig.cameras:
             mine = [self._rows[i].image for i in order.get(cam.name, [])]
-            try:
-                wrong = self._images_of_another_size(mine, (cam.width, cam.height))
-            except UndecodableImageError as e:
-                return e
+            sizes = [(rel, image_size(self.directory / rel)) for rel in mine]
+            if mine and not any(isinstance(size, tuple) for _, size in sizes):
+                return self._undecodable_refusal(cam.name, sizes)
+            wrong = [(rel, size) for rel, size in sizes
+                     if isinstance(size, tuple) and size != (cam.width, cam.height)]
             if wrong:
                 return self._size_refusal(cam.name, (cam.width, cam.height), len(mine), wrong)
         return None
 
-    def _images_of_another_size(self, images: list[str],
-                                expected: tuple[int, int]) -> list[tuple[str, tuple[int, int]]]:
-        """Those of ``images`` (paths in the take) whose size is not ``expected``, with their size, in order."""
-        sizes = ((rel, image_size(self.directory / rel)) for rel in images)
-        return [(rel, size) for rel, size in sizes if size is not None and size != expected]
+    def _undecodable_refusal(self, camera: str,
+                             sizes: list[tuple[str, tuple[int, int] | RefusedLayoutError | None]],
+                             ) -> RigInitializationError:
+        """The error naming the take, ``camera``, none of whose images decode, and the first's cause: an
+        :class:`UndecodableImageError` where one is valid but of a layout this OpenCV refuses (the remedy named),
+        else a RigInitializationError naming the first file as corrupt."""
+        refused = [error for _, error in sizes if isinstance(error, RefusedLayoutError)]
+        head = (f"recording {self.directory}: camera {camera!r}: none of its {len(sizes)} images decode, "
+                f"nothing of it would play")
+        if refused:
+            return UndecodableImageError(f"{head} ({len(refused)} of a layout this OpenCV refuses; first: "
+                                         f"{refused[0]})")
+        return RigInitializationError(f"{head} (first: {self.directory / sizes[0][0]} is corrupt: OpenCV cannot "
+                                      f"decode it)")
 
     def _size_refusal(self, camera: str, expected: tuple[int, int], count: int,
                       wrong: list[tuple[str, tuple[int, int]]]) -> FrameSizeError:

@@ -35,6 +35,7 @@ from tests.odd_images import (
     bmp_built,
     isobmff_boxes,
     riff_chunk,
+    tiff_entries,
     tiff_laid_out,
     tiff_tiled,
     webp_extended,
@@ -670,6 +671,40 @@ def test_a_take_of_avifs_marked_as_turned_opens_and_plays_as_stored(tmp_path):
     assert play(take) == (3, [])
 
 
+def clean_aperture(width: int, height: int, offset: tuple[int, int]) -> bytes:
+    """An AVIF ``clap`` property box: a crop of ``width`` x ``height`` pixels, its centre ``offset`` from the
+    image's (each a fraction of 1)."""
+    return struct.pack(">I4s8i", 40, b"clap", width, 1, height, 1, offset[0], 1, offset[1], 1)
+
+
+@pytest.mark.parametrize("offset", [(0, 0), (-10, -7)])
+def test_an_avif_s_clean_aperture_is_not_applied_the_stored_image_is_read_and_measured(tmp_path, offset):
+    """OpenCV 5.0 (libavif) decodes the whole stored image, a ``clap`` crop ignored: the size measured at open is
+    the decoded one (no AVIF header reader), so a decoder applying it would change both, and a crop of another size
+    than the rig's would be refused at open, not misread (avif_header's docstring)."""
+    image = np.random.default_rng(15).integers(0, 256, (HEIGHT, WIDTH, 3), np.uint8)
+    plain = cv2.imencode(".avif", image, [cv2.IMWRITE_AVIF_QUALITY, 100])[1].tobytes()
+    path = tmp_path / "image.avif"
+    path.write_bytes(avif_with_properties(plain, [clean_aperture(20, 16, offset)]))
+    assert image_size(path) == (WIDTH, HEIGHT)
+    assert np.array_equal(load_image(path), cv2.imdecode(np.frombuffer(plain, np.uint8), cv2.IMREAD_COLOR))
+
+
+def test_a_multi_page_tiff_is_read_and_measured_from_its_first_page_whatever_its_later_pages_hold(tmp_path):
+    """OpenCV decodes a TIFF's first page (cv2.imread and cv2.imdecode alike), the page whose directory the header
+    reader, the turn reset and the cut-short check read; a later page of another size, or cut short, changes
+    nothing (tiff_header's docstring)."""
+    first = np.random.default_rng(16).integers(0, 256, (HEIGHT, WIDTH, 3), np.uint8)
+    path = tmp_path / "image.tiff"
+    assert cv2.imwritemulti(str(path), [first, np.zeros((2 * HEIGHT, 2 * WIDTH, 3), np.uint8)])
+    data = path.read_bytes()
+    for content in (data, data[:-10]):  # whole, then cut in its last page's directory
+        path.write_bytes(content)
+        assert header_size(path) == (WIDTH, HEIGHT) == image_size(path)
+        assert recording_format.payload_is_whole(path)
+        assert np.array_equal(load_image(path), first)
+
+
 def retiled(take: Path, tile: tuple[int, int]) -> list[Path]:
     """``take``'s JPEGs as uncompressed tiled TIFFs of ``tile`` (the journal naming those), in recorded order."""
     tiffs = []
@@ -698,11 +733,38 @@ def test_a_valid_tiled_tiff_opencv_refuses_from_memory_is_no_header_size_and_is_
     assert header_size(path) is None
     assert np.array_equal(load_image(path), cv2.imread(str(path), cv2.IMREAD_COLOR))
     assert image_size(path) == (40, 30)
-    monkeypatch.setattr(recording_format, "read_image_or_none", lambda path, flags: None)  # the file reader fails
-    with pytest.raises(RigOperationError, match=r"image\.tiff does not decode: it is an uncompressed tiled TIFF .*Invalid tile byte count"):
+    path.write_bytes(turned_tiff(path.read_bytes()))  # the file reader is not used: its Orientation is reset in memory
+    with pytest.raises(recording_format.RefusedLayoutError,
+                       match=r"image\.tiff does not decode: it is an uncompressed tiled TIFF .*Invalid tile byte count"
+                             r".*file reader.*not used for it: its orientation"):
         load_image(path)
-    with pytest.raises(recording_format.UndecodableImageError, match="Invalid tile byte count"):
-        image_size(path)
+    assert isinstance(image_size(path), recording_format.RefusedLayoutError)
+
+
+def turned_tiff(data: bytes) -> bytes:
+    """A TIFF's bytes with Orientation 3 (half a turn): replay decodes it from memory, its tag reset there."""
+    return tiff_laid_out(data, changed={274: (3, (3,))})
+
+
+def tiles_past_the_end(path: Path) -> None:
+    """A tiled TIFF corrupted in place: its header intact, its tiles' offsets past the end of the file."""
+    data = path.read_bytes()
+    kind, offsets = tiff_entries(data)[324]
+    path.write_bytes(tiff_laid_out(data, changed={324: (kind, tuple(o + len(data) for o in offsets))}))
+
+
+def test_a_corrupt_tiled_tiff_of_a_layout_opencv_refuses_from_memory_is_corrupt_not_a_refused_layout(tmp_path):
+    """Both OpenCV readers fail on it: its file reader was used, so the file is corrupt. It was called valid (the
+    layout's refusal, 'though the file is valid'), and its take refused at open."""
+    path = tmp_path / "image.tiff"
+    path.write_bytes(tiff_tiled(np.zeros((30, 40, 3), np.uint8), (16, 16)))
+    tiles_past_the_end(path)
+    assert cv2.imread(str(path)) is None
+    with pytest.raises(RigOperationError, match=r"image\.tiff is corrupt \(OpenCV cannot decode it, from memory nor "
+                                                r"through its file reader\)") as caught:
+        load_image(path)
+    assert not isinstance(caught.value, recording_format.RefusedLayoutError)
+    assert image_size(path) is None
 
 
 @pytest.mark.parametrize(("tile", "samples", "separate"),
@@ -723,17 +785,63 @@ def test_a_take_of_tiled_tiffs_opencv_refuses_from_memory_plays(tmp_path):
     assert play(take) == (3, [])
 
 
-def test_a_take_of_tiled_tiffs_no_reader_decodes_is_refused_at_open_naming_the_file_and_the_cause(tmp_path,
-                                                                                                   monkeypatch):
-    """Where the file reader fails too, the take is refused at open: before session 63 it opened (each size read
-    from its header) and every read was a corrupt frame: nothing played, and nothing said why."""
+def test_a_take_of_tiled_tiffs_no_reader_decodes_is_refused_at_open_naming_the_file_and_the_cause(tmp_path):
+    """Where the file reader is not used either (an Orientation to reset, in memory), none of a camera's images
+    decode, and the take is refused at open: before session 63 it opened (each size read from its header) and
+    every read was a corrupt frame: nothing played, and nothing said why."""
     take = write_take(tmp_path / "take", "jpg", frames=3)
-    first = retiled(take, (16, 16))[0]
-    monkeypatch.setattr(recording_format, "read_image_or_none", lambda path, flags: None)
+    tiffs = retiled(take, (16, 16))
+    for path in tiffs:
+        path.write_bytes(turned_tiff(path.read_bytes()))
     source = create_rig_source(f"replay://{take}?speed=free")
-    with pytest.raises(RigInitializationError, match=rf"{re.escape(str(first))}.*768 bytes, not a multiple of 1024.*Invalid tile"):
+    with pytest.raises(RigInitializationError,
+                       match=rf"camera 'left': none of its 3 images decode.*3 of a layout this OpenCV refuses; first: "
+                             rf"recording image {re.escape(str(tiffs[0]))}.*768 bytes, not a multiple of 1024"
+                             rf".*Invalid tile.*orientation"):
         source.open()
     assert isinstance(source.size_error(), recording_format.UndecodableImageError)
+
+
+@pytest.mark.parametrize("damage", [tiles_past_the_end, lambda path: path.write_bytes(turned_tiff(path.read_bytes()))],
+                         ids=["corrupt", "valid, not decoded"])
+def test_a_take_with_one_tiled_tiff_no_reader_decodes_plays_it_as_a_corrupt_frame(tmp_path, damage):
+    """One file of a layout OpenCV refuses from memory that does not decode, corrupt or valid: its frame is a
+    corrupt frame, as any other, its read naming the file (the next read goes on). The whole take was refused at
+    open (UndecodableImageError, calling a corrupt file valid)."""
+    take = write_take(tmp_path / "take", "jpg", frames=3)
+    bad = retiled(take, (16, 16))[2]
+    damage(bad)
+    pairs, errors = play(take)
+    assert pairs == 2 and len(errors) == 1
+    assert str(bad) in str(errors[0]) and not isinstance(errors[0], RigInitializationError)
+
+
+def test_a_take_whose_tiled_tiffs_are_all_corrupt_is_refused_at_open_naming_one_as_corrupt(tmp_path):
+    """Nothing of it would play: refused at open, as a take of valid images no reader decodes is, but the file
+    called corrupt (it was called valid, the remedy a rewrite of its tiles)."""
+    take = write_take(tmp_path / "take", "jpg", frames=3)
+    tiffs = retiled(take, (16, 16))
+    for path in tiffs:
+        tiles_past_the_end(path)
+    source = create_rig_source(f"replay://{take}?speed=free")
+    with pytest.raises(RigInitializationError, match=rf"camera 'left': none of its 3 images decode, nothing of it "
+                                                     rf"would play \(first: {re.escape(str(tiffs[0]))} is corrupt"):
+        source.open()
+    assert not isinstance(source.size_error(), recording_format.UndecodableImageError)
+
+
+def test_a_take_one_camera_of_which_has_no_image_that_decodes_is_refused_at_open(tmp_path):
+    """Every image of camera 'right' garbage (no header to read, nothing decodes): no pair would ever play. It
+    opened, and every read was a corrupt frame (a daemon reopened it for ever); one such image is still a
+    corrupt frame (test_a_take_with_one_tiled_tiff_no_reader_decodes_plays_it_as_a_corrupt_frame)."""
+    take = write_take(tmp_path / "take", "png", frames=3)
+    for n in range(3):
+        image_of(take, "right", n).write_bytes(b"not an image at all")
+    source = create_rig_source(f"replay://{take}?speed=free")
+    with pytest.raises(RigInitializationError, match=rf"camera 'right': none of its 3 images decode, nothing of it "
+                                                     rf"would play \(first: {re.escape(str(image_of(take, 'right', 0)))} "
+                                                     rf"is corrupt"):
+        source.open()
 
 
 def test_a_take_of_tiled_tiffs_opencv_decodes_opens_and_plays(tmp_path):
