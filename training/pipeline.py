@@ -998,9 +998,22 @@ def _scene_inputs(model, item: dict, ray_stride: int, targets=None, points_per_t
 
 def calibration_items(dataset, scenes: int) -> list[tuple[int, dict]]:
     """``(index, scene)`` of the int8 calibration: ``scenes`` evenly spaced over the training split (the quantize
-    stage's, and ``training.early_prior``'s for the same keypoint graph)."""
-    step = max(1, len(dataset) // scenes)
+    stage's, and ``training.early_prior``'s for the same keypoint graph). A split of fewer scenes than asked
+    gives all of its scenes, with a warning naming both counts: indexing past its end was an IndexError
+    traceback at the quantize stage, after the training (``--train 8`` with the 16 ``calib_scenes``)."""
+    if len(dataset) < scenes:
+        log.warning("int8 calibration: %s holds %d scene(s), fewer than the %d asked (calib_scenes): "
+                    "calibrating on all %d", _split_name(dataset), len(dataset), scenes, len(dataset))
+        scenes = len(dataset)
+    step = max(1, len(dataset) // scenes) if scenes else 1
     return [(i, dataset[i]) for i in range(0, step * scenes, step)[:scenes]]
+
+
+def _split_name(dataset) -> str:
+    """``<root>/<split>`` of a ``MultiViewDataset`` (its ``ShardedSplit``) for messages."""
+    shards = getattr(dataset, "split", None)
+    root, split = getattr(shards, "root", None), getattr(shards, "split", None)
+    return f"{root}/{split}" if root is not None and split is not None else "the calibration split"
 
 
 #: The quantize stage's calibration inputs (``training.early_prior`` calibrates its keypoint graph alike).

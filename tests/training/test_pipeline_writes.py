@@ -477,3 +477,19 @@ def test_the_card_says_which_split_calibrated_the_int8_graphs():
     assert ("int8 calibration (static QDQ activation ranges): ghnerf on 16 scenes of the `train` split (evenly "
             "spaced, `training.pipeline.calibration_items`), none of the held-out scenes scored above.") in md
     assert "baseline on" not in md
+
+
+def test_int8_calibration_on_a_split_of_fewer_scenes_than_asked_takes_them_all_and_warns(data64, caplog):
+    # `--train 8` with the default 16 calib_scenes indexed past the split's end: an IndexError traceback at the
+    # quantize stage (and in training.early_prior), after the training had run
+    from training.data.targets import TargetConfig
+    from training.data.torch_dataset import MultiViewDataset
+
+    train = MultiViewDataset(data64, "train", TargetConfig())
+    with caplog.at_level(logging.WARNING, logger="training.pipeline"):
+        items = pipeline.calibration_items(train, 16)
+    assert [i for i, _ in items] == [0, 1, 2]
+    assert f"{data64}/train holds 3 scene(s), fewer than the 16 asked (calib_scenes)" in caplog.text
+    caplog.clear()
+    assert [i for i, _ in pipeline.calibration_items(train, 2)] == [0, 1]  # enough scenes: as before, no warning
+    assert not caplog.text
