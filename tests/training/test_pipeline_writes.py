@@ -420,6 +420,29 @@ def test_the_export_cli_writes_the_checkpoints_training_padding_into_the_contrac
     assert f"{ckpt}: frame_padding:" in err and "'grey'" in err, err
 
 
+def test_the_export_cli_warns_of_a_checkpoint_whose_run_has_not_finished(tmp_path, capsys, caplog):
+    """A checkpoint of a run stopped at step 1 of 6 (Ctrl-C, ``max_minutes``) was exported without a word, its
+    graphs in the model folder as if the run had ended; a finished run's and a weights file's are not named."""
+    torch = pytest.importorskip("torch")
+    import training.export.cli as cli
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    model = GHNeRF(preset("tiny"))
+    ckpt = tmp_path / "last.pt"
+    argv = ["--preset", "tiny", "--checkpoint", str(ckpt), "--graphs", "encoder", "--out", str(tmp_path / "m")]
+    for step, warned in ((1, True), (6, False)):
+        torch.save({"model": model.state_dict(), "model_config": model.config.to_dict(), "step": step,
+                    "config": {"iterations": 6}}, ckpt)
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="training.export"):
+            assert cli.main(argv) == 0
+        said = f"{ckpt}: step 1 of its run's 6 iterations: the run has not finished" in caplog.text
+        assert said == warned, caplog.text
+    assert cli.unfinished_run_words("w.pt", {"model": {}, "step": 3}) is None  # no run recorded: nothing to say
+    capsys.readouterr()
+
+
 # ----------------------------------------------------------------------------------------- strict JSON
 def _strict(text: str):
     """``json.loads`` that refuses the bare NaN / Infinity Python writes and other readers refuse."""

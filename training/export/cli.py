@@ -128,6 +128,20 @@ def model_folder_place_problem(out: Path) -> str | None:
     return None
 
 
+def unfinished_run_words(path: str, checkpoint: object) -> str | None:
+    """What to warn of a trainer checkpoint written before its run's last step (a run stopped by Ctrl-C, a
+    SIGTERM or ``max_minutes``, or a ``ckpt_*.pt`` of a longer run); None for a finished run's or a weights file
+    that records no run. Exported without a word, its graphs sat in a model folder as if the run had ended."""
+    if not isinstance(checkpoint, dict):
+        return None
+    step, config = checkpoint.get("step"), checkpoint.get("config")
+    iterations = config.get("iterations") if isinstance(config, dict) else None
+    if not (isinstance(step, int) and isinstance(iterations, int)) or step >= iterations:
+        return None
+    return (f"{path}: step {step} of its run's {iterations} iterations: the run has not finished (`--resume` "
+            "continues it); exporting its weights as they are")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
@@ -169,6 +183,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             model, ck = load_model(args.checkpoint, default_config=preset(args.preset))
             frame_padding = trained_frame_padding(ck)  # into the contract: the runtime pads crops as trained
+            if words := unfinished_run_words(args.checkpoint, ck):
+                log.warning(words)
         except ConfigError as e:  # a damaged or foreign file, named
             print(f"python -m training.export: error: {e}", file=sys.stderr)
             return 2
