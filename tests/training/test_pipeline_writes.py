@@ -443,6 +443,37 @@ def test_the_export_cli_warns_of_a_checkpoint_whose_run_has_not_finished(tmp_pat
     capsys.readouterr()
 
 
+def test_the_export_cli_refuses_to_leave_graphs_of_other_weights_beside_its_own(tmp_path, capsys):
+    """``--graphs encoder`` of other weights into a folder holding a whole model replaced its encoder and left the
+    rest: a folder of two models, which the runtime refuses, its working encoder gone. Refused before anything is
+    written, naming the files left; the same weights' encoder goes in."""
+    torch = pytest.importorskip("torch")
+    import training.export.cli as cli
+    from training.configs import preset
+    from training.export.export import example_inputs, export_all
+    from training.model import GHNeRF
+
+    torch.manual_seed(0)
+    shipped = GHNeRF(preset("tiny")).eval()
+    out = tmp_path / "m"
+    export_all(shipped, out, graphs=("encoder", "volume"), inputs=example_inputs(shipped))
+    before = {f.name: sha256(f) for f in out.iterdir()}
+    torch.manual_seed(1)
+    other = GHNeRF(preset("tiny"))
+    for model, status in ((other, 2), (shipped, 0)):
+        ckpt = tmp_path / "w.pt"
+        torch.save({"model": model.state_dict(), "model_config": model.config.to_dict()}, ckpt)
+        argv = ["--preset", "tiny", "--checkpoint", str(ckpt), "--graphs", "encoder", "--out", str(out)]
+        assert cli.main(argv) == status
+        if status == 2:
+            err = capsys.readouterr().err
+            assert f"--out {out}: volume.onnx (weights id " in err and "would hold two models" in err, err
+            assert {f.name: sha256(f) for f in out.iterdir()} == before
+            assert not (tmp_path / "m.staging").exists()
+    assert {f.name: sha256(f) for f in out.iterdir()} == before  # the same weights: the same files
+    capsys.readouterr()
+
+
 # ----------------------------------------------------------------------------------------- strict JSON
 def _strict(text: str):
     """``json.loads`` that refuses the bare NaN / Infinity Python writes and other readers refuse."""

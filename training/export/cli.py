@@ -142,6 +142,42 @@ def unfinished_run_words(path: str, checkpoint: object) -> str | None:
             "continues it); exporting its weights as they are")
 
 
+def graph_files_left(out: Path, written: tuple[str, ...]) -> list[Path]:
+    """The graph files of ``out`` an export of the graphs ``written`` leaves in place: those of other graphs (a
+    ``--graphs`` subset, or graphs this model has not), fp32 and int8."""
+    return [out / f"{graph}{suffix}" for graph in GRAPH_NAMES if graph not in written
+            for suffix in (".onnx", ".int8.onnx") if (out / f"{graph}{suffix}").is_file()]
+
+
+def file_weights_id(path: Path) -> str | None:
+    """The weights id a graph file carries (``ghnerf.weights_id``); None when it has none or cannot be read (the
+    runtime names such a file when it loads the folder)."""
+    import onnx  # noqa: PLC0415 - with torch, after the arguments
+    from google.protobuf.message import DecodeError  # noqa: PLC0415
+
+    from ghnerf_runtime.contract import ContractError, weights_id_of  # noqa: PLC0415
+
+    try:
+        props = {p.key: p.value for p in onnx.load(str(path), load_external_data=False).metadata_props}
+        return weights_id_of(props)
+    except (OSError, DecodeError, ContractError):  # truncated, damaged: nothing to compare
+        return None
+
+
+def mixed_folder_problem(out: Path, written: tuple[str, ...], weights: str) -> str | None:
+    """Why exporting the graphs ``written`` of the weights ``weights`` into ``out`` would leave a folder of two
+    models (None: it would not): ``out`` keeps graph files of other weights beside them, which the runtime refuses
+    to load as one model; the folder's working graphs were replaced by then. Files without a weights id (exported
+    before there were ids) cannot be compared and are left to the runtime's warning."""
+    others = [(f, wid) for f in graph_files_left(out, written) if (wid := file_weights_id(f)) not in (None, weights)]
+    if not others:
+        return None
+    names = ", ".join(f.name for f, _ in others)
+    return (f"{names} (weights id {others[0][1][:16]}...) stay in {out} beside this export's "
+            f"{', '.join(written)} (weights id {weights[:16]}...): the folder would hold two models, which the "
+            "runtime refuses to load; export every graph of the model (no --graphs) or give another --out")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
@@ -198,6 +234,11 @@ def main(argv: list[str] | None = None) -> int:
     graphs = tuple(g for g in args.graphs.split(",") if g) or has
     if unknown := [g for g in graphs if g not in has]:
         ap.error(f"--graphs: {', '.join(unknown)} not among this model's graphs ({', '.join(has)})")
+    from training.export.export import weights_id  # noqa: PLC0415
+
+    if problem := mixed_folder_problem(Path(args.out), graphs, weights_id(model)):  # before anything is written
+        print(f"python -m training.export: error: --out {args.out}: {problem}", file=sys.stderr)
+        return 2
     calib_frames = None
     if args.int8 and args.calib_npz:  # checked before anything is written: a wrong file fails in a second
         try:
