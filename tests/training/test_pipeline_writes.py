@@ -474,6 +474,34 @@ def test_the_export_cli_refuses_to_leave_graphs_of_other_weights_beside_its_own(
     capsys.readouterr()
 
 
+def test_the_export_cli_warns_when_it_replaces_another_models_graphs(tmp_path, capsys, caplog):
+    """A whole export of other weights into a model's folder replaced that model with one INFO line (``moved 1
+    graph(s)``); it is now a warning naming the replaced files and both weights ids. The same weights: no word."""
+    torch = pytest.importorskip("torch")
+    import training.export.cli as cli
+    from training.configs import preset
+    from training.export.export import example_inputs, export_all, weights_id
+    from training.model import GHNeRF
+
+    torch.manual_seed(0)
+    shipped = GHNeRF(preset("tiny")).eval()
+    out = tmp_path / "m"
+    export_all(shipped, out, graphs=("encoder",), inputs=example_inputs(shipped))
+    torch.manual_seed(1)
+    other = GHNeRF(preset("tiny"))
+    for model, warned in ((shipped, False), (other, True)):
+        ckpt = tmp_path / "w.pt"
+        torch.save({"model": model.state_dict(), "model_config": model.config.to_dict()}, ckpt)
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="training.export"):
+            assert cli.main(["--preset", "tiny", "--checkpoint", str(ckpt), "--graphs", "encoder",
+                             "--out", str(out)]) == 0
+        said = (f"{out} held another model: its encoder.onnx (weights id {weights_id(shipped)[:16]}...) were "
+                f"replaced by this export's (weights id {weights_id(other)[:16]}...)") in caplog.text
+        assert said == warned, caplog.text
+    capsys.readouterr()
+
+
 # ----------------------------------------------------------------------------------------- strict JSON
 def _strict(text: str):
     """``json.loads`` that refuses the bare NaN / Infinity Python writes and other readers refuse."""

@@ -178,6 +178,13 @@ def mixed_folder_problem(out: Path, written: tuple[str, ...], weights: str) -> s
             "runtime refuses to load; export every graph of the model (no --graphs) or give another --out")
 
 
+def other_weights_replaced(out: Path, written: tuple[str, ...], weights: str) -> list[tuple[Path, str]]:
+    """The graph files of ``out`` this export replaces (or drops, their int8) that hold other weights than
+    ``weights``, with their ids: another model, which the move replaces with no more than an INFO line."""
+    files = [out / f"{graph}{suffix}" for graph in written for suffix in (".onnx", ".int8.onnx")]
+    return [(f, wid) for f in files if f.is_file() and (wid := file_weights_id(f)) not in (None, weights)]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
@@ -236,9 +243,11 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--graphs: {', '.join(unknown)} not among this model's graphs ({', '.join(has)})")
     from training.export.export import weights_id  # noqa: PLC0415
 
-    if problem := mixed_folder_problem(Path(args.out), graphs, weights_id(model)):  # before anything is written
+    weights = weights_id(model)
+    if problem := mixed_folder_problem(Path(args.out), graphs, weights):  # before anything is written
         print(f"python -m training.export: error: --out {args.out}: {problem}", file=sys.stderr)
         return 2
+    replacing = other_weights_replaced(Path(args.out), graphs, weights)  # said once they are replaced
     calib_frames = None
     if args.int8 and args.calib_npz:  # checked before anything is written: a wrong file fails in a second
         try:
@@ -264,6 +273,9 @@ def main(argv: list[str] | None = None) -> int:
     removed = drop_stale_int8(out, fp32)
     move_into(staging, out, [*fp32.values(), *int8.values()], removed)
     log.info("moved %d graph(s) into %s", len(fp32) + len(int8), out)
+    if replacing:
+        log.warning("%s held another model: its %s (weights id %s...) were replaced by this export's (weights id "
+                    "%s...)", out, ", ".join(f.name for f, _ in replacing), replacing[0][1][:16], weights[:16])
     return 0
 
 
