@@ -829,11 +829,20 @@ SKIP_HINT = "passed over: --resume tries the next older ckpt_*.pt"
 READ_HINT = "give another checkpoint (a run's last.pt or ckpt_*.pt, or a model folder's <variant>.pt)"
 
 
+#: ... and about a damaged last.pt of a run with no ckpt_*.pt (a short run, or one whose checkpoint_every its
+#: steps never reached): RESUME_HINT's "the newest ckpt_*.pt" named files that were not there.
+RESUME_FROM_NOTHING_HINT = ("the run has no ckpt_*.pt to go back to: restore last.pt from a copy, or delete it "
+                            "and --resume starts the run again from step 0")
+
+
 def load_checkpoint(path: str | Path, map_location="cpu", hint: str = RESUME_HINT) -> dict:
-    """``torch.load`` of a checkpoint; a damaged file is a ``ConfigError`` naming it, with ``hint``."""
+    """``torch.load`` of a checkpoint; a damaged file is a ``ConfigError`` naming it, with ``hint`` (the
+    default, :data:`RESUME_HINT`, only where the folder holds a ``ckpt_*.pt`` to go back to)."""
     try:
         return torch.load(str(path), map_location=map_location, weights_only=False)
     except Exception as e:  # torch's zip reader, pickle, EOF...
+        if hint is RESUME_HINT and not _step_checkpoints(Path(path).parent):
+            hint = RESUME_FROM_NOTHING_HINT
         raise ConfigError(f"{path}: unreadable checkpoint ({type(e).__name__}: {error_words(e)}); {hint}") from e
 
 

@@ -263,6 +263,23 @@ def test_resume_refuses_another_config_and_names_a_damaged_checkpoint(data64, tm
         train(tiny_cfg(data64), tmp_path / "r", resume=True, quiet=True)
 
 
+def test_a_damaged_last_pt_of_a_run_without_step_checkpoints_is_not_sent_to_a_ckpt_that_is_not_there(tmp_path):
+    # a run shorter than checkpoint_every has last.pt alone: the advice "delete it (--resume then continues from
+    # the newest ckpt_*.pt)" named files that were not there, and deleting it started the run again from step 0
+    from training.model.config import ConfigError
+    from training.train import load_checkpoint
+
+    last = tmp_path / "last.pt"
+    last.write_bytes(b"PK\x03\x04 torn")
+    with pytest.raises(ConfigError, match=r"last.pt: unreadable checkpoint .*; the run has no ckpt_\*\.pt to go "
+                                          r"back to: restore last.pt from a copy, or delete it and --resume starts "
+                                          r"the run again from step 0"):
+        load_checkpoint(last)
+    (tmp_path / "ckpt_0000100.pt").write_bytes(b"")
+    with pytest.raises(ConfigError, match=r"delete it \(--resume then continues from the newest ckpt_\*\.pt\)"):
+        load_checkpoint(last)
+
+
 def test_an_unreadable_checkpoint_is_named_with_torchs_words_cut_after_a_sentence(tmp_path):
     """torch's text was cut at 200 characters, mid-sentence: "...there is a high likelihood that your checkpoint
     file is)". It now ends after the last sentence that fits, and still names the file."""
