@@ -40,6 +40,9 @@ if TYPE_CHECKING:  # torch and the modules on it load in main, after the argumen
 
 log = logging.getLogger("training.export")
 
+#: Random calibration frames without --calib-frames (and without --calib-npz, whose file gives its own).
+DEFAULT_CALIB_FRAMES = 8
+
 #: Per-graph timing scenarios: (graph, label, targets, ray stride, points); targets 2 = the two sources.
 SCENARIOS = (
     ("encoder", "S=2", 2, None, 0),
@@ -97,8 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"ONNX opset of the graphs, {MIN_OPSET} to {MAX_OPSET} (training.export.opsets; default "
                          f"{DEFAULT_OPSET})")
     ap.add_argument("--int8", action="store_true", help="also write static int8 QDQ graphs")
-    ap.add_argument("--calib-frames", type=int, default=8,
-                    help=f"random calibration frames (no --calib-npz), at least {MIN_FRAMES} (default 8)")
+    ap.add_argument("--calib-frames", type=int, default=None,
+                    help=f"random calibration frames (no --calib-npz), at least {MIN_FRAMES} (default "
+                         f"{DEFAULT_CALIB_FRAMES})")
     ap.add_argument("--calib-npz", help="npz with images (F, 2, 3, H, W) float RGB in [0, 1] at the model's "
                     f"resolution, at least {MIN_FRAMES} frame pairs, no view uniform (checked before the export)")
     ap.add_argument("--bench", action="store_true", help="time every graph (fp32 and int8)")
@@ -194,7 +198,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--opset: {problem}, got {args.opset}")
     if args.threads < 1:
         ap.error(f"--threads: must be at least 1, got {args.threads}")
-    if args.calib_frames < MIN_FRAMES:  # the floor --calib-npz has: one or two frames' ranges are one scene's
+    if args.calib_frames is not None and args.calib_frames < MIN_FRAMES:  # the floor --calib-npz has: one or two
+        # frames' ranges are one scene's
         ap.error(f"--calib-frames: must be at least {MIN_FRAMES} (calibration.MIN_FRAMES, as for --calib-npz), "
                  f"got {args.calib_frames}")
     if Path(args.out).exists() and not Path(args.out).is_dir():
@@ -203,6 +208,13 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--out {args.out}: {problem}")
     if args.calib_npz and not args.int8:  # calibration frames are only read for int8: ignoring them misleads
         ap.error("--calib-npz calibrates the int8 graphs: give --int8 with it")
+    if args.calib_frames is not None and not args.int8:
+        ap.error("--calib-frames counts the int8 graphs' random calibration frames: give --int8 with it")
+    if args.calib_frames is not None and args.calib_npz:  # the file's frames were taken, all of them, without a word
+        ap.error(f"--calib-frames {args.calib_frames} counts random calibration frames, which --calib-npz replaces "
+                 "with every frame pair of its file: give one of them")
+    if args.calib_frames is None:
+        args.calib_frames = DEFAULT_CALIB_FRAMES
     if args.report:  # written after the export, parity, int8 and timings: its place is settled first
         args.report = ready_output_arg(ap, args.report, "--report")
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
