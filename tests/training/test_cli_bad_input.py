@@ -217,3 +217,15 @@ def test_fill_net_device_cuda_without_a_gpu_is_a_usage_error(tmp_path, capsys, m
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     rc, err = run(main, ["score", "--val-cache", "v.npz", "--net", "n.pt", "--device", "cuda"], capsys)
     assert rc == 2 and "--device cuda: torch sees no GPU" in one_error_line(err)
+
+
+def test_generate_without_a_scene_count_is_a_usage_error_that_writes_nothing(tmp_path, capsys):
+    # every count is 0 by default: `--out DATA` alone wrote an empty dataset.json ("nan bytes/sample", exit 0), and
+    # the trainer then said the folder had no 'train' split
+    from training.data.generate import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["--out", str(tmp_path / "data"), "--res", "64"])
+    assert e.value.code == 2 and "nothing to generate: give a scene count, --train, --val or --val-seen-motions" \
+        in capsys.readouterr().err
+    assert not (tmp_path / "data").exists()
