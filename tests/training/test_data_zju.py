@@ -265,6 +265,17 @@ def test_keypoints_of_another_skeleton_are_refused_by_their_joint_count(tmp_path
                                   kp)
 
 
+def test_a_split_of_another_view_count_names_both_layouts(tmp_path, subject):
+    # was "holds a dataset of another resolution or view count", naming neither
+    out = tmp_path / "d"
+    convert_zju(subject[0], out, ZjuConfig(resolution=RES, view_sets=((0, 1),)), split="two")
+    with pytest.raises(DatasetError, match=r"holds 64 px scenes of 2 views \(resolution, view_names\); this "
+                                           r"conversion makes 64 px scenes of 4 views \(--res, --view-set\)") as err:
+        convert_zju(subject[0], out, ZjuConfig(resolution=RES, view_sets=((0, 3, 1, 2),)), split="four")
+    assert err.value.path == str(out / "dataset.json")
+    assert sorted(ShardedSplit(out, "two").manifest["splits"]) == ["two"]
+
+
 def test_a_failed_reconversion_leaves_the_previous_split_whole(tmp_path, subject):
     import shutil
 

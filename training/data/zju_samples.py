@@ -316,13 +316,21 @@ def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, spli
         return _convert(seq, subject, out, config, split, shard_size)
 
 
+def another_layout_words(manifest: dict, config: ZjuConfig) -> str:
+    """Why a dataset folder cannot take this conversion's split, with both values: every split of a folder has one
+    resolution and one set of views (the trainer and the evaluation read any split with the folder's)."""
+    had, want = (manifest["resolution"], len(manifest["view_names"])), (config.resolution, len(config.view_names))
+    return (f"holds {had[0]} px scenes of {had[1]} views (resolution, view_names); this conversion makes {want[0]} px "
+            f"scenes of {want[1]} views (--res, --view-set): convert into another --out, or with the folder's")
+
+
 def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig, split: str,
              shard_size: int) -> int:
     source_config = {"zju": config.to_json()}
     if (out / MANIFEST).exists():
         manifest = read_manifest(out)
         if manifest["resolution"] != config.resolution or manifest["view_names"] != list(config.view_names):
-            raise DatasetError(out / MANIFEST, "holds a dataset of another resolution or view count")
+            raise DatasetError(out / MANIFEST, another_layout_words(manifest, config))
     else:
         manifest = new_manifest(resolution=config.resolution, view_names=config.view_names, source="zju",
                                 source_config=source_config)
