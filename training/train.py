@@ -933,12 +933,26 @@ def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[st
 RESUME_KEYS = ("model", "optimizer", "step", "config", "rng")
 
 
+def other_tools_checkpoint(ck: Mapping, keys: tuple[str, ...]) -> str | None:
+    """What ``ck`` is when it is the other trainer's resumable checkpoint (``keys``: the resuming tool's
+    :data:`RESUME_KEYS`): the two tools' run folders both hold a ``last.pt``, and one given to the other was called
+    "a weights-only file", with the advice to restore a ``ckpt_*.pt`` the pretraining never writes."""
+    if "model" in keys and "human" in ck and "optimizer" in ck and "model" not in ck:
+        return "a human-encoder pretraining checkpoint (python -m training.pretrain_human's)"
+    if "human" in keys and all(k in ck for k in RESUME_KEYS):
+        return "a training checkpoint of the whole model (ghnerf-train's)"
+    return None
+
+
 def require_resume_keys(ck: Any, path: Path, keys: tuple[str, ...] = RESUME_KEYS) -> None:
     """Refuse a checkpoint ``--resume`` cannot continue from, naming the ``keys`` it lacks."""
     if not isinstance(ck, Mapping):
         raise ConfigError(f"{path}: not a training checkpoint (a {type(ck).__name__}, not a mapping); "
                           "start a new run (another --out)")
     missing = [k for k in keys if k not in ck]
+    if missing and (kind := other_tools_checkpoint(ck, keys)):  # a run folder of the other trainer: say which
+        raise ConfigError(f"{path}: {kind}, which this tool's --resume cannot continue; resume it with the tool that "
+                          "made it, or give this run another --out")
     if missing:
         raise ConfigError(f"{path}: not a training checkpoint --resume can continue from: no "
                           f"{', '.join(missing)} (a weights-only file?); restore one of the run's ckpt_*.pt as "
