@@ -63,7 +63,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable, NamedTuple
+from typing import Any, Callable, Mapping, NamedTuple
 
 from training.model_card import write_atomic  # stamps and requests whole: half a one would stop every later run
 from training.run_lock import lock_holder
@@ -793,6 +793,16 @@ def pretrain_inputs(cfg: PipelineConfig, variant: str) -> dict:
 
     pc = config_from_train_config(train_inputs(cfg, VARIANTS[variant]), cfg.pretrain_overrides)
     return json.loads(json.dumps(asdict(pc)))
+
+
+def pretrain_scene_problem(cfg: PipelineConfig, pretrain: Mapping) -> str | None:
+    """Why the pretraining ``pretrain`` (:func:`pretrain_inputs`) cannot run on the train split ``cfg`` makes
+    (None: it can): each step reads ``scenes_per_step`` scenes of it. ``--train 3`` under the cpu recipe's 4 was
+    refused by the pretrain stage, after the data stage."""
+    if pretrain.get("split") != "train" or cfg.train >= pretrain["scenes_per_step"]:
+        return None
+    return (f"--train {cfg.train}: fewer scenes than the pretraining's scenes_per_step {pretrain['scenes_per_step']} "
+            "(each of its steps reads that many train scenes); give more, or --pretrain-set scenes_per_step=N")
 
 
 def _pretrain_config_matches(cfg: PipelineConfig, variant: str) -> bool:
@@ -1854,8 +1864,8 @@ def main(argv: list[str] | None = None) -> int:
         # bad value was found by the train or pretrain stage, after the dataset (an hour on two cores) was made
         for variant in cfg.variants:
             train_inputs(cfg, VARIANTS[variant])
-            if pretrain_block(cfg, variant):
-                pretrain_inputs(cfg, variant)
+            if pretrain_block(cfg, variant) and (problem := pretrain_scene_problem(cfg, pretrain_inputs(cfg, variant))):
+                ap.error(problem)
     except ConfigError as e:
         ap.error(str(e))
 

@@ -157,6 +157,10 @@ def test_painter_export_names_a_missing_net_or_cache_before_writing(tmp_path, ca
     (["--set", "lr=-1"], "lr: must be a positive number, got -1"),
     (["--pretrain-set", "lr=-1"], "pretrain_human.lr: must be a finite number > 0, got -1"),
     (["--pretrain-set", "loader_workers=-2"], "pretrain_human.loader_workers: must be >= 0, got -2"),
+    # session 64: refused by the pretrain stage, after the dataset was made
+    (["--train", "3", "--pretrain-set", "scenes_per_step=4"],
+     "--train 3: fewer scenes than the pretraining's scenes_per_step 4 (each of its steps reads that many train "
+     "scenes)"),
 ])
 def test_pipeline_refuses_out_of_range_numbers_before_any_stage(tmp_path, capsys, monkeypatch, more, says):
     """These were used hours in (the eval limit, the export's threads) or raised a traceback from the dataset's
