@@ -368,6 +368,14 @@ def setup_distributed(device_kind: str) -> DistInfo:
     return DistInfo(dist.get_rank(), dist.get_world_size(), int(os.environ.get("LOCAL_RANK", "0")))
 
 
+def require_cuda_if_asked(kind: str) -> None:
+    """``device: "cuda"`` on a host where torch sees no GPU is a config error (the pretraining's too): it was torch's
+    RuntimeError traceback from ``torch.cuda.set_device`` (exit 1), the pretraining's after ``config.json``."""
+    if kind == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("device: 'cuda', but torch sees no CUDA GPU here (torch.cuda.is_available() is False); "
+                          "use 'auto' or 'cpu'")
+
+
 def pick_device(kind: str, info: DistInfo) -> torch.device:
     if kind == "cuda" or (kind == "auto" and torch.cuda.is_available()):
         torch.cuda.set_device(info.local_rank)
@@ -776,6 +784,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
         raise ConfigError(f"{out_dir}: is a file; --out names the run folder")
     if not resume:
         refuse_existing_run(out_dir)  # before config.json is overwritten with the new one
+    require_cuda_if_asked(cfg.device)
     device_kind = "cuda" if cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available()) else "cpu"
     info = setup_distributed(device_kind)
     device = pick_device(cfg.device, info)

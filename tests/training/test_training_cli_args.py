@@ -414,3 +414,21 @@ def test_the_opset_range_is_what_torch_exports():
 
     assert MIN_OPSET <= DEFAULT_OPSET <= MAX_OPSET
     assert _constants.ONNX_MIN_OPSET <= MIN_OPSET and MAX_OPSET <= _constants.ONNX_TORCHSCRIPT_EXPORTER_MAX_OPSET
+
+
+@pytest.mark.parametrize("module", ["training.train", "training.pretrain_human"])
+def test_device_cuda_without_a_gpu_is_a_config_error_before_the_run_folder(data64, tmp_path, capsys, monkeypatch,
+                                                                           module):
+    # was torch's RuntimeError traceback (exit 1): the trainer's from torch.cuda.set_device, the pretraining's
+    # when the model moved to the GPU, after its config.json was written
+    import importlib
+
+    torch = pytest.importorskip("torch")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    tool = importlib.import_module(module)
+    out = tmp_path / "run"
+    rc = tool.main(["--data", str(data64), "--out", str(out), "--set", 'preset="tiny"', "--set", 'device="cuda"',
+                    "--iterations", "1", "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "device: 'cuda', but torch sees no CUDA GPU here" in err and "Traceback" not in err, err
+    assert not out.exists()
