@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -263,6 +264,20 @@ def test_keypoints_of_another_skeleton_are_refused_by_their_joint_count(tmp_path
         parse_keypoints2d_json({"annots": [{"keypoints": np.vstack([kp, kp[:1]]).tolist()}]}, root / "kp.json")
     np.testing.assert_array_equal(parse_keypoints2d_json({"annots": [{"keypoints": kp.tolist()}]}, root / "kp.json"),
                                   kp)
+
+
+def test_frames_that_select_no_frame_are_refused_and_the_split_kept(tmp_path, subject):
+    # a --frames range past the subject's end (a copy of fewer frames than thought) converted 0 samples, exit 0,
+    # and replaced the converted split with an empty one
+    out = tmp_path / "d"
+    convert_zju(subject[0], out, ZjuConfig(resolution=RES, view_sets=((0, 1),)), split="s")
+    before = {p.name: p.read_bytes() for p in (out / "s").rglob("*") if p.is_file()}
+    for frames in ((100, 200, 1), (2, -1, 1), (1, 1, 1)):
+        with pytest.raises(DataConfigError, match=r"ZjuConfig.frames: selects none of the 2 frames in .* \(0 to 1\), "
+                                                  r"got " + re.escape(str(frames))):
+            convert_zju(subject[0], out, ZjuConfig(resolution=RES, view_sets=((0, 1),), frames=frames), split="s")
+    assert len(ShardedSplit(out, "s")) == 2
+    assert {p.name: p.read_bytes() for p in (out / "s").rglob("*") if p.is_file()} == before
 
 
 def test_a_split_of_another_view_count_names_both_layouts(tmp_path, subject):

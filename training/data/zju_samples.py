@@ -309,6 +309,9 @@ def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, spli
         if max(view_set) >= seq.num_cameras:
             raise DataConfigError("ZjuConfig.view_sets", f"camera {max(view_set)} does not exist "
                                                          f"({seq.num_cameras} cameras in {seq.root})")
+    if not config.frame_indices(seq.num_frames):  # an empty split replaced a converted one, exit 0
+        raise DataConfigError("ZjuConfig.frames", f"selects none of the {seq.num_frames} frames in {seq.root} "
+                                                  f"(0 to {seq.num_frames - 1}), got {config.frames}")
     check_folders(seq, config)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
