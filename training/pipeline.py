@@ -63,7 +63,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable, NamedTuple
+from typing import Any, Callable, Mapping, NamedTuple
 
 from training.model_card import write_atomic  # stamps and requests whole: half a one would stop every later run
 from training.run_lock import lock_holder
@@ -795,6 +795,16 @@ def pretrain_inputs(cfg: PipelineConfig, variant: str) -> dict:
     return json.loads(json.dumps(asdict(pc)))
 
 
+def pretrain_scene_problem(cfg: PipelineConfig, pretrain: Mapping) -> str | None:
+    """Why the pretraining ``pretrain`` (:func:`pretrain_inputs`) cannot run on the train split ``cfg`` makes
+    (None: it can): each step reads ``scenes_per_step`` scenes of it. ``--train 3`` under the cpu recipe's 4 was
+    refused by the pretrain stage, after the data stage."""
+    if pretrain.get("split") != "train" or cfg.train >= pretrain["scenes_per_step"]:
+        return None
+    return (f"--train {cfg.train}: fewer scenes than the pretraining's scenes_per_step {pretrain['scenes_per_step']} "
+            "(each of its steps reads that many train scenes); give more, or --pretrain-set scenes_per_step=N")
+
+
 def _pretrain_config_matches(cfg: PipelineConfig, variant: str) -> bool:
     """The pretraining folder's ``config.json`` has this pipeline's settings (runtime keys aside)."""
     from training.pretrain_human import PretrainConfig
@@ -998,9 +1008,22 @@ def _scene_inputs(model, item: dict, ray_stride: int, targets=None, points_per_t
 
 def calibration_items(dataset, scenes: int) -> list[tuple[int, dict]]:
     """``(index, scene)`` of the int8 calibration: ``scenes`` evenly spaced over the training split (the quantize
-    stage's, and ``training.early_prior``'s for the same keypoint graph)."""
-    step = max(1, len(dataset) // scenes)
+    stage's, and ``training.early_prior``'s for the same keypoint graph). A split of fewer scenes than asked
+    gives all of its scenes, with a warning naming both counts: indexing past its end was an IndexError
+    traceback at the quantize stage, after the training (``--train 8`` with the 16 ``calib_scenes``)."""
+    if len(dataset) < scenes:
+        log.warning("int8 calibration: %s holds %d scene(s), fewer than the %d asked (calib_scenes): "
+                    "calibrating on all %d", _split_name(dataset), len(dataset), scenes, len(dataset))
+        scenes = len(dataset)
+    step = max(1, len(dataset) // scenes) if scenes else 1
     return [(i, dataset[i]) for i in range(0, step * scenes, step)[:scenes]]
+
+
+def _split_name(dataset) -> str:
+    """``<root>/<split>`` of a ``MultiViewDataset`` (its ``ShardedSplit``) for messages."""
+    shards = getattr(dataset, "split", None)
+    root, split = getattr(shards, "root", None), getattr(shards, "split", None)
+    return f"{root}/{split}" if root is not None and split is not None else "the calibration split"
 
 
 #: The quantize stage's calibration inputs (``training.early_prior`` calibrates its keypoint graph alike).
@@ -1841,8 +1864,8 @@ def main(argv: list[str] | None = None) -> int:
         # bad value was found by the train or pretrain stage, after the dataset (an hour on two cores) was made
         for variant in cfg.variants:
             train_inputs(cfg, VARIANTS[variant])
-            if pretrain_block(cfg, variant):
-                pretrain_inputs(cfg, variant)
+            if pretrain_block(cfg, variant) and (problem := pretrain_scene_problem(cfg, pretrain_inputs(cfg, variant))):
+                ap.error(problem)
     except ConfigError as e:
         ap.error(str(e))
 

@@ -368,6 +368,14 @@ def setup_distributed(device_kind: str) -> DistInfo:
     return DistInfo(dist.get_rank(), dist.get_world_size(), int(os.environ.get("LOCAL_RANK", "0")))
 
 
+def require_cuda_if_asked(kind: str) -> None:
+    """``device: "cuda"`` on a host where torch sees no GPU is a config error (the pretraining's too): it was torch's
+    RuntimeError traceback from ``torch.cuda.set_device`` (exit 1), the pretraining's after ``config.json``."""
+    if kind == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("device: 'cuda', but torch sees no CUDA GPU here (torch.cuda.is_available() is False); "
+                          "use 'auto' or 'cpu'")
+
+
 def pick_device(kind: str, info: DistInfo) -> torch.device:
     if kind == "cuda" or (kind == "auto" and torch.cuda.is_available()):
         torch.cuda.set_device(info.local_rank)
@@ -776,6 +784,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
         raise ConfigError(f"{out_dir}: is a file; --out names the run folder")
     if not resume:
         refuse_existing_run(out_dir)  # before config.json is overwritten with the new one
+    require_cuda_if_asked(cfg.device)
     device_kind = "cuda" if cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available()) else "cpu"
     info = setup_distributed(device_kind)
     device = pick_device(cfg.device, info)
@@ -829,11 +838,20 @@ SKIP_HINT = "passed over: --resume tries the next older ckpt_*.pt"
 READ_HINT = "give another checkpoint (a run's last.pt or ckpt_*.pt, or a model folder's <variant>.pt)"
 
 
+#: ... and about a damaged last.pt of a run with no ckpt_*.pt (a short run, or one whose checkpoint_every its
+#: steps never reached): RESUME_HINT's "the newest ckpt_*.pt" named files that were not there.
+RESUME_FROM_NOTHING_HINT = ("the run has no ckpt_*.pt to go back to: restore last.pt from a copy, or delete it "
+                            "and --resume starts the run again from step 0")
+
+
 def load_checkpoint(path: str | Path, map_location="cpu", hint: str = RESUME_HINT) -> dict:
-    """``torch.load`` of a checkpoint; a damaged file is a ``ConfigError`` naming it, with ``hint``."""
+    """``torch.load`` of a checkpoint; a damaged file is a ``ConfigError`` naming it, with ``hint`` (the
+    default, :data:`RESUME_HINT`, only where the folder holds a ``ckpt_*.pt`` to go back to)."""
     try:
         return torch.load(str(path), map_location=map_location, weights_only=False)
     except Exception as e:  # torch's zip reader, pickle, EOF...
+        if hint is RESUME_HINT and not _step_checkpoints(Path(path).parent):
+            hint = RESUME_FROM_NOTHING_HINT
         raise ConfigError(f"{path}: unreadable checkpoint ({type(e).__name__}: {error_words(e)}); {hint}") from e
 
 
@@ -924,12 +942,26 @@ def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[st
 RESUME_KEYS = ("model", "optimizer", "step", "config", "rng")
 
 
+def other_tools_checkpoint(ck: Mapping, keys: tuple[str, ...]) -> str | None:
+    """What ``ck`` is when it is the other trainer's resumable checkpoint (``keys``: the resuming tool's
+    :data:`RESUME_KEYS`): the two tools' run folders both hold a ``last.pt``, and one given to the other was called
+    "a weights-only file", with the advice to restore a ``ckpt_*.pt`` the pretraining never writes."""
+    if "model" in keys and "human" in ck and "optimizer" in ck and "model" not in ck:
+        return "a human-encoder pretraining checkpoint (python -m training.pretrain_human's)"
+    if "human" in keys and all(k in ck for k in RESUME_KEYS):
+        return "a training checkpoint of the whole model (ghnerf-train's)"
+    return None
+
+
 def require_resume_keys(ck: Any, path: Path, keys: tuple[str, ...] = RESUME_KEYS) -> None:
     """Refuse a checkpoint ``--resume`` cannot continue from, naming the ``keys`` it lacks."""
     if not isinstance(ck, Mapping):
         raise ConfigError(f"{path}: not a training checkpoint (a {type(ck).__name__}, not a mapping); "
                           "start a new run (another --out)")
     missing = [k for k in keys if k not in ck]
+    if missing and (kind := other_tools_checkpoint(ck, keys)):  # a run folder of the other trainer: say which
+        raise ConfigError(f"{path}: {kind}, which this tool's --resume cannot continue; resume it with the tool that "
+                          "made it, or give this run another --out")
     if missing:
         raise ConfigError(f"{path}: not a training checkpoint --resume can continue from: no "
                           f"{', '.join(missing)} (a weights-only file?); restore one of the run's ckpt_*.pt as "

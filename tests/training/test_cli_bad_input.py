@@ -157,6 +157,10 @@ def test_painter_export_names_a_missing_net_or_cache_before_writing(tmp_path, ca
     (["--set", "lr=-1"], "lr: must be a positive number, got -1"),
     (["--pretrain-set", "lr=-1"], "pretrain_human.lr: must be a finite number > 0, got -1"),
     (["--pretrain-set", "loader_workers=-2"], "pretrain_human.loader_workers: must be >= 0, got -2"),
+    # session 64: refused by the pretrain stage, after the dataset was made
+    (["--train", "3", "--pretrain-set", "scenes_per_step=4"],
+     "--train 3: fewer scenes than the pretraining's scenes_per_step 4 (each of its steps reads that many train "
+     "scenes)"),
 ])
 def test_pipeline_refuses_out_of_range_numbers_before_any_stage(tmp_path, capsys, monkeypatch, more, says):
     """These were used hours in (the eval limit, the export's threads) or raised a traceback from the dataset's
@@ -217,3 +221,15 @@ def test_fill_net_device_cuda_without_a_gpu_is_a_usage_error(tmp_path, capsys, m
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     rc, err = run(main, ["score", "--val-cache", "v.npz", "--net", "n.pt", "--device", "cuda"], capsys)
     assert rc == 2 and "--device cuda: torch sees no GPU" in one_error_line(err)
+
+
+def test_generate_without_a_scene_count_is_a_usage_error_that_writes_nothing(tmp_path, capsys):
+    # every count is 0 by default: `--out DATA` alone wrote an empty dataset.json ("nan bytes/sample", exit 0), and
+    # the trainer then said the folder had no 'train' split
+    from training.data.generate import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["--out", str(tmp_path / "data"), "--res", "64"])
+    assert e.value.code == 2 and "nothing to generate: give a scene count, --train, --val or --val-seen-motions" \
+        in capsys.readouterr().err
+    assert not (tmp_path / "data").exists()

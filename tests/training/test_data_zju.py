@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -236,6 +237,58 @@ def test_malformed_keypoint_entries_name_the_file(tmp_path, subject):
 
         with pytest.raises(DatasetError, match=match):
             parse_keypoints2d_json(data, bad_2d)
+
+
+def test_keypoints_of_another_skeleton_are_refused_by_their_joint_count(tmp_path, subject):
+    # more than 25 joints were cut to their first 25 without a word: Halpe's 26 (COCO's order first) or an OpenPose
+    # BODY_135 file read as BODY_25; EasyMocap's bodyhand (67) and bodyhandface (137) begin with BODY_25's joints
+    import shutil
+
+    from training.data.zju import parse_keypoints2d_json
+
+    root = tmp_path / "s"
+    shutil.copytree(subject[0], root)
+    path = root / "keypoints3d" / "000001.json"
+    body = json.loads(path.read_text())[0]["keypoints3d"]
+    path.write_text(json.dumps([{"id": 0, "keypoints3d": body + [[0.0, 0.0, 0.0, 1.0]]}]))
+    with pytest.raises(DatasetError, match=r"keypoints3d must be \(25, 4\) BODY_25 .* got \(26, 4\)") as err:
+        ZjuSequence(root).joints_3d(1)
+    assert err.value.path == str(path)
+    path.write_text(json.dumps([{"id": 0, "keypoints3d": body + [[0.0, 0.0, 0.0, 1.0]] * 42}]))
+    np.testing.assert_array_equal(ZjuSequence(root).joints_3d(1), np.asarray(body))  # bodyhand: its body
+    kp = subject[2][0].kpts2d[0]
+    with pytest.raises(DatasetError, match="pose_keypoints_2d has 405 values, expected 75"):
+        parse_keypoints2d_json({"people": [{"pose_keypoints_2d": np.tile(kp, (6, 1))[:135].ravel().tolist()}]},
+                               root / "kp.json")
+    with pytest.raises(DatasetError, match=r"keypoints must be \(25, 3\) BODY_25 .* got \(26, 3\)"):
+        parse_keypoints2d_json({"annots": [{"keypoints": np.vstack([kp, kp[:1]]).tolist()}]}, root / "kp.json")
+    np.testing.assert_array_equal(parse_keypoints2d_json({"annots": [{"keypoints": kp.tolist()}]}, root / "kp.json"),
+                                  kp)
+
+
+def test_frames_that_select_no_frame_are_refused_and_the_split_kept(tmp_path, subject):
+    # a --frames range past the subject's end (a copy of fewer frames than thought) converted 0 samples, exit 0,
+    # and replaced the converted split with an empty one
+    out = tmp_path / "d"
+    convert_zju(subject[0], out, ZjuConfig(resolution=RES, view_sets=((0, 1),)), split="s")
+    before = {p.name: p.read_bytes() for p in (out / "s").rglob("*") if p.is_file()}
+    for frames in ((100, 200, 1), (2, -1, 1), (1, 1, 1)):
+        with pytest.raises(DataConfigError, match=r"ZjuConfig.frames: selects none of the 2 frames in .* \(0 to 1\), "
+                                                  r"got " + re.escape(str(frames))):
+            convert_zju(subject[0], out, ZjuConfig(resolution=RES, view_sets=((0, 1),), frames=frames), split="s")
+    assert len(ShardedSplit(out, "s")) == 2
+    assert {p.name: p.read_bytes() for p in (out / "s").rglob("*") if p.is_file()} == before
+
+
+def test_a_split_of_another_view_count_names_both_layouts(tmp_path, subject):
+    # was "holds a dataset of another resolution or view count", naming neither
+    out = tmp_path / "d"
+    convert_zju(subject[0], out, ZjuConfig(resolution=RES, view_sets=((0, 1),)), split="two")
+    with pytest.raises(DatasetError, match=r"holds 64 px scenes of 2 views \(resolution, view_names\); this "
+                                           r"conversion makes 64 px scenes of 4 views \(--res, --view-set\)") as err:
+        convert_zju(subject[0], out, ZjuConfig(resolution=RES, view_sets=((0, 3, 1, 2),)), split="four")
+    assert err.value.path == str(out / "dataset.json")
+    assert sorted(ShardedSplit(out, "two").manifest["splits"]) == ["two"]
 
 
 def test_a_failed_reconversion_leaves_the_previous_split_whole(tmp_path, subject):

@@ -420,6 +420,88 @@ def test_the_export_cli_writes_the_checkpoints_training_padding_into_the_contrac
     assert f"{ckpt}: frame_padding:" in err and "'grey'" in err, err
 
 
+def test_the_export_cli_warns_of_a_checkpoint_whose_run_has_not_finished(tmp_path, capsys, caplog):
+    """A checkpoint of a run stopped at step 1 of 6 (Ctrl-C, ``max_minutes``) was exported without a word, its
+    graphs in the model folder as if the run had ended; a finished run's and a weights file's are not named."""
+    torch = pytest.importorskip("torch")
+    import training.export.cli as cli
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    model = GHNeRF(preset("tiny"))
+    ckpt = tmp_path / "last.pt"
+    argv = ["--preset", "tiny", "--checkpoint", str(ckpt), "--graphs", "encoder", "--out", str(tmp_path / "m")]
+    for step, warned in ((1, True), (6, False)):
+        torch.save({"model": model.state_dict(), "model_config": model.config.to_dict(), "step": step,
+                    "config": {"iterations": 6}}, ckpt)
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="training.export"):
+            assert cli.main(argv) == 0
+        said = f"{ckpt}: step 1 of its run's 6 iterations: the run has not finished" in caplog.text
+        assert said == warned, caplog.text
+    assert cli.unfinished_run_words("w.pt", {"model": {}, "step": 3}) is None  # no run recorded: nothing to say
+    capsys.readouterr()
+
+
+def test_the_export_cli_refuses_to_leave_graphs_of_other_weights_beside_its_own(tmp_path, capsys):
+    """``--graphs encoder`` of other weights into a folder holding a whole model replaced its encoder and left the
+    rest: a folder of two models, which the runtime refuses, its working encoder gone. Refused before anything is
+    written, naming the files left; the same weights' encoder goes in."""
+    torch = pytest.importorskip("torch")
+    import training.export.cli as cli
+    from training.configs import preset
+    from training.export.export import example_inputs, export_all
+    from training.model import GHNeRF
+
+    torch.manual_seed(0)
+    shipped = GHNeRF(preset("tiny")).eval()
+    out = tmp_path / "m"
+    export_all(shipped, out, graphs=("encoder", "volume"), inputs=example_inputs(shipped))
+    before = {f.name: sha256(f) for f in out.iterdir()}
+    torch.manual_seed(1)
+    other = GHNeRF(preset("tiny"))
+    for model, status in ((other, 2), (shipped, 0)):
+        ckpt = tmp_path / "w.pt"
+        torch.save({"model": model.state_dict(), "model_config": model.config.to_dict()}, ckpt)
+        argv = ["--preset", "tiny", "--checkpoint", str(ckpt), "--graphs", "encoder", "--out", str(out)]
+        assert cli.main(argv) == status
+        if status == 2:
+            err = capsys.readouterr().err
+            assert f"--out {out}: volume.onnx (weights id " in err and "would hold two models" in err, err
+            assert {f.name: sha256(f) for f in out.iterdir()} == before
+            assert not (tmp_path / "m.staging").exists()
+    assert {f.name: sha256(f) for f in out.iterdir()} == before  # the same weights: the same files
+    capsys.readouterr()
+
+
+def test_the_export_cli_warns_when_it_replaces_another_models_graphs(tmp_path, capsys, caplog):
+    """A whole export of other weights into a model's folder replaced that model with one INFO line (``moved 1
+    graph(s)``); it is now a warning naming the replaced files and both weights ids. The same weights: no word."""
+    torch = pytest.importorskip("torch")
+    import training.export.cli as cli
+    from training.configs import preset
+    from training.export.export import example_inputs, export_all, weights_id
+    from training.model import GHNeRF
+
+    torch.manual_seed(0)
+    shipped = GHNeRF(preset("tiny")).eval()
+    out = tmp_path / "m"
+    export_all(shipped, out, graphs=("encoder",), inputs=example_inputs(shipped))
+    torch.manual_seed(1)
+    other = GHNeRF(preset("tiny"))
+    for model, warned in ((shipped, False), (other, True)):
+        ckpt = tmp_path / "w.pt"
+        torch.save({"model": model.state_dict(), "model_config": model.config.to_dict()}, ckpt)
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="training.export"):
+            assert cli.main(["--preset", "tiny", "--checkpoint", str(ckpt), "--graphs", "encoder",
+                             "--out", str(out)]) == 0
+        said = (f"{out} held another model: its encoder.onnx (weights id {weights_id(shipped)[:16]}...) were "
+                f"replaced by this export's (weights id {weights_id(other)[:16]}...)") in caplog.text
+        assert said == warned, caplog.text
+    capsys.readouterr()
+
+
 # ----------------------------------------------------------------------------------------- strict JSON
 def _strict(text: str):
     """``json.loads`` that refuses the bare NaN / Infinity Python writes and other readers refuse."""
@@ -477,3 +559,19 @@ def test_the_card_says_which_split_calibrated_the_int8_graphs():
     assert ("int8 calibration (static QDQ activation ranges): ghnerf on 16 scenes of the `train` split (evenly "
             "spaced, `training.pipeline.calibration_items`), none of the held-out scenes scored above.") in md
     assert "baseline on" not in md
+
+
+def test_int8_calibration_on_a_split_of_fewer_scenes_than_asked_takes_them_all_and_warns(data64, caplog):
+    # `--train 8` with the default 16 calib_scenes indexed past the split's end: an IndexError traceback at the
+    # quantize stage (and in training.early_prior), after the training had run
+    from training.data.targets import TargetConfig
+    from training.data.torch_dataset import MultiViewDataset
+
+    train = MultiViewDataset(data64, "train", TargetConfig())
+    with caplog.at_level(logging.WARNING, logger="training.pipeline"):
+        items = pipeline.calibration_items(train, 16)
+    assert [i for i, _ in items] == [0, 1, 2]
+    assert f"{data64}/train holds 3 scene(s), fewer than the 16 asked (calib_scenes)" in caplog.text
+    caplog.clear()
+    assert [i for i, _ in pipeline.calibration_items(train, 2)] == [0, 1]  # enough scenes: as before, no warning
+    assert not caplog.text

@@ -263,6 +263,44 @@ def test_resume_refuses_another_config_and_names_a_damaged_checkpoint(data64, tm
         train(tiny_cfg(data64), tmp_path / "r", resume=True, quiet=True)
 
 
+def test_a_damaged_last_pt_of_a_run_without_step_checkpoints_is_not_sent_to_a_ckpt_that_is_not_there(tmp_path):
+    # a run shorter than checkpoint_every has last.pt alone: the advice "delete it (--resume then continues from
+    # the newest ckpt_*.pt)" named files that were not there, and deleting it started the run again from step 0
+    from training.model.config import ConfigError
+    from training.train import load_checkpoint
+
+    last = tmp_path / "last.pt"
+    last.write_bytes(b"PK\x03\x04 torn")
+    with pytest.raises(ConfigError, match=r"last.pt: unreadable checkpoint .*; the run has no ckpt_\*\.pt to go "
+                                          r"back to: restore last.pt from a copy, or delete it and --resume starts "
+                                          r"the run again from step 0"):
+        load_checkpoint(last)
+    (tmp_path / "ckpt_0000100.pt").write_bytes(b"")
+    with pytest.raises(ConfigError, match=r"delete it \(--resume then continues from the newest ckpt_\*\.pt\)"):
+        load_checkpoint(last)
+
+
+def test_resuming_the_other_trainers_run_folder_names_which_tool_made_it(tmp_path):
+    # both tools keep a last.pt: each called the other's "a weights-only file?" and sent the user to a ckpt_*.pt
+    # (which the pretraining never writes)
+    from training.model.config import ConfigError
+    from training.pretrain_human import RESUME_KEYS as PRETRAIN_KEYS
+    from training.train import RESUME_KEYS, require_resume_keys
+
+    pretraining = {"human": {}, "optimizer": {}, "step": 2, "config": {}, "model_config": {}}
+    joint = {"model": {}, "optimizer": {}, "step": 2, "config": {}, "model_config": {}, "rng": {}, "extra": {}}
+    last = tmp_path / "last.pt"
+    with pytest.raises(ConfigError, match=r"last.pt: a human-encoder pretraining checkpoint \(python -m "
+                                          r"training.pretrain_human's\), which this tool's --resume cannot continue"):
+        require_resume_keys(pretraining, last, RESUME_KEYS)
+    with pytest.raises(ConfigError, match=r"last.pt: a training checkpoint of the whole model \(ghnerf-train's\)"):
+        require_resume_keys(joint, last, PRETRAIN_KEYS)
+    with pytest.raises(ConfigError, match=r"no optimizer, step, config, rng \(a weights-only file\?\)"):
+        require_resume_keys({"model": {}, "model_config": {}}, last, RESUME_KEYS)  # make model's <variant>.pt
+    require_resume_keys(joint, last, RESUME_KEYS)
+    require_resume_keys(pretraining, last, PRETRAIN_KEYS)
+
+
 def test_an_unreadable_checkpoint_is_named_with_torchs_words_cut_after_a_sentence(tmp_path):
     """torch's text was cut at 200 characters, mid-sentence: "...there is a high likelihood that your checkpoint
     file is)". It now ends after the last sentence that fits, and still names the file."""

@@ -342,6 +342,12 @@ def test_a_sigterm_stops_training_as_ctrl_c_does_with_143_and_how_to_resume(tmp_
                                              f"as for --calib-npz), got {n}") for n in (1, MIN_FRAMES - 1)],
     # MIN_FRAMES itself passes that check and reaches the next one
     (["--calib-frames", str(MIN_FRAMES), "--calib-npz", "x.npz"], "--calib-npz calibrates the int8 graphs"),
+    # session 64: a file of 4 frame pairs calibrated on 4 where 16 were asked, without a word; and fp32 alone
+    # ignored the count
+    (["--int8", "--calib-frames", "16", "--calib-npz", "x.npz"],
+     "--calib-frames 16 counts random calibration frames, which --calib-npz replaces with every frame pair of its "
+     "file: give one of them"),
+    (["--calib-frames", "16"], "--calib-frames counts the int8 graphs' random calibration frames: give --int8"),
     (["--out", "AFILE"], "is a file; give the model folder"),  # was mkdir's FileExistsError
     # was "Unsupported onnx_opset_version: 3" (or grid_sampler unsupported below 16) after loading the model
     (["--opset", "3"], "--opset: must be 16 to 20 (GridSample needs 16; torch's exporter stops at 20), got 3"),
@@ -408,3 +414,21 @@ def test_the_opset_range_is_what_torch_exports():
 
     assert MIN_OPSET <= DEFAULT_OPSET <= MAX_OPSET
     assert _constants.ONNX_MIN_OPSET <= MIN_OPSET and MAX_OPSET <= _constants.ONNX_TORCHSCRIPT_EXPORTER_MAX_OPSET
+
+
+@pytest.mark.parametrize("module", ["training.train", "training.pretrain_human"])
+def test_device_cuda_without_a_gpu_is_a_config_error_before_the_run_folder(data64, tmp_path, capsys, monkeypatch,
+                                                                           module):
+    # was torch's RuntimeError traceback (exit 1): the trainer's from torch.cuda.set_device, the pretraining's
+    # when the model moved to the GPU, after its config.json was written
+    import importlib
+
+    torch = pytest.importorskip("torch")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    tool = importlib.import_module(module)
+    out = tmp_path / "run"
+    rc = tool.main(["--data", str(data64), "--out", str(out), "--set", 'preset="tiny"', "--set", 'device="cuda"',
+                    "--iterations", "1", "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "device: 'cuda', but torch sees no CUDA GPU here" in err and "Traceback" not in err, err
+    assert not out.exists()

@@ -274,7 +274,12 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if not (args.train or args.val or args.val_seen_motions):  # each is 0 by default: `--out DATA` alone wrote an
+        # empty dataset.json, exit 0, which the trainer then called a dataset without a 'train' split
+        parser.error("nothing to generate: give a scene count, --train, --val or --val-seen-motions (each 0 by "
+                     "default)")
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
     try:
         config = SyntheticConfig(resolution=args.res, novel_views=args.novel_views, supersample=args.supersample,

@@ -123,6 +123,16 @@ def parse_cameras(annots: dict, path: Path) -> list[tuple[np.ndarray, np.ndarray
     return out
 
 
+#: Joint counts of the EasyMocap skeletons whose first 25 joints are BODY_25's, in its order: body25, bodyhand
+#: (+ 2 x 21 hand joints) and bodyhandface (+ 70 face points). Any other count is another skeleton (Halpe's 26,
+#: SMPL-X's 55, COCO-WholeBody's 133: COCO's order first), whose first 25 joints were read as BODY_25's.
+BODY25_FIRST_COUNTS = (NUM_JOINTS, NUM_JOINTS + 42, NUM_JOINTS + 42 + 70)
+
+
+def _body25_first(count: int) -> bool:
+    return count in BODY25_FIRST_COUNTS
+
+
 def _read_json(path: Path):
     try:
         return json.loads(path.read_text())
@@ -139,8 +149,9 @@ def parse_keypoints2d_json(data, path: Path) -> np.ndarray | None:
         if not people:
             return None
         flat = _numeric(people[0].get("pose_keypoints_2d", []), path, "people[0].pose_keypoints_2d")
-        if flat.size < 3 * NUM_JOINTS:
-            raise DatasetError(path, f"pose_keypoints_2d has {flat.size} values, expected {3 * NUM_JOINTS} (BODY_25)")
+        if flat.size != 3 * NUM_JOINTS:  # OpenPose keeps hands and face apart: 405 values are BODY_135's
+            raise DatasetError(path, f"pose_keypoints_2d has {flat.size} values, expected {3 * NUM_JOINTS} (BODY_25 "
+                                     "x, y, confidence)")
         return flat[: 3 * NUM_JOINTS].reshape(NUM_JOINTS, 3)
     persons = data.get("annots") if isinstance(data, dict) else data
     if not isinstance(persons, list):
@@ -150,8 +161,9 @@ def parse_keypoints2d_json(data, path: Path) -> np.ndarray | None:
     if not isinstance(persons[0], dict):
         raise DatasetError(path, f"person 0 must be an object with 'keypoints', got {persons[0]!r:.80}")
     kp = _numeric(persons[0].get("keypoints", persons[0].get("keypoints2d", [])), path, "annots[0].keypoints")
-    if kp.ndim != 2 or kp.shape[0] < NUM_JOINTS or kp.shape[1] < 3:
-        raise DatasetError(path, f"keypoints must be (25, 3) BODY_25 x, y, confidence, got {kp.shape}")
+    if kp.ndim != 2 or not _body25_first(kp.shape[0]) or kp.shape[1] < 3:
+        raise DatasetError(path, f"keypoints must be (25, 3) BODY_25 x, y, confidence (or EasyMocap's "
+                                 f"{BODY25_FIRST_COUNTS[1:]} joints with hands, face), got {kp.shape}")
     return kp[:NUM_JOINTS, :3]
 
 
@@ -322,8 +334,9 @@ class ZjuSequence:
         if not isinstance(data[0], dict):
             raise DatasetError(path, f"person 0 must be an {{'id', 'keypoints3d'}} object, got {data[0]!r:.80}")
         kp = _numeric(data[0].get("keypoints3d", []), path, "[0].keypoints3d")
-        if kp.ndim != 2 or kp.shape[0] < NUM_JOINTS or kp.shape[1] not in (3, 4):
-            raise DatasetError(path, f"keypoints3d must be (25, 4) x, y, z, confidence, got {kp.shape}")
+        if kp.ndim != 2 or not _body25_first(kp.shape[0]) or kp.shape[1] not in (3, 4):
+            raise DatasetError(path, f"keypoints3d must be (25, 4) BODY_25 x, y, z, confidence (or EasyMocap's "
+                                     f"{BODY25_FIRST_COUNTS[1:]} joints with hands, face), got {kp.shape}")
         if kp.shape[1] == 3:
             kp = np.concatenate([kp, np.ones((len(kp), 1))], axis=1)
         return kp[:NUM_JOINTS]

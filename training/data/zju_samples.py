@@ -309,11 +309,22 @@ def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, spli
         if max(view_set) >= seq.num_cameras:
             raise DataConfigError("ZjuConfig.view_sets", f"camera {max(view_set)} does not exist "
                                                          f"({seq.num_cameras} cameras in {seq.root})")
+    if not config.frame_indices(seq.num_frames):  # an empty split replaced a converted one, exit 0
+        raise DataConfigError("ZjuConfig.frames", f"selects none of the {seq.num_frames} frames in {seq.root} "
+                                                  f"(0 to {seq.num_frames - 1}), got {config.frames}")
     check_folders(seq, config)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     with writer_lock(out):  # one writer per folder: two conversions at once would drop a split's entry
         return _convert(seq, subject, out, config, split, shard_size)
+
+
+def another_layout_words(manifest: dict, config: ZjuConfig) -> str:
+    """Why a dataset folder cannot take this conversion's split, with both values: every split of a folder has one
+    resolution and one set of views (the trainer and the evaluation read any split with the folder's)."""
+    had, want = (manifest["resolution"], len(manifest["view_names"])), (config.resolution, len(config.view_names))
+    return (f"holds {had[0]} px scenes of {had[1]} views (resolution, view_names); this conversion makes {want[0]} px "
+            f"scenes of {want[1]} views (--res, --view-set): convert into another --out, or with the folder's")
 
 
 def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig, split: str,
@@ -322,7 +333,7 @@ def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig
     if (out / MANIFEST).exists():
         manifest = read_manifest(out)
         if manifest["resolution"] != config.resolution or manifest["view_names"] != list(config.view_names):
-            raise DatasetError(out / MANIFEST, "holds a dataset of another resolution or view count")
+            raise DatasetError(out / MANIFEST, another_layout_words(manifest, config))
     else:
         manifest = new_manifest(resolution=config.resolution, view_names=config.view_names, source="zju",
                                 source_config=source_config)

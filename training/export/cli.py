@@ -40,6 +40,9 @@ if TYPE_CHECKING:  # torch and the modules on it load in main, after the argumen
 
 log = logging.getLogger("training.export")
 
+#: Random calibration frames without --calib-frames (and without --calib-npz, whose file gives its own).
+DEFAULT_CALIB_FRAMES = 8
+
 #: Per-graph timing scenarios: (graph, label, targets, ray stride, points); targets 2 = the two sources.
 SCENARIOS = (
     ("encoder", "S=2", 2, None, 0),
@@ -97,8 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"ONNX opset of the graphs, {MIN_OPSET} to {MAX_OPSET} (training.export.opsets; default "
                          f"{DEFAULT_OPSET})")
     ap.add_argument("--int8", action="store_true", help="also write static int8 QDQ graphs")
-    ap.add_argument("--calib-frames", type=int, default=8,
-                    help=f"random calibration frames (no --calib-npz), at least {MIN_FRAMES} (default 8)")
+    ap.add_argument("--calib-frames", type=int, default=None,
+                    help=f"random calibration frames (no --calib-npz), at least {MIN_FRAMES} (default "
+                         f"{DEFAULT_CALIB_FRAMES})")
     ap.add_argument("--calib-npz", help="npz with images (F, 2, 3, H, W) float RGB in [0, 1] at the model's "
                     f"resolution, at least {MIN_FRAMES} frame pairs, no view uniform (checked before the export)")
     ap.add_argument("--bench", action="store_true", help="time every graph (fp32 and int8)")
@@ -128,6 +132,63 @@ def model_folder_place_problem(out: Path) -> str | None:
     return None
 
 
+def unfinished_run_words(path: str, checkpoint: object) -> str | None:
+    """What to warn of a trainer checkpoint written before its run's last step (a run stopped by Ctrl-C, a
+    SIGTERM or ``max_minutes``, or a ``ckpt_*.pt`` of a longer run); None for a finished run's or a weights file
+    that records no run. Exported without a word, its graphs sat in a model folder as if the run had ended."""
+    if not isinstance(checkpoint, dict):
+        return None
+    step, config = checkpoint.get("step"), checkpoint.get("config")
+    iterations = config.get("iterations") if isinstance(config, dict) else None
+    if not (isinstance(step, int) and isinstance(iterations, int)) or step >= iterations:
+        return None
+    return (f"{path}: step {step} of its run's {iterations} iterations: the run has not finished (`--resume` "
+            "continues it); exporting its weights as they are")
+
+
+def graph_files_left(out: Path, written: tuple[str, ...]) -> list[Path]:
+    """The graph files of ``out`` an export of the graphs ``written`` leaves in place: those of other graphs (a
+    ``--graphs`` subset, or graphs this model has not), fp32 and int8."""
+    return [out / f"{graph}{suffix}" for graph in GRAPH_NAMES if graph not in written
+            for suffix in (".onnx", ".int8.onnx") if (out / f"{graph}{suffix}").is_file()]
+
+
+def file_weights_id(path: Path) -> str | None:
+    """The weights id a graph file carries (``ghnerf.weights_id``); None when it has none or cannot be read (the
+    runtime names such a file when it loads the folder)."""
+    import onnx  # noqa: PLC0415 - with torch, after the arguments
+    from google.protobuf.message import DecodeError  # noqa: PLC0415
+
+    from ghnerf_runtime.contract import ContractError, weights_id_of  # noqa: PLC0415
+
+    try:
+        props = {p.key: p.value for p in onnx.load(str(path), load_external_data=False).metadata_props}
+        return weights_id_of(props)
+    except (OSError, DecodeError, ContractError):  # truncated, damaged: nothing to compare
+        return None
+
+
+def mixed_folder_problem(out: Path, written: tuple[str, ...], weights: str) -> str | None:
+    """Why exporting the graphs ``written`` of the weights ``weights`` into ``out`` would leave a folder of two
+    models (None: it would not): ``out`` keeps graph files of other weights beside them, which the runtime refuses
+    to load as one model; the folder's working graphs were replaced by then. Files without a weights id (exported
+    before there were ids) cannot be compared and are left to the runtime's warning."""
+    others = [(f, wid) for f in graph_files_left(out, written) if (wid := file_weights_id(f)) not in (None, weights)]
+    if not others:
+        return None
+    names = ", ".join(f.name for f, _ in others)
+    return (f"{names} (weights id {others[0][1][:16]}...) stay in {out} beside this export's "
+            f"{', '.join(written)} (weights id {weights[:16]}...): the folder would hold two models, which the "
+            "runtime refuses to load; export every graph of the model (no --graphs) or give another --out")
+
+
+def other_weights_replaced(out: Path, written: tuple[str, ...], weights: str) -> list[tuple[Path, str]]:
+    """The graph files of ``out`` this export replaces (or drops, their int8) that hold other weights than
+    ``weights``, with their ids: another model, which the move replaces with no more than an INFO line."""
+    files = [out / f"{graph}{suffix}" for graph in written for suffix in (".onnx", ".int8.onnx")]
+    return [(f, wid) for f in files if f.is_file() and (wid := file_weights_id(f)) not in (None, weights)]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
@@ -137,7 +198,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--opset: {problem}, got {args.opset}")
     if args.threads < 1:
         ap.error(f"--threads: must be at least 1, got {args.threads}")
-    if args.calib_frames < MIN_FRAMES:  # the floor --calib-npz has: one or two frames' ranges are one scene's
+    if args.calib_frames is not None and args.calib_frames < MIN_FRAMES:  # the floor --calib-npz has: one or two
+        # frames' ranges are one scene's
         ap.error(f"--calib-frames: must be at least {MIN_FRAMES} (calibration.MIN_FRAMES, as for --calib-npz), "
                  f"got {args.calib_frames}")
     if Path(args.out).exists() and not Path(args.out).is_dir():
@@ -146,6 +208,13 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--out {args.out}: {problem}")
     if args.calib_npz and not args.int8:  # calibration frames are only read for int8: ignoring them misleads
         ap.error("--calib-npz calibrates the int8 graphs: give --int8 with it")
+    if args.calib_frames is not None and not args.int8:
+        ap.error("--calib-frames counts the int8 graphs' random calibration frames: give --int8 with it")
+    if args.calib_frames is not None and args.calib_npz:  # the file's frames were taken, all of them, without a word
+        ap.error(f"--calib-frames {args.calib_frames} counts random calibration frames, which --calib-npz replaces "
+                 "with every frame pair of its file: give one of them")
+    if args.calib_frames is None:
+        args.calib_frames = DEFAULT_CALIB_FRAMES
     if args.report:  # written after the export, parity, int8 and timings: its place is settled first
         args.report = ready_output_arg(ap, args.report, "--report")
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
@@ -169,6 +238,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             model, ck = load_model(args.checkpoint, default_config=preset(args.preset))
             frame_padding = trained_frame_padding(ck)  # into the contract: the runtime pads crops as trained
+            if words := unfinished_run_words(args.checkpoint, ck):
+                log.warning(words)
         except ConfigError as e:  # a damaged or foreign file, named
             print(f"python -m training.export: error: {e}", file=sys.stderr)
             return 2
@@ -182,6 +253,13 @@ def main(argv: list[str] | None = None) -> int:
     graphs = tuple(g for g in args.graphs.split(",") if g) or has
     if unknown := [g for g in graphs if g not in has]:
         ap.error(f"--graphs: {', '.join(unknown)} not among this model's graphs ({', '.join(has)})")
+    from training.export.export import weights_id  # noqa: PLC0415
+
+    weights = weights_id(model)
+    if problem := mixed_folder_problem(Path(args.out), graphs, weights):  # before anything is written
+        print(f"python -m training.export: error: --out {args.out}: {problem}", file=sys.stderr)
+        return 2
+    replacing = other_weights_replaced(Path(args.out), graphs, weights)  # said once they are replaced
     calib_frames = None
     if args.int8 and args.calib_npz:  # checked before anything is written: a wrong file fails in a second
         try:
@@ -207,6 +285,9 @@ def main(argv: list[str] | None = None) -> int:
     removed = drop_stale_int8(out, fp32)
     move_into(staging, out, [*fp32.values(), *int8.values()], removed)
     log.info("moved %d graph(s) into %s", len(fp32) + len(int8), out)
+    if replacing:
+        log.warning("%s held another model: its %s (weights id %s...) were replaced by this export's (weights id "
+                    "%s...)", out, ", ".join(f.name for f, _ in replacing), replacing[0][1][:16], weights[:16])
     return 0
 
 
