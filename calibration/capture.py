@@ -25,7 +25,7 @@ import cv2
 from calibration.board import BoardSpec
 from calibration.detect import BoardDetector, BoardView, board_mismatch, mirrored_corners, mirrored_words
 from calibration.errors import BoardError, CaptureError
-from ghnerf_runtime.image_files import read_image_or_none
+from ghnerf_runtime.image_files import read_image_or_none, tiff_compression_refusal
 from ghnerf_runtime.rig_file import write_text_atomic
 
 __all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
@@ -206,7 +206,7 @@ def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[s
             # black for a 10- or 12-bit camera's frame (the detector scales it: detect.grey8)
             image = read_image_or_none(path, READ_GREY)
             if image is None:
-                raise CaptureError(f"{path}: not a readable image")
+                raise CaptureError(f"{path}: not a readable image{_why_unreadable(path)}")
             try:
                 view = detector.detect(image)
             except (BoardError, CaptureError) as e:
@@ -218,6 +218,13 @@ def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[s
         if not views[camera]:
             _name_board_mismatch(board, [images[n] for n in missed[camera]])
     return views, missed
+
+
+def _why_unreadable(path: Path) -> str:
+    """Why an image that did not decode does not, where its header says: a TIFF of a compression OpenCV does not
+    decode (most such were read as black images, the board "not found")."""
+    compression = tiff_compression_refusal(path)
+    return "" if compression is None else f": it is {compression}"
 
 
 #: A camera that found the board in none of its images: this many of them (spread over the capture) are tried

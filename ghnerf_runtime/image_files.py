@@ -18,6 +18,11 @@ applies neither, a later decoder might.
 beyond its limits (CV_IO_MAX_IMAGE_WIDTH/HEIGHT/PIXELS: a corrupt or hostile BMP, for one): each caller's error
 naming the file was skipped for a traceback naming none. replay:// reads its files' bytes itself
 (``drivers.backends.recording_format.load_image``) and decodes them with :func:`decode_image_or_none`.
+
+A TIFF whose compression OpenCV does not decode is None too, told from its header (``ghnerf_runtime.
+tiff_compression``): for most such values (JPEG 2000's 34712, any unregistered one) OpenCV returned an image of
+the stored size holding zeros, an all-black frame, having only logged libtiff's error;
+:func:`tiff_compression_refusal` says why.
 """
 from __future__ import annotations
 
@@ -28,11 +33,11 @@ from typing import BinaryIO
 import cv2
 import numpy as np
 
-from ghnerf_runtime import avif_header, tiff_header
+from ghnerf_runtime import avif_header, tiff_compression, tiff_header
 from ghnerf_runtime.path_check import is_utf8
 
 __all__ = ["AS_STORED", "decode_image_or_none", "decoded_from_memory_because", "read_image_or_none",
-           "samples_not_8_bit"]
+           "samples_not_8_bit", "tiff_compression_refusal"]
 
 #: The decode flag that keeps an image's pixels as stored (IMREAD_UNCHANGED never turns them anyway), a JPEG's,
 #: PNG's or WebP's EXIF orientation ignored; a TIFF's Orientation tag and an AVIF's irot and imir need more
@@ -47,8 +52,7 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
     the bytes must be decoded from memory, the read of the rest."""
     try:
         with open(path, "rb") as f:
-            if _decodes_to_8_bits(flags) and _tiff_header_samples_wider_than(f, 16):
-                # OpenCV fails on it too, printing libtiff's "Sorry, can not handle images with 32-bit samples"
+            if _tiff_header_refuses(f, flags):
                 return None
             f.seek(0)
             resets = _turn_resets(f)
@@ -66,6 +70,45 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
 def _decodes_to_8_bits(flags: int) -> bool:
     """Whether a read with ``flags`` makes 8-bit samples (IMREAD_COLOR, IMREAD_GRAYSCALE), not the file's own."""
     return flags != cv2.IMREAD_UNCHANGED and not flags & cv2.IMREAD_ANYDEPTH
+
+
+def _tiff_header_refuses(f: BinaryIO, flags: int) -> bool:
+    """Whether ``f`` (at its start) is a TIFF that OpenCV does not decode with ``flags``, told from its first
+    directory: its compression (:func:`_tiff_compression_refusal`; for most such, OpenCV delivered zeros), or
+    samples of more than 16 bits read as 8 (OpenCV fails on those too, printing libtiff's "Sorry, can not handle
+    images with 32-bit samples"). False for another format, or a header that cannot be read."""
+    if f.read(4) not in tiff_header.LAYOUTS:
+        return False  # a JPEG or PNG: nothing more read
+    f.seek(0)
+    if _tiff_compression_refusal(f) is not None:
+        return True
+    f.seek(0)
+    return _decodes_to_8_bits(flags) and _tiff_header_samples_wider_than(f, 16)
+
+
+def _tiff_compression_refusal(f: BinaryIO) -> str | None:
+    """Why ``f`` (at its start) is a TIFF that OpenCV does not decode: its first directory's one Compression
+    value, where ``ghnerf_runtime.tiff_compression`` says it is not decoded; None for another format, another
+    compression, none given (uncompressed), or one of several values or a header that cannot be read (libtiff
+    refuses the file: OpenCV returns None)."""
+    layout = tiff_header.LAYOUTS.get(f.read(4))
+    entries = None if layout is None else tiff_header.first_directory(f, layout,
+                                                                      frozenset({tiff_header.COMPRESSION}))
+    compression = (entries or {}).get(tiff_header.COMPRESSION)
+    if compression is None or len(compression.values) != 1:
+        return None
+    return tiff_compression.refusal(compression.values[0])
+
+
+def tiff_compression_refusal(path: str | os.PathLike) -> str | None:
+    """Why :func:`read_image_or_none` and :func:`decode_image_or_none` give None for ``path``, where it is a TIFF
+    of a compression OpenCV does not decode: e.g. "a TIFF of Compression 34712 (JPEG 2000), which OpenCV 5.0.0's
+    libtiff does not decode: ..."; None for another image, or a file that cannot be opened."""
+    try:
+        with open(path, "rb") as f:
+            return _tiff_compression_refusal(f)
+    except (OSError, ValueError):  # ValueError: a NUL byte in the path
+        return None
 
 
 def _tiff_header_samples_wider_than(f: BinaryIO, bits: int) -> bool:
@@ -118,11 +161,15 @@ def _opencv_can_take(path: str | os.PathLike) -> bool:
 
 def decode_image_or_none(data: np.ndarray, flags: int) -> np.ndarray | None:
     """``cv2.imdecode(data, flags)`` (``data`` a file's bytes as uint8) as stored, as :func:`read_image_or_none`
-    reads a file; None where OpenCV cannot decode it, a size beyond its limits included."""
-    if (_decodes_to_8_bits(flags) and data[:4].tobytes() in tiff_header.LAYOUTS
-            and _tiff_header_samples_wider_than(io.BytesIO(data.tobytes()), 16)):
-        return None  # as read_image_or_none: OpenCV fails on it too, and prints libtiff's complaint
-    return _decoded_with(data, _turn_resets_in(data), flags)
+    reads a file; None where OpenCV cannot decode it, a size beyond its limits included. Only a TIFF's header is
+    read (once copied, for its refusals and its turn reset); a JPEG's or PNG's bytes go to OpenCV as they are."""
+    if data[:4].tobytes() not in tiff_header.LAYOUTS:
+        return _decoded_with(data, _turn_resets_in(data), flags)
+    tiff = io.BytesIO(data.tobytes())
+    if _tiff_header_refuses(tiff, flags):
+        return None  # as read_image_or_none
+    tiff.seek(0)
+    return _decoded_with(data, _turn_resets(tiff), flags)
 
 
 def _decoded_with(data: np.ndarray, resets: list[tuple[int, bytes]], flags: int) -> np.ndarray | None:

@@ -38,6 +38,7 @@ from ghnerf_runtime.image_files import (
     decoded_from_memory_because,
     read_image_or_none,
     samples_not_8_bit,
+    tiff_compression_refusal,
 )
 from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
@@ -589,8 +590,9 @@ _DECODE_FLAGS = cv2.IMREAD_COLOR
 
 
 class RefusedLayoutError(RigOperationError):
-    """A recorded image that is valid, but of a layout this OpenCV does not decode from memory
-    (:func:`tiff_decoding_refusal`), which its file reader cannot be given either (:func:`load_image`); raised by
+    """A recorded image that is valid, but of a layout this OpenCV does not decode: a TIFF of a compression it
+    does not decode (``ghnerf_runtime.tiff_compression``), or one it does not decode from memory
+    (:func:`tiff_decoding_refusal`) which its file reader cannot be given either (:func:`load_image`); raised by
     its read, a corrupt frame as any image that does not decode, its message naming the cause and the remedy."""
 
 
@@ -599,7 +601,8 @@ def load_image(path: Path) -> np.ndarray:
     ``ghnerf_runtime.image_files.decode_image_or_none``).
 
     Raises:
-        RefusedLayoutError: a valid image this OpenCV does not decode (:func:`_read_from_the_file`).
+        RefusedLayoutError: a valid image this OpenCV does not decode (:func:`_read_from_the_file`), or a TIFF
+            of a compression it does not decode (before session 64's review, an all-black frame for most).
         RigOperationError: naming the file when it is missing or cannot be decoded.
     """
     try:
@@ -611,6 +614,9 @@ def load_image(path: Path) -> np.ndarray:
         refusal = tiff_decoding_refusal(path)  # read only for one that failed
         if refusal is not None:
             return _read_from_the_file(path, refusal)
+        compression = tiff_compression_refusal(path)
+        if compression is not None:
+            raise RefusedLayoutError(f"recording image {path} does not decode: it is {compression}")
         samples = samples_not_8_bit(path)  # a valid float TIFF was called corrupt
         if samples is not None:
             raise RigOperationError(f"recording image {path} does not decode: it has {samples}")
@@ -679,8 +685,10 @@ _TIFF_UNCOMPRESSED = 1
 #: is valid.
 _LIBTIFF_READ_BUFFER_STEP = 1024
 _TIFF_BITS_DECODED = frozenset({8, 16})
-#: The TIFF compressions this OpenCV build decodes (none, LZW, JPEG, Adobe and old deflate, PackBits): another one
-#: (CCITT fax, LZMA, ...) is decoded to tell, as a BMP layout OpenCV does not read is.
+#: The TIFF compressions whose header gives the size, those cv2.imwrite writes (none, LZW, JPEG, Adobe and old
+#: deflate, PackBits): another one that OpenCV decodes (CCITT fax, ...; ghnerf_runtime.tiff_compression.DECODED)
+#: is decoded to tell, as a BMP layout OpenCV does not read is, and one it does not decode has no size (its read
+#: names the compression: load_image).
 _TIFF_COMPRESSIONS = frozenset({1, 5, 7, 8, 32946, 32773})
 #: A VP8X chunk's animation flag; the chunks holding a WebP's image; a VP8 key frame's start code; VP8L's signature.
 _WEBP_ANIMATED = 0x02

@@ -100,6 +100,18 @@ def test_a_view_whose_header_is_beyond_opencv_s_size_limits_is_named_as_unreadab
     assert earlier_size(tmp_path / "left") is None  # ghcal capture --append: an unreadable one is the solve's to name
 
 
+def test_a_view_of_a_compression_opencv_does_not_decode_is_named_not_a_black_image(tmp_path):
+    # a JPEG 2000 TIFF (Compression 34712) was read as an image of zeros: the board "not found" in it
+    data = cv2.imencode(".tiff", np.full((30, 40), 200, np.uint8), [cv2.IMWRITE_TIFF_COMPRESSION, 1])[1].tobytes()
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+        (tmp_path / cam / "000.tiff").write_bytes(tiff_laid_out(data, changed={259: (3, (34712,))}))
+    with pytest.raises(CaptureError, match=r"000.tiff: not a readable image: it is a TIFF of Compression 34712 "
+                                           r"\(JPEG 2000\), which OpenCV"):
+        detect_folder(BOARD, tmp_path)
+    assert earlier_size(tmp_path / "left") is None  # ghcal capture --append: the solve names it
+
+
 @pytest.mark.parametrize("convert", [
     lambda im: im.astype(np.uint16) * 257,                      # 16-bit grey
     lambda im: im[..., None],                                   # (H, W, 1)

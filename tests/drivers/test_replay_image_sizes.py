@@ -848,3 +848,61 @@ def test_a_take_of_tiled_tiffs_opencv_decodes_opens_and_plays(tmp_path):
     take = write_take(tmp_path / "take", "jpg", frames=3)
     retiled(take, (32, 32))
     assert play(take) == (3, [])
+
+
+# ------------------------------------------------------------------ a TIFF's compression
+def recompressed(take: Path, compression: int) -> list[Path]:
+    """``take``'s JPEGs as uncompressed TIFFs (OpenCV's) whose Compression says ``compression`` (the journal naming
+    those), in recorded order: a JPEG 2000 TIFF's header, say, with data OpenCV will not get to."""
+    tiffs = []
+    for path in sorted(take.glob("images/*/*.jpg")):
+        data = cv2.imencode(".tiff", cv2.imread(str(path)), [cv2.IMWRITE_TIFF_COMPRESSION, 1])[1].tobytes()
+        tiffs.append(path.with_suffix(".tiff"))
+        tiffs[-1].write_bytes(tiff_laid_out(data, changed={259: (3, (compression,))}))
+        path.unlink()
+    (take / FRAMES).write_text((take / FRAMES).read_text().replace(".jpg", ".tiff"))
+    return tiffs
+
+
+@pytest.mark.parametrize(("compression", "name"), [(34712, "JPEG 2000"), (65000, "unregistered"), (50000, "Zstandard")])
+def test_a_tiff_of_a_compression_opencv_does_not_decode_is_a_frame_naming_it_not_a_black_image(tmp_path, capfd,
+                                                                                              compression, name):
+    """OpenCV read a JPEG 2000 TIFF (34712, or any value libtiff has no codec for) as an image of zeros of its
+    stored size, libtiff's error only logged: the frame was delivered black, measured at open by that decode. Its
+    read names the file and the compression (a valid image this OpenCV refuses), and it has no size; a Zstandard
+    one (None from OpenCV already) was 'corrupt'."""
+    path = tmp_path / "image.tiff"
+    data = cv2.imencode(".tiff", np.full((HEIGHT, WIDTH, 3), 200, np.uint8), [cv2.IMWRITE_TIFF_COMPRESSION, 1])[1]
+    path.write_bytes(tiff_laid_out(data.tobytes(), changed={259: (3, (compression,))}))
+    said = (f"recording image {path} does not decode: it is a TIFF of Compression {compression} ({name}), which "
+            f"OpenCV {cv2.__version__}'s libtiff does not decode")
+    with pytest.raises(recording_format.RefusedLayoutError, match=re.escape(said)):
+        load_image(path)
+    assert header_size(path) is None
+    assert isinstance(image_size(path), recording_format.RefusedLayoutError)
+    captured = capfd.readouterr()
+    assert "TIFF" not in captured.err + captured.out  # nothing decoded: libtiff says nothing
+
+
+def test_a_take_with_one_jpeg_2000_tiff_plays_it_as_a_corrupt_frame_naming_the_compression(tmp_path):
+    """It played as a black frame, estimated as any other; now its read fails, naming the file and the
+    compression, and the next read goes on."""
+    take = write_take(tmp_path / "take", "jpg", frames=3)
+    tiffs = recompressed(take, 1)  # uncompressed: they play
+    tiffs[2].write_bytes(tiff_laid_out(tiffs[2].read_bytes(), changed={259: (3, (34712,))}))
+    pairs, errors = play(take)
+    assert pairs == 2 and len(errors) == 1
+    assert str(tiffs[2]) in str(errors[0]) and "Compression 34712 (JPEG 2000)" in str(errors[0])
+    assert not isinstance(errors[0], RigInitializationError)
+
+
+def test_a_take_of_jpeg_2000_tiffs_is_refused_at_open_naming_the_file_and_the_compression(tmp_path):
+    """Nothing of it would play: refused at open (it opened, measured by decodes of zeros, and played black)."""
+    take = write_take(tmp_path / "take", "jpg", frames=3)
+    tiffs = recompressed(take, 34712)
+    source = create_rig_source(f"replay://{take}?speed=free")
+    with pytest.raises(recording_format.UndecodableImageError,
+                       match=rf"camera 'left': none of its 3 images decode.*first: recording image "
+                             rf"{re.escape(str(tiffs[0]))} does not decode: it is a TIFF of Compression 34712 "
+                             rf"\(JPEG 2000\)"):
+        source.open()

@@ -19,7 +19,7 @@ from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.rig_file import load_rig
 from tests.exif_images import jpeg_turned
 from tests.rotated_videos import phone_take
-from tests.odd_images import bmp_beyond_opencv_s_limits
+from tests.odd_images import bmp_beyond_opencv_s_limits, tiff_laid_out
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
 simdata = pytest.importorskip("ghnerf_runtime.cli.simdata")
@@ -160,6 +160,19 @@ def test_an_image_of_samples_that_do_not_decode_to_8_bits_is_named_by_its_sample
         cli_run._read_image(str(path))
     captured = capfd.readouterr()
     assert "Sorry" not in captured.err + captured.out
+
+
+def test_a_tiff_of_a_compression_opencv_does_not_decode_is_named_not_estimated_as_a_black_image(tmp_path, capfd):
+    # a JPEG 2000 TIFF (Compression 34712) was read as an image of zeros, libtiff's error only logged, and its
+    # joints estimated from it
+    data = cv2.imencode(".tiff", np.full((6, 8, 3), 200, np.uint8), [cv2.IMWRITE_TIFF_COMPRESSION, 1])[1]
+    path = tmp_path / "left.tiff"
+    path.write_bytes(tiff_laid_out(data.tobytes(), changed={259: (3, (34712,))}))
+    said = f"{path}: cannot take the image: it is a TIFF of Compression 34712 (JPEG 2000), which OpenCV"
+    with pytest.raises(cli_run.UsageError, match=re.escape(said)):
+        cli_run._read_image(str(path))
+    captured = capfd.readouterr()
+    assert "TIFF" not in captured.err + captured.out
 
 
 def test_a_missing_or_unreadable_image_is_named_without_opencv_s_warning(tmp_path, capfd):

@@ -1,0 +1,95 @@
+"""ghnerf_runtime.tiff_compression: which TIFF Compression values the installed OpenCV decodes, checked against it
+(a later OpenCV that decodes another one, or stops decoding one, fails here first)."""
+from __future__ import annotations
+
+import contextlib
+import struct
+
+import cv2
+import numpy as np
+import pytest
+
+from ghnerf_runtime import tiff_compression
+from tests.odd_images import tiff_entries
+
+#: A small 8-bit BGR image: none of its samples zero, so an image of zeros is told from it.
+IMAGE = np.random.default_rng(64).integers(1, 256, (16, 16, 3), np.uint8)
+
+
+@contextlib.contextmanager
+def opencv_silent():
+    """OpenCV's log (libtiff's errors, one a decode here) off for a while."""
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        yield
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+
+
+def uncompressed_tagged(compression: int) -> bytes:
+    """:data:`IMAGE` as an uncompressed TIFF (as OpenCV writes one) whose Compression says ``compression``."""
+    data = bytearray(cv2.imencode(".tiff", IMAGE, [cv2.IMWRITE_TIFF_COMPRESSION, 1])[1].tobytes())
+    assert tiff_entries(bytes(data))[259] == (3, (1,))
+    (ifd,) = struct.unpack_from("<I", data, 4)
+    (count,) = struct.unpack_from("<H", data, ifd)
+    entry = next(ifd + 2 + 12 * n for n in range(count) if struct.unpack_from("<H", data, ifd + 2 + 12 * n)[0] == 259)
+    struct.pack_into("<H", data, entry + 8, compression)  # its value, held in the entry
+    return bytes(data)
+
+
+def test_each_compression_opencv_writes_is_one_it_decodes():
+    """cv2.imwrite writes none, LZW, JPEG, both deflates and PackBits (and LZW where asked for DNG's lossy JPEG or
+    JPEG XL); an OpenCV built with more codecs (LZMA, Zstandard, WebP, ...) writes those too, and its DECODED must
+    then grow."""
+    written = set()
+    with opencv_silent():
+        for compression in sorted(tiff_compression.NAMES):
+            with contextlib.suppress(cv2.error):
+                ok, data = cv2.imencode(".tiff", IMAGE, [cv2.IMWRITE_TIFF_COMPRESSION, compression])
+                if ok and tiff_entries(data.tobytes())[259][1] == (compression,) \
+                        and cv2.imdecode(data, cv2.IMREAD_COLOR) is not None:
+                    written.add(compression)
+    assert written == {1, 5, 7, 8, 32773, 32946}
+    assert written <= tiff_compression.DECODED
+
+
+def test_opencv_reads_a_tiff_of_a_compression_it_has_no_codec_for_as_an_image_of_zeros():
+    """The reason for the refusal (docs/recording-format.md, "Images"): JPEG 2000 (34712) and any unregistered
+    value decode to the stored size, every sample zero, libtiff's error only logged. Should an OpenCV release fail
+    on them instead, this test says so."""
+    with opencv_silent():
+        for compression in (34712, 65000):
+            data = np.frombuffer(uncompressed_tagged(compression), np.uint8)
+            decoded = cv2.imdecode(data, cv2.IMREAD_COLOR)
+            assert decoded.shape == IMAGE.shape and not decoded.any(), compression
+
+
+def test_no_compression_outside_decoded_decodes_and_none_inside_it_is_read_as_zeros():
+    """Every Compression value (65536), on a small uncompressed TIFF: one outside DECODED never gives the image
+    (None, or zeros: refusing it loses nothing), and one inside it that cv2.imwrite does not write fails on 8-bit
+    data (None: CCITT fax is 1-bit, ThunderScan 4-bit, NeXT 2-bit, SGILog LogLuv), never an image of zeros."""
+    black, decoded_as_zeros = [], []
+    with opencv_silent():
+        for compression in range(1 << 16):
+            image = cv2.imdecode(np.frombuffer(uncompressed_tagged(compression), np.uint8), cv2.IMREAD_COLOR)
+            if compression not in tiff_compression.DECODED:
+                if image is not None and image.any():
+                    black.append(compression)
+            elif compression not in (1, 5, 7, 8, 32773, 32946) and image is not None:
+                decoded_as_zeros.append(compression)
+    assert black == [] and decoded_as_zeros == []
+
+
+@pytest.mark.parametrize(("compression", "said"), [
+    (34712, "a TIFF of Compression 34712 (JPEG 2000), which OpenCV"),
+    (50000, "a TIFF of Compression 50000 (Zstandard), which OpenCV"),
+    (65000, "a TIFF of Compression 65000 (unregistered), which OpenCV"),
+])
+def test_a_compression_not_decoded_is_refused_by_number_and_name(compression, said):
+    assert tiff_compression.refusal(compression).startswith(said)
+    assert f"OpenCV {cv2.__version__}'s libtiff does not decode" in tiff_compression.refusal(compression)
+
+
+def test_a_compression_decoded_is_not_refused():
+    assert all(tiff_compression.refusal(compression) is None for compression in tiff_compression.DECODED)
