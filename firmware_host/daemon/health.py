@@ -24,10 +24,14 @@ from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch,
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
 from ghnerf_runtime.frame_reasons import REASONS
 
-__all__ = ["State", "Health", "write_status_file", "sink_keys"]
+__all__ = ["SCENE_FLAGS", "State", "Health", "scene_flags_of", "write_status_file", "sink_keys"]
 
 #: Window of recent estimates the latency and joints-found figures are taken over.
 WINDOW = 100
+#: The pair's scene flags the report counts over the window, as ``PairResult`` names them (docs/protocol.md, "Scene
+#: flags"; CALIBRATION_SUSPECT is the report's ``calibration``): how many of the last pairs showed two people, fell
+#: back from the skeleton prior or were seen by one camera alone.
+SCENE_FLAGS = ("several_people", "prior_fallback", "single_view")
 #: Running with no estimate for this long: the rate reads 0 and the status line says so (the rate of the last
 #: window stayed on, reading healthy while every pair was rejected or none came).
 STALE_S = 2.0
@@ -49,6 +53,12 @@ def sink_keys(urls: Iterable[str]) -> dict[str, str]:
         taken.add(key)
         keys[url] = key
     return keys
+
+
+def scene_flags_of(result: Any) -> frozenset[str]:
+    """The :data:`SCENE_FLAGS` a pair's estimate (a ``PairResult``) carries: ``single_view`` is a camera's name or
+    ``None``, the others booleans."""
+    return frozenset(name for name in SCENE_FLAGS if getattr(result, name))
 
 
 class State:
@@ -91,6 +101,7 @@ class Health:
     latencies_ms: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     found_fraction: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     estimate_times: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
+    scene_flags: deque = field(default_factory=lambda: deque(maxlen=WINDOW))  # each estimate's, scene_flags_of
     calibration: CalibrationWatch = field(default_factory=lambda: CalibrationWatch(CALIBRATION_WINDOW,
                                                                                     CALIBRATION_MAX_PX))
     # the calibration's second symptom: the feet off the floor (a pan, which the view agreement does not show)
@@ -118,13 +129,16 @@ class Health:
         """The STATUS= line's words while either check is suspect, naming each symptom (empty otherwise)."""
         return status_words((self.calibration, self.floor))
 
-    def estimated(self, total_ms: float, found: float) -> None:
+    def estimated(self, total_ms: float, found: float, flags: frozenset[str] = frozenset()) -> None:
+        """One pair estimated in ``total_ms``, ``found`` the fraction of its 3D joints found, ``flags`` its
+        :func:`scene_flags_of`."""
         now = self.clock()
         self.pairs_estimated += 1
         self.last_pair_at = now
         self.latencies_ms.append(float(total_ms))
         self.found_fraction.append(float(found))
         self.estimate_times.append(now)
+        self.scene_flags.append(frozenset(flags))
 
     def frames_checked(self, frame_reason: dict[str, Optional[str]]) -> None:
         """Count each camera's frame the estimator's frame check rejected (``PairResult.frame_reason``), by
@@ -133,6 +147,11 @@ class Health:
             if why is not None:
                 counts = self.frames_rejected.setdefault(camera, dict.fromkeys(REASONS, 0))
                 counts[why] = counts.get(why, 0) + 1
+
+    def _flagged_report(self) -> dict[str, int]:
+        """The status file's ``estimator.flagged``: of the window's estimates, how many carried each scene flag
+        (an operator's answer to "why fewer joints?" when two people stand in view)."""
+        return {name: sum(name in flags for flags in self.scene_flags) for name in SCENE_FLAGS}
 
     def _rejected_report(self) -> dict[str, dict[str, int]]:
         """Every camera of the rig (and any counted before a rig change) with every reason, 0 included."""
@@ -164,6 +183,7 @@ class Health:
                           "latency_ms_p99": round(float(np.percentile(lat, 99)), 2) if lat.size else None,
                           "joints_found": round(float(np.mean(self.found_fraction)), 3)
                           if self.found_fraction else None,
+                          "flagged": self._flagged_report(),
                           "window": len(lat)},
             "calibration": self._calibration_report(),
             "last_error": self.last_error,

@@ -74,7 +74,7 @@ import numpy as np
 import drivers
 from drivers.url import RigUrl, redact_url
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
-from firmware_host.daemon.health import Health, State, write_status_file
+from firmware_host.daemon.health import Health, State, scene_flags_of, write_status_file
 from firmware_host.daemon.memory import pin_mmap_threshold, return_freed_memory
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
 from firmware_host.daemon.sandbox import rig_url_hint, service_hint
@@ -571,7 +571,8 @@ class Daemon:
             failed_runs = 0
             took = self._clock() - t0
             self.watchdog.beat("handing the joints to the sinks")
-            self.health.estimated(result.timing_ms["total"], float(np.mean(~np.asarray(result.missing, bool))))
+            self.health.estimated(result.timing_ms["total"], float(np.mean(~np.asarray(result.missing, bool))),
+                                  scene_flags_of(result))
             self.health.frames_checked(result.frame_reason)
             self._calibration_changed(self.health.calibration.add(result.reprojection_px_median))
             self._floor_changed(self.health.floor.add(result.lowest_foot_m))

@@ -321,6 +321,10 @@ def test_what_the_status_file_says_of_a_frame_reaches_the_receiver(sim_url, tmp_
     assert not statuses[0].header.flags & Flags.CALIBRATION_SUSPECT
     assert statuses[-1].header.flags == Flags.CALIBRATION_SUSPECT  # the link says so while no frame flows too
     assert {m.header.flags for m in messages if isinstance(m, Hello)} == {0x3C}  # SCENE_FLAGS: the sender says them
+    # and the status file counts them over its window (docs/daemon.md; until session 64 it said none of them,
+    # though docs/daemon.md had it call the pairs several_people, prior_fallback or single_view)
+    report = json.loads((tmp_path / "status.json").read_text())
+    assert report["estimator"]["flagged"] == {"several_people": 2, "prior_fallback": 1, "single_view": 0}
 
 
 class _PannedEstimator(_CountingEstimator):
@@ -1229,6 +1233,27 @@ def test_the_rate_and_status_line_do_not_stay_healthy_when_no_pair_is_estimated(
     health.enter(State.RUNNING)  # a rig opened again after 10 s away: counted from the open
     now[0] += 1
     assert health.status_line().startswith("running: 0.0 pairs/s")
+
+
+def test_the_status_file_counts_the_window_s_pairs_of_each_scene_flag():
+    """``estimator.flagged``: of the last WINDOW estimates, those with two people in view, a prior fallback or one
+    camera alone (a ``PairResult``'s ``single_view`` is the camera's name); older ones leave the count."""
+    from types import SimpleNamespace
+
+    from firmware_host.daemon.health import WINDOW, Health, scene_flags_of
+
+    def result(several=False, fallback=False, camera=None):
+        return SimpleNamespace(several_people=several, prior_fallback=fallback, single_view=camera)
+
+    health = Health()
+    assert health.report()["estimator"]["flagged"] == {"several_people": 0, "prior_fallback": 0, "single_view": 0}
+    assert scene_flags_of(result(camera="left")) == {"single_view"}
+    for flags in (result(several=True), result(several=True, fallback=True), result(camera="right"), result()):
+        health.estimated(20.0, 1.0, scene_flags_of(flags))
+    assert health.report()["estimator"]["flagged"] == {"several_people": 2, "prior_fallback": 1, "single_view": 1}
+    for _ in range(WINDOW - 1):  # the first three fall out of the window
+        health.estimated(20.0, 1.0, scene_flags_of(result()))
+    assert health.report()["estimator"]["flagged"] == {"several_people": 0, "prior_fallback": 0, "single_view": 0}
 
 
 def test_on_two_videos_through_opencv(sim_url, tmp_path):
