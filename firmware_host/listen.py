@@ -14,7 +14,7 @@ sender numbered but dropped or decimated, or the link lost; camera pairs the sen
 frame of take no number), late JOINTS (reordered: a seq up to :data:`LATE_WINDOW` behind the newest; one
 that fills a gap takes it back out of the gaps) and duplicates, the latest STATUS (its fault code,
 docs/protocol.md, and CALIBRATION SUSPECT when its flag says so) and HELLO, the JOINTS flagged with each scene
-flag (``3 several people``: the robot should not follow them), and the decoder's error counts (a noisy
+flag (``3 several people``: two people seen, one person's joints sent; not a presence detector, docs/protocol.md), and the decoder's error counts (a noisy
 serial line shows as ``crc``/``cobs`` errors). A seq further back is a restarted sender, not a gap. Ctrl-C,
 SIGTERM or ``--seconds`` ends it with the totals on stderr. Exit status: 0; 2 for a bad URL or a port that
 cannot be opened (named), or one that fails while read (an unplugged serial port: the totals of what arrived

@@ -66,12 +66,13 @@ extern "C" {
 
 /* Header flags (header byte 2; docs/protocol.md, section 3). DECIMATED and DROPPED say why frames are
  * missing before this one. The scene flags say what this frame's estimate is (on its JOINTS and JOINTS_2D);
- * a robot that must not move with a second person in view stops on GHJ_FLAG_SEVERAL_PEOPLE. STATUS carries
+ * GHJ_FLAG_SEVERAL_PEOPLE says the maps showed two people and the joints are one person's: not that nobody
+ * else is near (a second person outside the tracked subject's crop is mostly not flagged). STATUS carries
  * GHJ_FLAG_CALIBRATION_SUSPECT while it lasts; HELLO carries GHJ_SCENE_FLAGS when the sender sets them (an
  * older sender's HELLO has 0: it cannot say). Other bits are reserved: ignore them. */
 #define GHJ_FLAG_DECIMATED 0x01u           /* sender skips frames on purpose to fit the link */
 #define GHJ_FLAG_DROPPED 0x02u             /* sender dropped frames since the previous JOINTS */
-#define GHJ_FLAG_SEVERAL_PEOPLE 0x04u      /* two people in view: one person's joints only */
+#define GHJ_FLAG_SEVERAL_PEOPLE 0x04u      /* two people seen: one person's joints only */
 #define GHJ_FLAG_PRIOR_FALLBACK 0x08u      /* the skeleton prior disagreed: triangulated joints sent */
 #define GHJ_FLAG_SINGLE_VIEW 0x10u         /* one camera only: every 3D joint missing, that camera's 2D */
 #define GHJ_FLAG_CALIBRATION_SUSPECT 0x20u /* views disagree or feet left the floor: recalibrate */
