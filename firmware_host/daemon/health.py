@@ -2,7 +2,7 @@
 
 The report (``docs/daemon.md`` lists the fields) is what an operator reads to tell a pulled camera
 from a slow estimator from a dead link: the state, what the rig delivered and what was estimated,
-latency and joints found over the last window, camera reopen counts with the last error, the frames
+latency, joints found and the pairs of each scene flag over the last window, camera reopen counts with the last error, the frames
 the estimator's frame check rejected per camera and reason, whether the rig's calibration still fits
 (:mod:`firmware_host.daemon.calibration_watch`), and each sink's counters.
 """
@@ -26,7 +26,7 @@ from ghnerf_runtime.frame_reasons import REASONS
 
 __all__ = ["SCENE_FLAGS", "State", "Health", "scene_flags_of", "write_status_file", "sink_keys"]
 
-#: Window of recent estimates the latency and joints-found figures are taken over.
+#: Window of recent estimates the latency, joints-found and scene-flag figures are taken over.
 WINDOW = 100
 #: The pair's scene flags the report counts over the window, as ``PairResult`` names them (docs/protocol.md, "Scene
 #: flags"; CALIBRATION_SUSPECT is the report's ``calibration``): how many of the last pairs showed two people, fell
