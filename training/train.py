@@ -64,7 +64,7 @@ from training.configs import PRESETS, preset
 from training.losses import LossConfig, compute_losses
 from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
-from training.model_card import write_atomic
+from training.model_card import strict_json, write_atomic
 from training.run_clock import RunClock
 from training.run_limits import seed_problem, threads_problem
 from training.run_lock import lock_holder, lock_text
@@ -1273,8 +1273,9 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
                 if info.main:
                     prog.update(step, {"loss": rec["loss"], "psnr": rec["psnr"], "pck": rec["pck"]})
                     with open(log_path, "a") as fh:
-                        fh.write(json.dumps({"step": step, "lr": lr, "time_s": round(clock.elapsed(), 2),
-                                             **rec}) + "\n")
+                        # strict JSON: the pck before the first pck_every step is NaN, written as null
+                        fh.write(strict_json({"step": step, "lr": lr, "time_s": round(clock.elapsed(), 2),
+                                              **rec}, indent=None) + "\n")
             if step % cfg.checkpoint_every == 0 or step == cfg.iterations:
                 checkpoint(step)
             if cfg.max_minutes and step % cfg.log_every == 0 and step < cfg.iterations:
@@ -1293,7 +1294,7 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
                **({"gpu": torch.cuda.get_device_name(device)} if device.type == "cuda" else {}),
                "threads": torch.get_num_threads(), "checkpoint": str(last)}
     if info.main:
-        write_atomic(out_dir / "summary.json", json.dumps(summary, indent=1))
+        write_atomic(out_dir / "summary.json", strict_json(summary))
     return summary, model
 
 
@@ -1347,7 +1348,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return exit_status(e)
     if int(os.environ.get("RANK", "0")) == 0:
-        print(json.dumps(summary))
+        print(strict_json(summary, indent=None))
     if dist.is_initialized():
         dist.destroy_process_group()
     return 0

@@ -591,6 +591,26 @@ def test_resume_drops_the_log_records_past_the_checkpoint(data64, tmp_path):
     assert [json.loads(line)["step"] for line in (run / "log.jsonl").read_text().splitlines()] == [1, 2]
 
 
+def strict_loads(text: str):
+    """``text`` read as strict JSON: a bare ``NaN`` / ``Infinity`` (which ``jq`` and ``JSON.parse`` refuse) fails."""
+    def refuse(name):
+        raise ValueError(f"not strict JSON: {name}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_cli_writes_strict_json_when_no_pck_was_scored(data64, tmp_path, capsys):
+    """pck_every 0 leaves every record's pck NaN: log.jsonl, summary.json and stdout write it as null."""
+    (tmp_path / "c.json").write_text(json.dumps({"preset": "tiny", "data": str(data64), "iterations": 1,
+                                                 "targets_per_iter": 2, "heat_rays": 32, "patch_size": 8,
+                                                 "log_every": 1, "pck_every": 0, "threads": 2}))
+    run = tmp_path / "run"
+    assert main(["--config", str(tmp_path / "c.json"), "--out", str(run), "--quiet"]) == 0
+    assert strict_loads(capsys.readouterr().out)["steps"] == 1
+    assert strict_loads((run / "summary.json").read_text())["steps"] == 1
+    assert [strict_loads(line)["pck"] for line in (run / "log.jsonl").read_text().splitlines()] == [None]
+
+
 def log_records(run: Path) -> list[dict]:
     """``run``'s log.jsonl records without their wall times, NaN as None (so two runs' logs compare equal)."""
     import math
