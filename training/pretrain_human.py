@@ -58,8 +58,8 @@ from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_w
 from training.train import HEATMAP_SIGMA_HM_PX, CheckpointWriteError, DistInfo, Progress, apply_overrides, \
     encoder_views_images, error_words, holds_more_than_weights, learning_rate, load_config_file, load_error_words, \
     mirrored, check_model_human_init, model_config_of, padding_config, refuse_another_config, refuse_another_model, \
-    refuse_existing_run, refuse_live_lock, require_cuda_if_asked, require_resume_keys, save_atomic, scene_order, \
-    seed_everything, take_lock, truncate_log
+    refuse_existing_run, refuse_live_lock, refuse_model_folder, require_cuda_if_asked, require_resume_keys, \
+    save_atomic, scene_order, seed_everything, take_lock, truncate_log
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -487,6 +487,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     out = Path(out_dir)
     if out.exists() and not out.is_dir():  # (mkdir below raised FileExistsError: a traceback)
         raise ConfigError(f"{out}: is a file; --out names the run folder")
+    refuse_model_folder(out)  # its last.pt and config.json beside the graphs (the trainer's check)
     refuse_live_lock(out / "train.pid")  # a folder in use is named first, whatever else is wrong
     require_cuda_if_asked(cfg.device)
     start = pretrain_checkpoint.resume_point(out) if resume else None  # last.pt, else prev.pt

@@ -430,6 +430,18 @@ def test_cli_writes_strict_json_when_no_evaluation_ran(data64, tmp_path, capsys)
     assert [strict_loads(line)["pck"] for line in (run / "log.jsonl").read_text().splitlines()] == [None]
 
 
+@pytest.mark.parametrize("resume", [False, True])
+def test_a_model_folder_is_refused_as_the_run_folder(tmp_path, capsys, resume):
+    """As the trainer (``tests/training/test_trainer.py``): its last.pt and config.json went beside the graphs."""
+    folder = tmp_path / "ghnerf"
+    folder.mkdir()
+    (folder / "encoder.onnx").write_bytes(b"graph")
+    assert main(["--out", str(folder), "--set", 'preset="tiny"', "--data", str(tmp_path / "nowhere"),
+                 *["--resume"] * resume]) == 2
+    assert f"{folder}: is a model folder (it holds encoder.onnx), not a run folder" in capsys.readouterr().err
+    assert [p.name for p in folder.iterdir()] == ["encoder.onnx"]
+
+
 def test_score_reports_the_heatmap_pck_of_a_human_pt(data64, tmp_path, capsys):
     pretrain(tiny_pretrain(data64, iterations=1, eval_every=0), tmp_path / "a", quiet=True)
     assert main(["--score", str(tmp_path / "a" / "human.pt"), "--data", str(data64), "--split", "val"]) == 0

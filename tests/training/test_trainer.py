@@ -104,6 +104,23 @@ def test_cli_reports_config_error(tmp_path, capsys):
     assert f"config file {tmp_path / 'list.json'}: must hold a JSON object" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("marks", [["encoder.onnx", "volume.int8.onnx"], ["model_card.json"]])
+@pytest.mark.parametrize("resume", [False, True])
+def test_a_model_folder_is_refused_as_the_run_folder(tmp_path, capsys, marks, resume):
+    """``--out models/ghnerf`` (a path copied from a ghnerf-run command) trained into it: last.pt, config.json and
+    log.jsonl beside the graphs. Refused naming the folder and what marks it, before anything is written."""
+    (tmp_path / "c.json").write_text(json.dumps({"preset": "tiny", "data": str(tmp_path / "nowhere")}))
+    folder = tmp_path / "models"
+    folder.mkdir()
+    for name in marks:
+        (folder / name).write_bytes(b"graph")
+    assert main(["--config", str(tmp_path / "c.json"), "--out", str(folder), *["--resume"] * resume]) == 2
+    err = capsys.readouterr().err
+    assert f"{folder}: is a model folder (it holds {', '.join(marks)}), not a run folder" in err
+    assert "give a new one" in err
+    assert sorted(p.name for p in folder.iterdir()) == marks
+
+
 def test_cli_reports_the_run_folders_config_errors(tmp_path, capsys):
     """ConfigErrors of the run itself (not of the config file) exit 2 too, before anything is written."""
     (tmp_path / "c.json").write_text(json.dumps({"preset": "tiny", "data": str(tmp_path / "nowhere")}))
