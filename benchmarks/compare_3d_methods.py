@@ -39,6 +39,7 @@ from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfi
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
 from ghnerf_runtime.metrics import VISIBILITY_CLASSES, mpjpe, visibility_class  # noqa: E402
 from ghnerf_runtime.session import ModelSession  # noqa: E402
+from training.model_card import strict_json  # noqa: E402
 
 #: name -> Joints3DConfig overrides.
 METHODS = {
@@ -170,8 +171,9 @@ def main(argv=None) -> int:
         print(f"| {row['method']} | " + " | ".join(
             f"{c['mpjpe_mm']:.1f} / {100 * c['found']:.1f} %" for c in row["by_visibility"].values()) + " |")
     if args.json:
-        args.json.write_text(json.dumps({"model": model_line, "rows": rows,
-                                         "sequences": [s.info for s in sequences]}, indent=2, default=float))
+        # strict JSON: a method that finds no joint has a NaN MPJPE, written as null
+        args.json.write_text(strict_json({"model": model_line, "rows": rows,
+                                          "sequences": [s.info for s in sequences]}, indent=2))
     return 0
 
 

@@ -23,7 +23,6 @@ these features (docs/training.md, "Heatmap shape as prior evidence").
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -168,6 +167,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
+    from training.model_card import strict_json
     from training.skeleton_prior import PriorTrainConfig, _train_one, inputs_of, score
 
     torch.set_num_threads(args.threads)
@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name} (+{len(cols)} per view, seed {args.seed}): every joint {m['all']['mean_mm']:.1f} mean / "
               f"{m['all']['median_mm']:.1f} median mm, without the flip test {p['mean_mm']:.1f}; within "
               f"{gate} m {g['mean_mm']:.1f} mm over {g['found']:.1%}; {train_s:.0f} s", flush=True)
-    print(json.dumps(results))
+    print(strict_json(results, indent=None))  # a NaN error (a diverged network) as null
     return 0
 
 

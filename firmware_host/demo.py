@@ -75,12 +75,13 @@ from firmware_host.sinks import Sink, open_sink
 from firmware_host.sinks.file_sink import FileSink
 from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
+from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
 from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
-from ghnerf_runtime.errors import ConfigError, ModelError
-from ghnerf_runtime.estimator import Estimator, PairResult
+from ghnerf_runtime.errors import ConfigError, ModelError, ModelLoadError
+from ghnerf_runtime.estimator import Estimator, PairResult, check_model_files
 from ghnerf_runtime.path_check import user_path, user_path_as_path
 
 DEFAULT_URL = "sim://?fps=30&seed=0&motion=wave"
@@ -132,15 +133,20 @@ def _how_to_build(model_dir: str) -> str:
     return f"build it with {make}`python -m training.pipeline --out {out}` (or run with --truth-only)"
 
 
-def _check_model_dir(model_dir: str) -> None:
-    """Fail early (before the rig is opened) when the folder holds no model at all."""
-    from ghnerf_runtime.session import resolve_model_dir
-
-    folder = resolve_model_dir(model_dir)
-    if not folder.is_dir():
-        raise DemoError(f"no model in {model_dir}: the folder does not exist; {_how_to_build(model_dir)}")
-    if not any(folder.glob("*.onnx")):
-        raise DemoError(f"no model in {model_dir}: it holds no *.onnx graph files; {_how_to_build(model_dir)}")
+def _check_model_dir(args: argparse.Namespace, cfg: EstimatorConfig) -> None:
+    """Fail early (before the rig is opened) when the model folder is none, or lacks a graph the settings run:
+    checked as ``ghnerf-run --validate-config`` checks it (:func:`check_model_files`, nothing loaded), and named
+    by what gave it (``--model-dir``, the config's ``session.model_dir``). A file given as ``--model-dir`` was
+    "the folder does not exist", naming no option."""
+    model_dir = cfg.session.model_dir
+    try:
+        check_model_files(cfg)
+    except ModelError as e:
+        where = model_dir_source(args.model_dir, args.config, model_dir) or model_dir
+        # building a model helps where there is none; a file given as the folder is a wrong path
+        build = isinstance(e, ModelLoadError) and not (Path(model_dir).exists() and not Path(model_dir).is_dir())
+        hint = f"; {_how_to_build(model_dir)}" if build else ""
+        raise DemoError(f"no model in {named_by_source(where, e, model_dir)}{hint}") from None
 
 
 def _load_estimator(rig, cfg: EstimatorConfig) -> Estimator:
@@ -383,7 +389,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     cfg = None
     if not args.truth_only:
         cfg = _estimator_config(args)
-        _check_model_dir(cfg.session.model_dir)
+        _check_model_dir(args, cfg)
     if args.out.exists() and not args.out.is_dir():
         raise DemoError(f"--out {args.out}: is a file; give a folder for the demo's outputs")
     try:  # a path through a file or a link to nothing: was OSError's bare "[Errno 17] File exists"

@@ -722,7 +722,10 @@ def prepare(specs: list[str], data: str, split: str, threads: int) -> list[tuple
     out = []
     for item in specs:
         label, spec = _label(item), split_model_item(item)[1]
-        renderer, desc = make_renderer(spec, threads)
+        try:
+            renderer, desc = make_renderer(spec, threads)
+        except EvalInputError as e:  # "m.json: a file, not a model folder" said no option: which --model gave it
+            raise EvalInputError(f"--model {item}: {e}") from None
         out.append((label, renderer, desc, open_eval_dataset(data, split, renderer, label)))
     return out
 

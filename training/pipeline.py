@@ -65,7 +65,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, NamedTuple
 
-from training.model_card import write_atomic  # stamps and requests whole: half a one would stop every later run
+# write_atomic: stamps and requests whole, as half a one would stop every later run
+from training.model_card import strict_json, write_atomic
 from training.run_lock import lock_holder
 
 log = logging.getLogger("training.pipeline")
@@ -1241,7 +1242,7 @@ def adopt_early_prior(cfg: PipelineConfig, variant: str, data: Any) -> bool:
     write_atomic(out, prior_for_folder(prior, folder))  # (a small MLP) never half a prior beside the graphs
     report.update({"file": str(out), "trained_in": str(prior),
                    "trained_beside": "the joint run (training.early_prior, from the pretrained encoder)"})
-    write_atomic(out.with_suffix(".json"), json.dumps(report, indent=1) + "\n")
+    write_atomic(out.with_suffix(".json"), strict_json(report) + "\n")  # an older report's NaN read back: null
     log.info("prior: taken from %s (trained beside the joint run on the same keypoint graphs)", staged)
     return True
 
@@ -1355,7 +1356,7 @@ def kept_painter_sections(cfg: PipelineConfig) -> dict:
 
 
 def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
-    from training.model_card import hardware, sha256, strict_json, write_card
+    from training.model_card import hardware, sha256, write_card
     from training.skeleton_prior import card_summary
 
     data_s = st.stamp("data")
@@ -1882,7 +1883,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"python -m training.pipeline: error: {e}", file=sys.stderr)
         return 2
     if card is not None:
-        print(json.dumps(card["metrics"], indent=1))
+        print(strict_json(card["metrics"]))  # as model_card.json holds them: a NaN as null
     return 0
 
 

@@ -52,14 +52,14 @@ from training.run_limits import seed_problem, threads_problem
 from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
 from training.augment import AugmentConfig, augment_views
-from training.model_card import write_atomic
+from training.model_card import strict_json, write_atomic
 from training import pretrain_checkpoint
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
 from training.train import HEATMAP_SIGMA_HM_PX, CheckpointWriteError, DistInfo, Progress, apply_overrides, \
     encoder_views_images, error_words, holds_more_than_weights, learning_rate, load_config_file, load_error_words, \
     mirrored, check_model_human_init, model_config_of, padding_config, refuse_another_config, refuse_another_model, \
-    refuse_existing_run, refuse_live_lock, require_cuda_if_asked, require_resume_keys, save_atomic, scene_order, \
-    seed_everything, take_lock, truncate_log
+    refuse_existing_run, refuse_live_lock, refuse_model_folder, require_cuda_if_asked, require_resume_keys, \
+    save_atomic, scene_order, seed_everything, take_lock, truncate_log
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -487,6 +487,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     out = Path(out_dir)
     if out.exists() and not out.is_dir():  # (mkdir below raised FileExistsError: a traceback)
         raise ConfigError(f"{out}: is a file; --out names the run folder")
+    refuse_model_folder(out)  # its last.pt and config.json beside the graphs (the trainer's check)
     refuse_live_lock(out / "train.pid")  # a folder in use is named first, whatever else is wrong
     require_cuda_if_asked(cfg.device)
     start = pretrain_checkpoint.resume_point(out) if resume else None  # last.pt, else prev.pt
@@ -607,7 +608,7 @@ def _pretrain(cfg: PretrainConfig, out: Path, start: tuple[Path, dict] | None, q
             losses = []
             prog.update(step, {"loss": rec["loss"], "pck": last_pck})
             with open(out / "log.jsonl", "a") as fh:
-                fh.write(json.dumps(rec) + "\n")
+                fh.write(strict_json(rec, indent=None) + "\n")  # a pck not yet scored (NaN) as null
         if step % cfg.checkpoint_every == 0 or step == cfg.iterations:
             checkpoint(step)
         if step < cfg.iterations and ((cfg.max_minutes and clock.elapsed() > 60 * cfg.max_minutes)
@@ -626,7 +627,7 @@ def _pretrain(cfg: PretrainConfig, out: Path, start: tuple[Path, dict] | None, q
                "images_per_step": cfg.scenes_per_step * ds[0]["tgt_images"].shape[0] * (2 if cfg.flip else 1),
                "eval_pck@0.2": last_pck, "eval_split": cfg.eval_split if cfg.eval_every else None,
                "human": str(out / "human.pt")}
-    write_atomic(out / "summary.json", json.dumps(summary, indent=1))
+    write_atomic(out / "summary.json", strict_json(summary))  # eval_pck@0.2 never scored: null
     return summary
 
 
@@ -672,7 +673,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.threads:
             torch.set_num_threads(args.threads)
         try:
-            print(json.dumps(score_human(args.score, args.data or "data/edge128", args.split, args.scenes), indent=1))
+            print(strict_json(score_human(args.score, args.data or "data/edge128", args.split, args.scenes)))
         except (ConfigError, DataError) as e:  # the file, or a missing dataset or split (was a traceback)
             print(f"error: {e}", file=sys.stderr)
             return 2
@@ -700,6 +701,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"stopped ({stop_words(e)}); `--resume --out {args.out}` continues from its last checkpoint",
               file=sys.stderr)
         return exit_status(e)
-    print(json.dumps(summary, indent=1))
+    print(strict_json(summary))
     return 0
 

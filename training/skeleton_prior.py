@@ -50,7 +50,7 @@ from ghnerf_runtime.skeleton_prior import (
     prior_inputs,
 )
 from training.cli import at_least
-from training.model_card import write_atomic
+from training.model_card import strict_json, write_atomic
 
 #: What a tilted training copy turns (``PriorTrainConfig.tilt_mode``).
 TILT_MODES = ("scene", "body")
@@ -690,7 +690,7 @@ def main(argv: list[str] | None = None) -> int:
               "trained_on": trained_on,
               "encoder_file": encoder_file, "flip_test": not args.no_flip_test, "config": asdict(config),
               "collect_s": round(collect_s, 1), "train_s": round(train_s, 1), "metrics": metrics}
-    write_atomic(out.with_suffix(".json"), json.dumps(result, indent=1) + "\n")
+    write_atomic(out.with_suffix(".json"), strict_json(result) + "\n")  # a NaN error (NaN joints) as null
     m, tg = metrics, metrics["triangulation_gated"]
 
     def mm(v):

@@ -64,7 +64,7 @@ from training.configs import PRESETS, preset
 from training.losses import LossConfig, compute_losses
 from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
-from training.model_card import write_atomic
+from training.model_card import strict_json, write_atomic
 from training.run_clock import RunClock
 from training.run_limits import seed_problem, threads_problem
 from training.run_lock import lock_holder, lock_text
@@ -782,6 +782,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
     # config.json was written into the new run folder
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError(f"{out_dir}: is a file; --out names the run folder")
+    refuse_model_folder(out_dir)  # resumed or not: nothing of a run belongs beside the graphs
     if not resume:
         refuse_existing_run(out_dir)  # before config.json is overwritten with the new one
     require_cuda_if_asked(cfg.device)
@@ -881,6 +882,31 @@ def _step_checkpoints(out_dir: Path) -> list[Path]:
     """The run's ``ckpt_<step>.pt``, newest first (by step: the zero padding runs out past 9999999)."""
     found = [(int(p.stem[5:]), p) for p in out_dir.glob("ckpt_*.pt") if p.stem[5:].isdigit()]
     return [p for _, p in sorted(found, reverse=True)]
+
+
+#: Files only a model folder holds: the graphs ``python -m training.export`` writes (what ``ghnerf-run --model-dir``
+#: loads), and the card of the folder ``make model`` writes (``models/``, its variants in subfolders).
+MODEL_FOLDER_MARKS = ("*.onnx", "model_card.json")
+
+
+def model_folder_marks(folder: Path) -> list[str]:
+    """The names of ``folder``'s files that mark it as a model folder (:data:`MODEL_FOLDER_MARKS`), sorted; empty
+    for a run folder, a new one or none at all."""
+    if not folder.is_dir():
+        return []
+    return sorted({p.name for pattern in MODEL_FOLDER_MARKS for p in folder.glob(pattern)})
+
+
+def refuse_model_folder(out_dir: Path) -> None:
+    """A model folder is no run folder: ``--out models/ghnerf`` (a path copied from a ``ghnerf-run`` command) put
+    ``last.pt``, ``config.json`` and ``log.jsonl`` beside the ONNX graphs. Refused for the trainer and the
+    pretraining, resumed or not, before anything is read or written."""
+    marks = model_folder_marks(out_dir)
+    if marks:
+        held = ", ".join(marks[:3]) + (", ..." if len(marks) > 3 else "")
+        raise ConfigError(f"{out_dir}: is a model folder (it holds {held}), not a run folder: --out names the "
+                          "folder of the run's checkpoints, config.json and log.jsonl; give a new one (runs/<name>, "
+                          "say)")
 
 
 def refuse_existing_run(out_dir: Path) -> None:
@@ -1273,8 +1299,9 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
                 if info.main:
                     prog.update(step, {"loss": rec["loss"], "psnr": rec["psnr"], "pck": rec["pck"]})
                     with open(log_path, "a") as fh:
-                        fh.write(json.dumps({"step": step, "lr": lr, "time_s": round(clock.elapsed(), 2),
-                                             **rec}) + "\n")
+                        # strict JSON: the pck before the first pck_every step is NaN, written as null
+                        fh.write(strict_json({"step": step, "lr": lr, "time_s": round(clock.elapsed(), 2),
+                                              **rec}, indent=None) + "\n")
             if step % cfg.checkpoint_every == 0 or step == cfg.iterations:
                 checkpoint(step)
             if cfg.max_minutes and step % cfg.log_every == 0 and step < cfg.iterations:
@@ -1293,7 +1320,7 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
                **({"gpu": torch.cuda.get_device_name(device)} if device.type == "cuda" else {}),
                "threads": torch.get_num_threads(), "checkpoint": str(last)}
     if info.main:
-        write_atomic(out_dir / "summary.json", json.dumps(summary, indent=1))
+        write_atomic(out_dir / "summary.json", strict_json(summary))
     return summary, model
 
 
@@ -1347,7 +1374,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return exit_status(e)
     if int(os.environ.get("RANK", "0")) == 0:
-        print(json.dumps(summary))
+        print(strict_json(summary, indent=None))
     if dist.is_initialized():
         dist.destroy_process_group()
     return 0

@@ -37,9 +37,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
 from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig
-from ghnerf_runtime.errors import ConfigError, RuntimeErrorBase
+from ghnerf_runtime.errors import ConfigError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_MATTE_STAGE, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
                                       NOVEL_STAGES, Estimator, load_session)
 from ghnerf_runtime.metrics import finite_or_none
@@ -162,6 +163,16 @@ def row_base_config(args, precision: str, source: str) -> EstimatorConfig:
         novel_view=replace(runtime.novel_view, enabled=True, stride=args.novel_stride or runtime.novel_view.stride))
 
 
+def _load_row_session(args, cfg: EstimatorConfig):
+    """A row's session, a model folder it cannot use named by ``--model-dir`` (the session words it as
+    ``session.model_dir``, which the bench has no way to set)."""
+    try:
+        return load_session(cfg)
+    except ModelLoadError as e:
+        where = model_dir_source(args.model_dir, None, cfg.session.model_dir)  # (the bench reads no config file)
+        raise ModelLoadError(named_by_source(where, e, cfg.session.model_dir)) from None
+
+
 class RenderPlanError(ValueError):
     """The sequences to render would not fit where they go (the cache's disk, or memory without a cache)."""
 
@@ -234,7 +245,7 @@ def run_runtime_bench(args) -> dict:
     rows = []
     for precision, source in itertools.product(args.precisions, args.heatmap_sources):
         cfg = row_base_config(args, precision, source)
-        session = load_session(cfg)
+        session = _load_row_session(args, cfg)
         model_desc = session.describe()
         flips = (args.flip_tests or [None]) if source == "encoder" else [None]
         follows = (args.follow_encoder or [None]) if source == "rendered" else [None]

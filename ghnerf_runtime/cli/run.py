@@ -34,11 +34,12 @@ from typing import Iterator, Sequence
 import cv2
 import numpy as np
 
+from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
 from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output, same_file
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
-    load_config, read_json_file
-from ghnerf_runtime.errors import ConfigError, FrameError, GeometryError, ModelError, ModelLoadError, RuntimeErrorBase
+    load_config
+from ghnerf_runtime.errors import FrameError, GeometryError, ModelError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult, check_model_files
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.image_files import read_image_or_none, samples_not_8_bit, tiff_compression_refusal
@@ -46,7 +47,7 @@ from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import load_rig, write_text_atomic
 from ghnerf_runtime.video_files import read_as_stored
-from ghnerf_runtime.path_check import shown, user_path
+from ghnerf_runtime.path_check import user_path
 
 log = logging.getLogger("ghnerf-run")
 
@@ -353,14 +354,9 @@ def _ready(path: str, flag: str) -> str:
         raise UsageError(str(e)) from None
 
 
-def _config_names_model_dir(path: str | None) -> bool:
-    """Whether the config file at ``path`` (None: no ``--config``) names ``session.model_dir``; it was read already
-    (:func:`_config`), so an error reading it again is one ``ConfigError`` naming it."""
-    if not path:
-        return False
-    data = read_json_file(path, lambda message: ConfigError(message, key=str(path)))
-    session = data.get("session") if isinstance(data, dict) else None
-    return isinstance(session, dict) and "model_dir" in session
+def _model_dir_source(args, cfg: EstimatorConfig) -> str | None:
+    """What named the model folder (:func:`model_dir_source`): ``--model-dir``, the ``--config``'s key, or None."""
+    return model_dir_source(args.model_dir, args.config, cfg.session.model_dir)
 
 
 def _check_named_model_folder(args, cfg: EstimatorConfig) -> None:
@@ -372,17 +368,12 @@ def _check_named_model_folder(args, cfg: EstimatorConfig) -> None:
 
     :raises UsageError: naming the option (or the config file's key) and its value.
     """
-    if args.model_dir:
-        where = f"--model-dir {shown(args.model_dir)}"
-    elif _config_names_model_dir(args.config):
-        where = f"session.model_dir in {args.config} ({shown(cfg.session.model_dir)})"
-    else:
+    if not (where := _model_dir_source(args, cfg)):
         return
     try:
         check_model_files(cfg)
     except ModelError as e:
-        named = f"{e.path}: " if e.path is not None and Path(e.path) == Path(cfg.session.model_dir) else ""
-        raise UsageError(f"{where}: {str(e).removeprefix(named)}") from None  # the folder said once
+        raise UsageError(named_by_source(where, e, cfg.session.model_dir)) from None
 
 
 def _run(args) -> int:
@@ -399,7 +390,11 @@ def _run(args) -> int:
     try:
         estimator = Estimator.from_config(rig, cfg)
     except ModelLoadError as e:
-        if args.model_dir or Path(cfg.session.model_dir).exists() or _config_names_model_dir(args.config):
+        # worded as --validate-config words it: a file given as --model-dir was "m.json: is not a folder
+        # (session.model_dir names ...)", naming a key the user never typed
+        if where := _model_dir_source(args, cfg):
+            raise UsageError(named_by_source(where, e, cfg.session.model_dir)) from None
+        if Path(cfg.session.model_dir).exists():
             raise
         # the default ./models (no --model-dir, no session.model_dir in --config), run from outside the repository:
         # say which option names the folder

@@ -208,6 +208,20 @@ def test_no_model_is_a_one_line_error(tmp_path, capsys, make):
     assert "--truth-only" in lines[0]
 
 
+def test_a_file_given_as_the_model_folder_is_named_by_the_option_or_key(tmp_path, capsys):
+    """It said "no model in m.json: the folder does not exist" of a file that exists, naming no option."""
+    model = tmp_path / "m.json"
+    model.write_text("{}")
+    assert demo.main(["--model-dir", str(model), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"no model in --model-dir {model}: is not a folder" in err
+    assert "training.pipeline" not in err  # no advice to build a model into a file's path
+    config = tmp_path / "runtime.json"
+    config.write_text(json.dumps({"session": {"model_dir": str(model)}}))
+    assert demo.main(["--config", str(config), "--out", str(tmp_path / "out")]) == 2
+    assert f"no model in session.model_dir in {config} ({model}): is not a folder" in capsys.readouterr().err
+
+
 def test_default_model_folder_error_names_make_model(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)  # no ./models here
     assert demo.main(["--out", str(tmp_path / "out")]) == 2

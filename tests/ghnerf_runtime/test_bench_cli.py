@@ -36,6 +36,17 @@ def test_a_model_or_config_error_is_said_before_the_sequences_are_rendered(tmp_p
     assert words in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(("make", "said"), [(lambda p: p.write_text("{}"), "is not a folder"),
+                                             (lambda p: None, "model folder does not exist")])
+def test_a_model_dir_that_is_no_model_folder_is_named_by_the_option(tmp_path, capsys, no_render, make, said):
+    """It said "m.json: is not a folder (session.model_dir names ...)": a key the bench has no way to set."""
+    folder = tmp_path / "m.json"
+    make(folder)
+    assert bench.main(["runtime", "--sequences", "1", "--frames", "2", "--warmup", "0", "--cache", "off",
+                       "--precisions", "fp32", "--model-dir", str(folder)]) == 2
+    assert f"ghnerf-bench: error: --model-dir {folder}: {said}" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("modes", ["keypoints", "keypoints,novel"])
 def test_an_invalid_interior_stride_is_refused_whatever_the_modes(capsys, no_render, monkeypatch, modes):
     """``--modes keypoints --novel-interior-strides 3`` ran, the 3 (not a stride the runtime takes) unseen."""

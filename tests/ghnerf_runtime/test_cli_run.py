@@ -301,12 +301,15 @@ def test_validate_config_needs_no_rig_or_images(tmp_path, capsys):
     assert "not UTF-8" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize(("make", "said"), [
+NO_MODEL_FOLDERS = [  # how to make a path that is no model folder, and what the error says of it
     (lambda p: p.write_text("{}"), "is not a folder"),
     (lambda p: None, "model folder does not exist"),
     (lambda p: p.symlink_to(p.parent / "gone"), "is a symbolic link that leads to no folder"),
     (lambda p: p.mkdir(), "no file for graph 'encoder'"),
-])
+]
+
+
+@pytest.mark.parametrize(("make", "said"), NO_MODEL_FOLDERS)
 def test_validate_config_refuses_a_model_dir_that_is_no_model_folder(tmp_path, capsys, make, said):
     """It exited 0 and printed the tree; the run then stopped on the folder (docs/runtime.md, "The model folder")."""
     folder = tmp_path / "models"
@@ -317,6 +320,22 @@ def test_validate_config_refuses_a_model_dir_that_is_no_model_folder(tmp_path, c
     cfg = tmp_path / "cfg.json"  # named by the config instead: its key and the file
     cfg.write_text(json.dumps({"session": {"model_dir": str(folder)}}))
     assert cli_run.main(["--config", str(cfg), "--validate-config"]) == 2
+    assert f"error: session.model_dir in {cfg} ({folder}): {said}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("make", "said"), NO_MODEL_FOLDERS)
+def test_a_run_names_the_option_or_key_that_gave_a_model_dir_that_is_no_model_folder(sim_pair, tmp_path, capsys,
+                                                                                     make, said):
+    """As --validate-config says it: the run said "m.json: is not a folder (session.model_dir names ...)" of a
+    file given as --model-dir, naming a key the user never typed."""
+    folder = tmp_path / "models"
+    make(folder)
+    pair = ["--rig", sim_pair["rig"], "--images", sim_pair["left"], sim_pair["right"]]
+    assert cli_run.main(pair + ["--model-dir", str(folder)]) == 2
+    assert f"error: --model-dir {folder}: {said}" in capsys.readouterr().err
+    cfg = tmp_path / "cfg.json"
+    cfg.write_text(json.dumps({"session": {"model_dir": str(folder)}}))
+    assert cli_run.main(pair + ["--config", str(cfg)]) == 2
     assert f"error: session.model_dir in {cfg} ({folder}): {said}" in capsys.readouterr().err
 
 

@@ -395,6 +395,35 @@ def test_the_export_cli_stages_its_graphs_and_moves_them_in_only_after_the_parit
     assert "set aside as model_card.stale.json" in caplog.text
 
 
+def test_the_export_cli_writes_a_nan_parity_figure_as_null(tmp_path, monkeypatch, capsys):
+    """A broken model's NaN parity figure: the report (stdout and --report) is strict JSON, null for NaN; it was
+    a bare NaN, which ``jq`` and ``JSON.parse`` refuse."""
+    pytest.importorskip("torch")
+    import training.export.cli as cli
+    import training.export.export as export
+    import training.export.parity as parity
+
+    def export_all(model, out_dir, graphs, opset, inputs, frame_padding):
+        paths = {g: Path(out_dir) / f"{g}.onnx" for g in graphs}
+        for p in paths.values():
+            p.write_bytes(b"graph")
+        return paths
+
+    monkeypatch.setattr(export, "export_all", export_all)
+    monkeypatch.setattr(export, "example_inputs", lambda model, **kw: None)
+    monkeypatch.setattr(parity, "torch_vs_ort", lambda model, paths, inputs: {
+        g: {"out": {"max_abs": float("nan"), "ref_max": 1.0}} for g in paths})
+    report = tmp_path / "report.json"
+    assert cli.main(["--preset", "tiny", "--graphs", "encoder", "--out", str(tmp_path / "m"), "--report", str(report),
+                     "--no-parity-check"]) == 0
+
+    def refuse(name):
+        raise ValueError(f"not strict JSON: {name}")
+
+    for text in (capsys.readouterr().out, report.read_text()):
+        assert json.loads(text, parse_constant=refuse)["fp32_parity"]["encoder"]["out"]["max_abs"] is None
+
+
 def test_the_export_cli_writes_the_checkpoints_training_padding_into_the_contract(tmp_path, capsys):
     """``python -m training.export --checkpoint``: a checkpoint whose train config set ``frame_padding`` gives
     graphs whose contract says "black" (the runtime's unset ``roi.pad_fill`` follows it); a padding record of

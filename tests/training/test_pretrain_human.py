@@ -11,7 +11,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from ghnerf_runtime.body25 import FLIP_INDEX  # noqa: E402
-from tests.training.test_trainer import log_records, tiny_cfg  # noqa: E402  (data64: conftest)
+from tests.training.test_trainer import log_records, strict_loads, tiny_cfg  # noqa: E402  (data64: conftest)
 from training import pretrain_checkpoint  # noqa: E402
 from training.model.config import ConfigError  # noqa: E402
 from training.pretrain_human import (PretrainConfig, load_human, main, pretrain, pretrain_step,  # noqa: E402
@@ -418,6 +418,28 @@ def test_cli_reads_the_block_of_a_train_config(data64, tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["steps"] == 1
     assert main(["--config", str(tmp_path / "train.json"), "--out", str(tmp_path / "r2"), "--set", "lr=-1"]) == 2
     assert "pretrain_human.lr" in capsys.readouterr().err
+
+
+def test_cli_writes_strict_json_when_no_evaluation_ran(data64, tmp_path, capsys):
+    """eval_every 0: eval_pck@0.2 and each record's pck are NaN, written as null (a bare NaN is no JSON)."""
+    run = tmp_path / "run"
+    assert main(["--out", str(run), "--data", str(data64), "--iterations", "1", "--quiet", "--set", 'preset="tiny"',
+                 "--set", "scenes_per_step=1", "--set", "eval_every=0", "--set", "log_every=1"]) == 0
+    assert strict_loads(capsys.readouterr().out)["eval_pck@0.2"] is None
+    assert strict_loads((run / "summary.json").read_text())["eval_pck@0.2"] is None
+    assert [strict_loads(line)["pck"] for line in (run / "log.jsonl").read_text().splitlines()] == [None]
+
+
+@pytest.mark.parametrize("resume", [False, True])
+def test_a_model_folder_is_refused_as_the_run_folder(tmp_path, capsys, resume):
+    """As the trainer (``tests/training/test_trainer.py``): its last.pt and config.json went beside the graphs."""
+    folder = tmp_path / "ghnerf"
+    folder.mkdir()
+    (folder / "encoder.onnx").write_bytes(b"graph")
+    assert main(["--out", str(folder), "--set", 'preset="tiny"', "--data", str(tmp_path / "nowhere"),
+                 *["--resume"] * resume]) == 2
+    assert f"{folder}: is a model folder (it holds encoder.onnx), not a run folder" in capsys.readouterr().err
+    assert [p.name for p in folder.iterdir()] == ["encoder.onnx"]
 
 
 def test_score_reports_the_heatmap_pck_of_a_human_pt(data64, tmp_path, capsys):

@@ -104,6 +104,23 @@ def test_cli_reports_config_error(tmp_path, capsys):
     assert f"config file {tmp_path / 'list.json'}: must hold a JSON object" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("marks", [["encoder.onnx", "volume.int8.onnx"], ["model_card.json"]])
+@pytest.mark.parametrize("resume", [False, True])
+def test_a_model_folder_is_refused_as_the_run_folder(tmp_path, capsys, marks, resume):
+    """``--out models/ghnerf`` (a path copied from a ghnerf-run command) trained into it: last.pt, config.json and
+    log.jsonl beside the graphs. Refused naming the folder and what marks it, before anything is written."""
+    (tmp_path / "c.json").write_text(json.dumps({"preset": "tiny", "data": str(tmp_path / "nowhere")}))
+    folder = tmp_path / "models"
+    folder.mkdir()
+    for name in marks:
+        (folder / name).write_bytes(b"graph")
+    assert main(["--config", str(tmp_path / "c.json"), "--out", str(folder), *["--resume"] * resume]) == 2
+    err = capsys.readouterr().err
+    assert f"{folder}: is a model folder (it holds {', '.join(marks)}), not a run folder" in err
+    assert "give a new one" in err
+    assert sorted(p.name for p in folder.iterdir()) == marks
+
+
 def test_cli_reports_the_run_folders_config_errors(tmp_path, capsys):
     """ConfigErrors of the run itself (not of the config file) exit 2 too, before anything is written."""
     (tmp_path / "c.json").write_text(json.dumps({"preset": "tiny", "data": str(tmp_path / "nowhere")}))
@@ -589,6 +606,26 @@ def test_resume_drops_the_log_records_past_the_checkpoint(data64, tmp_path):
         fh.write('{"step": 3, "lo')  # and a line cut short by a crash
     train(tiny_cfg(data64, pck_every=0), run, resume=True, quiet=True)
     assert [json.loads(line)["step"] for line in (run / "log.jsonl").read_text().splitlines()] == [1, 2]
+
+
+def strict_loads(text: str):
+    """``text`` read as strict JSON: a bare ``NaN`` / ``Infinity`` (which ``jq`` and ``JSON.parse`` refuse) fails."""
+    def refuse(name):
+        raise ValueError(f"not strict JSON: {name}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_cli_writes_strict_json_when_no_pck_was_scored(data64, tmp_path, capsys):
+    """pck_every 0 leaves every record's pck NaN: log.jsonl, summary.json and stdout write it as null."""
+    (tmp_path / "c.json").write_text(json.dumps({"preset": "tiny", "data": str(data64), "iterations": 1,
+                                                 "targets_per_iter": 2, "heat_rays": 32, "patch_size": 8,
+                                                 "log_every": 1, "pck_every": 0, "threads": 2}))
+    run = tmp_path / "run"
+    assert main(["--config", str(tmp_path / "c.json"), "--out", str(run), "--quiet"]) == 0
+    assert strict_loads(capsys.readouterr().out)["steps"] == 1
+    assert strict_loads((run / "summary.json").read_text())["steps"] == 1
+    assert [strict_loads(line)["pck"] for line in (run / "log.jsonl").read_text().splitlines()] == [None]
 
 
 def log_records(run: Path) -> list[dict]:

@@ -50,6 +50,16 @@ def test_a_model_spec_that_is_a_file_not_named_pt_is_named_as_a_file():
             evaluate.make_renderer(str(ckpt))
 
 
+@pytest.mark.parametrize(("make", "said"), [(lambda p: p.write_text("{}"), "a file, not a model folder"),
+                                             (lambda p: None, "no such model folder")])
+def test_a_model_spec_that_is_no_model_folder_is_named_by_its_model_item(tmp_path, make, said):
+    """``ghnerf-eval --model x=m.json`` said "m.json: a file, not a model folder", naming no option."""
+    spec = tmp_path / "m.json"
+    make(spec)
+    with pytest.raises(evaluate.EvalInputError, match=rf"^--model x={spec}: {spec}: {said}"):
+        evaluate.prepare([f"x={spec}"], str(tmp_path), "val", 1)
+
+
 def _prepared(monkeypatch, items: list[str]) -> list[tuple[str, str]]:
     """``(label, spec)`` that :func:`evaluate.prepare` gives each ``--model`` item, nothing loaded."""
     monkeypatch.setattr(evaluate, "make_renderer", lambda spec, threads: (spec, {}))

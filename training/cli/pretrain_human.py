@@ -10,7 +10,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m training.pretrain_human",
                                  description=doc_of("training.pretrain_human").split("\n\n")[0])
     ap.add_argument("--config", help="JSON file: a PretrainConfig, or a train config with a 'pretrain_human' block")
-    ap.add_argument("--out", help="run folder (required unless --score)")
+    ap.add_argument("--out", help="run folder (required unless --score; not a model folder of *.onnx graphs)")
     ap.add_argument("--score", metavar="HUMAN_PT", help="only score this human.pt's heatmaps on --split "
                                                          "(--data, default data/edge128; --scenes, default all)")
     ap.add_argument("--split", default="val")

@@ -12,7 +12,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="ghnerf-train", description=doc_of("training.train").split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", type=user_path, help="JSON or TOML train config (training/train_configs/*.json)")
-    p.add_argument("--out", type=user_path, required=True, help="run folder: checkpoints, log.jsonl, config.json")
+    p.add_argument("--out", type=user_path, required=True, help="run folder: checkpoints, log.jsonl, config.json "
+                   "(not a model folder of *.onnx graphs: refused)")
     p.add_argument("--resume", action="store_true",
                    help="continue from OUT/last.pt (without it, the newest OUT/ckpt_*.pt) when it exists; "
                         "without --resume an OUT holding checkpoints is refused")

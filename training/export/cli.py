@@ -18,7 +18,6 @@ a file that holds anything else is refused before the export, exit 2 (``training
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
 import sys
@@ -32,7 +31,7 @@ from ghnerf_runtime.contract import GRAPH_NAMES
 from training.configs import PRESETS, preset
 from training.export.calibration import MIN_FRAMES
 from training.export.opsets import DEFAULT_OPSET, MAX_OPSET, MIN_OPSET, opset_problem
-from training.model_card import write_atomic
+from training.model_card import strict_json, write_atomic
 
 if TYPE_CHECKING:  # torch and the modules on it load in main, after the arguments (--help without torch's 3 s)
     from training.export.export import ExampleInputs
@@ -329,7 +328,7 @@ def _export_and_check(args: argparse.Namespace, model: GHNeRF, graphs: tuple[str
         if int8:
             report["latency_int8"] = time_graphs(model, int8, args.threads)
         report["load_average"] = os.getloadavg()
-    text = json.dumps(report, indent=2, default=float)
+    text = strict_json(report, indent=2)  # a broken model's NaN parity figures as null, not a bare NaN
     print(text)  # first: the figures reach the terminal whatever happens to the file
     if args.report:
         write_atomic(args.report, text)

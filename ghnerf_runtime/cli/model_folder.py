@@ -1,0 +1,43 @@
+"""Errors about the model folder, led by what named it: the option (``--model-dir X``) or the config file's key
+(``session.model_dir in FILE``). The session words them as ``session.model_dir`` only (it knows no command line),
+so ``ghnerf-run --model-dir m.json`` said ``m.json: is not a folder (session.model_dir names ...)``, naming a key
+the user never typed; ``--validate-config`` named the option. ``ghnerf-run``, ``ghnerf-bench`` and
+``ghnerf-demo`` word them here, so each says the same.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ghnerf_runtime.config import read_json_file
+from ghnerf_runtime.errors import ConfigError, ModelError
+from ghnerf_runtime.path_check import shown
+
+__all__ = ["config_names_model_dir", "model_dir_source", "named_by_source"]
+
+
+def config_names_model_dir(config_path: str | None) -> bool:
+    """Whether the config file at ``config_path`` (None: no ``--config``) names ``session.model_dir``; it was read
+    already, so an error reading it again is one ``ConfigError`` naming it."""
+    if not config_path:
+        return False
+    data = read_json_file(config_path, lambda message: ConfigError(message, key=str(config_path)))
+    session = data.get("session") if isinstance(data, dict) else None
+    return isinstance(session, dict) and "model_dir" in session
+
+
+def model_dir_source(model_dir_option: str | None, config_path: str | None, model_dir: str) -> str | None:
+    """What named the model folder ``model_dir``, as an error should say it: ``--model-dir X`` (the option,
+    ``model_dir_option``, wins over the config), ``session.model_dir in FILE (X)``, or None for the default
+    ``./models`` that neither names."""
+    if model_dir_option:
+        return f"--model-dir {shown(model_dir_option)}"
+    if config_names_model_dir(config_path):
+        return f"session.model_dir in {config_path} ({shown(model_dir)})"
+    return None
+
+
+def named_by_source(where: str, e: ModelError, model_dir: str) -> str:
+    """``e`` led by ``where`` (:func:`model_dir_source`), the folder said once: ``--model-dir m.json: is not a
+    folder (...)``. A file's error (``e.path`` inside the folder) keeps its path."""
+    named = f"{e.path}: " if e.path is not None and Path(e.path) == Path(model_dir) else ""
+    return f"{where}: {str(e).removeprefix(named)}"
