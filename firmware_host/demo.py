@@ -198,8 +198,7 @@ class _Tally:
         if not acc:
             lines.append("accuracy: the frames carry no ground truth; not measured")
             return lines
-        text = (f"accuracy of the estimate vs ground truth: MPJPE {acc['mpjpe_mm']:.0f} mm over the "
-                f"{acc['mpjpe_evaluated']} joints found ({acc['mpjpe_pred_missing']} not found, not scored)")
+        text = f"accuracy of the estimate vs ground truth: {_mpjpe_words(acc)}"
         if "pck@0.2" in acc:
             text += (f"; 2D PCK@0.2 {acc['pck@0.2']:.3f} over {acc['pck_evaluated']} visible joints in both views "
                      f"(not found = wrong)")
@@ -207,6 +206,15 @@ class _Tally:
             text += f"; jitter {acc['jitter_mm']:.1f} mm per pair^2"
         lines.append(text)
         return lines
+
+
+def _mpjpe_words(acc: dict) -> str:
+    """The MPJPE part of the accuracy line. With no joint found there is no error to average: it printed
+    "MPJPE nan mm over the 0 joints found" (a 16x16 sim:// image, a subject out of view)."""
+    if acc["mpjpe_evaluated"] == 0:
+        return f"MPJPE not measured: no joint found ({acc['mpjpe_pred_missing']} not found)"
+    return (f"MPJPE {acc['mpjpe_mm']:.0f} mm over the {acc['mpjpe_evaluated']} joints found "
+            f"({acc['mpjpe_pred_missing']} not found, not scored)")
 
 
 # ------------------------------------------------------------------ calibration check
@@ -334,10 +342,21 @@ def _print_joints(pair: drivers.FramePair, result: PairResult | None) -> None:
 
 # ------------------------------------------------------------------ main
 def _positive_seconds(text: str) -> float:
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:  # argparse said "invalid _positive_seconds value: 'abc'", naming this function
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
     if not (math.isfinite(value) and value > 0):  # -1 or nan ran no pair and said all was well
         raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text}")
     return value
+
+
+def _sink_url(text: str) -> str:
+    """A ``--sink`` value: an empty one (a ``"$UNSET"`` in a script) is refused; it was read as no --sink given and
+    the joints went to the default file sink without a word."""
+    if text == "":
+        raise argparse.ArgumentTypeError("is empty: give a sink URL, or leave the option out for OUT/joints.jsonl")
+    return text
 
 
 def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
@@ -353,7 +372,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--out", type=user_path_as_path, default=Path("out/demo"),
                         help="output folder: sim_pair.png (the last pair, whatever the rig) and the default sink's joints.jsonl "
                              "(default: %(default)s)")
-    parser.add_argument("--sink", default=None,
+    parser.add_argument("--sink", type=_sink_url, default=None,
                         help="joint-stream sink URL (default: file://OUT/joints.jsonl, rewritten each run)")
     parser.add_argument("--model-dir", type=user_path, default=None,
                         help="model folder (default: the --config's session.model_dir, else ./models)")

@@ -407,9 +407,33 @@ def test_seconds_and_out_are_checked_by_name(tmp_path, capsys):
         with pytest.raises(SystemExit) as e:
             demo.main(["--truth-only", "--seconds", seconds])
         assert e.value.code == 2 and "--seconds: must be a finite number of seconds > 0" in capsys.readouterr().err
+    for seconds in ("abc", ""):  # argparse's own words named the parser's function: "invalid _positive_seconds value"
+        with pytest.raises(SystemExit) as e:
+            demo.main(["--truth-only", "--seconds", seconds])
+        err = capsys.readouterr().err
+        assert e.value.code == 2 and f"--seconds: must be a number of seconds, got {seconds!r}" in err
     (tmp_path / "afile").write_text("")
     assert demo.main(["--truth-only", "--out", str(tmp_path / "afile")]) == 2
     assert f"--out {tmp_path / 'afile'}: is a file" in capsys.readouterr().err
+
+
+@needs_model
+def test_a_run_that_found_no_joint_says_its_mpjpe_is_not_measured(tmp_path, capsys, sim_url):
+    """A 16x16 image shows the subject too small for the model: no joint is found, and the accuracy line printed
+    "MPJPE nan mm over the 0 joints found"."""
+    rc = demo.main(["--url", f"{sim_url}&width=16&height=16", "--seconds", "0.3", "--out", str(tmp_path),
+                    "--model-dir", str(MODELS)])
+    out = capsys.readouterr().out
+    assert rc == 0 and "estimated joints found: 0.0%" in out
+    assert "MPJPE not measured: no joint found" in out and "nan" not in out
+
+
+def test_an_empty_sink_is_refused_by_name(tmp_path, capsys):
+    """``--sink ''`` (a ``"$UNSET"`` in a script) streamed to the default file sink without a word."""
+    with pytest.raises(SystemExit) as e:
+        demo.main(["--truth-only", "--seconds", "0.2", "--out", str(tmp_path / "out"), "--sink", ""])
+    assert e.value.code == 2 and "argument --sink: is empty" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize("flags, named", [
