@@ -312,6 +312,7 @@ class _Sink:
             self.path = path = str(ready_output(path, flag))
         except OutputPathError as e:
             raise UsageError(str(e)) from None
+        self.flag = flag  # named in a later error: which of --novel-view and --overlay could not be written
         self.video = Path(path).suffix.lower() in (".mp4", ".avi", ".mkv")
         if not self.video and not cv2.haveImageWriter(path):  # said now, not after the whole run
             raise UsageError(f"{path}: cannot write an image of this kind; give .png, .jpg or .mp4")
@@ -327,7 +328,7 @@ class _Sink:
             self.writer = cv2.VideoWriter(self.path, cv2.VideoWriter_fourcc(*"mp4v"), self.fps,
                                           (image.shape[1], image.shape[0]))
             if not self.writer.isOpened():
-                raise UsageError(f"{self.path}: cannot write a video here")
+                raise UsageError(f"{self.flag} {self.path}: cannot write a video here")
         self.writer.write(image)
 
     def close(self) -> None:
@@ -337,9 +338,61 @@ class _Sink:
             try:
                 written = cv2.imwrite(self.path, self.last)
             except cv2.error as e:
-                raise UsageError(f"{self.path}: cannot write the image: {e}") from None
+                raise UsageError(f"{self.flag} {self.path}: cannot write the image: {e}") from None
             if not written:
-                raise UsageError(f"{self.path}: cannot write the image (no permission, or no such folder)")
+                # OpenCV says no more than False: a full disk (libpng's "Write Error") was told as a permission
+                raise UsageError(f"{self.flag} {self.path}: cannot write the image (no permission, no such folder, "
+                                 "or no room left on its disk)")
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    """``data`` written to ``fd`` whole (``os.write`` may write part of it)."""
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
+class _JsonLines:
+    """``--out`` as ``.jsonl``: a line per pair, written as each is done, the file opened at the first (an input
+    that does not open leaves an earlier file as it was). A line that cannot be written (a full disk) is cut off
+    again, so the file holds whole lines only, and the error names --out and how many pairs it holds: it was
+    OSError's bare "[Errno 28] No space left on device", the last line left half written."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.file = None
+        self.lines = 0
+        self.size = 0  # bytes of whole lines written
+        self.failed: str | None = None  # the error, said again for any later pair: no line past a gap
+
+    def write(self, obj: dict) -> None:
+        if self.failed is not None:
+            raise UsageError(self.failed)
+        data = (json.dumps(obj, allow_nan=False) + "\n").encode("utf-8")
+        try:
+            if self.file is None:
+                self.file = open(self.path, "wb", buffering=0)
+            _write_all(self.file.fileno(), data)
+        except OSError as e:
+            self._cut_back()
+            self.failed = (f"--out {self.path}: cannot write pair {obj.get('sequence')}'s line "
+                           f"({e.strerror or e}); it holds the {self.lines} pair(s) before it, whole")
+            raise UsageError(self.failed) from None
+        self.lines += 1
+        self.size += len(data)
+
+    def _cut_back(self) -> None:
+        """The file back to its whole lines (a device such as /dev/full cannot be cut: left as it is)."""
+        if self.file is None:
+            return
+        try:
+            os.ftruncate(self.file.fileno(), self.size)
+        except OSError:
+            pass
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
 
 
 def _ready(path: str, flag: str) -> str:
@@ -415,9 +468,8 @@ def _run(args) -> int:
     novel = _Sink(args.novel_view, fps, "--novel-view") if args.novel_view else None
     overlay = _Sink(args.overlay, fps, "--overlay") if args.overlay else None
     as_list = not to_stdout and Path(out_path).suffix.lower() == ".json"
-    # .jsonl / stdout: a line per pair as it is done, the file opened at the first (an input that does not
-    # open leaves an earlier file as it was); .json: one list, written whole at the end (below)
-    out = sys.stdout if to_stdout else None
+    # .jsonl / stdout: a line per pair as it is done (_JsonLines); .json: one list, written whole at the end (below)
+    lines = None if to_stdout or as_list else _JsonLines(out_path)
     frames: list[dict] = []
     done = False
     held: dict[int, list[np.ndarray]] = {}  # the pairs in flight, for their overlay
@@ -427,18 +479,17 @@ def _run(args) -> int:
 
     def emit(result) -> None:
         images = held.pop(result.sequence)
-        nonlocal out
         obj = result.to_json()
         pair_time = times.pop(result.sequence, None)
         obj = {"sequence": obj["sequence"],
                "time_s": None if pair_time is None else round(float(pair_time), 6), **obj}
         if as_list:
             frames.append(obj)
+        elif lines is not None:
+            lines.write(obj)
         else:
-            if out is None:
-                out = open(out_path, "w", encoding="utf-8")
-            out.write(json.dumps(obj, allow_nan=False) + "\n")
-            out.flush()
+            sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
+            sys.stdout.flush()
         if novel is not None:
             # A pair whose frames were rejected, or that found nobody, has no novel view: keep the video in step
             # with black.
@@ -482,7 +533,7 @@ def _run(args) -> int:
         # a Ctrl-C pressed again while the outputs are written is held back (a stop already on its way is the one
         # reported; after a finished run, it is raised once they are whole)
         with stop_signals_deferred(then_raise=done):
-            _close_outputs(pairs, as_list, out_path, frames, done, None if to_stdout else out, (novel, overlay))
+            _close_outputs(pairs, as_list, out_path, frames, done, lines, (novel, overlay))
     return 0
 
 

@@ -897,6 +897,48 @@ def test_a_jsonl_output_is_left_as_it_was_when_an_input_fails_before_the_first_p
     assert out.read_text() == "an earlier run's lines\n"  # was emptied before the input was read
 
 
+def test_a_jsonl_output_on_a_full_disk_keeps_whole_lines_and_names_out(monkeypatch, tmp_path, capsys):
+    """The disk fills at the third pair's line: it was OSError's bare "[Errno 28] No space left on device" (no
+    option, no file named) with the line left half written."""
+    import errno
+    import os
+
+    out = tmp_path / "joints.jsonl"
+    writes = []
+
+    def fills_up(fd, data):
+        writes.append(data)
+        if len(writes) == 3:
+            os.write(fd, bytes(data[: len(data) // 2]))
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        os.write(fd, data)
+
+    monkeypatch.setattr(cli_run, "_write_all", fills_up)
+    rc, _ = _stub_run(monkeypatch, out, pairs=5)
+    assert rc == 2 and len(writes) == 3  # no line past the gap
+    assert [json.loads(line)["sequence"] for line in out.read_text().splitlines()] == [0, 1]
+    assert out.read_text().endswith("}\n")
+    err = capsys.readouterr().err
+    assert f"--out {out}: cannot write pair 2's line (No space left on device); it holds the 2 pair(s)" in err
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full here")
+def test_a_jsonl_output_that_cannot_be_written_names_out(monkeypatch, capsys):
+    """/dev/full, a disk with no room from the first line."""
+    rc, _ = _stub_run(monkeypatch, Path("/dev/full"), pairs=2)
+    err = capsys.readouterr().err
+    assert rc == 2 and "--out /dev/full: cannot write pair 0's line (No space left on device)" in err
+
+
+def test_an_image_output_that_cannot_be_written_names_its_option(monkeypatch, tmp_path):
+    """A full disk made OpenCV's imwrite return False: the error named the file only, and guessed a permission."""
+    sink = cli_run._Sink(str(tmp_path / "novel.png"), flag="--novel-view")
+    sink.add(np.zeros((4, 4, 3), np.uint8))
+    monkeypatch.setattr(cli_run.cv2, "imwrite", lambda path, image: False)
+    with pytest.raises(cli_run.UsageError, match=r"^--novel-view .*novel\.png: cannot write the image \(.*no room left"):
+        sink.close()
+
+
 def test_a_closed_pipe_ends_the_run_quietly(monkeypatch, tmp_path):
     # `ghnerf-run ... --out - | head`: was "error: [Errno 32] Broken pipe" and status 2
     class _Closed:
