@@ -561,15 +561,14 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     print(f"sink {redact_url(sink_url)}: {sink_stats}")
     png = args.out / "sim_pair.png"
     suspect = calibration.symptoms() if estimator is not None else ""  # as the check stood at the last estimate
-    if last_pair is not None and cv2.imwrite(str(png), _annotated(last_pair, last_result, suspect)):
-        what = ("estimated 2D joints (magenta) over the ground truth (dots)" if last_result is not None
-                else "its ground-truth 2D joints")
-        if suspect:
-            what += ", marked CALIBRATION SUSPECT"
-        print(f"wrote {png} (pair {last_pair.sequence} with {what})")
+    picture_lost = False
     if last_pair is not None:
+        picture_lost = not _write_picture(png, last_pair, last_result, suspect)
         _print_joints(last_pair, last_result)
     failed = False
+    if picture_lost:  # OpenCV says no more than False (libpng's "Write Error" on a full disk): was not a word
+        print(f"{prog}: error: could not write {png} (no permission, or no room left on its disk)", file=sys.stderr)
+        failed = True
     if rig_failed is not None:
         print(f"{prog}: error: the rig failed after {delivered} pairs: {rig_failed}", file=sys.stderr)
         failed = True
@@ -586,6 +585,18 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         print(f"{prog}: stopped (SIGTERM); the summary above is of the pairs read until then", file=sys.stderr)
         return exit_status(stopped)
     return 0
+
+
+def _write_picture(png: Path, pair: drivers.FramePair, result: PairResult | None, suspect: str) -> bool:
+    """The last pair drawn into ``png``, said on stdout; False where it could not be written."""
+    if not cv2.imwrite(str(png), _annotated(pair, result, suspect)):
+        return False
+    what = ("estimated 2D joints (magenta) over the ground truth (dots)" if result is not None
+            else "its ground-truth 2D joints")
+    if suspect:
+        what += ", marked CALIBRATION SUSPECT"
+    print(f"wrote {png} (pair {pair.sequence} with {what})")
+    return True
 
 
 def _refuse_ignored_flags(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:

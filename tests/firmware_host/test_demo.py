@@ -428,6 +428,16 @@ def test_a_run_that_found_no_joint_says_its_mpjpe_is_not_measured(tmp_path, caps
     assert "MPJPE not measured: no joint found" in out and "nan" not in out
 
 
+def test_a_picture_that_cannot_be_written_fails_the_run_naming_it(tmp_path, capsys, sim_url, monkeypatch):
+    """On a full disk OpenCV's imwrite returned False (libpng printed "Write Error"): the "wrote" line was left out
+    and the run exited 0 without a word that OUT/sim_pair.png was not written."""
+    monkeypatch.setattr(demo.cv2, "imwrite", lambda path, image: False)
+    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.3", "--out", str(tmp_path)])
+    out, err = capsys.readouterr()
+    assert rc == 2 and "BODY_25 joints of that pair" in out  # the rest of the summary still printed
+    assert f"error: could not write {tmp_path / 'sim_pair.png'} (no permission, or no room left" in err
+
+
 def test_an_empty_sink_is_refused_by_name(tmp_path, capsys):
     """``--sink ''`` (a ``"$UNSET"`` in a script) streamed to the default file sink without a word."""
     with pytest.raises(SystemExit) as e:
