@@ -71,6 +71,7 @@ from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame, truth_frame
 from firmware_host.protocol.constants import MAX_RIG_ID_LEN
+from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks import Sink, open_sink
 from firmware_host.sinks.file_sink import FileSink
 from firmware_host.sinks.url import parse_url
@@ -489,31 +490,28 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                     read_failed = False
                     delivered += 1
                     stats_at_pair = source.stats
-                    if estimator is None:
-                        frame = truth_frame(pair, sequence=numbers.take()) if pair.joints_3d is not None else None
-                    else:
+                    result = None
+                    if estimator is not None:
                         result = estimator.estimate(pair.images, sequence=pair.sequence,
                                                     timestamp_s=pair.timestamps_ns[0] * 1e-9)
-                        tally.add(pair, result, time.monotonic_ns())
-                        change = calibration.add(pair.sequence, result)
-                        if change is not None:
-                            print(change)
-                            # a protocol sink's STATUS packets carry the flag too, as the daemon's do (its
-                            # _sync_calibration); vmc:// has no STATUS
-                            set_suspect = getattr(sink, "set_calibration_suspect", None)
-                            if set_suspect is not None:
-                                set_suspect(calibration.suspect)
-                        frame = estimate_frame(pair, result, sequence=numbers.take(),
-                                               calibration_suspect=calibration.suspect)
-                        last_result = result
+                    # A pair read (and estimated) is counted, streamed and kept as the last pair whole: a Ctrl-C
+                    # landing there waits for it. It counted an estimate the sink never got ("9 estimated", 8
+                    # sent), drew one pair's joints over the pair before it, or, in the send, escaped this loop
+                    # as exit 130 without the summary.
+                    with stop_signals_deferred():
+                        if result is None:
+                            frame = truth_frame(pair, sequence=numbers.take()) if pair.joints_3d is not None else None
+                        else:
+                            frame = _counted_estimate(pair, result, tally, calibration, sink, numbers)
+                            last_result = result
+                        if frame is not None:
+                            sink.send(frame)
+                        skews.append(pair.skew_ns / 1e6)
+                        last_pair = pair
                 except KeyboardInterrupt as e:  # SIGTERM too (main's sigterm_as_interrupt)
                     stopped = e
                     print(f"stopping: {stop_words(e)}")
                     break
-                if frame is not None:
-                    sink.send(frame)
-                skews.append(pair.skew_ns / 1e6)
-                last_pair = pair
             elapsed = max(time.monotonic() - start, 1e-9)
             # the sink delivers what it holds queued as it closes (up to a second: a file:// sink's last lines, a
             # slow serial link): a second Ctrl-C pressed there cut it short and ended the run without its summary,
@@ -585,6 +583,22 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         print(f"{prog}: stopped (SIGTERM); the summary above is of the pairs read until then", file=sys.stderr)
         return exit_status(stopped)
     return 0
+
+
+def _counted_estimate(pair: drivers.FramePair, result: PairResult, tally: _Tally, calibration: _CalibrationCheck,
+                      sink: Sink, numbers: FrameNumbers) -> JointFrame:
+    """``result`` added to the summary's tally and to the calibration check (a change of its verdict printed and
+    flagged on the sink), as the frame to stream."""
+    tally.add(pair, result, time.monotonic_ns())
+    change = calibration.add(pair.sequence, result)
+    if change is not None:
+        print(change)
+        # a protocol sink's STATUS packets carry the flag too, as the daemon's do (its _sync_calibration); vmc://
+        # has no STATUS
+        set_suspect = getattr(sink, "set_calibration_suspect", None)
+        if set_suspect is not None:
+            set_suspect(calibration.suspect)
+    return estimate_frame(pair, result, sequence=numbers.take(), calibration_suspect=calibration.suspect)
 
 
 def _write_picture(png: Path, pair: drivers.FramePair, result: PairResult | None, suspect: str) -> bool:

@@ -555,6 +555,35 @@ def _main_no_escape(argv: list[str]) -> int:
 
 
 @needs_model
+@pytest.mark.parametrize("where", ["calibration", "send"])
+def test_ctrl_c_after_an_estimate_streams_it_and_counts_it_once(tmp_path, capsys, sim_url, monkeypatch, where):
+    """A Ctrl-C landing after the third estimate, in the calibration check or in the sink's send: the summary said
+    "3 estimated" with 2 streamed, or (in the send, outside the loop's catch) the run ended 130 without its
+    summary. Now the pair is counted, streamed and drawn whole, then the run stops."""
+    import os
+    import signal
+
+    owner, name = (demo._CalibrationCheck, "add") if where == "calibration" else (demo.FileSink, "send")
+    original = getattr(owner, name)
+    calls = {"n": 0}
+
+    def then_ctrl_c(self, *args, **kwargs):
+        value = original(self, *args, **kwargs)
+        calls["n"] += 1
+        if calls["n"] == 3:
+            os.kill(os.getpid(), signal.SIGINT)
+        return value
+
+    monkeypatch.setattr(owner, name, then_ctrl_c)
+    rc = _main_no_escape(["--url", sim_url, "--seconds", "20", "--out", str(tmp_path), "--model-dir", str(MODELS)])
+    out = capsys.readouterr().out
+    assert rc == 0 and "stopping: Ctrl-C" in out
+    _, estimated, _ = _summary(out)
+    assert estimated == 3 == len(_joints_rows(tmp_path / "joints.jsonl"))
+    assert "wrote " in out and "with estimated 2D joints" in out
+
+
+@needs_model
 def test_ctrl_c_in_an_estimate_ends_the_run_with_its_summary(tmp_path, capsys, sim_url, monkeypatch):
     """The estimate is most of a pair's time, so that is where a Ctrl-C mostly lands: it was a traceback."""
     original = Estimator.estimate
