@@ -319,8 +319,14 @@ class _Sink:
         self.writer = None
         self.fps = fps
         self.last = None
+        self.frames = 0
+        self.blank = 0  # frames written black: pairs with no novel view
+        self.last_blank = False
 
-    def add(self, image: np.ndarray) -> None:
+    def add(self, image: np.ndarray, blank: bool = False) -> None:
+        self.frames += 1
+        self.blank += blank
+        self.last_blank = blank
         if not self.video:
             self.last = image
             return
@@ -330,6 +336,15 @@ class _Sink:
             if not self.writer.isOpened():
                 raise UsageError(f"{self.flag} {self.path}: cannot write a video here")
         self.writer.write(image)
+
+    def blank_words(self) -> str | None:
+        """What the output shows black, for a warning (None: nothing): a black --novel-view with exit 0 and no
+        word looked like a broken render, not a pair that showed nobody."""
+        if self.video and self.blank:
+            return f"{self.flag} {self.path}: {self.blank} of {self.frames} frame(s) black"
+        if not self.video and self.last_blank:
+            return f"{self.flag} {self.path}: black"
+        return None
 
     def close(self) -> None:
         if self.writer is not None:
@@ -492,9 +507,10 @@ def _run(args) -> int:
             sys.stdout.flush()
         if novel is not None:
             # A pair whose frames were rejected, or that found nobody, has no novel view: keep the video in step
-            # with black.
-            novel.add(result.novel_view.image if result.novel_view is not None
-                      else np.zeros((estimator.size, estimator.size, 3), np.uint8))
+            # with black (said at the end: _say_blank_novel_views).
+            blank = result.novel_view is None
+            novel.add(np.zeros((estimator.size, estimator.size, 3), np.uint8) if blank else result.novel_view.image,
+                      blank=blank)
         if overlay is not None:
             overlay.add(overlay_image(images, result))
         log.info("pair %d: %d/25 joints, %.1f ms", result.sequence, result.num_found, result.timing_ms["total"])
@@ -529,12 +545,22 @@ def _run(args) -> int:
             for result in pipe.flush():
                 emit(result)
         done = True
+        _say_blank_novel_views(novel)
     finally:
         # a Ctrl-C pressed again while the outputs are written is held back (a stop already on its way is the one
         # reported; after a finished run, it is raised once they are whole)
         with stop_signals_deferred(then_raise=done):
             _close_outputs(pairs, as_list, out_path, frames, done, lines, (novel, overlay))
     return 0
+
+
+def _say_blank_novel_views(novel: _Sink | None) -> None:
+    """A warning where --novel-view shows black: no view for a pair that shows nobody (the presence gate) or
+    whose frames the frame check rejected (docs/runtime.md, "Novel view, nobody there")."""
+    words = novel.blank_words() if novel is not None else None
+    if words is not None:
+        log.warning("%s: no novel view for a pair that shows nobody or whose frames were rejected (the pair's "
+                    "\"missing\" and \"frame_reason\" say which)", words)
 
 
 def _close_outputs(pairs, as_list: bool, out_path: str | None, frames: list[dict], done: bool, out_file,

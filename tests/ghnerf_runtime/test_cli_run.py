@@ -83,6 +83,18 @@ def test_run_on_a_sim_pair_writes_the_documented_json(sim_pair, tiny_model_dir, 
     assert ov is not None and ov.shape == (480, 1280, 3)
 
 
+def test_a_novel_view_of_a_pair_that_shows_nobody_is_said_to_be_black(sim_pair, tiny_model_dir, tmp_path,  # noqa: F811
+                                                                     caplog):
+    """The random weights find nobody, so the pair has no novel view and --novel-view gets black: it was written
+    with exit status 0 and no word, which looked like a broken render."""
+    novel = tmp_path / "novel.png"
+    rc = cli_run.main(["--rig", sim_pair["rig"], "--images", sim_pair["left"], sim_pair["right"],
+                       "--model-dir", str(tiny_model_dir), "--out", str(tmp_path / "j.json"),
+                       "--novel-view", str(novel)])
+    assert rc == 0 and not cv2.imread(str(novel)).any()
+    assert f"--novel-view {novel}: black: no novel view for a pair that shows nobody" in caplog.text
+
+
 def test_run_on_two_videos_writes_one_object_per_line(tiny_model_dir, tmp_path, capsys):  # noqa: F811
     clip = simdata.write_sim_example(tmp_path / "clip", frames=3, width=320, height=240)
     rc = cli_run.main(["--rig", clip["rig"], "--videos", clip["left"], clip["right"],
