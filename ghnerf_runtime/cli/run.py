@@ -69,7 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                "one object per line as each pair is done); default -")
     ap.add_argument("--config", type=user_path, help="estimator config (JSON, docs/runtime.md); flags below override it")
     ap.add_argument("--model-dir", type=user_path, help="model folder (default: the config's, else ./models)")
-    ap.add_argument("--precision", choices=("auto", "fp32", "int8"), help="graph file precision")
+    ap.add_argument("--precision", choices=("auto", "fp32", "int8"),
+                    help="graph file precision (session.precision; int8 runs a graph's fp32 file, with a warning, "
+                         "where the folder has no int8 one)")
     ap.add_argument("--method", choices=THREE_D_METHODS, help="3D joint method")
     ap.add_argument("--heatmap-source", choices=HEATMAP_SOURCES,
                     help="rendered (GHNeRF render_heat) or encoder (the encoder's 2D heatmaps; faster)")
