@@ -130,6 +130,9 @@ def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
                  if v is not None]
         if given:
             ap.error(f"{', '.join(given)} without --novel-view: there is no novel view to apply it to")
+    if args.smoothing is not None and args.images and not args.validate_config:  # (there it sets what is printed)
+        ap.error(f"--{'' if args.smoothing else 'no-'}smoothing applies to --videos (--images is one pair, nothing "
+                 "to smooth)")
     if args.max_frames is not None:
         if args.images:
             ap.error("--max-frames applies to --videos (--images is one pair)")
@@ -452,8 +455,24 @@ def _check_named_model_folder(args, cfg: EstimatorConfig) -> None:
         raise UsageError(f"{where}: {str(e).removeprefix(named)}") from None  # the folder said once
 
 
+def _refuse_flags_the_settings_ignore(args, cfg: EstimatorConfig) -> None:
+    """A flag whose setting the others (or the --config) turn off: it ran, exit 0, the flag without effect.
+
+    :raises UsageError: naming the flag and the setting that turns it off.
+    """
+    if args.flip_test is not None and cfg.heatmaps.source != "encoder":
+        raise UsageError(f"--{'' if args.flip_test else 'no-'}flip-test with heatmaps.source "
+                         f"{cfg.heatmaps.source!r}: the flip test runs on the encoder's heatmaps only")
+    prior_off = cfg.joints3d.skeleton_prior == "off" or cfg.joints3d.method != "triangulate"
+    if args.max_prior_error is not None and prior_off:
+        why = (f"joints3d.method {cfg.joints3d.method!r}" if cfg.joints3d.method != "triangulate"
+               else "joints3d.skeleton_prior 'off'")
+        raise UsageError(f"--max-prior-error with {why}: no skeleton prior runs, so there is nothing to apply it to")
+
+
 def _run(args) -> int:
     cfg = _config(args)
+    _refuse_flags_the_settings_ignore(args, cfg)
     if args.validate_config:
         _check_named_model_folder(args, cfg)
         print(json.dumps(config_to_dict(cfg), indent=2))

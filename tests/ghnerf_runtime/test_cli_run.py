@@ -372,6 +372,8 @@ def test_a_corrupt_graph_the_config_does_not_run_is_not_loaded_nor_checked(sim_p
     (["--rig", "r.json", "--images", "a", "b", "--novel-view", "n.png", "--novel-alpha", "nan"],
      ["--novel-alpha nan: ", "in [-1, 2]"]),
     (["--rig", "r.json", "--videos", "a", "b", "--max-frames", "0"], ["at least 1"]),
+    # a still pair has nothing to smooth: it ran, exit 0 (session 64)
+    (["--rig", "r.json", "--images", "a", "b", "--no-smoothing"], ["--no-smoothing applies to --videos"]),
 ])
 def test_flags_that_would_be_ignored_are_refused(extra, words, capsys):
     with pytest.raises(SystemExit) as e:
@@ -379,6 +381,21 @@ def test_flags_that_would_be_ignored_are_refused(extra, words, capsys):
     assert e.value.code == 2
     err = capsys.readouterr().err
     assert all(w in err for w in words), err
+
+
+@pytest.mark.parametrize("extra, said", [
+    (["--skeleton-prior", "off", "--max-prior-error", "0.1"],
+     "--max-prior-error with joints3d.skeleton_prior 'off': no skeleton prior runs"),
+    (["--method", "depth_centroid", "--max-prior-error", "0.1"],
+     "--max-prior-error with joints3d.method 'depth_centroid'"),
+    (["--heatmap-source", "rendered", "--flip-test"],
+     "--flip-test with heatmaps.source 'rendered': the flip test runs on the encoder's heatmaps only"),
+])
+def test_a_flag_the_other_settings_turn_off_is_refused_before_anything_is_read(extra, said, capsys):
+    """Each ran with the flag without effect, exit 0 (session 64's review): said before the rig or model is read."""
+    assert cli_run.main(["--rig", "nowhere.json", "--images", "a.png", "b.png", *extra]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "nowhere.json" not in err
 
 
 @pytest.mark.parametrize(("extra", "said"), [
