@@ -71,6 +71,7 @@ from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame, truth_frame
 from firmware_host.protocol.constants import MAX_RIG_ID_LEN
+from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks import Sink, open_sink
 from firmware_host.sinks.file_sink import FileSink
 from firmware_host.sinks.url import parse_url
@@ -204,8 +205,7 @@ class _Tally:
         if not acc:
             lines.append("accuracy: the frames carry no ground truth; not measured")
             return lines
-        text = (f"accuracy of the estimate vs ground truth: MPJPE {acc['mpjpe_mm']:.0f} mm over the "
-                f"{acc['mpjpe_evaluated']} joints found ({acc['mpjpe_pred_missing']} not found, not scored)")
+        text = f"accuracy of the estimate vs ground truth: {_mpjpe_words(acc)}"
         if "pck@0.2" in acc:
             text += (f"; 2D PCK@0.2 {acc['pck@0.2']:.3f} over {acc['pck_evaluated']} visible joints in both views "
                      f"(not found = wrong)")
@@ -213,6 +213,15 @@ class _Tally:
             text += f"; jitter {acc['jitter_mm']:.1f} mm per pair^2"
         lines.append(text)
         return lines
+
+
+def _mpjpe_words(acc: dict) -> str:
+    """The MPJPE part of the accuracy line. With no joint found there is no error to average: it printed
+    "MPJPE nan mm over the 0 joints found" (a 16x16 sim:// image, a subject out of view)."""
+    if acc["mpjpe_evaluated"] == 0:
+        return f"MPJPE not measured: no joint found ({acc['mpjpe_pred_missing']} not found)"
+    return (f"MPJPE {acc['mpjpe_mm']:.0f} mm over the {acc['mpjpe_evaluated']} joints found "
+            f"({acc['mpjpe_pred_missing']} not found, not scored)")
 
 
 # ------------------------------------------------------------------ calibration check
@@ -340,10 +349,21 @@ def _print_joints(pair: drivers.FramePair, result: PairResult | None) -> None:
 
 # ------------------------------------------------------------------ main
 def _positive_seconds(text: str) -> float:
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:  # argparse said "invalid _positive_seconds value: 'abc'", naming this function
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
     if not (math.isfinite(value) and value > 0):  # -1 or nan ran no pair and said all was well
         raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text}")
     return value
+
+
+def _sink_url(text: str) -> str:
+    """A ``--sink`` value: an empty one (a ``"$UNSET"`` in a script) is refused; it was read as no --sink given and
+    the joints went to the default file sink without a word."""
+    if text == "":
+        raise argparse.ArgumentTypeError("is empty: give a sink URL, or leave the option out for OUT/joints.jsonl")
+    return text
 
 
 def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
@@ -359,7 +379,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--out", type=user_path_as_path, default=Path("out/demo"),
                         help="output folder: sim_pair.png (the last pair, whatever the rig) and the default sink's joints.jsonl "
                              "(default: %(default)s)")
-    parser.add_argument("--sink", default=None,
+    parser.add_argument("--sink", type=_sink_url, default=None,
                         help="joint-stream sink URL (default: file://OUT/joints.jsonl, rewritten each run)")
     parser.add_argument("--model-dir", type=user_path, default=None,
                         help="model folder (default: the --config's session.model_dir, else ./models)")
@@ -476,31 +496,28 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                     read_failed = False
                     delivered += 1
                     stats_at_pair = source.stats
-                    if estimator is None:
-                        frame = truth_frame(pair, sequence=numbers.take()) if pair.joints_3d is not None else None
-                    else:
+                    result = None
+                    if estimator is not None:
                         result = estimator.estimate(pair.images, sequence=pair.sequence,
                                                     timestamp_s=pair.timestamps_ns[0] * 1e-9)
-                        tally.add(pair, result, time.monotonic_ns())
-                        change = calibration.add(pair.sequence, result)
-                        if change is not None:
-                            print(change)
-                            # a protocol sink's STATUS packets carry the flag too, as the daemon's do (its
-                            # _sync_calibration); vmc:// has no STATUS
-                            set_suspect = getattr(sink, "set_calibration_suspect", None)
-                            if set_suspect is not None:
-                                set_suspect(calibration.suspect)
-                        frame = estimate_frame(pair, result, sequence=numbers.take(),
-                                               calibration_suspect=calibration.suspect)
-                        last_result = result
+                    # A pair read (and estimated) is counted, streamed and kept as the last pair whole: a Ctrl-C
+                    # landing there waits for it. It counted an estimate the sink never got ("9 estimated", 8
+                    # sent), drew one pair's joints over the pair before it, or, in the send, escaped this loop
+                    # as exit 130 without the summary.
+                    with stop_signals_deferred():
+                        if result is None:
+                            frame = truth_frame(pair, sequence=numbers.take()) if pair.joints_3d is not None else None
+                        else:
+                            frame = _counted_estimate(pair, result, tally, calibration, sink, numbers)
+                            last_result = result
+                        if frame is not None:
+                            sink.send(frame)
+                        skews.append(pair.skew_ns / 1e6)
+                        last_pair = pair
                 except KeyboardInterrupt as e:  # SIGTERM too (main's sigterm_as_interrupt)
                     stopped = e
                     print(f"stopping: {stop_words(e)}")
                     break
-                if frame is not None:
-                    sink.send(frame)
-                skews.append(pair.skew_ns / 1e6)
-                last_pair = pair
             elapsed = max(time.monotonic() - start, 1e-9)
             # the sink delivers what it holds queued as it closes (up to a second: a file:// sink's last lines, a
             # slow serial link): a second Ctrl-C pressed there cut it short and ended the run without its summary,
@@ -548,15 +565,14 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     print(f"sink {redact_url(sink_url)}: {sink_stats}")
     png = args.out / "sim_pair.png"
     suspect = calibration.symptoms() if estimator is not None else ""  # as the check stood at the last estimate
-    if last_pair is not None and cv2.imwrite(str(png), _annotated(last_pair, last_result, suspect)):
-        what = ("estimated 2D joints (magenta) over the ground truth (dots)" if last_result is not None
-                else "its ground-truth 2D joints")
-        if suspect:
-            what += ", marked CALIBRATION SUSPECT"
-        print(f"wrote {png} (pair {last_pair.sequence} with {what})")
+    picture_lost = False
     if last_pair is not None:
+        picture_lost = not _write_picture(png, last_pair, last_result, suspect)
         _print_joints(last_pair, last_result)
     failed = False
+    if picture_lost:  # OpenCV says no more than False (libpng's "Write Error" on a full disk): was not a word
+        print(f"{prog}: error: could not write {png} (no permission, or no room left on its disk)", file=sys.stderr)
+        failed = True
     if rig_failed is not None:
         print(f"{prog}: error: the rig failed after {delivered} pairs: {rig_failed}", file=sys.stderr)
         failed = True
@@ -573,6 +589,34 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         print(f"{prog}: stopped (SIGTERM); the summary above is of the pairs read until then", file=sys.stderr)
         return exit_status(stopped)
     return 0
+
+
+def _counted_estimate(pair: drivers.FramePair, result: PairResult, tally: _Tally, calibration: _CalibrationCheck,
+                      sink: Sink, numbers: FrameNumbers) -> JointFrame:
+    """``result`` added to the summary's tally and to the calibration check (a change of its verdict printed and
+    flagged on the sink), as the frame to stream."""
+    tally.add(pair, result, time.monotonic_ns())
+    change = calibration.add(pair.sequence, result)
+    if change is not None:
+        print(change)
+        # a protocol sink's STATUS packets carry the flag too, as the daemon's do (its _sync_calibration); vmc://
+        # has no STATUS
+        set_suspect = getattr(sink, "set_calibration_suspect", None)
+        if set_suspect is not None:
+            set_suspect(calibration.suspect)
+    return estimate_frame(pair, result, sequence=numbers.take(), calibration_suspect=calibration.suspect)
+
+
+def _write_picture(png: Path, pair: drivers.FramePair, result: PairResult | None, suspect: str) -> bool:
+    """The last pair drawn into ``png``, said on stdout; False where it could not be written."""
+    if not cv2.imwrite(str(png), _annotated(pair, result, suspect)):
+        return False
+    what = ("estimated 2D joints (magenta) over the ground truth (dots)" if result is not None
+            else "its ground-truth 2D joints")
+    if suspect:
+        what += ", marked CALIBRATION SUSPECT"
+    print(f"wrote {png} (pair {pair.sequence} with {what})")
+    return True
 
 
 def _refuse_ignored_flags(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:

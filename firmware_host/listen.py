@@ -193,6 +193,8 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
     refuses it, since nothing would tell the sender which port to use. Its errors show the URL without any password
     (``drivers.url.redact_url``), as the sinks' do: a terminal's scrollback and a shell's log keep them.
     """
+    if not url:  # a "$UNSET" in a script: was ": the listener reads udp:// or serial://", the URL shown as nothing
+        raise ListenError("the URL is empty: give udp://[HOST]:PORT or serial:///dev/DEVICE?baud=N")
     shown = redact_url(url)
     try:
         parts = urlsplit(url)

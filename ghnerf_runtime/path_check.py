@@ -92,7 +92,12 @@ def shown(value: str) -> str:
 
 def user_path(value: str) -> str:
     """An argparse ``type=`` for an option naming a file or folder: a value :func:`path_problem` refuses ends the
-    tool as argparse ends it (``argument --out: ...``, exit status 2)."""
+    tool as argparse ends it (``argument --out: ...``, exit status 2). An empty value is refused too: it names no
+    file, yet tools read it as the option left out (``ghnerf-run --novel-view ''`` rendered nothing and exited 0,
+    ``--config ''`` ran on the defaults) or as the current folder (``ghnerf-demo --out ''`` wrote there), as a
+    ``"$UNSET"`` in a script gives it."""
+    if value == "":
+        raise argparse.ArgumentTypeError("is empty: give a path, or leave the option out")
     problem = path_problem(value)
     if problem is not None:
         raise argparse.ArgumentTypeError(f"{shown(value)}: {problem}")

@@ -70,7 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                "one object per line as each pair is done); default -")
     ap.add_argument("--config", type=user_path, help="estimator config (JSON, docs/runtime.md); flags below override it")
     ap.add_argument("--model-dir", type=user_path, help="model folder (default: the config's, else ./models)")
-    ap.add_argument("--precision", choices=("auto", "fp32", "int8"), help="graph file precision")
+    ap.add_argument("--precision", choices=("auto", "fp32", "int8"),
+                    help="graph file precision (session.precision; int8 runs a graph's fp32 file, with a warning, "
+                         "where the folder has no int8 one)")
     ap.add_argument("--method", choices=THREE_D_METHODS, help="3D joint method")
     ap.add_argument("--heatmap-source", choices=HEATMAP_SOURCES,
                     help="rendered (GHNeRF render_heat) or encoder (the encoder's 2D heatmaps; faster)")
@@ -129,6 +131,9 @@ def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
                  if v is not None]
         if given:
             ap.error(f"{', '.join(given)} without --novel-view: there is no novel view to apply it to")
+    if args.smoothing is not None and args.images and not args.validate_config:  # (there it sets what is printed)
+        ap.error(f"--{'' if args.smoothing else 'no-'}smoothing applies to --videos (--images is one pair, nothing "
+                 "to smooth)")
     if args.max_frames is not None:
         if args.images:
             ap.error("--max-frames applies to --videos (--images is one pair)")
@@ -316,14 +321,21 @@ class _Sink:
             self.path = path = str(ready_output(path, flag))
         except OutputPathError as e:
             raise UsageError(str(e)) from None
+        self.flag = flag  # named in a later error: which of --novel-view and --overlay could not be written
         self.video = Path(path).suffix.lower() in (".mp4", ".avi", ".mkv")
         if not self.video and not cv2.haveImageWriter(path):  # said now, not after the whole run
             raise UsageError(f"{path}: cannot write an image of this kind; give .png, .jpg or .mp4")
         self.writer = None
         self.fps = fps
         self.last = None
+        self.frames = 0
+        self.blank = 0  # frames written black: pairs with no novel view
+        self.last_blank = False
 
-    def add(self, image: np.ndarray) -> None:
+    def add(self, image: np.ndarray, blank: bool = False) -> None:
+        self.frames += 1
+        self.blank += blank
+        self.last_blank = blank
         if not self.video:
             self.last = image
             return
@@ -331,8 +343,17 @@ class _Sink:
             self.writer = cv2.VideoWriter(self.path, cv2.VideoWriter_fourcc(*"mp4v"), self.fps,
                                           (image.shape[1], image.shape[0]))
             if not self.writer.isOpened():
-                raise UsageError(f"{self.path}: cannot write a video here")
+                raise UsageError(f"{self.flag} {self.path}: cannot write a video here")
         self.writer.write(image)
+
+    def blank_words(self) -> str | None:
+        """What the output shows black, for a warning (None: nothing): a black --novel-view with exit 0 and no
+        word looked like a broken render, not a pair that showed nobody."""
+        if self.video and self.blank:
+            return f"{self.flag} {self.path}: {self.blank} of {self.frames} frame(s) black"
+        if not self.video and self.last_blank:
+            return f"{self.flag} {self.path}: black"
+        return None
 
     def close(self) -> None:
         if self.writer is not None:
@@ -341,9 +362,61 @@ class _Sink:
             try:
                 written = cv2.imwrite(self.path, self.last)
             except cv2.error as e:
-                raise UsageError(f"{self.path}: cannot write the image: {e}") from None
+                raise UsageError(f"{self.flag} {self.path}: cannot write the image: {e}") from None
             if not written:
-                raise UsageError(f"{self.path}: cannot write the image (no permission, or no such folder)")
+                # OpenCV says no more than False: a full disk (libpng's "Write Error") was told as a permission
+                raise UsageError(f"{self.flag} {self.path}: cannot write the image (no permission, no such folder, "
+                                 "or no room left on its disk)")
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    """``data`` written to ``fd`` whole (``os.write`` may write part of it)."""
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
+
+
+class _JsonLines:
+    """``--out`` as ``.jsonl``: a line per pair, written as each is done, the file opened at the first (an input
+    that does not open leaves an earlier file as it was). A line that cannot be written (a full disk) is cut off
+    again, so the file holds whole lines only, and the error names --out and how many pairs it holds: it was
+    OSError's bare "[Errno 28] No space left on device", the last line left half written."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.file = None
+        self.lines = 0
+        self.size = 0  # bytes of whole lines written
+        self.failed: str | None = None  # the error, said again for any later pair: no line past a gap
+
+    def write(self, obj: dict) -> None:
+        if self.failed is not None:
+            raise UsageError(self.failed)
+        data = (json.dumps(obj, allow_nan=False) + "\n").encode("utf-8")
+        try:
+            if self.file is None:
+                self.file = open(self.path, "wb", buffering=0)
+            _write_all(self.file.fileno(), data)
+        except OSError as e:
+            self._cut_back()
+            self.failed = (f"--out {self.path}: cannot write pair {obj.get('sequence')}'s line "
+                           f"({e.strerror or e}); it holds the {self.lines} pair(s) before it, whole")
+            raise UsageError(self.failed) from None
+        self.lines += 1
+        self.size += len(data)
+
+    def _cut_back(self) -> None:
+        """The file back to its whole lines (a device such as /dev/full cannot be cut: left as it is)."""
+        if self.file is None:
+            return
+        try:
+            os.ftruncate(self.file.fileno(), self.size)
+        except OSError:
+            pass
+
+    def close(self) -> None:
+        if self.file is not None:
+            self.file.close()
 
 
 def _ready(path: str, flag: str) -> str:
@@ -376,8 +449,24 @@ def _check_named_model_folder(args, cfg: EstimatorConfig) -> None:
         raise UsageError(named_by_source(where, e, cfg.session.model_dir)) from None
 
 
+def _refuse_flags_the_settings_ignore(args, cfg: EstimatorConfig) -> None:
+    """A flag whose setting the others (or the --config) turn off: it ran, exit 0, the flag without effect.
+
+    :raises UsageError: naming the flag and the setting that turns it off.
+    """
+    if args.flip_test is not None and cfg.heatmaps.source != "encoder":
+        raise UsageError(f"--{'' if args.flip_test else 'no-'}flip-test with heatmaps.source "
+                         f"{cfg.heatmaps.source!r}: the flip test runs on the encoder's heatmaps only")
+    prior_off = cfg.joints3d.skeleton_prior == "off" or cfg.joints3d.method != "triangulate"
+    if args.max_prior_error is not None and prior_off:
+        why = (f"joints3d.method {cfg.joints3d.method!r}" if cfg.joints3d.method != "triangulate"
+               else "joints3d.skeleton_prior 'off'")
+        raise UsageError(f"--max-prior-error with {why}: no skeleton prior runs, so there is nothing to apply it to")
+
+
 def _run(args) -> int:
     cfg = _config(args)
+    _refuse_flags_the_settings_ignore(args, cfg)
     if args.validate_config:
         _check_named_model_folder(args, cfg)
         print(json.dumps(config_to_dict(cfg), indent=2))
@@ -413,9 +502,8 @@ def _run(args) -> int:
     novel = _Sink(args.novel_view, fps, "--novel-view") if args.novel_view else None
     overlay = _Sink(args.overlay, fps, "--overlay") if args.overlay else None
     as_list = not to_stdout and Path(out_path).suffix.lower() == ".json"
-    # .jsonl / stdout: a line per pair as it is done, the file opened at the first (an input that does not
-    # open leaves an earlier file as it was); .json: one list, written whole at the end (below)
-    out = sys.stdout if to_stdout else None
+    # .jsonl / stdout: a line per pair as it is done (_JsonLines); .json: one list, written whole at the end (below)
+    lines = None if to_stdout or as_list else _JsonLines(out_path)
     frames: list[dict] = []
     done = False
     held: dict[int, list[np.ndarray]] = {}  # the pairs in flight, for their overlay
@@ -425,23 +513,23 @@ def _run(args) -> int:
 
     def emit(result) -> None:
         images = held.pop(result.sequence)
-        nonlocal out
         obj = result.to_json()
         pair_time = times.pop(result.sequence, None)
         obj = {"sequence": obj["sequence"],
                "time_s": None if pair_time is None else round(float(pair_time), 6), **obj}
         if as_list:
             frames.append(obj)
+        elif lines is not None:
+            lines.write(obj)
         else:
-            if out is None:
-                out = open(out_path, "w", encoding="utf-8")
-            out.write(json.dumps(obj, allow_nan=False) + "\n")
-            out.flush()
+            sys.stdout.write(json.dumps(obj, allow_nan=False) + "\n")
+            sys.stdout.flush()
         if novel is not None:
             # A pair whose frames were rejected, or that found nobody, has no novel view: keep the video in step
-            # with black.
-            novel.add(result.novel_view.image if result.novel_view is not None
-                      else np.zeros((estimator.size, estimator.size, 3), np.uint8))
+            # with black (said at the end: _say_blank_novel_views).
+            blank = result.novel_view is None
+            novel.add(np.zeros((estimator.size, estimator.size, 3), np.uint8) if blank else result.novel_view.image,
+                      blank=blank)
         if overlay is not None:
             overlay.add(overlay_image(images, result))
         log.info("pair %d: %d/25 joints, %.1f ms", result.sequence, result.num_found, result.timing_ms["total"])
@@ -476,12 +564,22 @@ def _run(args) -> int:
             for result in pipe.flush():
                 emit(result)
         done = True
+        _say_blank_novel_views(novel)
     finally:
         # a Ctrl-C pressed again while the outputs are written is held back (a stop already on its way is the one
         # reported; after a finished run, it is raised once they are whole)
         with stop_signals_deferred(then_raise=done):
-            _close_outputs(pairs, as_list, out_path, frames, done, None if to_stdout else out, (novel, overlay))
+            _close_outputs(pairs, as_list, out_path, frames, done, lines, (novel, overlay))
     return 0
+
+
+def _say_blank_novel_views(novel: _Sink | None) -> None:
+    """A warning where --novel-view shows black: no view for a pair that shows nobody (the presence gate) or
+    whose frames the frame check rejected (docs/runtime.md, "Novel view, nobody there")."""
+    words = novel.blank_words() if novel is not None else None
+    if words is not None:
+        log.warning("%s: no novel view for a pair that shows nobody or whose frames were rejected (the pair's "
+                    "\"missing\" and \"frame_reason\" say which)", words)
 
 
 def _close_outputs(pairs, as_list: bool, out_path: str | None, frames: list[dict], done: bool, out_file,

@@ -421,9 +421,43 @@ def test_seconds_and_out_are_checked_by_name(tmp_path, capsys):
         with pytest.raises(SystemExit) as e:
             demo.main(["--truth-only", "--seconds", seconds])
         assert e.value.code == 2 and "--seconds: must be a finite number of seconds > 0" in capsys.readouterr().err
+    for seconds in ("abc", ""):  # argparse's own words named the parser's function: "invalid _positive_seconds value"
+        with pytest.raises(SystemExit) as e:
+            demo.main(["--truth-only", "--seconds", seconds])
+        err = capsys.readouterr().err
+        assert e.value.code == 2 and f"--seconds: must be a number of seconds, got {seconds!r}" in err
     (tmp_path / "afile").write_text("")
     assert demo.main(["--truth-only", "--out", str(tmp_path / "afile")]) == 2
     assert f"--out {tmp_path / 'afile'}: is a file" in capsys.readouterr().err
+
+
+@needs_model
+def test_a_run_that_found_no_joint_says_its_mpjpe_is_not_measured(tmp_path, capsys, sim_url):
+    """A 16x16 image shows the subject too small for the model: no joint is found, and the accuracy line printed
+    "MPJPE nan mm over the 0 joints found"."""
+    rc = demo.main(["--url", f"{sim_url}&width=16&height=16", "--seconds", "0.3", "--out", str(tmp_path),
+                    "--model-dir", str(MODELS)])
+    out = capsys.readouterr().out
+    assert rc == 0 and "estimated joints found: 0.0%" in out
+    assert "MPJPE not measured: no joint found" in out and "nan" not in out
+
+
+def test_a_picture_that_cannot_be_written_fails_the_run_naming_it(tmp_path, capsys, sim_url, monkeypatch):
+    """On a full disk OpenCV's imwrite returned False (libpng printed "Write Error"): the "wrote" line was left out
+    and the run exited 0 without a word that OUT/sim_pair.png was not written."""
+    monkeypatch.setattr(demo.cv2, "imwrite", lambda path, image: False)
+    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.3", "--out", str(tmp_path)])
+    out, err = capsys.readouterr()
+    assert rc == 2 and "BODY_25 joints of that pair" in out  # the rest of the summary still printed
+    assert f"error: could not write {tmp_path / 'sim_pair.png'} (no permission, or no room left" in err
+
+
+def test_an_empty_sink_is_refused_by_name(tmp_path, capsys):
+    """``--sink ''`` (a ``"$UNSET"`` in a script) streamed to the default file sink without a word."""
+    with pytest.raises(SystemExit) as e:
+        demo.main(["--truth-only", "--seconds", "0.2", "--out", str(tmp_path / "out"), "--sink", ""])
+    assert e.value.code == 2 and "argument --sink: is empty" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize("flags, named", [
@@ -532,6 +566,35 @@ def _main_no_escape(argv: list[str]) -> int:
         return demo.main(argv)
     except KeyboardInterrupt:
         pytest.fail("Ctrl-C escaped demo.main: the user saw a traceback")
+
+
+@needs_model
+@pytest.mark.parametrize("where", ["calibration", "send"])
+def test_ctrl_c_after_an_estimate_streams_it_and_counts_it_once(tmp_path, capsys, sim_url, monkeypatch, where):
+    """A Ctrl-C landing after the third estimate, in the calibration check or in the sink's send: the summary said
+    "3 estimated" with 2 streamed, or (in the send, outside the loop's catch) the run ended 130 without its
+    summary. Now the pair is counted, streamed and drawn whole, then the run stops."""
+    import os
+    import signal
+
+    owner, name = (demo._CalibrationCheck, "add") if where == "calibration" else (demo.FileSink, "send")
+    original = getattr(owner, name)
+    calls = {"n": 0}
+
+    def then_ctrl_c(self, *args, **kwargs):
+        value = original(self, *args, **kwargs)
+        calls["n"] += 1
+        if calls["n"] == 3:
+            os.kill(os.getpid(), signal.SIGINT)
+        return value
+
+    monkeypatch.setattr(owner, name, then_ctrl_c)
+    rc = _main_no_escape(["--url", sim_url, "--seconds", "20", "--out", str(tmp_path), "--model-dir", str(MODELS)])
+    out = capsys.readouterr().out
+    assert rc == 0 and "stopping: Ctrl-C" in out
+    _, estimated, _ = _summary(out)
+    assert estimated == 3 == len(_joints_rows(tmp_path / "joints.jsonl"))
+    assert "wrote " in out and "with estimated 2D joints" in out
 
 
 @needs_model

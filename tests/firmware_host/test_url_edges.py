@@ -33,6 +33,7 @@ def _listen_fails(capsys, *argv: str) -> str:
 
 
 @pytest.mark.parametrize("url, message", [
+    ("", "the URL is empty: give udp://[HOST]:PORT"),  # was ": the listener reads udp:// or serial://"
     ("udp://[::1:9871", "cannot be parsed"),  # an unclosed [: was a ValueError traceback, exit 1
     ("udp://:0", "bad port 0"),  # was bound to a port nobody was told, exit 0
     ("udp://127.0.0.1:0", "bad port 0"),

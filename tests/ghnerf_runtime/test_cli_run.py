@@ -83,6 +83,18 @@ def test_run_on_a_sim_pair_writes_the_documented_json(sim_pair, tiny_model_dir, 
     assert ov is not None and ov.shape == (480, 1280, 3)
 
 
+def test_a_novel_view_of_a_pair_that_shows_nobody_is_said_to_be_black(sim_pair, tiny_model_dir, tmp_path,  # noqa: F811
+                                                                     caplog):
+    """The random weights find nobody, so the pair has no novel view and --novel-view gets black: it was written
+    with exit status 0 and no word, which looked like a broken render."""
+    novel = tmp_path / "novel.png"
+    rc = cli_run.main(["--rig", sim_pair["rig"], "--images", sim_pair["left"], sim_pair["right"],
+                       "--model-dir", str(tiny_model_dir), "--out", str(tmp_path / "j.json"),
+                       "--novel-view", str(novel)])
+    assert rc == 0 and not cv2.imread(str(novel)).any()
+    assert f"--novel-view {novel}: black: no novel view for a pair that shows nobody" in caplog.text
+
+
 def test_run_on_two_videos_writes_one_object_per_line(tiny_model_dir, tmp_path, capsys):  # noqa: F811
     clip = simdata.write_sim_example(tmp_path / "clip", frames=3, width=320, height=240)
     rc = cli_run.main(["--rig", clip["rig"], "--videos", clip["left"], clip["right"],
@@ -392,6 +404,8 @@ def test_a_corrupt_graph_the_config_does_not_run_is_not_loaded_nor_checked(sim_p
     (["--rig", "r.json", "--images", "a", "b", "--novel-view", "n.png", "--novel-alpha", "nan"],
      ["--novel-alpha nan: ", "in [-1, 2]"]),
     (["--rig", "r.json", "--videos", "a", "b", "--max-frames", "0"], ["at least 1"]),
+    # a still pair has nothing to smooth: it ran, exit 0 (session 64)
+    (["--rig", "r.json", "--images", "a", "b", "--no-smoothing"], ["--no-smoothing applies to --videos"]),
 ])
 def test_flags_that_would_be_ignored_are_refused(extra, words, capsys):
     with pytest.raises(SystemExit) as e:
@@ -399,6 +413,21 @@ def test_flags_that_would_be_ignored_are_refused(extra, words, capsys):
     assert e.value.code == 2
     err = capsys.readouterr().err
     assert all(w in err for w in words), err
+
+
+@pytest.mark.parametrize("extra, said", [
+    (["--skeleton-prior", "off", "--max-prior-error", "0.1"],
+     "--max-prior-error with joints3d.skeleton_prior 'off': no skeleton prior runs"),
+    (["--method", "depth_centroid", "--max-prior-error", "0.1"],
+     "--max-prior-error with joints3d.method 'depth_centroid'"),
+    (["--heatmap-source", "rendered", "--flip-test"],
+     "--flip-test with heatmaps.source 'rendered': the flip test runs on the encoder's heatmaps only"),
+])
+def test_a_flag_the_other_settings_turn_off_is_refused_before_anything_is_read(extra, said, capsys):
+    """Each ran with the flag without effect, exit 0 (session 64's review): said before the rig or model is read."""
+    assert cli_run.main(["--rig", "nowhere.json", "--images", "a.png", "b.png", *extra]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "nowhere.json" not in err
 
 
 @pytest.mark.parametrize(("extra", "said"), [
@@ -927,6 +956,48 @@ def test_a_jsonl_output_is_left_as_it_was_when_an_input_fails_before_the_first_p
     monkeypatch.setattr(cli_run, "_pairs", no_pairs)
     assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(out)]) == 2
     assert out.read_text() == "an earlier run's lines\n"  # was emptied before the input was read
+
+
+def test_a_jsonl_output_on_a_full_disk_keeps_whole_lines_and_names_out(monkeypatch, tmp_path, capsys):
+    """The disk fills at the third pair's line: it was OSError's bare "[Errno 28] No space left on device" (no
+    option, no file named) with the line left half written."""
+    import errno
+    import os
+
+    out = tmp_path / "joints.jsonl"
+    writes = []
+
+    def fills_up(fd, data):
+        writes.append(data)
+        if len(writes) == 3:
+            os.write(fd, bytes(data[: len(data) // 2]))
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        os.write(fd, data)
+
+    monkeypatch.setattr(cli_run, "_write_all", fills_up)
+    rc, _ = _stub_run(monkeypatch, out, pairs=5)
+    assert rc == 2 and len(writes) == 3  # no line past the gap
+    assert [json.loads(line)["sequence"] for line in out.read_text().splitlines()] == [0, 1]
+    assert out.read_text().endswith("}\n")
+    err = capsys.readouterr().err
+    assert f"--out {out}: cannot write pair 2's line (No space left on device); it holds the 2 pair(s)" in err
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full here")
+def test_a_jsonl_output_that_cannot_be_written_names_out(monkeypatch, capsys):
+    """/dev/full, a disk with no room from the first line."""
+    rc, _ = _stub_run(monkeypatch, Path("/dev/full"), pairs=2)
+    err = capsys.readouterr().err
+    assert rc == 2 and "--out /dev/full: cannot write pair 0's line (No space left on device)" in err
+
+
+def test_an_image_output_that_cannot_be_written_names_its_option(monkeypatch, tmp_path):
+    """A full disk made OpenCV's imwrite return False: the error named the file only, and guessed a permission."""
+    sink = cli_run._Sink(str(tmp_path / "novel.png"), flag="--novel-view")
+    sink.add(np.zeros((4, 4, 3), np.uint8))
+    monkeypatch.setattr(cli_run.cv2, "imwrite", lambda path, image: False)
+    with pytest.raises(cli_run.UsageError, match=r"^--novel-view .*novel\.png: cannot write the image \(.*no room left"):
+        sink.close()
 
 
 def test_a_closed_pipe_ends_the_run_quietly(monkeypatch, tmp_path):

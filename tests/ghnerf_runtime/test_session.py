@@ -182,6 +182,22 @@ def test_loads_only_requested_graphs_and_int8_falls_back_to_fp32(tiny_model_dir)
     assert s.files["encoder"].path.name == "encoder.onnx"  # the tiny export has no int8 files
 
 
+def test_int8_asked_for_by_name_and_run_in_fp32_is_said(tiny_model_dir, caplog):
+    """`ghnerf-run --precision int8` on a folder without int8 files ran fp32 without a word (INFO only), and its
+    timings were taken for int8's. ``auto`` takes what the folder has: no warning."""
+    import logging
+
+    with caplog.at_level(logging.WARNING, logger="ghnerf_runtime.session"):
+        ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), precision="int8", warmup=False),
+                          ("encoder", "volume"))
+    assert "int8 was asked for" in caplog.text and "running the fp32 encoder.onnx, volume.onnx" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="ghnerf_runtime.session"):
+        ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), precision="auto", warmup=False),
+                          ("encoder", "volume"))
+    assert "int8 was asked for" not in caplog.text
+
+
 def test_int8_file_is_preferred_when_present(tiny_model_dir, tmp_path):
     folder = _copy(tiny_model_dir, tmp_path / "m")
     shutil.copy(folder / "encoder.onnx", folder / "encoder.int8.onnx")
