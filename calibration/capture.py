@@ -25,7 +25,7 @@ import cv2
 from calibration.board import BoardSpec
 from calibration.detect import BoardDetector, BoardView, board_mismatch, mirrored_corners, mirrored_words
 from calibration.errors import BoardError, CaptureError
-from ghnerf_runtime.image_files import read_image_or_none, tiff_compression_refusal
+from ghnerf_runtime.image_files import read_image_or_none, unread_because
 from ghnerf_runtime.rig_file import write_text_atomic
 
 __all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
@@ -221,10 +221,10 @@ def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[s
 
 
 def _why_unreadable(path: Path) -> str:
-    """Why an image that did not decode does not, where its header says: a TIFF of a compression OpenCV does not
-    decode (most such were read as black images, the board "not found")."""
-    compression = tiff_compression_refusal(path)
-    return "" if compression is None else f": it is {compression}"
+    """Why an image that did not decode does not, where the file says (:func:`unread_because`): a TIFF of a
+    compression OpenCV does not decode, say (most such were read as black images, the board "not found")."""
+    cause = unread_because(path, READ_GREY)
+    return "" if cause is None else f": {cause}"
 
 
 #: A camera that found the board in none of its images: this many of them (spread over the capture) are tried

@@ -22,7 +22,7 @@ naming the file was skipped for a traceback naming none. replay:// reads its fil
 A TIFF whose compression OpenCV does not decode is None too, told from its header (``ghnerf_runtime.
 tiff_compression``): for most such values (JPEG 2000's 34712, any unregistered one) OpenCV returned an image of
 the stored size holding zeros, an all-black frame, having only logged libtiff's error;
-:func:`tiff_compression_refusal` says why.
+:func:`tiff_compression_refusal` says why (:func:`unread_because`, for any read that failed).
 """
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ from ghnerf_runtime import avif_header, tiff_compression, tiff_header
 from ghnerf_runtime.path_check import is_utf8
 
 __all__ = ["AS_STORED", "decode_image_or_none", "decoded_from_memory_because", "read_image_or_none",
-           "samples_not_8_bit", "tiff_compression_refusal"]
+           "samples_not_8_bit", "tiff_compression_refusal", "unread_because"]
 
 #: The decode flag that keeps an image's pixels as stored (IMREAD_UNCHANGED never turns them anyway), a JPEG's,
 #: PNG's or WebP's EXIF orientation ignored; a TIFF's Orientation tag and an AVIF's irot and imir need more
@@ -132,6 +132,19 @@ def samples_not_8_bit(path: str | os.PathLike) -> str | None:
     channels = 1 if image.ndim == 2 else image.shape[2]
     return (f"{image.dtype.name} samples ({image.shape[1]}x{image.shape[0]}, {channels} channel"
             f"{'' if channels == 1 else 's'}): only 8- or 16-bit images decode to 8 bits")
+
+
+def unread_because(path: str | os.PathLike, flags: int) -> str | None:
+    """Why :func:`read_image_or_none` gave None for ``path`` read with ``flags``, where the file is a valid image
+    OpenCV does not read so: "it is a TIFF of Compression 34712 (JPEG 2000), ..." (:func:`tiff_compression_refusal`),
+    or, read to 8 bits, "it has float32 samples (...)" (:func:`samples_not_8_bit`); None for a corrupt, missing or
+    unknown file. The one place for every caller's error: ZJU-MoCap's frames were "missing or unreadable" whatever the
+    cause. Call it once the read failed: the sample check decodes the file again."""
+    compression = tiff_compression_refusal(path)
+    if compression is not None:
+        return f"it is {compression}"
+    samples = samples_not_8_bit(path) if _decodes_to_8_bits(flags) else None
+    return None if samples is None else f"it has {samples}"
 
 
 def decoded_from_memory_because(path: str | os.PathLike) -> str | None:

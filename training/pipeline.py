@@ -799,8 +799,10 @@ def pretrain_inputs(cfg: PipelineConfig, variant: str) -> dict:
 def pretrain_scene_problem(cfg: PipelineConfig, pretrain: Mapping) -> str | None:
     """Why the pretraining ``pretrain`` (:func:`pretrain_inputs`) cannot run on the train split ``cfg`` makes
     (None: it can): each step reads ``scenes_per_step`` scenes of it. ``--train 3`` under the cpu recipe's 4 was
-    refused by the pretrain stage, after the data stage."""
-    if pretrain.get("split") != "train" or cfg.train >= pretrain["scenes_per_step"]:
+    refused by the pretrain stage, after the data stage. A pretraining on another dataset (``--pretrain-set
+    data=...``) or split is not the data stage's: its own stage checks it."""
+    if pretrain.get("split") != "train" or Path(pretrain.get("data", "")) != Path(cfg.data) \
+            or cfg.train >= pretrain["scenes_per_step"]:
         return None
     return (f"--train {cfg.train}: fewer scenes than the pretraining's scenes_per_step {pretrain['scenes_per_step']} "
             "(each of its steps reads that many train scenes); give more, or --pretrain-set scenes_per_step=N")

@@ -42,7 +42,7 @@ from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS,
 from ghnerf_runtime.errors import FrameError, GeometryError, ModelError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult, check_model_files
 from ghnerf_runtime.geometry.camera import Camera
-from ghnerf_runtime.image_files import read_image_or_none, samples_not_8_bit, tiff_compression_refusal
+from ghnerf_runtime.image_files import read_image_or_none, unread_because
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import load_rig, write_text_atomic
@@ -216,12 +216,9 @@ def _read_image(path: str) -> np.ndarray:
     _check_input_file(path, "an image")
     img = read_image_or_none(path, cv2.IMREAD_COLOR)  # as stored, whatever its EXIF orientation (image_files)
     if img is None:
-        compression = tiff_compression_refusal(path)  # most such TIFFs were read as black images
-        if compression is not None:
-            raise UsageError(f"{path}: cannot take the image: it is {compression}")
-        samples = samples_not_8_bit(path)  # a float TIFF was "not a format OpenCV reads", which it is
-        if samples is not None:
-            raise UsageError(f"{path}: cannot take the image, of {samples}")
+        # a JPEG 2000 TIFF was read as a black image, a float TIFF was "not a format OpenCV reads", which it is
+        if (cause := unread_because(path, cv2.IMREAD_COLOR)) is not None:
+            raise UsageError(f"{path}: cannot take the image: {cause}")
         raise UsageError(f"{path}: cannot read the image (not a format OpenCV reads, or unreadable)")
     return img
 

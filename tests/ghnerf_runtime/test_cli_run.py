@@ -167,7 +167,7 @@ def test_an_image_of_samples_that_do_not_decode_to_8_bits_is_named_by_its_sample
         image[0, 0], image[1, 1], image[2, 2] = np.nan, np.inf, -3.0
     path = tmp_path / "float.tiff"
     assert cv2.imwrite(str(path), image)
-    said = f"{path}: cannot take the image, of {np.dtype(dtype).name} samples (8x6, 3 channels): only 8- or 16-bit"
+    said = f"{path}: cannot take the image: it has {np.dtype(dtype).name} samples (8x6, 3 channels): only 8- or 16-bit"
     with pytest.raises(cli_run.UsageError, match=re.escape(said)):
         cli_run._read_image(str(path))
     captured = capfd.readouterr()

@@ -266,3 +266,20 @@ def test_only_a_tiff_s_single_compression_value_is_judged(tmp_path):
     path.write_bytes(cv2.imencode(".png", image)[1].tobytes())
     assert image_files.tiff_compression_refusal(path) is None
     assert image_files.tiff_compression_refusal(tmp_path / "missing.tiff") is None
+
+
+def test_why_a_read_failed_is_said_for_the_reads_it_concerns(tmp_path):
+    """unread_because, every caller's one source of the cause (ghnerf-run, ghcal, the ZJU-MoCap reader): the
+    compression for any read, the samples only for a read to 8 bits (IMREAD_ANYDEPTH keeps float32), nothing for a
+    corrupt file."""
+    jpeg2000 = tmp_path / "view.tiff"
+    jpeg2000.write_bytes(tiff_of_compression(stored_image(3), 34712))
+    for flags in READ_FLAGS.values():
+        assert image_files.unread_because(jpeg2000, flags).startswith("it is a TIFF of Compression 34712 (JPEG 2000)")
+    floats = tmp_path / "float.tiff"
+    assert cv2.imwrite(str(floats), np.full((6, 8), 0.5, np.float32))
+    assert image_files.unread_because(floats, cv2.IMREAD_COLOR).startswith("it has float32 samples (8x6, 1 channel)")
+    assert image_files.unread_because(floats, cv2.IMREAD_ANYDEPTH) is None
+    corrupt = tmp_path / "corrupt.png"
+    corrupt.write_bytes(b"\x89PNG\r\n\x1a\n cut")
+    assert image_files.unread_because(corrupt, cv2.IMREAD_COLOR) is None

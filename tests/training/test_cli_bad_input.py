@@ -178,6 +178,21 @@ def test_pipeline_refuses_out_of_range_numbers_before_any_stage(tmp_path, capsys
     assert not (tmp_path / "data").exists() and not (tmp_path / "models").exists()
 
 
+def test_the_pipeline_s_scene_count_check_is_only_of_a_pretraining_on_its_train_split(tmp_path):
+    # --train counts the scenes the data stage makes: a pretraining on another dataset (--pretrain-set data=...)
+    # was refused by it all the same (--train 1 under scenes_per_step 2)
+    from training import pipeline
+
+    cfg = pipeline.PipelineConfig(out=tmp_path / "models", data=tmp_path / "data", train=1)
+    variant = next(v for v in cfg.variants if pipeline.pretrain_block(cfg, v))
+    assert "--train 1: fewer scenes than the pretraining's scenes_per_step" in pipeline.pretrain_scene_problem(
+        cfg, pipeline.pretrain_inputs(cfg, variant))
+    cfg.pretrain_overrides = [f'data="{tmp_path / "elsewhere"}"']
+    assert pipeline.pretrain_scene_problem(cfg, pipeline.pretrain_inputs(cfg, variant)) is None
+    cfg.pretrain_overrides = ['split="val"']
+    assert pipeline.pretrain_scene_problem(cfg, pipeline.pretrain_inputs(cfg, variant)) is None
+
+
 def test_early_prior_names_a_job_file_it_cannot_read(tmp_path, capsys):
     from training.early_prior import main
 

@@ -186,6 +186,26 @@ def test_missing_image_and_mask_name_the_file(tmp_path, subject):
     assert err.value.path == str(root / "mask" / "Camera_B1" / "000000.png")
 
 
+def test_an_image_or_mask_of_a_compression_opencv_does_not_decode_names_it(tmp_path, subject):
+    # a JPEG 2000 TIFF copy was "missing or unreadable", as a corrupt file is (and read as a black frame before
+    # session 64): the error names its compression, as ghnerf-run's and ghcal's do
+    import cv2
+
+    from tests.odd_images import tiff_laid_out
+
+    _, cams, frames = subject
+    root = write_zju_format(tmp_path / "s", cams[:2], [ZjuFrame(frames[0].images[:2], frames[0].masks[:2])],
+                            image_ext=".png")
+    seq = ZjuSequence(root)
+    for path in (root / "Camera_B2" / "000000.png", root / "mask" / "Camera_B1" / "000000.png"):
+        data = cv2.imencode(".tiff", cv2.imread(str(path)), [cv2.IMWRITE_TIFF_COMPRESSION, 1])[1].tobytes()
+        path.write_bytes(tiff_laid_out(data, changed={259: (3, (34712,))}))  # a TIFF's bytes, its name kept
+    with pytest.raises(DatasetError, match=r"cannot read the image: it is a TIFF of Compression 34712 \(JPEG 2000\)"):
+        seq.read_image(0, 1)
+    with pytest.raises(DatasetError, match=r"cannot read the mask: it is a TIFF of Compression 34712 \(JPEG 2000\)"):
+        seq.read_mask(0, 0)
+
+
 def test_config_errors_name_the_field():
     with pytest.raises(DataConfigError, match="ZjuConfig.view_sets"):
         ZjuConfig(view_sets=((0,),))

@@ -47,7 +47,7 @@ from ghnerf_runtime.body25 import NUM_JOINTS
 from ghnerf_runtime.geometry import Camera
 from ghnerf_runtime.geometry.camera import DIST_LENGTHS
 from ghnerf_runtime.geometry.rig import MIN_BASELINE_M
-from ghnerf_runtime.image_files import read_image_or_none
+from ghnerf_runtime.image_files import read_image_or_none, unread_because
 from training.data.errors import DatasetError
 
 log = logging.getLogger(__name__)
@@ -131,6 +131,13 @@ BODY25_FIRST_COUNTS = (NUM_JOINTS, NUM_JOINTS + 42, NUM_JOINTS + 42 + 70)
 
 def _body25_first(count: int) -> bool:
     return count in BODY25_FIRST_COUNTS
+
+
+def _unread_words(kind: str, path: Path, flags: int) -> str:
+    """The error of an image or mask that did not read: what the file is where it says (a JPEG 2000 TIFF, which was
+    "missing or unreadable" as a corrupt file is), else "missing or unreadable"."""
+    cause = unread_because(path, flags)
+    return f"missing or unreadable {kind}" if cause is None else f"cannot read the {kind}: {cause}"
 
 
 def _read_json(path: Path):
@@ -249,7 +256,7 @@ class ZjuSequence:
         # stored pixel grid
         image = read_image_or_none(path, cv2.IMREAD_COLOR)
         if image is None:
-            raise DatasetError(path, "missing or unreadable image")
+            raise DatasetError(path, _unread_words("image", path, cv2.IMREAD_COLOR))
         return image
 
     def read_mask(self, frame: int, cam: int) -> np.ndarray:
@@ -258,7 +265,7 @@ class ZjuSequence:
         path = self.mask_path(frame, cam)
         mask = read_image_or_none(path, cv2.IMREAD_UNCHANGED)
         if mask is None:
-            raise DatasetError(path, "missing or unreadable mask")
+            raise DatasetError(path, _unread_words("mask", path, cv2.IMREAD_UNCHANGED))
         return (mask if mask.ndim == 2 else mask[..., :3].max(axis=-1)) != 0
 
     def camera(self, cam: int, frame: int = 0) -> Camera:
