@@ -572,7 +572,7 @@ def _run(args) -> int:
 
 def _say_blank_novel_views(novel: _Sink | None) -> None:
     """A warning where --novel-view shows black: no view for a pair that shows nobody (the presence gate) or
-    whose frames the frame check rejected (docs/runtime.md, "Novel view, nobody there")."""
+    whose frames the frame check rejected (docs/runtime.md, "Compute only what the scene requires")."""
     words = novel.blank_words() if novel is not None else None
     if words is not None:
         log.warning("%s: no novel view for a pair that shows nobody or whose frames were rejected (the pair's "
