@@ -175,11 +175,13 @@ class _Tally:
     capture_to_joints_ms: list[float] = field(default_factory=list)
     found: list[np.ndarray] = field(default_factory=list)  # (25,) per estimated pair
     accuracy: Accuracy = field(default_factory=Accuracy)  # pairs with 3D truth only
+    several_people: int = 0  # estimates flagged several_people (streamed with SEVERAL_PEOPLE)
 
     def add(self, pair: drivers.FramePair, result: PairResult, done_ns: int) -> None:
         self.totals_ms.append(float(result.timing_ms["total"]))
         self.capture_to_joints_ms.append((done_ns - pair.frames[0].timestamp_ns) / 1e6)
         self.found.append(~np.asarray(result.missing, bool))
+        self.several_people += int(bool(result.several_people))
         if pair.joints_3d is not None:
             truths = [f.truth for f in pair.frames]
             with_2d = all(t is not None for t in truths)
@@ -201,6 +203,10 @@ class _Tally:
         found = np.asarray(self.found)
         lines.append(f"estimated joints found: {found.mean():.1%} ({int(found.sum())} of {found.size}; "
                      f"the rest are streamed as missing)")
+        if self.several_people:  # a second person in view (sim://?second=): what a robot would be told
+            lines.append(f"{self.several_people} of the {len(self.totals_ms)} pairs estimated were flagged "
+                         "several_people, streamed with SEVERAL_PEOPLE (two people in the maps the joints came "
+                         "from: docs/two-people.md)")
         acc = self.accuracy.summary()
         if not acc:
             lines.append("accuracy: the frames carry no ground truth; not measured")

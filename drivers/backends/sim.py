@@ -1,9 +1,9 @@
-"""``sim://``: a simulated two-camera rig filming a synthetic person, as a first-class backend.
+"""``sim://``: a simulated two-camera rig filming a synthetic person (or two: ``second=``), as a first-class backend.
 
 In the spirit of python-can's virtual bus: a real backend, not a test mock. It
 models what breaks a stereo pipeline: capture timing from an injectable clock,
 Gaussian timestamp jitter, an inter-camera capture offset, independent frame
-drops per camera, and a camera vanishing (unplug). Frames carry ground truth.
+drops per camera, and a camera vanishing (unplug). Frames carry ground truth (the subject's).
 
 URL options (every one validated; unknown ones are rejected by name)::
 
@@ -42,6 +42,20 @@ URL options (every one validated; unknown ones are rejected by name)::
 * ``workers`` (CPU count): render threads.
 * ``max_loop_mb`` (2048): refuse (``RigConfigError``) a loop needing more memory
   than this, rather than exhausting the machine.
+* ``second`` (none; ``X,Z``): a second person standing at rig-frame ``(x, z)`` metres (x to the right, z
+  ahead; the subject stands at ``(0, distance)``), as ``benchmarks/measure_two_people.py --places`` places
+  people: ``second=1.0,3.4`` is its default places' offset, a metre beside the subject and 0.4 m behind
+  (docs/two-people.md, "Rehearse it on the simulated rig"). Their body, clothes and motion come from
+  ``seed`` + 1000 (the benchmark's second person), rendered into the subject's room with
+  :func:`drivers.sim.render_people_and_truth` (the nearer person's pixel in front). Refused
+  (``RigConfigError``): a place either camera does not see (the hips outside its image: the runtime would
+  never see them), and hips within 0.4 m of the subject's at any instant of the loop (the bodies would pass
+  through each other, one picture of two people's parts): :mod:`drivers.backends.sim_second`.
+* ``second_motion`` (the subject's motion; ``wave`` with ``bvh=``): the second person's procedural motion. It
+  plays the subject's loop instants, so one of another period restarts with the subject's loop.
+* ``second_after_s`` (none: from the first frame): the second person walks in this long after open, as
+  ``unplug_after_s`` counts; frames captured before show the subject alone (the one-person URL's loop and
+  cache entry; ``open()`` fills both loops, twice the memory).
 
 Real time: rendering a 640x480 pair can take longer than a 30 fps period on a
 2-core machine (``benchmarks/bench_sim_render.py`` prints the figure). The motion loops (``period_s`` of the scene), so frames are a
@@ -67,7 +81,9 @@ loses them, counted as ``stats.overruns``; ``stats.simulated_drops`` counts the
 ``drop`` losses (both also show as index gaps in ``stats.camera_gaps``).
 
 Each frame says which scene instant it shows (``scene_time_s``, within the loop)
-and carries the ground truth of that instant (``truth``, ``joints_3d``).
+and carries the ground truth of that instant (``truth``, ``joints_3d``): always the subject's, with a second
+person too (their mask, depth and part labels are the subject's whole silhouette, also where the second person
+stands in front, and ``visible`` asks only the subject's own body; the second person's joints are not carried).
 
 What it does NOT model: the image does not move with the jitter (it shows the
 nominal capture instant; ``scene_time_s`` says which); noise, like the image,
@@ -94,6 +110,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.backends.sim_loop import FrameLoop, LoopFrame, default_cache_root
+from drivers.backends.sim_second import SecondPerson, check_second_person, take_second_person
 from drivers.backends.sim_timing import Capture, CaptureSchedule, TimingModel
 from drivers.base import RigSource
 from drivers.clock import Clock
@@ -101,7 +118,8 @@ from drivers.errors import RigConfigError, RigDisconnectedError, RigOperationErr
 from drivers.frames import Frame
 from drivers.pairing import MAX_HELD, PairingConfig, PairingStats
 from drivers.pairing_options import take_pairing_options
-from drivers.sim import MOTION_NAMES, MotionParams, RigPlacement, SceneConfig, SensorModel, SimScene
+from drivers.sim import (MOTION_NAMES, MotionParams, RigPlacement, SceneConfig, SensorModel, SimScene,
+                         render_people_and_truth)
 from drivers.url import RigUrl
 from ghnerf_runtime.body25 import JOINT_INDEX
 from ghnerf_runtime.geometry import Rig
@@ -160,6 +178,7 @@ class SimOptions:
     cache_root: Path | None
     workers: int
     max_loop_mb: float = 2048.0
+    second: SecondPerson | None = None
 
     @classmethod
     def from_url(cls, url: RigUrl) -> "SimOptions":
@@ -197,6 +216,7 @@ class SimOptions:
             _check_cache_folder(url, Path(cache))
         workers = url.take_int("workers", os.cpu_count() or 2, lo=1, hi=64)
         max_loop_mb = url.take_float("max_loop_mb", 2048.0, lo=1.0)
+        second = take_second_person(url, seed, motion)
         url.finish()
         kwargs = {"motion": bvh} if bvh is not None else ({"motion": motion} if motion else {})
         if motion == "freestyle":  # its random trajectories follow the URL's seed too
@@ -215,6 +235,7 @@ class SimOptions:
             cache_root=None if cache == "off" else (Path(cache) if cache else default_cache_root()),
             workers=workers,
             max_loop_mb=max_loop_mb,
+            second=second,
         )
 
 
@@ -301,8 +322,10 @@ class SimRigSource(RigSource):
         self.period_s = self._scene.period_s
         self.loop_periods, self.loop_frames = _loop_length(self.period_s, options.timing.fps)
         _check_subject_in_view(self._scene, rig, options.placement)
+        if options.second is not None:
+            check_second_person(self._scene, SimScene(options.second.scene), rig)
         w, h = rig.pair[0].size
-        loop_mb = 2 * self.loop_frames * w * h * LOOP_BYTES_PER_PIXEL / 1e6
+        loop_mb = 2 * self.loop_frames * w * h * LOOP_BYTES_PER_PIXEL / 1e6 * len(self._loop_people())
         if loop_mb > options.max_loop_mb:
             raise RigConfigError(
                 f"sim: the motion loops every {self.period_s:.1f} s: {self.loop_frames} frames per camera at "
@@ -310,9 +333,11 @@ class SimRigSource(RigSource):
                 f"{options.max_loop_mb:g} (lower fps or size, use a shorter clip, or raise max_loop_mb)"
             )
         self._local = threading.local()  # SimScene is not thread-safe: one per render thread
-        self._loop: FrameLoop | None = None
+        self._loop: FrameLoop | None = None  # what the URL films (two people with second=)
+        self._loop_alone: FrameLoop | None = None  # the subject alone, before second_after_s
         self._schedule: CaptureSchedule | None = None
         self._unplug_ns: int | None = None
+        self._second_joins_ns: int | None = None
         self._unplugged = False
         names = rig.names[:2]
         self._drops = {n: 0 for n in names}
@@ -333,28 +358,56 @@ class SimRigSource(RigSource):
         offset_s = self.options.timing.offset_ms / 1000.0 if camera == 1 else 0.0
         return (j * self.loop_periods * self.period_s / self.loop_frames + offset_s) % self.period_s
 
-    def _render(self, camera: int, j: int) -> LoopFrame:
-        scene = getattr(self._local, "scene", None)
-        if scene is None:
-            scene = self._local.scene = SimScene(self.options.scene)
+    def _loop_people(self) -> list[bool]:
+        """The loops ``open()`` fills, each by whether the second person is in it: the subject alone before a
+        ``second_after_s``, then (or from the start) the URL's scene."""
+        second = self.options.second
+        if second is None:
+            return [False]
+        return [False, True] if second.after_s is not None else [True]
+
+    def _thread_scenes(self) -> tuple[SimScene, SimScene | None]:
+        """This render thread's subject and second person (``None`` without ``second=``)."""
+        scenes = getattr(self._local, "scenes", None)
+        if scenes is None:
+            second = self.options.second
+            scenes = self._local.scenes = (SimScene(self.options.scene),
+                                           None if second is None else SimScene(second.scene))
+        return scenes
+
+    def _render(self, camera: int, j: int, *, together: bool = False) -> LoopFrame:
+        """Loop frame ``j`` of ``camera``: the subject, and the second person too where ``together``. The truth
+        (``truth``, ``joints_3d``) is always the subject's (:func:`drivers.sim.render_people_and_truth`)."""
+        scene, second = self._thread_scenes()
         t = self.scene_time(camera, j)
-        image, truth = scene.render(self.rig.cameras[camera], t)
+        cam = self.rig.cameras[camera]
+        if together and second is not None:  # the second person plays the subject's loop instants too
+            image, truth = render_people_and_truth((scene, second), cam, t)
+        else:
+            image, truth = scene.render(cam, t)
         return LoopFrame(image=image, truth=truth, scene_time_s=t, joints_3d=scene.joints_3d(t))
 
-    def cache_key(self) -> str:
-        """Hash of everything that changes the pre-rendered pixels (options, rig, simulator code)."""
+    def cache_key(self, together: bool | None = None) -> str:
+        """Hash of everything that changes the pre-rendered pixels (options, rig, simulator code) of the loop
+        the URL films (``together``: ``None``), or of the subject alone (``False``) or with the second person
+        (``True``). A one-person loop's key names no second person, so ``second_after_s``'s first loop is the
+        one-person URL's entry."""
         import drivers.sim  # the package, to hash its sources
         import ghnerf_runtime.body25
         import ghnerf_runtime.geometry
 
         scene = self.options.scene
         bvh = Path(str(scene.motion))
-        h = hashlib.sha256()
-        h.update(json.dumps({
+        together = self.options.second is not None if together is None else together
+        described = {
             "scene": repr(scene),
             "rig": rig_to_dict(self.rig),
             "loop": [self.loop_frames, self.period_s, self.options.timing.offset_ms, self.loop_periods],
-        }, sort_keys=True, default=repr).encode())
+        }
+        if together and self.options.second is not None:  # only then: one person's keys stay what they were
+            described["second"] = repr(self.options.second.scene)
+        h = hashlib.sha256()
+        h.update(json.dumps(described, sort_keys=True, default=repr).encode())
         if bvh.suffix.lower() == ".bvh":
             h.update(bvh.read_bytes())
         # The ray casting and lens model the renderer uses live in ghnerf_runtime.geometry, the joint
@@ -368,25 +421,43 @@ class SimRigSource(RigSource):
 
     # ----------------------------------------------------------- hooks
     def _open(self) -> None:
-        cache_dir = None
-        if self.options.cache_root is not None:
-            cache_dir = self.options.cache_root / self.cache_key()
-        loop = FrameLoop(self._render, self.loop_frames, workers=self.options.workers, cache_dir=cache_dir)
-        self._loop = loop
-        w, h = self.rig.pair[0].size
-
-        def progress(done: int, total: int, elapsed: float) -> None:
-            left = elapsed * (total - done) / max(done, 1)
-            log.info("sim: pre-rendering the %.2f s loop at %dx%d: %d/%d frames, ~%.0f s left",
-                     self.period_s, w, h, done, total, left)
-
-        self.fill_report = loop.fill(progress)
-        log.info("sim: loop of %d frames per camera ready (%s in %.1f s, %.0f MB)",
-                 self.loop_frames, self.fill_report.source, self.fill_report.wall_s, loop.nbytes() / 1e6)
+        for together in self._loop_people():
+            self._fill_loop(together)
         start = self.clock.now_ns()
         self._schedule = CaptureSchedule(self.options.timing, start)
         if self.options.unplug_after_s is not None:
             self._unplug_ns = start + int(round(self.options.unplug_after_s * 1e9))
+        second = self.options.second
+        self._second_joins_ns = None if second is None or second.after_s is None else (
+            start + int(round(second.after_s * 1e9)))
+
+    def _fill_loop(self, together: bool) -> None:
+        """Renders (or loads from the disk cache) the loop with the second person or without, held (before it
+        fills, so that a close meanwhile cancels it) as ``_loop``, or ``_loop_alone`` where the second person joins
+        later; ``fill_report`` says how the last one became ready."""
+        cache_dir = None
+        if self.options.cache_root is not None:
+            cache_dir = self.options.cache_root / self.cache_key(together)
+
+        def render(camera: int, j: int) -> LoopFrame:
+            return self._render(camera, j, together=together)
+
+        loop = FrameLoop(render, self.loop_frames, workers=self.options.workers, cache_dir=cache_dir)
+        if together or self.options.second is None:
+            self._loop = loop
+        else:
+            self._loop_alone = loop
+        w, h = self.rig.pair[0].size
+        who = "two people" if together else "the subject"
+
+        def progress(done: int, total: int, elapsed: float) -> None:
+            left = elapsed * (total - done) / max(done, 1)
+            log.info("sim: pre-rendering the %.2f s loop of %s at %dx%d: %d/%d frames, ~%.0f s left",
+                     self.period_s, who, w, h, done, total, left)
+
+        self.fill_report = loop.fill(progress)
+        log.info("sim: loop of %d frames per camera ready (%s in %.1f s, %.0f MB)",
+                 self.loop_frames, self.fill_report.source, self.fill_report.wall_s, loop.nbytes() / 1e6)
 
     def _read_frame(self, timeout_s: float) -> Frame | None:
         schedule = self._schedule
@@ -433,7 +504,11 @@ class SimRigSource(RigSource):
 
     def _frame(self, capture: Capture) -> Frame:
         assert self._loop is not None
-        shown = self._loop.frame(capture.camera, capture.index % self.loop_frames)
+        loop = self._loop
+        joins_ns = self._second_joins_ns
+        if self._loop_alone is not None and joins_ns is not None and capture.time_ns < joins_ns:
+            loop = self._loop_alone  # captured before the second person joins (second_after_s)
+        shown = loop.frame(capture.camera, capture.index % self.loop_frames)
         return Frame(
             camera=self.rig.pair[capture.camera].name,
             image=shown.image,
@@ -445,7 +520,9 @@ class SimRigSource(RigSource):
         )
 
     def _close(self) -> None:
-        if self._loop is not None:
-            self._loop.close()
+        for loop in (self._loop, self._loop_alone):
+            if loop is not None:
+                loop.close()
         self._loop = None
+        self._loop_alone = None
         self._schedule = None

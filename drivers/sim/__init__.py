@@ -15,7 +15,9 @@ Quick start::
     image, truth = scene.render(rig.cameras[0], t=0.5)
 
 Several people: :func:`render_people` puts scenes' people into the first's room, the nearer person's pixel
-where two overlap (no ground truth of the whole: each scene's joints are its person's; since session 55). What it
+where two overlap (no ground truth of the whole: each scene's joints are its person's; since session 55);
+:func:`render_people_and_truth` adds the first person's maps, as ``sim://?second=X,Z`` films two people
+(since session 64). What it
 does NOT model: people casting light or shadow on each other, props or occluders other than the
 body, cloth/hair/soft-tissue dynamics, shadows and inter-reflections,
 specular materials, motion blur, rolling shutter, lens vignetting or flare,
@@ -34,7 +36,7 @@ from drivers.sim.motions import MOTION_NAMES, MotionParams, Pose, make_motion
 from drivers.sim.placement import RigPlacement
 from drivers.sim.render import Lighting
 from drivers.sim.retarget import BvhMotion
-from drivers.sim.scene import SceneConfig, SimScene, random_scene, render_people
+from drivers.sim.scene import SceneConfig, SimScene, random_scene, render_people, render_people_and_truth
 from drivers.sim.sensor import SensorModel
 from drivers.sim.skeleton import BodyParams, Skeleton
 
@@ -43,5 +45,6 @@ __all__ = [
     "Appearance", "BodyModel", "BodyParams", "BvhClip", "BvhError", "BvhMotion", "Fabric", "Lighting",
     "MotionParams", "Pose", "RigPlacement", "RoomStyle", "SceneConfig", "SensorModel", "SimConfigError",
     "SimScene", "Skeleton", "dumps_bvh", "load_bvh", "make_motion", "parse_bvh", "random_scene", "render_people",
+    "render_people_and_truth",
     "save_bvh",
 ]

@@ -6,9 +6,9 @@ and ``t``), and all randomness (body, clothes, room) derives from
 ``SceneConfig.seed`` through independent streams, so fixing one part (say
 ``body``) does not change the others.
 
-Not modelled: multiple people, props, cloth or hair dynamics, motion blur,
-rolling shutter, shadows, camera timing (jitter, drops, skew: the ``sim://``
-backend adds those on top of this scene).
+Not modelled here: multiple people (:func:`render_people` puts several scenes' people in one
+picture), props, cloth or hair dynamics, motion blur, rolling shutter, shadows, camera timing
+(jitter, drops, skew: the ``sim://`` backend adds those on top of this scene).
 """
 from __future__ import annotations
 
@@ -219,12 +219,20 @@ def render_people(scenes: Sequence[SimScene], camera: Camera, t: float) -> np.nd
     together per pixel by depth (the nearer person's pixel where two overlap, :func:`composite_nearest`) over the
     first scene's room, and captured by the first scene's sensor (its noise seed). ``(H, W, 3)`` uint8 BGR, as
     :meth:`SimScene.render`. The other scenes' rooms and sensors are not used; no ground truth (each scene's
-    :meth:`SimScene.joints_3d` is its person's)."""
+    :meth:`SimScene.joints_3d` is its person's; :func:`render_people_and_truth` gives the first's maps too)."""
+    return render_people_and_truth(scenes, camera, t)[0]
+
+
+def render_people_and_truth(scenes: Sequence[SimScene], camera: Camera, t: float) -> tuple[np.ndarray, CameraTruth]:
+    """:func:`render_people`'s image and the first scene's person's :class:`CameraTruth` as that person alone gives
+    it (``sim://?second=``: the frames carry the subject's truth). Its mask, depth and part labels are the first
+    person's whole silhouette, also where another person stands in front of it, and ``visible`` says only whether
+    the first person's own body hides a joint (the other people are not asked)."""
     if not scenes:
         raise SimConfigError("render_people", "needs at least one scene")
     layers = [scene.renderer.render(scene.posed(t), camera) for scene in scenes]
     radiance = composite_nearest([image for image, _ in layers], [truth.depth for _, truth in layers])
-    return scenes[0].capture(radiance, camera, t)
+    return scenes[0].capture(radiance, camera, t), layers[0][1]
 
 
 def random_scene(seed: int, *, volume: WorkingVolume | None = None, motions: Sequence[str] = MOTION_NAMES,
