@@ -67,7 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--videos", type=user_path, nargs=2, metavar=("FIRST", "SECOND"), help="one video per camera, rig order")
     ap.add_argument("--out", type=user_path, default="-", help="joints output: .json (a list, written atomically at the end; a run "
                                                "stopped early keeps the pairs it finished), .jsonl or - (stdout, "
-                                               "one object per line as each pair is done); default -")
+                                               "one object per line as each pair is done; a device or pipe such "
+                                               "as /dev/stdout too); any other suffix is refused; default -")
     ap.add_argument("--config", type=user_path, help="estimator config (JSON, docs/runtime.md); flags below override it")
     ap.add_argument("--model-dir", type=user_path, help="model folder (default: the config's, else ./models)")
     ap.add_argument("--precision", choices=("auto", "fp32", "int8"),
@@ -139,6 +140,8 @@ def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
             ap.error("--max-frames applies to --videos (--images is one pair)")
         if args.max_frames < 1:
             ap.error(f"--max-frames must be at least 1, got {args.max_frames}")
+    if (refusal := _out_kind_refusal(args.out)) is not None:
+        ap.error(refusal)
     pair = args.images or args.videos
     if pair and same_file(*pair):  # each camera's view in one picture: the joints came out, wrong
         ap.error(f"{'--images' if args.images else '--videos'}: {pair[0]} and {pair[1]} are one file; give each "
@@ -157,6 +160,24 @@ def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
         args.novel_overlay = "none"
     if args.novel_view:
         _check_novel_alpha(ap, args.novel_alpha)
+
+
+#: ``--out``'s file kinds, by suffix (any case): a list written whole at the end, or a line per pair.
+OUT_SUFFIXES = (".json", ".jsonl")
+
+
+def _out_kind_refusal(out: str | None) -> str | None:
+    """Why ``--out`` names no kind ghnerf-run writes, or None: ``-``, a ``.json`` or ``.jsonl`` file, or an existing
+    device or pipe (``/dev/stdout``, a FIFO: written a line per pair, as stdout is). ``--out joints.csv`` was
+    written as JSON lines under a name promising CSV; a folder is left to :func:`ready_output`, which names it."""
+    if out in (None, "-") or Path(out).suffix.lower() in OUT_SUFFIXES:
+        return None
+    if os.path.exists(out) and not os.path.isfile(out):
+        return None  # a character device or a FIFO: no name to promise a format (a folder: ready_output says so)
+    suffix = Path(out).suffix
+    kind = f"suffix {suffix!r}" if suffix else "no suffix"
+    return (f"--out {out}: {kind}; give a {' or '.join(OUT_SUFFIXES)} file (a JSON list, or one object per "
+            "line) or - (stdout)")
 
 
 def _check_novel_alpha(ap: argparse.ArgumentParser, alpha: float) -> None:

@@ -1187,3 +1187,37 @@ def test_the_first_video_is_released_when_the_second_does_not_open(monkeypatch, 
     with pytest.raises(cli_run.UsageError, match="second.mp4: cannot open the video"):
         next(cli_run._pairs(args))
     assert [cap.released for cap in opened] == [True, True]
+
+
+@pytest.mark.parametrize("name, said", [("x.txt", "suffix '.txt'"), ("joints.csv", "suffix '.csv'"),
+                                        ("joints", "no suffix")])
+def test_an_out_of_another_kind_is_refused_naming_the_kinds(tmp_path, monkeypatch, capsys, name, said):
+    """``--out x.txt`` (or .csv) was written as JSON lines, exit 0, though the help lists .json, .jsonl and -."""
+    monkeypatch.setattr(cli_run, "_run", lambda args: pytest.fail("ran"))
+    with pytest.raises(SystemExit) as e:
+        cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / name)])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and f"--out {tmp_path / name}: {said}; give a .json or .jsonl file" in err
+    assert not (tmp_path / name).exists()
+
+
+@pytest.mark.parametrize("name", ["J.JSONL", "J.Json"])
+def test_out_s_kind_is_told_by_its_suffix_in_any_case(monkeypatch, tmp_path, name):
+    rc, _ = _stub_run(monkeypatch, tmp_path / name, pairs=2)
+    text = (tmp_path / name).read_text()
+    got = json.loads(text) if name.lower().endswith(".json") else [json.loads(line) for line in text.splitlines()]
+    assert rc == 0 and [p["sequence"] for p in got] == [0, 1]
+
+
+@pytest.mark.skipif(not Path("/dev/null").exists(), reason="no /dev/null here")
+def test_a_device_or_pipe_as_out_gets_a_line_per_pair(monkeypatch):
+    """No suffix to promise a format: /dev/stdout, a FIFO a reader waits on, /dev/null."""
+    rc, _ = _stub_run(monkeypatch, Path("/dev/null"), pairs=2)
+    assert rc == 0
+
+
+def test_a_folder_as_out_is_named_a_folder_not_a_kind(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: pytest.fail("read the rig"))
+    (tmp_path / "joints").mkdir()
+    rc = cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "joints")])
+    assert rc == 2 and f"--out {tmp_path / 'joints'}: is a folder" in capsys.readouterr().err
