@@ -280,8 +280,23 @@ def _pair_time(cap) -> float | None:
     return t if math.isfinite(t) else None
 
 
+def _is_still_image(path: str) -> bool:
+    """Whether ``path`` is a file OpenCV's image reader takes (told by its content, not its name) holding one image.
+    An animated PNG or GIF (several) plays as a video; an image-sequence pattern (``left_%04d.png``) is no file."""
+    if not os.path.isfile(path) or not cv2.haveImageReader(path):
+        return False
+    try:
+        return cv2.imcount(path) == 1
+    except cv2.error:  # a header its reader cannot count: left to the video reader
+        return False
+
+
 def _open_video(path: str):
-    """``path`` opened as a ``cv2.VideoCapture`` reading frames as stored; released again when it cannot be."""
+    """``path`` opened as a ``cv2.VideoCapture`` reading frames as stored; released again when it cannot be. A still
+    image is refused: FFmpeg opens a PNG or JPEG as a one-frame video, and the run reported that one pair, exit 0,
+    as a clip (or, beside a real video, one pair and "videos end at different frames")."""
+    if _is_still_image(path):
+        raise UsageError(f"--videos {path}: a still image, not a video; give a still pair as --images FIRST SECOND")
     cap = cv2.VideoCapture(path)
     try:
         if not cap.isOpened():  # why, checked only now: OpenCV also opens image-sequence patterns (left_%04d.png)

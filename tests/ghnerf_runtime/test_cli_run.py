@@ -1221,3 +1221,34 @@ def test_a_folder_as_out_is_named_a_folder_not_a_kind(tmp_path, monkeypatch, cap
     (tmp_path / "joints").mkdir()
     rc = cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "joints")])
     assert rc == 2 and f"--out {tmp_path / 'joints'}: is a folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("still", ["a.png", "a.jpg", "a.mp4"])  # a.mp4: a PNG under a video's name
+def test_a_still_image_given_as_a_video_is_refused_pointing_at_images(tmp_path, monkeypatch, capsys, still):
+    """FFmpeg opens a PNG or JPEG as a one-frame video: the run reported that one pair, exit 0, as a clip."""
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _StubEstimator())
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    (tmp_path / still).write_bytes(cv2.imencode(".png" if still != "a.jpg" else ".jpg",
+                                                np.zeros((8, 8, 3), np.uint8))[1].tobytes())
+    second = tmp_path / "b.avi"
+    writer = cv2.VideoWriter(str(second), cv2.VideoWriter_fourcc(*"MJPG"), 30, (8, 8))
+    for _ in range(3):
+        writer.write(np.zeros((8, 8, 3), np.uint8))
+    writer.release()
+    out = tmp_path / "o.jsonl"
+    for pair in ((tmp_path / still, second), (second, tmp_path / still)):
+        assert cli_run.main(["--rig", "r.json", "--videos", *map(str, pair), "--out", str(out)]) == 2
+        assert (f"--videos {tmp_path / still}: a still image, not a video; give a still pair as --images"
+                in capsys.readouterr().err)
+        assert not out.exists()
+
+
+def test_an_animated_image_or_an_image_sequence_still_plays_as_a_video(tmp_path):
+    animation = cv2.Animation()
+    animation.frames = [np.full((8, 8, 3), 60 * i, np.uint8) for i in range(3)]
+    animation.durations = [40] * 3
+    assert cv2.imwriteanimation(str(tmp_path / "moving.png"), animation)
+    cv2.imwrite(str(tmp_path / "left_0001.png"), np.zeros((8, 8, 3), np.uint8))
+    assert not cli_run._is_still_image(str(tmp_path / "moving.png"))
+    assert not cli_run._is_still_image(str(tmp_path / "left_%04d.png"))
+    assert cli_run._is_still_image(str(tmp_path / "left_0001.png"))
