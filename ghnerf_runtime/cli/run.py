@@ -46,6 +46,7 @@ from ghnerf_runtime.image_files import read_image_or_none, unread_because
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import load_rig, write_text_atomic
+from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.video_files import read_as_stored
 from ghnerf_runtime.path_check import user_path
 
@@ -87,7 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "the model folder's skeleton_prior.onnx when it has one: docs/runtime.md)")
     ap.add_argument("--max-prior-error", type=float, metavar="M",
                     help="skeleton prior: report a joint only when its expected error is at most M metres "
-                         "(joints3d.max_prior_error_m, default 0.15)")
+                         "(joints3d.max_prior_error_m, default 0.15; refused where the settings turn the prior off, "
+                         "warned of where the model folder has none)")
     ap.add_argument("--smoothing", action=argparse.BooleanOptionalAction, default=None,
                     help="videos: One Euro smoothing of the 3D joints on the frames' times (smoothing.enabled, on "
                          "by default: less jitter and a lower MPJPE on the bench, docs/runtime.md); --no-smoothing "
@@ -497,6 +499,18 @@ def _refuse_flags_the_settings_ignore(args, cfg: EstimatorConfig) -> None:
         raise UsageError(f"--max-prior-error with {why}: no skeleton prior runs, so there is nothing to apply it to")
 
 
+def _say_a_prior_flag_without_a_prior(args, cfg: EstimatorConfig, estimator) -> None:
+    """A warning, once at load, where ``--max-prior-error`` is given and no skeleton prior runs after all:
+    ``joints3d.skeleton_prior`` 'auto' and a model folder without the prior's file, known only now (the settings
+    that turn the prior off are refused before: :func:`_refuse_flags_the_settings_ignore`). It ran, exit 0, the
+    flag without effect and without a word. Not refused: a script's flag should survive a change of model folder."""
+    if args.max_prior_error is None or getattr(estimator, "skeleton_prior", None) is not None:
+        return
+    log.warning("--max-prior-error %g has no effect: the model folder %s has no %s, so no skeleton prior runs "
+                "(joints3d.skeleton_prior 'auto'; plain triangulation)", args.max_prior_error,
+                cfg.session.model_dir, PRIOR_FILE)
+
+
 def _run(args) -> int:
     cfg = _config(args)
     _refuse_flags_the_settings_ignore(args, cfg)
@@ -523,6 +537,7 @@ def _run(args) -> int:
         also = f" or session.model_dir in {args.config}" if args.config else ""
         raise UsageError(f"{e}; pass --model-dir{also} (the repository's models/ holds the shipped model)") from None
     log.info("model %s", json.dumps(estimator.session.describe()))
+    _say_a_prior_flag_without_a_prior(args, cfg, estimator)
     request = NovelViewRequest(alpha=args.novel_alpha, overlay=args.novel_overlay) if args.novel_view else None
     fps = 30.0
     if args.videos:

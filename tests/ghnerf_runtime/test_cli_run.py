@@ -1252,3 +1252,36 @@ def test_an_animated_image_or_an_image_sequence_still_plays_as_a_video(tmp_path)
     assert not cli_run._is_still_image(str(tmp_path / "moving.png"))
     assert not cli_run._is_still_image(str(tmp_path / "left_%04d.png"))
     assert cli_run._is_still_image(str(tmp_path / "left_0001.png"))
+
+
+@pytest.mark.parametrize("prior", [None, object()])
+def test_max_prior_error_without_a_prior_in_the_folder_is_warned_of_once(monkeypatch, tmp_path, caplog, prior):
+    """``--skeleton-prior auto`` (the default) and a model folder without skeleton_prior.onnx, known only at load:
+    the flag ran without effect and without a word. Once at load, not per pair; nothing where the prior runs."""
+    def from_config(rig, cfg):
+        estimator = _StubEstimator()
+        estimator.skeleton_prior = prior
+        return estimator
+
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run.Estimator, "from_config", from_config)
+    monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * 3))
+    rc = cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--model-dir", str(tmp_path / "m"),
+                       "--max-prior-error", "0.3", "--out", str(tmp_path / "j.jsonl")])
+    said = [r.getMessage() for r in caplog.records if "--max-prior-error" in r.getMessage()]
+    assert rc == 0
+    if prior is None:
+        assert said == [f"--max-prior-error 0.3 has no effect: the model folder {tmp_path / 'm'} has no "
+                        "skeleton_prior.onnx, so no skeleton prior runs (joints3d.skeleton_prior 'auto'; plain "
+                        "triangulation)"]
+    else:
+        assert said == []
+
+
+def test_the_tiny_model_without_a_prior_warns_of_max_prior_error(sim_pair, tiny_model_dir, tmp_path, caplog):  # noqa: F811
+    assert not (Path(tiny_model_dir) / "skeleton_prior.onnx").exists()
+    rc = cli_run.main(["--rig", sim_pair["rig"], "--images", sim_pair["left"], sim_pair["right"], "--model-dir",
+                       str(tiny_model_dir), "--max-prior-error", "0.2", "--out", str(tmp_path / "j.json")])
+    assert rc == 0
+    assert [r.levelname for r in caplog.records if "--max-prior-error 0.2 has no effect" in r.getMessage()] == \
+        ["WARNING"]
