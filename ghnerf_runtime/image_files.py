@@ -56,7 +56,7 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
                 return None
             f.seek(0)
             resets = _turn_resets(f)
-            if resets or not _opencv_can_take(path):
+            if _memory_decode_because(path, resets) is not None:
                 f.seek(0)
                 return _decoded_with(np.fromfile(f, dtype=np.uint8), resets, flags)
     except (OSError, ValueError):  # ValueError: a NUL byte in the path
@@ -150,18 +150,29 @@ def unread_because(path: str | os.PathLike, flags: int) -> str | None:
 def decoded_from_memory_because(path: str | os.PathLike) -> str | None:
     """Why :func:`read_image_or_none` decodes ``path`` from a copy of its bytes rather than through
     ``cv2.imread``'s file reader (which decodes some layouts that OpenCV refuses from memory), e.g. "its name is
-    not UTF-8"; None where the file reader reads it (or the file cannot be opened)."""
-    if not _opencv_can_take(path):
-        return "its name is not UTF-8 or holds a NUL byte, which OpenCV's file reader cannot be given"
+    not UTF-8"; None where the file reader reads it (or the file cannot be opened). The choice is
+    :func:`_memory_decode_because`'s, as for the read: replay calls a file corrupt on its word."""
     try:
         with open(path, "rb") as f:
             resets = _turn_resets(f)
-    except OSError:
-        return None
-    if resets:
-        return ("its orientation (a TIFF's Orientation tag, an AVIF's irot or imir) is not 'as stored', and is "
-                "reset in a copy of its bytes that OpenCV then decodes from memory")
-    return None
+    except (OSError, ValueError):  # as the read; ValueError: a NUL byte in the path, which the name check refuses
+        resets = []
+    return _memory_decode_because(path, resets)
+
+
+#: Why a file is decoded from a copy of its bytes (:func:`_memory_decode_because`).
+_NAME_NOT_TAKEN = "its name is not UTF-8 or holds a NUL byte, which OpenCV's file reader cannot be given"
+_TURN_RESET = ("its orientation (a TIFF's Orientation tag, an AVIF's irot or imir) is not 'as stored', and is "
+               "reset in a copy of its bytes that OpenCV then decodes from memory")
+
+
+def _memory_decode_because(path: str | os.PathLike, resets: list[tuple[int, bytes]]) -> str | None:
+    """The one choice between decoding ``path`` from a copy of its bytes and ``cv2.imread``'s file reader, given its
+    :func:`_turn_resets`: why the bytes (a name OpenCV cannot be given, a turn to reset), or None for the file
+    reader. :func:`read_image_or_none` reads by it and :func:`decoded_from_memory_because` tells it."""
+    if not _opencv_can_take(path):
+        return _NAME_NOT_TAKEN
+    return _TURN_RESET if resets else None
 
 
 def _opencv_can_take(path: str | os.PathLike) -> bool:

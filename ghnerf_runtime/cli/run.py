@@ -46,6 +46,7 @@ from ghnerf_runtime.image_files import read_image_or_none, unread_because
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import load_rig, write_text_atomic
+from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.video_files import read_as_stored
 from ghnerf_runtime.path_check import user_path
 
@@ -67,7 +68,8 @@ def build_parser() -> argparse.ArgumentParser:
     src.add_argument("--videos", type=user_path, nargs=2, metavar=("FIRST", "SECOND"), help="one video per camera, rig order")
     ap.add_argument("--out", type=user_path, default="-", help="joints output: .json (a list, written atomically at the end; a run "
                                                "stopped early keeps the pairs it finished), .jsonl or - (stdout, "
-                                               "one object per line as each pair is done); default -")
+                                               "one object per line as each pair is done; a device or pipe such "
+                                               "as /dev/stdout too); any other suffix is refused; default -")
     ap.add_argument("--config", type=user_path, help="estimator config (JSON, docs/runtime.md); flags below override it")
     ap.add_argument("--model-dir", type=user_path, help="model folder (default: the config's, else ./models)")
     ap.add_argument("--precision", choices=("auto", "fp32", "int8"),
@@ -86,7 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "the model folder's skeleton_prior.onnx when it has one: docs/runtime.md)")
     ap.add_argument("--max-prior-error", type=float, metavar="M",
                     help="skeleton prior: report a joint only when its expected error is at most M metres "
-                         "(joints3d.max_prior_error_m, default 0.15)")
+                         "(joints3d.max_prior_error_m, default 0.15; refused where the settings turn the prior off, "
+                         "warned of where the model folder has none)")
     ap.add_argument("--smoothing", action=argparse.BooleanOptionalAction, default=None,
                     help="videos: One Euro smoothing of the 3D joints on the frames' times (smoothing.enabled, on "
                          "by default: less jitter and a lower MPJPE on the bench, docs/runtime.md); --no-smoothing "
@@ -139,6 +142,8 @@ def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
             ap.error("--max-frames applies to --videos (--images is one pair)")
         if args.max_frames < 1:
             ap.error(f"--max-frames must be at least 1, got {args.max_frames}")
+    if (refusal := _out_kind_refusal(args.out)) is not None:
+        ap.error(refusal)
     pair = args.images or args.videos
     if pair and same_file(*pair):  # each camera's view in one picture: the joints came out, wrong
         ap.error(f"{'--images' if args.images else '--videos'}: {pair[0]} and {pair[1]} are one file; give each "
@@ -157,6 +162,24 @@ def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
         args.novel_overlay = "none"
     if args.novel_view:
         _check_novel_alpha(ap, args.novel_alpha)
+
+
+#: ``--out``'s file kinds, by suffix (any case): a list written whole at the end, or a line per pair.
+OUT_SUFFIXES = (".json", ".jsonl")
+
+
+def _out_kind_refusal(out: str | None) -> str | None:
+    """Why ``--out`` names no kind ghnerf-run writes, or None: ``-``, a ``.json`` or ``.jsonl`` file, or an existing
+    device or pipe (``/dev/stdout``, a FIFO: written a line per pair, as stdout is). ``--out joints.csv`` was
+    written as JSON lines under a name promising CSV; a folder is left to :func:`ready_output`, which names it."""
+    if out in (None, "-") or Path(out).suffix.lower() in OUT_SUFFIXES:
+        return None
+    if os.path.exists(out) and not os.path.isfile(out):
+        return None  # a character device or a FIFO: no name to promise a format (a folder: ready_output says so)
+    suffix = Path(out).suffix
+    kind = f"suffix {suffix!r}" if suffix else "no suffix"
+    return (f"--out {out}: {kind}; give a {' or '.join(OUT_SUFFIXES)} file (a JSON list, or one object per "
+            "line) or - (stdout)")
 
 
 def _check_novel_alpha(ap: argparse.ArgumentParser, alpha: float) -> None:
@@ -259,8 +282,23 @@ def _pair_time(cap) -> float | None:
     return t if math.isfinite(t) else None
 
 
+def _is_still_image(path: str) -> bool:
+    """Whether ``path`` is a file OpenCV's image reader takes (told by its content, not its name) holding one image.
+    An animated PNG or GIF (several) plays as a video; an image-sequence pattern (``left_%04d.png``) is no file."""
+    if not os.path.isfile(path) or not cv2.haveImageReader(path):
+        return False
+    try:
+        return cv2.imcount(path) == 1
+    except cv2.error:  # a header its reader cannot count: left to the video reader
+        return False
+
+
 def _open_video(path: str):
-    """``path`` opened as a ``cv2.VideoCapture`` reading frames as stored; released again when it cannot be."""
+    """``path`` opened as a ``cv2.VideoCapture`` reading frames as stored; released again when it cannot be. A still
+    image is refused: FFmpeg opens a PNG or JPEG as a one-frame video, and the run reported that one pair, exit 0,
+    as a clip (or, beside a real video, one pair and "videos end at different frames")."""
+    if _is_still_image(path):
+        raise UsageError(f"--videos {path}: a still image, not a video; give a still pair as --images FIRST SECOND")
     cap = cv2.VideoCapture(path)
     try:
         if not cap.isOpened():  # why, checked only now: OpenCV also opens image-sequence patterns (left_%04d.png)
@@ -461,6 +499,18 @@ def _refuse_flags_the_settings_ignore(args, cfg: EstimatorConfig) -> None:
         raise UsageError(f"--max-prior-error with {why}: no skeleton prior runs, so there is nothing to apply it to")
 
 
+def _say_a_prior_flag_without_a_prior(args, cfg: EstimatorConfig, estimator) -> None:
+    """A warning, once at load, where ``--max-prior-error`` is given and no skeleton prior runs after all:
+    ``joints3d.skeleton_prior`` 'auto' and a model folder without the prior's file, known only now (the settings
+    that turn the prior off are refused before: :func:`_refuse_flags_the_settings_ignore`). It ran, exit 0, the
+    flag without effect and without a word. Not refused: a script's flag should survive a change of model folder."""
+    if args.max_prior_error is None or getattr(estimator, "skeleton_prior", None) is not None:
+        return
+    log.warning("--max-prior-error %g has no effect: the model folder %s has no %s, so no skeleton prior runs "
+                "(joints3d.skeleton_prior 'auto'; plain triangulation)", args.max_prior_error,
+                cfg.session.model_dir, PRIOR_FILE)
+
+
 def _run(args) -> int:
     cfg = _config(args)
     _refuse_flags_the_settings_ignore(args, cfg)
@@ -487,6 +537,7 @@ def _run(args) -> int:
         also = f" or session.model_dir in {args.config}" if args.config else ""
         raise UsageError(f"{e}; pass --model-dir{also} (the repository's models/ holds the shipped model)") from None
     log.info("model %s", json.dumps(estimator.session.describe()))
+    _say_a_prior_flag_without_a_prior(args, cfg, estimator)
     request = NovelViewRequest(alpha=args.novel_alpha, overlay=args.novel_overlay) if args.novel_view else None
     fps = 30.0
     if args.videos:

@@ -1187,3 +1187,101 @@ def test_the_first_video_is_released_when_the_second_does_not_open(monkeypatch, 
     with pytest.raises(cli_run.UsageError, match="second.mp4: cannot open the video"):
         next(cli_run._pairs(args))
     assert [cap.released for cap in opened] == [True, True]
+
+
+@pytest.mark.parametrize("name, said", [("x.txt", "suffix '.txt'"), ("joints.csv", "suffix '.csv'"),
+                                        ("joints", "no suffix")])
+def test_an_out_of_another_kind_is_refused_naming_the_kinds(tmp_path, monkeypatch, capsys, name, said):
+    """``--out x.txt`` (or .csv) was written as JSON lines, exit 0, though the help lists .json, .jsonl and -."""
+    monkeypatch.setattr(cli_run, "_run", lambda args: pytest.fail("ran"))
+    with pytest.raises(SystemExit) as e:
+        cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / name)])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and f"--out {tmp_path / name}: {said}; give a .json or .jsonl file" in err
+    assert not (tmp_path / name).exists()
+
+
+@pytest.mark.parametrize("name", ["J.JSONL", "J.Json"])
+def test_out_s_kind_is_told_by_its_suffix_in_any_case(monkeypatch, tmp_path, name):
+    rc, _ = _stub_run(monkeypatch, tmp_path / name, pairs=2)
+    text = (tmp_path / name).read_text()
+    got = json.loads(text) if name.lower().endswith(".json") else [json.loads(line) for line in text.splitlines()]
+    assert rc == 0 and [p["sequence"] for p in got] == [0, 1]
+
+
+@pytest.mark.skipif(not Path("/dev/null").exists(), reason="no /dev/null here")
+def test_a_device_or_pipe_as_out_gets_a_line_per_pair(monkeypatch):
+    """No suffix to promise a format: /dev/stdout, a FIFO a reader waits on, /dev/null."""
+    rc, _ = _stub_run(monkeypatch, Path("/dev/null"), pairs=2)
+    assert rc == 0
+
+
+def test_a_folder_as_out_is_named_a_folder_not_a_kind(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: pytest.fail("read the rig"))
+    (tmp_path / "joints").mkdir()
+    rc = cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "joints")])
+    assert rc == 2 and f"--out {tmp_path / 'joints'}: is a folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("still", ["a.png", "a.jpg", "a.mp4"])  # a.mp4: a PNG under a video's name
+def test_a_still_image_given_as_a_video_is_refused_pointing_at_images(tmp_path, monkeypatch, capsys, still):
+    """FFmpeg opens a PNG or JPEG as a one-frame video: the run reported that one pair, exit 0, as a clip."""
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _StubEstimator())
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    (tmp_path / still).write_bytes(cv2.imencode(".png" if still != "a.jpg" else ".jpg",
+                                                np.zeros((8, 8, 3), np.uint8))[1].tobytes())
+    second = tmp_path / "b.avi"
+    writer = cv2.VideoWriter(str(second), cv2.VideoWriter_fourcc(*"MJPG"), 30, (8, 8))
+    for _ in range(3):
+        writer.write(np.zeros((8, 8, 3), np.uint8))
+    writer.release()
+    out = tmp_path / "o.jsonl"
+    for pair in ((tmp_path / still, second), (second, tmp_path / still)):
+        assert cli_run.main(["--rig", "r.json", "--videos", *map(str, pair), "--out", str(out)]) == 2
+        assert (f"--videos {tmp_path / still}: a still image, not a video; give a still pair as --images"
+                in capsys.readouterr().err)
+        assert not out.exists()
+
+
+def test_an_animated_image_or_an_image_sequence_still_plays_as_a_video(tmp_path):
+    animation = cv2.Animation()
+    animation.frames = [np.full((8, 8, 3), 60 * i, np.uint8) for i in range(3)]
+    animation.durations = [40] * 3
+    assert cv2.imwriteanimation(str(tmp_path / "moving.png"), animation)
+    cv2.imwrite(str(tmp_path / "left_0001.png"), np.zeros((8, 8, 3), np.uint8))
+    assert not cli_run._is_still_image(str(tmp_path / "moving.png"))
+    assert not cli_run._is_still_image(str(tmp_path / "left_%04d.png"))
+    assert cli_run._is_still_image(str(tmp_path / "left_0001.png"))
+
+
+@pytest.mark.parametrize("prior", [None, object()])
+def test_max_prior_error_without_a_prior_in_the_folder_is_warned_of_once(monkeypatch, tmp_path, caplog, prior):
+    """``--skeleton-prior auto`` (the default) and a model folder without skeleton_prior.onnx, known only at load:
+    the flag ran without effect and without a word. Once at load, not per pair; nothing where the prior runs."""
+    def from_config(rig, cfg):
+        estimator = _StubEstimator()
+        estimator.skeleton_prior = prior
+        return estimator
+
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run.Estimator, "from_config", from_config)
+    monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * 3))
+    rc = cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--model-dir", str(tmp_path / "m"),
+                       "--max-prior-error", "0.3", "--out", str(tmp_path / "j.jsonl")])
+    said = [r.getMessage() for r in caplog.records if "--max-prior-error" in r.getMessage()]
+    assert rc == 0
+    if prior is None:
+        assert said == [f"--max-prior-error 0.3 has no effect: the model folder {tmp_path / 'm'} has no "
+                        "skeleton_prior.onnx, so no skeleton prior runs (joints3d.skeleton_prior 'auto'; plain "
+                        "triangulation)"]
+    else:
+        assert said == []
+
+
+def test_the_tiny_model_without_a_prior_warns_of_max_prior_error(sim_pair, tiny_model_dir, tmp_path, caplog):  # noqa: F811
+    assert not (Path(tiny_model_dir) / "skeleton_prior.onnx").exists()
+    rc = cli_run.main(["--rig", sim_pair["rig"], "--images", sim_pair["left"], sim_pair["right"], "--model-dir",
+                       str(tiny_model_dir), "--max-prior-error", "0.2", "--out", str(tmp_path / "j.json")])
+    assert rc == 0
+    assert [r.levelname for r in caplog.records if "--max-prior-error 0.2 has no effect" in r.getMessage()] == \
+        ["WARNING"]

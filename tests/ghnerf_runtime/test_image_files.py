@@ -283,3 +283,26 @@ def test_why_a_read_failed_is_said_for_the_reads_it_concerns(tmp_path):
     corrupt = tmp_path / "corrupt.png"
     corrupt.write_bytes(b"\x89PNG\r\n\x1a\n cut")
     assert image_files.unread_because(corrupt, cv2.IMREAD_COLOR) is None
+
+
+@pytest.mark.parametrize("kind", ["plain", "turned", "name_not_utf8"])
+def test_the_read_and_its_reason_take_the_one_choice_of_reader(tmp_path, monkeypatch, kind):
+    """``decoded_from_memory_because`` re-derived the read's choice between the bytes and OpenCV's file reader: had
+    the two drifted apart, replay would call a valid file corrupt. Both now ask ``_memory_decode_because``: the read
+    goes to the file reader exactly where no reason is given, and follows the choice where it is changed."""
+    image = stored_image(3)
+    data = tagged_tiff(image, 3) if kind == "turned" else tagged_tiff(image, 1)
+    name = os.fsdecode(b"frame\xff.tiff") if kind == "name_not_utf8" else "frame.tiff"
+    path = tmp_path / name
+    path.write_bytes(data)
+    file_reads = []
+    real_imread = cv2.imread
+    monkeypatch.setattr(image_files.cv2, "imread", lambda p, f: file_reads.append(p) or real_imread(p, f))
+    assert read_image_or_none(path, cv2.IMREAD_COLOR) is not None
+    reason = image_files.decoded_from_memory_because(path)
+    assert (reason is None) == bool(file_reads) and (reason is None) == (kind == "plain")
+    # the choice changed in its one place: the read follows it, as the reason does
+    monkeypatch.setattr(image_files, "_memory_decode_because", lambda p, resets: "told so")
+    file_reads.clear()
+    assert read_image_or_none(path, cv2.IMREAD_COLOR) is not None and not file_reads
+    assert image_files.decoded_from_memory_because(path) == "told so"
