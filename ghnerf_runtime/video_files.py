@@ -4,19 +4,21 @@ A phone held upright writes its video sideways and a rotation beside it (the MP4
 display-matrix side data): a display hint, like an image's EXIF orientation. OpenCV's FFmpeg backend turns every
 decoded frame by it by default (``CAP_PROP_ORIENTATION_AUTO`` is on in OpenCV 5.0), so such a video's frames came a
 quarter turn against the rig's calibration, which is of the sensor's pixel grid (docs/recording-format.md,
-"Images": an image's EXIF orientation is ignored for the same reason). One helper for ``drivers`` (``opencv://``) and
-``ghnerf-run``, both of which open video files; cv2 only, so ``drivers`` imports it without the runtime's heavier
-modules.
+"Images": an image's EXIF orientation is ignored for the same reason). And a still image is no video
+(:func:`is_still_image`), though FFmpeg opens a PNG or JPEG as a one-frame video: both callers refuse it, pointing at
+their way of taking stills. Helpers for ``drivers`` (``opencv://``) and ``ghnerf-run``, both of which open video
+files; cv2 only, so ``drivers`` imports them without the runtime's heavier modules.
 """
 from __future__ import annotations
 
 import logging
 import math
+import os
 from typing import Any
 
 import cv2
 
-__all__ = ["read_as_stored"]
+__all__ = ["is_still_image", "read_as_stored"]
 
 log = logging.getLogger(__name__)
 
@@ -39,3 +41,16 @@ def read_as_stored(capture: Any, shown: str) -> bool:
     log.warning("video %s: OpenCV's capture backend did not let its rotation metadata%s be ignored: its frames may "
                 "come turned against the rig's calibration, which is of the frames as stored", shown, stated)
     return False
+
+
+def is_still_image(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a file OpenCV's image reader takes (told by its content, not its name) holding one image:
+    opened as a video, FFmpeg plays it as one frame, and the stream ends after its first pair. An animated PNG or
+    GIF (several images) plays as a video; an image-sequence pattern (``left_%04d.png``) is no file."""
+    path = os.fspath(path)
+    if not os.path.isfile(path) or not cv2.haveImageReader(path):
+        return False
+    try:
+        return cv2.imcount(path) == 1
+    except cv2.error:  # a header its reader cannot count: left to the video reader
+        return False

@@ -29,7 +29,7 @@ import os
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Iterable, Iterator, Sequence
 
 import cv2
 import numpy as np
@@ -47,7 +47,7 @@ from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import load_rig, write_text_atomic
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
-from ghnerf_runtime.video_files import read_as_stored
+from ghnerf_runtime.video_files import is_still_image, read_as_stored
 from ghnerf_runtime.path_check import user_path
 
 log = logging.getLogger("ghnerf-run")
@@ -282,22 +282,11 @@ def _pair_time(cap) -> float | None:
     return t if math.isfinite(t) else None
 
 
-def _is_still_image(path: str) -> bool:
-    """Whether ``path`` is a file OpenCV's image reader takes (told by its content, not its name) holding one image.
-    An animated PNG or GIF (several) plays as a video; an image-sequence pattern (``left_%04d.png``) is no file."""
-    if not os.path.isfile(path) or not cv2.haveImageReader(path):
-        return False
-    try:
-        return cv2.imcount(path) == 1
-    except cv2.error:  # a header its reader cannot count: left to the video reader
-        return False
-
-
 def _open_video(path: str):
     """``path`` opened as a ``cv2.VideoCapture`` reading frames as stored; released again when it cannot be. A still
     image is refused: FFmpeg opens a PNG or JPEG as a one-frame video, and the run reported that one pair, exit 0,
     as a clip (or, beside a real video, one pair and "videos end at different frames")."""
-    if _is_still_image(path):
+    if is_still_image(path):
         raise UsageError(f"--videos {path}: a still image, not a video; give a still pair as --images FIRST SECOND")
     cap = cv2.VideoCapture(path)
     try:
@@ -311,29 +300,69 @@ def _open_video(path: str):
     return cap
 
 
-def _pairs(args) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+def _pairs(args) -> Iterable[tuple[np.ndarray, np.ndarray]]:
+    """The input pairs: the two stills, read when the first pair is asked for, or the two videos' frames
+    (:class:`_VideoPairs`: the videos opened now)."""
     if args.images:
-        yield _read_image(args.images[0]), _read_image(args.images[1])
-        return
-    caps = []
-    try:  # the first video's capture is released too when the second does not open (was left to the collector)
-        for path in args.videos:
+        return _still_pair(args.images)
+    return _VideoPairs(args.videos, args.max_frames)
+
+
+def _still_pair(paths: Sequence[str]) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    yield _read_image(paths[0]), _read_image(paths[1])
+
+
+def _open_videos(paths: Sequence[str]) -> list:
+    """Each video opened (:func:`_open_video`); the ones opened before are released again when the next does not
+    open (the first was left to the garbage collector: a file descriptor and a decoder thread held until then)."""
+    caps: list = []
+    try:
+        for path in paths:
             caps.append(_open_video(path))
-        n = 0
-        while args.max_frames is None or n < args.max_frames:
-            frames = [cap.read() for cap in caps]
-            ok = [f[0] for f in frames]
-            if not any(ok):
-                return
-            if not all(ok):
-                log.warning("videos end at different frames; stopping at pair %d", n)
-                return
-            pair = _TimedPair((frames[0][1], frames[1][1]))
-            pair.time_s = _pair_time(caps[0])
-            yield pair
-            n += 1
-    finally:
+    except BaseException:
         for cap in caps:
+            cap.release()
+        raise
+    return caps
+
+
+def _frame_rate(cap) -> float:
+    """The rate a video's container states; 30 fps where it states none usable (0, NaN, negative, inf): the pairs'
+    times (tracking.max_gap_s) and the written videos assume 30 fps then."""
+    fps = cap.get(cv2.CAP_PROP_FPS)
+    return fps if math.isfinite(fps) and fps > 0 else 30.0
+
+
+class _VideoPairs:
+    """``--videos``: the two videos, each opened once, here (the run opened the first a second time only to read
+    its rate), paired frame by frame as they are read; ``fps`` is the first one's rate (:func:`_frame_rate`).
+    :meth:`close` releases them (so does the end of an iteration)."""
+
+    def __init__(self, paths: Sequence[str], max_frames: int | None) -> None:
+        self._caps = _open_videos(paths)
+        self.fps = _frame_rate(self._caps[0])
+        self._max_frames = max_frames
+
+    def __iter__(self) -> Iterator[_TimedPair]:
+        try:
+            n = 0
+            while self._max_frames is None or n < self._max_frames:
+                frames = [cap.read() for cap in self._caps]
+                ok = [f[0] for f in frames]
+                if not any(ok):
+                    return
+                if not all(ok):
+                    log.warning("videos end at different frames; stopping at pair %d", n)
+                    return
+                pair = _TimedPair((frames[0][1], frames[1][1]))
+                pair.time_s = _pair_time(self._caps[0])
+                yield pair
+                n += 1
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        for cap in self._caps:
             cap.release()
 
 
@@ -539,16 +568,8 @@ def _run(args) -> int:
     log.info("model %s", json.dumps(estimator.session.describe()))
     _say_a_prior_flag_without_a_prior(args, cfg, estimator)
     request = NovelViewRequest(alpha=args.novel_alpha, overlay=args.novel_overlay) if args.novel_view else None
-    fps = 30.0
-    if args.videos:
-        cap = cv2.VideoCapture(args.videos[0])
-        fps = cap.get(cv2.CAP_PROP_FPS)
-        # a container without a usable rate gives 0 or NaN: the pairs' times (tracking.max_gap_s) and the
-        # written videos assume 30 fps then
-        fps = fps if math.isfinite(fps) and fps > 0 else 30.0
-        cap.release()
-    novel = _Sink(args.novel_view, fps, "--novel-view") if args.novel_view else None
-    overlay = _Sink(args.overlay, fps, "--overlay") if args.overlay else None
+    novel = _Sink(args.novel_view, flag="--novel-view") if args.novel_view else None
+    overlay = _Sink(args.overlay, flag="--overlay") if args.overlay else None
     as_list = not to_stdout and Path(out_path).suffix.lower() == ".json"
     # .jsonl / stdout: a line per pair as it is done (_JsonLines); .json: one list, written whole at the end (below)
     lines = None if to_stdout or as_list else _JsonLines(out_path)
@@ -582,7 +603,11 @@ def _run(args) -> int:
             overlay.add(overlay_image(images, result))
         log.info("pair %d: %d/25 joints, %.1f ms", result.sequence, result.num_found, result.timing_ms["total"])
 
-    pairs = _pairs(args)
+    pairs = _pairs(args)  # the videos opened here, once; their rate read there (after the outputs' places, as ever)
+    fps = getattr(pairs, "fps", 30.0)  # stills (or a stand-in iterator): no rate; 30 fps, as for a video without one
+    for sink in (novel, overlay):
+        if sink is not None:
+            sink.fps = fps  # used from its first frame on
     try:
         # Each pair's novel view is finished while the next pair is estimated (the same numbers, more pairs per
         # second: docs/runtime.md, "The novel view alongside the keypoints"); without one, a pair comes out at once.

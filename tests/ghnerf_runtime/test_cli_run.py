@@ -1032,13 +1032,45 @@ def test_a_video_without_a_usable_frame_rate_is_timed_at_30_fps(monkeypatch, tmp
             return super().estimate_then_view(images, sequence=sequence, novel_view=novel_view,
                                               timestamp_s=timestamp_s)
 
-    monkeypatch.setattr(cli_run.cv2, "VideoCapture",
-                        lambda path: type("C", (), {"get": lambda self, prop: rate, "release": lambda self: None})())
+    # frames without presentation times (NaN), so each step is a frame at the rate
+    monkeypatch.setattr(cli_run.cv2, "VideoCapture", _video_with_times([float("nan")] * 3, rate))
     monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
     monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _Timed())
-    monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * 3))
     assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "j.jsonl")]) == 0
     assert times == pytest.approx([0.0, 1 / 30, 2 / 30])
+
+
+def test_each_video_is_opened_once_its_rate_read_where_it_is_opened(monkeypatch, tmp_path):
+    """The run opened the first video a second time, only to read its frame rate, before the pairs opened it
+    again (twice the container's parsing, and a rate read from another capture than the frames'). Each capture
+    is released at the end."""
+    opened = []
+    timed_capture = _video_with_times([0.0, float("nan"), float("nan")], 25.0)
+
+    class _Counted(timed_capture):
+        def __init__(self, path):
+            super().__init__(path)
+            self.path, self.released = path, False
+            opened.append(self)
+
+        def release(self):
+            self.released = True
+
+    times = []
+
+    class _Timed(_StubEstimator):
+        def estimate_then_view(self, images, *, sequence, novel_view=None, timestamp_s=None):
+            times.append(timestamp_s)
+            return super().estimate_then_view(images, sequence=sequence, novel_view=novel_view,
+                                              timestamp_s=timestamp_s)
+
+    monkeypatch.setattr(cli_run.cv2, "VideoCapture", _Counted)
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _Timed())
+    assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "j.jsonl")]) == 0
+    assert [cap.path for cap in opened] == ["a.mp4", "b.mp4"]
+    assert all(cap.released for cap in opened)
+    assert times == pytest.approx([0.0, 0.04, 0.08])  # the rate (25 fps) of the capture the frames came from
 
 
 def _video_with_times(pts_ms, fps):
@@ -1241,17 +1273,6 @@ def test_a_still_image_given_as_a_video_is_refused_pointing_at_images(tmp_path, 
         assert (f"--videos {tmp_path / still}: a still image, not a video; give a still pair as --images"
                 in capsys.readouterr().err)
         assert not out.exists()
-
-
-def test_an_animated_image_or_an_image_sequence_still_plays_as_a_video(tmp_path):
-    animation = cv2.Animation()
-    animation.frames = [np.full((8, 8, 3), 60 * i, np.uint8) for i in range(3)]
-    animation.durations = [40] * 3
-    assert cv2.imwriteanimation(str(tmp_path / "moving.png"), animation)
-    cv2.imwrite(str(tmp_path / "left_0001.png"), np.zeros((8, 8, 3), np.uint8))
-    assert not cli_run._is_still_image(str(tmp_path / "moving.png"))
-    assert not cli_run._is_still_image(str(tmp_path / "left_%04d.png"))
-    assert cli_run._is_still_image(str(tmp_path / "left_0001.png"))
 
 
 @pytest.mark.parametrize("prior", [None, object()])

@@ -1,11 +1,14 @@
-"""Video files read as stored (ghnerf_runtime.video_files): what each kind of capture backend answers."""
+"""Video files (ghnerf_runtime.video_files): read as stored, what each kind of capture backend answers; a still
+image told from a video."""
 from __future__ import annotations
 
 import logging
 
 import cv2
+import numpy as np
+import pytest
 
-from ghnerf_runtime.video_files import read_as_stored
+from ghnerf_runtime.video_files import is_still_image, read_as_stored
 
 
 class _Capture:
@@ -42,3 +45,26 @@ def test_a_backend_that_refuses_and_keeps_turning_is_warned_of(caplog):
     first, second = (r.getMessage() for r in caplog.records)
     assert first.startswith("video take/left.mov: ") and "(its container says 270 degrees)" in first
     assert second.startswith("video take/right.mov: ") and "container says" not in second
+
+
+@pytest.mark.parametrize("name, kind", [("a.png", ".png"), ("a.jpg", ".jpg"), ("a.mp4", ".png")])
+def test_a_still_image_is_told_by_its_content_whatever_its_name(tmp_path, name, kind):
+    """FFmpeg opens a PNG or JPEG as a one-frame video: ghnerf-run --videos and opencv:// refuse it by this."""
+    (tmp_path / name).write_bytes(cv2.imencode(kind, np.zeros((8, 8, 3), np.uint8))[1].tobytes())
+    assert is_still_image(tmp_path / name) and is_still_image(str(tmp_path / name))
+
+
+def test_an_animated_image_an_image_sequence_or_a_video_still_plays_as_a_video(tmp_path):
+    animation = cv2.Animation()
+    animation.frames = [np.full((8, 8, 3), 60 * i, np.uint8) for i in range(3)]
+    animation.durations = [40] * 3
+    assert cv2.imwriteanimation(str(tmp_path / "moving.png"), animation)
+    cv2.imwrite(str(tmp_path / "left_0001.png"), np.zeros((8, 8, 3), np.uint8))
+    writer = cv2.VideoWriter(str(tmp_path / "take.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 30, (8, 8))
+    writer.write(np.zeros((8, 8, 3), np.uint8))
+    writer.release()
+    assert not is_still_image(tmp_path / "moving.png")
+    assert not is_still_image(tmp_path / "left_%04d.png")
+    assert not is_still_image(tmp_path / "take.avi")
+    assert not is_still_image(tmp_path / "missing.png")
+    assert is_still_image(tmp_path / "left_0001.png")
