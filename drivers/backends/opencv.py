@@ -16,7 +16,11 @@ Options:
   ``/dev/v4l/by-id/`` (or ``by-path/``, for two webcams of one model): indices can swap between
   boots, which would swap left and right under a rig file of the same size, and on Linux each
   webcam usually takes two nodes (``/dev/video0`` and its metadata node ``/dev/video1``), so the
-  second webcam is ``/dev/video2``, not ``1``.
+  second webcam is ``/dev/video2``, not ``1``. A still image (a PNG or JPEG, told by its content whatever its
+  name) is no video: refused at :meth:`open` with :class:`~drivers.errors.RigConfigError` naming the option, since
+  session 64 (FFmpeg opens it as a one-frame video: the stream delivered one pair, then ended, "video ... ended after
+  1 frames"); play still images as a ``replay://`` take (docs/recording-format.md). An animated PNG or GIF plays as
+  a video.
 * ``rig``: the rig file (``ghcal solve``); its first two cameras are ``first`` and ``second``, in
   that order, and their image sizes are asked of the cameras and checked on every frame. Without
   it the source has a nominal, uncalibrated rig (``hfov``, ``names``, the size the cameras deliver):
@@ -112,7 +116,7 @@ from drivers.url import RigUrl, redact_url
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.rig_file import load_rig
-from ghnerf_runtime.video_files import read_as_stored
+from ghnerf_runtime.video_files import is_still_image, read_as_stored
 
 log = logging.getLogger(__name__)
 #: The rig id of the nominal rig an ``opencv://`` source without ``rig=`` makes (for ``ghcal capture`` only).
@@ -240,8 +244,9 @@ def is_video_file(spec: str) -> bool:
 class _Camera:
     """One ``cv2.VideoCapture`` and the thread that owns it: grabs, decodes, checks and queues its frames."""
 
-    def __init__(self, name: str, spec: str, size: tuple[int, int] | None, source: "OpenCVRigSource") -> None:
-        self.name, self.spec, self.source = name, spec, source
+    def __init__(self, name: str, option: str, spec: str, size: tuple[int, int] | None,
+                 source: "OpenCVRigSource") -> None:
+        self.name, self.option, self.spec, self.source = name, option, spec, source  # option: "first" or "second"
         self.shown = redact_url(spec)  # in messages and logs: a stream URL's password never
         self.size = size  # (width, height) every frame must have; None: the first frame's (a nominal rig)
         self.size_from = "rig" if source._fixed_rig is not None else ("asked" if size is not None else "first")
@@ -263,6 +268,8 @@ class _Camera:
         o = self.source.options
         if self.video and "%" not in self.spec and not os.path.exists(self.spec):
             raise RigInitializationError(f"camera {self.name!r}: no such video file {self.shown!r}")
+        if self.video and is_still_image(self.spec):
+            raise RigConfigError(still_image_message(self.option, self.shown, self.name))
         capture = self.source._capture_factory(capture_target(self.spec), APIS[o.api])
         if not capture.isOpened():
             capture.release()
@@ -437,6 +444,14 @@ def rig_size_message(camera: str, shown: str, delivered: tuple[int, int], expect
     return message + f"; {again}, or use videos recorded at {rw}x{rh}"
 
 
+def still_image_message(option: str, shown: str, camera: str) -> str:
+    """Why a still image named by ``first=`` or ``second=`` is refused: OpenCV's FFmpeg backend opens a PNG or JPEG
+    as a one-frame video, and the stream ended after its first pair ("video ... ended after 1 frames")."""
+    return (f"opencv:// option {option}={shown} (camera {camera!r}): a still image, not a video (opencv:// would play "
+            f"it as one frame and end); play still images as a replay:// take, a folder whose manifest.json and "
+            f"frames.jsonl name them (docs/recording-format.md)")
+
+
 def video_size(spec: str) -> tuple[int, int] | None:
     """The frame size a video file's container states (nothing decoded), None where OpenCV cannot say: the size as
     stored, as its frames are read (:func:`read_as_stored`), not turned by a rotation in its container."""
@@ -544,11 +559,13 @@ class OpenCVRigSource(RigSource):
             # A thread of the failed attempt may still be in a grab; it must not feed a new one.
             raise RigOperationError("opencv://: an open() that failed is final: make a new source (drivers.open_rig)")
         if self._fixed_rig is not None:
-            specs = [(c.name, spec, (c.width, c.height)) for c, spec in zip(self._fixed_rig.pair, (o.first, o.second))]
+            sizes = [(c.width, c.height) for c in self._fixed_rig.pair]
+            names = [c.name for c in self._fixed_rig.pair]
         else:
-            size = (o.width, o.height) if o.width else None
-            specs = [(name, spec, size) for name, spec in zip(o.names, (o.first, o.second))]
-        self._cameras = [_Camera(name, spec, size, self) for name, spec, size in specs]
+            sizes = [(o.width, o.height) if o.width else None] * 2
+            names = list(o.names)
+        self._cameras = [_Camera(name, option, spec, size, self) for name, option, spec, size
+                         in zip(names, ("first", "second"), (o.first, o.second), sizes)]
         self._per_camera = {cam.name: 0 for cam in self._cameras}
         self._overruns = {cam.name: 0 for cam in self._cameras}
         try:

@@ -58,7 +58,8 @@ from typing import Any
 from pathlib import Path
 
 import drivers
-from drivers.backends.opencv import is_nominal_rig, is_video_file, rig_size_message, video_size
+from drivers.backends.opencv import (is_nominal_rig, is_video_file, rig_size_message, still_image_message,
+                                     video_size)
 from drivers.backends.recording_format import MANIFEST, read_manifest
 from drivers.backends.replay import ReplayRigSource
 from drivers.url import RigUrl, redact_url
@@ -78,6 +79,7 @@ from ghnerf_runtime.novel_painter import NovelPainter
 from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.session import resolve_model_dir
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
+from ghnerf_runtime.video_files import is_still_image
 from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser", "check_config", "check_model", "read_checked_config", "EXAMPLE_CONFIG"]
@@ -221,13 +223,17 @@ def _check_rig_url(text: str) -> None:
 def _check_video_sizes(url: RigUrl, rig_file: str, rig: Rig) -> None:
     """``opencv://`` videos against the rig file: a video's size, which its container states, is known without
     opening a camera, and no retry changes it (the daemon would stop on it at the rig's third open). Live cameras
-    are judged when they open (the daemon's ``SIZE_MISMATCH_OPENS``).
+    are judged when they open (the daemon's ``SIZE_MISMATCH_OPENS``). A still image, which the open refuses, is
+    refused here too: it passed, and the start stopped on it.
 
-    :raises DaemonConfigError: keyed ``rig.url``, naming the video, the rig file and both sizes.
+    :raises DaemonConfigError: keyed ``rig.url``, naming the video, the rig file and both sizes (or the option).
     """
-    for camera, spec in zip(rig.pair, (url.options.get("first"), url.options.get("second"))):
+    for camera, option in zip(rig.pair, ("first", "second")):
+        spec = url.options.get(option)
         if not spec or not is_video_file(spec) or not os.path.isfile(spec):
             continue  # a device, a stream, an image sequence, a missing file (the open names it)
+        if is_still_image(spec):
+            raise DaemonConfigError(still_image_message(option, redact_url(spec), camera.name), key="rig.url")
         size = video_size(spec)
         if size is not None and size != (camera.width, camera.height):
             raise DaemonConfigError(rig_size_message(camera.name, redact_url(spec), size, (camera.width, camera.height),

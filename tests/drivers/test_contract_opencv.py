@@ -181,6 +181,43 @@ def test_a_missing_video_or_a_size_the_rig_does_not_have_is_refused_at_open(take
     assert caught.value.camera in ("left", "right")
 
 
+@pytest.mark.parametrize("name, kind", [("still.png", ".png"), ("still.jpg", ".jpg"), ("still.avi", ".png")])
+def test_a_still_image_is_refused_at_open_naming_the_option_and_pointing_at_replay(takes, tmp_path, name, kind):
+    """FFmpeg opens a PNG or JPEG as a one-frame video: the stream delivered one pair, then ended with "video
+    still.png (camera 'left') ended after 1 frames", as though a camera's take had run out. Told by its content
+    (a PNG under a video's name too), refused before any capture opens."""
+    first, second, rig, _ = takes[0]
+    still = tmp_path / name
+    still.write_bytes(cv2.imencode(kind, np.zeros((SIZE[1], SIZE[0], 3), np.uint8))[1].tobytes())
+    opened = []
+
+    def capture(target, api):
+        opened.append(target)
+        return cv2.VideoCapture(target, api)
+
+    for option, query, camera in (("first", f"first={still}&second={second}", "left"),
+                                  ("second", f"first={first}&second={still}", "right")):
+        source = create_rig_source(f"opencv://?{query}&rig={rig}", capture_factory=capture)
+        with pytest.raises(RigConfigError) as caught:
+            source.open()
+        message = str(caught.value)
+        assert message.startswith(f"opencv:// option {option}={still} (camera '{camera}'): a still image, not a video")
+        assert "replay://" in message and "docs/recording-format.md" in message
+    assert str(still) not in opened
+
+
+def test_an_animated_image_still_plays_as_a_video(tmp_path):
+    animation = cv2.Animation()
+    animation.frames = [np.full((SIZE[1], SIZE[0], 3), 60 * i, np.uint8) for i in range(3)]
+    animation.durations = [40] * 3
+    moving = [tmp_path / "first.png", tmp_path / "second.png"]
+    for path in moving:
+        assert cv2.imwriteanimation(str(path), animation)
+    with open_rig(f"opencv://?first={moving[0]}&second={moving[1]}&policy=all") as source:
+        pairs = [source.read(timeout_s=5.0) for _ in range(3)]
+    assert [int(pair.images[0][0, 0, 0]) for pair in pairs] == [0, 60, 120]
+
+
 def test_a_phone_s_video_turned_by_its_metadata_is_read_as_stored(tmp_path):
     """A phone held upright stores its video sideways with a rotation in the container (the ``tkhd`` matrix):
     OpenCV's FFmpeg backend turned every frame by it (``CAP_PROP_ORIENTATION_AUTO`` is on by default), a 64x48

@@ -662,6 +662,33 @@ def test_validate_config_and_the_start_refuse_videos_of_another_size_than_the_ri
             assert err.count("ghnerf-daemon: error:") == 2  # --validate-config, then the start: one line each
 
 
+def test_validate_config_and_the_start_refuse_a_still_image_as_an_opencv_video(tmp_path, capsys):
+    """A PNG of the rig camera's size named by first=: --validate-config passed it (its container, FFmpeg's image
+    reader, states that size), and the daemon played it as one frame. Refused by both, naming the option and
+    pointing at replay://, as the open refuses it."""
+    import cv2
+
+    from drivers.sim.placement import RigPlacement
+    from ghnerf_runtime.rig_file import save_rig
+
+    still, video = tmp_path / "left.png", tmp_path / "right.avi"
+    cv2.imwrite(str(still), np.zeros((480, 640, 3), np.uint8))
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (640, 480))
+    writer.write(np.zeros((480, 640, 3), np.uint8))
+    writer.release()
+    rig = tmp_path / "rig.json"
+    save_rig(RigPlacement(width=640, height=480).build(rig_id="desk"), rig)
+    path = _write(tmp_path, {"rig": {"url": f"opencv://?first={still}&second={video}&rig={rig}"},
+                             "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": str(MODELS)}}})
+    assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == 2
+    assert cli.main(["--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count(f"ghnerf-daemon: error: {path}: rig.url: opencv:// option first={still} (camera 'left'): a "
+                     f"still image, not a video") == 2
+    assert "replay://" in err
+
+
 def test_validate_config_and_the_start_refuse_a_take_of_another_size_than_its_rig(tmp_path, capsys):
     """A replay:// take whose images are all of another size than the rig in its manifest (resized after recording)
     passed --validate-config and the start, then the daemon reopened it for ever (each read failed on an image). A
