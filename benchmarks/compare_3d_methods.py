@@ -37,9 +37,8 @@ from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences, percentiles, visibility_summary  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
-from ghnerf_runtime.metrics import VISIBILITY_CLASSES, mpjpe, visibility_class  # noqa: E402
+from ghnerf_runtime.metrics import VISIBILITY_CLASSES, mpjpe, strict_json, visibility_class  # noqa: E402
 from ghnerf_runtime.session import ModelSession  # noqa: E402
-from training.model_card import strict_json  # noqa: E402
 
 #: name -> Joints3DConfig overrides.
 METHODS = {

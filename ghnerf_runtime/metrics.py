@@ -19,6 +19,7 @@ the metric is undefined (nothing to evaluate); each function says when.
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -27,6 +28,7 @@ import numpy as np
 
 from ghnerf_runtime.body25 import FLIP_INDEX, JOINT_INDEX, MID_HIP, NECK
 from ghnerf_runtime.errors import ShapeError
+from ghnerf_runtime.plain_values import numpy_for_json
 
 #: BODY_25 joints whose bounding box gives the fallback PCK reference length:
 #: Neck, RShoulder, LShoulder, MidHip, RHip, LHip.
@@ -49,7 +51,7 @@ __all__ = [
     "TORSO_BOX_JOINTS", "LEFT_RIGHT_PAIRS", "PckResult", "SwapResult", "MpjpeResult", "ImageMetricResult",
     "MseResult", "VISIBILITY_CLASSES", "visibility_class", "mpjpe_by_visibility", "left_right_swaps",
     "AccelerationResult", "acceleration_error", "pck", "mpjpe", "masked_psnr", "masked_ssim", "heatmap_mse",
-    "gaussian_heatmaps", "finite_or_none", "PSNR_CAP_DB", "capped_psnr", "scorable_images",
+    "gaussian_heatmaps", "finite_or_none", "strict_json", "PSNR_CAP_DB", "capped_psnr", "scorable_images",
 ]
 
 
@@ -69,6 +71,25 @@ def finite_or_none(value):
     if isinstance(value, (float, np.floating)) and not np.isfinite(value):
         return None
     return value
+
+
+def _json_default(value):
+    """A value ``json`` cannot write: numpy scalars as Python numbers (``default=str`` wrote a float32 2.5 as the
+    string ``"2.5"``, ``default=float`` an int64 count as 3.0), arrays as lists (non-finite entries ``None``),
+    anything else (a path) as text."""
+    try:
+        return finite_or_none(numpy_for_json(value))
+    except TypeError:  # not NumPy (a path): the reports are read by people, so as text
+        return str(value)
+
+
+def strict_json(report, indent: int | None = 1) -> str:
+    """``report`` as strict JSON: every NaN or infinity (a metric with nothing to score, a PSNR of identical
+    images) as ``null``. ``json.dumps`` writes them as bare ``NaN`` / ``Infinity``, which is not JSON: other
+    readers (``jq``, browsers, most languages) refuse the whole file. The one writer of the bench's, the
+    benchmarks' and the training side's reports (``training.model_card`` takes it from here: the runtime imports
+    nothing of training)."""
+    return json.dumps(finite_or_none(report), indent=indent, default=_json_default, allow_nan=False)
 
 
 # ------------------------------------------------------------------ results

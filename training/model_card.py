@@ -105,25 +105,12 @@ def _fmt(v: Any, digits: int = 3) -> str:
     return str(v)
 
 
-def _json_default(value: Any) -> Any:
-    """A value ``json`` cannot write: numpy scalars as Python numbers (``default=str`` wrote a float32 2.5 as the
-    string ``"2.5"``), arrays as lists (non-finite entries ``None``), anything else (a path) as text."""
-    from ghnerf_runtime.metrics import finite_or_none
-    from ghnerf_runtime.plain_values import numpy_for_json
-
-    try:
-        return finite_or_none(numpy_for_json(value))
-    except TypeError:  # not NumPy (a path): the card is read by people, so as text
-        return str(value)
-
-
 def strict_json(report: Any, indent: int | None = 1) -> str:
-    """``report`` as strict JSON: every NaN or infinity (a metric with nothing to score, a PSNR of identical
-    images) as ``null``. ``json.dumps`` writes them as bare ``NaN`` / ``Infinity``, which is not JSON: other
-    readers (``jq``, browsers, most languages) refuse the whole file."""
-    from ghnerf_runtime.metrics import finite_or_none
+    """``report`` as strict JSON (NaN and infinity as ``null``): :func:`ghnerf_runtime.metrics.strict_json`, the
+    one writer the bench and the benchmarks use too, imported when called (the card's module loads without cv2)."""
+    from ghnerf_runtime.metrics import strict_json as written
 
-    return json.dumps(finite_or_none(report), indent=indent, default=_json_default, allow_nan=False)
+    return written(report, indent)
 
 
 def write_card(out_dir: str | Path, card: Mapping[str, Any]) -> tuple[Path, Path]:

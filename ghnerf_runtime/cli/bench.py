@@ -43,7 +43,7 @@ from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS,
 from ghnerf_runtime.errors import ConfigError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_MATTE_STAGE, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
                                       NOVEL_STAGES, Estimator, load_session)
-from ghnerf_runtime.metrics import finite_or_none
+from ghnerf_runtime.metrics import strict_json
 from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import write_text_atomic
@@ -660,7 +660,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"load average {os.getloadavg()}, {os.cpu_count()} CPUs; model {args.model_dir}", flush=True)
         report = run_runtime_bench(args)
         if args.json:  # whole or not at all (an earlier report left as it was): a Ctrl-C in the write cut it short
-            text = json.dumps(finite_or_none(report), indent=2, default=float)  # strict JSON: NaN becomes null
+            text = strict_json(report, indent=2)  # NaN becomes null
             write_text_atomic(args.json, text + "\n")
         return 0
     except (RuntimeErrorBase, OSError, OutputPathError, RenderPlanError) as e:

@@ -1,6 +1,7 @@
 """``ghnerf-bench runtime``'s argument errors and Ctrl-C, without a model or a rendered sequence."""
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import replace
 from types import SimpleNamespace
@@ -10,6 +11,7 @@ import pytest
 
 from ghnerf_runtime.cli import bench, simdata
 from ghnerf_runtime.config import EstimatorConfig
+from ghnerf_runtime.metrics import strict_json
 
 
 @pytest.fixture
@@ -94,7 +96,7 @@ def test_ctrl_c_while_the_report_is_written_leaves_no_half_report(tmp_path, caps
     """The --json report is written as the bench ends: a Ctrl-C landing in that write left the file cut short (an
     earlier report truncated too), while the bench said no report was written."""
     class _PressedNow:
-        def __float__(self):  # json's default=float reaches it halfway through the report
+        def __str__(self):  # the JSON writer's default reaches it halfway through the report
             raise KeyboardInterrupt
 
     monkeypatch.setattr(bench, "run_runtime_bench", lambda args: {"rows": [1.0, 2.0], "late": _PressedNow()})
@@ -104,6 +106,18 @@ def test_ctrl_c_while_the_report_is_written_leaves_no_half_report(tmp_path, caps
                      "--json", str(report)])
     assert rc == 130 and "no report written" in capsys.readouterr().err
     assert report.read_text() == '{"earlier": true}\n' and [p.name for p in tmp_path.iterdir()] == ["r.json"]
+
+
+def test_the_report_is_written_by_the_one_strict_json_writer(tmp_path, monkeypatch):
+    """Its own ``json.dumps(..., default=float)`` wrote an int64 count as 3.0 and failed, a traceback after the whole
+    bench, on an array of figures; the training side's reports went through another writer."""
+    report = {"pairs": np.int64(3), "per_joint_mm": np.array([12.5, np.nan]), "ms": np.float32("inf")}
+    monkeypatch.setattr(bench, "run_runtime_bench", lambda args: report)
+    out = tmp_path / "r.json"
+    assert bench.main(["runtime", "--sequences", "1", "--frames", "2", "--warmup", "0", "--cache", "off",
+                       "--json", str(out)]) == 0
+    assert out.read_text() == strict_json(report, indent=2) + "\n"
+    assert json.loads(out.read_text()) == {"pairs": 3, "per_joint_mm": [12.5, None], "ms": None}
 
 
 def test_runtime_help_names_the_defaults_the_docs_rely_on(capsys):
