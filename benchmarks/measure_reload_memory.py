@@ -17,9 +17,10 @@ load (an even ``--loads`` ends on the first load's threads, so the first and las
 with what tells a leak from a level: resident memory at loads 10, half-way and last (loads on the last one's
 threads, as the two thread counts sit some megabytes apart), and its slope over the last half of the loads
 in KB a load, fitted on each thread count's loads (a least-squares line), and the same slope of what glibc
-holds in use (heap in use and mapped blocks: what a leak adds to, and the heap's free space does not). The first figure, taken before any
-reload trimmed the heap, also holds what opening ``sim://`` left: with no loop in its disk cache it renders the
-loop first, and the run then starts tens of MB higher and stays higher throughout. The other options try one change at a time: ``--no-trim`` / ``--no-gc`` leave out the trim or the
+holds in use (heap in use and mapped blocks: what a leak adds to, and the heap's free space does not). The
+first figure, taken before any reload trimmed the heap, also holds what opening ``sim://`` left: with no loop
+in its disk cache it renders the loop first, and the run then starts tens of MB higher and stays higher
+throughout. The other options try one change at a time: ``--no-trim`` / ``--no-gc`` leave out the trim or the
 collection, ``--same-key`` keeps the loaded sessions (what a reload whose session key did not change
 does), ``--ort`` patches the sessions' options (an experiment: the daemon does not set them), and
 ``--arena-max N`` caps glibc's malloc arenas (``mallopt(M_ARENA_MAX, N)``) before anything loads.
