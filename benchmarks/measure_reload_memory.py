@@ -13,8 +13,14 @@ calls :func:`firmware_host.daemon.memory.return_freed_memory`. The loads alterna
 (``--main-thread``: as ``ghnerf-daemon`` runs them). glibc's mmap threshold is fixed first as
 ``Daemon._load_model`` fixes it (``--mmap-threshold 0``: left to glibc, as before). It prints VmRSS
 (``/proc/self/status``) and glibc's account of its heap (``mallinfo2``: in use, free, mapped) after each
-load (an even ``--loads`` ends on the first load's threads, so the first and last figures compare). The
-other options try one change at a time: ``--no-trim`` / ``--no-gc`` leave out the trim or the
+load (an even ``--loads`` ends on the first load's threads, so the first and last figures compare). It ends
+with what tells a leak from a level: resident memory at loads 10, half-way and last (loads on the last one's
+threads, as the two thread counts sit some megabytes apart), and its slope over the last half of the loads
+in KB a load, fitted on each thread count's loads (a least-squares line), and the same slope of what glibc
+holds in use (heap in use and mapped blocks: what a leak adds to, and the heap's free space does not). The
+first figure, taken before any reload trimmed the heap, also holds what opening ``sim://`` left: with no loop
+in its disk cache it renders the loop first, and the run then starts tens of MB higher and stays higher
+throughout. The other options try one change at a time: ``--no-trim`` / ``--no-gc`` leave out the trim or the
 collection, ``--same-key`` keeps the loaded sessions (what a reload whose session key did not change
 does), ``--ort`` patches the sessions' options (an experiment: the daemon does not set them), and
 ``--arena-max N`` caps glibc's malloc arenas (``mallopt(M_ARENA_MAX, N)``) before anything loads.
@@ -30,6 +36,9 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Sequence
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -48,15 +57,21 @@ class _MallInfo2(ctypes.Structure):
                                                "uordblks", "fordblks", "keepcost")]
 
 
-def heap_mb() -> str:
-    """glibc's own account (``mallinfo2``, every arena): heap in use and free, and memory in mmapped chunks."""
+def glibc_heap_mb() -> tuple[float, float, float] | None:
+    """glibc's own account (``mallinfo2``, every arena): heap in use and free, and memory in mmapped chunks
+    (None without glibc)."""
     try:
         f = ctypes.CDLL(ctypes.util.find_library("c")).mallinfo2
     except (OSError, AttributeError, TypeError):
-        return ""
+        return None
     f.restype = _MallInfo2
     m, mb = f(), 1 << 20
-    return f"{m.uordblks / mb:6.1f} {m.fordblks / mb:6.1f} {m.hblkhd / mb:6.1f}"
+    return m.uordblks / mb, m.fordblks / mb, m.hblkhd / mb
+
+
+def heap_mb() -> str:
+    heap = glibc_heap_mb()
+    return "" if heap is None else " ".join(f"{v:6.1f}" for v in heap)
 
 
 def patch_session_options(which: str) -> None:
@@ -81,6 +96,43 @@ def patch_session_options(which: str) -> None:
         ort.create_and_register_allocator(ort.OrtMemoryInfo("Cpu", ort.OrtAllocatorType.ORT_ARENA_ALLOCATOR, 0,
                                                             ort.OrtMemType.DEFAULT), None)
     session_mod._session_options = patched
+
+
+def on_last_threads(load: int, last: int) -> int:
+    """``load``, or the next one when it ran on the other thread count than ``last`` (the counts alternate)."""
+    return min(load + (last - load) % 2, last)
+
+
+def threads_text(count: int) -> str:
+    return f"{count} thread" + ("" if count == 1 else "s")
+
+
+def marks_line(rss: dict[int, float], threads: dict[int, int]) -> str:
+    """RSS at loads 10, half-way and last, each on the last load's threads."""
+    last = max(rss)
+    marks = sorted({on_last_threads(n, last) for n in (min(10, last), max(last // 2, 1), last)})
+    return (f"RSS at loads {' / '.join(map(str, marks))} ({threads_text(threads[last])}): "
+            f"{' / '.join(f'{rss[n]:.1f}' for n in marks)} MB")
+
+
+def slope_kb_per_load(loads: Sequence[int], rss_mb: Sequence[float]) -> float:
+    """The least-squares slope of RSS against the load number, in KB a load (nan under two loads)."""
+    if len(loads) < 2:
+        return float("nan")
+    return float(np.polyfit(np.asarray(loads, float), np.asarray(rss_mb, float), 1)[0]) * 1024
+
+
+def slope_line(what: str, mb: dict[int, float], threads: dict[int, int]) -> str:
+    """The slope of ``mb`` over the last half of the loads, one per thread count: a leak climbs in both, a
+    level is ~0."""
+    last = max(mb)
+    half = [n for n in sorted(mb) if n > last // 2]
+    parts = []
+    for count in sorted({threads[n] for n in half}, reverse=True):
+        mine = [n for n in half if threads[n] == count]
+        parts.append(f"{slope_kb_per_load(mine, [mb[n] for n in mine]):+.1f} KB a load at {threads_text(count)} "
+                     f"({len(mine)} loads)")
+    return f"slope over loads {half[0]}-{last}, {what}: " + ", ".join(parts)
 
 
 def main() -> None:
@@ -161,6 +213,9 @@ def measure(args: argparse.Namespace) -> None:
     print(f"load 0: {rss_mb():.1f} MB; glibc used/free/mmap {heap_mb()} MB")
     first = rss_mb()
     print(" load  threads  RSS MB  change  trimmed  load s   used   free   mmap (glibc, MB)")
+    rss: dict[int, float] = {}
+    live: dict[int, float] = {}  # glibc's blocks in use, heap and mapped: what a leak adds to
+    threads: dict[int, int] = {}
     for i in range(1, args.loads + 1):
         cfg = configs[0] if args.same_key else configs[i % 2]
         t0 = time.monotonic()
@@ -178,10 +233,19 @@ def measure(args: argparse.Namespace) -> None:
             gc.collect()
         run(estimator)
         now = rss_mb()
+        rss[i], threads[i] = now, cfg.session.threads
+        heap = glibc_heap_mb()
+        if heap is not None:
+            live[i] = heap[0] + heap[2]
         print(f"{i:5d} {cfg.session.threads:8d} {now:7.1f} {now - first:+7.1f} {str(trimmed):>8} {took:7.2f} "
               f"{heap_mb()}", flush=True)
     print(f"after {args.loads} loads: {first:.1f} -> {rss_mb():.1f} MB "
           f"({(rss_mb() - first) / max(args.loads, 1):+.2f} MB a load)")
+    if rss:
+        print(marks_line(rss, threads))
+        print(slope_line("RSS", rss, threads))
+    if live:
+        print(slope_line("glibc in use (used + mmap)", live, threads))
 
 
 if __name__ == "__main__":

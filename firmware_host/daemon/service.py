@@ -496,8 +496,6 @@ class Daemon:
                 self._reopen_rig = True  # run() closes this rig and opens the new rig.url
                 return False
             rig_cfg = self.config.rig  # a reload may have changed its timeouts
-            estimator = self._estimator  # or replaced the estimator
-            assert estimator is not None
             self.watchdog.beat("reading a pair")
             self._tick()
             try:
@@ -552,9 +550,13 @@ class Daemon:
                 self._backoff_s = rig_cfg.reopen_min_s
             self.watchdog.beat("estimating a pair")
             t0 = self._clock()
+            # self._estimator, as a reload may have replaced it, and never kept in a local: one held across the
+            # loop kept the replaced estimator, and through it the old model's sessions, alive through the
+            # reload's trim (return_freed_memory), which then could not hand their pages back
+            assert self._estimator is not None
             try:
-                result = estimator.estimate(pair.images, sequence=pair.sequence,
-                                            timestamp_s=pair.timestamps_ns[0] * 1e-9)
+                result = self._estimator.estimate(pair.images, sequence=pair.sequence,
+                                                  timestamp_s=pair.timestamps_ns[0] * 1e-9)
             except (FrameError, ModelRunError) as e:
                 # One pair onnxruntime fails on is skipped like a rejected one; it took the daemon down (exit 1,
                 # a restart: the model loaded again, the seqs from 0), with nothing in the status file to say why.

@@ -27,6 +27,7 @@ import numpy as np
 import pytest
 
 from ghnerf_runtime.body25 import JOINT_NAMES
+from tests.firmware_host.daemon.test_daemon_memory import glibc_only_reason
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
@@ -312,11 +313,28 @@ def test_soak_daemon(model, capsys, monkeypatch):
 
 def test_measure_reload_memory(model, capsys, monkeypatch):
     # glibc's threshold left as it is (0): the script's default would fix it for this whole test process
-    out = run_script("measure_reload_memory", "--model-dir", model, "--loads", "2", "--pairs", "2",
+    out = run_script("measure_reload_memory", "--model-dir", model, "--loads", "8", "--pairs", "2",
                      "--mmap-threshold", "0", capsys=capsys, monkeypatch=monkeypatch)
     rows = re.findall(r"^ +(\d+) +([12]) +[\d.]+ +[-+][\d.]+ +(True|False) ", out, re.M)
-    assert [(n, t) for n, t, _ in rows] == [("1", "1"), ("2", "2")], out
-    assert re.search(r"^after 2 loads: [\d.]+ -> [\d.]+ MB", out, re.M), out
+    assert [(n, t) for n, t, _ in rows] == [(str(n), "21"[n % 2]) for n in range(1, 9)], out
+    assert re.search(r"^after 8 loads: [\d.]+ -> [\d.]+ MB", out, re.M), out
+    # what tells a leak from a level: RSS at the marks on the last load's threads, the last half's slopes
+    assert re.search(r"^RSS at loads 4 / 8 \(2 threads\): [\d.]+ / [\d.]+ MB$", out, re.M), out
+    glibc = [] if glibc_only_reason() else [r"glibc in use \(used \+ mmap\)"]  # mallinfo2 is glibc's
+    for what in [r"RSS", *glibc]:
+        assert re.search(rf"^slope over loads 5-8, {what}: [-+][\d.]+ KB a load at 2 threads \(2 loads\), "
+                         r"[-+][\d.]+ KB a load at 1 thread \(2 loads\)$", out, re.M), out
+
+
+def test_measure_reload_memory_figures():
+    script = runpy.run_path(str(BENCH / "measure_reload_memory.py"))  # its functions; main() not run
+    assert script["slope_kb_per_load"]([11, 13, 15], [100.0, 101.0, 102.0]) == pytest.approx(512.0)
+    assert script["on_last_threads"](10, 301) == 11 and script["on_last_threads"](150, 300) == 150
+    rss = {n: 140.0 + (12.0 if n % 2 == 0 else 0.0) + 0.001 * n for n in range(1, 301)}  # levels 12 MB apart
+    threads = {n: 2 if n % 2 == 0 else 1 for n in rss}
+    assert script["marks_line"](rss, threads) == "RSS at loads 10 / 150 / 300 (2 threads): 152.0 / 152.2 / 152.3 MB"
+    assert script["slope_line"]("RSS", rss, threads) == ("slope over loads 151-300, RSS: +1.0 KB a load at 2 threads "
+                                                         "(75 loads), +1.0 KB a load at 1 thread (75 loads)")
 
 
 def test_bench_runtime_vs_eval(model, data64, capsys, monkeypatch):

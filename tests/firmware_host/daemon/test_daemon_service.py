@@ -10,6 +10,7 @@ for events, never asserting how long something took.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import logging
 import os
@@ -18,6 +19,7 @@ import socket
 import stat
 import threading
 import time
+import weakref
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -945,6 +947,36 @@ def test_a_reload_that_loads_the_model_again_hands_the_old_ones_pages_back(sim_u
         wait_until(lambda: run.daemon.health.reloads == 2, timeout=120, what="the second reload")
         assert run.daemon._session is not first and trims == [1]
         assert run.finish() == 0
+
+
+def test_a_reload_that_loads_the_model_again_trims_after_the_old_sessions_are_freed(sim_url, tmp_path, monkeypatch):
+    """The trim hands back the replaced model's pages only once nothing holds its sessions: the streaming loop
+    kept the old estimator (and through it the old sessions) in a local until the pair after the reload, so
+    the trim ran while they were alive and their pages were freed after it, left to the next reload's trim."""
+    import firmware_host.daemon.service as service
+
+    replaced: list[weakref.ref] = []  # weak: this test must not be what keeps them
+    freed_at_trim = []
+
+    def trim() -> bool:
+        gc.collect()  # as return_freed_memory does first
+        freed_at_trim.append([ref() is None for ref in replaced])
+        return True
+
+    monkeypatch.setattr(service, "return_freed_memory", trim)
+    configs = _Configs()
+    with _Running(_config({"url": sim_url}, tmp_path), tmp_path, reload_config=configs) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 3, timeout=60, what="3 estimated pairs")
+        old = run.daemon._session
+        replaced.extend([weakref.ref(old), *(weakref.ref(sess) for sess in old._sessions.values())])
+        del old
+        data = _config_dict(sim_url, tmp_path)
+        data["estimator"]["session"]["threads"] = 1  # the model loaded again
+        configs.next = daemon_config_from_dict(data)
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.reloads == 1, timeout=120, what="the reload")
+        assert run.finish() == 0
+    assert freed_at_trim == [[True] * len(replaced)]
 
 
 def test_the_daemon_keeps_the_models_big_blocks_out_of_the_heap():
