@@ -13,7 +13,8 @@ The summary: JOINTS messages per second, joints present per message, the sender'
 sender numbered but dropped or decimated, or the link lost; camera pairs the sender never made a
 frame of take no number), late JOINTS (reordered: a seq up to :data:`LATE_WINDOW` behind the newest; one
 that fills a gap takes it back out of the gaps) and duplicates, the latest STATUS (its fault code,
-docs/protocol.md, and CALIBRATION SUSPECT when its flag says so) and HELLO, the JOINTS flagged with each scene
+docs/protocol.md, and CALIBRATION SUSPECT when its flag says so) and HELLO (with what of its joint set, units and
+frame is not BODY_25 millimetres in the rig frame), the JOINTS flagged with each scene
 flag (``3 several people``: two people seen, one person's joints sent; not a presence detector, docs/protocol.md), and the decoder's error counts (a noisy
 serial line shows as ``crc``/``cobs`` errors). A seq further back is a restarted sender, not a gap. Ctrl-C,
 SIGTERM or ``--seconds`` ends it with the totals on stderr. Exit status: 0; 2 for a bad URL or a port that
@@ -41,7 +42,7 @@ from urllib.parse import parse_qs, urlsplit
 from drivers.url import not_utf8_escapes, redact_location, redact_url, unquote_keeping_bytes
 from firmware_host.addresses import ipv4_first
 from firmware_host.errors import shown_value
-from firmware_host.protocol.constants import NO_FRAME_SEQ, SCENE_FLAGS, Fault, Flags
+from firmware_host.protocol.constants import NO_FRAME_SEQ, SCENE_FLAGS, CoordFrame, Fault, Flags, JointSet, Units
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
 from firmware_host.sinks.url import LocationError, host_name_problem, integer, ipv6_hint, location_host
@@ -263,6 +264,18 @@ SCENE_WORDS = ((Flags.SEVERAL_PEOPLE, "several people"), (Flags.PRIOR_FALLBACK, 
                (Flags.SINGLE_VIEW, "single view"), (Flags.CALIBRATION_SUSPECT, "calibration suspect"))
 
 
+def _unexpected_layout(hello: Hello) -> str:
+    """What of the HELLO's joint set, units and frame is not BODY_25 millimetres in the rig frame, the only values
+    version 1 defines (docs/protocol.md, HELLO): the decoders pass another value through, so a receiver checks them
+    itself. "" when all three are as expected."""
+    odd = [f"{name} {value}" for name, value, known in (("joint_set", hello.joint_set, JointSet.BODY_25),
+                                                       ("units", hello.units, Units.MILLIMETRES),
+                                                       ("frame", hello.frame, CoordFrame.RIG)) if value != known]
+    if not odd:
+        return ""
+    return f" (not BODY_25 in mm in the rig frame: {', '.join(odd)})"
+
+
 def _fault_name(code: int) -> str:
     try:
         return Fault(code).name
@@ -389,7 +402,8 @@ class Tally:
             age = f" ({now - self.hello_at:.0f} s ago)" if now - self.hello_at > 2 * seconds + 1 else ""
             # an older sender never sets the scene flags: their absence then says nothing of the scene
             older = "" if self.hello.header.flags & SCENE_FLAGS == SCENE_FLAGS else " (sends no scene flags)"
-            parts.append(f"rig {self.hello.rig_id!r} cameras {list(self.hello.cameras)}{older}{age}")
+            layout = _unexpected_layout(self.hello)
+            parts.append(f"rig {self.hello.rig_id!r} cameras {list(self.hello.cameras)}{older}{layout}{age}")
         bad = {k: v - self.errors_before.get(k, 0) for k, v in errors.items() if v - self.errors_before.get(k, 0)}
         self.errors_before = dict(errors)
         if bad:
@@ -450,7 +464,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("url", help="udp://[HOST]:PORT (no HOST: every interface, IPv4 and IPv6; a multicast HOST, "
                                 "udp://239.255.0.1:PORT, is joined) or serial:///dev/DEVICE?baud=N (three "
                                 "slashes: an absolute path)")
-    ap.add_argument("--json", action="store_true", help="every message (and decode error) as a JSON line")
+    ap.add_argument("--json", action="store_true",
+                    help="every message (and decode error) as a JSON line, the wire's integers: a JOINTS row is "
+                         "[x, y, z in mm (rig frame: x right, y down, z away from the cameras), confidence 0-255, "
+                         "missing 0/1] (docs/protocol.md, sections 4 and 9)")
     ap.add_argument("--seconds", type=_positive_seconds, default=None,
                     help="stop after this long (default: Ctrl-C)")
     args = ap.parse_args(argv)

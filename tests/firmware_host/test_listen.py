@@ -590,3 +590,30 @@ def test_a_stop_inside_a_write_blocked_on_a_full_pipe_leaves_no_half_json_line(s
     assert lines[-1] == b"" and len(lines) > 2  # ends at a line's end
     assert all(len(line) < select.PIPE_BUF for line in lines)
     assert [json.loads(line)["type"] for line in lines[:-1]][:3] == ["HELLO", "STATUS", "JOINTS"]
+
+
+def test_the_line_says_when_the_hello_announces_joints_other_than_body25_mm_in_the_rig_frame():
+    """Version 1 defines only joint set 0, units 0 and frame 0, and the decoders pass another value through, so a
+    receiver checks them itself (docs/protocol.md, HELLO). The listener, the reference receiver, printed such a
+    HELLO as any other: an integrator read millimetres in the rig frame off a stream that said otherwise."""
+    from firmware_host.protocol.constants import SCENE_FLAGS, MsgType
+    from firmware_host.protocol.messages import Hello, make_header
+
+    expected = listen.Tally()
+    expected.add(_hello(0))
+    assert "not BODY_25" not in expected.line(1.0, {})
+    other = listen.Tally()
+    other.add(Hello(make_header(MsgType.HELLO, 0, 0, 0, SCENE_FLAGS), 1, 3, 25, 1, 2, "arm", ("left", "right")))
+    line = other.line(1.0, {})
+    assert "rig 'arm' cameras ['left', 'right'] (not BODY_25 in mm in the rig frame: joint_set 3, units 1, frame 2)" \
+        in line, line
+    units_only = listen.Tally()
+    units_only.add(Hello(make_header(MsgType.HELLO, 0, 0, 0, SCENE_FLAGS), 1, 0, 25, 1, 0, "arm", ("left",)))
+    assert "(not BODY_25 in mm in the rig frame: units 1)" in units_only.line(1.0, {})
+
+
+def test_the_json_help_names_the_joints_units_and_frame(capsys):
+    with pytest.raises(SystemExit):
+        listen.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "x, y, z in mm (rig frame: x right, y down, z away from the cameras)" in text, text
