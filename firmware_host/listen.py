@@ -257,6 +257,10 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
 #: after all is taken back out of the loss and counted late instead.
 LATE_WINDOW = 32
 _SEQ_MOD = 1 << 32  # sequence numbers wrap (docs/protocol.md)
+#: A HELLO of seq NO_FRAME_SEQ written at most this long before the newest JOINTS (after the HELLO that began their
+#: numbering) is that sender's own, duplicated or reordered on the link, not a new process: about LATE_WINDOW frames
+#: at 30 fps. Kept short, so that a device that rebooted (its monotonic clock restarted) is hardly ever mistaken for it.
+STALE_HELLO_US = 1_000_000
 
 
 #: The scene flags (docs/protocol.md section 3) as the summary counts them: JOINTS of that kind per interval.
@@ -316,6 +320,10 @@ class Tally:
     _arrived: set[int] = field(default_factory=set, repr=False)
     _missing: dict[int, int] = field(default_factory=dict, repr=False)
     _interval: int = field(default=0, repr=False)
+    # send_us of the earliest HELLO of seq NO_FRAME_SEQ that began the current numbering (None: begun by a JOINTS),
+    # and of the newest JOINTS in it: a HELLO written between the two is this numbering's own, come late.
+    _begun_us: Optional[int] = field(default=None, repr=False)
+    _newest_us: Optional[int] = field(default=None, repr=False)
 
     def add(self, message: Message) -> None:
         if isinstance(message, Joints):
@@ -327,21 +335,36 @@ class Tally:
             for flag, word in SCENE_WORDS:
                 if h.flags & flag:
                     self.scene[word] = self.scene.get(word, 0) + 1
-            self._sequence(h.seq)
+            self._sequence(h.seq, h.send_us)
         elif isinstance(message, Status):
             self.status, self.status_at = message, time.monotonic()
         elif isinstance(message, Hello):
             self.hello, self.hello_at = message, time.monotonic()
-            if message.header.seq == NO_FRAME_SEQ:
+            if message.header.seq == NO_FRAME_SEQ and not self._written_in_this_numbering(message.header.send_us):
                 # a sender that has numbered no frame yet: a new process, whose JOINTS start again at 0, counted
                 # from the seq its HELLO carries (frames lost before its first JOINTS arrives are gaps). Without
                 # this, one that restarted within LATE_WINDOW of its old seq had its first frames read as late.
-                self.last_seq, self._arrived, self._missing = NO_FRAME_SEQ, set(), {}
+                self._begin_at_hello(message.header.send_us)
 
-    def _sequence(self, seq: int) -> None:
+    def _written_in_this_numbering(self, send_us: int) -> bool:
+        """Whether a HELLO of seq NO_FRAME_SEQ was written after the one that began this numbering and shortly
+        before its newest JOINTS (:data:`STALE_HELLO_US`): a duplicated or reordered datagram of this sender, not a
+        new process (whose HELLO is written after its predecessor's frames, on the same monotonic clock). Taken for
+        a new numbering, it counted the frames that had arrived since as lost."""
+        if self._begun_us is None or self._newest_us is None:
+            return False
+        return self._begun_us <= send_us <= self._newest_us and self._newest_us - send_us <= STALE_HELLO_US
+
+    def _begin_at_hello(self, send_us: int) -> None:
+        if self._newest_us is None and self._begun_us is not None:  # another HELLO before any JOINTS: same start
+            send_us = min(send_us, self._begun_us)
+        self.last_seq, self._arrived, self._missing = NO_FRAME_SEQ, set(), {}
+        self._begun_us, self._newest_us = send_us, None
+
+    def _sequence(self, seq: int, send_us: int) -> None:
         """Count ``seq`` as the next frame, a gap's end, a late or repeated one, or a restarted sender's first."""
         if self.last_seq is None:
-            self._restart(seq)
+            self._restart(seq, send_us)
             return
         step = (seq - self.last_seq) % _SEQ_MOD
         if 0 < step < _SEQ_MOD // 2:  # forward: the frames stepped over are lost until they come late
@@ -350,7 +373,7 @@ class Tally:
             self.total_gaps += skipped
             for k in range(max(1, step - LATE_WINDOW), step):  # only those that can still count as late
                 self._missing[(self.last_seq + k) % _SEQ_MOD] = self._interval
-            self.last_seq = seq
+            self.last_seq, self._newest_us = seq, send_us
             self._arrived.add(seq)
             self._forget_behind_window()
         elif step == 0 or _SEQ_MOD - step <= LATE_WINDOW:
@@ -369,12 +392,13 @@ class Tally:
                 if counted_in == self._interval:
                     self.gaps -= 1
         else:
-            self._restart(seq)
+            self._restart(seq, send_us)
 
-    def _restart(self, seq: int) -> None:
+    def _restart(self, seq: int, send_us: int) -> None:
         """A new numbering (the first JOINTS heard, or a restarted sender): the old one's window is forgotten."""
         self._arrived, self._missing = {seq}, {}
         self.last_seq = seq
+        self._begun_us, self._newest_us = None, send_us
 
     def _forget_behind_window(self) -> None:
         newest = self.last_seq

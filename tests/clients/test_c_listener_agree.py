@@ -41,8 +41,8 @@ def _joints(seq: int, flags: int = 0) -> bytes:
                          np.full(25, 200, np.uint8), np.zeros(25, bool)))
 
 
-def _hello(seq: int) -> bytes:
-    return encode(Hello(make_header(MsgType.HELLO, seq, 10, 20), 1, 0, 25, 0, 0, "rig-A1", ("left", "right")))
+def _hello(seq: int, send_us: int = 20) -> bytes:
+    return encode(Hello(make_header(MsgType.HELLO, seq, 10, send_us), 1, 0, 25, 0, 0, "rig-A1", ("left", "right")))
 
 
 def _status(seq: int) -> bytes:
@@ -294,10 +294,13 @@ def test_restart_after_hello_none_sent_starts_a_new_numbering(uart_example: Path
     before the restart and 1 after it; a second restart, 5 -> 0, loses none; a third loses its first two, counted
     from the seq its HELLO carries."""
     data = b"\x00" + _hello(old_last - 3) + _joints(old_last - 2) + _joints(old_last)  # old_last - 1 lost
-    data += _hello(NONE_SENT) + _status(NONE_SENT)  # the restarted producer, before its first frame
+    # each restarted producer's HELLO is written after its predecessor's frames (one monotonic clock): the listener
+    # takes one written among them for a duplicated or reordered datagram
+    later = 1 << 40
+    data += _hello(NONE_SENT, later) + _status(NONE_SENT)  # the restarted producer, before its first frame
     data += b"".join(_joints(s) for s in (0, 1, 2, 4, 5))  # 3 lost
-    data += _hello(NONE_SENT) + b"".join(_joints(s) for s in (0, 1, 2))  # restarted again, 5 -> 0
-    data += _hello(NONE_SENT) + b"".join(_joints(s) for s in (2, 3))  # again, its frames 0 and 1 lost
+    data += _hello(NONE_SENT, later + 1) + b"".join(_joints(s) for s in (0, 1, 2))  # restarted again, 5 -> 0
+    data += _hello(NONE_SENT, later + 2) + b"".join(_joints(s) for s in (2, 3))  # again, its frames 0 and 1 lost
     [uart] = _run_c(uart_example, data)
     _, tally = _listener(_Replay([data]))
     assert tally.total_joints == 2 + 5 + 3 + 2 and tally.total_late == 0

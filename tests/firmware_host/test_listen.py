@@ -617,3 +617,47 @@ def test_the_json_help_names_the_joints_units_and_frame(capsys):
         listen.main(["--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "x, y, z in mm (rig frame: x right, y down, z away from the cameras)" in text, text
+
+
+def _at(seq: int, msg_type: str, send_us: int):
+    """A JOINTS or HELLO of ``seq`` written at ``send_us`` on the sender's monotonic clock."""
+    from dataclasses import replace
+
+    message = _joints(seq) if msg_type == "JOINTS" else _hello(seq)
+    return replace(message, header=replace(message.header, send_us=send_us))
+
+
+def test_a_duplicated_or_reordered_hello_of_a_new_sender_does_not_restart_its_numbering():
+    """On UDP the HELLO a new process sends before its first frame can come twice, or after its first JOINTS.
+    Taken for another new process, it counted the frames that had arrived since as lost: 0 and 1 here."""
+    from firmware_host.protocol.constants import NO_FRAME_SEQ
+
+    period = 33_333
+    start = 50_000_000
+    duplicated = listen.Tally()
+    hello = _at(NO_FRAME_SEQ, "HELLO", start)
+    for message in (hello, _at(0, "JOINTS", start + period), _at(1, "JOINTS", start + 2 * period), hello,
+                    _at(2, "JOINTS", start + 3 * period)):
+        duplicated.add(message)
+    assert (duplicated.total_gaps, duplicated.total_late, duplicated.last_seq) == (0, 0, 2)
+    reordered = listen.Tally()  # the periodic HELLO written just before frame 0 arrives after it
+    for message in (_at(NO_FRAME_SEQ, "HELLO", start), _at(0, "JOINTS", start + 2 * period),
+                    _at(NO_FRAME_SEQ, "HELLO", start + period), _at(1, "JOINTS", start + 3 * period)):
+        reordered.add(message)
+    assert (reordered.total_gaps, reordered.last_seq) == (0, 1)
+
+
+def test_a_hello_written_after_the_frames_or_long_before_them_is_a_new_process():
+    """A restarted process writes its HELLO after its predecessor's frames; a device that rebooted writes it on a
+    clock that started again, long before the old frames' times: both begin a new numbering."""
+    from firmware_host.protocol.constants import NO_FRAME_SEQ
+
+    period = 33_333
+    for hello_us in (50_000_000 + 40 * period, 20_000_000):  # restarted after the frames; rebooted, uptime 20 s
+        tally = listen.Tally()
+        tally.add(_at(NO_FRAME_SEQ, "HELLO", 50_000_000))
+        for seq in range(30):
+            tally.add(_at(seq, "JOINTS", 50_000_000 + (seq + 1) * period))
+        tally.add(_at(NO_FRAME_SEQ, "HELLO", hello_us))
+        tally.add(_at(2, "JOINTS", hello_us + period))  # its frames 0 and 1 lost
+        assert (tally.total_gaps, tally.total_late, tally.last_seq) == (2, 0, 2), hello_us
