@@ -42,7 +42,7 @@ from urllib.parse import parse_qs, urlsplit
 from drivers.url import not_utf8_escapes, redact_location, redact_url, unquote_keeping_bytes
 from firmware_host.addresses import ipv4_first
 from firmware_host.errors import shown_value
-from firmware_host.protocol.constants import NO_FRAME_SEQ, SCENE_FLAGS, CoordFrame, Fault, Flags, JointSet, Units
+from firmware_host.protocol.constants import NO_FRAME_SEQ, PROTOCOL_VERSION, SCENE_FLAGS, CoordFrame, Fault, Flags, JointSet, Units
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
 from firmware_host.sinks.url import LocationError, host_name_problem, integer, ipv6_hint, location_host
@@ -280,6 +280,11 @@ def _unexpected_layout(hello: Hello) -> str:
     return f" (not BODY_25 in mm in the rig frame: {', '.join(odd)})"
 
 
+#: A ``version`` error passed its CRC: a sender of another protocol version, not line noise (docs/protocol.md, section 4).
+_VERSION_HINT = (f" (version: whole frames of a protocol version other than {PROTOCOL_VERSION}, which this listener "
+                 "does not read: a newer sender needs a newer ghnerf-listen)")
+
+
 def _fault_name(code: int) -> str:
     try:
         return Fault(code).name
@@ -431,7 +436,7 @@ class Tally:
         bad = {k: v - self.errors_before.get(k, 0) for k, v in errors.items() if v - self.errors_before.get(k, 0)}
         self.errors_before = dict(errors)
         if bad:
-            parts.append(f"decode errors {bad}")
+            parts.append(f"decode errors {bad}{_VERSION_HINT if 'version' in bad else ''}")
         self.joints, self.present, self.latency_ms, self.gaps, self.late, self.duplicates = 0, [], [], 0, 0, 0
         self.scene = {}
         self._interval += 1  # a frame skipped before now that comes late no longer changes this line's gaps

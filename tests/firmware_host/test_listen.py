@@ -661,3 +661,13 @@ def test_a_hello_written_after_the_frames_or_long_before_them_is_a_new_process()
         tally.add(_at(NO_FRAME_SEQ, "HELLO", hello_us))
         tally.add(_at(2, "JOINTS", hello_us + period))  # its frames 0 and 1 lost
         assert (tally.total_gaps, tally.total_late, tally.last_seq) == (2, 0, 2), hello_us
+
+
+def test_version_errors_say_the_sender_speaks_another_protocol_version():
+    """A listener older than its sender gets a ``version`` error on every frame (docs/protocol.md, section 4); the
+    line said only "decode errors {'version': 5}", which reads like line noise."""
+    tally = listen.Tally()
+    line = tally.line(1.0, {"version": 5, "crc": 0})
+    assert "decode errors {'version': 5} (version: whole frames of a protocol version other than 1" in line, line
+    assert "newer ghnerf-listen" in line
+    assert "(version:" not in tally.line(1.0, {"version": 5, "crc": 1})  # a crc error alone: no such hint
