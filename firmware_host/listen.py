@@ -486,8 +486,9 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"lost), and when any came 'N late (reordered)' (a seq up to {LATE_WINDOW} behind the newest: one a "
               "gap stepped over leaves the lost frames) and 'N duplicate'; JOINTS flagged 'N several people', "
               "'N prior fallback', 'N single view', 'N calibration suspect' (docs/protocol.md, section 3); "
-              "the sender's last STATUS fault (', CALIBRATION SUSPECT' when flagged) and HELLO; "
-              "decode errors. Ctrl-C, SIGTERM or --seconds ends it with the totals. Counters: docs/daemon.md; "
+              "the sender's last STATUS fault (', CALIBRATION SUSPECT' when flagged) and HELLO ('(not BODY_25 in "
+              "mm in the rig frame: ...)' when it announces other joints, units or frame); decode errors ('version': "
+              "a sender of a newer protocol). Ctrl-C, SIGTERM or --seconds ends it with the totals. Counters: docs/daemon.md; "
               "protocol: docs/protocol.md")
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0], epilog=epilog)
     ap.add_argument("url", help="udp://[HOST]:PORT (no HOST: every interface, IPv4 and IPv6; a multicast HOST, "

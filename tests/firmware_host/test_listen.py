@@ -671,3 +671,10 @@ def test_version_errors_say_the_sender_speaks_another_protocol_version():
     assert "decode errors {'version': 5} (version: whole frames of a protocol version other than 1" in line, line
     assert "newer ghnerf-listen" in line
     assert "(version:" not in tally.line(1.0, {"version": 5, "crc": 1})  # a crc error alone: no such hint
+
+
+def test_the_help_names_the_hello_s_layout_warning_and_the_version_errors(capsys):
+    with pytest.raises(SystemExit):
+        listen.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "'(not BODY_25 in mm in the rig frame: ...)'" in text and "'version': a sender of a newer protocol" in text
