@@ -59,6 +59,11 @@ seeds of each of ``--motions``, ``--frames`` pairs each, a row per place. Every 
 sight discounted for the depth error), against ``MIXED_TORSO_SLACK_M``: docs/two-people.md, "A torso of two people"
 (session 58's review).
 
+``--scan-every-s SECONDS`` sets ``presence.scan_every_s`` (the whole working volume scanned for anyone besides the
+tracked subject, ``PairResult.someone_else``; 0.001 scans every tracked pair): each row adds the pairs scanned and
+those that said someone else is there, and ``--one-person-model``'s line the same (docs/two-people.md, "Anyone else
+near?", session 64).
+
 With ``--calibration`` it measures the daemon's calibration figures (``lowest_foot_m``, ``reprojection_px_median``)
 on two people's pairs against the reported person's alone at the same instants, the rig file's second camera turned
 by each angle given about ``--axis`` while the oracle films through the true rig (``measure_calibration``;
@@ -270,6 +275,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
         config = replace(config, session=replace(config.session, model_dir=model_dir))
         session = load_session(config)  # once: every scene's estimator shares it
     counts = {"reported": 0, "first": 0, "second": 0, "neither": 0, "nearer_mm": 0.0, "flagged": 0,
+              "scanned": 0, "someone_else": 0,
               "flagged_joints": 0, "flagged_mm": 0.0,
               "followed_first": 0, "followed_second": 0, "stable": 0,
               "passes": 0, "twice_view0": 0, "twice_view1": 0, "twice_both": 0, "hidden_view0": 0.0,
@@ -342,6 +348,8 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 if paired is not None:
                     counts["joint_unpaired"][:len(found)] += found & ~paired
                 counts["flagged"] += int(r.several_people)
+                counts["scanned"] += int(r.someone_else is not None)
+                counts["someone_else"] += int(bool(r.someone_else))
                 if r.several_people:  # the subject's alone: its pairings' (the prior's fed their peaks, with it)
                     counts["flagged_joints"] += int(found.sum())
                     counts["flagged_mm"] += float(nearer[found].sum()) * 1000.0
@@ -425,20 +433,24 @@ def measure_calibration(scenes: int, pairs: int, alone: int, degrees: float,
     return out
 
 
-def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
+def measure_one_person(model_dir: str, sequences: int, frames: int, scan_every_s: float = 0.0) -> dict:
     """One person (module docstring, ``--one-person-model``): ``pairs``, ``flagged``, ``identical`` (every pair's
     joints and missing flags equal with the check on and off), ``found`` and ``joints`` (joints found, of all),
     ``error_mm`` (mean over those found; NaN with none), ``passes`` and ``shown_twice`` (passes by the number of
     joints shown twice in both views, at the defaults' ``second_person_ratio``), ``torso_mixed`` (passes whose peaks
-    made a torso of two people, ``two_people.mixed_torso``)."""
+    made a torso of two people, ``two_people.mixed_torso``), ``scanned`` and ``someone_else`` (pairs whose
+    ``PairResult.someone_else`` is not None, and True: ``scan_every_s`` sets ``presence.scan_every_s`` of the checked
+    estimator alone, so ``identical`` covers the scan too)."""
     from ghnerf_runtime.cli.simdata import load_sequences
 
-    on = EstimatorConfig(session=SessionConfig(model_dir=model_dir))
-    off = replace(on, joints3d=replace(on.joints3d, second_person_min_joints=0))
+    off = EstimatorConfig(session=SessionConfig(model_dir=model_dir))
+    on = replace(off, presence=replace(off.presence, scan_every_s=scan_every_s))
+    off = replace(off, joints3d=replace(off.joints3d, second_person_min_joints=0))
     session = load_session(on)
     ratio = on.joints3d.second_person_ratio
     shown: Counter[int] = Counter()
-    out = {"pairs": 0, "flagged": 0, "identical": True, "found": 0, "joints": 0, "torso_mixed": 0, "torso_excess": []}
+    out = {"pairs": 0, "flagged": 0, "identical": True, "found": 0, "joints": 0, "torso_mixed": 0, "torso_excess": [],
+           "scanned": 0, "someone_else": 0}
     errors: list[float] = []
     for seq in load_sequences(sequences, frames):
         with Estimator(session, seq.rig, on) as checked, Estimator(session, seq.rig, off) as unchecked:
@@ -458,6 +470,8 @@ def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
                 u = unchecked.estimate(images, **when)
                 out["pairs"] += 1
                 out["flagged"] += int(r.several_people)
+                out["scanned"] += int(r.someone_else is not None)
+                out["someone_else"] += int(bool(r.someone_else))
                 out["identical"] &= bool(np.array_equal(r.missing, u.missing)
                                          and np.array_equal(r.joints_3d, u.joints_3d))
                 found = ~r.missing
@@ -542,6 +556,14 @@ def _places(text: str) -> tuple:
     return (values[0], values[1]), (values[2], values[3])
 
 
+def scanned(counts: dict, pairs: int) -> str:
+    """The row's ``presence.scan_every_s`` figures: pairs scanned (a ``someone_else`` answer) and those saying yes."""
+    if not counts["scanned"]:
+        return ""
+    return (f"; someone_else on {counts['someone_else']} of {counts['scanned']} pairs with a scan's answer "
+            f"({counts['someone_else'] / counts['scanned']:.0%}; {pairs} pairs)")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", type=int, default=8, help="scene pairs (seeds 1..N for the first person)")
@@ -593,6 +615,10 @@ def main(argv=None) -> int:
                     help="each row also per joint: the pairs reporting it, their mean mm from the nearer person's, "
                          "and of them those a flagged pair reported without a pairing of the subject's (the skeleton "
                          "prior's place; docs/two-people.md, \"Fewer, right joints\")")
+    ap.add_argument("--scan-every-s", type=float, default=EstimatorConfig().presence.scan_every_s, metavar="SECONDS",
+                    help="presence.scan_every_s: scan the working volume for anyone besides the tracked subject this "
+                         "often (0, the default: off; 0.001: every tracked pair); the rows count the pairs that said "
+                         "someone else is there (PairResult.someone_else)")
     ap.add_argument("--no-refine", action="store_true",
                     help="tracking.refine_cold_start off: a cold pass (the working volume's crop) is not run again "
                          "on the crop of what it found (docs/two-people.md, \"A track of both people's joints\")")
@@ -613,6 +639,10 @@ def main(argv=None) -> int:
                  "--one-person-model film no hidden joints): leave it out")
     if args.no_refine and args.one_person_model:
         ap.error("--one-person-model runs that folder at the defaults: leave --no-refine out")
+    if not (np.isfinite(args.scan_every_s) and args.scan_every_s >= 0):
+        ap.error(f"--scan-every-s needs 0 s or more, got {args.scan_every_s!r}")
+    if args.scan_every_s and args.calibration:
+        ap.error("--calibration does not use --scan-every-s: leave it out")
     if not 0 <= args.behind_min_joints <= 25:
         ap.error(f"--behind-min-joints needs 0 to 25 joints, got {args.behind_min_joints}")
     if args.behind is not None:
@@ -659,13 +689,13 @@ def main(argv=None) -> int:
                   f"{torso_spread(row['torso_excess'])}")
         return 0
     if args.one_person_model:
-        m = measure_one_person(args.one_person_model, args.sequences, args.frames)
+        m = measure_one_person(args.one_person_model, args.sequences, args.frames, args.scan_every_s)
         shown = ", ".join(f"{n} joints: {k}" for n, k in m["shown_twice"].items())
         print(f"one person, {args.one_person_model} at the defaults, {args.sequences} bench sequences of "
               f"{args.frames} pairs: {m['flagged']} of {m['pairs']} pairs flagged several_people; joints "
               f"{'identical' if m['identical'] else 'DIFFERENT'} with the check on and off; "
               f"{m['error_mm']:.2f} mm over {100.0 * m['found'] / max(m['joints'], 1):.2f} % of joints "
-              f"(against the truth)")
+              f"(against the truth)" + scanned(m, m["pairs"]))
         print(f"passes by joints shown twice in both views at {EstimatorConfig().joints3d.second_person_ratio}: "
               f"{shown} ({m['passes']} passes); a torso of two people (two_people.mixed_torso) on "
               f"{m['torso_mixed']} of them")
@@ -680,7 +710,8 @@ def main(argv=None) -> int:
                                   f"({args.scenes} scenes)"))
     config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject,
                                               skeleton_prior=args.skeleton_prior,
-                                              behind_min_joints=args.behind_min_joints), tracking=tracking)
+                                              behind_min_joints=args.behind_min_joints), tracking=tracking,
+                             presence=replace(EstimatorConfig().presence, scan_every_s=args.scan_every_s))
     for alone, second, what in runs:
         counts, pairs = measure(args.scenes, args.pairs, alone, config, args.swap, args.places, args.model_dir,
                                 second, args.occlude)
@@ -704,7 +735,7 @@ def main(argv=None) -> int:
               f"(> {NEAR_M * 100:.0f} cm from both); {counts['nearer_mm'] / n:.1f} mm from the nearer person's (mean; "
               f"{flagged_mm}); {counts['flagged'] / pairs:.0%} of pairs flagged several_people; "
               f"scenes following the first person {counts['followed_first']}, the second {counts['followed_second']}, "
-              f"one person throughout {counts['stable']} of {args.scenes}")
+              f"one person throughout {counts['stable']} of {args.scenes}" + scanned(counts, pairs))
         passes = max(counts["passes"], 1)
         print(f"  {counts['passes']} passes: joints shown twice at {config.joints3d.second_person_ratio} per pass, "
               f"view 0 {counts['twice_view0'] / passes:.1f}, view 1 {counts['twice_view1'] / passes:.1f}, both "

@@ -599,17 +599,22 @@ class PresenceConfig:
         min_joints: strong joints needed.
         min_confidence: confidence of a strong joint; ``None`` takes the measured default of the
             heatmap source (``PRESENCE_MIN_CONFIDENCE``).
+        scan_every_s: while tracking, every this many seconds of capture time, run the keypoint graph once on
+            the whole working volume and ask whether anyone besides the subject is there
+            (:mod:`ghnerf_runtime.others_scan`, ``PairResult.someone_else``); 0 (the default): never.
     """
 
     enabled: bool = True
     min_joints: int = 6
     min_confidence: float | None = None
+    scan_every_s: float = 0.0
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
         _integer(self, "min_joints", 1, 25)
         if self.min_confidence is not None:
             _number(self, "min_confidence", 0.0, 1.0)
+        _number(self, "scan_every_s", 0.0, 3600.0)
 
     def threshold(self, source: str) -> float:
         return PRESENCE_MIN_CONFIDENCE[source] if self.min_confidence is None else float(self.min_confidence)

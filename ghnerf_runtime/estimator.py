@@ -82,6 +82,7 @@ from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides
     novel_pivot, novel_target, render_novel_view, skeleton_overlay
 from ghnerf_runtime.novel_painter import FILE_NAME as PAINTER_FILE
 from ghnerf_runtime.novel_painter import NovelPainter, angle_from_sources_deg
+from ghnerf_runtime.others_scan import ScanClock, box_cells, someone_else, subject_box
 from ghnerf_runtime.plain_values import is_true_false, plain_scalar, whole_number_or_none
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
 from ghnerf_runtime.proxy_matte import proxy_matte
@@ -142,7 +143,7 @@ _FLOOR_BODY_M = 1.0
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "turn_search", "volume", "render_heat", "decode_2d",
-                   "joints_3d")
+                   "joints_3d", "scan")
 #: Stage keys of the novel view.
 NOVEL_STAGES = ("novel_volume", "novel_render", "novel_compose")
 #: With ``novel_view.proxy_blend`` only.
@@ -187,6 +188,11 @@ class PairResult:
         prior_fallback: the prior ran but its skeleton disagreed with the triangulation by more than
             ``joints3d.max_prior_disagreement_m``, so the joints are the triangulated ones (as without the prior);
             never on a pair that reports nobody.
+        someone_else: ``presence.scan_every_s`` set (off by default, since session 64): the latest scan of the whole
+            working volume, at most that long ago, showed someone besides the tracked subject in both views
+            (:mod:`~ghnerf_runtime.others_scan`); ``None``: no scan since the track began (the option off, a pair
+            without a track). Unlike ``several_people`` it looks outside the subject's crop; it misses a person
+            hidden behind the subject in a view or inside the subject's box.
         several_people: at least ``joints3d.second_person_min_joints`` joint maps showed a second strong peak in
             both views (two people in view; fewer, down to one, while the pairs follow a flagged pair's subject),
             or, on a tracked pass with ``joints3d.behind_min_joints`` set (off by default), in one view alone (one
@@ -257,6 +263,7 @@ class PairResult:
     single_view: str | None = None
     reprojection_px_median: float | None = None
     lowest_foot_m: float | None = None
+    someone_else: bool | None = None
 
     def __post_init__(self) -> None:
         reasons = self.frame_reason
@@ -322,6 +329,8 @@ class PairResult:
             else r(self.reprojection_px_median, 3),
             # the lower triangulated foot's height (since session 54): null where none was triangulated
             "lowest_foot_m": None if self.lowest_foot_m is None else r(self.lowest_foot_m, 4),
+            # anyone besides the subject in the working volume (since session 64): null where not scanned
+            "someone_else": None if self.someone_else is None else bool(self.someone_else),
             "timing_ms": {k: r(v, 3) for k, v in self.timing_ms.items()},
         }
 
@@ -624,6 +633,11 @@ class Estimator:
             if self.contract.strides.get("human_feat") != self.contract.heatmap_stride:
                 raise ModelError(f"encoder heatmaps at stride {self.contract.strides.get('human_feat')} do not match "
                                  f"the heatmap grid's stride {self.contract.heatmap_stride}")
+        if self.config.presence.scan_every_s > 0 and not getattr(self.contract, "encoder_heatmaps", False):
+            # said at load: the scan reads these maps of the working volume's crops
+            raise ModelError(f"presence.scan_every_s = {self.config.presence.scan_every_s} reads the encoder "
+                             "heatmaps of the working volume's crops (contract key ghnerf.encoder_heatmaps); this "
+                             "model has none: set presence.scan_every_s = 0")
         if self.config.roi.turn_search and not getattr(self.contract, "encoder_heatmaps", False):
             # said at load: the search scores each turn by these maps, and a weak pair found them missing
             raise ModelError("roi.turn_search scores the turned crops by the encoder heatmaps (the human encoder's "
@@ -691,6 +705,8 @@ class Estimator:
         self._sequence = 0
         self._last_timestamp_s: float | None = None
         self._last_pair_cold = False
+        self._scan_clock = ScanClock(self.config.presence.scan_every_s)  # presence.scan_every_s
+        self._someone_else: bool | None = None  # the latest scan's answer while this track lasts
         # the track is a several_people pass's subject (SubjectSelector.several_people's hysteresis)
         self._several_track = False
         self._behind_track: int | None = None  # and the view that showed one peak, where that pass was behind_view's
@@ -767,6 +783,7 @@ class Estimator:
         self._turn_check_wait = 0
         self._kept_axis = None
         self._crop_terms = None
+        self._forget_scan()
         if self._smoother is not None:
             self._smoother.reset()
 
@@ -974,6 +991,7 @@ class Estimator:
             self._end_wait()  # someone found well: the next weak pair searches at once
         self._kept_axis = self._kept_turn_axis(p)
         if p.j3 is None:
+            self._forget_scan()
             if self._smoother is not None:
                 self._smoother.reset()
             timing["total"] = 1e3 * (time.perf_counter() - t_start)
@@ -999,6 +1017,7 @@ class Estimator:
                     self._smoother.reset()
                 points = self._smoother(float(timestamp_s), p.j3.points, p.j3.valid)  # missing joints stay 0
         self._last_pair_cold = not p.regions.tracked
+        self._scan_for_others(images, p, timestamp_s, timing)
         timing["total"] = 1e3 * (time.perf_counter() - t_start)
         names = self.camera_names
         result = PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
@@ -1007,7 +1026,7 @@ class Estimator:
                             prior_disagreement_m=p.prior_disagreement_m, prior_fallback=p.prior_fallback,
                             several_people=p.several_people,
                             single_view=p.single_view, reprojection_px_median=p.reprojection_px_median,
-                            lowest_foot_m=p.lowest_foot_m)
+                            lowest_foot_m=p.lowest_foot_m, someone_else=self._someone_else)
         if novel_view is None or not all(p.frame_ok.values()) or not p.someone:
             # A single-view pair has no novel view, nor has a pair that found nobody: there is no subject to
             # view, and rendering the working volume's box for nothing was the dearest part of an empty room.
@@ -1065,6 +1084,48 @@ class Estimator:
             self._track_unsorted = False
         self.tracker = tracker
         self._turns = turns
+
+    def _forget_scan(self) -> None:
+        """No track: the scan's answer was about the lost subject's surroundings, and the next track scans at once."""
+        self._scan_clock.reset()
+        self._someone_else = None
+
+    def _scan_for_others(self, images: Sequence[np.ndarray], p: "_Pass", timestamp_s: float | None,
+                         timing: dict) -> None:
+        """``presence.scan_every_s``: on a tracked pair whose scan is due, the keypoint graph once on the working
+        volume's crops, and whether both views show someone outside the reported subject's box
+        (:mod:`~ghnerf_runtime.others_scan`). Time: ``scan``. The pair's joints are not touched."""
+        if not p.regions.tracked:
+            self._forget_scan()
+            return
+        now = time.monotonic() if timestamp_s is None else float(timestamp_s)
+        box = subject_box(p.j3.points, p.j3.valid)
+        if box is None or not self._scan_clock.due(now):
+            return
+        t = time.perf_counter()
+        heat, crops = self._volume_heatmaps(images)
+        if heat is not None:
+            stride = self.contract.heatmap_stride
+            cells = [box_cells(np.asarray(c.P, np.float64), box, stride) for c in crops]
+            pres = self.config.presence
+            self._someone_else = someone_else(heat, cells, pres.threshold("encoder"), pres.min_joints)
+        self._scan_clock.ran(now)
+        _add_ms(timing, "scan", t)
+
+    def _volume_heatmaps(self, images: Sequence[np.ndarray]) -> tuple[np.ndarray | None, list[Camera]]:
+        """The encoder heatmaps ``(2, J, H, W)`` of the working volume's upright crops (the cold pass's) and their
+        crop cameras; ``None`` where a crop fails the frame check (the answer stays the last scan's)."""
+        batch = np.empty((2, 3, self.size, self.size), np.float32)
+        crops = []
+        for i, (img, st, roi) in enumerate(zip(images, self._cams, self.tracker.volume_regions.rois)):
+            maps, crop = self._crop(st, roi)
+            crops.append(crop)
+            batch[i] = preprocess_image(img, maps, self.contract.normalisation)
+            if not check_crop(batch[i, 1], self._levels, self.config.frame_check, maps.inside)[0]:
+                return None, crops
+        graph = "human" if self.session.has("human") else "encoder"
+        feeds = {"images": batch, "src_P": source_projections(crops, self.size, self.size)}  # (as _turn_scores')
+        return self.session.run(graph, feeds)["encoder_heatmaps"], crops
 
     def _refined(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
                  novel_view: NovelViewRequest | None) -> "_Pass":

@@ -222,6 +222,11 @@ class SubjectTracker:
         self._used: Regions | None = None  # the regions of the pair being estimated (carried joints)
         self.drops = 0
 
+    @property
+    def volume_regions(self) -> Regions:
+        """The whole working volume's regions (a cold pass's), whatever the track."""
+        return self._volume
+
     def regions(self) -> Regions:
         if self.track is None or not self.config.enabled:
             self._last_rois = None

@@ -102,6 +102,8 @@ class Health:
     found_fraction: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     estimate_times: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     scene_flags: deque = field(default_factory=lambda: deque(maxlen=WINDOW))  # each estimate's, scene_flags_of
+    # each estimate's PairResult.someone_else (presence.scan_every_s): True, False or None (no scan's answer)
+    someone_else: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     calibration: CalibrationWatch = field(default_factory=lambda: CalibrationWatch(CALIBRATION_WINDOW,
                                                                                     CALIBRATION_MAX_PX))
     # the calibration's second symptom: the feet off the floor (a pan, which the view agreement does not show)
@@ -129,9 +131,10 @@ class Health:
         """The STATUS= line's words while either check is suspect, naming each symptom (empty otherwise)."""
         return status_words((self.calibration, self.floor))
 
-    def estimated(self, total_ms: float, found: float, flags: frozenset[str] = frozenset()) -> None:
+    def estimated(self, total_ms: float, found: float, flags: frozenset[str] = frozenset(),
+                  someone_else: Optional[bool] = None) -> None:
         """One pair estimated in ``total_ms``, ``found`` the fraction of its 3D joints found, ``flags`` its
-        :func:`scene_flags_of`."""
+        :func:`scene_flags_of`, ``someone_else`` its ``PairResult.someone_else``."""
         now = self.clock()
         self.pairs_estimated += 1
         self.last_pair_at = now
@@ -139,6 +142,7 @@ class Health:
         self.found_fraction.append(float(found))
         self.estimate_times.append(now)
         self.scene_flags.append(frozenset(flags))
+        self.someone_else.append(None if someone_else is None else bool(someone_else))
 
     def frames_checked(self, frame_reason: dict[str, Optional[str]]) -> None:
         """Count each camera's frame the estimator's frame check rejected (``PairResult.frame_reason``), by
@@ -152,6 +156,13 @@ class Health:
         """The status file's ``estimator.flagged``: of the window's estimates, how many carried each scene flag
         (an operator's answer to "why fewer joints?" when two people stand in view)."""
         return {name: sum(name in flags for flags in self.scene_flags) for name in SCENE_FLAGS}
+
+    def _someone_else_report(self) -> Optional[int]:
+        """The status file's ``estimator.someone_else``: of the window's estimates, how many said someone besides
+        the tracked subject is in the working volume; None where none had a scan's answer (``presence.scan_every_s``
+        off, the default, or nobody tracked): not "nobody else", but not looked."""
+        answers = [a for a in self.someone_else if a is not None]
+        return sum(answers) if answers else None
 
     def _rejected_report(self) -> dict[str, dict[str, int]]:
         """Every camera of the rig (and any counted before a rig change) with every reason, 0 included."""
@@ -184,6 +195,7 @@ class Health:
                           "joints_found": round(float(np.mean(self.found_fraction)), 3)
                           if self.found_fraction else None,
                           "flagged": self._flagged_report(),
+                          "someone_else": self._someone_else_report(),
                           "window": len(lat)},
             "calibration": self._calibration_report(),
             "last_error": self.last_error,

@@ -574,7 +574,7 @@ class Daemon:
             took = self._clock() - t0
             self.watchdog.beat("handing the joints to the sinks")
             self.health.estimated(result.timing_ms["total"], float(np.mean(~np.asarray(result.missing, bool))),
-                                  scene_flags_of(result))
+                                  scene_flags_of(result), result.someone_else)
             self.health.frames_checked(result.frame_reason)
             self._calibration_changed(self.health.calibration.add(result.reprojection_px_median))
             self._floor_changed(self.health.floor.add(result.lowest_foot_m))

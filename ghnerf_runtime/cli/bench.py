@@ -29,6 +29,7 @@ import argparse
 import itertools
 import json
 import logging
+import math
 import os
 import shutil
 import sys
@@ -57,7 +58,7 @@ __all__ = ["main", "run_runtime_bench", "row_base_config", "STAGE_GROUPS"]
 #: Printed columns: the issue's stage names -> estimator stage keys.
 STAGE_GROUPS = {
     "preprocess": ("preprocess",),
-    "encoders": ("encoder", "encoder_flip", "turn_search"),
+    "encoders": ("encoder", "encoder_flip", "turn_search", "scan"),
     "depth (volume)": ("volume",),
     "rendering (heat)": ("render_heat",),
     "decoding (2D+3D)": ("decode_2d", "joints_3d"),
@@ -257,8 +258,11 @@ def run_runtime_bench(args) -> dict:
         searches = (args.turn_searches or [None]) if getattr(session.contract, "encoder_heatmaps", False) else [None]
         sides = (args.flip_side_by_side or [None]) if source == "encoder" else [None]
         refines = args.refine_cold_starts or [None]
-        for mode, flip, follow, prior, prior_flip, smooth, side, presence, search, refine in itertools.product(
-                args.modes, flips, follows, priors, prior_flips, smooths, sides, presences, searches, refines):
+        # the scan reads the encoder heatmaps too: a model without them refuses it (no row)
+        scans = (args.scan_every_s or [None]) if getattr(session.contract, "encoder_heatmaps", False) else [None]
+        for mode, flip, follow, prior, prior_flip, smooth, side, presence, search, refine, scan in itertools.product(
+                args.modes, flips, follows, priors, prior_flips, smooths, sides, presences, searches, refines,
+                scans):
             if flip is False and side is not None and side != sides[0]:
                 continue  # without the flip test there is nothing to run side by side: one row
             if prior is False and prior_flip is not None and prior_flip != prior_flips[0]:
@@ -275,6 +279,8 @@ def run_runtime_bench(args) -> dict:
                 flip_cfg = replace(flip_cfg, smoothing=replace(flip_cfg.smoothing, enabled=smooth))
             if presence is not None:
                 flip_cfg = replace(flip_cfg, presence=replace(flip_cfg.presence, enabled=presence))
+            if scan is not None:
+                flip_cfg = replace(flip_cfg, presence=replace(flip_cfg.presence, scan_every_s=scan))
             if side is not None:
                 flip_cfg = replace(flip_cfg, heatmaps=replace(flip_cfg.heatmaps, flip_test_side_by_side=side))
             if search is not None:
@@ -302,6 +308,7 @@ def run_runtime_bench(args) -> dict:
                              "smoothing_label": smooth is not None, "proxy_label": blend is not None,
                              "presence_label": presence is not None, "turn_search_label": search is not None,
                              "side_label": side is not None, "refine_label": refine is not None,
+                             "scan_label": scan is not None,
                              "painter_label": paint is not None,
                              "pipeline": bool(piped), "pipeline_label": piped is not None,
                              "lanes_label": lanes is not None})
@@ -348,6 +355,7 @@ def run_runtime_bench(args) -> dict:
                "turn_search_label": row["turn_search_label"],
                "flip_side_by_side": cfg.heatmaps.flip_test_side_by_side, "side_label": row["side_label"],
                "refine_cold_start": cfg.tracking.refine_cold_start, "refine_label": row["refine_label"],
+               "scan_every_s": cfg.presence.scan_every_s, "scan_label": row["scan_label"],
                **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride,
                    "proxy_blend": cfg.novel_view.proxy_blend, "proxy_label": row["proxy_label"],
                    "painter": cfg.novel_view.uses_painter(getattr(session, "novel_painter", None) is not None),
@@ -396,6 +404,8 @@ def _print_row(row: dict) -> None:
         tracked += " flip-side-by-side" if row["flip_side_by_side"] else " flip-in-turn"
     if row.get("refine_label"):
         tracked += " refine-cold" if row["refine_cold_start"] else " no-refine-cold"
+    if row.get("scan_label"):
+        tracked += f" scan/{row['scan_every_s']:g}s" if row["scan_every_s"] else " no-scan"
     if row.get("proxy_label"):
         tracked += " proxy-blend" if row["proxy_blend"] else " no-proxy-blend"
     if row.get("painter_label"):
@@ -464,6 +474,16 @@ def _on_off_list(text: str) -> list[bool]:
     if bad := [p for p in text.split(",") if p and p not in words]:
         raise argparse.ArgumentTypeError(f"{bad}: expected on, off, 1 or 0")
     return _refuse_repeats([words[p] for p in text.split(",") if p], text)
+
+
+def _seconds_list(text: str) -> list[float]:
+    try:
+        values = [float(p) for p in text.split(",") if p]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a comma list of seconds") from None
+    if any(not (math.isfinite(v) and v >= 0) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: seconds must be finite and 0 or more")
+    return _refuse_repeats(values, text)
 
 
 def _int_list(text: str) -> list[int]:
@@ -562,6 +582,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="comma list of roi.turn_search values (on,off), one row each (interleaved; default: "
                          f"{_configs(runtime.roi.turn_search)}: on for a model with encoder heatmaps, off for one "
                          "without, which gets no such rows)")
+    rt.add_argument("--scan-every-s", default=None, type=_seconds_list, metavar="SECONDS",
+                    help="comma list of presence.scan_every_s values (0: off), one row each (interleaved; default: "
+                         f"the config's {runtime.presence.scan_every_s:g}): the working volume scanned for anyone "
+                         "besides the tracked subject that often, its time in the encoders column (stage 'scan'); "
+                         "a model without encoder heatmaps gets no such rows")
     rt.add_argument("--flip-side-by-side", default=None, type=_on_off_list,
                     help="comma list of heatmaps.flip_test_side_by_side values (on,off), one row each for the "
                          "encoder heatmaps with the flip test (interleaved; default: "

@@ -403,6 +403,18 @@ def test_measure_two_people(capsys, monkeypatch):
     assert len(re.findall(TORSO_SPREAD, out, re.M)) == 2, out
 
 
+def test_measure_two_people_counts_the_scan_s_answers(capsys, monkeypatch):
+    # docs/two-people.md, "Anyone else near?" (session 64): --scan-every-s adds each row's pairs with a scan's answer
+    # and those saying someone else is there; the oracle's second person a metre beside is told on every pair
+    out = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", "--alone", "0", "--scan-every-s", "0.001",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^2 pairs of two people .*; someone_else on 2 of 2 pairs with a scan's answer \(100%; 2 pairs\)$",
+                     out, re.M), out
+    plain = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", "--alone", "0", capsys=capsys,
+                       monkeypatch=monkeypatch)
+    assert "someone_else" not in plain, plain
+
+
 def test_measure_two_people_by_joint(capsys, monkeypatch):
     # the joint-by-joint figures of docs/two-people.md ("Fewer, right joints", session 59) come from this option: each
     # row's 25 joints, the pairs reporting each and of them those without a subject's pairing (at most as many)

@@ -221,3 +221,15 @@ def test_freshly_rendered_sequences_are_read_back_mapped_not_held(tmp_path):
     assert all(isinstance(s.images, np.memmap) for s in sequences)
     again = simdata.load_sequences(2, 2, cache_dir=tmp_path)
     assert all(np.array_equal(a.images, b.images) for a, b in zip(sequences, again))
+
+
+def test_scan_every_s_takes_a_comma_list_of_seconds_and_labels_its_rows(capsys):
+    # docs/two-people.md, "Anyone else near?" (session 64): the scan's cost is the rows' encoders column ('scan')
+    args = bench.build_parser().parse_args(["runtime", "--scan-every-s", "0,1"])
+    assert args.scan_every_s == [0.0, 1.0]
+    assert bench.build_parser().parse_args(["runtime"]).scan_every_s is None
+    for bad in ("-1", "nan", "x"):
+        with pytest.raises(SystemExit):
+            bench.build_parser().parse_args(["runtime", "--scan-every-s", bad])
+        assert "--scan-every-s" in capsys.readouterr().err
+    assert "scan" in bench.STAGE_GROUPS["encoders"]

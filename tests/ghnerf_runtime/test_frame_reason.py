@@ -75,9 +75,10 @@ def test_the_json_carries_the_reason_and_keeps_the_old_keys(shot):
     r = _estimate(shot, (np.zeros_like(pair[0]), pair[1]), truth=False)
     obj = json.loads(json.dumps(r.to_json(), allow_nan=False))
     # additive: every earlier key is still there (the skeleton prior's check came in session 52, the two-people
-    # flag, single_view and the views' agreement in 53, the lowest foot in 54)
+    # flag, single_view and the views' agreement in 53, the lowest foot in 54, someone_else in 64)
     assert set(obj) == KEYS_BEFORE | {"frame_reason", "prior_disagreement_m", "prior_fallback", "several_people",
-                                      "single_view", "reprojection_px_median", "lowest_foot_m"}
+                                      "single_view", "reprojection_px_median", "lowest_foot_m", "someone_else"}
+    assert obj["someone_else"] is None  # presence.scan_every_s off (the default): never scanned
     assert obj["reprojection_px_median"] is None and obj["lowest_foot_m"] is None  # a frame rejected: nothing measured
     assert obj["single_view"] is None  # (the oracle's heatmaps are zeros here: nobody in the good camera either)
     assert obj["frame_reason"] == {left: FLAT, right: None}  # null: the frame passed

@@ -1267,6 +1267,21 @@ def test_the_rate_and_status_line_do_not_stay_healthy_when_no_pair_is_estimated(
     assert health.status_line().startswith("running: 0.0 pairs/s")
 
 
+def test_the_status_file_counts_the_window_s_pairs_that_said_someone_else_is_near():
+    """``estimator.someone_else`` (``presence.scan_every_s``, docs/two-people.md, "Anyone else near?"): of the last
+    WINDOW estimates, those whose scan said someone besides the subject is there; null where none had an answer."""
+    from firmware_host.daemon.health import WINDOW, Health
+
+    health = Health()
+    assert health.report()["estimator"]["someone_else"] is None
+    for answer in (None, False, True, True):
+        health.estimated(20.0, 1.0, frozenset(), answer)
+    assert health.report()["estimator"]["someone_else"] == 2
+    for _ in range(WINDOW):  # the scan off since (a reload): the window holds no answer
+        health.estimated(20.0, 1.0)
+    assert health.report()["estimator"]["someone_else"] is None
+
+
 def test_the_status_file_counts_the_window_s_pairs_of_each_scene_flag():
     """``estimator.flagged``: of the last WINDOW estimates, those with two people in view, a prior fallback or one
     camera alone (a ``PairResult``'s ``single_view`` is the camera's name); older ones leave the count."""
