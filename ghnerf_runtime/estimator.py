@@ -1017,7 +1017,7 @@ class Estimator:
                     self._smoother.reset()
                 points = self._smoother(float(timestamp_s), p.j3.points, p.j3.valid)  # missing joints stay 0
         self._last_pair_cold = not p.regions.tracked
-        self._scan_for_others(images, p, timestamp_s, timing)
+        self._scan_for_others(images, p, timestamp_s, timing, cold_pass)
         timing["total"] = 1e3 * (time.perf_counter() - t_start)
         names = self.camera_names
         result = PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
@@ -1091,14 +1091,16 @@ class Estimator:
         self._someone_else = None
 
     def _scan_for_others(self, images: Sequence[np.ndarray], p: "_Pass", timestamp_s: float | None,
-                         timing: dict) -> None:
+                         timing: dict, cold_pass: bool) -> None:
         """``presence.scan_every_s``: on a tracked pair whose scan is due, the keypoint graph once on the working
         volume's crops, and whether both views show someone outside the reported subject's box
-        (:mod:`~ghnerf_runtime.others_scan`). Time: ``scan``. The pair's joints are not touched."""
-        if not p.regions.tracked:
-            self._forget_scan()
-            return
+        (:mod:`~ghnerf_runtime.others_scan`). Time: ``scan``. The pair's joints are not touched. A pair that began
+        ``cold_pass`` (refined to a tracked one or not) starts the scan clock instead of scanning."""
         now = time.monotonic() if timestamp_s is None else float(timestamp_s)
+        if cold_pass or not p.regions.tracked:
+            self._forget_scan()
+            self._scan_clock.cold_start(now)
+            return
         box = subject_box(p.j3.points, p.j3.valid)
         if box is None or not self._scan_clock.due(now):
             return

@@ -15,8 +15,10 @@ import numpy as np
 from .tracking import box_corners
 
 #: The subject's box is their reported joints grown by this much every way (m) before it is blanked out: a limb
-#: swinging past the joints of the pair, and the heatmaps' spread around a peak, stay inside it.
-SUBJECT_MARGIN_M = 0.3
+#: swinging past the joints of the pair, and the heatmaps' spread around a peak, stay inside it. 0.2 since session 64's
+#: review U (0.3 before): at 0.3 the box projected into view 0 covered a person a metre beside on 18 of 80 joining
+#: pairs, at 0.2 on 1; 0.1 told a lone person once in 300 pairs, 0.15 and 0.2 never (docs/two-people.md).
+SUBJECT_MARGIN_M = 0.2
 
 
 def subject_box(points: np.ndarray, valid: np.ndarray, margin_m: float = SUBJECT_MARGIN_M) -> np.ndarray | None:
@@ -53,7 +55,8 @@ def someone_else(heat: np.ndarray, cells: list[tuple[int, int, int, int]], thres
 
 
 class ScanClock:
-    """When the next scan is due: every ``every_s`` seconds of capture time while tracking (0: never)."""
+    """When the next scan is due: every ``every_s`` seconds of capture time while tracking (0: never), counted from
+    the track's cold start."""
 
     def __init__(self, every_s: float) -> None:
         self.every_s = float(every_s)
@@ -69,5 +72,10 @@ class ScanClock:
         self._last = float(now_s)
 
     def reset(self) -> None:
-        """The track was lost: the next tracked pair scans at once."""
+        """The track was lost, the time unknown: the next tracked pair scans at once."""
         self._last = None
+
+    def cold_start(self, now_s: float) -> None:
+        """A cold pass read the whole working volume at ``now_s``: the first scan of the track it starts is due
+        ``every_s`` later, not on its first pair, which already ran the cold pass and its refined one (p99)."""
+        self._last = float(now_s)

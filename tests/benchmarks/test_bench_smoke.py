@@ -405,10 +405,11 @@ def test_measure_two_people(capsys, monkeypatch):
 
 def test_measure_two_people_counts_the_scan_s_answers(capsys, monkeypatch):
     # docs/two-people.md, "Anyone else near?" (session 64): --scan-every-s adds each row's pairs with a scan's answer
-    # and those saying someone else is there; the oracle's second person a metre beside is told on every pair
-    out = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", "--alone", "0", "--scan-every-s", "0.001",
+    # and those saying someone else is there; the oracle's second person a metre beside is told on every pair after
+    # the cold start's (which starts the scan clock: no answer)
+    out = run_script("measure_two_people", "--scenes", "1", "--pairs", "3", "--alone", "0", "--scan-every-s", "0.001",
                      capsys=capsys, monkeypatch=monkeypatch)
-    assert re.search(r"^2 pairs of two people .*; someone_else on 2 of 2 pairs with a scan's answer \(100%; 2 pairs\)$",
+    assert re.search(r"^3 pairs of two people .*; someone_else on 2 of 2 pairs with a scan's answer \(100%; 3 pairs\)$",
                      out, re.M), out
     plain = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", "--alone", "0", capsys=capsys,
                        monkeypatch=monkeypatch)

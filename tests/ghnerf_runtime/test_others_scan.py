@@ -4,6 +4,7 @@ estimator on the two-people oracle of ``benchmarks/measure_two_people.py``."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -70,6 +71,14 @@ def test_the_scan_clock_runs_every_so_many_seconds_and_again_after_a_reset_or_a_
     assert not ScanClock(0.0).due(0.0)
 
 
+def test_the_scan_clock_starts_at_a_cold_start_not_on_the_track_s_first_pair():
+    """The cold pair already ran the cold pass and its refined one: the track's first scan is ``every_s`` later."""
+    clock = ScanClock(1.0)
+    clock.cold_start(10.0)
+    assert not clock.due(10.0) and not clock.due(10.9) and clock.due(11.0)
+    assert clock.due(9.0)  # a replay started again
+
+
 @pytest.mark.parametrize("value", [-1.0, float("nan"), "1", True, 4000.0])
 def test_scan_every_s_is_checked(value):
     with pytest.raises(ConfigError, match="scan_every_s") as e:
@@ -109,7 +118,8 @@ def test_a_second_person_beside_the_tracked_subject_is_told_and_the_joints_do_no
     """The tracked crop mostly leaves the second person out (``several_people`` is not a presence detector): the scan
     of the whole working volume tells them, and one person alone is not told. Off by default: ``None``."""
     scanned, plain = _joining(EVERY_PAIR), _joining(EstimatorConfig())
-    assert [r.someone_else for r in scanned] == [False] * 3 + [True] * 4
+    # the first pair is the cold start: it starts the scan clock, its answer is null
+    assert [r.someone_else for r in scanned] == [None] + [False] * 2 + [True] * 4
     assert all(r.tracked for r in scanned)
     assert all(r.someone_else is None and r.to_json()["someone_else"] is None for r in plain)
     assert scanned[-1].to_json()["someone_else"] is True
@@ -117,11 +127,33 @@ def test_a_second_person_beside_the_tracked_subject_is_told_and_the_joints_do_no
         np.testing.assert_array_equal(r.joints_3d, u.joints_3d)
         np.testing.assert_array_equal(r.missing, u.missing)
         assert r.several_people == u.several_people
-    assert all("scan" in r.timing_ms for r in scanned) and not any("scan" in r.timing_ms for r in plain)
+    assert ["scan" in r.timing_ms for r in scanned] == [False] + [True] * 6
+    assert not any("scan" in r.timing_ms for r in plain)
 
 
-def test_the_answer_is_held_between_scans():
-    """Every second: the pairs between two scans carry the last answer, and run no scan."""
-    results = _joining(EstimatorConfig(presence=PresenceConfig(scan_every_s=1.0)), alone=3, pairs=4)
-    assert [r.someone_else for r in results] == [False] * 7  # the one scan, on the first pair, saw one person
-    assert ["scan" in r.timing_ms for r in results] == [True] + [False] * 6
+def test_the_answer_is_held_between_scans_counted_from_the_cold_start():
+    """Every 0.1 s (3 pairs at 30 fps) from the cold start: no scan on the cold pair, then the pairs between two
+    scans carry the last answer, and run no scan."""
+    results = _joining(EstimatorConfig(presence=PresenceConfig(scan_every_s=0.1)), alone=2, pairs=5)
+    assert ["scan" in r.timing_ms for r in results] == [False, False, False, True, False, False, True]
+    assert [r.someone_else for r in results] == [None] * 3 + [True] * 4  # the first scan, 0.1 s on, saw both
+
+
+needs_model = pytest.mark.skipif(not (Path(__file__).resolve().parents[2] / "models" / "model_card.json").is_file(),
+                                 reason="no trained model in models/")
+
+
+@needs_model
+def test_the_shipped_model_tells_the_second_person_joining_and_not_the_first_alone():
+    """Through the shipped model, the second person joining a metre beside (the benchmark's default places): with
+    the 0.3 m margin, the subject's box projected into view 0 covered the second person on 18 of the 8 scenes' 80
+    pairs (one of the first two scenes' 20: the reported left arm up to 0.9 m off the subject's grows it too); at
+    0.2 m every pair is told, and the first person alone still is not
+    (``measure_two_people.py --model-dir models --scenes 8 --pairs 10 --scan-every-s 0.001``)."""
+    from benchmarks.measure_two_people import measure
+
+    models = str(Path(__file__).resolve().parents[2] / "models")
+    joining, _ = measure(2, 10, 3, EVERY_PAIR, model_dir=models)
+    assert joining["scanned"] == 20 and joining["someone_else"] == 20, joining
+    alone, _ = measure(2, 10, 0, EVERY_PAIR, model_dir=models, second=False)
+    assert alone["scanned"] >= 18 and alone["someone_else"] == 0, alone
