@@ -191,7 +191,7 @@ class PairResult:
         someone_else: ``presence.scan_every_s`` set (off by default, since session 64): the latest scan of the whole
             working volume, at most that long ago, showed someone besides the tracked subject in both views
             (:mod:`~ghnerf_runtime.others_scan`); ``None``: no scan since the track began (the option off, a pair
-            without a track). Unlike ``several_people`` it looks outside the subject's crop; it misses a person
+            without a track, the track's cold pair: the first scan is ``scan_every_s`` after it). Unlike ``several_people`` it looks outside the subject's crop; it misses a person
             hidden behind the subject in a view or inside the subject's box.
         several_people: at least ``joints3d.second_person_min_joints`` joint maps showed a second strong peak in
             both views (two people in view; fewer, down to one, while the pairs follow a flagged pair's subject),
