@@ -775,6 +775,21 @@ def _outer_sigterm_handler(signum, frame):
     raise _Escaped
 
 
+def _main_under_outer_sigterm(argv: list[str]) -> tuple[int, object]:
+    """:func:`_main_no_escape` with :func:`_outer_sigterm_handler` standing for SIGTERM's default action (which would
+    end the test run itself): the exit status and the SIGTERM handler the demo left installed."""
+    import signal
+
+    previous = signal.signal(signal.SIGTERM, _outer_sigterm_handler)
+    try:
+        rc = _main_no_escape(argv)
+        return rc, signal.getsignal(signal.SIGTERM)
+    except _Escaped:
+        pytest.fail("SIGTERM was left to the default action: the demo died without a word")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def test_sigterm_before_the_first_pair_exits_143_with_one_line_and_restores_the_handler(tmp_path, capsys,
                                                                                       sim_url, monkeypatch):
     # the handler installed here stands for SIGTERM's default action, which would end the test run itself
@@ -789,14 +804,7 @@ def test_sigterm_before_the_first_pair_exits_143_with_one_line_and_restores_the_
         pytest.fail("SIGTERM was not delivered")
 
     monkeypatch.setattr(drivers, "create_rig_source", source)
-    previous = signal.signal(signal.SIGTERM, _outer_sigterm_handler)
-    try:
-        rc = _main_no_escape(["--truth-only", "--url", sim_url, "--out", str(tmp_path)])
-        restored = signal.getsignal(signal.SIGTERM)
-    except _Escaped:
-        pytest.fail("SIGTERM was left to the default action: the demo died without a word")
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    rc, restored = _main_under_outer_sigterm(["--truth-only", "--url", sim_url, "--out", str(tmp_path)])
     assert rc == 143 and capsys.readouterr().err.splitlines() == [f"{demo.prog_name()}: stopped (SIGTERM)"]
     assert restored is _outer_sigterm_handler
 
@@ -819,13 +827,8 @@ def test_a_sigterm_in_the_recorder_s_close_waits_for_the_take_to_be_complete(tmp
     monkeypatch.setattr(record.RecordingWriter, "close", close)
     take = tmp_path / "take"
     url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
-    previous = signal.signal(signal.SIGTERM, _outer_sigterm_handler)
-    try:
-        rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "0.3", "--out", str(tmp_path / "out")])
-    except _Escaped:
-        pytest.fail("SIGTERM was left to the default action: the demo died without a word")
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
+                                       str(tmp_path / "out")])
     assert rc == 143 and capsys.readouterr().err.splitlines() == [f"{demo.prog_name()}: stopped (SIGTERM)"]
     manifest = json.loads((take / "manifest.json").read_text())
     assert manifest["complete"] is True
@@ -915,13 +918,8 @@ def test_an_error_on_its_way_is_reported_when_a_sigterm_lands_in_the_recorder_s_
     monkeypatch.setattr(demo, "truth_frame", failed)
     take = tmp_path / "take"
     url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
-    previous = signal.signal(signal.SIGTERM, _outer_sigterm_handler)
-    try:
-        rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
-    except _Escaped:
-        pytest.fail("SIGTERM was left to the default action: the demo died without a word")
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "20", "--out",
+                                       str(tmp_path / "out")])
     assert rc == 2 and capsys.readouterr().err.splitlines() == [
         f"{demo.prog_name()}: error: [Errno 5] Input/output error"]
     assert json.loads((take / "manifest.json").read_text())["complete"] is True
@@ -953,13 +951,8 @@ def test_an_error_on_its_way_is_reported_when_a_stop_lands_in_the_sink_s_close(t
     monkeypatch.setattr(base.Sink, "close", close)
     monkeypatch.setattr(demo, "truth_frame", failed)
     url = f"sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}"
-    previous = signal.signal(signal.SIGTERM, _outer_sigterm_handler)
-    try:
-        rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
-    except _Escaped:
-        pytest.fail("SIGTERM was left to the default action: the demo died without a word")
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "20", "--out",
+                                       str(tmp_path / "out")])
     assert rc == 2 and capsys.readouterr().err.splitlines() == [
         f"{demo.prog_name()}: error: [Errno 5] Input/output error"]
     assert len(closed) >= 1

@@ -41,19 +41,24 @@ def _send_for(sink, seconds: float, first_seq: int) -> int:
     return seq
 
 
+def _stats_after_sending(url: str, seconds: float):
+    """The stats of a sink opened on ``url`` that sent frames for ``seconds`` and drained, and the frames sent."""
+    sink = open_sink(url, backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        seq = _send_for(sink, seconds, 0)
+        assert sink.wait_drained(5)
+        return sink.stats(), seq
+    finally:
+        sink.close()
+
+
 @pytest.mark.parametrize("scheme", ["udp", "vmc"])
 def test_a_port_nobody_listens_on_reads_stalled_naming_the_refusal_and_every_frame_goes_out(
         scheme: str, caplog: pytest.LogCaptureFixture) -> None:
     port = _closed_port()
     caplog.set_level(logging.INFO, logger="firmware_host.sinks.udp_sink")
-    sink = open_sink(f"{scheme}://127.0.0.1:{port}?stall_s={STALL_S}", backoff=FAST_BACKOFF)
-    try:
-        assert sink.wait_connected(5)
-        seq = _send_for(sink, STALL_S + 0.3, 0)
-        assert sink.wait_drained(5)
-        stats = sink.stats()
-    finally:
-        sink.close()
+    stats, seq = _stats_after_sending(f"{scheme}://127.0.0.1:{port}?stall_s={STALL_S}", STALL_S + 0.3)
     assert stats.state == "stalled" and stats.stalled_s is not None and stats.stalled_s >= STALL_S
     assert stats.last_error is not None
     assert f"nothing receives at 127.0.0.1:{port}" in stats.last_error and "ICMP port unreachable" in stats.last_error
@@ -236,14 +241,7 @@ def test_a_sink_whose_refused_datagrams_meet_a_full_buffer_reads_stalled_naming_
     # read stalled (its writes failing) naming only "socket send buffer full": nobody told it nothing listens.
     script = [errno.ECONNREFUSED, errno.EAGAIN] * 1000
     monkeypatch.setattr(udp_sink.DatagramLink, "_connected_socket", lambda link, family, addr: _ScriptedSocket(script))
-    sink = open_sink(f"udp://192.0.2.7:9870?stall_s={STALL_S}", backoff=FAST_BACKOFF)
-    try:
-        assert sink.wait_connected(5)
-        seq = _send_for(sink, STALL_S + 0.2, 0)
-        assert sink.wait_drained(5)
-        stats = sink.stats()
-    finally:
-        sink.close()
+    stats, seq = _stats_after_sending(f"udp://192.0.2.7:9870?stall_s={STALL_S}", STALL_S + 0.2)
     assert stats.state == "stalled" and stats.stalled_s is not None and stats.stalled_s >= STALL_S
     assert "nothing receives at 192.0.2.7:9870" in (stats.last_error or ""), stats.last_error
     assert stats.sent == 0 and stats.dropped_error == seq and stats.disconnects == 0

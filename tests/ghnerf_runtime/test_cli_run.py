@@ -158,6 +158,15 @@ def test_an_image_whose_header_is_beyond_opencv_s_size_limits_is_named_as_unread
         cli_run._read_image(str(path))
 
 
+def _refused_without_opencv_s_words(path: str, said: str, capfd, opencv_s: str) -> None:
+    """``_read_image(path)`` refused, its error containing ``said``, and nothing of OpenCV's own log (``opencv_s``,
+    a word of its line) printed beside it."""
+    with pytest.raises(cli_run.UsageError, match=re.escape(said)):
+        cli_run._read_image(path)
+    captured = capfd.readouterr()
+    assert opencv_s not in captured.err + captured.out
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64, np.int32])
 def test_an_image_of_samples_that_do_not_decode_to_8_bits_is_named_by_its_sample_type(tmp_path, capfd, dtype):
     # a float TIFF (NaN and values outside 0-1 in it) was "not a format OpenCV reads", which it is, under libtiff's
@@ -168,10 +177,7 @@ def test_an_image_of_samples_that_do_not_decode_to_8_bits_is_named_by_its_sample
     path = tmp_path / "float.tiff"
     assert cv2.imwrite(str(path), image)
     said = f"{path}: cannot take the image: it has {np.dtype(dtype).name} samples (8x6, 3 channels): only 8- or 16-bit"
-    with pytest.raises(cli_run.UsageError, match=re.escape(said)):
-        cli_run._read_image(str(path))
-    captured = capfd.readouterr()
-    assert "Sorry" not in captured.err + captured.out
+    _refused_without_opencv_s_words(str(path), said, capfd, "Sorry")
 
 
 def test_a_tiff_of_a_compression_opencv_does_not_decode_is_named_not_estimated_as_a_black_image(tmp_path, capfd):
@@ -181,10 +187,7 @@ def test_a_tiff_of_a_compression_opencv_does_not_decode_is_named_not_estimated_a
     path = tmp_path / "left.tiff"
     path.write_bytes(tiff_laid_out(data.tobytes(), changed={259: (3, (34712,))}))
     said = f"{path}: cannot take the image: it is a TIFF of Compression 34712 (JPEG 2000), which OpenCV"
-    with pytest.raises(cli_run.UsageError, match=re.escape(said)):
-        cli_run._read_image(str(path))
-    captured = capfd.readouterr()
-    assert "TIFF" not in captured.err + captured.out
+    _refused_without_opencv_s_words(str(path), said, capfd, "TIFF")
 
 
 def test_a_missing_or_unreadable_image_is_named_without_opencv_s_warning(tmp_path, capfd):
