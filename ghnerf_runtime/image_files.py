@@ -91,10 +91,7 @@ def _tiff_compression_refusal(f: BinaryIO) -> str | None:
     value, where ``ghnerf_runtime.tiff_compression`` says it is not decoded; None for another format, another
     compression, none given (uncompressed), or one of several values or a header that cannot be read (libtiff
     refuses the file: OpenCV returns None)."""
-    layout = tiff_header.LAYOUTS.get(f.read(4))
-    entries = None if layout is None else tiff_header.first_directory(f, layout,
-                                                                      frozenset({tiff_header.COMPRESSION}))
-    compression = (entries or {}).get(tiff_header.COMPRESSION)
+    compression = _tiff_first_entry(f, tiff_header.COMPRESSION)
     if compression is None or len(compression.values) != 1:
         return None
     return tiff_compression.refusal(compression.values[0])
@@ -114,11 +111,16 @@ def tiff_compression_refusal(path: str | os.PathLike) -> str | None:
 def _tiff_header_samples_wider_than(f: BinaryIO, bits: int) -> bool:
     """Whether ``f`` (at its start) is a TIFF whose first directory gives samples of more than ``bits`` bits, read
     from its header; False for another format, or a header that cannot be read."""
-    layout = tiff_header.LAYOUTS.get(f.read(4))
-    entries = None if layout is None else tiff_header.first_directory(f, layout,
-                                                                      frozenset({tiff_header.BITS_PER_SAMPLE}))
-    sample_bits = (entries or {}).get(tiff_header.BITS_PER_SAMPLE)
+    sample_bits = _tiff_first_entry(f, tiff_header.BITS_PER_SAMPLE)
     return sample_bits is not None and max(sample_bits.values, default=0) > bits
+
+
+def _tiff_first_entry(f: BinaryIO, tag: int) -> tiff_header.TiffEntry | None:
+    """The entry of ``tag`` in the first directory of ``f`` (at its start), where it is a TIFF; None for another
+    format, a tag not given, or a header :func:`ghnerf_runtime.tiff_header.first_directory` cannot read."""
+    layout = tiff_header.LAYOUTS.get(f.read(4))
+    entries = None if layout is None else tiff_header.first_directory(f, layout, frozenset({tag}))
+    return (entries or {}).get(tag)
 
 
 def samples_not_8_bit(path: str | os.PathLike) -> str | None:

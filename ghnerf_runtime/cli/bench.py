@@ -39,7 +39,7 @@ from dataclasses import replace
 import numpy as np
 
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
+from ghnerf_runtime.cli.output_path import OutputPathError, existing_ancestor, ready_output
 from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig
 from ghnerf_runtime.errors import ConfigError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_MATTE_STAGE, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
@@ -222,10 +222,7 @@ def _free_bytes(folder) -> int:
     """Free space where the sequences go: the cache folder's disk (its nearest existing parent), else memory."""
     if folder is None:
         return available_memory_bytes()
-    existing = folder
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    return shutil.disk_usage(existing).free
+    return shutil.disk_usage(existing_ancestor(folder)).free
 
 
 def run_runtime_bench(args) -> dict:

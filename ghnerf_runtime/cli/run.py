@@ -380,7 +380,7 @@ def overlay_image(images, result: PairResult) -> np.ndarray:
 class _Sink:
     """A PNG (the last frame wins) or an MP4 that grows frame by frame."""
 
-    def __init__(self, path: str, fps: float = 30.0, flag: str = "output") -> None:
+    def __init__(self, path: str, flag: str = "output") -> None:
         try:  # its folder made, or a bad place named, now: not after the whole run
             self.path = path = str(ready_output(path, flag))
         except OutputPathError as e:
@@ -390,7 +390,7 @@ class _Sink:
         if not self.video and not cv2.haveImageWriter(path):  # said now, not after the whole run
             raise UsageError(f"{path}: cannot write an image of this kind; give .png, .jpg or .mp4")
         self.writer = None
-        self.fps = fps
+        self.fps = 30.0  # the input's rate, set by _run once the inputs are open (before the first frame)
         self.last = None
         self.frames = 0
         self.blank = 0  # frames written black: pairs with no novel view
