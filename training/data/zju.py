@@ -159,7 +159,7 @@ def parse_keypoints2d_json(data, path: Path) -> np.ndarray | None:
         if flat.size != 3 * NUM_JOINTS:  # OpenPose keeps hands and face apart: 405 values are BODY_135's
             raise DatasetError(path, f"pose_keypoints_2d has {flat.size} values, expected {3 * NUM_JOINTS} (BODY_25 "
                                      "x, y, confidence)")
-        return flat[: 3 * NUM_JOINTS].reshape(NUM_JOINTS, 3)
+        return flat.reshape(NUM_JOINTS, 3)
     persons = data.get("annots") if isinstance(data, dict) else data
     if not isinstance(persons, list):
         raise DatasetError(path, "neither OpenPose ('people') nor EasyMocap ('annots' list) keypoints")

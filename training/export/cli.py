@@ -22,7 +22,7 @@ import logging
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
 
@@ -145,11 +145,16 @@ def unfinished_run_words(path: str, checkpoint: object) -> str | None:
             "continues it); exporting its weights as they are")
 
 
+def _graph_files(out: Path, graphs: Iterable[str]) -> list[Path]:
+    """The fp32 and int8 files of ``graphs`` that ``out`` holds."""
+    return [out / f"{graph}{suffix}" for graph in graphs for suffix in (".onnx", ".int8.onnx")
+            if (out / f"{graph}{suffix}").is_file()]
+
+
 def graph_files_left(out: Path, written: tuple[str, ...]) -> list[Path]:
     """The graph files of ``out`` an export of the graphs ``written`` leaves in place: those of other graphs (a
     ``--graphs`` subset, or graphs this model has not), fp32 and int8."""
-    return [out / f"{graph}{suffix}" for graph in GRAPH_NAMES if graph not in written
-            for suffix in (".onnx", ".int8.onnx") if (out / f"{graph}{suffix}").is_file()]
+    return _graph_files(out, (graph for graph in GRAPH_NAMES if graph not in written))
 
 
 def file_weights_id(path: Path) -> str | None:
@@ -172,7 +177,7 @@ def mixed_folder_problem(out: Path, written: tuple[str, ...], weights: str) -> s
     models (None: it would not): ``out`` keeps graph files of other weights beside them, which the runtime refuses
     to load as one model; the folder's working graphs were replaced by then. Files without a weights id (exported
     before there were ids) cannot be compared and are left to the runtime's warning."""
-    others = [(f, wid) for f in graph_files_left(out, written) if (wid := file_weights_id(f)) not in (None, weights)]
+    others = _of_other_weights(graph_files_left(out, written), weights)
     if not others:
         return None
     names = ", ".join(f.name for f, _ in others)
@@ -184,8 +189,12 @@ def mixed_folder_problem(out: Path, written: tuple[str, ...], weights: str) -> s
 def other_weights_replaced(out: Path, written: tuple[str, ...], weights: str) -> list[tuple[Path, str]]:
     """The graph files of ``out`` this export replaces (or drops, their int8) that hold other weights than
     ``weights``, with their ids: another model, which the move replaces with no more than an INFO line."""
-    files = [out / f"{graph}{suffix}" for graph in written for suffix in (".onnx", ".int8.onnx")]
-    return [(f, wid) for f in files if f.is_file() and (wid := file_weights_id(f)) not in (None, weights)]
+    return _of_other_weights(_graph_files(out, written), weights)
+
+
+def _of_other_weights(files: list[Path], weights: str) -> list[tuple[Path, str]]:
+    """Those of ``files`` whose weights id is known and not ``weights``, with their ids."""
+    return [(f, wid) for f in files if (wid := file_weights_id(f)) not in (None, weights)]
 
 
 def main(argv: list[str] | None = None) -> int:
