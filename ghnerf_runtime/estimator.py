@@ -2134,7 +2134,7 @@ def check_model_files(config: EstimatorConfig) -> Path:
 
     config, graphs = _session_plan(config)
     folder = ModelSession.check_files(config.session, graphs)
-    if config.joints3d.skeleton_prior == "on" and not (folder / PRIOR_FILE).is_file():
+    if config.joints3d.skeleton_prior == "on" and not ModelSession.has_skeleton_prior(config.session):
         raise ModelError(f"joints3d.skeleton_prior = 'on' but the folder has no {PRIOR_FILE} (make one with python "
                          "-m training.skeleton_prior, or set joints3d.skeleton_prior = 'auto' or 'off')",
                          path=str(folder))
