@@ -1101,8 +1101,10 @@ class Estimator:
             self._forget_scan()
             self._scan_clock.cold_start(now)
             return
+        if not self._scan_clock.due(now):  # (first: most tracked pairs are not due, and need no box)
+            return
         box = subject_box(p.j3.points, p.j3.valid)
-        if box is None or not self._scan_clock.due(now):
+        if box is None:
             return
         t = time.perf_counter()
         heat, crops = self._volume_heatmaps(images)
@@ -1117,17 +1119,30 @@ class Estimator:
     def _volume_heatmaps(self, images: Sequence[np.ndarray]) -> tuple[np.ndarray | None, list[Camera]]:
         """The encoder heatmaps ``(2, J, H, W)`` of the working volume's upright crops (the cold pass's) and their
         crop cameras; ``None`` where a crop fails the frame check (the answer stays the last scan's)."""
+        batch, crops, maps = self._crop_batch(images, self.tracker.volume_regions.rois)
+        if not all(check_crop(batch[i, 1], self._levels, self.config.frame_check, m.inside)[0]
+                   for i, m in enumerate(maps)):
+            return None, crops
+        return self._crop_heatmaps(batch, crops), crops
+
+    def _crop_batch(self, images: Sequence[np.ndarray], rois: Sequence[Roi]) \
+            -> tuple[np.ndarray, list[Camera], list[CropMaps]]:
+        """The preprocessed crops ``(2, 3, S, S)`` of ``rois``, their crop cameras and crop maps."""
         batch = np.empty((2, 3, self.size, self.size), np.float32)
-        crops = []
-        for i, (img, st, roi) in enumerate(zip(images, self._cams, self.tracker.volume_regions.rois)):
+        crops, maps_used = [], []
+        for i, (img, st, roi) in enumerate(zip(images, self._cams, rois)):
             maps, crop = self._crop(st, roi)
             crops.append(crop)
+            maps_used.append(maps)
             batch[i] = preprocess_image(img, maps, self.contract.normalisation)
-            if not check_crop(batch[i, 1], self._levels, self.config.frame_check, maps.inside)[0]:
-                return None, crops
+        return batch, crops, maps_used
+
+    def _crop_heatmaps(self, batch: np.ndarray, crops: list[Camera]) -> np.ndarray:
+        """The encoder heatmaps ``(2, J, H, W)`` of ``batch``: one run of the keypoint graph (``human`` where the
+        session has it), no flip test."""
         graph = "human" if self.session.has("human") else "encoder"
-        feeds = {"images": batch, "src_P": source_projections(crops, self.size, self.size)}  # (as _turn_scores')
-        return self.session.run(graph, feeds)["encoder_heatmaps"], crops
+        feeds = {"images": batch, "src_P": source_projections(crops, self.size, self.size)}
+        return self.session.run(graph, feeds)["encoder_heatmaps"]
 
     def _refined(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
                  novel_view: NovelViewRequest | None) -> "_Pass":
@@ -1199,17 +1214,9 @@ class Estimator:
         self._use_turns((turn, turn))
         if track is not None:
             self.tracker.follow(track)
-        S = self.size
         t = time.perf_counter()
-        batch = np.empty((2, 3, S, S), np.float32)
-        crops = []
-        for i, (img, st, roi) in enumerate(zip(images, self._cams, self.tracker.regions().rois)):
-            maps, crop = self._crop(st, roi)
-            crops.append(crop)
-            batch[i] = preprocess_image(img, maps, self.contract.normalisation)
-        feeds = {"images": batch, "src_P": source_projections(crops, S, S)}
-        graph = "human" if self.session.has("human") else "encoder"
-        heat = self.session.run(graph, feeds)["encoder_heatmaps"]
+        batch, crops, _ = self._crop_batch(images, self.tracker.regions().rois)
+        heat = self._crop_heatmaps(batch, crops)
         _add_ms(timing, "turn_search", t)
         return _view_score(heat)
 
@@ -2127,7 +2134,7 @@ def check_model_files(config: EstimatorConfig) -> Path:
 
     config, graphs = _session_plan(config)
     folder = ModelSession.check_files(config.session, graphs)
-    if config.joints3d.skeleton_prior == "on" and not (folder / PRIOR_FILE).is_file():
+    if config.joints3d.skeleton_prior == "on" and not ModelSession.has_skeleton_prior(config.session):
         raise ModelError(f"joints3d.skeleton_prior = 'on' but the folder has no {PRIOR_FILE} (make one with python "
                          "-m training.skeleton_prior, or set joints3d.skeleton_prior = 'auto' or 'off')",
                          path=str(folder))
