@@ -25,7 +25,8 @@ from typing import Any, Mapping
 from urllib.parse import urlsplit
 
 from firmware_host.errors import FirmwareHostError
-from firmware_host.sinks.usb_sink import claimed_interface
+from firmware_host.sinks.usb_select import PortPath
+from firmware_host.sinks.usb_sink import claimed_interface, named_board_now
 from ghnerf_runtime.cli.output_path import first_clash
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
 from drivers.errors import RigConfigError
@@ -268,18 +269,57 @@ def _one_sink_per_destination(sinks: typing.Sequence[str]) -> None:
     one destination: two sinks on it would send each frame twice to one UDP port, interleave two writers in one
     file, or leave the second serial sink down for ever behind the first one's lock. So do two serial paths to one
     device and two ``usb://`` URLs that may claim one interface (:func:`_sink_place`, :func:`_one_place`). Two
-    ``file://`` paths to one file are the outputs-apart check's (``realpath``)."""
+    ``file://`` paths to one file are the outputs-apart check's (``realpath``), and one board named by its serial
+    and by its port, when plugged in at load, :func:`_one_board`'s."""
     earlier: list[tuple[int, tuple[str, str, Any]]] = []
+    boards: dict[str, PortPath | None] = {}  # each usb:// URL's board, looked for once per load
     for k, url in enumerate(sinks):
         place = _sink_place(url)
         if place is None:
             continue
         for j, other in earlier:
             if _one_place(place, other):
-                _fail(f"sinks[{k}]", f"sends where sinks[{j}] ({redact_url(sinks[j])!r}) does"
-                                     f"{_how_one(place, other, url, sinks[j])}: one URL per destination, with all its "
-                                     "options", redact_url(url))  # shown as the sinks show it: no password
+                _refuse_one_destination(sinks, k, j, _how_one(place, other, url, sinks[j]))
+            board = _one_board(place, other, url, sinks[j], boards)
+            if board is not None:
+                _refuse_one_destination(sinks, k, j, f" (both claim interface {place[2][1]} of the {place[1]} board "
+                                                     f"at port {board}, named {other[2][0]} and {place[2][0]})")
         earlier.append((k, place))
+
+
+def _refuse_one_destination(sinks: typing.Sequence[str], k: int, j: int, how: str) -> None:
+    """:class:`DaemonConfigError` keyed ``sinks[k]``: it sends where ``sinks[j]`` does; ``how`` says why they are one
+    (:func:`_how_one`)."""
+    _fail(f"sinks[{k}]", f"sends where sinks[{j}] ({redact_url(sinks[j])!r}) does{how}: one URL per destination, "
+                         "with all its options", redact_url(sinks[k]))  # shown as the sinks show it: no password
+
+
+def _one_board(place: tuple[str, str, Any], other: tuple[str, str, Any], url: str, other_url: str,
+               boards: dict[str, PortPath | None]) -> PortPath | None:
+    """The port path of the one board two ``usb://`` sinks name apart, one by ``serial=`` and one by ``port=``, for
+    one interface, when it is plugged in at load (:func:`named_board_now`); None when they name
+    two boards, or either is not found (the spellings stand: a board not plugged in at boot is no error). The
+    second sink waited at connect for ever behind the first one's claim. Asked of the bus only for such a pair,
+    each URL once (``boards``): a config with one usb:// sink reads nothing from the bus."""
+    if not _two_names_of_one_interface(place, other):
+        return None
+    for each in (url, other_url):
+        if each not in boards:
+            boards[each] = named_board_now(each)
+    board = boards[url]
+    return board if board is not None and board == boards[other_url] else None
+
+
+def _two_names_of_one_interface(place: tuple[str, str, Any], other: tuple[str, str, Any]) -> bool:
+    """Whether two ``usb://`` places (:func:`_sink_place`) are one VID:PID and interface, one naming its board by
+    ``serial=`` and the other by ``port=``: the pair only the bus can tell apart (two serials or two ports are two
+    boards, a sink naming none is :func:`_one_place`'s)."""
+    if not (place[0] == other[0] == "usb" and isinstance(place[2], tuple) and isinstance(other[2], tuple)):
+        return False
+    (which, interface), (other_which, other_interface) = place[2], other[2]
+    if place[1] != other[1] or interface != other_interface or None in (which, other_which):
+        return False
+    return which.startswith("serial=") != other_which.startswith("serial=")  # claimed_interface's spelling
 
 
 def _sink_place(url: str) -> tuple[str, str, Any] | None:

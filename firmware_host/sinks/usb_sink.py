@@ -37,7 +37,7 @@ from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWrit
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.url import SinkUrl, int_in, integer, parse_url
-from firmware_host.sinks.usb_select import NoMatch, PortPath, describe, parse_port, parse_serial, select
+from firmware_host.sinks.usb_select import NoMatch, PortPath, describe, parse_port, parse_serial, port_of, select
 
 _log = logging.getLogger(__name__)
 
@@ -79,13 +79,24 @@ def claimed_interface(url: str) -> tuple[str, str | None, int] | None:
     board of them (``serial=``, ``port=``; None: the first libusb lists) and the interface; None for a URL the sink
     refuses (its own check says why). Two URLs that give one tuple claim one interface whatever their spelling
     (``usb://1209:1`` is ``usb://0x1209:0x0001``) or ``ep``: the second claim fails. Two selectors may still name
-    one board (its serial and its port), which only the bus tells, at connect."""
+    one board (its serial and its port), which only the bus tells (:func:`named_board_now`)."""
     try:
         sink = UsbSink.from_url(url)
     except (SinkConfigError, ValueError):
         return None
     which = f"serial={sink.serial!r}" if sink.serial is not None else f"port={sink.port}" if sink.port else None
     return f"{sink.vid:04x}:{sink.pid:04x}", which, sink.interface
+
+
+def named_board_now(url: str, backend: Any = None) -> Optional[PortPath]:
+    """The port path of the board a ``usb://`` URL's ``serial=`` or ``port=`` names, when exactly one plugged-in
+    board of its VID:PID fits it now (:meth:`UsbSink.named_board_now`); None for a URL the sink refuses or that
+    names no board."""
+    try:
+        sink = UsbSink.from_url(url, backend=backend)
+    except (SinkConfigError, ValueError):
+        return None
+    return sink.named_board_now()
 
 
 class UsbSink(ProtocolSink):
@@ -133,12 +144,37 @@ class UsbSink(ProtocolSink):
                 raise SinkUnavailableError(self.url, "libusb backend not available (libusb-package)")
         return self._backend
 
-    def _connect(self) -> None:
+    def _find_all(self) -> list:
+        """The devices of this VID:PID plugged in now: enumeration only, none opened."""
         backend = self._get_backend()
         try:
-            found = list(usb.core.find(find_all=True, idVendor=self.vid, idProduct=self.pid, backend=backend))
+            return list(usb.core.find(find_all=True, idVendor=self.vid, idProduct=self.pid, backend=backend))
         except usb.core.USBError as e:
             raise SinkUnavailableError(self.url, f"enumeration failed: {e}") from e
+
+    def named_board_now(self) -> Optional[PortPath]:
+        """The port path of the board this sink's ``serial=`` or ``port=`` names, when exactly one plugged-in board
+        fits it now; None without a selector, with no libusb, when none or several fit, or when the board's port
+        path is unknown. What the daemon's config check compares: one board named by its serial and by its port
+        is one destination. Enumerates and reads serial strings only: nothing is configured, claimed or reset,
+        and every handle opened to read a serial is closed again."""
+        if self.serial is None and self.port is None:
+            return None  # the first board libusb lists: an order that can change, so no board of its own
+        try:
+            found = self._find_all()
+        except (SinkUnavailableError, ImportError):  # no libusb here: no board can be seen either
+            return None
+        try:
+            dev = select(found, self.serial, self.port, f"{self.vid:04x}:{self.pid:04x}")
+        except NoMatch:
+            return None
+        try:
+            return port_of(dev)
+        finally:
+            usb.util.dispose_resources(dev)
+
+    def _connect(self) -> None:
+        found = self._find_all()
         dev = self._choose(found)
         try:
             self._configure(dev)

@@ -1,6 +1,7 @@
 """The daemon's config: defaults, every error names its key (and the file), round trip."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import re
@@ -144,6 +145,73 @@ def test_usb_sinks_that_claim_different_interfaces_are_kept(sinks):
 ])
 def test_usb_sinks_that_may_claim_one_interface_are_refused(sinks, said):
     assert _error({"sinks": sinks}).startswith(said)
+
+
+@pytest.fixture
+def boards_on_the_bus(monkeypatch):
+    """Plug simulated boards in where the usb:// sink's own backend looks (libusb_package's libusb): the config
+    check enumerates through the sink, as the daemon does at load."""
+    import libusb_package
+
+    from tests.firmware_host.fake_usb_backend import FakeBackend
+
+    def plug(*boards):  # none: no libusb on this machine (get_libusb1_backend's None)
+        monkeypatch.setattr(libusb_package, "get_libusb1_backend", lambda: FakeBackend(*boards) if boards else None)
+        return boards
+    return plug
+
+
+def _board(serial: str = "ABC123", ports: tuple = (1, 4), address: int = 7):
+    from tests.firmware_host.fake_usb_backend import FakeDevice
+
+    return FakeDevice(address=address, serial=serial, port_numbers=ports)
+
+
+@pytest.mark.parametrize("order", [(0, 1), (1, 0)])
+def test_one_usb_board_named_by_its_serial_and_by_its_port_is_one_destination(boards_on_the_bus, order):
+    """One board chosen once by ``serial=`` and once by ``port=``: both loaded, and the second sink waited at connect
+    for ever behind the first one's claim (session 65). Refused at load when the board is plugged in, naming both
+    sinks and the port; nothing on the board configured, claimed, detached or left open."""
+    board, = boards_on_the_bus(_board())
+    named = ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:1?ep=0x02&port=1-1.4"]
+    sinks = [named[k] for k in order]
+    whichs = ["serial='ABC123'", "port=1-1.4"]
+    assert _error({"sinks": sinks}) == (
+        f"sinks[1]: sends where sinks[0] ({sinks[0]!r}) does (both claim interface 0 of the 1209:0001 board at port "
+        f"1-1.4, named {whichs[order[0]]} and {whichs[order[1]]}): one URL per destination, with all its options, "
+        f"got {sinks[1]!r}")
+    assert (board.configuration, board.claimed, board.detaches, board.open_handles) == (0, set(), 0, 0)
+
+
+@pytest.mark.parametrize("boards, sinks", [
+    # no board at load: the spellings stand (a board unplugged at boot is no error), as before session 65
+    ((dataclasses.replace(_board(), present=False),),
+     ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01&port=1-1.4"]),
+    ((), ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01&port=1-1.4"]),  # no libusb at all
+    # the serial's board is in another socket: two boards
+    ((_board(), _board("XYZ789", (2,), 9)), ["usb://1209:0001?ep=0x01&serial=XYZ789", "usb://1209:0001?ep=0x01&port=1-1.4"]),
+    # one board, two interfaces
+    ((_board(),), ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x02&port=1-1.4&interface=1"]),
+    # its serial unreadable (no udev rule): which board it names is not known, the spellings stand
+    ((dataclasses.replace(_board(), access_denied=True),),
+     ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01&port=1-1.4"]),
+])
+def test_usb_sinks_naming_boards_apart_on_the_bus_are_kept(boards_on_the_bus, boards, sinks):
+    boards_on_the_bus(*boards)
+    assert daemon_config_from_dict({"sinks": sinks}).sinks == tuple(sinks)
+
+
+def test_a_config_with_no_serial_and_port_pair_reads_nothing_from_the_bus(monkeypatch):
+    """Only a ``serial=`` and ``port=`` pair of one VID:PID and interface is looked for on the bus: two boards named
+    by two serials load without a libusb call, so no device is opened at load."""
+    import libusb_package
+
+    def no_libusb():
+        raise AssertionError("libusb asked")
+    monkeypatch.setattr(libusb_package, "get_libusb1_backend", no_libusb)
+    sinks = ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01&serial=XYZ789",
+             "usb://1209:0001?ep=0x01&port=1-1.4&interface=1"]
+    assert daemon_config_from_dict({"sinks": sinks}).sinks == tuple(sinks)
 
 
 @pytest.fixture
