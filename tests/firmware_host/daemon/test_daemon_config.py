@@ -189,7 +189,8 @@ def test_one_usb_board_named_by_its_serial_and_by_its_port_is_one_destination(bo
      ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01&port=1-1.4"]),
     ((), ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01&port=1-1.4"]),  # no libusb at all
     # the serial's board is in another socket: two boards
-    ((_board(), _board("XYZ789", (2,), 9)), ["usb://1209:0001?ep=0x01&serial=XYZ789", "usb://1209:0001?ep=0x01&port=1-1.4"]),
+    ((_board(), _board("XYZ789", (2,), 9)),
+     ["usb://1209:0001?ep=0x01&serial=XYZ789", "usb://1209:0001?ep=0x01&port=1-1.4"]),
     # one board, two interfaces
     ((_board(),), ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x02&port=1-1.4&interface=1"]),
     # its serial unreadable (no udev rule): which board it names is not known, the spellings stand
