@@ -8,7 +8,10 @@ late, with what faults?), and a reference receiver in Python beside the C one in
     ghnerf-listen udp://0.0.0.0:9870 --seconds 10           # IPv4 only; stop after 10 s (default: Ctrl-C)
     ghnerf-listen udp://239.255.0.1:9870                    # a multicast group (joined), as a sink sends to it
 
-The summary: JOINTS messages per second, joints present per message, the sender's latency
+The summary: JOINTS messages per second, joints present per BODY_25 message (JOINTS of another joint set, which
+version 1 does not define, counted apart: ``3 JOINTS of joint_set 7 (unknown: left out of joints present)``, as a
+receiver that reads BODY_25 ignores them; they still count in the rate, latency, sequence and scene flags, which
+their headers carry), the sender's latency
 (``send_us - capture_us`` of the JOINTS headers: capture to the wire), sequence gaps (frames the
 sender numbered but dropped or decimated, or the link lost; camera pairs the sender never made a
 frame of take no number), late JOINTS (reordered: a seq up to :data:`LATE_WINDOW` behind the newest; one
@@ -17,9 +20,9 @@ docs/protocol.md, and CALIBRATION SUSPECT when its flag says so) and HELLO (with
 frame is not BODY_25 millimetres in the rig frame), the JOINTS flagged with each scene
 flag (``3 several people``: two people seen, one person's joints sent; not a presence detector, docs/protocol.md), and the decoder's error counts (a noisy
 serial line shows as ``crc``/``cobs`` errors). A seq further back is a restarted sender, not a gap. Ctrl-C,
-SIGTERM or ``--seconds`` ends it with the totals on stderr. Exit status: 0; 2 for a bad URL or a port that
-cannot be opened (named), or one that fails while read (an unplugged serial port: the totals of what arrived
-until then are still printed).
+SIGTERM or ``--seconds`` ends it with the totals on stderr (``, N of joint_set K (unknown)`` added when any came).
+Exit status: 0; 2 for a bad URL or a port that cannot be opened (named), or one that fails while read (an
+unplugged serial port: the totals of what arrived until then are still printed).
 """
 from __future__ import annotations
 
@@ -285,6 +288,16 @@ _VERSION_HINT = (f" (version: whole frames of a protocol version other than {PRO
                  "does not read: a newer sender needs a newer ghnerf-listen)")
 
 
+#: How a summary line and the totals name the JOINTS of a joint set other than BODY_25.
+UNKNOWN_SET_LINE = "{n} JOINTS of joint_set {joint_set} (unknown: left out of joints present)"
+UNKNOWN_SET_TOTAL = "{n} of joint_set {joint_set} (unknown)"
+
+
+def _unknown_set_words(counts: dict[int, int], form: str) -> list[str]:
+    """The JOINTS of each joint set other than BODY_25 (``counts``), in ``form`` (``{n}`` and ``{joint_set}``)."""
+    return [form.format(n=n, joint_set=joint_set) for joint_set, n in sorted(counts.items())]
+
+
 def _fault_name(code: int) -> str:
     try:
         return Fault(code).name
@@ -310,6 +323,10 @@ class Tally:
     late: int = 0
     duplicates: int = 0
     scene: dict[str, int] = field(default_factory=dict)  # JOINTS per scene flag (SCENE_WORDS), this interval
+    # JOINTS per joint set other than BODY_25 (version 1 defines none), this interval and in total: kept out of
+    # ``present``, whose count a receiver reads as BODY_25 joints
+    unknown_sets: dict[int, int] = field(default_factory=dict)
+    total_unknown_sets: dict[int, int] = field(default_factory=dict)
     last_seq: Optional[int] = None
     status: Optional[Status] = None
     hello: Optional[Hello] = None
@@ -334,7 +351,7 @@ class Tally:
         if isinstance(message, Joints):
             self.joints += 1
             self.total_joints += 1
-            self.present.append(int((~message.missing).sum()))
+            self._count_joints(message)
             h = message.header
             self.latency_ms.append((h.send_us - h.capture_us) / 1000.0)
             for flag, word in SCENE_WORDS:
@@ -350,6 +367,15 @@ class Tally:
                 # from the seq its HELLO carries (frames lost before its first JOINTS arrives are gaps). Without
                 # this, one that restarted within LATE_WINDOW of its old seq had its first frames read as late.
                 self._begin_at_hello(message.header.send_us)
+
+    def _count_joints(self, message: Joints) -> None:
+        """The joints present of a BODY_25 JOINTS; one of another joint set is only counted, by its set: a receiver
+        that reads BODY_25 ignores it (docs/protocol.md, HELLO), so its joints are none of the ones it expects."""
+        if message.joint_set == JointSet.BODY_25:
+            self.present.append(int((~message.missing).sum()))
+            return
+        for counts in (self.unknown_sets, self.total_unknown_sets):
+            counts[message.joint_set] = counts.get(message.joint_set, 0) + 1
 
     def _written_in_this_numbering(self, send_us: int) -> bool:
         """Whether a HELLO of seq NO_FRAME_SEQ was written after the one that began this numbering and shortly
@@ -415,6 +441,8 @@ class Tally:
         parts = [f"{self.joints / max(seconds, 1e-9):.1f} JOINTS/s"]
         if self.present:
             parts.append(f"{statistics.mean(self.present):.1f} joints present")
+        parts.extend(_unknown_set_words(self.unknown_sets, UNKNOWN_SET_LINE))
+        if self.latency_ms:
             parts.append(f"latency {statistics.median(self.latency_ms):.1f} ms")
         parts.append(f"{self.gaps} seq gaps")
         if self.late:
@@ -438,7 +466,7 @@ class Tally:
         if bad:
             parts.append(f"decode errors {bad}{_VERSION_HINT if 'version' in bad else ''}")
         self.joints, self.present, self.latency_ms, self.gaps, self.late, self.duplicates = 0, [], [], 0, 0, 0
-        self.scene = {}
+        self.scene, self.unknown_sets = {}, {}
         self._interval += 1  # a frame skipped before now that comes late no longer changes this line's gaps
         return "; ".join(parts)
 
@@ -486,6 +514,8 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"lost), and when any came 'N late (reordered)' (a seq up to {LATE_WINDOW} behind the newest: one a "
               "gap stepped over leaves the lost frames) and 'N duplicate'; JOINTS flagged 'N several people', "
               "'N prior fallback', 'N single view', 'N calibration suspect' (docs/protocol.md, section 3); "
+              "'N JOINTS of joint_set K (unknown: left out of joints present)' for JOINTS of a joint set other than "
+              "BODY_25 (the totals add 'N of joint_set K (unknown)'); "
               "the sender's last STATUS fault (', CALIBRATION SUSPECT' when flagged) and HELLO ('(not BODY_25 in "
               "mm in the rig frame: ...)' when it announces other joints, units or frame); decode errors ('version': "
               "a sender of a newer protocol). Ctrl-C, SIGTERM or --seconds ends it with the totals. Counters: docs/daemon.md; "
@@ -520,8 +550,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         status = 2
     finally:
         port.close()
+    unknown = "".join(f", {words}" for words in _unknown_set_words(tally.total_unknown_sets, UNKNOWN_SET_TOTAL))
     print(f"{tally.total_joints} JOINTS messages, {tally.total_gaps} sequence gaps (lost), {tally.total_late} late "
-          f"(reordered), {tally.total_duplicates} duplicate", file=sys.stderr)
+          f"(reordered), {tally.total_duplicates} duplicate{unknown}", file=sys.stderr)
     return status
 
 

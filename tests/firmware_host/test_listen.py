@@ -612,6 +612,68 @@ def test_the_line_says_when_the_hello_announces_joints_other_than_body25_mm_in_t
     assert "(not BODY_25 in mm in the rig frame: units 1)" in units_only.line(1.0, {})
 
 
+def _joints_of_set(seq: int, joint_set: int, count: int, missing: int = 0):
+    """A JOINTS of ``joint_set`` with ``count`` joints, the first ``missing`` of them missing."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    flags = np.arange(count) < missing
+    return replace(_joints(seq), joint_set=joint_set, xyz_mm=np.zeros((count, 3), np.int16),
+                   conf=np.where(flags, 0, 200).astype(np.uint8), missing=flags)
+
+
+def test_joints_of_an_unknown_joint_set_are_counted_apart_from_the_joints_present():
+    """Version 1 defines BODY_25 alone, and a receiver that reads it ignores JOINTS of another set (docs/protocol.md,
+    HELLO). The line averaged their joints into 'joints present' (25 and 10 read '17.5 joints present', a BODY_25
+    person short of joints) and said nothing else of them: only the HELLO's part warned, and only once a HELLO came.
+    They are counted by their set now, each JOINTS by its own joint_set; the rate, latency and sequence, which are
+    their headers', still count them."""
+    tally = listen.Tally()
+    for seq, message in enumerate((_joints_of_set(0, 0, 25, missing=1), _joints_of_set(1, 7, 10),
+                                   _joints_of_set(2, 7, 10), _joints_of_set(3, 9, 64))):
+        assert message.header.seq == seq
+        tally.add(message)
+    line = tally.line(1.0, {})
+    assert line.startswith("4.0 JOINTS/s; 24.0 joints present; 2 JOINTS of joint_set 7 (unknown: left out of joints "
+                           "present); 1 JOINTS of joint_set 9 (unknown: left out of joints present); latency "), line
+    assert "0 seq gaps" in line
+    alone = listen.Tally()  # none of BODY_25: no 'joints present' at all, the latency still said
+    alone.add(_joints_of_set(0, 7, 10))
+    line = alone.line(1.0, {})
+    assert "joints present;" not in line and "1 JOINTS of joint_set 7 (unknown" in line and "latency 1.0 ms" in line
+    assert "joint_set" not in alone.line(1.0, {})  # counted per interval
+    assert alone.total_unknown_sets == {7: 1} and tally.total_unknown_sets == {7: 2, 9: 1}
+
+
+def test_the_totals_count_joints_of_an_unknown_joint_set(monkeypatch, capsys):
+    from firmware_host.protocol.encoder import encode
+
+    class Port:
+        reads = [b"".join(encode(m) for m in (_joints_of_set(0, 0, 25), _joints_of_set(1, 7, 10)))]
+
+        def read(self, timeout_s: float) -> bytes:
+            if self.reads:
+                return self.reads.pop()
+            raise KeyboardInterrupt
+
+        def close(self) -> None:
+            pass
+
+    monkeypatch.setattr(listen, "open_port", lambda url: Port())
+    assert listen.main(["udp://:9870", "--json"]) == 0
+    assert capsys.readouterr().err.splitlines() == [
+        "2 JOINTS messages, 0 sequence gaps (lost), 0 late (reordered), 0 duplicate, 1 of joint_set 7 (unknown)"]
+
+
+def test_the_help_names_the_unknown_joint_set_counts(capsys):
+    with pytest.raises(SystemExit):
+        listen.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "'N JOINTS of joint_set K (unknown: left out of joints present)'" in text, text
+    assert "'N of joint_set K (unknown)'" in text, text
+
+
 def test_the_json_help_names_the_joints_units_and_frame(capsys):
     with pytest.raises(SystemExit):
         listen.main(["--help"])
