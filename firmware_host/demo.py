@@ -69,7 +69,7 @@ from drivers.url_paths import url_files
 from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, symptoms
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
 from firmware_host.errors import FirmwareHostError
-from firmware_host.joint_frames import FrameNumbers, estimate_frame, truth_frame
+from firmware_host.joint_frames import FrameNumbers, announced_scene_flags, estimate_frame, truth_frame
 from firmware_host.protocol.constants import MAX_RIG_ID_LEN
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks import Sink, open_sink
@@ -463,6 +463,8 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         # The 2D joints are keyed by camera index (rig.pair order): announce those names in HELLO, with the
         # rig's id as the daemon does (unless the URL names one, or the id does not fit HELLO: then none).
         sink_kw = {"cameras": tuple(camera.name for camera in source.rig.pair)}
+        if cfg is not None:  # HELLO says whether SOMEONE_ELSE means anything: the estimator's scan for others
+            sink_kw["scene_flags"] = announced_scene_flags(cfg)
         rig_id = source.rig.rig_id
         if ("rig_id" not in parse_url(sink_url).query and 0 < len(rig_id) <= MAX_RIG_ID_LEN and rig_id.isascii()
                 and rig_id.isprintable()):

@@ -10,11 +10,12 @@ from __future__ import annotations
 import numpy as np
 
 import drivers
-from firmware_host.protocol.constants import U32_MAX, Flags
+from firmware_host.protocol.constants import U32_MAX, Flags, hello_scene_flags
 from firmware_host.protocol.messages import JointFrame
+from ghnerf_runtime.config import EstimatorConfig
 from ghnerf_runtime.estimator import PairResult
 
-__all__ = ["FrameNumbers", "estimate_frame", "scene_flags", "truth_frame"]
+__all__ = ["FrameNumbers", "announced_scene_flags", "estimate_frame", "scene_flags", "truth_frame"]
 
 
 class FrameNumbers:
@@ -67,7 +68,15 @@ def scene_flags(result: PairResult, *, calibration_suspect: bool = False) -> int
         flags |= Flags.SINGLE_VIEW
     if calibration_suspect:
         flags |= Flags.CALIBRATION_SUSPECT
+    if result.someone_else:  # the latest scan's answer, held until the next (None: no scan this track)
+        flags |= Flags.SOMEONE_ELSE
     return int(flags)
+
+
+def announced_scene_flags(config: EstimatorConfig) -> int:
+    """The scene flags a sender whose estimator runs with ``config`` announces in its HELLO: SOMEONE_ELSE only
+    where ``presence.scan_every_s`` scans for others (docs/protocol.md, "Scene flags")."""
+    return hello_scene_flags(config.presence.scan_every_s > 0)
 
 
 def estimate_frame(pair: drivers.FramePair, result: PairResult, *, sequence: int,

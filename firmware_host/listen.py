@@ -18,7 +18,9 @@ frame of take no number), late JOINTS (reordered: a seq up to :data:`LATE_WINDOW
 that fills a gap takes it back out of the gaps) and duplicates, the latest STATUS (its fault code,
 docs/protocol.md, and CALIBRATION SUSPECT when its flag says so) and HELLO (with what of its joint set, units and
 frame is not BODY_25 millimetres in the rig frame), the JOINTS flagged with each scene
-flag (``3 several people``: two people seen, one person's joints sent; not a presence detector, docs/protocol.md), and the decoder's error counts (a noisy
+flag (``3 several people``: two people seen, one person's joints sent; not a presence detector, docs/protocol.md;
+``2 someone else``: the sender's scan for others, whose HELLO then reads ``(scans for someone else)``), and the
+decoder's error counts (a noisy
 serial line shows as ``crc``/``cobs`` errors). A seq further back is a restarted sender, not a gap. Ctrl-C,
 SIGTERM or ``--seconds`` ends it with the totals on stderr (``, N of joint_set K (unknown)`` added when any came).
 Exit status: 0; 2 for a bad URL or a port that cannot be opened (named), or one that fails while read (an
@@ -268,7 +270,14 @@ STALE_HELLO_US = 1_000_000
 
 #: The scene flags (docs/protocol.md section 3) as the summary counts them: JOINTS of that kind per interval.
 SCENE_WORDS = ((Flags.SEVERAL_PEOPLE, "several people"), (Flags.PRIOR_FALLBACK, "prior fallback"),
-               (Flags.SINGLE_VIEW, "single view"), (Flags.CALIBRATION_SUSPECT, "calibration suspect"))
+               (Flags.SINGLE_VIEW, "single view"), (Flags.CALIBRATION_SUSPECT, "calibration suspect"),
+               (Flags.SOMEONE_ELSE, "someone else"))
+
+
+def _scan_note(hello: Hello) -> str:
+    """Whether the HELLO's sender scans for someone besides its subject (SOMEONE_ELSE announced): only then does a
+    frame without the flag say "nobody else seen" rather than "nobody looked"."""
+    return " (scans for someone else)" if hello.header.flags & Flags.SOMEONE_ELSE else ""
 
 
 def _unexpected_layout(hello: Hello) -> str:
@@ -460,7 +469,8 @@ class Tally:
             # an older sender never sets the scene flags: their absence then says nothing of the scene
             older = "" if self.hello.header.flags & SCENE_FLAGS == SCENE_FLAGS else " (sends no scene flags)"
             layout = _unexpected_layout(self.hello)
-            parts.append(f"rig {self.hello.rig_id!r} cameras {list(self.hello.cameras)}{older}{layout}{age}")
+            parts.append(f"rig {self.hello.rig_id!r} cameras {list(self.hello.cameras)}{older}"
+                         f"{_scan_note(self.hello)}{layout}{age}")
         bad = {k: v - self.errors_before.get(k, 0) for k, v in errors.items() if v - self.errors_before.get(k, 0)}
         self.errors_before = dict(errors)
         if bad:

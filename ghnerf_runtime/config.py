@@ -601,7 +601,8 @@ class PresenceConfig:
             heatmap source (``PRESENCE_MIN_CONFIDENCE``).
         scan_every_s: while tracking, every this many seconds of capture time, run the keypoint graph once on
             the whole working volume and ask whether anyone besides the subject is there
-            (:mod:`ghnerf_runtime.others_scan`, ``PairResult.someone_else``); 0 (the default): never.
+            (:mod:`ghnerf_runtime.others_scan`, ``PairResult.someone_else``; on the joint stream the SOMEONE_ELSE
+            flag, announced in HELLO only while this is set); 0 (the default): never.
     """
 
     enabled: bool = True

@@ -69,14 +69,18 @@ extern "C" {
  * GHJ_FLAG_SEVERAL_PEOPLE says the maps showed two people and the joints are one person's: not that nobody
  * else is near (a second person outside the tracked subject's crop is mostly not flagged). STATUS carries
  * GHJ_FLAG_CALIBRATION_SUSPECT while it lasts; HELLO carries GHJ_SCENE_FLAGS when the sender sets them (an
- * older sender's HELLO has 0: it cannot say). Other bits are reserved: ignore them. */
+ * older sender's HELLO has 0: it cannot say), plus GHJ_FLAG_SOMEONE_ELSE (GHJ_ALL_SCENE_FLAGS) only when the
+ * sender scans for someone besides its subject: without it a frame's clear bit 6 says nobody looked. Bit 7 is
+ * reserved: ignore it. */
 #define GHJ_FLAG_DECIMATED 0x01u           /* sender skips frames on purpose to fit the link */
 #define GHJ_FLAG_DROPPED 0x02u             /* sender dropped frames since the previous JOINTS */
 #define GHJ_FLAG_SEVERAL_PEOPLE 0x04u      /* two people seen: one person's joints only */
 #define GHJ_FLAG_PRIOR_FALLBACK 0x08u      /* the skeleton prior disagreed: triangulated joints sent */
 #define GHJ_FLAG_SINGLE_VIEW 0x10u         /* one camera only: every 3D joint missing, that camera's 2D */
 #define GHJ_FLAG_CALIBRATION_SUSPECT 0x20u /* views disagree or feet left the floor: recalibrate */
-#define GHJ_SCENE_FLAGS 0x3Cu              /* the four above */
+#define GHJ_FLAG_SOMEONE_ELSE 0x40u        /* last scan saw someone besides the subject (if HELLO has it) */
+#define GHJ_SCENE_FLAGS 0x3Cu              /* SEVERAL_PEOPLE to CALIBRATION_SUSPECT: every HELLO that has any */
+#define GHJ_ALL_SCENE_FLAGS 0x7Cu          /* those and SOMEONE_ELSE: the HELLO of a sender that scans */
 
 /* STATUS fault codes. */
 #define GHJ_FAULT_OK 0u

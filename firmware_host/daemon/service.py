@@ -80,7 +80,7 @@ from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
 from firmware_host.daemon.sandbox import rig_url_hint, service_hint
 from firmware_host.daemon.status_claim import StatusFileClaim, StatusFileTaken, names_one_file
 from firmware_host.errors import FirmwareHostError
-from firmware_host.joint_frames import FrameNumbers, estimate_frame
+from firmware_host.joint_frames import FrameNumbers, announced_scene_flags, estimate_frame
 from firmware_host.protocol.constants import Fault, Flags
 from firmware_host.service_unit import read_only_hint
 from firmware_host.sinks.base import Sink
@@ -657,16 +657,18 @@ class Daemon:
             for url in self.config.sinks:
                 if url not in self._sinks:
                     try:
-                        self._start_sink(url, self._build_sink(url, key))
+                        self._start_sink(url, self._build_sink(url, key, self.config))
                     except FirmwareHostError as e:
                         self._close_sinks()
                         raise DaemonStartError(f"sinks: {e}") from None
             self._sinks_for = key
 
-    def _build_sink(self, url: str, key: tuple[str, tuple[str, ...]]) -> Sink:
-        """The sink of ``url`` for a rig's (id, camera names), built but not started (it holds nothing yet)."""
+    def _build_sink(self, url: str, key: tuple[str, tuple[str, ...]], config: DaemonConfig) -> Sink:
+        """The sink of ``url`` for a rig's (id, camera names), built but not started (it holds nothing yet), its
+        HELLO announcing the scene flags the estimator of ``config`` sets."""
         kw = dict(self._sink_kwargs)
         kw["cameras"] = key[1]  # 2D joints are keyed by index in rig.pair order
+        kw["scene_flags"] = announced_scene_flags(config.estimator)
         if "rig_id" not in parse_url(url).query:
             kw["rig_id"] = key[0]
         sink = sink_class(url).from_url(url, **kw)  # type: ignore[attr-defined]
@@ -793,7 +795,7 @@ class Daemon:
             for url in new.sinks:
                 if url not in self._sinks:
                     try:
-                        added[url] = self._build_sink(url, self._sinks_for)
+                        added[url] = self._build_sink(url, self._sinks_for, new)
                     except FirmwareHostError as e:  # the real rig id or camera names do not fit this sink
                         raise DaemonConfigError(str(e), key=f"sinks[{new.sinks.index(url)}]") from None
         # Accepted: swap, touching only what changed (nothing below raises).
@@ -811,6 +813,8 @@ class Daemon:
         with self._fault_lock:
             for url in [u for u in self._sinks if u not in new.sinks]:
                 self._close_sink(url)  # at once, rig or not: a removed serial sink frees its port now
+            if "estimator" in changed:  # the scan for others turned on or off: SOMEONE_ELSE's meaning with it
+                self._announce_scene_flags(announced_scene_flags(new.estimator))
             for url, sink in added.items():
                 self._start_sink(url, sink)
         if "health" in changed:
@@ -861,6 +865,13 @@ class Daemon:
                 and self._fault != int(Fault.ESTIMATOR_STALLED):
             self.health.estimator_stalled = True
             self._set_fault(Fault.ESTIMATOR_STALLED)
+
+    def _announce_scene_flags(self, flags: int) -> None:
+        """Announce ``flags`` in the HELLO of every open sink that sends one (the binary-protocol sinks)."""
+        for sink in self._sinks.values():
+            announce = getattr(sink, "announce_scene_flags", None)
+            if announce is not None:
+                announce(flags)
 
     def _apply_fault(self, sink: Sink) -> None:
         set_fault = getattr(sink, "set_fault", None)  # the binary-protocol sinks carry STATUS

@@ -42,7 +42,7 @@ class Flags(enum.IntFlag):
     # The sender dropped at least one frame (queue overflow or failed write)
     # since the previous JOINTS packet on this link.
     DROPPED = 0x02
-    # Bits 2-5 say what the estimate is (set on the frame's JOINTS and JOINTS_2D; docs/protocol.md section 3).
+    # Bits 2-6 say what the estimate is (set on the frame's JOINTS and JOINTS_2D; docs/protocol.md section 3).
     # Header bits, not appended payload bytes: they cost no link budget, and decoders of before session 53
     # already pass unknown bits through ("ignore when reading").
     # Two people in view: the joints are one person's only, the tracked subject's or, without a track, the one
@@ -56,12 +56,26 @@ class Flags(enum.IntFlag):
     # moved since calibration): 3D may be off. Also set in the STATUS header while it lasts, so it reaches a
     # receiver while no frame flows.
     CALIBRATION_SUSPECT = 0x20
+    # The estimator's latest scan of the whole working volume (presence.scan_every_s, off by default) showed someone
+    # besides the tracked subject in both views; held from one scan to the next. Only from a sender whose HELLO
+    # announces it (ALL_SCENE_FLAGS): without the scan a frame lacks it whoever is near.
+    SOMEONE_ELSE = 0x40
 
 
-#: The flags that describe a frame's estimate (``JointFrame.scene_flags``), as opposed to the sender's link. A
-#: sender that sets them says so in its HELLO's header ``flags`` (this value); an older sender's HELLO has 0, so a
-#: receiver can tell "no second person" from "a sender too old to say".
+#: The scene flags every sender since session 53 sets and announces in its HELLO's header ``flags`` (this value);
+#: an older sender's HELLO has 0, so a receiver can tell "no second person" from "a sender too old to say".
+#: Kept at 0x3C when SOMEONE_ELSE came (session 65): a receiver that checks a HELLO for this whole mask still
+#: finds it in a sender that does not scan.
 SCENE_FLAGS = int(Flags.SEVERAL_PEOPLE | Flags.PRIOR_FALLBACK | Flags.SINGLE_VIEW | Flags.CALIBRATION_SUSPECT)
+#: Every flag that describes a frame's estimate (``JointFrame.scene_flags``), as opposed to the sender's link: the
+#: HELLO mask of a sender that runs the estimator's scan for others (:func:`hello_scene_flags`).
+ALL_SCENE_FLAGS = SCENE_FLAGS | int(Flags.SOMEONE_ELSE)
+
+
+def hello_scene_flags(scans_for_others: bool) -> int:
+    """The header ``flags`` of a HELLO: the scene flags its sender sets, SOMEONE_ELSE only where the estimator scans
+    for others, so a receiver can tell "nobody else seen" from "nobody looked"."""
+    return ALL_SCENE_FLAGS if scans_for_others else SCENE_FLAGS
 
 
 class JointSet(enum.IntEnum):

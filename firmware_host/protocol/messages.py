@@ -13,7 +13,7 @@ from typing import Any, Union
 
 import numpy as np
 
-from firmware_host.protocol.constants import MAX_JOINTS, PROTOCOL_VERSION, SCENE_FLAGS, U64_MAX, Flags, MsgType
+from firmware_host.protocol.constants import ALL_SCENE_FLAGS, MAX_JOINTS, PROTOCOL_VERSION, U64_MAX, Flags, MsgType
 from ghnerf_runtime.plain_values import is_true_false, whole_number_or_none
 
 
@@ -63,8 +63,9 @@ class JointFrame:
     """Optional per-camera (J, 3) float: u, v in pixels and confidence 0..1, keyed by camera name or by index
     (a Python or numpy integer) into the cameras the sink announces."""
     scene_flags: int = 0
-    """What the estimate is (``Flags`` SEVERAL_PEOPLE, PRIOR_FALLBACK, SINGLE_VIEW, CALIBRATION_SUSPECT), sent in
-    the header flags of the frame's JOINTS and JOINTS_2D; the link's own DECIMATED / DROPPED are the sink's."""
+    """What the estimate is (``Flags`` SEVERAL_PEOPLE, PRIOR_FALLBACK, SINGLE_VIEW, CALIBRATION_SUSPECT,
+    SOMEONE_ELSE), sent in the header flags of the frame's JOINTS and JOINTS_2D; the link's own DECIMATED / DROPPED
+    are the sink's."""
 
     def __post_init__(self) -> None:
         # Checked here, at send(): a float or negative time failed only in the sink's worker, and was then
@@ -72,10 +73,10 @@ class JointFrame:
         for name, lo, hi in (("sequence", None, None), ("capture_time_us", 0, U64_MAX), ("joint_set", 0, 0xFF),
                              ("scene_flags", 0, 0xFF)):
             object.__setattr__(self, name, _whole(name, getattr(self, name), lo, hi))
-        if int(self.scene_flags) & ~SCENE_FLAGS:
+        if int(self.scene_flags) & ~ALL_SCENE_FLAGS:
             # A link bit (DECIMATED, DROPPED) or a reserved one set here would tell receivers something untrue.
             raise ValueError(f"JointFrame.scene_flags 0x{int(self.scene_flags):02x} sets bits other than the "
-                             f"scene flags 0x{SCENE_FLAGS:02x} ({Flags(SCENE_FLAGS)!r})")
+                             f"scene flags 0x{ALL_SCENE_FLAGS:02x} ({Flags(ALL_SCENE_FLAGS)!r})")
         _joint_values("joints_3d", self.joints_3d, 4)
         for cam, uv in self.joints_2d.items():
             if is_true_false(cam):  # True indexed camera 1

@@ -27,6 +27,7 @@ import numpy as np
 from cobs import cobs
 
 from firmware_host.protocol.constants import (
+    ALL_SCENE_FLAGS,
     ERROR_CODES,
     HEADER,
     MAX_FRAME_LEN,
@@ -214,7 +215,9 @@ def _v_scene_flags() -> _Stream:
         "Scene flags: a HELLO announcing them (flags 0x3C), JOINTS 40-43 with SEVERAL_PEOPLE, PRIOR_FALLBACK, "
         "CALIBRATION_SUSPECT, and all four with DROPPED; a SINGLE_VIEW frame 44 (every 3D joint missing, "
         "camera 0's 2D joints, camera 1's all missing, all three packets flagged); a STATUS with "
-        "CALIBRATION_SUSPECT; JOINTS 45 with the reserved bits 6 and 7, which decoders pass through."
+        "CALIBRATION_SUSPECT; JOINTS 45 with the reserved bit 7, which decoders pass through; a HELLO of a "
+        "sender that scans for others (flags 0x7C), JOINTS 46 and its JOINTS_2D with SOMEONE_ELSE, JOINTS 47 "
+        "with every scene flag and DROPPED."
     )
     s.message(_hello(39, flags=SCENE_FLAGS))
     s.message(_joints(40, flags=Flags.SEVERAL_PEOPLE))
@@ -225,7 +228,11 @@ def _v_scene_flags() -> _Stream:
     s.message(_joints2d(44, 0, flags=Flags.SINGLE_VIEW))
     s.message(_joints2d(44, 1, missing=range(25), flags=Flags.SINGLE_VIEW))
     s.message(_status(44, flags=Flags.CALIBRATION_SUSPECT))
-    return s.message(_joints(45, flags=0xC0))
+    s.message(_joints(45, flags=0x80))
+    s.message(_hello(45, flags=ALL_SCENE_FLAGS))
+    s.message(_joints(46, flags=Flags.SOMEONE_ELSE))
+    s.message(_joints2d(46, 0, flags=Flags.SOMEONE_ELSE))
+    return s.message(_joints(47, flags=ALL_SCENE_FLAGS | Flags.DROPPED))
 
 
 def _v_unknown_type() -> _Stream:

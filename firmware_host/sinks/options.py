@@ -6,9 +6,11 @@ from dataclasses import dataclass, field
 from typing import Callable, Optional, Sequence
 
 from firmware_host.errors import SinkConfigError
+from firmware_host.protocol.constants import ALL_SCENE_FLAGS, SCENE_FLAGS
 from firmware_host.sinks.backoff import BackoffPolicy
 from firmware_host.sinks.rate import MIN_MAX_FPS
 from firmware_host.sinks.url import SinkUrl, boolean, positive_float, positive_int
+from ghnerf_runtime.plain_values import whole_number_or_none
 
 
 def monotonic_us() -> int:
@@ -52,6 +54,21 @@ def camera_names_problem(names: Sequence[object]) -> str:
     return ""
 
 
+def scene_flags_mask(url: str, value: object) -> int:
+    """The scene flags a HELLO announces (the ``scene_flags`` keyword), as a Python int: a whole number (NumPy's
+    too) of scene-flag bits only, since a link bit or a reserved one announced would tell receivers something untrue.
+
+    :raises SinkConfigError: keyed ``scene_flags``."""
+    flags = whole_number_or_none(value)
+    scene = f"the scene flags 0x{ALL_SCENE_FLAGS:02x}"
+    if flags is None:
+        raise SinkConfigError(url, "scene_flags", value, f"must be a whole number of {scene}, not "
+                                                         f"{type(value).__name__}")
+    if flags < 0 or flags & ~ALL_SCENE_FLAGS:
+        raise SinkConfigError(url, "scene_flags", value, f"sets bits other than {scene}")
+    return flags
+
+
 def camera_names(raw: str) -> list[str]:
     """The ``cameras`` option as text: comma-separated names, in index order (:func:`camera_names_problem`).
     A name written with spaces around it (``left, right``) is refused too: ' right' is no camera's name, and its
@@ -93,6 +110,9 @@ class SinkOptions:
     """Reconnect schedule after a failed connect or an unplug."""
     clock_us: Callable[[], int] = monotonic_us
     """Clock for send timestamps; must be the clock of ``JointFrame.capture_time_us``."""
+    scene_flags: int = SCENE_FLAGS
+    """The scene flags the producer sets on its frames, announced in HELLO's header flags (a keyword only: the
+    producer's to say, not the link's): ``hello_scene_flags(True)`` where its estimator scans for others."""
 
     @classmethod
     def take(cls, u: SinkUrl, kw: dict) -> "SinkOptions":
@@ -109,6 +129,7 @@ class SinkOptions:
             joint_count=u.take("joint_count", positive_int, cls.joint_count, kw),
             backoff=kw.pop("backoff", BackoffPolicy()),
             clock_us=kw.pop("clock_us", monotonic_us),
+            scene_flags=scene_flags_mask(u.url, kw.pop("scene_flags", SCENE_FLAGS)),
         )
         problem = camera_names_problem(opts.cameras)  # a keyword's tuple of names: the query's are checked above
         if problem:

@@ -17,7 +17,6 @@ from firmware_host.protocol.constants import (
     PROTOCOL_VERSION,
     NO_FRAME_SEQ,
     U32_MAX,
-    SCENE_FLAGS,
     CoordFrame,
     Fault,
     Flags,
@@ -29,7 +28,7 @@ from firmware_host.protocol.encoder import encode, joints2d_packet_len, joints_p
 from firmware_host.protocol.from_frame import is_announced, joints2d_messages, joints_message, wire_seq
 from firmware_host.protocol.messages import Hello, JointFrame, Message, Status, make_header
 from firmware_host.sinks.base import Sink, SinkStats
-from firmware_host.sinks.options import SinkOptions
+from firmware_host.sinks.options import SinkOptions, scene_flags_mask
 
 _log = logging.getLogger(__name__)
 
@@ -56,6 +55,7 @@ class ProtocolSink(Sink):
         self._fault = int(Fault.OK)
         self._fault_since_status = int(Fault.OK)  # the last non-OK fault set since the previous STATUS
         self._calibration_suspect = False  # STATUS header flag CALIBRATION_SUSPECT (set_calibration_suspect)
+        self._scene_flags = options.scene_flags  # HELLO's header flags (announce_scene_flags)
         self._faults_set = 0  # non-OK faults set so far: a STATUS clears the latch only if none came since it read it
         self._status_due_us: Optional[int] = None
         self._status_owed = False  # the last STATUS was not written: the next frame carries one
@@ -117,6 +117,15 @@ class ProtocolSink(Sink):
         all that time (or been hidden by them)."""
         with self._cond:
             self._calibration_suspect = bool(suspect)
+
+    def announce_scene_flags(self, flags: int) -> None:
+        """Announce ``flags`` as the scene flags the producer sets (HELLO's header flags) from the next HELLO on:
+        a reload that turns the estimator's scan for others on or off changes whether SOMEONE_ELSE means anything.
+
+        :raises SinkConfigError: ``flags`` sets a bit that is no scene flag."""
+        mask = scene_flags_mask(self.url, flags)
+        with self._cond:
+            self._scene_flags = mask
 
     # ---- Sink hooks --------------------------------------------------------------
 
@@ -193,8 +202,10 @@ class ProtocolSink(Sink):
 
     def _hello(self, now: int) -> Hello:
         # HELLO's flags: the scene flags this sender sets on its frames (an older sender's are 0, so a receiver
-        # can tell "no second person" from "a sender that cannot say").
-        h = make_header(MsgType.HELLO, self._last_seq, now, now, SCENE_FLAGS)
+        # can tell "no second person" from "a sender that cannot say"; SOMEONE_ELSE only while the scan runs).
+        with self._cond:
+            scene_flags = self._scene_flags
+        h = make_header(MsgType.HELLO, self._last_seq, now, now, scene_flags)
         return Hello(
             h, PROTOCOL_VERSION, self._joint_set, self.options.joint_count, int(Units.MILLIMETRES),
             int(CoordFrame.RIG), self.options.rig_id, tuple(self.options.cameras),

@@ -93,6 +93,14 @@ def test_the_scene_flags_mask_matches(defines):
     assert sum(defines[f"GHJ_FLAG_{name}"] for name in scene) == proto.SCENE_FLAGS
 
 
+def test_the_mask_of_a_sender_that_scans_for_others_matches(defines):
+    """GHJ_ALL_SCENE_FLAGS (the HELLO of a sender that scans for others, since session 65) is the Python
+    ALL_SCENE_FLAGS: GHJ_SCENE_FLAGS and GHJ_FLAG_SOMEONE_ELSE, bit 6, the reserved bit before."""
+    assert defines.get("GHJ_FLAG_SOMEONE_ELSE") == 0x40 == int(proto.Flags.SOMEONE_ELSE)
+    assert defines.get("GHJ_ALL_SCENE_FLAGS") == proto.ALL_SCENE_FLAGS == proto.hello_scene_flags(True)
+    assert defines["GHJ_ALL_SCENE_FLAGS"] == defines["GHJ_SCENE_FLAGS"] | defines["GHJ_FLAG_SOMEONE_ELSE"]
+
+
 def test_results_follow_the_protocol_s_check_order():
     """ghj_result's errors are -1, -2, ... in docs/protocol.md section 5's order (ERROR_CODES); the decoders'
     event names (ghj_result_name, ghj_dump, ghnerf-listen) come from them."""

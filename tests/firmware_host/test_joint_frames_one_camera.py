@@ -46,12 +46,14 @@ def test_a_person_seen_by_one_camera_only_reaches_the_wire_as_that_cameras_2d_jo
 
 def test_scene_flags_refuse_the_link_s_and_reserved_bits():
     """JointFrame.scene_flags carries the estimate's flags only: DECIMATED / DROPPED are the sink's to set (a
-    frame claiming them would tell the receiver of losses that never happened), bits 6-7 are reserved."""
+    frame claiming them would tell the receiver of losses that never happened), bit 7 is reserved (bit 6 too until
+    session 65, when it became SOMEONE_ELSE)."""
     from tests.firmware_host.joint_stream_helpers import make_frame
     from dataclasses import replace
 
     frame = make_frame(0)
     assert replace(frame, scene_flags=0x3C).scene_flags == 0x3C
-    for bad in (Flags.DROPPED, Flags.DECIMATED | Flags.SEVERAL_PEOPLE, 0x40, 0x100, -1):
+    assert replace(frame, scene_flags=0x7C).scene_flags == 0x7C
+    for bad in (Flags.DROPPED, Flags.DECIMATED | Flags.SEVERAL_PEOPLE, 0x80, 0x100, -1):
         with pytest.raises(ValueError, match="JointFrame.scene_flags"):
             replace(frame, scene_flags=int(bad))

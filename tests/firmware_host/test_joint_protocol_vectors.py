@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from firmware_host.protocol import StreamDecoder, decode_stream
-from firmware_host.protocol.constants import SCENE_FLAGS, Flags
+from firmware_host.protocol.constants import ALL_SCENE_FLAGS, SCENE_FLAGS, Flags
 from firmware_host.protocol.vectors import VECTORS, build, default_dir
 
 VECTOR_DIR = Path(__file__).resolve().parents[1] / "vectors" / "joint_stream"
@@ -35,8 +35,9 @@ def test_vectors_cover_the_required_damage() -> None:
 
 def test_vectors_carry_every_flag_where_it_is_sent() -> None:
     """Each header flag on a JOINTS (the scene flags alone too: a decoder that reads one only next to DROPPED is
-    not tested), SINGLE_VIEW on JOINTS_2D, CALIBRATION_SUSPECT on STATUS, the scene-flag mask on HELLO, and the
-    reserved bits 6-7, which every decoder must pass through rather than refuse."""
+    not tested), SINGLE_VIEW and SOMEONE_ELSE on JOINTS_2D, CALIBRATION_SUSPECT on STATUS, both scene-flag masks
+    on HELLO (without and with the scan for others), and the reserved bit 7, which every decoder must pass through
+    rather than refuse."""
     events = [ev for name in VECTORS for ev in json.loads((VECTOR_DIR / f"{name}.json").read_text())["events"]]
     flags_of = {kind: {ev["flags"] for ev in events if ev.get("type") == kind}
                 for kind in ("JOINTS", "JOINTS_2D", "STATUS", "HELLO")}
@@ -44,9 +45,11 @@ def test_vectors_carry_every_flag_where_it_is_sent() -> None:
         if flag:
             assert int(flag) in flags_of["JOINTS"], f"no vector has a JOINTS flagged {flag!r} alone"
     assert int(Flags.SINGLE_VIEW) in flags_of["JOINTS_2D"]
+    assert int(Flags.SOMEONE_ELSE) in flags_of["JOINTS_2D"]
     assert int(Flags.CALIBRATION_SUSPECT) in flags_of["STATUS"]
-    assert SCENE_FLAGS in flags_of["HELLO"]
-    assert any(f & 0xC0 for f in flags_of["JOINTS"]), "no vector has the reserved flag bits set"
+    assert {SCENE_FLAGS, ALL_SCENE_FLAGS} <= flags_of["HELLO"]
+    assert ALL_SCENE_FLAGS | Flags.DROPPED in flags_of["JOINTS"]
+    assert any(f & 0x80 for f in flags_of["JOINTS"]), "no vector has the reserved flag bit set"
 
 
 @pytest.mark.parametrize("name", sorted(VECTORS))

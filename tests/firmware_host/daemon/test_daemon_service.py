@@ -773,6 +773,56 @@ def test_a_sink_url_with_camera_names_is_refused_at_start(tmp_path):
 
 
 # ---------------------------------------------------------------- reloading the config (SIGHUP)
+class _ScanningEstimator(_CountingEstimator):
+    """No rejected pairs; with ``presence.scan_every_s`` set, every other pair's (held) scan answer says someone
+    else is near, and without it there is no answer (``someone_else`` None), as the estimator's."""
+
+    def __init__(self, session, rig, config, **options) -> None:
+        super().__init__(session, rig, config, **options)
+        self.scans = config.presence.scan_every_s > 0
+
+    def estimate(self, images, *, sequence: int, timestamp_s: float):
+        from dataclasses import replace
+
+        self.calls = 0  # the parent's third call is a FrameError: never reached
+        self.n = getattr(self, "n", -1) + 1
+        result = super().estimate(images, sequence=sequence, timestamp_s=timestamp_s)
+        return replace(result, someone_else=(self.n % 2 == 1) if self.scans else None)
+
+
+def test_someone_else_reaches_the_link_and_hello_says_whether_the_scan_runs(sim_url, tmp_path, monkeypatch):
+    """A robot that slows down when someone else is near reads SOMEONE_ELSE on the frames (bit 6) while the
+    estimator's scan for others runs, announced in HELLO (0x7C); a reload that turns the scan off announces 0x3C
+    from then on, and no frame carries the bit (docs/protocol.md, "Scene flags"). Before session 65 the answer was
+    in ghnerf-run's JSON only, and HELLO said 0x3C either way."""
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _ScanningEstimator)
+    data = _config_dict(sim_url, tmp_path)
+    data["estimator"]["presence"] = {"scan_every_s": 0.5}
+    configs = _Configs()
+    with _Running(daemon_config_from_dict(data), tmp_path, reload_config=configs) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 6, timeout=60, what="6 estimated pairs")
+        del data["estimator"]["presence"]
+        configs.next = daemon_config_from_dict(data)
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.reloads == 1, timeout=60, what="the reload")
+        seen = run.daemon.health.pairs_estimated
+        wait_until(lambda: run.daemon.health.pairs_estimated > seen + 4, timeout=60, what="pairs after the reload")
+        sink = run.daemon.sinks["memory://?status_s=0.05"]
+        assert run.finish() == 0
+    messages = messages_of(sink.read())
+    hellos = [k for k, m in enumerate(messages) if isinstance(m, Hello)]
+    off = next(k for k in hellos if messages[k].header.flags == 0x3C)  # SCENE_FLAGS: the scan no longer runs
+    assert {messages[k].header.flags for k in hellos if k < off} == {0x7C}  # ALL_SCENE_FLAGS: it runs
+    assert {messages[k].header.flags for k in hellos if k > off} == {0x3C}
+    someone = [bool(m.header.flags & Flags.SOMEONE_ELSE) for m in messages[:off] if isinstance(m, Joints)]
+    assert True in someone and False in someone, someone
+    assert not any(m.header.flags & Flags.SOMEONE_ELSE for m in messages[off:] if isinstance(m, Joints))
+    assert any(isinstance(m, Joints) for m in messages[off:])
+
+
 class _Configs:
     """What ``reload_config`` returns next: a config, or the error a bad file raises."""
 
