@@ -46,10 +46,10 @@ class _ViewPeaks(Estimator):
 
     peaks: list = []
 
-    def _may_be_someone(self, heat, views):
+    def _may_be_someone(self, heat, views, peaks=None):
         if len(views) == 1:
             self.peaks.append(presence_peak(heat, views, self.config.presence.min_joints))
-        return super()._may_be_someone(heat, views)
+        return super()._may_be_someone(heat, views, peaks)
 
 
 class _OtherView(Estimator):

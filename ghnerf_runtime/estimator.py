@@ -70,7 +70,8 @@ from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_cen
     target_inputs, target_projections
 from ghnerf_runtime.errors import FrameError, GeometryError, ModelError
 from ghnerf_runtime.frame_reasons import FLAT, NOISE, NON_FINITE, REASONS
-from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projections, presence_peak
+from ghnerf_runtime.flip_test import flip_averaged, joint_peaks, mirror_images, mirror_projections, presence_peak, \
+    ranked_peak
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution
@@ -1170,7 +1171,8 @@ class Estimator:
         if self._one_view_needs_no_search(p) or self._two_people_report_nobody(p):
             return False
         rank = self.config.presence.min_joints
-        return any(presence_peak(p.env["encoder_heatmaps"], (v,), rank) >= _TURN_SEARCH_FLOOR for v in (0, 1))
+        peaks = joint_peaks(p.env["encoder_heatmaps"])  # once for both views
+        return any(ranked_peak(peaks, (v,), rank) >= _TURN_SEARCH_FLOOR for v in (0, 1))
 
     def _one_view_needs_no_search(self, p: "_Pass") -> bool:
         """Whether ``p`` is a person seen by one camera only (``p.single_view``: nobody in 3D, one view's own 2D
@@ -1492,14 +1494,10 @@ class Estimator:
             return _Pass(regions, frame_reason)
 
         # 2-4. encoder, volume (sources as targets), heatmaps on the subject's rays
-        env: dict[str, np.ndarray] = {
-            "images": batch,
-            "src_P": source_projections(crops, S, S),
-            "src_centers": source_centers(crops),
-            **target_inputs(crops, S, S),
-            "near_far": np.stack([near_far_from_box(c, box_corners(regions.box), cfg.tracking.near_far_margin_m)
-                                  for c in crops]),
-        }
+        # src_P with the images: a keypoint graph that reads the cameras (the benchmarks' oracle session) is fed them
+        env: dict[str, np.ndarray] = {"images": batch, "src_P": source_projections(crops, S, S)}
+        if self._builds_a_volume(novel_view):
+            env.update(self._volume_feeds(crops, regions))
         t = time.perf_counter()
         # onnxruntime runs a whole graph whatever is asked of it: without a volume to build, the
         # human-only graph skips the image feature network.
@@ -1520,8 +1518,7 @@ class Estimator:
             # below change: it starts now, on one thread, and the flip test's run goes beside it on the other.
             job = self._start_novel(novel_view, env, regions.box)
         try:
-            if not flipped and cfg.flips_encoder_heatmaps and any(self._may_be_someone(env["encoder_heatmaps"], v)
-                                                                  for v in self._presence_views):
+            if not flipped and cfg.flips_encoder_heatmaps and self._views_may_show_someone(env["encoder_heatmaps"]):
                 env["encoder_heatmaps"] = self._flip_test(batch, env["encoder_heatmaps"], timing, env["src_P"],
                                                           beside=job is not None)
             stride, g = self.contract.heatmap_stride, self.grid
@@ -1547,6 +1544,23 @@ class Estimator:
             if job is not None:  # leave no render running behind an error
                 job.abandon()
             raise
+
+    def _builds_a_volume(self, novel_view: NovelViewRequest | None) -> bool:
+        """Whether a pass may run a graph of the cost volume (``volume``, ``render_heat``, ``query``: each pair
+        with ``runs_source_volume``) or the novel view, which builds its volume from the pass's ``src_centers`` (a
+        cold pass's view too, rendered after :meth:`_add_features`): the graphs that read :meth:`_volume_feeds`.
+        The default keypoint path runs none, and building those feeds took about 0.2 ms a pass for nothing."""
+        return novel_view is not None or self.config.runs_source_volume
+
+    def _volume_feeds(self, crops: list[Camera], regions: Regions) -> dict[str, np.ndarray]:
+        """The crop cameras as the volume and rendering graphs read them, besides ``src_P``: ``src_centers``, the
+        sources as targets (``tgt_K_inv``, ``tgt_c2w``) and each camera's ``near_far`` of the pass's sweep box."""
+        margin = self.config.tracking.near_far_margin_m
+        return {
+            "src_centers": source_centers(crops),
+            **target_inputs(crops, self.size, self.size),
+            "near_far": np.stack([near_far_from_box(c, box_corners(regions.box), margin) for c in crops]),
+        }
 
     def _finish_pass(self, env: dict, out: dict, blocks, crops: list[Camera], regions: Regions, frame_reason: dict,
                      sequence: int, timing: dict, job: _NovelJob | None, cold_several: bool | None = None
@@ -1756,14 +1770,26 @@ class Estimator:
             env.update({k: out[k] for k in need})
             _add_ms(timing, "encoder", t)
 
-    def _may_be_someone(self, heat: np.ndarray, views: Sequence[int]) -> bool:
+    def _may_be_someone(self, heat: np.ndarray, views: Sequence[int], peaks: np.ndarray | None = None) -> bool:
         """Whether the flip test's second run can change the presence gate's answer
         (``heatmaps.flip_test_skip_below``, :func:`~ghnerf_runtime.flip_test.presence_peak`); always with
-        the gate off."""
-        floor = self.config.heatmaps.flip_test_skip_below
-        if not self.config.presence.enabled or floor <= 0:
+        the gate off. ``peaks``: ``heat``'s :func:`~ghnerf_runtime.flip_test.joint_peaks`, where already taken."""
+        if not self._skips_flip_for_nobody:
             return True
-        return presence_peak(heat, views, self.config.presence.min_joints) >= floor
+        peaks = joint_peaks(heat) if peaks is None else peaks
+        return ranked_peak(peaks, views, self.config.presence.min_joints) >= self.config.heatmaps.flip_test_skip_below
+
+    @property
+    def _skips_flip_for_nobody(self) -> bool:
+        """Whether the flip test's second run is skipped where the heatmaps say nobody may be there."""
+        return self.config.presence.enabled and self.config.heatmaps.flip_test_skip_below > 0
+
+    def _views_may_show_someone(self, heat: np.ndarray) -> bool:
+        """:meth:`_may_be_someone` of any of the presence gate's views (both, and each alone with one camera's
+        2D joints answered), the heatmap maxima taken once for them all: an empty room asked all three, and took
+        them three times."""
+        peaks = joint_peaks(heat) if self._skips_flip_for_nobody else None
+        return any(self._may_be_someone(heat, views, peaks) for views in self._presence_views)
 
     def _flip_test(self, batch: np.ndarray, heat: np.ndarray, timing: dict,
                    src_P: np.ndarray | None = None, beside: bool = False) -> np.ndarray:

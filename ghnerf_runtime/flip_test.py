@@ -71,8 +71,29 @@ def presence_peak(heatmaps: np.ndarray, views, rank: int) -> float:
     if heat.ndim != 4 or min(heat.shape[2:]) < 1 or rank < 1 or len(views) < 1:  # else numpy's bare errors
         raise ShapeError(f"heatmaps: expected (S, J, h, w) with h, w >= 1, rank >= 1 and at least one view, got "
                          f"{heat.shape}, rank {rank} and views {tuple(views)}")
-    maps = heat[list(views)].reshape(len(views), heat.shape[1], -1)
+    return ranked_peak(joint_peaks(heat[list(views)]), range(len(views)), rank)
+
+
+def joint_peaks(heatmaps: np.ndarray) -> np.ndarray:
+    """``(S, J)`` float64: each view's maximum of each joint's map in ``(S, J, h, w)`` heatmaps, 0 for a map holding
+    any non-finite value (:func:`presence_peak`'s peaks, before the views are combined). Taken once, they answer
+    :func:`ranked_peak` for any of the views, which :func:`presence_peak` took the maxima again for each time."""
+    heat = np.asarray(heatmaps)
+    maps = heat.reshape(heat.shape[0], heat.shape[1], -1)
     # nan_to_num made an inf map a full-strength peak, a joint the decoder reports missing
-    peaks = np.where(np.isfinite(maps).all(-1), maps.max(-1), 0.0).astype(np.float64)
-    joint = np.exp(np.log(np.clip(peaks, 1e-30, 1.0)).mean(0))
+    return np.where(np.isfinite(maps).all(-1), maps.max(-1), 0.0).astype(np.float64)
+
+
+def ranked_peak(peaks: np.ndarray, views, rank: int) -> float:
+    """:func:`presence_peak` from the views' :func:`joint_peaks` ``peaks`` ``(S, J)``: the ``rank``-th strongest of
+    the per-joint geometric means over ``views`` of their peaks (clipped to [0, 1]); 0 with fewer joints.
+
+    Example:
+        >>> peaks = np.array([[0.9, 0.4, 0.1], [0.4, 0.9, 0.0]])
+        >>> round(ranked_peak(peaks, (0, 1), 2), 3), round(ranked_peak(peaks, (0,), 2), 3)
+        (0.6, 0.4)
+    """
+    if rank < 1 or len(views) < 1:
+        raise ShapeError(f"ranked_peak needs rank >= 1 and at least one view, got rank {rank} and views {tuple(views)}")
+    joint = np.exp(np.log(np.clip(np.asarray(peaks)[list(views)], 1e-30, 1.0)).mean(0))
     return float(np.sort(joint)[::-1][rank - 1]) if len(joint) >= rank else 0.0

@@ -185,6 +185,15 @@ def test_time_demo_stages_counts_what_no_stage_covers():
     assert [key for key, *_ in summarise(timings)][:2] == ["encoder", "preprocess"]  # the stages by median
 
 
+def test_time_scenes(model, capsys, monkeypatch):
+    # the empty room alone: the other scenes read full-size sim:// loops (rendered once per machine)
+    out = run_script("time_scenes", "--model-dir", model, "--pairs", "2", "--scenes", "empty",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert "2 pairs a scene, keypoints; per-pair medians" in out, out
+    assert re.search(r"^empty  total +[\d.]+ ms  CPU +[\d.]+ ms  \| .*preprocess [\d.]+.* \| checksum 0\.000000$", out,
+                     re.M), out
+
+
 def test_compare_3d_methods(model, tmp_path, capsys, monkeypatch):
     run_script("compare_3d_methods", "--model-dir", model, *SIZES, "--methods", "triangulate,depth_centroid",
                "--json", str(tmp_path / "r.json"), capsys=capsys, monkeypatch=monkeypatch)

@@ -97,6 +97,43 @@ def test_triangulation_is_exact_on_oracle_heatmaps_and_tracking_engages(clip, so
     assert oracle.rays[0] == grid and max(oracle.rays[1:]) < grid
 
 
+class FeedRecorder(OracleSession):
+    """The oracle, also recording the names of the feeds each graph run was handed."""
+
+    def __init__(self):
+        super().__init__(edge128_contract())
+        self.feeds: list[tuple[str, frozenset]] = []
+
+    def run(self, graph, feeds):
+        self.feeds.append((graph, frozenset(feeds)))
+        return super().run(graph, feeds)
+
+
+#: The feeds of the cost volume's and the rendering's graphs besides the images and ``src_P``.
+VOLUME_FEEDS = {"src_centers", "tgt_K_inv", "tgt_c2w", "near_far"}
+
+
+def test_a_keypoint_pass_builds_no_feeds_for_a_volume_it_does_not_build(clip):
+    """The encoder heatmaps' path (the default) runs the keypoint graph alone, on the crops and their ``src_P``
+    (the oracle reads the cameras), cold and tracked, mirrored or not: the volume's camera feeds (``src_centers``,
+    the sources as targets, ``near_far``: about 0.2 ms a pass) are not built for it, as they were on every pass. A
+    pass that builds a volume (rendered heatmaps) hands them to its graphs as before."""
+    rig, frames, truth, visible, *_ = clip
+    for source, flip in (("encoder", True), ("encoder", False), ("rendered", False)):
+        oracle = FeedRecorder()
+        est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(source=source, flip_test=flip),
+                                                     joints3d=Joints3DConfig(method="triangulate")))
+        results = _run(est, oracle, frames, truth, visible)
+        assert results[-1].tracked and not results[-1].missing.all()
+        keypoint_feeds = {names for graph, names in oracle.feeds if graph == "encoder"}
+        if source == "encoder":
+            assert keypoint_feeds == {frozenset({"images", "src_P"})}, (source, flip, keypoint_feeds)
+            assert {graph for graph, _ in oracle.feeds} == {"encoder"}
+        else:
+            assert all(VOLUME_FEEDS <= names for graph, names in oracle.feeds if graph != "encoder")
+            assert {graph for graph, _ in oracle.feeds} >= {"volume", "render_heat"}
+
+
 def test_2d_joints_land_on_the_truth_in_the_original_images(clip):
     rig, frames, truth, visible, *_, twod = clip
     oracle = OracleSession(edge128_contract())
@@ -349,6 +386,37 @@ def test_a_pair_that_finds_nobody_renders_no_novel_view(clip):
         r = est.estimate(frames[0], novel_view=request)
         assert r.tracked and r.missing.all() and r.novel_view is None
         assert not set(NOVEL_STAGES) & set(r.timing_ms)
+
+
+def test_an_empty_room_takes_the_heatmap_maxima_once_for_the_flip_test_and_once_for_the_turn_search(clip,
+                                                                                                    monkeypatch):
+    """A pair that shows nobody asks its heatmaps' per-joint maxima whether to run the flip test's mirrored crops (of
+    both views, and of each alone: one camera's 2D joints are answered) and whether to search the crop turns (of each
+    view): one taking of the maxima for each of the two, the same answers. Before, each view asked took them again:
+    five times a pair, about 0.3 ms of an empty room's 5."""
+    import ghnerf_runtime.estimator as estimator_module
+    from ghnerf_runtime import flip_test
+
+    taken = []
+
+    def counted(name):
+        def wrapper(*args, **kwargs):
+            taken.append(name)
+            return getattr(flip_test, name)(*args, **kwargs)
+        return wrapper
+
+    for name in ("joint_peaks", "presence_peak"):  # (the code before this change had presence_peak alone)
+        monkeypatch.setattr(estimator_module, name, counted(name), raising=False)
+    rig, frames, *_ = clip
+    oracle = FeedRecorder()
+    est = Estimator(oracle, rig, EstimatorConfig())
+    oracle.set_truth(None)  # the model sees nobody in the (textured) frames
+    for pair in frames[:3]:
+        taken.clear()
+        r = est.estimate(pair)
+        assert all(r.frame_ok.values()) and r.missing.all() and "turn_search" not in r.timing_ms
+        assert taken == ["joint_peaks", "joint_peaks"], taken
+    assert oracle.run_counts["encoder"] == 3  # nobody: no mirrored run, no turn searched
 
 
 def _seen_by(visible: np.ndarray, k: int) -> np.ndarray:
