@@ -39,7 +39,8 @@ from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
                                  earlier_size, earlier_views, list_images, next_view_number, read_camera_order,
                                  write_camera_order)
-from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, exchanged_fit, floor_unmeasured
+from calibration.check import (FLOOR_VIEW, CheckLimits, check_failures, check_rig, exchanged_fit, floor_unmeasured,
+                               sized_as_exchanged)
 from calibration.detect import (PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view,
                                mirrored_corners, mirrored_words)
 from calibration.errors import BoardError, CalibrationError, CaptureError
@@ -925,6 +926,8 @@ def cmd_check(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.images} holds views of the cameras {held}, but {args.rig} is the rig of the cameras "
                          f"{names} (no folder {missing[0]!r}): views of another rig? check them with its rig file")
     views, missed = detect_folder(board, args.images, names)
+    if sized_as_exchanged(rig, views):
+        raise UsageError(_exchanged_sizes_words(rig, args.rig, board, views, Path(args.images), thickness, floor_view))
     for cam in rig.pair:
         for name, view in views[cam.name].items():
             if view.image_size != cam.size:
@@ -986,6 +989,24 @@ def _exchanged_words(report: dict, images: Path, names: Sequence[str]) -> str:
             f"px rms, scale {report['scale']:.4f}): {images / a} holds the images of camera {b!r}, and {images / b} "
             f"those of {a!r}. Exchange the two folders' images (a tool that named the cameras the other way round), then "
             "check again; solved from them as they are, the rig would give each camera the other's lens and pose")
+
+
+def _exchanged_sizes_words(rig, rig_path: str, board: BoardSpec, views: dict, images: Path, thickness: float,
+                           floor_view: str) -> str:
+    """The error for folders whose images are each the other camera's size (:func:`sized_as_exchanged`): the
+    sizes as the evidence, and how the rig fits the views exchanged (figures from the default limits)."""
+    a, b = rig.pair
+    exchanged = {a.name: views[b.name], b.name: views[a.name]}
+    report = check_rig(rig, board, exchanged, board_thickness_m=thickness, floor_view=floor_view)
+    reasons = check_failures(report) if report["pairs"] else ["no pair to measure"]
+    scale = "not measured" if report.get("scale") is None else f"{report['scale']:.4f}"
+    fit = (f"exchanged, the rig fits them (reprojection {report['reprojection_px_rms']:.3f} px rms, scale {scale})"
+           if not reasons else
+           f"exchanged, the rig does not fit them either ({'; '.join(reasons)}): calibrate again once they are")
+    return (f"the folders look exchanged: every image in {images / a.name} is {b.width}x{b.height}, the size of "
+            f"camera {b.name!r} in {rig_path}, and every image in {images / b.name} {a.width}x{a.height}, camera "
+            f"{a.name!r}'s; {fit}. Exchange the two folders' images (a tool that named the cameras the other way "
+            "round), then check again")
 
 
 # ------------------------------------------------------------------ main

@@ -457,6 +457,48 @@ def test_check_names_the_exchanged_folders_instead_of_calibrating_again(level_ri
                      "--images", str(images)]) == 0
 
 
+def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch) -> tuple[int, Path]:
+    """``ghcal check`` of ``rig`` on ``views`` (the detection stood in for): its exit status, and the images' folder."""
+    from ghnerf_runtime.rig_file import save_rig
+
+    images = tmp_path / "capture"
+    for cam, named in views.items():
+        (images / cam).mkdir(parents=True, exist_ok=True)
+        for name in named:
+            (images / cam / f"{name}.png").touch()  # listed by name
+    (tmp_path / "board.json").write_text(json.dumps(BOARD.to_dict()))
+    save_rig(rig, tmp_path / "rig.json")
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {cam: [] for cam in views}))
+    rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
+                   "--images", str(images)])
+    return rc, images
+
+
+@pytest.fixture(scope="module")
+def sized_rig(level_rig) -> Rig:
+    """``level_rig`` with its right camera at 640x400 (the same field of view)."""
+    left, right = level_rig.pair
+    small = dataclasses.replace(right, width=640, height=400, K=intrinsics_from_fov(640, 400, 75.0))
+    return Rig((left, small), level_rig.volume)
+
+
+def test_folders_exchanged_between_cameras_of_two_sizes_are_said_so(sized_rig, tmp_path, capsys, monkeypatch):
+    # every image was "the image is 640x400, camera 'left' ... 960x600", and the exchange never tried
+    views = _views(sized_rig, _facing_poses(sized_rig, 6, seed=5))
+    rc, images = _check_cli(sized_rig, _exchanged(views), tmp_path, monkeypatch)
+    err = capsys.readouterr().err
+    assert rc == 2 and (
+        f"the folders look exchanged: every image in {images / 'left'} is 640x400, the size of camera 'right' in "
+        f"{tmp_path / 'rig.json'}, and every image in {images / 'right'} 960x600, camera 'left''s; exchanged, the rig "
+        "fits them (reprojection 0.000 px rms, scale 1.0000). Exchange the two folders' images") in err
+    # one folder only at the other's size (the same images copied into both): the image named, as before
+    both_small = {"left": views["right"], "right": views["right"]}
+    rc, images = _check_cli(sized_rig, both_small, tmp_path, monkeypatch)
+    err = capsys.readouterr().err
+    assert rc == 2 and "look exchanged" not in err and "the image is 640x400, camera 'left'" in err
+    assert _check_cli(sized_rig, views, tmp_path, monkeypatch)[0] == 0
+
+
 @pytest.mark.parametrize("exchanged", [False, True])
 def test_a_left_camera_solved_on_the_right_is_warned_about(level_rig, exchanged):
     # each folder holding the other camera's images solves as well as the right ones (the rig file then gives each
@@ -469,18 +511,48 @@ def test_a_left_camera_solved_on_the_right_is_warned_about(level_rig, exchanged)
     if not exchanged:
         assert said == []
         return
-    assert len(said) == 1 and said[0].startswith("sides: camera 'left' came out 0.60")
+    assert len(said) == 1 and said[0].startswith("sides: camera 'left' came out 0.59")
     assert "m to the right of 'right'" in said[0] and "exchange the two folders' images and solve again" in said[0]
 
 
-def test_cameras_not_named_for_their_sides_are_not_warned_about(level_rig):
+@pytest.mark.parametrize("names", [("cam_a", "cam_b"), ("0", "1")])
+@pytest.mark.parametrize("exchanged", [False, True])
+def test_cameras_not_named_for_their_sides_are_checked_by_the_rig_s_order(level_rig, names, exchanged):
+    # only a pair named 'left' and 'right' was checked: cam_a's and cam_b's folders exchanged solved each camera
+    # with the other's lens and pose without a word; the rig sources put the first camera on the left
+    poses = _facing_poses(level_rig, 10, seed=7)
+    views = _views(level_rig, poses, noise_px=0.1)
+    if exchanged:
+        views = _exchanged(views)
+    renamed = dict(zip(names, (views["left"], views["right"])))
+    solution = solve.solve_rig(BOARD, renamed, names, camera_height_m=1.4, pitch_deg=9.0)
+    said = [w for w in solution.report["warnings"] if w.startswith("sides:")]
+    if not exchanged:
+        assert said == []
+        return
+    first, second = names
+    assert len(said) == 1 and said[0].startswith(f"sides: camera {first!r} came out 0.597 m")
+    assert f"m to the right of {second!r} (along camera {first!r}'s image x" in said[0]
+    assert "though the first camera of the pair, which the rig sources put on the left" in said[0]
+    assert "exchange the two folders' images and solve again" in said[0]
+
+
+def test_the_side_check_follows_the_names_then_the_order(level_rig):
     left, right = level_rig.pair
-    assert solve.sides_warning(Rig((right, left), level_rig.volume)) is None  # the rig's order is not a side
+    assert solve.sides_warning(Rig((right, left), level_rig.volume)) is None  # named for their sides: the names rule
     named = Rig((dataclasses.replace(right, name="first"), dataclasses.replace(left, name="second")), level_rig.volume)
-    assert solve.sides_warning(named) is None
+    assert solve.sides_warning(named).startswith("sides: camera 'first' came out 0.596 m to the right of 'second'")
     # one above the other, a hair to the left: no side to check
     above = dataclasses.replace(left, name="right").with_pose(left.R, left.t - left.R @ np.array([-0.01, 0.5, 0.0]))
     assert solve.sides_warning(Rig((left, above), level_rig.volume)) is None
+    # the side is the first camera's image x, not the levelled rig's: a pair mounted upside down (both cameras
+    # turned half a turn on their axes) has its 'left' sensor on the rig's right, and nothing is wrong with it
+    half_turn = np.diag([-1.0, -1.0, 1.0])
+    upside_down = Rig(tuple(dataclasses.replace(cam, name=name).with_pose(half_turn @ cam.R, half_turn @ cam.t)
+                            for cam, name in ((right, "left"), (left, "right"))), level_rig.volume)
+    assert solve.sides_warning(upside_down) is None
+    assert solve.sides_warning(Rig(tuple(dataclasses.replace(cam, name=name) for cam, name in (
+        (right, "left"), (left, "right"))), level_rig.volume)) is not None  # the same, upright: against the names
 
 
 def test_too_few_views_besides_the_floor_view_are_said_so(level_views):
