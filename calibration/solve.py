@@ -36,7 +36,8 @@ from ghnerf_runtime.rig_file import principal_point_problem
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
            "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "fold_warning", "MIN_VIEWS", "MAX_PAIR_PX",
            "USUAL_PITCH_DEG", "typed_pitch_warning", "BOARD_DISTANCE_SLACK", "median_board_distance_m",
-           "board_distance_warning", "SIDE_NAMES", "expected_sides", "sides_warning"]
+           "board_distance_warning", "SIDE_NAMES", "expected_sides", "sides_warning", "REPEAT_PX", "same_pose",
+           "repeated_views"]
 
 #: Lens models: OpenCV flags and what they suit.
 LENS_MODELS = {
@@ -77,6 +78,15 @@ BOARD_DISTANCE_SLACK = 2.0
 #: warned about (each folder holding the other camera's images); a pair stacked one above the other has no side.
 SIDE_NAMES = ("left", "right")
 SIDES_SHARE = 0.5
+#: Two images of one camera show the same board pose (counted once) where every corner both found lies within this
+#: many pixels of the other's, and they share at least half of each one's corners. On ghcal synth's rendered views
+#: (benchmarks/measure_repeated_views.py, 3 seeds) one pose's two images lay at most 1.84 px apart (re-saved as JPEG
+#: of quality 75; 1.11 px at quality 95, 0.75 px rendered twice with other sensor noise: a still board exposed
+#: twice), a board moved 5 mm at most 3.0 px (median 2.3), and each view at least 33 px from the capture's nearest
+#: other view (median 91 px): a re-saved image and a frame grabbed twice are caught, a view moved on purpose is not.
+#: 0.5 px would have missed over a tenth of the still board's second exposures (90th percentile 0.53 px) and of the
+#: quality-85 copies (0.61 px).
+REPEAT_PX = 3.0
 
 
 @dataclass(frozen=True)
@@ -117,6 +127,31 @@ class Floor:
 class RigSolution:
     rig: Rig
     report: dict[str, Any] = field(default_factory=dict)
+
+
+def same_pose(view: BoardView, other: BoardView, *, within_px: float = REPEAT_PX) -> bool:
+    """Whether two images of one camera show the board at the same pose (:data:`REPEAT_PX`): a copy, a re-saved
+    JPEG, a burst's frame grabbed twice, a still board exposed twice. Their corner ids may differ a little (a
+    re-saved image loses a corner or two): at least half of each one's are shared, and :data:`MIN_CORNERS`."""
+    shared, mine, theirs = np.intersect1d(view.ids, other.ids, return_indices=True)
+    if shared.size < max(MIN_CORNERS, len(view) / 2, len(other) / 2):
+        return False
+    gaps = np.linalg.norm(view.corners[mine] - other.corners[theirs], axis=1)
+    return bool(np.all(gaps <= within_px))
+
+
+def repeated_views(views: Mapping[str, BoardView], *, skip: str | None = None) -> dict[str, str]:
+    """View name -> the earlier view (by name) it shows the same pose as (:func:`same_pose`), for the views to count
+    once: each copy weighed its pose once more in the lens's fit. ``skip`` (the floor view) is neither."""
+    kept: list[str] = []
+    repeats: dict[str, str] = {}
+    for name in sorted(n for n in views if n != skip):
+        same = next((earlier for earlier in kept if same_pose(views[name], views[earlier])), None)
+        if same is None:
+            kept.append(name)
+        else:
+            repeats[name] = same
+    return repeats
 
 
 def _object_points(board: BoardSpec, view: BoardView) -> np.ndarray:

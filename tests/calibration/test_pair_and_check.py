@@ -572,10 +572,11 @@ def test_too_few_views_besides_the_floor_view_are_said_so(level_views):
 
 def test_an_image_given_twice_is_counted_once(level_rig, tmp_path, capsys, monkeypatch):
     # a copy weighed its pose twice in the lens's fit without a word; one copied into a single camera's folder made
-    # a pair "not taken at the same instant?"
+    # a pair "not taken at the same instant?"; a re-saved copy, its corners not equal to the last bit, was not caught
     views = _views(level_rig, _facing_poses(level_rig, 8, seed=3), noise_px=0.1)
     views["left"]["100"] = views["left"]["003"]  # left/100.png a copy of left/003.png
-    views["right"]["100"] = views["right"]["004"]  # right/100.png a copy of right/004.png, so the pair is one
+    # right/100.png right/004.png re-saved (its corners a little off, two lost), so the pair is one
+    views["right"]["100"] = _jittered(views["right"]["004"], 0.8, seed=5, lose=2)
     images = tmp_path / "capture"
     for cam, named in views.items():
         (images / cam).mkdir(parents=True)
@@ -588,8 +589,53 @@ def test_an_image_given_twice_is_counted_once(level_rig, tmp_path, capsys, monke
     out = capsys.readouterr().out
     assert rc == 0
     for cam, copied in (("left", "003"), ("right", "004")):
-        assert (f"note: {images / cam}: 1 image(s) show the board exactly as an earlier one does, the same image under "
-                f"two names: 100.png (as {copied}.png); the image counted once") in out
+        assert (f"note: {images / cam}: 1 image(s) show the board at the same pose as an earlier one (every corner "
+                f"within 3 px: a copy, a re-saved image, a frame grabbed twice): 100.png (as {copied}.png); dropped, "
+                "each pose counted once") in out
     report = json.loads((tmp_path / "rig.report.json").read_text())
     assert report["cameras"]["left"]["views"] == report["cameras"]["right"]["views"] == 8
     assert "100" not in report["pair"]["per_view_px"] and report["pair"]["dropped_views"] == []
+    assert report["cameras"]["left"]["repeated_views"] == {"100": "003"}
+    assert report["cameras"]["right"]["repeated_views"] == {"100": "004"}
+
+
+def _jittered(view: BoardView, px: float, seed: int, lose: int = 0) -> BoardView:
+    """``view`` with every corner moved by up to ``px`` and its last ``lose`` corners not found."""
+    rng = np.random.default_rng(seed)
+    step = rng.normal(size=view.corners.shape)
+    step *= px / np.linalg.norm(step, axis=1, keepdims=True) * rng.uniform(0.0, 1.0, (len(view), 1))
+    keep = slice(0, len(view) - lose)
+    return BoardView(view.ids[keep], (view.corners + step)[keep], view.image_size)
+
+
+def test_the_same_pose_captured_twice_is_counted_once(level_rig):
+    # only an image's exact copy was caught: the pose re-saved as JPEG, or a burst's frame grabbed twice, weighed
+    # its pose twice in the lens's fit
+    views = _views(level_rig, _facing_poses(level_rig, 6, seed=3), noise_px=0.1)["left"]
+    views["100"] = _jittered(views["002"], 2.9, seed=1, lose=4)  # within REPEAT_PX, a few corners lost
+    views["101"] = _jittered(views["004"], 0.3, seed=2)
+    views["102"] = BoardView(views["001"].ids, views["001"].corners + [4.0, 0.0], views["001"].image_size)  # moved
+    views["floor"] = views["003"]
+    assert solve.repeated_views(views, skip="floor") == {"100": "002", "101": "004"}
+    assert solve.repeated_views(views) == {"100": "002", "101": "004", "floor": "003"}
+    few = BoardView(views["000"].ids[:10], views["000"].corners[:10], views["000"].image_size)  # a quarter shared
+    assert not solve.same_pose(few, views["000"]) and solve.same_pose(views["000"], views["000"])
+
+
+def test_a_rendered_image_re_saved_as_jpeg_is_the_same_pose_and_a_moved_board_is_not():
+    # on the images ghcal synth renders: the corners the detector finds in a re-saved image, against those of the
+    # board moved by 20 mm (REPEAT_PX's measurement: benchmarks/measure_repeated_views.py)
+    from calibration.detect import BoardDetector
+    from calibration.render import render_board
+
+    rig, board = example_rig(), BoardSpec()
+    detector = BoardDetector(board)
+    R, t = next(iter(board_poses_both_see(rig, board, 1, seed=2).values()))  # all 40 corners found
+    cam = rig.pair[0]
+    image = render_board(cam, board, R, t, seed=1)
+    ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 75])
+    views = [detector.detect(im) for im in (image, cv2.imdecode(data, cv2.IMREAD_GRAYSCALE),
+                                            render_board(cam, board, R, t, seed=2),
+                                            render_board(cam, board, R, t + 0.02 * R[:, 0], seed=1))]
+    assert solve.same_pose(views[0], views[1]) and solve.same_pose(views[0], views[2])
+    assert not solve.same_pose(views[0], views[3])
