@@ -919,8 +919,10 @@ def cmd_check(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.images} holds views of the cameras {held}, but {args.rig} is the rig of the cameras "
                          f"{names} (no folder {missing[0]!r}): views of another rig? check them with its rig file")
     views, missed = detect_folder(board, args.images, names)
+    limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
     if sized_as_exchanged(rig, views):
-        raise UsageError(_exchanged_sizes_words(rig, args.rig, board, views, Path(args.images), thickness, floor_view))
+        raise UsageError(_exchanged_sizes_words(rig, args.rig, board, views, Path(args.images), limits, thickness,
+                                                floor_view))
     for cam in rig.pair:
         for name, view in views[cam.name].items():
             if view.image_size != cam.size:
@@ -961,7 +963,6 @@ def cmd_check(args: argparse.Namespace) -> int:
              if "floor" in report else "")
           + (f", {report['untriangulated']} of {report['corners']} corners not triangulated"
              if report["untriangulated"] else ""))
-    limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
     reasons = check_failures(report, limits)
     if reasons and (exchanged := exchanged_fit(rig, board, views, limits, board_thickness_m=thickness,
                                                floor_view=floor_view)) is not None:
@@ -984,14 +985,14 @@ def _exchanged_words(report: dict, images: Path, names: Sequence[str]) -> str:
             "check again; solved from them as they are, the rig would give each camera the other's lens and pose")
 
 
-def _exchanged_sizes_words(rig, rig_path: str, board: BoardSpec, views: dict, images: Path, thickness: float,
-                           floor_view: str) -> str:
+def _exchanged_sizes_words(rig, rig_path: str, board: BoardSpec, views: dict, images: Path, limits: CheckLimits,
+                           thickness: float, floor_view: str) -> str:
     """The error for folders whose images are each the other camera's size (:func:`sized_as_exchanged`): the
-    sizes as the evidence, and how the rig fits the views exchanged (figures from the default limits)."""
+    sizes as the evidence, and whether the rig fits the views exchanged (within ``limits``)."""
     a, b = rig.pair
     exchanged = {a.name: views[b.name], b.name: views[a.name]}
     report = check_rig(rig, board, exchanged, board_thickness_m=thickness, floor_view=floor_view)
-    reasons = check_failures(report) if report["pairs"] else ["no pair to measure"]
+    reasons = check_failures(report, limits) if report["pairs"] else ["no pair to measure"]
     scale = "not measured" if report.get("scale") is None else f"{report['scale']:.4f}"
     fit = (f"exchanged, the rig fits them (reprojection {report['reprojection_px_rms']:.3f} px rms, scale {scale})"
            if not reasons else

@@ -457,7 +457,7 @@ def test_check_names_the_exchanged_folders_instead_of_calibrating_again(level_ri
                      "--images", str(images)]) == 0
 
 
-def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch) -> tuple[int, Path]:
+def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str) -> tuple[int, Path]:
     """``ghcal check`` of ``rig`` on ``views`` (the detection stood in for): its exit status, and the images' folder."""
     from ghnerf_runtime.rig_file import save_rig
 
@@ -470,7 +470,7 @@ def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch) -> tuple[int, Path]
     save_rig(rig, tmp_path / "rig.json")
     monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {cam: [] for cam in views}))
     rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
-                   "--images", str(images)])
+                   "--images", str(images), *options])
     return rc, images
 
 
@@ -497,6 +497,12 @@ def test_folders_exchanged_between_cameras_of_two_sizes_are_said_so(sized_rig, t
     err = capsys.readouterr().err
     assert rc == 2 and "look exchanged" not in err and "the image is 640x400, camera 'left'" in err
     assert _check_cli(sized_rig, views, tmp_path, monkeypatch)[0] == 0
+    # exchanged, and not fitting within the limits given either: said so, the sizes still the evidence
+    noisy = _views(sized_rig, _facing_poses(sized_rig, 6, seed=5), noise_px=0.5)
+    rc, images = _check_cli(sized_rig, _exchanged(noisy), tmp_path, monkeypatch, "--max-px", "0.1")
+    err = capsys.readouterr().err
+    assert rc == 2 and "the folders look exchanged: every image in" in err
+    assert "exchanged, the rig does not fit them either (reprojection" in err and "over 0.1 px" in err
 
 
 @pytest.mark.parametrize("exchanged", [False, True])
