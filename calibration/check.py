@@ -25,7 +25,8 @@ from calibration.detect import MIN_CORNERS, BoardView
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.geometry.triangulation import triangulate_dlt
 
-__all__ = ["check_rig", "check_failures", "floor_unmeasured", "exchanged_fit", "CheckLimits", "FLOOR_VIEW"]
+__all__ = ["check_rig", "check_failures", "floor_unmeasured", "exchanged_fit", "sized_as_exchanged", "CheckLimits",
+           "FLOOR_VIEW"]
 
 FLOOR_VIEW = "floor"
 
@@ -158,6 +159,17 @@ def exchanged_fit(rig: Rig, board: BoardSpec, views: Mapping[str, Mapping[str, B
     exchanged = {a.name: views.get(b.name, {}), b.name: views.get(a.name, {})}
     report = check_rig(rig, board, exchanged, board_thickness_m=board_thickness_m, floor_view=floor_view)
     return report if report["pairs"] and not check_failures(report, limits) else None
+
+
+def sized_as_exchanged(rig: Rig, views: Mapping[str, Mapping[str, BoardView]]) -> bool:
+    """Whether each of the pair's cameras' images are all the other camera's size, the two sizes differing: the
+    folders exchanged, said so from the sizes alone. Every image was "the image is 1280x720, camera 'left' ...
+    640x480", and :func:`exchanged_fit` was never reached."""
+    a, b = rig.pair
+    if a.size == b.size:
+        return False
+    sizes = {cam.name: {v.image_size for v in views.get(cam.name, {}).values()} for cam in rig.pair}
+    return sizes[a.name] == {b.size} and sizes[b.name] == {a.size}
 
 
 def _expected_image(root: str | os.PathLike | None, camera: str, other: str, name: str) -> str:

@@ -39,12 +39,13 @@ from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
                                  earlier_size, earlier_views, list_images, next_view_number, read_camera_order,
                                  write_camera_order)
-from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, exchanged_fit, floor_unmeasured
+from calibration.check import (FLOOR_VIEW, CheckLimits, check_failures, check_rig, exchanged_fit, floor_unmeasured,
+                               sized_as_exchanged)
 from calibration.detect import (PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view,
                                mirrored_corners, mirrored_words)
 from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
-from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
+from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, unwritable_reason
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
@@ -600,7 +601,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          "squares_x counts them along board.png's width)? Is the board in "
                          "view, sharp, and without glare?")
     _check_pairing(args.images, names, views, missed, args.floor_view)
-    _drop_repeated_images(args.images, views, args.floor_view)  # after the pairing: a copy is no lonely image
+    repeats = _drop_repeated_images(args.images, views, args.floor_view)  # after the pairing: a copy is no lonely image
     if args.floor_view is not None and not any(args.floor_view in views[c] for c in names):
         if any(args.floor_view in missed[c] for c in names):  # taken, and the board not found in it
             raise UsageError(f"--floor-view {args.floor_view!r}: neither camera found the board in that view (lying "
@@ -614,6 +615,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          rig_id=args.rig_id, tangential=not args.no_tangential)
     # the previous rig and report kept first (copies: rig.prev.json, rig.report.prev.json), then the report, so
     # the rig file is never newer than its report; if save_rig then fails, the new report is left beside the old rig
+    for cam in names:
+        solution.report["cameras"][cam]["repeated_views"] = repeats[cam]
     kept = {path: _keep_previous(path, prev) for path, prev in previous.items()}
     write_text_atomic(report_path, json.dumps(solution.report, indent=1) + "\n")
     save_rig(solution.rig, out)
@@ -643,34 +646,25 @@ def _say_kept(kept: dict[Path, Path | None]) -> None:
             print(f"kept the previous {path} as {prev}")
 
 
-def _repeated_views(views: dict[str, BoardView], skip: str | None) -> dict[str, str]:
-    """View name -> the earlier view (by name) whose corners it repeats to the last bit: the same image under two
-    names (a copy, or a tool that saved a frame twice), which no two exposures give. ``skip`` (the floor view) is
-    neither."""
-    first_of: dict[bytes, str] = {}
-    repeats = {}
-    for name in sorted(n for n in views if n != skip):
-        key = views[name].ids.tobytes() + views[name].corners.tobytes()
-        if key in first_of:
-            repeats[name] = first_of[key]
-        else:
-            first_of[key] = name
-    return repeats
-
-
-def _drop_repeated_images(images: str, views: dict, floor_view: str | None) -> None:
-    """Count an image given twice once, saying so: each copy weighed its pose once more in the lens's fit, and one
-    copied into a single camera's folder made a pair "not taken at the same instant", not said as a copy."""
+def _drop_repeated_images(images: str, views: dict, floor_view: str | None) -> dict[str, dict[str, str]]:
+    """Count once the images of a camera that show the board at the same pose as an earlier one (a copy, a re-saved
+    JPEG, a frame grabbed twice), saying how many and which: each weighed its pose once more in the lens's fit, and
+    one copied into a single camera's folder made a pair "not taken at the same instant", not said as a copy.
+    Returns camera -> dropped view -> the earlier view kept, for the report."""
+    dropped = {}
     for cam, named in views.items():
-        repeats = _repeated_views(named, floor_view)
+        repeats = repeated_views(named, skip=floor_view)
+        dropped[cam] = repeats
         if not repeats:
             continue
         files = list_images(Path(images) / cam)
         said = [f"{files[name].name} (as {files[same].name})" for name, same in repeats.items()]
-        print(f"note: {Path(images) / cam}: {len(said)} image(s) show the board exactly as an earlier one does, the "
-              f"same image under two names: {', '.join(said[:4])}{', ...' if len(said) > 4 else ''}; the image counted once")
+        print(f"note: {Path(images) / cam}: {len(said)} image(s) show the board at the same pose as an earlier one "
+              f"(every corner within {REPEAT_PX:g} px: a copy, a re-saved image, a frame grabbed twice): "
+              f"{', '.join(said[:4])}{', ...' if len(said) > 4 else ''}; dropped, each pose counted once")
         for name in repeats:
             del named[name]
+    return dropped
 
 
 def _check_pairing(images: str, names: Sequence[str], views: dict, missed: dict, floor_view: str | None) -> None:
@@ -925,6 +919,10 @@ def cmd_check(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.images} holds views of the cameras {held}, but {args.rig} is the rig of the cameras "
                          f"{names} (no folder {missing[0]!r}): views of another rig? check them with its rig file")
     views, missed = detect_folder(board, args.images, names)
+    limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
+    if sized_as_exchanged(rig, views):
+        raise UsageError(_exchanged_sizes_words(rig, args.rig, board, views, Path(args.images), limits, thickness,
+                                                floor_view))
     for cam in rig.pair:
         for name, view in views[cam.name].items():
             if view.image_size != cam.size:
@@ -965,7 +963,6 @@ def cmd_check(args: argparse.Namespace) -> int:
              if "floor" in report else "")
           + (f", {report['untriangulated']} of {report['corners']} corners not triangulated"
              if report["untriangulated"] else ""))
-    limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
     reasons = check_failures(report, limits)
     if reasons and (exchanged := exchanged_fit(rig, board, views, limits, board_thickness_m=thickness,
                                                floor_view=floor_view)) is not None:
@@ -986,6 +983,24 @@ def _exchanged_words(report: dict, images: Path, names: Sequence[str]) -> str:
             f"px rms, scale {report['scale']:.4f}): {images / a} holds the images of camera {b!r}, and {images / b} "
             f"those of {a!r}. Exchange the two folders' images (a tool that named the cameras the other way round), then "
             "check again; solved from them as they are, the rig would give each camera the other's lens and pose")
+
+
+def _exchanged_sizes_words(rig, rig_path: str, board: BoardSpec, views: dict, images: Path, limits: CheckLimits,
+                           thickness: float, floor_view: str) -> str:
+    """The error for folders whose images are each the other camera's size (:func:`sized_as_exchanged`): the
+    sizes as the evidence, and whether the rig fits the views exchanged (within ``limits``)."""
+    a, b = rig.pair
+    exchanged = {a.name: views[b.name], b.name: views[a.name]}
+    report = check_rig(rig, board, exchanged, board_thickness_m=thickness, floor_view=floor_view)
+    reasons = check_failures(report, limits) if report["pairs"] else ["no pair to measure"]
+    scale = "not measured" if report.get("scale") is None else f"{report['scale']:.4f}"
+    fit = (f"exchanged, the rig fits them (reprojection {report['reprojection_px_rms']:.3f} px rms, scale {scale})"
+           if not reasons else
+           f"exchanged, the rig does not fit them either ({'; '.join(reasons)}): calibrate again once they are")
+    return (f"the folders look exchanged: every image in {images / a.name} is {b.width}x{b.height}, the size of "
+            f"camera {b.name!r} in {rig_path}, and every image in {images / b.name} {a.width}x{a.height}, camera "
+            f"{a.name!r}'s; {fit}. Exchange the two folders' images (a tool that named the cameras the other way "
+            "round), then check again")
 
 
 # ------------------------------------------------------------------ main

@@ -36,7 +36,8 @@ from ghnerf_runtime.rig_file import principal_point_problem
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
            "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "fold_warning", "MIN_VIEWS", "MAX_PAIR_PX",
            "USUAL_PITCH_DEG", "typed_pitch_warning", "BOARD_DISTANCE_SLACK", "median_board_distance_m",
-           "board_distance_warning", "SIDE_NAMES", "sides_warning"]
+           "board_distance_warning", "SIDE_NAMES", "expected_sides", "sides_warning", "REPEAT_PX", "same_pose",
+           "repeated_views"]
 
 #: Lens models: OpenCV flags and what they suit.
 LENS_MODELS = {
@@ -69,11 +70,23 @@ USUAL_PITCH_DEG = (-15.0, 60.0)
 #: gives a rig as consistent as the true one: the distance the board was held at is the figure that shows it (a
 #: body-capture rig is calibrated with the board where people will stand, not 10 cm or 20 m away).
 BOARD_DISTANCE_SLACK = 2.0
-#: Camera names that say a side (``opencv://``'s nominal rig, docs/calibration.md): a pair so named that solves with
-#: its "left" camera on the right, by more than this share of the baseline along the rig's x, is warned about
-#: (each folder holding the other camera's images); a pair stacked one above the other has no side to check.
+#: Camera names that say a side (``depthai://``'s sensors, docs/calibration.md): a pair so named is expected with its
+#: "left" camera on the left, whatever the rig's order. A pair named otherwise (``cam_a``/``cam_b``, ``0``/``1``) is
+#: expected with its first camera on the left, where every rig source puts it (``opencv://``'s nominal rig names
+#: its ``first=`` camera ``left``, ``drivers.sim.placement.RigPlacement`` its ``names[0]``). A pair solved the other
+#: way round, by more than this share of the baseline along the first camera's x (its image's rightward axis), is
+#: warned about (each folder holding the other camera's images); a pair stacked one above the other has no side.
 SIDE_NAMES = ("left", "right")
 SIDES_SHARE = 0.5
+#: Two images of one camera show the same board pose (counted once) where every corner both found lies within this
+#: many pixels of the other's, and they share at least half of each one's corners. On ghcal synth's rendered views
+#: (benchmarks/measure_repeated_views.py, 3 seeds) one pose's two images lay at most 1.84 px apart (re-saved as JPEG
+#: of quality 75; 1.11 px at quality 95, 0.75 px rendered twice with other sensor noise: a still board exposed
+#: twice), a board moved 5 mm at most 3.0 px (median 2.3), and each view at least 33 px from the capture's nearest
+#: other view (median 91 px): a re-saved image and a frame grabbed twice are caught, a view moved on purpose is not.
+#: 0.5 px would have missed over a tenth of the still board's second exposures (90th percentile 0.53 px) and of the
+#: quality-85 copies (0.61 px).
+REPEAT_PX = 3.0
 
 
 @dataclass(frozen=True)
@@ -114,6 +127,31 @@ class Floor:
 class RigSolution:
     rig: Rig
     report: dict[str, Any] = field(default_factory=dict)
+
+
+def same_pose(view: BoardView, other: BoardView, *, within_px: float = REPEAT_PX) -> bool:
+    """Whether two images of one camera show the board at the same pose (:data:`REPEAT_PX`): a copy, a re-saved
+    JPEG, a burst's frame grabbed twice, a still board exposed twice. Their corner ids may differ a little (a
+    re-saved image loses a corner or two): at least half of each one's are shared, and :data:`MIN_CORNERS`."""
+    shared, mine, theirs = np.intersect1d(view.ids, other.ids, return_indices=True)
+    if shared.size < max(MIN_CORNERS, len(view) / 2, len(other) / 2):
+        return False
+    gaps = np.linalg.norm(view.corners[mine] - other.corners[theirs], axis=1)
+    return bool(np.all(gaps <= within_px))
+
+
+def repeated_views(views: Mapping[str, BoardView], *, skip: str | None = None) -> dict[str, str]:
+    """View name -> the earlier view (by name) it shows the same pose as (:func:`same_pose`), for the views to count
+    once: each copy weighed its pose once more in the lens's fit. ``skip`` (the floor view) is neither."""
+    kept: list[str] = []
+    repeats: dict[str, str] = {}
+    for name in sorted(n for n in views if n != skip):
+        same = next((earlier for earlier in kept if same_pose(views[name], views[earlier])), None)
+        if same is None:
+            kept.append(name)
+        else:
+            repeats[name] = same
+    return repeats
 
 
 def _object_points(board: BoardSpec, view: BoardView) -> np.ndarray:
@@ -641,22 +679,44 @@ def fold_warning(cam: Camera) -> str:
     return f"{where}: views did not reach the image corners; capture some there, or use --lens narrow"
 
 
-def sides_warning(rig: Rig) -> str | None:
-    """The warning for a levelled pair named ``left`` and ``right`` (:data:`SIDE_NAMES`) whose ``left`` camera came
-    out to the right of the other (None otherwise): the images of each in the other's folder (another tool that
-    named the cameras the other way round) solve as well as the right ones, and the rig file gave each camera
-    the other's lens and pose without a word."""
+def expected_sides(rig: Rig) -> tuple[Camera, Camera, bool]:
+    """The pair's cameras as (expected on the left, expected on the right, by their names): by their names where
+    they are named ``left`` and ``right`` (:data:`SIDE_NAMES`, in either order), else by the rig's order, the
+    first on the left."""
     named = {cam.name.lower(): cam for cam in rig.pair}
-    if set(named) != set(SIDE_NAMES):
-        return None
-    left, right = (named[side] for side in SIDE_NAMES)
-    across = float(left.center[0] - right.center[0])  # the rig's x: to the right, as seen from behind the cameras
+    if set(named) == set(SIDE_NAMES):
+        left, right = (named[side] for side in SIDE_NAMES)
+        return left, right, True
+    first, second = rig.pair
+    return first, second, False
+
+
+def _across_first_camera_m(rig: Rig, cam: Camera) -> float:
+    """How far ``cam``'s centre lies along the first camera's x (to the right in its image), from that camera:
+    the side the extrinsics give, levelled or not (a typed --roll 180 would turn the rig's x around)."""
+    first = rig.pair[0]
+    return float((first.R @ (cam.center - first.center))[0])
+
+
+def sides_warning(rig: Rig) -> str | None:
+    """The warning for a pair whose camera expected on the left (:func:`expected_sides`: by its name ``left``, else
+    as the first camera) came out on the right of the other, along the first camera's x (None otherwise): the
+    images of each in the other's folder (another tool that named the cameras the other way round) solve as well
+    as the right ones, and the rig file gave each camera the other's lens and pose without a word. Before session
+    65 only a pair named ``left`` and ``right`` was checked; ``cam_a`` and ``cam_b`` exchanged passed."""
+    left, right, by_name = expected_sides(rig)
+    across = _across_first_camera_m(rig, left) - _across_first_camera_m(rig, right)
     if not across > SIDES_SHARE * rig.baseline:
         return None
-    return (f"sides: camera {left.name!r} came out {across:.3f} m to the right of {right.name!r} (seen from behind the "
-            f"cameras): if each camera's folder holds the other's images (a tool that named them the other way "
-            "round), exchange the two folders' images and solve again; if the cameras are named against their "
-            "sides (opencv://?first= names its camera 'left'), the rig is right as it is")
+    if by_name:
+        against, renamed = "against its name", "if the cameras are named against their sides, the rig is right as it is"
+    else:
+        against = "though the first camera of the pair, which the rig sources put on the left"
+        renamed = f"if camera {left.name!r} is on the right on purpose, the rig is right as it is"
+    return (f"sides: camera {left.name!r} came out {across:.3f} m to the right of {right.name!r} (along camera "
+            f"{rig.pair[0].name!r}'s image x, seen from behind the cameras), {against}: if each camera's folder holds "
+            "the other's images (a tool that named them the other way round), exchange the two folders' images and "
+            f"solve again; {renamed}")
 
 
 def typed_pitch_warning(pitch_deg: float, camera: str) -> str | None:

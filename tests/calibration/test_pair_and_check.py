@@ -457,6 +457,54 @@ def test_check_names_the_exchanged_folders_instead_of_calibrating_again(level_ri
                      "--images", str(images)]) == 0
 
 
+def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str) -> tuple[int, Path]:
+    """``ghcal check`` of ``rig`` on ``views`` (the detection stood in for): its exit status, and the images' folder."""
+    from ghnerf_runtime.rig_file import save_rig
+
+    images = tmp_path / "capture"
+    for cam, named in views.items():
+        (images / cam).mkdir(parents=True, exist_ok=True)
+        for name in named:
+            (images / cam / f"{name}.png").touch()  # listed by name
+    (tmp_path / "board.json").write_text(json.dumps(BOARD.to_dict()))
+    save_rig(rig, tmp_path / "rig.json")
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {cam: [] for cam in views}))
+    rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
+                   "--images", str(images), *options])
+    return rc, images
+
+
+@pytest.fixture(scope="module")
+def sized_rig(level_rig) -> Rig:
+    """``level_rig`` with its right camera at 640x400 (the same field of view)."""
+    left, right = level_rig.pair
+    small = dataclasses.replace(right, width=640, height=400, K=intrinsics_from_fov(640, 400, 75.0))
+    return Rig((left, small), level_rig.volume)
+
+
+def test_folders_exchanged_between_cameras_of_two_sizes_are_said_so(sized_rig, tmp_path, capsys, monkeypatch):
+    # every image was "the image is 640x400, camera 'left' ... 960x600", and the exchange never tried
+    views = _views(sized_rig, _facing_poses(sized_rig, 6, seed=5))
+    rc, images = _check_cli(sized_rig, _exchanged(views), tmp_path, monkeypatch)
+    err = capsys.readouterr().err
+    assert rc == 2 and (
+        f"the folders look exchanged: every image in {images / 'left'} is 640x400, the size of camera 'right' in "
+        f"{tmp_path / 'rig.json'}, and every image in {images / 'right'} 960x600, camera 'left''s; exchanged, the rig "
+        "fits them (reprojection 0.000 px rms, scale 1.0000). Exchange the two folders' images") in err
+    # one folder only at the other's size (the same images copied into both): the image named, as before
+    both_small = {"left": views["right"], "right": views["right"]}
+    rc, images = _check_cli(sized_rig, both_small, tmp_path, monkeypatch)
+    err = capsys.readouterr().err
+    assert rc == 2 and "look exchanged" not in err and "the image is 640x400, camera 'left'" in err
+    assert _check_cli(sized_rig, views, tmp_path, monkeypatch)[0] == 0
+    # exchanged, and not fitting within the limits given either: said so, the sizes still the evidence
+    noisy = _views(sized_rig, _facing_poses(sized_rig, 6, seed=5), noise_px=0.5)
+    rc, images = _check_cli(sized_rig, _exchanged(noisy), tmp_path, monkeypatch, "--max-px", "0.1")
+    err = capsys.readouterr().err
+    assert rc == 2 and "the folders look exchanged: every image in" in err
+    assert "exchanged, the rig does not fit them either (reprojection" in err and "over 0.1 px" in err
+
+
 @pytest.mark.parametrize("exchanged", [False, True])
 def test_a_left_camera_solved_on_the_right_is_warned_about(level_rig, exchanged):
     # each folder holding the other camera's images solves as well as the right ones (the rig file then gives each
@@ -469,18 +517,48 @@ def test_a_left_camera_solved_on_the_right_is_warned_about(level_rig, exchanged)
     if not exchanged:
         assert said == []
         return
-    assert len(said) == 1 and said[0].startswith("sides: camera 'left' came out 0.60")
+    assert len(said) == 1 and said[0].startswith("sides: camera 'left' came out 0.59")
     assert "m to the right of 'right'" in said[0] and "exchange the two folders' images and solve again" in said[0]
 
 
-def test_cameras_not_named_for_their_sides_are_not_warned_about(level_rig):
+@pytest.mark.parametrize("names", [("cam_a", "cam_b"), ("0", "1")])
+@pytest.mark.parametrize("exchanged", [False, True])
+def test_cameras_not_named_for_their_sides_are_checked_by_the_rig_s_order(level_rig, names, exchanged):
+    # only a pair named 'left' and 'right' was checked: cam_a's and cam_b's folders exchanged solved each camera
+    # with the other's lens and pose without a word; the rig sources put the first camera on the left
+    poses = _facing_poses(level_rig, 10, seed=7)
+    views = _views(level_rig, poses, noise_px=0.1)
+    if exchanged:
+        views = _exchanged(views)
+    renamed = dict(zip(names, (views["left"], views["right"])))
+    solution = solve.solve_rig(BOARD, renamed, names, camera_height_m=1.4, pitch_deg=9.0)
+    said = [w for w in solution.report["warnings"] if w.startswith("sides:")]
+    if not exchanged:
+        assert said == []
+        return
+    first, second = names
+    assert len(said) == 1 and said[0].startswith(f"sides: camera {first!r} came out 0.597 m")
+    assert f"m to the right of {second!r} (along camera {first!r}'s image x" in said[0]
+    assert "though the first camera of the pair, which the rig sources put on the left" in said[0]
+    assert "exchange the two folders' images and solve again" in said[0]
+
+
+def test_the_side_check_follows_the_names_then_the_order(level_rig):
     left, right = level_rig.pair
-    assert solve.sides_warning(Rig((right, left), level_rig.volume)) is None  # the rig's order is not a side
+    assert solve.sides_warning(Rig((right, left), level_rig.volume)) is None  # named for their sides: the names rule
     named = Rig((dataclasses.replace(right, name="first"), dataclasses.replace(left, name="second")), level_rig.volume)
-    assert solve.sides_warning(named) is None
+    assert solve.sides_warning(named).startswith("sides: camera 'first' came out 0.596 m to the right of 'second'")
     # one above the other, a hair to the left: no side to check
     above = dataclasses.replace(left, name="right").with_pose(left.R, left.t - left.R @ np.array([-0.01, 0.5, 0.0]))
     assert solve.sides_warning(Rig((left, above), level_rig.volume)) is None
+    # the side is the first camera's image x, not the levelled rig's: a pair mounted upside down (both cameras
+    # turned half a turn on their axes) has its 'left' sensor on the rig's right, and nothing is wrong with it
+    half_turn = np.diag([-1.0, -1.0, 1.0])
+    upside_down = Rig(tuple(dataclasses.replace(cam, name=name).with_pose(half_turn @ cam.R, half_turn @ cam.t)
+                            for cam, name in ((right, "left"), (left, "right"))), level_rig.volume)
+    assert solve.sides_warning(upside_down) is None
+    assert solve.sides_warning(Rig(tuple(dataclasses.replace(cam, name=name) for cam, name in (
+        (right, "left"), (left, "right"))), level_rig.volume)) is not None  # the same, upright: against the names
 
 
 def test_too_few_views_besides_the_floor_view_are_said_so(level_views):
@@ -500,10 +578,11 @@ def test_too_few_views_besides_the_floor_view_are_said_so(level_views):
 
 def test_an_image_given_twice_is_counted_once(level_rig, tmp_path, capsys, monkeypatch):
     # a copy weighed its pose twice in the lens's fit without a word; one copied into a single camera's folder made
-    # a pair "not taken at the same instant?"
+    # a pair "not taken at the same instant?"; a re-saved copy, its corners not equal to the last bit, was not caught
     views = _views(level_rig, _facing_poses(level_rig, 8, seed=3), noise_px=0.1)
     views["left"]["100"] = views["left"]["003"]  # left/100.png a copy of left/003.png
-    views["right"]["100"] = views["right"]["004"]  # right/100.png a copy of right/004.png, so the pair is one
+    # right/100.png right/004.png re-saved (its corners a little off, two lost), so the pair is one
+    views["right"]["100"] = _jittered(views["right"]["004"], 0.8, seed=5, lose=2)
     images = tmp_path / "capture"
     for cam, named in views.items():
         (images / cam).mkdir(parents=True)
@@ -516,8 +595,53 @@ def test_an_image_given_twice_is_counted_once(level_rig, tmp_path, capsys, monke
     out = capsys.readouterr().out
     assert rc == 0
     for cam, copied in (("left", "003"), ("right", "004")):
-        assert (f"note: {images / cam}: 1 image(s) show the board exactly as an earlier one does, the same image under "
-                f"two names: 100.png (as {copied}.png); the image counted once") in out
+        assert (f"note: {images / cam}: 1 image(s) show the board at the same pose as an earlier one (every corner "
+                f"within 3 px: a copy, a re-saved image, a frame grabbed twice): 100.png (as {copied}.png); dropped, "
+                "each pose counted once") in out
     report = json.loads((tmp_path / "rig.report.json").read_text())
     assert report["cameras"]["left"]["views"] == report["cameras"]["right"]["views"] == 8
     assert "100" not in report["pair"]["per_view_px"] and report["pair"]["dropped_views"] == []
+    assert report["cameras"]["left"]["repeated_views"] == {"100": "003"}
+    assert report["cameras"]["right"]["repeated_views"] == {"100": "004"}
+
+
+def _jittered(view: BoardView, px: float, seed: int, lose: int = 0) -> BoardView:
+    """``view`` with every corner moved by up to ``px`` and its last ``lose`` corners not found."""
+    rng = np.random.default_rng(seed)
+    step = rng.normal(size=view.corners.shape)
+    step *= px / np.linalg.norm(step, axis=1, keepdims=True) * rng.uniform(0.0, 1.0, (len(view), 1))
+    keep = slice(0, len(view) - lose)
+    return BoardView(view.ids[keep], (view.corners + step)[keep], view.image_size)
+
+
+def test_the_same_pose_captured_twice_is_counted_once(level_rig):
+    # only an image's exact copy was caught: the pose re-saved as JPEG, or a burst's frame grabbed twice, weighed
+    # its pose twice in the lens's fit
+    views = _views(level_rig, _facing_poses(level_rig, 6, seed=3), noise_px=0.1)["left"]
+    views["100"] = _jittered(views["002"], 2.9, seed=1, lose=4)  # within REPEAT_PX, a few corners lost
+    views["101"] = _jittered(views["004"], 0.3, seed=2)
+    views["102"] = BoardView(views["001"].ids, views["001"].corners + [4.0, 0.0], views["001"].image_size)  # moved
+    views["floor"] = views["003"]
+    assert solve.repeated_views(views, skip="floor") == {"100": "002", "101": "004"}
+    assert solve.repeated_views(views) == {"100": "002", "101": "004", "floor": "003"}
+    few = BoardView(views["000"].ids[:10], views["000"].corners[:10], views["000"].image_size)  # a quarter shared
+    assert not solve.same_pose(few, views["000"]) and solve.same_pose(views["000"], views["000"])
+
+
+def test_a_rendered_image_re_saved_as_jpeg_is_the_same_pose_and_a_moved_board_is_not():
+    # on the images ghcal synth renders: the corners the detector finds in a re-saved image, against those of the
+    # board moved by 20 mm (REPEAT_PX's measurement: benchmarks/measure_repeated_views.py)
+    from calibration.detect import BoardDetector
+    from calibration.render import render_board
+
+    rig, board = example_rig(), BoardSpec()
+    detector = BoardDetector(board)
+    R, t = next(iter(board_poses_both_see(rig, board, 1, seed=2).values()))  # all 40 corners found
+    cam = rig.pair[0]
+    image = render_board(cam, board, R, t, seed=1)
+    ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 75])
+    views = [detector.detect(im) for im in (image, cv2.imdecode(data, cv2.IMREAD_GRAYSCALE),
+                                            render_board(cam, board, R, t, seed=2),
+                                            render_board(cam, board, R, t + 0.02 * R[:, 0], seed=1))]
+    assert solve.same_pose(views[0], views[1]) and solve.same_pose(views[0], views[2])
+    assert not solve.same_pose(views[0], views[3])
