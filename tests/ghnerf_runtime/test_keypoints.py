@@ -409,6 +409,30 @@ def test_a_blob_past_one_keeps_its_peak():
     np.testing.assert_allclose(as_uint8.uv, centres, atol=0.1)  # rounded to integers, but no plateau
 
 
+@pytest.mark.parametrize("sigma, gain", [(2.0, 100.0), (3.0, 3.0), (1.5, 10.0)])
+def test_a_saturated_top_is_placed_at_its_centre(sigma, gain):
+    """A blob whose top saturates (a sigmoid at 1.0 in float32 past a logit of 17; an int8 output at its largest
+    value) is a plateau: the fit took the filtered map's highest pixel, which rounding picks anywhere on it
+    (up to 2 px off for sigma 2, 100-fold); the plateau's half-maximum centroid is within a tenth of a pixel."""
+    yy, xx = np.mgrid[:32, :32]
+    centres = np.random.default_rng(3).uniform(10.0, 22.0, size=(40, 2))
+    maps = np.stack([np.minimum(gain * np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * sigma ** 2)), 1.0)
+                     for x, y in centres]).astype(np.float32)
+    kp = decode_keypoints(maps)
+    assert kp.valid.all()
+    assert np.hypot(*(kp.uv - centres).T).max() < 0.1
+
+
+def test_a_saturated_top_beside_a_second_one_is_placed_on_one_of_them():
+    """Two saturated tops a few cells apart (two people) whose filtered valley is too shallow for a runner-up: the
+    joint is one plateau's centre, not the pair's centroid between them, on neither person."""
+    yy, xx = np.mgrid[:32, :32]
+    centres = np.array([(10.4, 15.3), (19.7, 15.8)])
+    top = np.maximum(*[np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * 1.5 ** 2)) for x, y in centres])
+    kp = decode_keypoints(np.minimum(20.0 * top, 1.0)[None].astype(np.float32))
+    assert kp.valid[0] and np.hypot(*(centres - kp.uv[0]).T).min() < 0.1
+
+
 def test_float64_values_past_the_float32_range_are_clipped_like_any_other():
     """A finite float64 value past 3.4e38 overflowed the float32 cast to inf, so its joint was dropped as
     non-finite (with a RuntimeWarning), where the same map in float32 range is clipped to 1 and decoded."""
