@@ -9,7 +9,9 @@ Algorithm, per joint map (a single person is assumed):
 3. The best region is the one with the highest peak, i.e. the region holding the
    map's maximum. A region covering more than ``max_region_frac`` of the map is no
    peak (saturated, flat or noise-flooded map): the joint is missing.
-4. Subpixel refinement of that peak (below), confidence = filtered peak value.
+4. Subpixel refinement of that peak (below), confidence = filtered peak value. A saturated top (a plateau
+   at the map's maximum: a sigmoid at 1.0 in float32) is placed by a paraboloid fitted to the log of its
+   flank, the unclipped samples around it (:func:`_place_flat_tops`).
 5. The runner-up: the highest filtered value outside the best region (so the peak of another
    region above the threshold), or, where higher, a second local maximum inside the best region
    with a valley between it and the peak (the map dipping to at most :data:`RUNNER_UP_DIP` of it
@@ -283,49 +285,119 @@ def _refine_quadratic(maps: np.ndarray, padded: np.ndarray, pad: int, iy: np.nda
         patch[near] = _patch3(maps, 0, iy[near], ix[near], which[near])
     # One fit for all: an axis with no outer neighbour is only flagged on the raw (edge) patches.
     offset = _newton_log(patch, near & ((ix == 0) | (ix == w - 1)), near & ((iy == 0) | (iy == h - 1)))
-    return _place_flat_tops(maps, padded, pad, which, top_iy, top_ix, np.stack([ix, iy], axis=-1) + offset)
+    # a plateau by the edge may show its ties at the raw maximum the climb reached rather than at the filtered peak
+    flat = _flat_tops(maps, which, top_iy, top_ix) | _flat_tops(maps, which, iy, ix)
+    return _place_flat_tops(maps, padded, pad, which, top_iy, top_ix, flat, np.stack([ix, iy], axis=-1) + offset)
 
 
-#: A saturated top (the raw 3x3 around the filtered peak all at the map's maximum) is placed at the centroid of the
-#: filtered map's excess over this share of its peak, inside the peak's connected part above that level.
+#: A saturated top's flank: the raw pixels below the plateau and above this share of it, within
+#: :data:`FLANK_WIDTH` pixels of it, whose log a paraboloid is fitted to.
+FLANK_LOW = 0.1
+FLANK_WIDTH = 3
+#: Fewest flank pixels for the fit (it has six terms).
+FLANK_MIN_PIXELS = 8
+#: How far (pixels) past its plateau's bounding box a fitted centre may lie: a saturated blob's centre is on its
+#: plateau, or past the map's edge where the edge cuts it (then placed on the edge pixel).
+FLANK_REACH = 1.5
+#: Without the fit (too few flank pixels, no maximum, another plateau beside): the centroid of the filtered map's
+#: excess over this share of its peak, over the peak's connected part above that level.
 FLAT_TOP_LEVEL = 0.8
-#: Pixels of a 3x3 tied at the map's maximum that make a plateau: a sampled Gaussian ties at most 4 ways (centred
-#: between four pixels), a saturated disc's rim pixel 5 or more.
-FLAT_TOP_TIES = 5
+#: Pixels of a 3x3 tied at the map's maximum that make a plateau: 2 where that maximum is 1, the top of the
+#: heatmaps' range (a sigmoid saturated in float32, a map past 1 scaled by its maximum), 5 below it (a sampled
+#: Gaussian ties at most 4 ways, centred between four pixels; the shipped int8 graphs' maps below 1 tie too: flagged
+#: at 2 ties, the reference bench (docs/runtime.md) moved from PCK 0.981 / MPJPE 29.1 mm to 0.980 / 29.2 mm).
+FLAT_TOP_TIES = 2
+FLAT_TOP_TIES_BELOW_ONE = 5
+#: The smallest plateau placed by the excess centroid where the flank fit fails: on a smaller one the log-quadratic
+#: fit is closer (0.05 px, where the centroid is 0.1-0.2 px off).
+EXCESS_MIN_PLATEAU = 5
 
 
 def _flat_tops(maps: np.ndarray, which: np.ndarray, iy: np.ndarray, ix: np.ndarray) -> np.ndarray:
     """``(N,)`` bool: pixel ``k`` of map ``which[k]`` lies on a plateau at that map's maximum (at least
-    :data:`FLAT_TOP_TIES` pixels of its raw 3x3 neighbourhood at it): a saturated top (a sigmoid at 1.0 in float32
-    past a logit of 17, a map past 1 scaled by its maximum). Without a filter the peak is the plateau's first pixel,
-    on its rim, hence not the whole 3x3."""
+    :data:`FLAT_TOP_TIES` or :data:`FLAT_TOP_TIES_BELOW_ONE` pixels of its raw 3x3 neighbourhood at it): a saturated top (a sigmoid at 1.0 in float32
+    past a logit of 17, a map past 1 scaled by its maximum)."""
     top = maps.reshape(len(maps), -1).max(axis=1)[which]
-    return (_patch3(maps, 0, iy, ix, which) == top[:, None, None]).sum(axis=(1, 2)) >= FLAT_TOP_TIES
+    ties = (_patch3(maps, 0, iy, ix, which) == top[:, None, None]).sum(axis=(1, 2))
+    return ties >= np.where(top >= 1.0, FLAT_TOP_TIES, FLAT_TOP_TIES_BELOW_ONE)
+
+
+def _pixels(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns of an ``(H, W)`` mask's pixels, from its flat indices (as :func:`_nonzero_3d`)."""
+    return np.divmod(np.flatnonzero(mask), mask.shape[1])
+
+
+def _plateau(raw: np.ndarray, iy: int, ix: int) -> tuple[np.ndarray, np.ndarray]:
+    """The 8-connected plateau at ``raw``'s maximum holding pixel ``(iy, ix)`` (or its nearest one: the filtered peak
+    of a plateau's rim may lie just off it), and every pixel at that maximum, ``(H, W)`` bool each."""
+    at_top = raw == raw.max()
+    _, labels = cv2.connectedComponents(at_top.astype(np.uint8), connectivity=8)
+    ys, xs = _pixels(at_top)
+    nearest = np.argmin((ys - iy) ** 2 + (xs - ix) ** 2)
+    return labels == labels[ys[nearest], xs[nearest]], at_top
+
+
+def _flank_fit(raw: np.ndarray, plateau: np.ndarray, at_top: np.ndarray) -> np.ndarray | None:
+    """The vertex ``(x, y)`` of a paraboloid fitted (least squares, weighted by value) to the log of the plateau's
+    flank (:data:`FLANK_LOW`, :data:`FLANK_WIDTH`): a clipped Gaussian's unclipped samples are exactly Gaussian, so
+    this finds its centre wherever the plateau is, on the map's edge too. None without enough flank pixels, with
+    another plateau beside (its flank would join in), without a maximum, or past :data:`FLANK_REACH`."""
+    near = cv2.dilate(plateau.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=FLANK_WIDTH) > 0
+    if (near & at_top & ~plateau).any():
+        return None
+    flank = near & ~plateau & (raw > FLANK_LOW * raw.max())
+    ys, xs = _pixels(flank)
+    if len(ys) < FLANK_MIN_PIXELS:
+        return None
+    py, px = _pixels(plateau)
+    y0, x0 = py.mean(), px.mean()  # centred: a well-scaled system
+    y, x = ys - y0, xs - x0
+    value = raw[ys, xs].astype(np.float64)
+    terms = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)
+    c = np.linalg.lstsq(terms * value[:, None], np.log(value) * value, rcond=None)[0]
+    hessian = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
+    if not (hessian[0, 0] < 0 and np.linalg.det(hessian) > 1e-12):
+        return None
+    vertex = np.linalg.solve(hessian, -c[1:3]) + [x0, y0]
+    inside = (px.min() - FLANK_REACH <= vertex[0] <= px.max() + FLANK_REACH
+              and py.min() - FLANK_REACH <= vertex[1] <= py.max() + FLANK_REACH)
+    return np.clip(vertex, 0.0, [raw.shape[1] - 1, raw.shape[0] - 1]) if inside else None
+
+
+def _excess_centroid(filtered: np.ndarray, iy: int, ix: int) -> np.ndarray | None:
+    """The centroid of ``filtered``'s excess over :data:`FLAT_TOP_LEVEL` of its value at ``(iy, ix)``, over that
+    pixel's connected part above the level (a high level: two saturated tops a few cells apart stay two parts);
+    None where the part reaches the map's edge (its centroid would be pulled inwards)."""
+    excess = filtered - FLAT_TOP_LEVEL * filtered[iy, ix]
+    _, labels = cv2.connectedComponents((excess > 0).astype(np.uint8), connectivity=8)
+    part = labels == labels[iy, ix]
+    if part[0].any() or part[-1].any() or part[:, 0].any() or part[:, -1].any():
+        return None
+    ys, xs = _pixels(part)
+    weight = excess[ys, xs]
+    return np.array([(weight * xs).sum(), (weight * ys).sum()]) / weight.sum()
 
 
 def _place_flat_tops(maps: np.ndarray, padded: np.ndarray, pad: int, which: np.ndarray, iy: np.ndarray,
-                     ix: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """``uv`` with each saturated top (:func:`_flat_tops`) at the weighted centroid of its filtered map's excess
-    over :data:`FLAT_TOP_LEVEL` of the peak, over the peak's connected part above that level (a high level: two
-    saturated tops a few cells apart stay two parts). The log-quadratic fit of a flat top
-    took the filtered map's highest pixel, which rounding picks anywhere on the plateau: 2 px off for a blob of
-    sigma 2 px saturated 100-fold, 0.02 px now (``tests/ghnerf_runtime/test_keypoints.py -k saturated``). A part
-    that reaches the map's edge is left to the fit: its centroid would be pulled inwards."""
-    flat = np.flatnonzero(_flat_tops(maps, which, iy, ix))
+                     ix: np.ndarray, flat: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """``uv`` with each saturated top (``flat``, :func:`_flat_tops`) placed by its flank (:func:`_flank_fit`), else, on a plateau
+    of :data:`EXCESS_MIN_PLATEAU` pixels or more, by its filtered map's excess (:func:`_excess_centroid`), else as the fit placed it. The log-quadratic fit of a flat
+    top took the filtered map's highest pixel, which rounding picks anywhere on the plateau: 2 px off for a blob of
+    sigma 2 px saturated 100-fold, 2.6 px on the map's edge (``tests/ghnerf_runtime/test_keypoints.py -k
+    saturated``)."""
+    flat = np.flatnonzero(flat)
     if not len(flat):
         return uv
     uv = uv.copy()
     h, w = maps.shape[1:]
-    for k in flat:  # rare (a saturated map): one labelling per top
-        filtered = padded[which[k], pad:pad + h, pad:pad + w].astype(np.float64)
-        excess = filtered - FLAT_TOP_LEVEL * filtered[iy[k], ix[k]]
-        _, labels = cv2.connectedComponents((excess > 0).astype(np.uint8), connectivity=8)
-        part = labels == labels[iy[k], ix[k]]
-        if part[0].any() or part[-1].any() or part[:, 0].any() or part[:, -1].any():
-            continue
-        weight = np.where(part, excess, 0.0)
-        rows, cols = np.mgrid[:h, :w]
-        uv[k] = [(weight * cols).sum() / weight.sum(), (weight * rows).sum() / weight.sum()]
+    for k in flat:  # rare (a saturated map): a few labellings per top
+        raw = maps[which[k]].astype(np.float64)
+        plateau, at_top = _plateau(raw, iy[k], ix[k])
+        placed = _flank_fit(raw, plateau, at_top)
+        if placed is None and plateau.sum() >= EXCESS_MIN_PLATEAU:
+            placed = _excess_centroid(padded[which[k], pad:pad + h, pad:pad + w].astype(np.float64), iy[k], ix[k])
+        if placed is not None:
+            uv[k] = placed
     return uv
 
 
