@@ -285,8 +285,9 @@ def _refine_quadratic(maps: np.ndarray, padded: np.ndarray, pad: int, iy: np.nda
         patch[near] = _patch3(maps, 0, iy[near], ix[near], which[near])
     # One fit for all: an axis with no outer neighbour is only flagged on the raw (edge) patches.
     offset = _newton_log(patch, near & ((ix == 0) | (ix == w - 1)), near & ((iy == 0) | (iy == h - 1)))
-    # a plateau by the edge may show its ties at the raw maximum the climb reached rather than at the filtered peak
-    flat = _flat_tops(maps, which, top_iy, top_ix) | _flat_tops(maps, which, iy, ix)
+    flat = _flat_tops(maps, which, top_iy, top_ix)
+    if near.any():  # a plateau by the edge may show its ties at the raw maximum the climb reached instead
+        flat[near] |= _flat_tops(maps, which[near], iy[near], ix[near])
     return _place_flat_tops(maps, padded, pad, which, top_iy, top_ix, flat, np.stack([ix, iy], axis=-1) + offset)
 
 
@@ -296,11 +297,14 @@ FLANK_LOW = 0.1
 FLANK_WIDTH = 3
 #: Fewest flank pixels for the fit (it has six terms).
 FLANK_MIN_PIXELS = 8
+#: Largest value-weighted RMS residual (heatmap units) of the flank's fit that is one blob's: 0.023 at most for
+#: single saturated blobs with noise N(0, 0.02), 0.14-0.18 for two people's plateaus run into one.
+FLANK_MAX_RMS = 0.06
 #: How far (pixels) past its plateau's bounding box a fitted centre may lie: a saturated blob's centre is on its
 #: plateau, or past the map's edge where the edge cuts it (then placed on the edge pixel).
 FLANK_REACH = 1.5
-#: Without the fit (too few flank pixels, no maximum, another plateau beside): the centroid of the filtered map's
-#: excess over this share of its peak, over the peak's connected part above that level.
+#: Where the flank is too small for the fit: the centroid of the filtered map's excess over this share of its peak,
+#: over the peak's connected part above that level.
 FLAT_TOP_LEVEL = 0.8
 #: Pixels of a 3x3 tied at the map's maximum that make a plateau: 2 where that maximum is 1, the top of the
 #: heatmaps' range (a sigmoid saturated in float32, a map past 1 scaled by its maximum), 5 below it (a sampled
@@ -337,24 +341,29 @@ def _plateau(raw: np.ndarray, iy: int, ix: int) -> tuple[np.ndarray, np.ndarray]
     return labels == labels[ys[nearest], xs[nearest]], at_top
 
 
-def _flank_fit(raw: np.ndarray, plateau: np.ndarray, at_top: np.ndarray) -> np.ndarray | None:
-    """The vertex ``(x, y)`` of a paraboloid fitted (least squares, weighted by value) to the log of the plateau's
-    flank (:data:`FLANK_LOW`, :data:`FLANK_WIDTH`): a clipped Gaussian's unclipped samples are exactly Gaussian, so
-    this finds its centre wherever the plateau is, on the map's edge too. None without enough flank pixels, with
-    another plateau beside (its flank would join in), without a maximum, or past :data:`FLANK_REACH`."""
+def _flank(raw: np.ndarray, plateau: np.ndarray, at_top: np.ndarray) -> np.ndarray | None:
+    """``(H, W)`` bool: the plateau's flank (:data:`FLANK_LOW`, :data:`FLANK_WIDTH`); None where another plateau
+    lies that near (its flank would join in)."""
     near = cv2.dilate(plateau.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=FLANK_WIDTH) > 0
     if (near & at_top & ~plateau).any():
         return None
-    flank = near & ~plateau & (raw > FLANK_LOW * raw.max())
+    return near & ~plateau & (raw > FLANK_LOW * raw.max())
+
+
+def _flank_fit(raw: np.ndarray, plateau: np.ndarray, flank: np.ndarray) -> np.ndarray | None:
+    """The vertex ``(x, y)`` of a paraboloid fitted (least squares, weighted by value) to the log of the plateau's
+    ``flank``: a clipped Gaussian's unclipped samples are exactly Gaussian, so this finds its centre wherever the
+    plateau is, on the map's edge too. None where the fit is no single blob's: no maximum, a residual past
+    :data:`FLANK_MAX_RMS` (two people's plateaus run into one), or a vertex past :data:`FLANK_REACH`."""
     ys, xs = _pixels(flank)
-    if len(ys) < FLANK_MIN_PIXELS:
-        return None
     py, px = _pixels(plateau)
     y0, x0 = py.mean(), px.mean()  # centred: a well-scaled system
     y, x = ys - y0, xs - x0
     value = raw[ys, xs].astype(np.float64)
     terms = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)
     c = np.linalg.lstsq(terms * value[:, None], np.log(value) * value, rcond=None)[0]
+    if np.sqrt(np.mean(np.square(value * (np.log(value) - terms @ c)))) > FLANK_MAX_RMS:
+        return None
     hessian = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
     if not (hessian[0, 0] < 0 and np.linalg.det(hessian) > 1e-12):
         return None
@@ -380,11 +389,12 @@ def _excess_centroid(filtered: np.ndarray, iy: int, ix: int) -> np.ndarray | Non
 
 def _place_flat_tops(maps: np.ndarray, padded: np.ndarray, pad: int, which: np.ndarray, iy: np.ndarray,
                      ix: np.ndarray, flat: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """``uv`` with each saturated top (``flat``, :func:`_flat_tops`) placed by its flank (:func:`_flank_fit`), else, on a plateau
-    of :data:`EXCESS_MIN_PLATEAU` pixels or more, by its filtered map's excess (:func:`_excess_centroid`), else as the fit placed it. The log-quadratic fit of a flat
-    top took the filtered map's highest pixel, which rounding picks anywhere on the plateau: 2 px off for a blob of
-    sigma 2 px saturated 100-fold, 2.6 px on the map's edge (``tests/ghnerf_runtime/test_keypoints.py -k
-    saturated``)."""
+    """``uv`` with each saturated top (``flat``, :func:`_flat_tops`) placed by its flank (:func:`_flank_fit`), or
+    where the flank is too small, on a plateau of :data:`EXCESS_MIN_PLATEAU` pixels or more, by its filtered map's
+    excess (:func:`_excess_centroid`); where neither holds, as the log-quadratic fit placed it. That fit took the
+    filtered plateau's highest pixel, which rounding picks anywhere on it: blobs of sigma 1.5-3 px saturated 1.5- to
+    100-fold were up to 2.0 px off inside the map and 3.0 px on its edge (``tests/ghnerf_runtime/test_keypoints.py
+    -k saturated``)."""
     flat = np.flatnonzero(flat)
     if not len(flat):
         return uv
@@ -393,9 +403,15 @@ def _place_flat_tops(maps: np.ndarray, padded: np.ndarray, pad: int, which: np.n
     for k in flat:  # rare (a saturated map): a few labellings per top
         raw = maps[which[k]].astype(np.float64)
         plateau, at_top = _plateau(raw, iy[k], ix[k])
-        placed = _flank_fit(raw, plateau, at_top)
-        if placed is None and plateau.sum() >= EXCESS_MIN_PLATEAU:
+        flank = _flank(raw, plateau, at_top)
+        if flank is None:  # another plateau beside: left to the fit, as is
+            continue
+        if flank.sum() >= FLANK_MIN_PIXELS:
+            placed = _flank_fit(raw, plateau, flank)
+        elif plateau.sum() >= EXCESS_MIN_PLATEAU:
             placed = _excess_centroid(padded[which[k], pad:pad + h, pad:pad + w].astype(np.float64), iy[k], ix[k])
+        else:
+            placed = None
         if placed is not None:
             uv[k] = placed
     return uv
