@@ -9,9 +9,9 @@ Algorithm, per joint map (a single person is assumed):
 3. The best region is the one with the highest peak, i.e. the region holding the
    map's maximum. A region covering more than ``max_region_frac`` of the map is no
    peak (saturated, flat or noise-flooded map): the joint is missing.
-4. Subpixel refinement of that peak (below), confidence = filtered peak value. A saturated top (a plateau
-   at the map's maximum: a sigmoid at 1.0 in float32) is placed by a paraboloid fitted to the log of its
-   flank, the unclipped samples around it (:func:`_place_flat_tops`).
+4. Subpixel refinement of that peak (below), confidence = filtered peak value. With ``"quadratic"``, a
+   saturated top (a plateau at the map's maximum: a sigmoid at 1.0 in float32) is placed by a paraboloid
+   fitted to the log of its flank, the unclipped samples around it (:func:`_place_flat_tops`).
 5. The runner-up: the highest filtered value outside the best region (so the peak of another
    region above the threshold), or, where higher, a second local maximum inside the best region
    with a valley between it and the peak (the map dipping to at most :data:`RUNNER_UP_DIP` of it
