@@ -392,6 +392,21 @@ def _warn_if_not_levelled(rig: Rig) -> None:
                     "it first with calibration.level.level_rig (docs/rig-file.md)", rig.rig_id, fmt)
 
 
+#: The coarsest step (seconds) a capture time may be held in at its value: a float32 stamp of a clock 1.7e9 s from
+#: its origin (the epoch) steps by 128 s, so every pair of a stream came with one time (the smoothing took each as
+#: the last pair again, the track's gap test passed every pair), and one past 16384 s (4.5 hours of a monotonic
+#: clock) by 2 ms or more; nanoseconds given as seconds (1.7e18) step by 256 s as a float64.
+MAX_TIME_STEP_S = 1e-3
+
+
+def _time_step_s(value) -> float:
+    """The spacing of the float type ``value`` is held in, at its value: a NumPy float narrower than float64 in
+    its own type, any other number as the float64 the runtime reads it as."""
+    held = np.asarray(value)
+    kind = held.dtype if held.dtype.kind == "f" and held.dtype.itemsize < 8 else np.dtype(np.float64)
+    return float(np.spacing(np.abs(held.astype(kind))))
+
+
 def _finite_time(value) -> bool:
     """Whether ``value`` is a finite number (a capture time): an integer past the float range (10**400) is not,
     nor is what is no number (a string): ``math.isfinite`` raised OverflowError or TypeError for them, which the
@@ -908,6 +923,11 @@ class Estimator:
         if timestamp_s is not None and not _finite_time(timestamp_s):
             # NaN compares false with every time: the track and the smoothing would restart on this pair and the next
             raise FrameError(f"timestamp_s must be a finite capture time (seconds), got {timestamp_s!r}")
+        if timestamp_s is not None and _time_step_s(timestamp_s) > MAX_TIME_STEP_S:
+            raise FrameError(f"timestamp_s {timestamp_s!r} ({np.asarray(timestamp_s).dtype}) is held in steps of "
+                             f"{_time_step_s(timestamp_s):.3g} s at that value, coarser than {MAX_TIME_STEP_S:g} s "
+                             "(MAX_TIME_STEP_S): pairs would share one time; give seconds as a float64 (a Python "
+                             "float), from a nearer origin")
         if novel_view is not None and not self.config.novel_view.enabled:
             raise ModelError("a novel view was requested but novel_view.enabled is false (the colour graph is "
                              "not loaded)")

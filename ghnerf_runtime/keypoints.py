@@ -9,7 +9,9 @@ Algorithm, per joint map (a single person is assumed):
 3. The best region is the one with the highest peak, i.e. the region holding the
    map's maximum. A region covering more than ``max_region_frac`` of the map is no
    peak (saturated, flat or noise-flooded map): the joint is missing.
-4. Subpixel refinement of that peak (below), confidence = filtered peak value.
+4. Subpixel refinement of that peak (below), confidence = filtered peak value. With ``"quadratic"``, a
+   saturated top (a plateau at the map's maximum: a sigmoid at 1.0 in float32) is placed by a paraboloid
+   fitted to the log of its flank, the unclipped samples around it (:func:`_place_flat_tops`).
 5. The runner-up: the highest filtered value outside the best region (so the peak of another
    region above the threshold), or, where higher, a second local maximum inside the best region
    with a valley between it and the peak (the map dipping to at most :data:`RUNNER_UP_DIP` of it
@@ -272,6 +274,7 @@ def _refine_quadratic(maps: np.ndarray, padded: np.ndarray, pad: int, iy: np.nda
     is not refined across the edge (its centre may lie outside the map).
     """
     n, h, w = maps.shape
+    top_iy, top_ix = iy, ix  # the filtered peaks, before the edge's climb
     band = _radius(sigma) if sigma > 0 else h + w  # sigma 0: the raw map is all there is
     near = np.minimum(np.minimum(ix, w - 1 - ix), np.minimum(iy, h - 1 - iy)) < band
     patch = _patch3(padded, pad, iy, ix, which)
@@ -282,7 +285,136 @@ def _refine_quadratic(maps: np.ndarray, padded: np.ndarray, pad: int, iy: np.nda
         patch[near] = _patch3(maps, 0, iy[near], ix[near], which[near])
     # One fit for all: an axis with no outer neighbour is only flagged on the raw (edge) patches.
     offset = _newton_log(patch, near & ((ix == 0) | (ix == w - 1)), near & ((iy == 0) | (iy == h - 1)))
-    return np.stack([ix, iy], axis=-1) + offset
+    flat = _flat_tops(maps, which, top_iy, top_ix)
+    if near.any():  # a plateau by the edge may show its ties at the raw maximum the climb reached instead
+        flat[near] |= _flat_tops(maps, which[near], iy[near], ix[near])
+    return _place_flat_tops(maps, padded, pad, which, top_iy, top_ix, flat, np.stack([ix, iy], axis=-1) + offset)
+
+
+#: A saturated top's flank: the raw pixels below the plateau and above this share of it, within
+#: :data:`FLANK_WIDTH` pixels of it, whose log a paraboloid is fitted to.
+FLANK_LOW = 0.1
+FLANK_WIDTH = 3
+#: Fewest flank pixels for the fit (it has six terms).
+FLANK_MIN_PIXELS = 8
+#: Largest value-weighted RMS residual (heatmap units) of the flank's fit that is one blob's: 0.023 at most for
+#: single saturated blobs with noise N(0, 0.02), 0.14-0.18 for two people's plateaus run into one.
+FLANK_MAX_RMS = 0.06
+#: How far (pixels) past its plateau's bounding box a fitted centre may lie: a saturated blob's centre is on its
+#: plateau, or past the map's edge where the edge cuts it (then placed on the edge pixel).
+FLANK_REACH = 1.5
+#: Where the flank is too small for the fit: the centroid of the filtered map's excess over this share of its peak,
+#: over the peak's connected part above that level.
+FLAT_TOP_LEVEL = 0.8
+#: Pixels of a 3x3 tied at the map's maximum that make a plateau: 2 where that maximum is 1, the top of the
+#: heatmaps' range (a sigmoid saturated in float32, a map past 1 scaled by its maximum), 5 below it (a sampled
+#: Gaussian ties at most 4 ways, centred between four pixels; the shipped int8 graphs' maps below 1 tie too: flagged
+#: at 2 ties, the reference bench (docs/runtime.md) moved from PCK 0.981 / MPJPE 29.1 mm to 0.980 / 29.2 mm).
+FLAT_TOP_TIES = 2
+FLAT_TOP_TIES_BELOW_ONE = 5
+#: The smallest plateau placed by the excess centroid where the flank fit fails: on a smaller one the log-quadratic
+#: fit is closer (0.05 px, where the centroid is 0.1-0.2 px off).
+EXCESS_MIN_PLATEAU = 5
+
+
+def _flat_tops(maps: np.ndarray, which: np.ndarray, iy: np.ndarray, ix: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: pixel ``k`` of map ``which[k]`` lies on a plateau at that map's maximum (at least
+    :data:`FLAT_TOP_TIES` or :data:`FLAT_TOP_TIES_BELOW_ONE` pixels of its raw 3x3 neighbourhood at it): a saturated top (a sigmoid at 1.0 in float32
+    past a logit of 17, a map past 1 scaled by its maximum)."""
+    top = maps.reshape(len(maps), -1).max(axis=1)[which]
+    ties = (_patch3(maps, 0, iy, ix, which) == top[:, None, None]).sum(axis=(1, 2))
+    return ties >= np.where(top >= 1.0, FLAT_TOP_TIES, FLAT_TOP_TIES_BELOW_ONE)
+
+
+def _pixels(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns of an ``(H, W)`` mask's pixels, from its flat indices (as :func:`_nonzero_3d`)."""
+    return np.divmod(np.flatnonzero(mask), mask.shape[1])
+
+
+def _plateau(raw: np.ndarray, iy: int, ix: int) -> tuple[np.ndarray, np.ndarray]:
+    """The 8-connected plateau at ``raw``'s maximum holding pixel ``(iy, ix)`` (or its nearest one: the filtered peak
+    of a plateau's rim may lie just off it), and every pixel at that maximum, ``(H, W)`` bool each."""
+    at_top = raw == raw.max()
+    _, labels = cv2.connectedComponents(at_top.astype(np.uint8), connectivity=8)
+    ys, xs = _pixels(at_top)
+    nearest = np.argmin((ys - iy) ** 2 + (xs - ix) ** 2)
+    return labels == labels[ys[nearest], xs[nearest]], at_top
+
+
+def _flank(raw: np.ndarray, plateau: np.ndarray, at_top: np.ndarray) -> np.ndarray | None:
+    """``(H, W)`` bool: the plateau's flank (:data:`FLANK_LOW`, :data:`FLANK_WIDTH`); None where another plateau
+    lies that near (its flank would join in)."""
+    near = cv2.dilate(plateau.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=FLANK_WIDTH) > 0
+    if (near & at_top & ~plateau).any():
+        return None
+    return near & ~plateau & (raw > FLANK_LOW * raw.max())
+
+
+def _flank_fit(raw: np.ndarray, plateau: np.ndarray, flank: np.ndarray) -> np.ndarray | None:
+    """The vertex ``(x, y)`` of a paraboloid fitted (least squares, weighted by value) to the log of the plateau's
+    ``flank``: a clipped Gaussian's unclipped samples are exactly Gaussian, so this finds its centre wherever the
+    plateau is, on the map's edge too. None where the fit is no single blob's: no maximum, a residual past
+    :data:`FLANK_MAX_RMS` (two people's plateaus run into one), or a vertex past :data:`FLANK_REACH`."""
+    ys, xs = _pixels(flank)
+    py, px = _pixels(plateau)
+    y0, x0 = py.mean(), px.mean()  # centred: a well-scaled system
+    y, x = ys - y0, xs - x0
+    value = raw[ys, xs].astype(np.float64)
+    terms = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=-1)
+    c = np.linalg.lstsq(terms * value[:, None], np.log(value) * value, rcond=None)[0]
+    if np.sqrt(np.mean(np.square(value * (np.log(value) - terms @ c)))) > FLANK_MAX_RMS:
+        return None
+    hessian = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
+    if not (hessian[0, 0] < 0 and np.linalg.det(hessian) > 1e-12):
+        return None
+    vertex = np.linalg.solve(hessian, -c[1:3]) + [x0, y0]
+    inside = (px.min() - FLANK_REACH <= vertex[0] <= px.max() + FLANK_REACH
+              and py.min() - FLANK_REACH <= vertex[1] <= py.max() + FLANK_REACH)
+    return np.clip(vertex, 0.0, [raw.shape[1] - 1, raw.shape[0] - 1]) if inside else None
+
+
+def _excess_centroid(filtered: np.ndarray, iy: int, ix: int) -> np.ndarray | None:
+    """The centroid of ``filtered``'s excess over :data:`FLAT_TOP_LEVEL` of its value at ``(iy, ix)``, over that
+    pixel's connected part above the level (a high level: two saturated tops a few cells apart stay two parts);
+    None where the part reaches the map's edge (its centroid would be pulled inwards)."""
+    excess = filtered - FLAT_TOP_LEVEL * filtered[iy, ix]
+    _, labels = cv2.connectedComponents((excess > 0).astype(np.uint8), connectivity=8)
+    part = labels == labels[iy, ix]
+    if part[0].any() or part[-1].any() or part[:, 0].any() or part[:, -1].any():
+        return None
+    ys, xs = _pixels(part)
+    weight = excess[ys, xs]
+    return np.array([(weight * xs).sum(), (weight * ys).sum()]) / weight.sum()
+
+
+def _place_flat_tops(maps: np.ndarray, padded: np.ndarray, pad: int, which: np.ndarray, iy: np.ndarray,
+                     ix: np.ndarray, flat: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """``uv`` with each saturated top (``flat``, :func:`_flat_tops`) placed by its flank (:func:`_flank_fit`), or
+    where the flank is too small, on a plateau of :data:`EXCESS_MIN_PLATEAU` pixels or more, by its filtered map's
+    excess (:func:`_excess_centroid`); where neither holds, as the log-quadratic fit placed it. That fit took the
+    filtered plateau's highest pixel, which rounding picks anywhere on it: blobs of sigma 1.5-3 px saturated 1.5- to
+    100-fold were up to 2.0 px off inside the map and 3.0 px on its edge (``tests/ghnerf_runtime/test_keypoints.py
+    -k saturated``)."""
+    flat = np.flatnonzero(flat)
+    if not len(flat):
+        return uv
+    uv = uv.copy()
+    h, w = maps.shape[1:]
+    for k in flat:  # rare (a saturated map): a few labellings per top
+        raw = maps[which[k]].astype(np.float64)
+        plateau, at_top = _plateau(raw, iy[k], ix[k])
+        flank = _flank(raw, plateau, at_top)
+        if flank is None:  # another plateau beside: left to the fit, as is
+            continue
+        if flank.sum() >= FLANK_MIN_PIXELS:
+            placed = _flank_fit(raw, plateau, flank)
+        elif plateau.sum() >= EXCESS_MIN_PLATEAU:
+            placed = _excess_centroid(padded[which[k], pad:pad + h, pad:pad + w].astype(np.float64), iy[k], ix[k])
+        else:
+            placed = None
+        if placed is not None:
+            uv[k] = placed
+    return uv
 
 
 def _refine_centroid(padded: np.ndarray, pad: int, labels: np.ndarray, top: np.ndarray, iy: np.ndarray,

@@ -409,6 +409,36 @@ def test_a_blob_past_one_keeps_its_peak():
     np.testing.assert_allclose(as_uint8.uv, centres, atol=0.1)  # rounded to integers, but no plateau
 
 
+@pytest.mark.parametrize("sigma, gain", [(2.0, 100.0), (3.0, 3.0), (1.5, 10.0), (1.5, 1.5)])
+@pytest.mark.parametrize("across", [(10.0, 22.0), (0.0, 1.0), (1.0, 3.0)], ids=["inside", "on the edge", "by it"])
+@pytest.mark.parametrize("noise", [0.0, 0.02])
+def test_a_saturated_top_is_placed_at_its_centre(sigma, gain, across, noise):
+    """A blob whose top saturates (a sigmoid at 1.0 in float32 past a logit of 17; an int8 output at its largest
+    value) is a plateau: the fit took the filtered map's highest pixel, which rounding picks anywhere on it, up to
+    2 px off for sigma 2, 100-fold, inside the map and 2.6 px on its edge. Its flank is a Gaussian's samples: placed
+    by them, within 0.001 px noise-free, 0.3 px with noise of 0.02."""
+    rng = np.random.default_rng(3)
+    yy, xx = np.mgrid[:32, :32]
+    centres = np.stack([rng.uniform(*across, size=30), rng.uniform(10.0, 22.0, size=30)], axis=-1)
+    maps = np.stack([gain * np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * sigma ** 2)) for x, y in centres])
+    maps = np.clip(maps + rng.normal(0.0, noise, maps.shape), 0.0, 1.0).astype(np.float32)
+    kp = decode_keypoints(maps)
+    assert kp.valid.all()
+    assert np.hypot(*(kp.uv - centres).T).max() < (0.3 if noise else 0.001)
+
+
+@pytest.mark.parametrize("apart", [5.27, 6.27, 7.27, 9.3])
+def test_a_saturated_top_run_into_a_second_one_is_placed_on_the_stronger(apart):
+    """Two people's saturated tops a few cells apart, their plateaus run into one or lying side by side: no
+    paraboloid fits two blobs' flanks (its vertex fell between them, on neither person, 4.0 px off for 7.27 cells
+    apart), so the joint stays where the filtered peak puts it, on the stronger blob's plateau."""
+    yy, xx = np.mgrid[:32, :32]
+    centres = np.array([(8.4, 15.3), (8.4 + apart, 16.1)])
+    tops = [gain * np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * 1.5 ** 2)) for (x, y), gain in zip(centres, (20, 8))]
+    kp = decode_keypoints(np.minimum(np.maximum(*tops), 1.0)[None].astype(np.float32))
+    assert kp.valid[0] and np.hypot(*(kp.uv[0] - centres[0])) < 0.7
+
+
 def test_float64_values_past_the_float32_range_are_clipped_like_any_other():
     """A finite float64 value past 3.4e38 overflowed the float32 cast to inf, so its joint was dropped as
     non-finite (with a RuntimeWarning), where the same map in float32 range is clipped to 1 and decoded."""

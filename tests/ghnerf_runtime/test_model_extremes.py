@@ -375,6 +375,43 @@ def test_estimator_with_identical_or_swapped_images(precision, case):
     assert np.all(pts <= est.rig.volume.max_corner + margin + 1e-9)
 
 
+def _moved_rig(rig, offset):
+    """``rig`` with its frame's origin moved by ``-offset``: every camera and the working volume at ``offset``."""
+    from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+
+    offset = np.asarray(offset, np.float64)
+    cameras = tuple(c.with_pose(c.R, c.t - c.R @ offset) for c in rig.cameras)
+    return Rig(cameras, WorkingVolume(rig.volume.min_corner + offset, rig.volume.max_corner + offset), rig.rig_id,
+               rig.metadata)
+
+
+@pytest.mark.parametrize("offset", [(1000.0, 0.0, 1000.0), (7000.0, 0.0, 7000.0)], ids=["1.4 km", "9.9 km"])
+def test_a_rig_far_from_its_origin_gives_the_joints_of_the_rig_at_it_moved(offset):
+    """The graphs take the cameras' matrices and centres in float32 (``contract.source_projections``), whose
+    spacing is 0.06 mm at 1 km and 1 mm at 10 km: a rig file whose origin lies that far from the cameras (the
+    convention puts it under them, nothing enforces it) gives the joints of the same rig at its origin, moved,
+    within 5 mm (the floor, y = 0, stays where it is: the frame's height is no free choice)."""
+    from ghnerf_runtime.estimator import Estimator
+
+    sim = pytest.importorskip("drivers.sim")
+    scene = sim.SimScene(sim.SceneConfig(seed=1, motion="wave"))
+    near = _rig()
+    pairs = [(t, [scene.render(c, t, with_truth=False)[0] for c in near.pair]) for t in np.arange(6) / 30]
+    answers = []
+    for rig in (near, _moved_rig(near, offset)):
+        cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), precision="int8", threads=2))
+        with Estimator.from_config(rig, cfg) as est:
+            for t, pair in pairs:
+                r = est.estimate(pair, timestamp_s=t)
+            _assert_sane(r, f"rig at {offset}" if rig is not near else "rig at 0")
+            answers.append(r)
+    at_origin, moved = answers
+    assert moved.num_found >= 20 and np.array_equal(moved.missing, at_origin.missing)
+    found = ~moved.missing
+    gap = np.abs(moved.joints_3d[found] - offset - at_origin.joints_3d[found]).max()
+    assert gap < 5e-3, gap
+
+
 @pytest.mark.parametrize("precision", PRECISIONS)
 def test_novel_views_at_the_alpha_bounds_and_at_odd_cameras(precision):
     """alpha -1 and 2 (the bounds ``NovelViewRequest`` allows), and requested cameras standing at a source

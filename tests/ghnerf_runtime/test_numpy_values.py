@@ -99,6 +99,24 @@ def test_true_is_no_capture_time(estimator_and_pair, flag) -> None:
         est.estimate(pair, timestamp_s=flag)
 
 
+@pytest.mark.parametrize("stamp, step", [(np.float32(1.7e9), "128"), (np.float32(20000.0), "0.00195"),
+                                         (np.float16(5000.0), "4"), (1.7e18, "256")])
+def test_a_capture_time_held_in_steps_coarser_than_a_millisecond_is_refused(estimator_and_pair, stamp, step) -> None:
+    """A float32 epoch stamp steps by 128 s: every pair of a stream came with one time, which the smoothing took for
+    the same pair again (a joint that moved restarted, unsmoothed) and the track's gap test for no gap at all."""
+    est, pair = estimator_and_pair
+    with pytest.raises(FrameError, match=rf"timestamp_s {re.escape(repr(stamp))} \(\w+\) is held in steps of "
+                                         rf"{re.escape(step)} s"):
+        est.estimate(pair, timestamp_s=stamp)
+
+
+@pytest.mark.parametrize("stamp", [np.float32(8000.5), np.float64(1.7e9), 1.7e9, 1_700_000_000, np.int64(10**12)])
+def test_a_capture_time_held_to_a_millisecond_is_taken(estimator_and_pair, stamp) -> None:
+    est, pair = estimator_and_pair
+    est.reset()
+    assert est.estimate(pair, timestamp_s=stamp).sequence >= 0
+
+
 def test_numpy_numbers_and_other_image_layouts_give_the_same_answer(estimator_and_pair) -> None:
     est, (left, right) = estimator_and_pair
     est.reset()

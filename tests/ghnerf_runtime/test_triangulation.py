@@ -919,3 +919,24 @@ def test_the_two_view_terms_and_the_general_solvers_refuse_a_matrix_in_one_messa
     why = "must be finite" if change in ("nan", "inf") else "has a singular left 3x3 block"
     assert message.startswith(f"P[{view}] (view {view}) projection matrix {why}"), message
     assert message.endswith(f"got {P[view].tolist()}"), message
+
+
+@pytest.mark.parametrize("origin", [0.0, 1e3, 1e5], ids=["at the origin", "1 km off", "100 km off"])
+@pytest.mark.parametrize("baseline", [0.02, 0.075])
+def test_a_narrow_rig_far_from_its_origin_triangulates_as_at_it(origin, baseline):
+    """The DLT is conditioned in pixels, not in the rig frame: a 2 cm pair 100 km from its origin (a rig file's
+    origin is a convention nothing enforces) still recovers a subject 3 m away to a micrometre (2e-7 m at
+    100 km), and a subject 25 m away along the baseline, whose rays meet at 0.004 degrees, is invalid, not far off."""
+    offset = np.array([origin, 0.0, origin])
+    cams = [Camera(n, 640, 480, K, np.zeros(5), *look_at(offset + (x, -1.4, 0.0), offset + (0.0, -1.0, 3.0)))
+            for n, x in (("a", -baseline / 2), ("b", baseline / 2))]
+    P = np.stack([c.P for c in cams])
+    rng = np.random.default_rng(5)
+    for target, valid in (((0.0, -1.0, 3.0), True), ((25.0, -1.4, 0.5), False)):
+        points = offset + target + rng.uniform(-0.3, 0.3, (25, 3))
+        uv = np.stack([c.project(points, distort=False)[0] for c in cams])
+        for res in (triangulate_dlt(uv, cams), triangulate_midpoint(uv, cams), triangulate_robust(uv, cams),
+                    triangulate_two_views(uv, P, np.ones((2, 25)))):
+            assert_finite(res)
+            assert np.all(res.valid == valid), (target, res.ray_angle_deg)
+            assert np.linalg.norm(res.points[res.valid] - points[res.valid], axis=-1).max(initial=0.0) < 1e-6
