@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import json
-import math
 import os
 import select
 import socket
@@ -49,6 +48,7 @@ from firmware_host.protocol.constants import NO_FRAME_SEQ, PROTOCOL_VERSION, SCE
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
 from firmware_host.sinks.url import host_name_problem, integer, ipv6_hint, location_host
+from ghnerf_runtime.cli.seconds import positive_seconds
 from ghnerf_runtime.cli.sigterm import sigterm_as_interrupt
 from ghnerf_runtime.path_check import path_problem, shown as shown_path
 
@@ -497,17 +497,6 @@ def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, e
     return tally
 
 
-def _positive_seconds(raw: str) -> float:
-    """``--seconds``: a finite number > 0 (``-1`` or ``nan`` would end the listening before it began)."""
-    try:
-        value = float(raw)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, not {raw!r}")
-    return value
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     # the counters the docs describe (docs/daemon.md), in the words each line prints them in
     epilog = ("Each second a line: JOINTS/s, joints present, latency (capture to the wire), 'N seq gaps' (frames "
@@ -528,7 +517,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="every message (and decode error) as a JSON line, the wire's integers: a JOINTS row is "
                          "[x, y, z in mm (rig frame: x right, y down, z away from the cameras), confidence 0-255, "
                          "missing 0/1] (docs/protocol.md, sections 4 and 9)")
-    ap.add_argument("--seconds", type=_positive_seconds, default=None,
+    ap.add_argument("--seconds", type=positive_seconds, default=None,
                     help="stop after this long (default: Ctrl-C)")
     args = ap.parse_args(argv)
     try:
