@@ -39,6 +39,30 @@ def unquote_keeping_bytes(text: str) -> str:
     return unquote(text, errors="surrogateescape")
 
 
+class UrlPartError(ValueError):
+    """A part of a URL refused: ``field`` (the path after ://, the host, the device...), its ``value`` as written,
+    and ``why``. Raised here, where the rule is, without a package's error type: each parser (rig URLs, sink URLs,
+    the listener) converts it to its own error, naming its URL."""
+
+    def __init__(self, field: str, value: str, why: str) -> None:
+        super().__init__(f"{field} {why}")
+        self.field, self.value, self.why = field, value, why
+
+
+def decode_url_part(field: str, raw: str) -> str:
+    """``raw``, the part ``field`` of a URL, percent-decoded as UTF-8 (:func:`unquote_keeping_bytes`): the one rule
+    for every URL parser's paths, devices and hosts.
+
+    :raises UrlPartError: naming ``field``, ``raw`` and its escapes that are no UTF-8 byte sequence (decoded to
+        U+FFFD, they named another file, device or host than the one written).
+    """
+    decoded = unquote_keeping_bytes(raw)
+    problem = not_utf8_escapes(raw, decoded)
+    if problem is not None:
+        raise UrlPartError(field, raw, problem)
+    return decoded
+
+
 def not_utf8_escapes(raw: str, decoded: str) -> str | None:
     """Why ``decoded`` (``raw`` through :func:`unquote_keeping_bytes`) cannot be used: the %XX escapes of ``raw``
     that are not UTF-8, written as escapes again (``holds %FF, which is not UTF-8 ...``); None when it has none.
@@ -209,8 +233,10 @@ class RigUrl:
                 f"rig URL {redact_url(url)!r}: '#' starts a URL fragment ({'#' + parts.fragment!r}), which rig URLs do not "
                 "use; write a '#' in a path or option value as %23"
             )
-        target = unquote_keeping_bytes(parts.netloc + parts.path)
-        _refuse_not_utf8(url, "the path after ://", parts.netloc + parts.path, target)
+        try:
+            target = decode_url_part("the path after ://", parts.netloc + parts.path)
+        except UrlPartError as e:
+            raise RigConfigError(f"rig URL {redact_url(url)!r}: {e}") from None
         options: dict[str, str] = {}
         # '+' is a plus here, as in the path (a form's '+' for a space turned out=/data/take+1 into '/data/take 1');
         # a space is %20

@@ -50,7 +50,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import math
 import signal
 import statistics
 import sys
@@ -78,6 +77,7 @@ from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
 from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output
+from ghnerf_runtime.cli.seconds import positive_seconds
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
@@ -354,16 +354,6 @@ def _print_joints(pair: drivers.FramePair, result: PairResult | None) -> None:
 
 
 # ------------------------------------------------------------------ main
-def _positive_seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:  # argparse said "invalid _positive_seconds value: 'abc'", naming this function
-        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0):  # -1 or nan ran no pair and said all was well
-        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text}")
-    return value
-
-
 def _sink_url(text: str) -> str:
     """A ``--sink`` value: an empty one (a ``"$UNSET"`` in a script) is refused; it was read as no --sink given and
     the joints went to the default file sink without a word."""
@@ -380,7 +370,7 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
                                                             "relative files read from the current directory; "
                                                             f"default: {DEFAULT_URL.replace('%', '%%')}, the "
                                                             "simulated rig)")
-    parser.add_argument("--seconds", type=_positive_seconds, default=3.0,
+    parser.add_argument("--seconds", type=positive_seconds, default=3.0,
                         help="how long to read pairs (default: %(default)s)")
     parser.add_argument("--out", type=user_path_as_path, default=Path("out/demo"),
                         help="output folder: sim_pair.png (the last pair, whatever the rig) and the default sink's joints.jsonl "

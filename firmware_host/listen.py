@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import json
-import math
 import os
 import select
 import socket
@@ -44,13 +43,14 @@ from dataclasses import dataclass, field
 from typing import Any, Optional, TextIO
 from urllib.parse import parse_qs, urlsplit
 
-from drivers.url import not_utf8_escapes, redact_location, redact_url, unquote_keeping_bytes
+from drivers.url import UrlPartError, decode_url_part, redact_location, redact_url
 from firmware_host.addresses import ipv4_first
 from firmware_host.errors import shown_value
 from firmware_host.protocol.constants import NO_FRAME_SEQ, PROTOCOL_VERSION, SCENE_FLAGS, CoordFrame, Fault, Flags, JointSet, Units
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
-from firmware_host.sinks.url import LocationError, host_name_problem, integer, ipv6_hint, location_host
+from firmware_host.sinks.url import host_name_problem, integer, ipv6_hint, location_host
+from ghnerf_runtime.cli.seconds import positive_seconds
 from ghnerf_runtime.cli.sigterm import sigterm_as_interrupt
 from ghnerf_runtime.path_check import path_problem, shown as shown_path
 
@@ -182,10 +182,10 @@ def _serial_device(shown: str, device: str) -> str:
     be written %23). An escape of a byte that is not UTF-8 is refused, as the sinks refuse it: decoded to U+FFFD,
     the listener tried to open a device never named. A device no file can be (a NUL byte, a name too long) is
     refused in :func:`ghnerf_runtime.path_check.path_problem`'s words: pyserial's ValueError read "cannot open"."""
-    decoded = unquote_keeping_bytes(device)
-    problem = not_utf8_escapes(device, decoded)
-    if problem is not None:
-        raise ListenError(f"{shown}: the device {device} {problem}")
+    try:
+        decoded = decode_url_part("the device", device)
+    except UrlPartError as e:
+        raise ListenError(f"{shown}: {e.field} {e.value} {e.why}") from None
     problem = path_problem(decoded)
     if problem is not None:
         raise ListenError(f"{shown}: the device {shown_path(decoded)}: {problem}")
@@ -229,7 +229,7 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
                               f"give 1..65535, e.g. udp://:9870")
         try:
             host = location_host(parts, "udp")  # "": every interface
-        except LocationError as e:
+        except UrlPartError as e:
             raise ListenError(f"{shown}: {e.why} ({shown_value(e.field, e.value)!r})") from None
         problem = host_name_problem(host) if host else ""
         if problem:  # the sinks' rule, in their words (the resolver's own error was an IDNA codec's)
@@ -507,17 +507,6 @@ def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, e
     return tally
 
 
-def _positive_seconds(raw: str) -> float:
-    """``--seconds``: a finite number > 0 (``-1`` or ``nan`` would end the listening before it began)."""
-    try:
-        value = float(raw)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, not {raw!r}")
-    return value
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     # the counters the docs describe (docs/daemon.md), in the words each line prints them in
     epilog = ("Each second a line: JOINTS/s, joints present, latency (capture to the wire), 'N seq gaps' (frames "
@@ -538,7 +527,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="every message (and decode error) as a JSON line, the wire's integers: a JOINTS row is "
                          "[x, y, z in mm (rig frame: x right, y down, z away from the cameras), confidence 0-255, "
                          "missing 0/1] (docs/protocol.md, sections 4 and 9)")
-    ap.add_argument("--seconds", type=_positive_seconds, default=None,
+    ap.add_argument("--seconds", type=positive_seconds, default=None,
                     help="stop after this long (default: Ctrl-C)")
     args = ap.parse_args(argv)
     try:

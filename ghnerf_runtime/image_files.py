@@ -52,10 +52,9 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
     the bytes must be decoded from memory, the read of the rest."""
     try:
         with open(path, "rb") as f:
-            if _tiff_header_refuses(f, flags):
+            resets = _resets_unless_refused(f, flags)
+            if resets is None:
                 return None
-            f.seek(0)
-            resets = _turn_resets(f)
             if _memory_decode_because(path, resets) is not None:
                 f.seek(0)
                 return _decoded_with(np.fromfile(f, dtype=np.uint8), resets, flags)
@@ -72,26 +71,41 @@ def _decodes_to_8_bits(flags: int) -> bool:
     return flags != cv2.IMREAD_UNCHANGED and not flags & cv2.IMREAD_ANYDEPTH
 
 
-def _tiff_header_refuses(f: BinaryIO, flags: int) -> bool:
-    """Whether ``f`` (at its start) is a TIFF that OpenCV does not decode with ``flags``, told from its first
-    directory: its compression (:func:`_tiff_compression_refusal`; for most such, OpenCV delivered zeros), or
-    samples of more than 16 bits read as 8 (OpenCV fails on those too, printing libtiff's "Sorry, can not handle
-    images with 32-bit samples"). False for another format, or a header that cannot be read."""
-    if f.read(4) not in tiff_header.LAYOUTS:
-        return False  # a JPEG or PNG: nothing more read
+#: What a decode reads of a TIFF's first directory, in one walk (:func:`_resets_unless_refused`): its compression
+#: and sample size (refusals) and its Orientation (the turn reset).
+_DECODE_TAGS = frozenset({tiff_header.COMPRESSION, tiff_header.BITS_PER_SAMPLE, tiff_header.ORIENTATION})
+
+
+def _resets_unless_refused(f: BinaryIO, flags: int) -> list[tuple[int, bytes]] | None:
+    """The :func:`_turn_resets` of ``f`` (at its start), or None where it is a TIFF that OpenCV does not decode with
+    ``flags`` (:func:`_tiff_refuses`). A TIFF's first directory is walked once for both."""
+    head = f.read(4)
     f.seek(0)
-    if _tiff_compression_refusal(f) is not None:
+    if head not in tiff_header.LAYOUTS:
+        return _turn_resets(f)
+    tags = tiff_header.read_tags(f, _DECODE_TAGS)
+    if _tiff_refuses(tags, flags):
+        return None
+    reset = tiff_header.upright_reset(tags)
+    return [] if reset is None else [reset]
+
+
+def _tiff_refuses(tags: tiff_header.DirectoryTags, flags: int) -> bool:
+    """Whether a TIFF whose first directory's ``tags`` were read is one that OpenCV does not decode with ``flags``:
+    its compression (:func:`_compression_refusal`; for most such, OpenCV delivered zeros), or samples of more than
+    16 bits read as 8 (OpenCV fails on those too, printing libtiff's "Sorry, can not handle images with 32-bit
+    samples"). False for a header that cannot be read."""
+    if _compression_refusal(tags) is not None:
         return True
-    f.seek(0)
-    return _decodes_to_8_bits(flags) and _tiff_header_samples_wider_than(f, 16)
+    return _decodes_to_8_bits(flags) and _samples_wider_than(tags, 16)
 
 
-def _tiff_compression_refusal(f: BinaryIO) -> str | None:
-    """Why ``f`` (at its start) is a TIFF that OpenCV does not decode: its first directory's one Compression
-    value, where ``ghnerf_runtime.tiff_compression`` says it is not decoded; None for another format, another
+def _compression_refusal(tags: tiff_header.DirectoryTags | None) -> str | None:
+    """Why a TIFF whose first directory's ``tags`` were read does not decode in OpenCV: its one Compression value,
+    where ``ghnerf_runtime.tiff_compression`` says it is not decoded; None for another format (no ``tags``), another
     compression, none given (uncompressed), or one of several values or a header that cannot be read (libtiff
     refuses the file: OpenCV returns None)."""
-    compression = _tiff_first_entry(f, tiff_header.COMPRESSION)
+    compression = None if tags is None else tags.get(tiff_header.COMPRESSION)
     if compression is None or len(compression.values) != 1:
         return None
     return tiff_compression.refusal(compression.values[0])
@@ -103,24 +117,16 @@ def tiff_compression_refusal(path: str | os.PathLike) -> str | None:
     libtiff does not decode: ..."; None for another image, or a file that cannot be opened."""
     try:
         with open(path, "rb") as f:
-            return _tiff_compression_refusal(f)
+            return _compression_refusal(tiff_header.read_tags(f, frozenset({tiff_header.COMPRESSION})))
     except (OSError, ValueError):  # ValueError: a NUL byte in the path
         return None
 
 
-def _tiff_header_samples_wider_than(f: BinaryIO, bits: int) -> bool:
-    """Whether ``f`` (at its start) is a TIFF whose first directory gives samples of more than ``bits`` bits, read
-    from its header; False for another format, or a header that cannot be read."""
-    sample_bits = _tiff_first_entry(f, tiff_header.BITS_PER_SAMPLE)
+def _samples_wider_than(tags: tiff_header.DirectoryTags, bits: int) -> bool:
+    """Whether a TIFF whose first directory's ``tags`` were read gives samples of more than ``bits`` bits; False
+    for a header that cannot be read."""
+    sample_bits = tags.get(tiff_header.BITS_PER_SAMPLE)
     return sample_bits is not None and max(sample_bits.values, default=0) > bits
-
-
-def _tiff_first_entry(f: BinaryIO, tag: int) -> tiff_header.TiffEntry | None:
-    """The entry of ``tag`` in the first directory of ``f`` (at its start), where it is a TIFF; None for another
-    format, a tag not given, or a header :func:`ghnerf_runtime.tiff_header.first_directory` cannot read."""
-    layout = tiff_header.LAYOUTS.get(f.read(4))
-    entries = None if layout is None else tiff_header.first_directory(f, layout, frozenset({tag}))
-    return (entries or {}).get(tag)
 
 
 def samples_not_8_bit(path: str | os.PathLike) -> str | None:
@@ -191,11 +197,10 @@ def decode_image_or_none(data: np.ndarray, flags: int) -> np.ndarray | None:
     read (once copied, for its refusals and its turn reset); a JPEG's or PNG's bytes go to OpenCV as they are."""
     if data[:4].tobytes() not in tiff_header.LAYOUTS:
         return _decoded_with(data, _turn_resets_in(data), flags)
-    tiff = io.BytesIO(data.tobytes())
-    if _tiff_header_refuses(tiff, flags):
+    resets = _resets_unless_refused(io.BytesIO(data.tobytes()), flags)
+    if resets is None:
         return None  # as read_image_or_none
-    tiff.seek(0)
-    return _decoded_with(data, _turn_resets(tiff), flags)
+    return _decoded_with(data, resets, flags)
 
 
 def _decoded_with(data: np.ndarray, resets: list[tuple[int, bytes]], flags: int) -> np.ndarray | None:
@@ -214,7 +219,7 @@ def _turn_resets(f: BinaryIO) -> list[tuple[int, bytes]]:
     head = f.read(8)
     f.seek(0)
     if head[:4] in tiff_header.LAYOUTS:
-        reset = tiff_header.orientation_reset(f)
+        reset = tiff_header.orientation_reset(f)  # (a decode reads it with its refusals: _resets_unless_refused)
         return [] if reset is None else [reset]
     if avif_header.is_isobmff(head):
         return avif_header.transforms_reset(f)

@@ -480,6 +480,8 @@ class ModelSession:
         wanted, only_fp32 = _wanted_precision(graph, config)
         path = cls._find(folder, graph, wanted)
         if path is None:
+            # empty means not scanned yet: an empty scan finds no file for this graph, which raises below, so a
+            # folder is never scanned twice; the scan's answer is the folder's and config's, fixed for one load
             if not by_meta:
                 by_meta.update(cls._scan(folder, config))
             path = by_meta.get((graph, wanted)) or by_meta.get((graph, "fp32")) or (

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from typing import BinaryIO
 
 __all__ = [
-    "BITS_PER_SAMPLE", "COMPRESSION", "HEIGHT", "LAYOUTS", "ORIENTATION", "UPRIGHT", "TiffEntry", "TiffLayout", "WIDTH",
-    "first_directory", "first_directory_end", "orientation_reset",
+    "BITS_PER_SAMPLE", "COMPRESSION", "HEIGHT", "LAYOUTS", "ORIENTATION", "UPRIGHT", "DirectoryTags", "TiffEntry",
+    "TiffLayout", "WIDTH", "first_directory", "first_directory_end", "orientation_reset", "read_tags", "upright_reset",
 ]
 
 #: The tags read here: ImageWidth, ImageLength, BitsPerSample, Compression, Orientation.
@@ -87,25 +87,61 @@ class TiffEntry:
     field_at: int
 
 
+@dataclass(frozen=True)
+class DirectoryTags:
+    """Tags of a TIFF's first directory read in one walk (:func:`read_tags`), for a reader that asks several
+    questions of one header (a decode's refusals and its turn reset): each tag as :func:`first_directory` would
+    read it alone, so that one tag the walk cannot read leaves the others' answers as they were."""
+
+    layout: TiffLayout
+    entries: dict[int, TiffEntry]  # the tags read; one repeated, not of unsigned integers or cut short is left out
+
+    def get(self, tag: int) -> TiffEntry | None:
+        return self.entries.get(tag)
+
+
 def first_directory(f: BinaryIO, layout: TiffLayout, tags: frozenset[int]) -> dict[int, TiffEntry] | None:
     """The entries of ``tags`` in the first image file directory (``f`` just past the byte order and version);
     ``None`` where the directory or a value is cut short, or one of those tags is repeated or not of unsigned
     integers (SHORT or LONG; in a BigTIFF, LONG8 too)."""
+    walked = _walk_tags(f, layout, tags)
+    if walked is None:
+        return None
+    found, unread = walked
+    return None if unread else found
+
+
+def read_tags(f: BinaryIO, tags: frozenset[int]) -> DirectoryTags | None:
+    """The entries of ``tags`` in the first directory of ``f`` (at its start), each read as :func:`first_directory`
+    reads it alone (none where the directory cannot be read); None where ``f`` is no TIFF."""
+    layout = LAYOUTS.get(f.read(4))
+    if layout is None:
+        return None
+    walked = _walk_tags(f, layout, tags)
+    found, unread = walked if walked is not None else ({}, set())
+    return DirectoryTags(layout, {tag: entry for tag, entry in found.items() if tag not in unread})
+
+
+def _walk_tags(f: BinaryIO, layout: TiffLayout, tags: frozenset[int]) -> tuple[dict[int, TiffEntry], set[int]] | None:
+    """The entries of ``tags`` in the first directory (``f`` just past the byte order and version), and the tags
+    that cannot be read (repeated, not of unsigned integers, values cut short); None where the directory cannot."""
     directory = _first_directory_entries(f, layout)
     if directory is None:
         return None
     entries_at, entries = directory
     found: dict[int, TiffEntry] = {}
+    unread: set[int] = set()
     for at in range(0, len(entries), layout.entry_size):
         tag, kind, number = struct.unpack(layout.order + layout.entry_head, entries[at:at + layout.entry_head_size])
-        if tag not in tags:
+        if tag not in tags or tag in unread:
             continue
         field_at = at + layout.entry_head_size
         values = _integers(f, layout, kind, number, entries[field_at:at + layout.entry_size])
         if values is None or tag in found:
-            return None
+            unread.add(tag)
+            continue
         found[tag] = TiffEntry(kind, values, entries_at + field_at)
-    return found
+    return found, unread
 
 
 def first_directory_end(f: BinaryIO, layout: TiffLayout) -> int | None:
@@ -165,16 +201,20 @@ def _first_directory_entries(f: BinaryIO, layout: TiffLayout) -> tuple[int, byte
 
 def orientation_reset(f: BinaryIO) -> tuple[int, bytes] | None:
     """Where to write what (offset, bytes) in a TIFF (``f`` at its start) so that its first directory's Orientation
-    is :data:`UPRIGHT`: its one value, of its own type and byte order, in place. ``None`` where there is nothing
-    to reset: not a TIFF, no Orientation or one already upright, or a directory this walk cannot read. An
-    Orientation of several values is left as it is too: libtiff ignores it (it warns of the count)."""
-    layout = LAYOUTS.get(f.read(4))
-    if layout is None:
-        return None
-    entry = (first_directory(f, layout, frozenset({ORIENTATION})) or {}).get(ORIENTATION)
+    is :data:`UPRIGHT` (:func:`upright_reset`); ``None`` where there is nothing to reset, or ``f`` is no TIFF."""
+    tags = read_tags(f, frozenset({ORIENTATION}))
+    return None if tags is None else upright_reset(tags)
+
+
+def upright_reset(tags: DirectoryTags) -> tuple[int, bytes] | None:
+    """Where to write what (offset, bytes) so that the first directory whose ``tags`` were read (Orientation among
+    them) gives the Orientation :data:`UPRIGHT`: its one value, of its own type and byte order, in place. ``None``
+    where there is nothing to reset: no Orientation or one already upright, or a directory this walk cannot read.
+    An Orientation of several values is left as it is too: libtiff ignores it (it warns of the count)."""
+    entry = tags.get(ORIENTATION)
     if entry is None or len(entry.values) != 1 or entry.values[0] == UPRIGHT:
         return None
-    return entry.field_at, struct.pack(layout.order + layout.integer_types[entry.kind], UPRIGHT)
+    return entry.field_at, struct.pack(tags.layout.order + tags.layout.integer_types[entry.kind], UPRIGHT)
 
 
 def _integers(f: BinaryIO, layout: TiffLayout, kind: int, number: int, field: bytes,

@@ -82,7 +82,7 @@ from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, he
 from ghnerf_runtime.metrics import (capped_psnr, heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility,
                                     pck, scorable_images)
 from ghnerf_runtime.novel_painter import angle_from_centres_deg
-from training.cli.evaluate import split_model_item
+from training.cli.evaluate import ModelItem
 from training.model_card import strict_json, write_atomic
 from training.run_limits import threads_problem
 
@@ -709,24 +709,17 @@ def open_eval_dataset(data: str, split: str, renderer: Renderer, label: str):
     return ds
 
 
-def _label(item: str) -> str:
-    """A ``--model`` item's label: the one it gives (:func:`split_model_item`), else the spec's file or folder
-    name."""
-    label, spec = split_model_item(item)
-    return Path(spec).stem if label is None else label
-
-
-def prepare(specs: list[str], data: str, split: str, threads: int) -> list[tuple[str, Renderer, dict, object]]:
-    """``(label, renderer, description, dataset)`` of every ``--model``: all loaded and checked before the first
-    scene is rendered, so a bad spec fails in seconds, not after the models before it were scored."""
+def prepare(items: list[ModelItem], data: str, split: str, threads: int) -> list[tuple[str, Renderer, dict, object]]:
+    """``(label, renderer, description, dataset)`` of every ``--model`` (as the parser split it): all loaded and
+    checked before the first scene is rendered, so a bad spec fails in seconds, not after the models before it were
+    scored."""
     out = []
-    for item in specs:
-        label, spec = _label(item), split_model_item(item)[1]
+    for item in items:
         try:
-            renderer, desc = make_renderer(spec, threads)
+            renderer, desc = make_renderer(item.spec, threads)
         except EvalInputError as e:  # "m.json: a file, not a model folder" said no option: which --model gave it
-            raise EvalInputError(f"--model {item}: {e}") from None
-        out.append((label, renderer, desc, open_eval_dataset(data, split, renderer, label)))
+            raise EvalInputError(f"--model {item.text}: {e}") from None
+        out.append((item.name, renderer, desc, open_eval_dataset(data, split, renderer, item.name)))
     return out
 
 
@@ -740,7 +733,7 @@ def _kept_words(finished: list[str], saved: list[str], out: str | None) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from training.cli.evaluate import build_parser, spec_path  # noqa: PLC0415
+    from training.cli.evaluate import build_parser  # noqa: PLC0415
 
     ap = build_parser()
     args = ap.parse_args(argv)
@@ -748,13 +741,13 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--limit: must be >= 0 (0: every scene), got {args.limit}")
     if problem := threads_problem(args.threads, 1):  # torch.set_num_threads: a traceback for 0 and past a C int
         ap.error(f"--threads: {problem}")
-    labels = [_label(item) for item in args.model]
+    labels = [item.name for item in args.model]
     if dup := sorted({label for label in labels if labels.count(label) > 1}):
         # two runs' last.pt are both "last": the second model's scores replaced the first's in the JSON
         ap.error(f"--model: the label {', '.join(dup)} is given twice; name each model, e.g. --model a=runs/a/last.pt")
     if args.out:  # written after minutes of evaluation: its place is settled first
         # --out x.pt beside --model x.pt replaced the checkpoint with the scores, after the evaluation
-        clash = output_clash({"--out": args.out}, {f"--model {item}": spec_path(item) for item in args.model})
+        clash = output_clash({"--out": args.out}, {f"--model {item.text}": item.path for item in args.model})
         if clash:
             ap.error(clash)
         args.out = ready_output_arg(ap, args.out, "--out")

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
 from urllib.parse import SplitResult, parse_qs, urlsplit
 
-from drivers.url import decimal_number, not_utf8_escapes, unquote_keeping_bytes, whole_number, \
+from drivers.url import UrlPartError, decimal_number, decode_url_part, not_utf8_escapes, whole_number, \
     with_kept_bytes_escaped, yes_no
 from firmware_host.errors import SinkConfigError
 from ghnerf_runtime.plain_values import plain_scalar
@@ -68,22 +68,24 @@ class SinkUrl:
 
 
 def _refuse_not_utf8(url: str, field: str, raw: str, decoded: str, value: str) -> None:
-    """:class:`SinkConfigError` naming ``field`` and its ``value`` when ``decoded`` (``raw`` percent-decoded) holds
-    escapes of bytes that are not UTF-8: decoded to U+FFFD, the sink wrote or opened another name than the one
-    given."""
+    """:class:`SinkConfigError` naming ``field`` and its ``value`` when ``decoded`` (a query key or value, which
+    ``parse_qs`` decoded from ``raw``, the query) holds escapes of bytes that are not UTF-8: decoded to U+FFFD, the
+    sink took another value than the one given. A path or port is decoded by :func:`unquote_part`."""
     problem = not_utf8_escapes(raw, decoded)
     if problem is not None:
         raise SinkConfigError(url, field, value, problem)
 
 
 def unquote_part(url: str, field: str, raw: str) -> str:
-    """The part ``raw`` of the sink URL ``url`` (a path, a port) percent-decoded as UTF-8.
+    """The part ``raw`` of the sink URL ``url`` (a path, a port) percent-decoded as UTF-8, by the rule every URL
+    parser shares (:func:`drivers.url.decode_url_part`).
 
     :raises SinkConfigError: naming ``field`` and the escapes, for one that is no UTF-8 byte sequence.
     """
-    decoded = unquote_keeping_bytes(raw)
-    _refuse_not_utf8(url, field, raw, decoded, raw)
-    return decoded
+    try:
+        return decode_url_part(field, raw)
+    except UrlPartError as e:
+        raise SinkConfigError(url, e.field, e.value, e.why) from None
 
 
 def parse_url(url: str) -> SinkUrl:
@@ -153,32 +155,22 @@ def boolean(raw: str) -> bool:
     return yes_no(raw)
 
 
-class LocationError(ValueError):
-    """A ``scheme://host:port`` location part that is refused: ``field`` (user info, path), its ``value``, ``why``."""
-
-    def __init__(self, field: str, value: str, why: str) -> None:
-        super().__init__(why)
-        self.field, self.value, self.why = field, value, why
-
-
 def location_host(parts: SplitResult, scheme: str) -> str:
     """The host of a ``scheme://host:port`` URL as ``getaddrinfo`` takes it, ``""`` when none is given: an IPv6
     zone percent-encoded (``[fe80::1%25eth0]``, RFC 6874) decoded and keeping its case (``hostname`` lowers it).
 
-    :raises LocationError: user info or a path, refused rather than ignored (a typo is never silently dropped).
+    :raises UrlPartError: user info or a path, refused rather than ignored (a typo is never silently dropped), or
+        a host whose escapes are not UTF-8 (:func:`drivers.url.decode_url_part`; U+FFFD: a lookup of a name never
+        given).
     """
     if parts.username is not None or parts.password is not None:
-        raise LocationError("user info", parts.netloc.rpartition("@")[0],
+        raise UrlPartError("user info", parts.netloc.rpartition("@")[0],
                             f"{scheme}:// takes no user info (the part before '@')")
     if parts.path not in ("", "/"):
-        raise LocationError("path", parts.path, f"{scheme}:// takes host:port and no path")
+        raise UrlPartError("path", parts.path, f"{scheme}:// takes host:port and no path")
     hostinfo = parts.netloc.rpartition("@")[2]
     raw = hostinfo[1:hostinfo.index("]")] if hostinfo.startswith("[") else parts.hostname or ""
-    host = unquote_keeping_bytes(raw)
-    problem = not_utf8_escapes(raw, host)
-    if problem is not None:  # U+FFFD: a lookup of a name never given
-        raise LocationError("host", raw, problem)
-    return host
+    return decode_url_part("host", raw)
 
 
 #: Longest host name, written out without a trailing dot (RFC 1035: 255 octets on the wire).
@@ -233,7 +225,7 @@ def host_port(u: SinkUrl, default_port: Optional[int] = None) -> tuple[str, int]
     parts = urlsplit(u.url)
     try:
         host = location_host(parts, u.scheme)
-    except LocationError as e:
+    except UrlPartError as e:
         raise SinkConfigError(u.url, e.field, e.value, e.why) from None
     hint = ipv6_hint(parts, u.scheme, 9000)
     # the port as written, after the host (past an IPv6 literal's brackets): the errors named the whole location

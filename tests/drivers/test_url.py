@@ -2,7 +2,7 @@
 import pytest
 
 from drivers import RigConfigError, create_rig_source
-from drivers.url import RigUrl
+from drivers.url import RigUrl, UrlPartError, decode_url_part
 
 
 def test_parse_scheme_target_and_options():
@@ -285,6 +285,16 @@ def test_an_escape_of_a_byte_that_is_not_utf8_is_refused_naming_the_part(url, sa
     assert said in str(e.value) and "(give the path in UTF-8, or rename the file)" in str(e.value)
     with pytest.raises(RigConfigError, match="which is not UTF-8"):
         create_rig_source(url)
+
+
+def test_one_helper_decodes_a_url_part_and_refuses_escapes_that_are_not_utf8_naming_the_field():
+    # the rule rig URLs, sink URLs and ghnerf-listen each wrote out (decode, then look for kept bytes): one place now
+    assert decode_url_part("the device", "/dev/usb-Robot%231-t%C3%A9") == "/dev/usb-Robot#1-t\u00e9"
+    with pytest.raises(UrlPartError) as e:
+        decode_url_part("the device", "/dev/tty%C3%A9%FE")
+    assert (e.value.field, e.value.value) == ("the device", "/dev/tty%C3%A9%FE")
+    assert e.value.why.startswith("holds %FE, which is not UTF-8")
+    assert str(e.value) == f"the device {e.value.why}" and isinstance(e.value, ValueError)
 
 
 def test_escapes_of_utf8_text_are_decoded_as_before():

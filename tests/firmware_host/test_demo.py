@@ -425,7 +425,7 @@ def test_seconds_and_out_are_checked_by_name(tmp_path, capsys):
         with pytest.raises(SystemExit) as e:
             demo.main(["--truth-only", "--seconds", seconds])
         err = capsys.readouterr().err
-        assert e.value.code == 2 and f"--seconds: must be a number of seconds, got {seconds!r}" in err
+        assert e.value.code == 2 and f"--seconds: must be a finite number of seconds > 0, got {seconds!r}" in err
     (tmp_path / "afile").write_text("")
     assert demo.main(["--truth-only", "--out", str(tmp_path / "afile")]) == 2
     assert f"--out {tmp_path / 'afile'}: is a file" in capsys.readouterr().err

@@ -209,6 +209,43 @@ def test_a_read_opens_the_file_once_whatever_its_format(tmp_path, monkeypatch, k
     assert image_read is not None and np.array_equal(image_read, expected)
 
 
+@pytest.mark.parametrize("flags", [cv2.IMREAD_COLOR, cv2.IMREAD_UNCHANGED], ids=["colour", "unchanged"])
+def test_a_decode_walks_a_tiff_s_first_directory_once(tmp_path, monkeypatch, flags):
+    """Its compression, its sample size and its Orientation are read in one walk of the header: each was a walk of
+    its own (three a decode, replay's frames included), reading the same directory."""
+    data = tagged_tiff(stored_image(3), 6)
+    path = tmp_path / "view.tiff"
+    path.write_bytes(data)
+    expected = decode_image_or_none(as_array(data), flags)
+    walks = []
+    real_walk = tiff_header._first_directory_entries
+
+    def counting_walk(f, layout):
+        walks.append(layout)
+        return real_walk(f, layout)
+
+    monkeypatch.setattr(tiff_header, "_first_directory_entries", counting_walk)
+    assert np.array_equal(decode_image_or_none(as_array(data), flags), expected) and len(walks) == 1
+    assert np.array_equal(read_image_or_none(path, flags), expected) and len(walks) == 2
+
+
+def test_a_tiff_tag_the_walk_cannot_read_leaves_the_others_read(tmp_path):
+    """One walk reads each tag as a walk of its own did: an Orientation of text (no unsigned integer) leaves the
+    Compression judged, and a Compression of text leaves the turn reset."""
+    image = stored_image(3)
+    plain = cv2.imencode(".tiff", image, [cv2.IMWRITE_TIFF_COMPRESSION, 1])[1].tobytes()
+    path = tmp_path / "view.tiff"
+    path.write_bytes(tiff_laid_out(plain, changed={259: (3, (34712,)), 274: (2, (54, 0))}))
+    assert read_image_or_none(path, cv2.IMREAD_COLOR) is None
+    assert decode_image_or_none(as_array(path.read_bytes()), cv2.IMREAD_COLOR) is None
+    path.write_bytes(tiff_laid_out(plain, changed={259: (2, (49, 0)), 274: (3, (6,))}))
+    with open(path, "rb") as f:
+        tags = tiff_header.read_tags(f, frozenset({tiff_header.COMPRESSION, tiff_header.ORIENTATION}))
+    with open(path, "rb") as f:
+        assert tiff_header.upright_reset(tags) == tiff_header.orientation_reset(f) is not None
+    assert tags.get(tiff_header.COMPRESSION) is None
+
+
 # ------------------------------------------------------------------ a TIFF's compression
 #: Compression values OpenCV 5.0 does not decode: JPEG 2000 and an unregistered one (read as images of zeros
 #: before session 64's review), LERC and Zstandard (libtiff's codecs this build leaves out: None already).

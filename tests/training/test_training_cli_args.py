@@ -9,6 +9,8 @@ import pytest
 
 pytest.importorskip("torch")
 from training import evaluate  # noqa: E402
+from training.cli import evaluate as evaluate_cli  # noqa: E402
+from training.cli.evaluate import ModelItem, split_model_item  # noqa: E402
 from training.export.calibration import MIN_FRAMES  # noqa: E402
 
 
@@ -57,14 +59,15 @@ def test_a_model_spec_that_is_no_model_folder_is_named_by_its_model_item(tmp_pat
     spec = tmp_path / "m.json"
     make(spec)
     with pytest.raises(evaluate.EvalInputError, match=rf"^--model x={spec}: {spec}: {said}"):
-        evaluate.prepare([f"x={spec}"], str(tmp_path), "val", 1)
+        evaluate.prepare([split_model_item(f"x={spec}")], str(tmp_path), "val", 1)
 
 
 def _prepared(monkeypatch, items: list[str]) -> list[tuple[str, str]]:
     """``(label, spec)`` that :func:`evaluate.prepare` gives each ``--model`` item, nothing loaded."""
     monkeypatch.setattr(evaluate, "make_renderer", lambda spec, threads: (spec, {}))
     monkeypatch.setattr(evaluate, "open_eval_dataset", lambda *a: None)
-    return [(label, renderer) for label, renderer, _, _ in evaluate.prepare(items, "data", "val", 1)]
+    parsed = [split_model_item(item) for item in items]
+    return [(label, renderer) for label, renderer, _, _ in evaluate.prepare(parsed, "data", "val", 1)]
 
 
 def test_a_model_path_holding_an_equals_sign_is_read_whole(tmp_path, monkeypatch):
@@ -91,7 +94,7 @@ def test_an_empty_label_is_a_usage_error_naming_the_item(tmp_path, capsys, monke
     assert "argument --model: =x.pt: the LABEL before '=' is empty" in capsys.readouterr().err
     monkeypatch.chdir(tmp_path)
     (tmp_path / "=x.pt").write_bytes(b"weights")
-    assert build_parser().parse_args(["--model", "=x.pt"]).model == ["=x.pt"]
+    assert build_parser().parse_args(["--model", "=x.pt"]).model == [ModelItem("=x.pt", None, "=x.pt")]
     assert _prepared(monkeypatch, ["=x.pt"]) == [("=x", "=x.pt")]
 
 
@@ -106,6 +109,19 @@ def test_an_out_that_is_a_checkpoint_whose_path_holds_an_equals_sign_is_refused(
     assert e.value.code == 2
     assert f"--out {ckpt} is the file --model {ckpt} reads" in capsys.readouterr().err
     assert ckpt.read_bytes() == b"weights"
+
+
+def test_each_model_item_is_split_once_from_the_command_line_to_its_renderer(tmp_path, monkeypatch):
+    """The parser's check, the labels, the --out clash check and the loading each split the item again (five
+    looks at the disk for one ``--model``), any of which could read it otherwise than the parser checked it."""
+    looked = []
+    monkeypatch.setattr(evaluate_cli, "_names_a_file", lambda item: looked.append(item) or False)
+    monkeypatch.setattr(evaluate, "make_renderer", lambda spec, threads: (spec, {"kind": "stand-in"}))
+    monkeypatch.setattr(evaluate, "open_eval_dataset", lambda *a: [])
+    monkeypatch.setattr(evaluate, "evaluate", lambda *a: {})
+    assert evaluate.main(["--data", str(tmp_path), "--model", "a=runs/a.pt", "--out", str(tmp_path / "s.json")]) == 0
+    assert looked == ["a=runs/a.pt"]
+    assert list(json.loads((tmp_path / "s.json").read_text())["models"]) == ["a"]
 
 
 def test_two_models_with_one_label_are_refused_before_the_work(tmp_path, capsys, monkeypatch):

@@ -3,21 +3,49 @@ from __future__ import annotations
 
 import argparse
 import os
+from dataclasses import dataclass
+from pathlib import Path
 
 from training.cli import doc_of, parse_then_run
 from training.run_limits import MAX_THREADS
 from ghnerf_runtime.path_check import shown, user_path
 
 
-def split_model_item(item: str) -> tuple[str | None, str]:
-    """A ``--model`` item's label (None where it gives none) and its spec. ``LABEL=SPEC`` is split at the first
-    ``=`` only where what comes before it is a name (no ``/``) and the whole item is no file or folder there: a path
-    holding ``=`` (``runs/lr=1e-3/x.pt``) was read as the label ``runs/lr`` and the spec ``1e-3/x.pt``. An explicit
-    label (``x=runs/lr=1e-3/x.pt``) always reads the rest as the spec."""
+@dataclass(frozen=True)
+class ModelItem:
+    """A ``--model`` item, split once (:func:`split_model_item`) where the parser reads it: whether it is
+    ``LABEL=SPEC`` depends on which files exist, so the label and spec read later are the ones the parser checked.
+
+    Attributes:
+        text: the item as written, for messages (``--model x=m.json: ...``).
+        label: the label it gives, None where it gives none.
+        spec: the checkpoint file, graph folder or ``folder#int8`` it names.
+    """
+
+    text: str
+    label: str | None
+    spec: str
+
+    @property
+    def path(self) -> str:
+        """The checkpoint file or graph folder the item reads (its spec without ``#int8``)."""
+        return self.spec.partition("#")[0]
+
+    @property
+    def name(self) -> str:
+        """The label its scores are kept under: the one it gives, else the spec's file or folder name."""
+        return Path(self.spec).stem if self.label is None else self.label
+
+
+def split_model_item(item: str) -> ModelItem:
+    """A ``--model`` item's label and spec. ``LABEL=SPEC`` is split at the first ``=`` only where what comes before
+    it is a name (no ``/``) and the whole item is no file or folder there: a path holding ``=``
+    (``runs/lr=1e-3/x.pt``) was read as the label ``runs/lr`` and the spec ``1e-3/x.pt``. An explicit label
+    (``x=runs/lr=1e-3/x.pt``) always reads the rest as the spec."""
     label, sep, spec = item.partition("=")
     if not sep or "/" in label or _names_a_file(item):
-        return None, item
-    return label, spec
+        return ModelItem(item, None, item)
+    return ModelItem(item, label, spec)
 
 
 def _names_a_file(spec: str) -> bool:
@@ -25,20 +53,16 @@ def _names_a_file(spec: str) -> bool:
     return os.path.exists(spec.partition("#")[0])
 
 
-def spec_path(item: str) -> str:
-    """The checkpoint file or graph folder a ``--model`` item reads (without its label and ``#int8``); here, not in
-    ``training.evaluate``, which loads torch, so that the parser checks it (:func:`_model_item`)."""
-    return split_model_item(item)[1].partition("#")[0]
-
-
-def _model_item(item: str) -> str:
-    """A ``--model`` item with no empty label whose file or folder (:func:`spec_path`) is a path a file can have: a
-    name past 255 bytes there raised ``ENAMETOOLONG`` from the loader (a traceback)."""
-    if split_model_item(item)[0] == "":
+def _model_item(text: str) -> ModelItem:
+    """A ``--model`` item (:func:`split_model_item`) with no empty label whose file or folder (:attr:`ModelItem.path`)
+    is a path a file can have: a name past 255 bytes there raised ``ENAMETOOLONG`` from the loader (a traceback).
+    Here, not in ``training.evaluate``, which loads torch, so that the parser checks it."""
+    item = split_model_item(text)
+    if item.label == "":
         # "=x.pt" was scored under the label "", a key no reader of the JSON expects
-        raise argparse.ArgumentTypeError(f"{shown(item)}: the LABEL before '=' is empty; write LABEL=SPEC or the "
+        raise argparse.ArgumentTypeError(f"{shown(text)}: the LABEL before '=' is empty; write LABEL=SPEC or the "
                                          "spec alone")
-    user_path(spec_path(item))
+    user_path(item.path)
     return item
 
 
