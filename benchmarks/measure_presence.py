@@ -6,9 +6,10 @@
 The trained model has only ever seen views with a person in them, so for an empty room it still
 answers "someone", with weaker peaks. For each heatmap source (with its best 3D method) this
 prints, with the presence gate and the frame check off, the joints found and the 6th-strongest 3D
-joint confidence of empty simulated rooms (the skeleton prior off: the gate is decided on the
-triangulation before it, and its confidence is its expected error, which it reports for any noise),
-and the same of the held-out pairs of ``tests/ghnerf_runtime/test_estimator_accuracy.py`` (4
+joint confidence of empty simulated rooms (textured rooms with nobody in them, ``benchmarks/empty_rooms.py``;
+until session 65 black frames, which the frame check rejects before the model runs; the skeleton prior off:
+the gate is decided on the triangulation before it, and its confidence is its expected error, which it reports
+for any noise), and the same of the held-out pairs of ``tests/ghnerf_runtime/test_estimator_accuracy.py`` (4
 sequences x 10 pairs). A presence threshold
 (``config.PRESENCE_MIN_CONFIDENCE``) belongs between the two. With ``--flip-test`` it also prints the
 statistic ``heatmaps.flip_test_skip_below`` is compared with (``flip_test.presence_peak`` of the heatmaps
@@ -31,6 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.empty_rooms import empty_room_pair  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     BEST_METHOD,
@@ -56,6 +58,12 @@ class _PeakRecorder(Estimator):
         return super()._flip_test(batch, heat, timing, src_P, beside)
 
 
+def empty_rooms(rig, count: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The pairs of ``count`` empty rooms (scene seeds 1..count): textured rooms with nobody in them
+    (``benchmarks/empty_rooms.py``), which pass the frame check as a real empty room does."""
+    return [empty_room_pair(rig, seed) for seed in range(1, count + 1)]
+
+
 def sixth_strongest(result) -> float:
     c = np.sort(result.confidence[~result.missing])[::-1]
     return float(c[5]) if len(c) > 5 else 0.0
@@ -64,7 +72,7 @@ def sixth_strongest(result) -> float:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--rooms", type=int, default=8, help="empty rooms (scene seeds 1..N)")
+    ap.add_argument("--rooms", type=int, default=8, help="empty textured rooms (scene seeds 1..N)")
     ap.add_argument("--flip-test", action="store_true", help="heatmaps.flip_test on (encoder heatmaps)")
     ap.add_argument("--time", action="store_true",
                     help="also time the empty rooms with the defaults, heatmaps.flip_test_skip_below default vs 0")
@@ -85,9 +93,7 @@ def main(argv=None) -> int:
         est = _PeakRecorder.from_config(rig, cfg)
         empty = []
         _PeakRecorder.peaks = []
-        for seed in range(1, args.rooms + 1):
-            room = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(40.0, 3.0)))  # nobody in view
-            pair = tuple(room.render(c, 0.2, with_truth=False)[0] for c in rig.pair)
+        for pair in empty_rooms(rig, args.rooms):
             est.reset()
             r = est.estimate(pair)
             empty.append((r.num_found, sixth_strongest(r)))
@@ -139,9 +145,7 @@ def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10, novel: bool 
         order.append(("no turn search", unsearched, None))
     times: dict[str, list[float]] = {name: [] for name, _, _ in order}
     views = phantoms = 0
-    for seed in range(1, rooms + 1):
-        room = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(40.0, 3.0)))
-        pair = tuple(room.render(c, 0.2, with_truth=False)[0] for c in rig.pair)
+    for pair in empty_rooms(rig, rooms):
         for rep in range(repeats + 1):
             for name, est, request in order[::-1] if rep % 2 else order:  # alternate which runs first
                 t = time.perf_counter()

@@ -579,7 +579,9 @@ class Joints3DConfig:
 #: pairs with a person (encoder >= 0.52; rendered: 37 of 40 pairs >= 0.52, 3 pairs of one sequence whose
 #: crop drifted <= 0.11) on held-out sequences with the shipped (sixth) model of 2026-11-22
 #: (benchmarks/measure_presence.py --rooms 32). The encoder gate was 0.3 for the fifth model (rooms
-#: <= 0.16); the rendered one 0.475 for the models before the fifth.
+#: <= 0.16); the rendered one 0.475 for the models before the fifth. Those rooms were black frames; textured empty
+#: rooms (since session 65) with the shipped tenth model: encoder no joint found, rendered <= 0.23 (docs/runtime.md,
+#: "Missing joints, never stale ones").
 PRESENCE_MIN_CONFIDENCE = {"encoder": 0.35, "rendered": 0.4}
 
 
@@ -683,8 +685,8 @@ class HeatmapsConfig:
             with ``frame_check.single_view_2d``, in either view alone (a person seen by one camera
             only): nobody is there, and the presence gate would say so with the mirrored run too. An empty room then
             costs one encoder run, not two. Only while the presence gate is on; 0 always runs it.
-            With the shipped model, 32 empty rooms (frame check off) reach <= 0.006 and 40 held-out
-            pairs with a person >= 0.80 (``benchmarks/measure_presence.py --rooms 32 --flip-test``).
+            With the shipped model, 32 textured empty rooms (frame check off) reach <= 0.010 and 40 held-out
+            pairs with a person >= 0.79 (``benchmarks/measure_presence.py --rooms 32 --flip-test``, session 65).
         flip_test_side_by_side: on a tracked pair (someone was there), run the ``human`` graph on the crops and
             on their mirror images side by side, one thread each (``ModelSession.run_both``), not one after
             the other on two threads; the same heatmaps, sooner (docs/runtime.md, "Flip test"). Only with a

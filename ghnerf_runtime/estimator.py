@@ -547,9 +547,9 @@ _TURN_MARGIN = 0.1
 _NEAR_LIE_STEP_DEG = 2.0
 #: roi.turn_search: a weak cold pair searches only when one view's ``presence.min_joints``-th strongest joint peak
 #: (:func:`~ghnerf_runtime.flip_test.presence_peak` of that view) reaches this: upright crops of people lying or
-#: upside down reached 0.16-0.7 in a one-off look at four bench scenes, empty rooms stay under 0.01 (both views
-#: together: benchmarks/measure_presence.py --flip-test; with --time --turn-search it counts the empty-room pairs
-#: that still search).
+#: upside down reached 0.16-0.7 in a one-off look at four bench scenes, textured empty rooms stay at or under 0.022
+#: (both views together, 100 rooms: benchmarks/measure_presence.py --rooms 100 --flip-test; with --time
+#: --turn-search it counts the empty-room pairs that still search: none of 88).
 _TURN_SEARCH_FLOOR = 0.1
 
 
