@@ -28,7 +28,7 @@ from __future__ import annotations
 import errno
 import logging
 import re
-from typing import Any, Optional
+from typing import Any, NamedTuple, Optional
 
 import usb.core
 import usb.util
@@ -37,7 +37,7 @@ from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWrit
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.url import SinkUrl, int_in, integer, parse_url
-from firmware_host.sinks.usb_select import NoMatch, PortPath, describe, parse_port, parse_serial, port_of, select
+from firmware_host.sinks.usb_select import BoardName, NoMatch, PortPath, describe, parse_port, parse_serial, port_of, select
 
 _log = logging.getLogger(__name__)
 
@@ -74,18 +74,28 @@ def _out_endpoint(raw: str) -> int:
     return ep
 
 
-def claimed_interface(url: str) -> tuple[str, str | None, int] | None:
-    """What a ``usb://`` URL claims, as far as the URL tells: ``("1209:0001", "serial='A'", 0)``, its VID:PID, which
-    board of them (``serial=``, ``port=``; None: the first libusb lists) and the interface; None for a URL the sink
-    refuses (its own check says why). Two URLs that give one tuple claim one interface whatever their spelling
-    (``usb://1209:1`` is ``usb://0x1209:0x0001``) or ``ep``: the second claim fails. Two selectors may still name
-    one board (its serial and its port), which only the bus tells (:func:`named_board_now`)."""
+class ClaimedInterface(NamedTuple):
+    """What a ``usb://`` URL claims, as far as the URL tells (:func:`claimed_interface`)."""
+    vid_pid: str
+    """``"1209:0001"``: the IDs as numbers, however the URL spelled them."""
+    board: Optional[BoardName]
+    """Which board of that VID:PID (``serial=``, ``port=``); None: the first libusb lists."""
+    interface: int
+
+
+def claimed_interface(url: str) -> Optional[ClaimedInterface]:
+    """What a ``usb://`` URL claims: its VID:PID, which board of them and the interface; None for a URL the sink
+    refuses (its own check says why). Two URLs that give one claim claim one interface whatever their spelling
+    (``usb://1209:1`` is ``usb://0x1209:0x0001``) or ``ep``: the second claim fails. Two boards named by one kind of
+    name (two serials, two ports) may still be one board named by its serial and by its port, which only the bus
+    tells (:func:`named_board_now`)."""
     try:
         sink = UsbSink.from_url(url)
     except (SinkConfigError, ValueError):
         return None
-    which = f"serial={sink.serial!r}" if sink.serial is not None else f"port={sink.port}" if sink.port else None
-    return f"{sink.vid:04x}:{sink.pid:04x}", which, sink.interface
+    board = (BoardName("serial", sink.serial) if sink.serial is not None
+             else BoardName("port", sink.port) if sink.port is not None else None)
+    return ClaimedInterface(f"{sink.vid:04x}:{sink.pid:04x}", board, sink.interface)
 
 
 def named_board_now(url: str, backend: Any = None) -> Optional[PortPath]:

@@ -12,6 +12,8 @@ import pytest
 
 from firmware_host.daemon.cli import EXAMPLE_CONFIG, check_config
 from ghnerf_runtime.config import config_to_dict
+from firmware_host.sinks.usb_select import PortPath
+from firmware_host.sinks.usb_sink import claimed_interface
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, daemon_config_from_dict, \
     load_daemon_config
 
@@ -145,6 +147,22 @@ def test_usb_sinks_that_claim_different_interfaces_are_kept(sinks):
 ])
 def test_usb_sinks_that_may_claim_one_interface_are_refused(sinks, said):
     assert _error({"sinks": sinks}).startswith(said)
+
+
+@pytest.mark.parametrize("url, board", [
+    ("usb://1209:1?ep=0x01&serial=ABC123", ("serial", "ABC123", "serial='ABC123'")),
+    ("usb://1209:1?ep=0x01&port=1-01.4", ("port", PortPath(1, (1, 4)), "port=1-1.4")),
+    # a serial that reads like a port is still a serial: the kind is the claim's, not its text's
+    ("usb://1209:1?ep=0x01&serial=port%3D1-1.4", ("serial", "port=1-1.4", "serial='port=1-1.4'")),
+])
+def test_a_usb_claim_says_which_kind_of_name_chose_its_board(url, board):
+    """The config check tells a ``serial=`` from a ``port=`` by the claim's :class:`BoardName` (it read the prefix of
+    the claim's own text before the session-65 review); the text is the one its errors show."""
+    claim = claimed_interface(url)
+    assert (claim.vid_pid, claim.interface) == ("1209:0001", 0)
+    assert (claim.board.by, claim.board.value, str(claim.board)) == board
+    assert claimed_interface("usb://1209:1?ep=0x01").board is None  # the first board libusb lists
+    assert claimed_interface("usb://1209:1") is None  # no ep=: the sink's own check says why
 
 
 @pytest.fixture
