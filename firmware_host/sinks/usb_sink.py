@@ -37,7 +37,8 @@ from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWrit
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.url import SinkUrl, int_in, integer, parse_url
-from firmware_host.sinks.usb_select import BoardName, NoMatch, PortPath, describe, parse_port, parse_serial, port_of, select
+from firmware_host.sinks.usb_select import (BoardName, NoMatch, PortPath, describe, parse_port, parse_serial,
+                                             port_of, select)
 
 _log = logging.getLogger(__name__)
 
