@@ -87,12 +87,11 @@ class ClaimedInterface(NamedTuple):
 def claimed_interface(url: str) -> Optional[ClaimedInterface]:
     """What a ``usb://`` URL claims: its VID:PID, which board of them and the interface; None for a URL the sink
     refuses (its own check says why). Two URLs that give one claim claim one interface whatever their spelling
-    (``usb://1209:1`` is ``usb://0x1209:0x0001``) or ``ep``: the second claim fails. Two boards named by one kind of
-    name (two serials, two ports) may still be one board named by its serial and by its port, which only the bus
-    tells (:func:`named_board_now`)."""
-    try:
-        sink = UsbSink.from_url(url)
-    except (SinkConfigError, ValueError):
+    (``usb://1209:1`` is ``usb://0x1209:0x0001``) or ``ep``: the second claim fails. Two claims that name their
+    boards apart, one by ``serial=`` and one by ``port=``, may still name one board, which only the bus tells
+    (:func:`named_board_now`)."""
+    sink = _unstarted_sink(url)
+    if sink is None:
         return None
     board = (BoardName("serial", sink.serial) if sink.serial is not None
              else BoardName("port", sink.port) if sink.port is not None else None)
@@ -103,11 +102,17 @@ def named_board_now(url: str, backend: Any = None) -> Optional[PortPath]:
     """The port path of the board a ``usb://`` URL's ``serial=`` or ``port=`` names, when exactly one plugged-in
     board of its VID:PID fits it now (:meth:`UsbSink.named_board_now`); None for a URL the sink refuses or that
     names no board."""
+    sink = _unstarted_sink(url, backend)
+    return None if sink is None else sink.named_board_now()
+
+
+def _unstarted_sink(url: str, backend: Any = None) -> Optional["UsbSink"]:
+    """The sink of ``url``, built but not started (it holds nothing), to read what its URL says; None for a URL the
+    sink refuses (its own check says why, at start)."""
     try:
-        sink = UsbSink.from_url(url, backend=backend)
+        return UsbSink.from_url(url, backend=backend)
     except (SinkConfigError, ValueError):
         return None
-    return sink.named_board_now()
 
 
 class UsbSink(ProtocolSink):
