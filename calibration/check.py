@@ -25,8 +25,8 @@ from calibration.detect import MIN_CORNERS, BoardView
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.geometry.triangulation import triangulate_dlt
 
-__all__ = ["check_rig", "check_failures", "floor_unmeasured", "exchanged_fit", "sized_as_exchanged", "CheckLimits",
-           "FLOOR_VIEW"]
+__all__ = ["check_rig", "check_failures", "floor_unmeasured", "exchanged_fit", "exchanged_report", "sized_as_exchanged",
+           "CheckLimits", "FLOOR_VIEW"]
 
 FLOOR_VIEW = "floor"
 
@@ -156,9 +156,17 @@ def exchanged_fit(rig: Rig, board: BoardSpec, views: Mapping[str, Mapping[str, B
     if any(v.image_size != b.size for v in views.get(a.name, {}).values()) or \
             any(v.image_size != a.size for v in views.get(b.name, {}).values()):
         return None
-    exchanged = {a.name: views.get(b.name, {}), b.name: views.get(a.name, {})}
-    report = check_rig(rig, board, exchanged, board_thickness_m=board_thickness_m, floor_view=floor_view)
+    report = exchanged_report(rig, board, views, board_thickness_m=board_thickness_m, floor_view=floor_view)
     return report if report["pairs"] and not check_failures(report, limits) else None
+
+
+def exchanged_report(rig: Rig, board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], *,
+                     board_thickness_m: float = 0.0, floor_view: str = FLOOR_VIEW) -> dict[str, Any]:
+    """:func:`check_rig`'s report with the pair's two cameras' views exchanged, whether the rig fits them or not
+    (:func:`exchanged_fit` keeps it only where it does); the views must be each the other camera's size."""
+    a, b = rig.pair
+    exchanged = {a.name: views.get(b.name, {}), b.name: views.get(a.name, {})}
+    return check_rig(rig, board, exchanged, board_thickness_m=board_thickness_m, floor_view=floor_view)
 
 
 def sized_as_exchanged(rig: Rig, views: Mapping[str, Mapping[str, BoardView]]) -> bool:

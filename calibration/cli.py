@@ -39,8 +39,8 @@ from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
                                  earlier_size, earlier_views, list_images, next_view_number, read_camera_order,
                                  write_camera_order)
-from calibration.check import (FLOOR_VIEW, CheckLimits, check_failures, check_rig, exchanged_fit, floor_unmeasured,
-                               sized_as_exchanged)
+from calibration.check import (FLOOR_VIEW, CheckLimits, check_failures, check_rig, exchanged_fit, exchanged_report,
+                               floor_unmeasured, sized_as_exchanged)
 from calibration.detect import (PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view,
                                mirrored_corners, mirrored_words)
 from calibration.errors import BoardError, CalibrationError, CaptureError
@@ -990,8 +990,7 @@ def _exchanged_sizes_words(rig, rig_path: str, board: BoardSpec, views: dict, im
     """The error for folders whose images are each the other camera's size (:func:`sized_as_exchanged`): the
     sizes as the evidence, and whether the rig fits the views exchanged (within ``limits``)."""
     a, b = rig.pair
-    exchanged = {a.name: views[b.name], b.name: views[a.name]}
-    report = check_rig(rig, board, exchanged, board_thickness_m=thickness, floor_view=floor_view)
+    report = exchanged_report(rig, board, views, board_thickness_m=thickness, floor_view=floor_view)
     reasons = check_failures(report, limits) if report["pairs"] else ["no pair to measure"]
     scale = "not measured" if report.get("scale") is None else f"{report['scale']:.4f}"
     fit = (f"exchanged, the rig fits them (reprojection {report['reprojection_px_rms']:.3f} px rms, scale {scale})"

@@ -511,14 +511,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     # the counters the docs describe (docs/daemon.md), in the words each line prints them in
     epilog = ("Each second a line: JOINTS/s, joints present, latency (capture to the wire), 'N seq gaps' (frames "
               f"lost), and when any came 'N late (reordered)' (a seq up to {LATE_WINDOW} behind the newest: one a "
-              "gap stepped over leaves the lost frames) and 'N duplicate'; JOINTS flagged 'N several people', "
-              "'N prior fallback', 'N single view', 'N calibration suspect' (docs/protocol.md, section 3); "
+              "gap stepped over leaves the lost frames) and 'N duplicate'; JOINTS flagged "
+              f"{', '.join(repr(f'N {word}') for _, word in SCENE_WORDS)} (docs/protocol.md, section 3); "
               "'N JOINTS of joint_set K (unknown: left out of joints present)' for JOINTS of a joint set other than "
               "BODY_25 (the totals add 'N of joint_set K (unknown)'); "
-              "the sender's last STATUS fault (', CALIBRATION SUSPECT' when flagged) and HELLO ('(not BODY_25 in "
-              "mm in the rig frame: ...)' when it announces other joints, units or frame); decode errors ('version': "
-              "a sender of a newer protocol). Ctrl-C, SIGTERM or --seconds ends it with the totals. Counters: docs/daemon.md; "
-              "protocol: docs/protocol.md")
+              "the sender's last STATUS fault (', CALIBRATION SUSPECT' when flagged) and HELLO ('(sends no scene "
+              "flags)' from a sender too old to set them; '(scans for someone else)' from one whose estimator scans "
+              "for others, the only sender whose frames without 'someone else' say nobody else was seen; '(not "
+              "BODY_25 in mm in the rig frame: ...)' when it announces other joints, units or frame); decode errors "
+              "('version': a sender of a newer protocol). Ctrl-C, SIGTERM or --seconds ends it with the totals. "
+              "Counters: docs/daemon.md; protocol: docs/protocol.md")
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0], epilog=epilog)
     ap.add_argument("url", help="udp://[HOST]:PORT (no HOST: every interface, IPv4 and IPv6; a multicast HOST, "
                                 "udp://239.255.0.1:PORT, is joined) or serial:///dev/DEVICE?baud=N (three "

@@ -271,7 +271,9 @@ def _refine_quadratic(maps: np.ndarray, padded: np.ndarray, pad: int, iy: np.nda
     more with a decoder sigma of 2 or more), so those peaks are refined on the raw map, which has no
     such bias but is noisier: from the raw map's own maximum next to the filtered one (the fit's step is
     clipped to a pixel, so starting 2 px off left the joint a pixel off). A peak on the edge pixel itself
-    is not refined across the edge (its centre may lie outside the map).
+    is not refined across the edge (its centre may lie outside the map). A saturated top (:func:`_flat_tops`, at the
+    filtered peak or the raw maximum the edge's climb reached) is then placed by its flank instead
+    (:func:`_place_flat_tops`): on a plateau this fit takes whichever pixel rounding made highest.
     """
     n, h, w = maps.shape
     top_iy, top_ix = iy, ix  # the filtered peaks, before the edge's climb
@@ -319,8 +321,9 @@ EXCESS_MIN_PLATEAU = 5
 
 def _flat_tops(maps: np.ndarray, which: np.ndarray, iy: np.ndarray, ix: np.ndarray) -> np.ndarray:
     """``(N,)`` bool: pixel ``k`` of map ``which[k]`` lies on a plateau at that map's maximum (at least
-    :data:`FLAT_TOP_TIES` or :data:`FLAT_TOP_TIES_BELOW_ONE` pixels of its raw 3x3 neighbourhood at it): a saturated top (a sigmoid at 1.0 in float32
-    past a logit of 17, a map past 1 scaled by its maximum)."""
+    :data:`FLAT_TOP_TIES`, or :data:`FLAT_TOP_TIES_BELOW_ONE` for a maximum under 1, pixels of its raw 3x3
+    neighbourhood at it): a saturated top (a sigmoid at 1.0 in float32 past a logit of 17, a map past 1 scaled by its
+    maximum)."""
     top = maps.reshape(len(maps), -1).max(axis=1)[which]
     ties = (_patch3(maps, 0, iy, ix, which) == top[:, None, None]).sum(axis=(1, 2))
     return ties >= np.where(top >= 1.0, FLAT_TOP_TIES, FLAT_TOP_TIES_BELOW_ONE)

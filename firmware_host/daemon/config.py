@@ -26,7 +26,7 @@ from urllib.parse import urlsplit
 
 from firmware_host.errors import FirmwareHostError
 from firmware_host.sinks.usb_select import PortPath
-from firmware_host.sinks.usb_sink import claimed_interface, named_board_now
+from firmware_host.sinks.usb_sink import ClaimedInterface, claimed_interface, named_board_now
 from ghnerf_runtime.cli.output_path import first_clash
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
 from drivers.errors import RigConfigError
@@ -282,8 +282,7 @@ def _one_sink_per_destination(sinks: typing.Sequence[str]) -> None:
                 _refuse_one_destination(sinks, k, j, _how_one(place, other, url, sinks[j]))
             board = _one_board(place, other, url, sinks[j], boards)
             if board is not None:
-                _refuse_one_destination(sinks, k, j, f" (both claim interface {place[2][1]} of the {place[1]} board "
-                                                     f"at port {board}, named {other[2][0]} and {place[2][0]})")
+                _refuse_one_destination(sinks, k, j, _how_one_board(place[2], other[2], board))
         earlier.append((k, place))
 
 
@@ -310,28 +309,47 @@ def _one_board(place: tuple[str, str, Any], other: tuple[str, str, Any], url: st
     return board if board is not None and board == boards[other_url] else None
 
 
+def _how_one_board(claim: ClaimedInterface, other: ClaimedInterface, board: PortPath) -> str:
+    """For the refusal, how two ``usb://`` sinks naming one board apart (:func:`_one_board`) are one destination."""
+    return f" (both claim interface {claim.interface} of the {claim.vid_pid} board at port {board}, named " \
+           f"{other.board} and {claim.board})"
+
+
+def _usb_claims(place: tuple[str, str, Any], other: tuple[str, str, Any]
+                ) -> tuple[ClaimedInterface, ClaimedInterface] | None:
+    """The interfaces two places (:func:`_sink_place`) claim, where both are ``usb://`` sinks whose URLs the sink
+    takes; None otherwise."""
+    if isinstance(place[2], ClaimedInterface) and isinstance(other[2], ClaimedInterface):
+        return place[2], other[2]
+    return None
+
+
+def _one_interface(claim: ClaimedInterface, other: ClaimedInterface) -> bool:
+    """Whether two claims are one VID:PID and interface, whichever boards they name."""
+    return claim.vid_pid == other.vid_pid and claim.interface == other.interface
+
+
 def _two_names_of_one_interface(place: tuple[str, str, Any], other: tuple[str, str, Any]) -> bool:
     """Whether two ``usb://`` places (:func:`_sink_place`) are one VID:PID and interface, one naming its board by
     ``serial=`` and the other by ``port=``: the pair only the bus can tell apart (two serials or two ports are two
     boards, a sink naming none is :func:`_one_place`'s)."""
-    if not (place[0] == other[0] == "usb" and isinstance(place[2], tuple) and isinstance(other[2], tuple)):
+    claims = _usb_claims(place, other)
+    if claims is None or not _one_interface(*claims):
         return False
-    (which, interface), (other_which, other_interface) = place[2], other[2]
-    if place[1] != other[1] or interface != other_interface or None in (which, other_which):
-        return False
-    return which.startswith("serial=") != other_which.startswith("serial=")  # claimed_interface's spelling
+    board, other_board = (claim.board for claim in claims)
+    return board is not None and other_board is not None and board.by != other_board.by
 
 
 def _sink_place(url: str) -> tuple[str, str, Any] | None:
     """:func:`_destination`, with a serial port that exists named by the device it is (:func:`_serial_device`):
     ``/dev/serial/by-id/usb-...-if00`` is a link to ``/dev/ttyACM0``, and the second sink on it sat behind the first
     one's lock for ever. A port not there at load keeps its spelling: a board not plugged in at boot is no error.
-    A ``usb://`` sink is the interface it claims (:func:`claimed_interface`): the options dropped, two boards of one
-    VID:PID told apart by ``serial=`` or ``port=`` were refused as one destination."""
+    A ``usb://`` sink is the interface it claims (:func:`claimed_interface`): with the options dropped, two boards of
+    one VID:PID told apart by ``serial=`` or ``port=`` were refused as one destination."""
     place = _destination(url)
     if place is not None and place[0] == "usb":
         claim = claimed_interface(url)
-        return place if claim is None else ("usb", claim[0], claim[1:])
+        return place if claim is None else ("usb", claim.vid_pid, claim)
     if place is None or place[0] != "serial" or place[1]:
         return place
     device = _serial_device(place[2])
@@ -341,24 +359,26 @@ def _sink_place(url: str) -> tuple[str, str, Any] | None:
 def _one_place(place: tuple[str, str, Any], other: tuple[str, str, Any]) -> bool:
     """Whether two sinks' places (:func:`_sink_place`) may be one. A ``usb://`` sink with no ``serial=`` or
     ``port=`` takes whichever board of its VID:PID libusb lists first: that may be the one another sink names."""
-    if place[0] == other[0] == "usb" and isinstance(place[2], tuple) and isinstance(other[2], tuple):
-        (which, interface), (other_which, other_interface) = place[2], other[2]
-        return place[1] == other[1] and interface == other_interface and \
-            (which == other_which or which is None or other_which is None)
-    return place == other
+    claims = _usb_claims(place, other)
+    if claims is None:
+        return place == other
+    claim, other_claim = claims
+    return _one_interface(claim, other_claim) and (
+        claim.board == other_claim.board or claim.board is None or other_claim.board is None)
 
 
 def _how_one(place: tuple[str, str, Any], other: tuple[str, str, Any], url: str, other_url: str) -> str:
     """For the refusal, how two URLs spelled apart were found one destination: two serial paths one device, two
     ``usb://`` URLs one interface ("" for one place spelled twice)."""
-    if place[0] == "usb" and isinstance(place[2], tuple):
-        (which, interface), other_which = place[2], other[2][0]
-        if which == other_which:
-            board = f"with {which}" if which else "listed first"
-            return f" (both claim interface {interface} of the {place[1]} board {board})"
-        named = which or other_which
-        return f" (both claim interface {interface} of {place[1]}, and the one with no serial= or port= takes the " \
-               f"board listed first, which may be {named}: name each sink's board)"
+    claims = _usb_claims(place, other)
+    if claims is not None:
+        claim, other_claim = claims
+        if claim.board == other_claim.board:
+            board = "listed first" if claim.board is None else f"with {claim.board}"
+            return f" (both claim interface {claim.interface} of the {claim.vid_pid} board {board})"
+        named = claim.board or other_claim.board
+        return f" (both claim interface {claim.interface} of {claim.vid_pid}, and the one with no serial= or port= " \
+               f"takes the board listed first, which may be {named}: name each sink's board)"
     if place[0] != "serial" or not isinstance(place[2], tuple) or _destination(url) == _destination(other_url):
         return ""
     kind, major_or_dev, minor_or_ino = place[2]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import errno
 import re
 from dataclasses import dataclass
-from typing import Any, Optional, Sequence
+from typing import Any, Literal, Optional, Sequence, Union
 
 import usb.core
 import usb.util
@@ -38,6 +38,20 @@ class PortPath:
 
     def __str__(self) -> str:
         return f"{self.bus}-{'.'.join(str(p) for p in self.ports)}"
+
+
+@dataclass(frozen=True)
+class BoardName:
+    """Which board of its VID:PID a ``usb://`` URL names: by its serial number string (``by`` "serial", ``value`` the
+    string) or by the port path it is plugged into (``by`` "port", ``value`` a :class:`PortPath`). Two names of one
+    kind and value are one board, two of one kind and other values two boards; a serial and a port may be one
+    board, which only the bus tells."""
+    by: Literal["serial", "port"]
+    value: Union[str, PortPath]
+
+    def __str__(self) -> str:
+        """As the URL gives it, the serial quoted: ``serial='ABC123'``, ``port=1-1.4``."""
+        return f"serial={self.value!r}" if self.by == "serial" else f"port={self.value}"
 
 
 def parse_serial(raw: str) -> str:

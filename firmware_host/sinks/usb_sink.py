@@ -28,7 +28,7 @@ from __future__ import annotations
 import errno
 import logging
 import re
-from typing import Any, Optional
+from typing import Any, NamedTuple, Optional
 
 import usb.core
 import usb.util
@@ -37,7 +37,8 @@ from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWrit
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.url import SinkUrl, int_in, integer, parse_url
-from firmware_host.sinks.usb_select import NoMatch, PortPath, describe, parse_port, parse_serial, port_of, select
+from firmware_host.sinks.usb_select import (BoardName, NoMatch, PortPath, describe, parse_port, parse_serial,
+                                             port_of, select)
 
 _log = logging.getLogger(__name__)
 
@@ -74,29 +75,44 @@ def _out_endpoint(raw: str) -> int:
     return ep
 
 
-def claimed_interface(url: str) -> tuple[str, str | None, int] | None:
-    """What a ``usb://`` URL claims, as far as the URL tells: ``("1209:0001", "serial='A'", 0)``, its VID:PID, which
-    board of them (``serial=``, ``port=``; None: the first libusb lists) and the interface; None for a URL the sink
-    refuses (its own check says why). Two URLs that give one tuple claim one interface whatever their spelling
-    (``usb://1209:1`` is ``usb://0x1209:0x0001``) or ``ep``: the second claim fails. Two selectors may still name
-    one board (its serial and its port), which only the bus tells (:func:`named_board_now`)."""
-    try:
-        sink = UsbSink.from_url(url)
-    except (SinkConfigError, ValueError):
+class ClaimedInterface(NamedTuple):
+    """What a ``usb://`` URL claims, as far as the URL tells (:func:`claimed_interface`)."""
+    vid_pid: str
+    """``"1209:0001"``: the IDs as numbers, however the URL spelled them."""
+    board: Optional[BoardName]
+    """Which board of that VID:PID (``serial=``, ``port=``); None: the first libusb lists."""
+    interface: int
+
+
+def claimed_interface(url: str) -> Optional[ClaimedInterface]:
+    """What a ``usb://`` URL claims: its VID:PID, which board of them and the interface; None for a URL the sink
+    refuses (its own check says why). Two URLs that give one claim claim one interface whatever their spelling
+    (``usb://1209:1`` is ``usb://0x1209:0x0001``) or ``ep``: the second claim fails. Two claims that name their
+    boards apart, one by ``serial=`` and one by ``port=``, may still name one board, which only the bus tells
+    (:func:`named_board_now`)."""
+    sink = _unstarted_sink(url)
+    if sink is None:
         return None
-    which = f"serial={sink.serial!r}" if sink.serial is not None else f"port={sink.port}" if sink.port else None
-    return f"{sink.vid:04x}:{sink.pid:04x}", which, sink.interface
+    board = (BoardName("serial", sink.serial) if sink.serial is not None
+             else BoardName("port", sink.port) if sink.port is not None else None)
+    return ClaimedInterface(f"{sink.vid:04x}:{sink.pid:04x}", board, sink.interface)
 
 
 def named_board_now(url: str, backend: Any = None) -> Optional[PortPath]:
     """The port path of the board a ``usb://`` URL's ``serial=`` or ``port=`` names, when exactly one plugged-in
     board of its VID:PID fits it now (:meth:`UsbSink.named_board_now`); None for a URL the sink refuses or that
     names no board."""
+    sink = _unstarted_sink(url, backend)
+    return None if sink is None else sink.named_board_now()
+
+
+def _unstarted_sink(url: str, backend: Any = None) -> Optional["UsbSink"]:
+    """The sink of ``url``, built but not started (it holds nothing), to read what its URL says; None for a URL the
+    sink refuses (its own check says why, at start)."""
     try:
-        sink = UsbSink.from_url(url, backend=backend)
+        return UsbSink.from_url(url, backend=backend)
     except (SinkConfigError, ValueError):
         return None
-    return sink.named_board_now()
 
 
 class UsbSink(ProtocolSink):

@@ -435,28 +435,6 @@ def test_views_whose_cameras_are_exchanged_are_said_to_fit_so(level_rig, level_v
     assert exchanged_fit(level_rig, BOARD, small, limits) is None  # another size than the rig's: not exchanged
 
 
-def test_check_names_the_exchanged_folders_instead_of_calibrating_again(level_rig, level_views, tmp_path, capsys,
-                                                                        monkeypatch):
-    from ghnerf_runtime.rig_file import save_rig
-
-    images = tmp_path / "capture"
-    for cam in ("left", "right"):
-        (images / cam).mkdir(parents=True)
-    (tmp_path / "board.json").write_text(json.dumps(BOARD.to_dict()))
-    save_rig(level_rig, tmp_path / "rig.json")
-    missed = {"left": [], "right": []}
-    monkeypatch.setattr(cli, "detect_folder", lambda *args: (_exchanged(level_views), missed))
-    rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
-                   "--images", str(images)])
-    err = capsys.readouterr().err
-    assert rc == 1 and "It fits them with the two cameras' images exchanged (reprojection 0.000 px rms" in err
-    assert f"{images / 'left'} holds the images of camera 'right', and {images / 'right'} those of 'left'" in err
-    assert "Exchange the two folders' images" in err and "calibrate again" not in err
-    monkeypatch.setattr(cli, "detect_folder", lambda *args: (level_views, missed))
-    assert cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
-                     "--images", str(images)]) == 0
-
-
 def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str) -> tuple[int, Path]:
     """``ghcal check`` of ``rig`` on ``views`` (the detection stood in for): its exit status, and the images' folder."""
     from ghnerf_runtime.rig_file import save_rig
@@ -472,6 +450,16 @@ def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str) -> t
     rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
                    "--images", str(images), *options])
     return rc, images
+
+
+def test_check_names_the_exchanged_folders_instead_of_calibrating_again(level_rig, level_views, tmp_path, capsys,
+                                                                        monkeypatch):
+    rc, images = _check_cli(level_rig, _exchanged(level_views), tmp_path, monkeypatch)
+    err = capsys.readouterr().err
+    assert rc == 1 and "It fits them with the two cameras' images exchanged (reprojection 0.000 px rms" in err
+    assert f"{images / 'left'} holds the images of camera 'right', and {images / 'right'} those of 'left'" in err
+    assert "Exchange the two folders' images" in err and "calibrate again" not in err
+    assert _check_cli(level_rig, level_views, tmp_path, monkeypatch)[0] == 0
 
 
 @pytest.fixture(scope="module")

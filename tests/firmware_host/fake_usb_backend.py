@@ -257,3 +257,10 @@ class FakeBackend(usb.backend.IBackend):
         with dev.lock:
             dev.stalled = False
             dev.halts_cleared += 1
+
+
+def two_boards() -> tuple[FakeDevice, FakeDevice]:
+    """Two identical boards of 1209:0001: libusb lists the first (serial ``ABC123``, port ``1-1.4``) first; only
+    serial and port tell it from the second (serial ``XYZ789``, port ``1-2``)."""
+    return (FakeDevice(address=7, serial="ABC123", port_numbers=(1, 4)),
+            FakeDevice(address=9, serial="XYZ789", port_numbers=(2,)))

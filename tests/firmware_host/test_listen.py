@@ -674,6 +674,21 @@ def test_the_help_names_the_unknown_joint_set_counts(capsys):
     assert "'N of joint_set K (unknown)'" in text, text
 
 
+def test_the_help_names_every_scene_flag_s_count_and_both_hello_notes(capsys):
+    """The line counts every scene flag (``ALL_SCENE_FLAGS``), and ``--help`` names each count and both HELLO notes
+    in the line's words: session 65 added ``someone else`` and ``(scans for someone else)`` to the line, not to the
+    help."""
+    from firmware_host.protocol import ALL_SCENE_FLAGS
+
+    assert sum(int(flag) for flag, _ in listen.SCENE_WORDS) == ALL_SCENE_FLAGS
+    with pytest.raises(SystemExit):
+        listen.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for _, word in listen.SCENE_WORDS:
+        assert f"'N {word}'" in text, word
+    assert "'(sends no scene flags)'" in text and "'(scans for someone else)'" in text, text
+
+
 def test_the_json_help_names_the_joints_units_and_frame(capsys):
     with pytest.raises(SystemExit):
         listen.main(["--help"])

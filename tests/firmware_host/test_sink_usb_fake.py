@@ -8,7 +8,7 @@ import usb.core
 
 from firmware_host.protocol import Flags, Hello, Joints, decode_stream
 from firmware_host.sinks import open_sink
-from tests.firmware_host.fake_usb_backend import FakeBackend, FakeDevice
+from tests.firmware_host.fake_usb_backend import FakeBackend, FakeDevice, two_boards
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, joints_seqs, make_frame, messages_of, wait_until
 
 URL = "usb://1209:0001?ep=0x01&queue=16"
@@ -283,17 +283,11 @@ def test_a_board_that_stops_taking_transfers_reads_stalled_then_up() -> None:
 
 # ---- choosing one of two boards of one VID:PID: ?serial= and ?port= ----
 
-def _two_boards() -> tuple[FakeDevice, FakeDevice]:
-    """Two identical boards: libusb lists ``first`` first; only serial and port tell them apart."""
-    return (FakeDevice(address=7, serial="ABC123", port_numbers=(1, 4)),
-            FakeDevice(address=9, serial="XYZ789", port_numbers=(2,)))
-
-
 @pytest.mark.parametrize(("query", "chosen"), [
     ("serial=ABC123", 0), ("serial=XYZ789", 1), ("port=1-1.4", 0), ("port=1-2", 1),
 ])
 def test_a_selector_sends_to_the_board_it_names(query: str, chosen: int) -> None:
-    boards = _two_boards()
+    boards = two_boards()
     sink = open_sink(f"{URL}&{query}", backend=FakeBackend(*boards), backoff=FAST_BACKOFF)
     assert sink.wait_connected(5)
     sink.send(make_frame(0))
@@ -307,7 +301,7 @@ def test_a_selector_sends_to_the_board_it_names(query: str, chosen: int) -> None
 
 def test_the_selected_board_is_found_again_after_a_replug_in_another_order() -> None:
     # the gap: after a replug libusb may list the other board first, and frames went to it
-    first, second = _two_boards()
+    first, second = two_boards()
     backend = FakeBackend(first, second)
     sink = open_sink(f"{URL}&serial=XYZ789", backend=backend, backoff=FAST_BACKOFF)
     assert sink.wait_connected(5)
@@ -332,7 +326,7 @@ def test_the_selected_board_is_found_again_after_a_replug_in_another_order() -> 
 ])
 def test_a_selector_that_matches_nothing_is_waited_for_and_says_what_it_found(
         query: str, words: list[str], caplog: pytest.LogCaptureFixture) -> None:
-    boards = _two_boards()
+    boards = two_boards()
     backend = FakeBackend(*boards)
     with caplog.at_level(logging.WARNING, logger="firmware_host.sinks"):
         sink = open_sink(f"{URL}&{query}", backend=backend, backoff=FAST_BACKOFF)
@@ -373,7 +367,7 @@ def test_a_serial_that_cannot_be_read_for_permission_names_the_udev_rule() -> No
 
 
 def test_a_board_whose_serial_read_fails_is_listed_and_the_other_still_chosen() -> None:
-    first, second = _two_boards()
+    first, second = two_boards()
     first.string_stall = True  # a firmware that stalls string requests
     sink = open_sink(f"{URL}&serial=XYZ789", backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
     assert sink.wait_connected(5)
@@ -389,7 +383,7 @@ def test_a_board_whose_serial_read_fails_is_listed_and_the_other_still_chosen() 
 
 
 def test_two_boards_with_one_serial_are_not_guessed_between() -> None:
-    first, second = _two_boards()
+    first, second = two_boards()
     second.serial = first.serial  # flashed alike
     sink = open_sink(f"{URL}&serial=ABC123", backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
     wait_until(lambda: sink.stats().connect_failures >= 2, what="retries")
@@ -401,7 +395,7 @@ def test_two_boards_with_one_serial_are_not_guessed_between() -> None:
 
 def test_without_a_selector_no_string_descriptor_is_read() -> None:
     # the default is unchanged: no serial read (which could fail on permissions), the first board taken
-    first, second = _two_boards()
+    first, second = two_boards()
     sink = open_sink(URL, backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
     assert sink.wait_connected(5)
     sink.send(make_frame(0))
@@ -413,7 +407,7 @@ def test_without_a_selector_no_string_descriptor_is_read() -> None:
 
 def test_the_several_devices_warning_lists_ports_and_how_to_choose(caplog: pytest.LogCaptureFixture) -> None:
     with caplog.at_level(logging.WARNING, logger="firmware_host.sinks"):
-        sink = open_sink(URL, backend=FakeBackend(*_two_boards()), backoff=FAST_BACKOFF)
+        sink = open_sink(URL, backend=FakeBackend(*two_boards()), backoff=FAST_BACKOFF)
         assert sink.wait_connected(5)
         sink.close()
     [warning] = [r.getMessage() for r in caplog.records if "devices 1209:0001 found" in r.getMessage()]

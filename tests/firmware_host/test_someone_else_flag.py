@@ -97,24 +97,26 @@ def test_a_numpy_mask_counts_as_the_python_int_it_holds():
     assert set(_hello_flags(sink)) == {0x3C}
 
 
+def _listener_line(sink: MemorySink) -> str:
+    """``ghnerf-listen``'s summary line of everything ``sink`` wrote."""
+    tally = listen.Tally()
+    for message in messages_of(sink.read()):
+        tally.add(message)
+    return tally.line(1.0, {})
+
+
 def test_the_listener_counts_someone_else_and_says_the_sender_scans():
     sink = MemorySink.from_url("memory://", rig_id="arm", scene_flags=ALL_SCENE_FLAGS).start()
     for seq, flags in ((0, 0), (1, Flags.SOMEONE_ELSE), (2, Flags.SOMEONE_ELSE | Flags.SEVERAL_PEOPLE)):
         sink.send(replace(make_frame(seq), scene_flags=int(flags)))
     sink.close()
-    tally = listen.Tally()
-    for event in decode_stream(sink.read())[0]:
-        tally.add(event.message)
-    line = tally.line(1.0, {})
+    line = _listener_line(sink)
     assert "1 several people; 2 someone else" in line, line
     assert "rig 'arm' cameras [] (scans for someone else)" in line, line
 
     plain = MemorySink.from_url("memory://", rig_id="arm").start()
     plain.close()
-    tally = listen.Tally()
-    for event in decode_stream(plain.read())[0]:
-        tally.add(event.message)
-    line = tally.line(1.0, {})
+    line = _listener_line(plain)
     assert "scans for someone else" not in line and "(sends no scene flags)" not in line, line
 
 

@@ -12,6 +12,9 @@ import pytest
 
 from firmware_host.daemon.cli import EXAMPLE_CONFIG, check_config
 from ghnerf_runtime.config import config_to_dict
+from firmware_host.sinks.usb_select import PortPath
+from firmware_host.sinks.usb_sink import claimed_interface
+from tests.firmware_host.fake_usb_backend import FakeBackend, two_boards
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, daemon_config_from_dict, \
     load_daemon_config
 
@@ -147,13 +150,27 @@ def test_usb_sinks_that_may_claim_one_interface_are_refused(sinks, said):
     assert _error({"sinks": sinks}).startswith(said)
 
 
+@pytest.mark.parametrize("url, board", [
+    ("usb://1209:1?ep=0x01&serial=ABC123", ("serial", "ABC123", "serial='ABC123'")),
+    ("usb://1209:1?ep=0x01&port=1-01.4", ("port", PortPath(1, (1, 4)), "port=1-1.4")),
+    # a serial that reads like a port is still a serial: the kind is the claim's, not its text's
+    ("usb://1209:1?ep=0x01&serial=port%3D1-1.4", ("serial", "port=1-1.4", "serial='port=1-1.4'")),
+])
+def test_a_usb_claim_says_which_kind_of_name_chose_its_board(url, board):
+    """The config check tells a ``serial=`` from a ``port=`` by the claim's :class:`BoardName` (it read the prefix of
+    the claim's own text before the session-65 review); the text is the one its errors show."""
+    claim = claimed_interface(url)
+    assert (claim.vid_pid, claim.interface) == ("1209:0001", 0)
+    assert (claim.board.by, claim.board.value, str(claim.board)) == board
+    assert claimed_interface("usb://1209:1?ep=0x01").board is None  # the first board libusb lists
+    assert claimed_interface("usb://1209:1") is None  # no ep=: the sink's own check says why
+
+
 @pytest.fixture
 def boards_on_the_bus(monkeypatch):
     """Plug simulated boards in where the usb:// sink's own backend looks (libusb_package's libusb): the config
     check enumerates through the sink, as the daemon does at load."""
     import libusb_package
-
-    from tests.firmware_host.fake_usb_backend import FakeBackend
 
     def plug(*boards):  # none: no libusb on this machine (get_libusb1_backend's None)
         monkeypatch.setattr(libusb_package, "get_libusb1_backend", lambda: FakeBackend(*boards) if boards else None)
@@ -161,18 +178,12 @@ def boards_on_the_bus(monkeypatch):
     return plug
 
 
-def _board(serial: str = "ABC123", ports: tuple = (1, 4), address: int = 7):
-    from tests.firmware_host.fake_usb_backend import FakeDevice
-
-    return FakeDevice(address=address, serial=serial, port_numbers=ports)
-
-
 @pytest.mark.parametrize("order", [(0, 1), (1, 0)])
 def test_one_usb_board_named_by_its_serial_and_by_its_port_is_one_destination(boards_on_the_bus, order):
     """One board chosen once by ``serial=`` and once by ``port=``: both loaded, and the second sink waited at connect
     for ever behind the first one's claim (session 65). Refused at load when the board is plugged in, naming both
     sinks and the port; nothing on the board configured, claimed, detached or left open."""
-    board, = boards_on_the_bus(_board())
+    board, = boards_on_the_bus(two_boards()[0])
     named = ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:1?ep=0x02&port=1-1.4"]
     sinks = [named[k] for k in order]
     whichs = ["serial='ABC123'", "port=1-1.4"]
@@ -185,16 +196,17 @@ def test_one_usb_board_named_by_its_serial_and_by_its_port_is_one_destination(bo
 
 @pytest.mark.parametrize("boards, sinks", [
     # no board at load: the spellings stand (a board unplugged at boot is no error), as before session 65
-    ((dataclasses.replace(_board(), present=False),),
+    ((dataclasses.replace(two_boards()[0], present=False),),
      ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01&port=1-1.4"]),
     ((), ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01&port=1-1.4"]),  # no libusb at all
     # the serial's board is in another socket: two boards
-    ((_board(), _board("XYZ789", (2,), 9)),
+    (two_boards(),
      ["usb://1209:0001?ep=0x01&serial=XYZ789", "usb://1209:0001?ep=0x01&port=1-1.4"]),
     # one board, two interfaces
-    ((_board(),), ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x02&port=1-1.4&interface=1"]),
+    ((two_boards()[0],),
+     ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x02&port=1-1.4&interface=1"]),
     # its serial unreadable (no udev rule): which board it names is not known, the spellings stand
-    ((dataclasses.replace(_board(), access_denied=True),),
+    ((dataclasses.replace(two_boards()[0], access_denied=True),),
      ["usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01&port=1-1.4"]),
 ])
 def test_usb_sinks_naming_boards_apart_on_the_bus_are_kept(boards_on_the_bus, boards, sinks):
