@@ -57,8 +57,8 @@ def truth_frame(pair: drivers.FramePair, *, sequence: int) -> JointFrame | None:
 
 def scene_flags(result: PairResult, *, calibration_suspect: bool = False) -> int:
     """The wire flags that say what ``result`` is (docs/protocol.md section 3): what the status file's JSON says
-    of a pair, for a receiver (a robot that must stop when a second person is in view) that reads only the
-    joint stream."""
+    of a pair, for a receiver that reads only the joint stream (a robot told the joints are one person's, or,
+    where the scan for others runs, that someone else was seen: neither is a presence sensor, docs/two-people.md)."""
     flags = Flags.NONE
     if result.several_people:
         flags |= Flags.SEVERAL_PEOPLE

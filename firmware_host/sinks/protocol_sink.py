@@ -55,7 +55,8 @@ class ProtocolSink(Sink):
         self._fault = int(Fault.OK)
         self._fault_since_status = int(Fault.OK)  # the last non-OK fault set since the previous STATUS
         self._calibration_suspect = False  # STATUS header flag CALIBRATION_SUSPECT (set_calibration_suspect)
-        self._scene_flags = options.scene_flags  # HELLO's header flags (announce_scene_flags)
+        # HELLO's header flags: the options' value as opened, then what announce_scene_flags last said (a reload)
+        self._scene_flags = options.scene_flags
         self._faults_set = 0  # non-OK faults set so far: a STATUS clears the latch only if none came since it read it
         self._status_due_us: Optional[int] = None
         self._status_owed = False  # the last STATUS was not written: the next frame carries one
