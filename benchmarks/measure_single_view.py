@@ -15,8 +15,8 @@ would pass an all-255 frame if the frame check also looked at the zero padding. 
 empty simulated rooms with one camera bad, and how many of them report a person (the presence gate
 on the good view's own peaks). The rooms are textured rooms with nobody in them
 (``benchmarks/empty_rooms.py``), whose good view passes the frame check and goes to the model; until
-session 65 they were black frames, which the frame check rejected too, so no view reached the model. Each run keeps its own estimator, so single-view pairs start cold, as on
-the device. A tool, not a test.
+session 65 they were black frames, which the frame check rejected too, so no view reached the model.
+Each run keeps its own estimator, so single-view pairs start cold, as on the device. A tool, not a test.
 """
 from __future__ import annotations
 

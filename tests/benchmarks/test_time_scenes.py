@@ -1,6 +1,6 @@
-"""``benchmarks/time_scenes.py``'s ``empty`` scene: scene 1's own room with its person left out, as the benchmarks' other
-empty rooms (``benchmarks/empty_rooms.py``); until session 65 the person stood 3 m behind the rig, which moved the room
-back so that the cameras faced its near wall."""
+"""``benchmarks/time_scenes.py``'s ``empty`` scene: scene 1's own room with its person left out, as the benchmarks'
+other empty rooms (``benchmarks/empty_rooms.py``); until session 65 the person stood 3 m behind the rig, which moved
+the room back so that the cameras faced its near wall."""
 from __future__ import annotations
 
 import numpy as np

@@ -42,10 +42,6 @@ MEASURED_ON = ("models/ of 2026-11-22, session 15 (the tenth, `--recipe gpu`: th
 #: (hidden joints 38.6 mm, 97 % found); without the (heatmaps') flip test 0.953 / 41.0 mm / 97 %. The rows
 #: without the prior measured as above in the same run. (Session 16's one-network prior without its own flip
 #: test: 0.952 / 41.9 mm / 96 %.)
-#: A view of a textured empty room is far from flat (the frame check's floor is 2 levels of standard deviation); the
-#: black frames these tests used until session 65 (the person put 40 m away took the room along) had 0.9.
-TEXTURED_STD_MIN = 5.0
-
 THRESHOLDS = {
     "rendered": {"pck@0.2_min": 0.86, "mpjpe_mm_max": 195.0, "found_3d_min": 0.90},
     "encoder": {"pck@0.2_min": 0.88, "mpjpe_mm_max": 125.0, "found_3d_min": 0.52},
@@ -53,6 +49,10 @@ THRESHOLDS = {
 }
 METHODS = {"rendered": "depth_centroid", "encoder": "triangulate"}
 SEQUENCES, FRAMES = 4, 10
+#: A view of a textured empty room is far from flat (the frame check's floor is 2 levels of standard deviation); the
+#: black frames these tests used until session 65 (the person put 40 m away took the room along) had 0.9.
+TEXTURED_STD_MIN = 5.0
+
 
 def textured_empty_room(rig, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Scene ``seed``'s room with nobody in it, as ``rig.pair`` sees it at 0.2 s (``benchmarks/empty_rooms.py``),
