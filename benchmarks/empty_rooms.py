@@ -17,5 +17,11 @@ import drivers.sim as sim
 def empty_room_pair(rig, seed: int, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """The images ``rig.pair`` takes at scene time ``t`` of simulated scene ``seed``'s room with nobody in it:
     uint8 BGR, as ``SimScene.render`` gives them with the person taken out."""
-    scene = sim.SimScene(sim.SceneConfig(seed=seed))
-    return tuple(scene.capture(scene.renderer.background(camera), camera, t) for camera in rig.pair)
+    return scene_without_person(sim.SimScene(sim.SceneConfig(seed=seed)), rig.pair, t)
+
+
+def scene_without_person(scene, cameras, t: float) -> tuple[np.ndarray, ...]:
+    """What each of ``cameras`` sees of ``scene`` (a ``SimScene``) at scene time ``t`` with its person left out:
+    the scene's own room (or plain background) where it stands, through its sensor, uint8 BGR. The room the scene's
+    frames with the person show, at the same instant (``measure_one_camera.py``'s other camera)."""
+    return tuple(scene.capture(scene.renderer.background(camera), camera, t) for camera in cameras)

@@ -6,8 +6,9 @@
 Someone entering at the edge of one camera's view, outside the other's: both frames pass the frame check, the pair
 has no 3D joints, and the camera that sees them reports its 2D joints (``PairResult.single_view``). Made from the
 held-out-like bench sequences (``ghnerf-bench runtime``'s): each pair is run as it is, and with one camera's frame
-replaced in turn by the same room, at the same instant, without the person (the sequence's scene, its person moved
-40 m to the side). It prints, for the camera that sees them, PCK@0.2 and the share of pairs whose answer is that
+replaced in turn by the same room, at the same instant, without the person (the sequence's scene with its person left
+out, ``benchmarks/empty_rooms.py``; until session 65 its person moved 40 m to the side, which took the room along and
+left black frames). It prints, for the camera that sees them, PCK@0.2 and the share of pairs whose answer is that
 camera's (``single_view``), beside the same camera's PCK in the normal pair; each run keeps its own estimator. Per
 run too: how many pairs searched the crop turns (``roi.turn_search``, on by default since session 57;
 ``Estimator.turn_searches``; ``--turn-search off`` sets it off), the median, mean and slowest of the pairs'
@@ -15,24 +16,26 @@ run too: how many pairs searched the crop turns (``roi.turn_search``, on by defa
 the median and the lowest of that view's median joint confidence, and the highest 6th-strongest joint peak of the
 other view (what decides whether such a pair may search: a view read under ``roi.turn_search_below`` beside
 another at 0.1 or more, ``Estimator._one_view_needs_no_search``). Then the false alarms: the pairs of those rooms
-with nobody in either camera, and ``--rooms`` empty simulated rooms (``measure_presence.py``'s), each room cold:
+with nobody in either camera, and ``--rooms`` empty simulated rooms (``measure_presence.py``'s: textured rooms with
+nobody in them; black frames until session 65), each room cold:
 how many report anyone, how many ran the flip test's mirrored run (each view alone is asked whether someone may be
 there), and each view's 6th-strongest heatmap peak before it (the per-view presence rule asks for 6 at >= 0.35;
-the mirrored run's skip, 0.1). The frame check is off throughout: many simulated rooms are plain walls, which it
-rejects (the rejected frame's path, ``measure_single_view.py``), where a real room passes it.
+the mirrored run's skip, 0.1). The frame check is off throughout, as before session 65, when the empty frames were
+black and it would have rejected them (the rejected frame's path is ``measure_single_view.py``'s); the textured
+rooms pass it.
 A tool, not a test.
 """
 from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.empty_rooms import empty_room_pair, scene_without_person  # noqa: E402
 from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, RoiConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -68,14 +71,13 @@ class _OtherView(Estimator):
 
 
 def empty_counterpart(seq) -> list:
-    """Per pair of ``seq``, its two frames of the same room without the person (``None`` where the sequence
-    does not say its scene)."""
+    """Per pair of ``seq``, its two frames of the same room at the same instant without the person: the sequence's
+    scene with its person left out (moving the person away would take the room along: black frames)."""
     import drivers.sim as sim  # a tool: the runtime library never imports drivers
 
     scene = sim.random_scene(int(seq.info["scene_seed"]), volume=seq.rig.volume, motions=HELD_OUT_MOTIONS)
-    gone = sim.SimScene(replace(scene.config, position_xz=(40.0, scene.config.position_xz[1])))
     t0, fps = float(seq.info["t0"]), float(seq.info["fps"])
-    return [[gone.render(c, t0 + i / fps, with_truth=False)[0] for c in seq.rig.pair] for i in range(len(seq))]
+    return [list(scene_without_person(scene, seq.rig.pair, t0 + i / fps)) for i in range(len(seq))]
 
 
 def main(argv=None) -> int:
@@ -156,9 +158,8 @@ def main(argv=None) -> int:
     _ViewPeaks.peaks = []
     alarms = flips = 0
     for seed in range(1, args.rooms + 1):
-        room = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(40.0, 3.0)))  # nobody in view
         est.reset()
-        r = est.estimate([room.render(c, 0.2, with_truth=False)[0] for c in rig.pair])
+        r = est.estimate(list(empty_room_pair(rig, seed)))
         alarms += int(r.single_view is not None or not all(m.all() for m in r.missing_2d.values()))
         flips += "encoder_flip" in r.timing_ms
     est.close()

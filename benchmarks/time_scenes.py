@@ -6,8 +6,10 @@
 Each scene is a simulated rig's pairs read in order on a manual clock (``policy=all``, so every run sees the same
 pairs and prints the same joints checksum) through one estimator with the runtime's defaults (or ``--config``):
 
-* ``empty``: a textured room with nobody in view (the person stands behind the rig, seed 1); every pair passes the
-  frame check, so the model runs and the presence gate says nobody (the same pair, with the capture times of 30 fps);
+* ``empty``: a textured room with nobody in view (scene seed 1's room with its person left out,
+  ``benchmarks/empty_rooms.py``; until session 65 the person stood 3 m behind the rig, which moved the room back: the
+  cameras faced its near wall); every pair passes the frame check, so the model runs and the presence gate says
+  nobody (the same pair, with the capture times of 30 fps);
 * ``still``: someone standing still (``motion=stand``, seed 0);
 * ``walk``: someone walking on the spot (``motion=walk``, seed 3): the tracked crop moves most pairs;
 * ``far``, ``near``: someone waving 6 m and 1.5 m from the rig (small in the frame, filling it).
@@ -31,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import drivers  # noqa: E402
 import drivers.sim as sim  # noqa: E402
+from benchmarks.empty_rooms import empty_room_pair  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, load_config  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
@@ -43,8 +46,8 @@ SCENE_URLS = {
     "near": "sim://?fps=30&seed=0&motion=wave&distance=1.5&policy=all",
 }
 SCENES = ("empty", *SCENE_URLS)
-#: The empty room: the person 3 m behind the rig, whose cameras look the other way at the room's far wall.
-EMPTY_ROOM = sim.SceneConfig(seed=1, motion="stand", position_xz=(0.0, -3.0))
+#: The empty room's scene seed: its room, its person left out.
+EMPTY_ROOM_SEED = 1
 FPS = 30.0
 
 
@@ -52,8 +55,7 @@ def scene_pairs(scene: str, count: int):
     """The scene's rig and ``count`` pairs: ``[(images, timestamp_s)]``."""
     if scene == "empty":
         rig = sim.RigPlacement().build()
-        room = sim.SimScene(EMPTY_ROOM)
-        images = tuple(room.render(camera, 0.0, with_truth=False)[0] for camera in rig.pair)
+        images = empty_room_pair(rig, EMPTY_ROOM_SEED)
         return rig, [(images, i / FPS) for i in range(count)]
     source = drivers.create_rig_source(SCENE_URLS[scene], clock=drivers.ManualClock())
     source.open()

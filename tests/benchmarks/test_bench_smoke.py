@@ -284,7 +284,9 @@ def test_measure_single_view(model, capsys, monkeypatch):
     out = run_script("measure_single_view", "--model-dir", model, *SIZES, "--rooms", "1",
                      capsys=capsys, monkeypatch=monkeypatch)
     assert "3 pairs of 1 held-out-like sequences" in out, out
-    assert "empty rooms with one camera black: " in out
+    # the room's other view is a textured room that reaches the model (until session 65 black frames: none passed)
+    assert re.search(r"^empty rooms with one camera black: \d+ of 2 report a person \(2 of 2 good views passed the "
+                     r"frame check\)$", out, re.M), out
 
 
 def test_measure_one_camera(model, capsys, monkeypatch):

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+from benchmarks.empty_rooms import empty_room_pair
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, FrameCheckConfig, HeatmapsConfig, Joints3DConfig, \
     NovelViewConfig, PresenceConfig, TrackingConfig, config_from_dict
 from ghnerf_runtime.errors import ModelRunError
@@ -39,10 +40,10 @@ class RayCounter(OracleSession):
 
 @pytest.fixture(scope="module")
 def clip():
-    """A short clip of a person in view, then the same room without anyone (person moved away)."""
+    """A short clip of a person in view, then the same room without anyone (the scene's room with its person left
+    out: a textured room, which the frame check passes; moving the person away took the room along, black frames)."""
     rig = sim.RigPlacement().build()
     scene = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(0.0, 3.0)))
-    gone = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(40.0, 3.0)))  # far out of view
     frames, truth, visible, twod = [], [], [], []
     for i in range(5):
         t = i / 30
@@ -51,9 +52,8 @@ def clip():
         truth.append(scene.joints_3d(t))
         visible.append(np.stack([tr.visible for _, tr in rendered]))
         twod.append(np.stack([tr.joints_2d for _, tr in rendered]))
-    empty = tuple(gone.render(c, 0.2, with_truth=False)[0] for c in rig.pair)
-    empty_truth = gone.joints_3d(0.2)
-    return rig, frames, truth, visible, empty, empty_truth, twod
+    empty = empty_room_pair(rig, scene.config.seed, 0.2)
+    return rig, frames, truth, visible, empty, twod
 
 
 #: The tests that watch a cold pair itself (reported cold, then tracked) keep it unrefined: refined (the default
@@ -161,20 +161,26 @@ def test_other_3d_methods_on_the_oracle(clip, method, tol_mm):
     assert err.num_evaluated > 50 and err.value < tol_mm, (err.value, err.num_evaluated)
 
 
-def test_person_leaving_the_view_gives_missing_joints_and_drops_the_track(clip):
-    rig, frames, truth, visible, empty, empty_truth, _ = clip
+@pytest.mark.parametrize("left_behind", ["textured room", "black frames"])
+def test_person_leaving_the_view_gives_missing_joints_and_drops_the_track(clip, left_behind):
+    """The person leaves: the room they leave (the model finds nobody in it), or black frames (a covered rig: the
+    frame check rejects them before the model runs)."""
+    rig, frames, truth, visible, empty, _ = clip
+    if left_behind == "black frames":
+        empty = tuple(np.zeros_like(image) for image in empty)
     oracle = OracleSession(edge128_contract())
     est = Estimator(oracle, rig, EstimatorConfig(tracking=COLD))
     first = _run(est, oracle, frames[:2], truth[:2], visible[:2])
     assert first[-1].num_found > 6 and est.tracker.track is not None
-    oracle.set_truth(empty_truth)  # the person is 40 m to the side: projections fall outside every crop
+    oracle.set_truth(None)  # nobody in view
     gone = est.estimate(empty)
     assert gone.missing.all() and not gone.joints_3d.any() and not gone.confidence.any()
     assert all(m.all() for m in gone.missing_2d.values())
-    # the tracked crops showed the empty room's plain wall (frame check): the working volume was looked at in
-    # the same pair (tracking.retry_cold), nobody there either, and the track is dropped
-    assert gone.tracked is False and not any(gone.frame_ok.values()) and est.tracker.track is None
-    oracle.set_truth(None)
+    # the tracked crops found nobody (or were rejected): the working volume was looked at in the same pair
+    # (tracking.retry_cold), nobody there either, and the track is dropped
+    assert gone.tracked is False and est.tracker.track is None
+    assert all(gone.frame_ok.values()) == (left_behind == "textured room"), gone.frame_reason
+    assert any(gone.frame_ok.values()) == (left_behind == "textured room"), gone.frame_reason
     cold = est.estimate(empty)
     assert cold.tracked is False and cold.missing.all()  # fell back to the working volume
     back = _run(est, oracle, frames[2:4], truth[2:4], visible[2:4])
@@ -182,7 +188,7 @@ def test_person_leaving_the_view_gives_missing_joints_and_drops_the_track(clip):
 
 
 def test_no_stale_joints_after_a_good_pair(clip):
-    rig, frames, truth, visible, empty, *_ = clip
+    rig, frames, truth, visible, *_ = clip
     oracle = OracleSession(edge128_contract())
     est = Estimator(oracle, rig)
     good = _run(est, oracle, frames[:1], truth[:1], visible[:1])[0]
@@ -435,7 +441,7 @@ def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, sour
     that camera's next crop follows its joints (the view track). Before session 53 every joint was missing.
     The view gets the flip test's mirrored run (with the encoder source) as a two-view pair with someone does;
     the pair's geometric mean alone (one view empty) skipped it."""
-    rig, frames, truth, visible, _, _, twod = clip
+    rig, frames, truth, visible, _, twod = clip
     oracle = OracleSession(edge128_contract())
     cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True), heatmaps=HeatmapsConfig(source, flip_test=flip),
                           joints3d=Joints3DConfig(method="triangulate"))
