@@ -65,8 +65,9 @@ import drivers
 from drivers.sim.demo import draw_truth
 from drivers.url import redact_url
 from drivers.url_paths import url_files
-from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, symptoms
-from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
+from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch, symptoms
+from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
+    CALIBRATION_WINDOW
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, announced_scene_flags, estimate_frame, truth_frame
 from firmware_host.protocol.constants import MAX_RIG_ID_LEN
@@ -232,28 +233,31 @@ def _mpjpe_words(acc: dict) -> str:
 
 # ------------------------------------------------------------------ calibration check
 class _CalibrationCheck:
-    """The daemon's two calibration checks (the views' agreement, the feet on the floor) over the demo's estimates,
+    """The daemon's calibration checks (the views' agreement, the feet on the floor, a mirror-image skeleton: the
+    cameras' inputs exchanged) over the demo's estimates,
     with the daemon's default window and limits: a demo run on a rig of one's own is where a camera knocked since
     ``ghcal`` shows first, and its stream should say so as the daemon's would."""
 
     def __init__(self, window: int) -> None:
         self.view = CalibrationWatch(window, CALIBRATION_MAX_PX)
         self.floor = FloorWatch(window, CALIBRATION_MAX_FLOOR_M)
+        self.handedness = HandednessWatch(window, CALIBRATION_MAX_MIRROR)
         self.flagged = 0  # estimates streamed with CALIBRATION_SUSPECT
 
     @property
     def suspect(self) -> bool:
-        return bool(self.view.suspect or self.floor.suspect)
+        return bool(self.view.suspect or self.floor.suspect or self.handedness.suspect)
 
     def symptoms(self) -> str:
         """The suspect checks' words (``1.46 px > 0.8, feet 0.18 m below the floor > 0.1 m``); empty when none is."""
-        return symptoms((self.view, self.floor))
+        return symptoms((self.view, self.floor, self.handedness))
 
     def add(self, pair_sequence: int, result: PairResult) -> str | None:
         """Count one estimate; returns the line to print when the verdict changes (else None)."""
         was = self.suspect
         self.view.add(result.reprojection_px_median)
         self.floor.add(result.lowest_foot_m)
+        self.handedness.add(result.handedness)
         if self.suspect:
             self.flagged += 1
         if self.suspect == was:

@@ -75,6 +75,7 @@ from ghnerf_runtime.flip_test import flip_averaged, joint_peaks, mirror_images, 
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution
+from ghnerf_runtime.handedness import handedness
 from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, depth_centroid_joints, gate_presence, gate_to_box, \
     lower_foot_m, near_the_body, \
     query_grid, solve_two_view_peaks, triangulate_joints, triangulate_joints_checked, volumetric_joints
@@ -241,6 +242,14 @@ class PairResult:
             both people's pairings split into two people before the box gates: :meth:`SubjectSelector.matched_foot`),
             or a person not on their feet (the torso joints triangulated likewise less than 0.5 m above that foot, or
             none: upside down, lying).
+        handedness: since session 65, whether the triangulated person is a person (+1) or a mirror image (-1)
+            (:func:`ghnerf_runtime.handedness.handedness`: the nose and toes ahead of the neck and ankles along the
+            facing direction that the body's left and up axes give), of the joints the floor check reads (triangulated
+            from peaks of at least the presence threshold in both views, near the body), not the skeleton prior's
+            (which answers a person whatever the triangulation). Negative over a window when the two cameras' inputs are
+            exchanged on a symmetric rig (the daemon watches it: docs/calibration.md, "Cameras exchanged").
+            ``None``: too few torso joints or no nose or toes so found, nobody, a frame rejected, or two people in
+            view (``several_people``: the joints may be both people's). Not in :meth:`to_json` (not streamed).
     """
 
     sequence: int
@@ -265,6 +274,7 @@ class PairResult:
     reprojection_px_median: float | None = None
     lowest_foot_m: float | None = None
     someone_else: bool | None = None
+    handedness: float | None = None
 
     def __post_init__(self) -> None:
         reasons = self.frame_reason
@@ -295,6 +305,9 @@ class PairResult:
         foot = self.lowest_foot_m
         if foot is not None and not (isinstance(foot, numbers.Real) and math.isfinite(foot)):
             raise ValueError(f"PairResult.lowest_foot_m must be a finite number or None, got {foot!r}")
+        hand = self.handedness
+        if hand is not None and not (isinstance(hand, numbers.Real) and -1.0 <= hand <= 1.0):
+            raise ValueError(f"PairResult.handedness must be a number in [-1, 1] or None, got {hand!r}")
 
     @property
     def num_found(self) -> int:
@@ -457,6 +470,7 @@ class _Pass:
     single_view: str | None = None  # the camera whose 2D joints alone are the answer (PairResult.single_view)
     reprojection_px_median: float | None = None  # the views' agreement before the gate (PairResult's)
     lowest_foot_m: float | None = None  # the lower triangulated foot's height (PairResult's)
+    handedness: float | None = None  # a person (+1) or a mirror image (-1) by the triangulation (PairResult's)
 
     @property
     def frame_ok(self) -> dict:
@@ -677,6 +691,7 @@ class Estimator:
         self._prior_check: tuple[float | None, bool] = (None, False)  # this pair's (disagreement, fell back)
         self._agreement: ViewAgreement | None = None  # this pair's, set by _joints_3d
         self._lowest_foot: float | None = None  # this pair's, set by _joints_3d
+        self._handedness: float | None = None  # this pair's, set by _joints_3d
         self._crop_terms: _CropTerms | None = None  # the last crop cameras' (_crop_terms_for)
         self._torso_mixed = False  # this pass's, set by _joints_3d (_finish_pass)
         # and its torso limbs' excess over one body's, as measured and as mixed_torso reads it (benchmarks)
@@ -1047,7 +1062,8 @@ class Estimator:
                             prior_disagreement_m=p.prior_disagreement_m, prior_fallback=p.prior_fallback,
                             several_people=p.several_people,
                             single_view=p.single_view, reprojection_px_median=p.reprojection_px_median,
-                            lowest_foot_m=p.lowest_foot_m, someone_else=self._someone_else)
+                            lowest_foot_m=p.lowest_foot_m, someone_else=self._someone_else,
+                            handedness=p.handedness)
         if novel_view is None or not all(p.frame_ok.values()) or not p.someone:
             # A single-view pair has no novel view, nor has a pair that found nobody: there is no subject to
             # view, and rendering the working volume's box for nothing was the dearest part of an empty room.
@@ -1718,10 +1734,12 @@ class Estimator:
             # the triangulation's feet (not the prior's placed ones), whether or not the box gates left someone to
             # report (_joints_3d: the presence gate asked of the joints before them)
             foot = self._lowest_foot
+        # two people's joints may mix in one skeleton: no handedness is read of a several_people pair
+        hand = None if several else self._handedness
         _add_ms(timing, "joints_3d", t)  # (the figures too: both_people checks every pairing again)
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
-                     None if seen_by is None else self.camera_names[seen_by], agreement, foot)
+                     None if seen_by is None else self.camera_names[seen_by], agreement, foot, hand)
 
     def _subject_prior(self, reported: Joints3D, subject: Joints3D, chosen: tuple[Keypoints2D, np.ndarray],
                        crops: list[Camera], regions: Regions) -> Joints3D:
@@ -1927,7 +1945,13 @@ class Estimator:
         # off), and someone must be there by the peaks (the presence gate, on those joints), not by the boxes.
         someone = tri if not pres.enabled else gate_presence(tri, pres.min_joints,
                                                              pres.threshold(self.config.heatmaps.source))
-        self._lowest_foot = self._lowest_foot_m(near_the_body(someone, _FLOOR_BODY_M), kp, regions)
+        near = near_the_body(someone, _FLOOR_BODY_M)
+        self._lowest_foot = self._lowest_foot_m(near, kp, regions)
+        # the cameras' inputs exchanged on a symmetric rig triangulate a mirror image (ghnerf_runtime.handedness):
+        # read from the same strong, near joints as the feet, not the prior's (which always answers a person)
+        strong_seen = near.valid & np.all(kp.valid & (kp.confidence >= pres.threshold(self.config.heatmaps.source)),
+                                          axis=0)
+        self._handedness = handedness(near.points, strong_seen)
         # two people's joints in one skeleton (two_people.mixed_torso), from the peaks strong in both views (a weak
         # peak may be noise's): asked whatever the 3D method, as the maps' second peaks are (_finish_pass)
         strong = tri.valid & np.all(kp.confidence >= pres.threshold(self.config.heatmaps.source), axis=0)

@@ -15,6 +15,10 @@ it: no flapping near the limit):
   its vertical axis) moves the peaks along the epipolar lines of a level rig, where the views still meet and
   only the depth changes: the px check cannot see it, but the person's feet leave the floor (float above it
   or sink below it). The median over the window, further than ``max_floor_m`` from the floor either way.
+* :class:`HandednessWatch`: whether the triangulated person is a mirror image (``PairResult.handedness``, +1 a
+  person, -1 a mirror image: :mod:`ghnerf_runtime.handedness`). The cameras' inputs exchanged on a symmetric rig
+  (the left camera's frames fed as the right's) still meet in 3D and leave the feet near the floor; the skeleton
+  comes out mirrored. The median over the window, below ``-max_mirror``.
 
 Pairs without the figure (an empty room, a frame rejected, two people in view not told apart; for the floor,
 feet out of view or near a frame's edge) do not count. Two people told apart give the reported subject's own
@@ -29,7 +33,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["CalibrationWatch", "FloorWatch", "CLEAR_RATIO", "status_words", "symptoms"]
+__all__ = ["CalibrationWatch", "FloorWatch", "HandednessWatch", "CLEAR_RATIO", "status_words", "symptoms"]
 
 #: A suspect calibration fits again once the median (its distance from the floor) is under this share of
 #: the limit.
@@ -195,3 +199,43 @@ class FloorWatch(_RollingCheck):
         """What is wrong while suspect, for the STATUS= line: ``feet 0.18 m below the floor > 0.1 m`` (empty
         otherwise)."""
         return f"{self.words()} > {self.max_floor_m:g} m" if self.suspect else ""
+
+
+class HandednessWatch(_RollingCheck):
+    """The rolling median of the pairs' handedness, and whether the rig triangulates a mirror image of the person: the
+    two cameras' inputs exchanged (a symmetric rig's left camera fed as its right).
+
+    Args:
+        window: pairs with a handedness figure the median is taken over; none is judged before it is full.
+        max_mirror: how far below 0 the median may go before the cameras look exchanged (``None``: never); the
+            true rig's windows stay near +0.8, an exchanged rig's near -0.7 (docs/calibration.md, "Cameras
+            exchanged").
+
+    Example:
+        >>> watch = HandednessWatch(window=3, max_mirror=0.2)
+        >>> [watch.add(h) for h in (0.8, -0.7, None, -0.6, -0.8, 0.9, 0.7, 0.8)]
+        [None, None, None, True, None, None, False, None]
+        >>> watch.report()
+        {'handedness_median': 0.8, 'handedness_pairs': 3, 'max_mirror': 0.2, 'exchanged_suspect': False}
+    """
+
+    def __init__(self, window: int, max_mirror: Optional[float]) -> None:
+        super().__init__(window, max_mirror)
+
+    @property
+    def max_mirror(self) -> Optional[float]:
+        return self.limit
+
+    def _distance(self, median: float) -> float:
+        return -median  # a person reads +1, a mirror image -1
+
+    def report(self) -> dict[str, Any]:
+        """The status file's ``calibration`` object's handedness keys."""
+        median = self.median
+        return {"handedness_median": None if median is None else round(median, 3),
+                "handedness_pairs": len(self.values), "max_mirror": self.max_mirror, "exchanged_suspect": self.suspect}
+
+    def symptom(self) -> str:
+        """What is wrong while suspect, for the STATUS= line (empty otherwise)."""
+        return (f"cameras look exchanged (the skeleton is a mirror image: handedness {self.median:.2f} < "
+                f"-{self.max_mirror:g})" if self.suspect else "")

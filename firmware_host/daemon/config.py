@@ -60,6 +60,13 @@ CALIBRATION_MAX_PX = 0.8
 #: joint against 0.1 m: 32 of 112 and 95 of 113, the true rig 1 of 28): benchmarks/measure_calibration_drift.py,
 #: docs/calibration.md "The feet on the floor".
 CALIBRATION_MAX_FLOOR_M = 0.05
+#: How far below 0 the 30-pair median of the pairs' handedness (PairResult.handedness: +1 a person, -1 a mirror
+#: image) may go before the cameras look exchanged (a symmetric rig's left camera fed as its right). Not a setting:
+#: on the simulated rig the true rig's 30-figure windows stayed at +0.14 or more, the exchanged rig's at -0.02 or
+#: less over 30-pair takes (-0.35 or less over 150-pair ones), and every exchanged take with a full window was flagged
+#: (benchmarks/measure_exchanged_cameras.py, docs/calibration.md "Cameras exchanged"). The window is
+#: health.calibration_window.
+CALIBRATION_MAX_MIRROR = 0.2
 
 
 class DaemonConfigError(FirmwareHostError, ValueError):

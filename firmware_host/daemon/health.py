@@ -20,8 +20,9 @@ from typing import Any, Iterable, Optional
 import numpy as np
 
 from drivers.url import redact_url
-from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, status_words
-from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
+from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch, status_words
+from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
+    CALIBRATION_WINDOW
 from ghnerf_runtime.frame_reasons import REASONS
 
 __all__ = ["SCENE_FLAGS", "State", "Health", "scene_flags_of", "write_status_file", "sink_keys"]
@@ -108,6 +109,9 @@ class Health:
                                                                                     CALIBRATION_MAX_PX))
     # the calibration's second symptom: the feet off the floor (a pan, which the view agreement does not show)
     floor: FloorWatch = field(default_factory=lambda: FloorWatch(CALIBRATION_WINDOW, CALIBRATION_MAX_FLOOR_M))
+    # the third: a mirror-image skeleton (the cameras' inputs exchanged, which neither of the others shows)
+    handedness: HandednessWatch = field(default_factory=lambda: HandednessWatch(CALIBRATION_WINDOW,
+                                                                                 CALIBRATION_MAX_MIRROR))
 
     def __post_init__(self) -> None:
         self.started = self.state_since = self.clock()
@@ -118,18 +122,19 @@ class Health:
 
     @property
     def calibration_suspect(self) -> bool:
-        """Either check says the rig no longer fits (the CALIBRATION_SUSPECT flag)."""
-        return bool(self.calibration.suspect or self.floor.suspect)
+        """Any check says the rig no longer fits (the CALIBRATION_SUSPECT flag): moved, or its inputs exchanged."""
+        return bool(self.calibration.suspect or self.floor.suspect or self.handedness.suspect)
 
     def _calibration_report(self) -> dict[str, Any]:
         """The status file's ``calibration``: each check's figures, ``suspect`` for either (``px_suspect`` and
         ``floor_suspect`` say which)."""
         px = self.calibration.report()
-        return {**px, "px_suspect": px["suspect"], **self.floor.report(), "suspect": self.calibration_suspect}
+        return {**px, "px_suspect": px["suspect"], **self.floor.report(), **self.handedness.report(),
+                "suspect": self.calibration_suspect}
 
     def _calibration_status(self) -> str:
         """The STATUS= line's words while either check is suspect, naming each symptom (empty otherwise)."""
-        return status_words((self.calibration, self.floor))
+        return status_words((self.calibration, self.floor, self.handedness))
 
     def estimated(self, total_ms: float, found: float, flags: frozenset[str] = frozenset(),
                   someone_else: Optional[bool] = None) -> None:

@@ -243,6 +243,7 @@ class Daemon:
         self.health = Health(clock=clock, rig_url=redact_url(config.rig.url))
         self.health.calibration.configure(config.health.calibration_window, config.health.calibration_max_px)
         self.health.floor.configure(config.health.calibration_window, config.health.calibration_max_floor_m)
+        self.health.handedness.configure(config.health.calibration_window, self.health.handedness.max_mirror)
         # Woken often enough to flag a stuck estimate within about half of slow_estimate_s.
         self.watchdog = HangWatchdog(self.notifier, config.health.loop_allowance_s, clock=clock,
                                      interval_s=min(config.health.slow_estimate_s / 2, 1.0),
@@ -578,6 +579,7 @@ class Daemon:
             self.health.frames_checked(result.frame_reason)
             self._calibration_changed(self.health.calibration.add(result.reprojection_px_median))
             self._floor_changed(self.health.floor.add(result.lowest_foot_m))
+            self._handedness_changed(self.health.handedness.add(result.handedness))
             self._sync_calibration()
             self.health.estimator_stalled = took > self.config.health.slow_estimate_s
             self.health.camera_fault = False
@@ -616,10 +618,23 @@ class Daemon:
         elif suspect is not None:
             _log.info("calibration fits the floor again: %s over the last %d pairs", watch.words(), len(watch.values))
 
+    def _handedness_changed(self, suspect: Optional[bool]) -> None:
+        """Log the handedness check's verdict when it changes: the cameras' inputs look exchanged, or no longer do."""
+        watch = self.health.handedness
+        if suspect:
+            _log.warning("calibration suspect: the cameras look exchanged: the triangulated person is a mirror image "
+                         "(handedness %.2f, median over the last %d pairs; +1 a person, -1 a mirror image): the left "
+                         "camera's frames come in as the right's; exchange the cameras' plugs or names in rig.url "
+                         "(docs/calibration.md, \"Cameras exchanged\")", watch.median, len(watch.values))
+        elif suspect is not None:
+            _log.info("the cameras no longer look exchanged: handedness %.2f over the last %d pairs",
+                      watch.median if watch.median is not None else 0.0, len(watch.values))
+
     def _reset_calibration(self) -> None:
-        """Both calibration checks start afresh (another calibration, model or settings), and the sinks hear it."""
+        """The calibration checks start afresh (another calibration, model or settings), and the sinks hear it."""
         self.health.calibration.reset()
         self.health.floor.reset()
+        self.health.handedness.reset()
         self._sync_calibration()
 
     def _lost(self, why: str, *, size_counted: bool = False) -> None:
@@ -822,6 +837,8 @@ class Daemon:
                                                                         new.health.calibration_max_px))
             self._floor_changed(self.health.floor.configure(new.health.calibration_window,
                                                             new.health.calibration_max_floor_m))
+            self._handedness_changed(self.health.handedness.configure(new.health.calibration_window,
+                                                                      self.health.handedness.max_mirror))
             self._sync_calibration()
             self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
             self._next_status = 0.0

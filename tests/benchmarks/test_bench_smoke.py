@@ -207,6 +207,14 @@ def test_measure_foot_spread(model, capsys, monkeypatch):
     assert re.search(r"^  dropped by the box gates: \d+: ", out, re.M), out
 
 
+def test_measure_exchanged_cameras(model, capsys, monkeypatch):
+    out = run_script("measure_exchanged_cameras", "--model-dir", model, *SIZES, "--window", "2", "--per-sequence",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert "1 held-out-like sequences x 3 pairs" in out and "windows of 2 figures" in out, out
+    assert re.search(r"^  sequence +0 \(.*\): as filmed +\d+ figures", out, re.M), out
+    assert re.search(r"^  +as filmed \| .*\n  +exchanged \| ", out, re.M), out
+
+
 def test_measure_mounting(model, capsys, monkeypatch):
     out = run_script("measure_mounting", "--model-dir", model, "--sequences", "1", "--frames", "2", "--rolls", "0,90",
                      capsys=capsys, monkeypatch=monkeypatch)

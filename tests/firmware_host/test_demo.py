@@ -174,7 +174,7 @@ def test_a_suspect_calibration_is_streamed_printed_and_drawn(tmp_path, capsys, s
 def test_the_calibration_check_says_when_it_changes_and_how_it_stands():
     check = demo._CalibrationCheck(window=3)
     assert check.report(0).startswith("calibration check: not judged (too few pairs measured; run longer")
-    pair = lambda px, foot: SimpleNamespace(reprojection_px_median=px, lowest_foot_m=foot)  # noqa: E731
+    pair = lambda px, foot: SimpleNamespace(reprojection_px_median=px, lowest_foot_m=foot, handedness=None)  # noqa
     assert [check.add(k, pair(0.3, 0.02)) for k in range(3)] == [None] * 3
     assert check.report(3) == ("calibration check: fits; views' agreement: peaks 0.30 px apart (median of the last 3 "
                                "pairs, limit 0.8 px); feet: feet 0.02 m above the floor (median of the last 3 pairs, "
@@ -191,6 +191,17 @@ def test_the_calibration_check_says_when_it_changes_and_how_it_stands():
     lines = [check.add(k, pair(0.3, None if k == 6 else 0.01)) for k in range(6, 10)]
     assert lines == [None, None, "pair 8: the calibration fits again", None]
     assert not check.suspect and check.flagged == 4  # pairs 4 to 7
+
+
+def test_the_demo_s_calibration_check_says_when_the_cameras_look_exchanged():
+    """A mirror-image skeleton (the cameras' inputs exchanged on a symmetric rig): the views meet and the feet stand on
+    the floor, and the demo's stream is flagged as the daemon's is (since session 65)."""
+    check = demo._CalibrationCheck(window=3)
+    pair = lambda hand: SimpleNamespace(reprojection_px_median=0.3, lowest_foot_m=0.01, handedness=hand)  # noqa
+    lines = [check.add(k, pair(-0.7)) for k in range(3)]
+    assert lines[:2] == [None, None] and lines[2].startswith(
+        "pair 2: CALIBRATION SUSPECT (cameras look exchanged (the skeleton is a mirror image: handedness -0.70 < -0.2))")
+    assert check.suspect and check.flagged == 1
 
 
 @pytest.mark.parametrize("make", [False, True], ids=["absent", "empty"])

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from firmware_host.daemon import DaemonConfigError, daemon_config_from_dict
-from firmware_host.daemon.calibration_watch import CLEAR_RATIO, CalibrationWatch, FloorWatch
-from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
+from firmware_host.daemon.calibration_watch import CLEAR_RATIO, CalibrationWatch, FloorWatch, HandednessWatch
+from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
+    CALIBRATION_WINDOW
 from firmware_host.daemon.health import STATUS_KEEP, STATUS_MAX, Health, State
 
 SINK = "memory://"
@@ -84,7 +85,10 @@ def test_the_status_file_and_line_say_it():
     report = health.report()
     assert report["calibration"] == {"reprojection_px_median": 1.46, "pairs": 3, "window": 3, "max_px": 0.8,
                                      "suspect": True, "px_suspect": True, "lowest_foot_m_median": None,
-                                     "floor_pairs": 0, "max_floor_m": CALIBRATION_MAX_FLOOR_M, "floor_suspect": False}
+                                     "floor_pairs": 0, "max_floor_m": CALIBRATION_MAX_FLOOR_M, "floor_suspect": False,
+                                     # since session 65: the cameras' inputs exchanged (HandednessWatch)
+                                     "handedness_median": None, "handedness_pairs": 0,
+                                     "max_mirror": CALIBRATION_MAX_MIRROR, "exchanged_suspect": False}
     assert "; calibration suspect: recalibrate (ghcal), 1.46 px > 0.8" in health.status_line()
     # a refused reload and a long state keep the warning whole, and the state its STATUS_KEEP
     health.reload_error = "reload refused: " + "x" * 300
@@ -187,3 +191,54 @@ def test_the_floor_key_and_its_checks():
         with pytest.raises(DaemonConfigError, match=f"^health.calibration_max_floor_m: must be a number of metres in "
                                                     rf"\(0, 10\], or null for no floor check, got {value!r}"):
             daemon_config_from_dict({"sinks": [SINK], "health": {"calibration_max_floor_m": value}})
+
+
+def _person(n: int, seed: int = 0) -> np.ndarray:
+    """Per-pair handedness as the true rig gave it (benchmarks/measure_exchanged_cameras.py: median +0.83, 10 % under
+    +0.58), with a few pairs read the wrong way (a peak on the wrong foot, the head turned)."""
+    rng = np.random.default_rng(seed)
+    v = np.clip(rng.normal(0.8, 0.1, n), -1, 1)
+    v[rng.choice(n, n // 10, replace=False)] = -0.6
+    return v
+
+
+def test_a_person_never_raises_the_handedness_check_and_a_mirror_image_does_once():
+    watch = HandednessWatch(CALIBRATION_WINDOW, CALIBRATION_MAX_MIRROR)
+    assert _feed(watch, _person(300)) == []
+    mirrored = -_person(60, seed=1)  # the cameras' inputs exchanged: every pair's sign turns
+    raised = _feed(watch, mirrored)  # once about half the window is mirrored (the person's odd pairs hasten it)
+    assert [change for _, change in raised] == [True] and raised[0][0] <= CALIBRATION_WINDOW // 2, raised
+    assert watch.suspect and watch.report()["exchanged_suspect"] and watch.median < -CALIBRATION_MAX_MIRROR
+    assert watch.symptom().startswith("cameras look exchanged (the skeleton is a mirror image: handedness -0.")
+    cleared = _feed(watch, _person(60, seed=2))  # plugged back: clears once
+    assert [change for _, change in cleared] == [False] and cleared[0][0] <= CALIBRATION_WINDOW // 2 + 1, cleared
+
+
+def test_pairs_without_a_handedness_do_not_count_and_the_check_waits_for_a_full_window():
+    watch = HandednessWatch(3, 0.2)
+    assert _feed(watch, [None, -0.7, None, float("nan"), -0.7]) == []  # two figures: not judged
+    assert watch.report() == {"handedness_median": -0.7, "handedness_pairs": 2, "max_mirror": 0.2,
+                              "exchanged_suspect": False}
+    assert _feed(watch, [-0.7]) == [(0, True)]
+    assert HandednessWatch(3, None).add(-1.0) is None  # None: never
+
+
+def test_a_mirror_image_makes_the_calibration_suspect_and_the_line_says_the_cameras_look_exchanged():
+    health = Health(clock=lambda: 0.0)
+    health.handedness.configure(3, 0.2)
+    health.enter(State.RUNNING)
+    for _ in range(3):
+        health.estimated(100.0, 1.0)
+        health.calibration.add(0.2)  # the views meet
+        health.floor.add(0.01)  # and the feet stand on the floor
+        health.handedness.add(-0.76)
+    calibration = health.report()["calibration"]
+    assert calibration["suspect"] and calibration["exchanged_suspect"]
+    assert not calibration["px_suspect"] and not calibration["floor_suspect"]
+    assert calibration["handedness_median"] == -0.76 and calibration["handedness_pairs"] == 3
+    assert health.calibration_suspect
+    line = health.status_line()
+    assert line.endswith("; calibration suspect: recalibrate (ghcal), cameras look exchanged (the skeleton is a "
+                         "mirror image: handedness -0.76 < -0.2)") and len(line) <= STATUS_MAX, line
+    health.handedness.reset()
+    assert not health.calibration_suspect and "calibration" not in health.status_line()

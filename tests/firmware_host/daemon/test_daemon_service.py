@@ -1936,3 +1936,35 @@ def test_a_camera_whose_frames_arrive_ten_frames_late_is_said_to_need_max_pendin
         assert run.finish() == 0
     assert run.daemon.health.rig_lost == 0
 
+
+
+class _ExchangedEstimator(_CountingEstimator):
+    """Views that meet (0.2 px) and feet on the floor throughout, no handedness for pairs 0-2, a person (+0.8) for 3-5
+    and a mirror image (-0.7) from pair 6 on: the cameras' inputs exchanged on a symmetric rig (the median of the
+    handedness check's window of 3 passes -0.2 at pair 7)."""
+
+    def estimate(self, images, *, sequence: int, timestamp_s: float):
+        from dataclasses import replace
+
+        self.n = getattr(self, "n", -1) + 1
+        self.calls = 0  # the parent's third call is a FrameError: never reached
+        result = super().estimate(images, sequence=sequence, timestamp_s=timestamp_s)
+        return replace(result, reprojection_px_median=0.2, lowest_foot_m=0.01,
+                       handedness=None if self.n < 3 else -0.7 if self.n >= 6 else 0.8)
+
+
+def test_exchanged_cameras_flag_the_calibration_on_the_link(sim_url, tmp_path, monkeypatch):
+    """The cameras' inputs exchanged on a symmetric rig: the views meet and the feet stand on the floor, but the
+    triangulated person is a mirror image. Once the handedness check's window of 3 (health.calibration_window) has its
+    median below -0.2 the JOINTS and every STATUS carry CALIBRATION_SUSPECT, the status file says which symptom and
+    the STATUS line says the cameras look exchanged (docs/calibration.md, "Cameras exchanged"). Before session 65
+    nothing did."""
+    run, messages, flags = _flags_on_the_link(_ExchangedEstimator, sim_url, tmp_path, monkeypatch)
+    assert {seq: bool(f & Flags.CALIBRATION_SUSPECT) for seq, f in flags.items()} == {seq: seq >= 7 for seq in flags}
+    assert [m for m in messages if isinstance(m, Status)][-1].header.flags == Flags.CALIBRATION_SUSPECT
+    calibration = run.daemon.health.report()["calibration"]
+    assert calibration["suspect"] and calibration["exchanged_suspect"]
+    assert not calibration["px_suspect"] and not calibration["floor_suspect"]
+    assert calibration["handedness_median"] == -0.7 and calibration["handedness_pairs"] == 3
+    assert "cameras look exchanged (the skeleton is a mirror image: handedness -0.70 < -0.2)" in \
+        run.daemon.health.status_line()

@@ -1,0 +1,110 @@
+"""Whether a triangulated skeleton is a person or a person's mirror image: the cameras' inputs exchanged.
+
+On a rig whose two cameras are mirror images of each other about its centre plane (the usual side-by-side rig,
+both aimed at one point), the left camera's frames fed as the right's still meet in 3D: the calibration's view
+agreement and the floor stay near a true rig's (docs/calibration.md, "Cameras exchanged"). Each image's 2D joints are
+right (the model reads left and right from appearance) but the depths are reflected about the point the cameras
+aim at, and the triangulated skeleton is the person's mirror image: its facing direction, taken from its
+left-to-right axis and its up axis, points to its back, where the nose and the toes are not.
+
+:func:`handedness` reads that from a pair's triangulated joints (before the skeleton prior, which was trained on
+people and answers a person's handedness whatever the triangulation: measured, it hid the mirror entirely). The
+figure is in the body's own frame, so turning round, bending, lying or a handstand leave it as it is; a mirror image
+turns its sign. A few dot products a pair.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ghnerf_runtime.body25 import JOINT_INDEX
+
+__all__ = ["handedness", "LEFTWARD_PAIRS", "FORWARD_CUES"]
+
+_J = JOINT_INDEX
+#: (a, b) pairs whose ``a - b`` points to the person's left: the shoulders and hips, through the neck and the mid-hip
+#: too (the model's peaks often miss one side's shoulder or hip where the other side's and the middle are found), and
+#: the knees and ankles. Summed as they are, so the longer spans weigh more: a span's depth error is about the same
+#: whatever its length, and a shoulder's 0.18 m to the neck alone swung the axis by 45 degrees and more at 3.5 m. With
+#: the legs and the spans' lengths 702 of 900 pairs gave a figure (587 with the torso's unit vectors alone), and the
+#: least separated take read +0.14 / -0.02 as filmed / exchanged (+0.07 / +0.07): ``benchmarks/
+#: measure_exchanged_cameras.py --sequences 30 --frames 30 --per-sequence``, session 65.
+LEFTWARD_PAIRS: tuple[tuple[int, int], ...] = (
+    (_J["LShoulder"], _J["Neck"]), (_J["Neck"], _J["RShoulder"]), (_J["LShoulder"], _J["RShoulder"]),
+    (_J["LHip"], _J["MidHip"]), (_J["MidHip"], _J["RHip"]), (_J["LHip"], _J["RHip"]),
+    (_J["LKnee"], _J["RKnee"]), (_J["LAnkle"], _J["RAnkle"]))
+_TOP = _J["Neck"]
+_SHOULDERS = (_J["LShoulder"], _J["RShoulder"])
+_HIPS = (_J["MidHip"], _J["LHip"], _J["RHip"])
+_KNEES = (_J["LKnee"], _J["RKnee"])
+#: (front, back) joint groups whose mean front minus mean back points the way the person faces: the nose ahead of the
+#: neck, each foot's toes ahead of its ankle (looking down or lying keeps both ahead in the body's frame).
+FORWARD_CUES: tuple[tuple[tuple[int, ...], tuple[int, ...]], ...] = (
+    ((_J["Nose"],), (_J["Neck"],)),
+    ((_J["RBigToe"], _J["RSmallToe"]), (_J["RAnkle"],)),
+    ((_J["LBigToe"], _J["LSmallToe"]), (_J["LAnkle"],)),
+)
+_TINY_M = 1e-6
+
+
+def _unit(v: np.ndarray) -> np.ndarray | None:
+    n = float(np.sqrt(v @ v))  # (np.linalg.norm's overhead is most of a 3-vector's cost)
+    return v / n if n > _TINY_M else None
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of two 3-vectors, without its argument handling (a fifth of this module's cost a pair)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _mean_of(points: np.ndarray, found: np.ndarray, joints: Sequence[int]) -> np.ndarray | None:
+    idx = [j for j in joints if found[j]]
+    return points[idx].mean(axis=0) if idx else None
+
+
+def _body_axes(points: np.ndarray, found: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The person's leftward and upward unit axes from the found torso joints (None: too few of them)."""
+    leftward = [points[a] - points[b] for a, b in LEFTWARD_PAIRS if found[a] and found[b]]
+    top = points[_TOP] if found[_TOP] else _mean_of(points, found, _SHOULDERS)
+    bottom = _mean_of(points, found, _HIPS)
+    if bottom is None:
+        bottom = _mean_of(points, found, _KNEES)
+    if not leftward or top is None or bottom is None:
+        return None
+    left, up = _unit(sum(leftward)), _unit(top - bottom)
+    return None if left is None or up is None else (left, up)
+
+
+def handedness(points: np.ndarray, found: np.ndarray) -> float | None:
+    """How much a skeleton faces the way a person's left and up axes say it should: +1 a person, -1 a mirror image.
+
+    The mean over :data:`FORWARD_CUES` with their joints found of the cosine between the cue's direction and the
+    facing direction ``left x up`` (the rig frame is x right, y down, z forward: right-handed). ``None`` when the
+    torso gives no axes or no cue is found.
+
+    Args:
+        points: ``(25, 3)`` BODY_25 joints, metres.
+        found: ``(25,)`` bool, the joints to read (those triangulated from confident peaks).
+
+    Example:
+        >>> from ghnerf_runtime.body25 import JOINT_INDEX as J
+        >>> P = np.zeros((25, 3)); ok = np.zeros(25, bool)
+        >>> for name, p in {"Neck": (0, -1.5, 0), "MidHip": (0, -1, 0), "LHip": (0.1, -1, 0), "RHip": (-0.1, -1, 0),
+        ...                 "Nose": (0, -1.6, -0.1)}.items():  # facing the cameras (-z), the person's left at +x
+        ...     P[J[name]], ok[J[name]] = p, True
+        >>> round(handedness(P, ok), 2), round(handedness(P * [1, 1, -1], ok), 2)  # and its mirror in depth
+        (0.71, -0.71)
+    """
+    axes = _body_axes(points, found)
+    if axes is None:
+        return None
+    left, up = axes
+    facing = _cross(left, up)
+    cosines = []
+    for front, back in FORWARD_CUES:
+        ahead, behind = _mean_of(points, found, front), _mean_of(points, found, back)
+        cue = None if ahead is None or behind is None else _unit(ahead - behind)
+        if cue is not None:
+            cosines.append(float(np.dot(cue, facing)))
+    return float(np.mean(cosines)) if cosines else None
