@@ -379,9 +379,10 @@ class FrameCheckConfig:
         min_std: a crop whose standard deviation (8-bit levels) is below this is flat
             (black, saturated, lens cap): no joints from that camera.
         max_noise_ratio: share of the crop's variance that is pixel-scale detail
-            (``var(x - box3(x)) / var(x)``). Measured on model inputs: white noise 0.48-0.79
-            (depending on how the crop resamples it), simulator frames 0.008-0.08. Above this
-            the crop is treated as noise: no joints from that camera.
+            (``var(x - box3(x)) / var(x)``). Measured on model inputs (session 65,
+            ``benchmarks/measure_frame_check.py --sequences 30``): uniform noise 0.68-0.90 (depending
+            on how the crop resamples it), the bench's frames 0.007-0.11. Above this the crop is
+            treated as noise: no joints from that camera.
         single_view_2d: when one camera's crop fails and the other's passes, still report the
             passing camera's 2D joints, from the encoder heatmaps of models that have them (one
             view gives no depth: every 3D joint is missing, and there is no novel view). Likewise

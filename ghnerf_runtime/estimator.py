@@ -106,8 +106,8 @@ from ghnerf_runtime.subject import STILL_SEVERAL_MIN_JOINTS, SubjectSelector, gu
     picks_subject
 from ghnerf_runtime.two_people import TORSO_LIMBS_M, reads_as_two_people, torso_excess
 
-__all__ = ["Estimator", "PairResult", "check_crop", "check_model_files", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
-           "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
+__all__ = ["Estimator", "PairResult", "check_crop", "crop_statistics", "check_model_files", "load_session",
+           "KEYPOINT_STAGES", "NOVEL_STAGES", "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
            "NOVEL_MATTE_STAGE", "joints_shown_twice"]
 
 log = logging.getLogger(__name__)
@@ -358,6 +358,26 @@ def _levels_per_unit(norm: Normalisation) -> float:
     return scale
 
 
+def crop_statistics(plane: np.ndarray, levels_per_unit: float,
+                    inside: np.ndarray | None = None) -> tuple[float, float] | None:
+    """The frame check's two measures of a finite model-input plane ``(S, S)``: its standard deviation in 8-bit
+    levels and the share of its variance that is pixel-to-pixel detail (``var(x - box3(x)) / var(x)``), both over
+    the pixels ``inside`` marks (``CropMaps.inside``; every pixel when ``None``). ``None`` where no pixel shows the
+    frame; the share is ``inf`` for a plane with no variance. Apart from :func:`check_crop` so that
+    ``benchmarks/measure_frame_check.py`` prints what the check compares with its thresholds."""
+    shown = plane if inside is None else plane[inside]
+    if shown.size == 0:
+        return None
+    var = float(shown.var())
+    if var <= 0.0:
+        return 0.0, float("inf")
+    detail = plane - cv2.blur(plane, (3, 3), borderType=cv2.BORDER_REFLECT)
+    if inside is not None:  # pixels whose 3x3 box shows the frame: the padding's edge is no detail
+        core = cv2.erode(inside.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        detail = detail[core if core.any() else inside]
+    return float(np.sqrt(var) * levels_per_unit), float(detail.var()) / var
+
+
 def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConfig,
                inside: np.ndarray | None = None) -> tuple[bool, str]:
     """Is a model-input plane ``(S, S)`` (one channel, float) worth running the model on?
@@ -365,8 +385,8 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
     Returns ``(ok, reason)``, the reason a word of :mod:`ghnerf_runtime.frame_reasons`: ``"flat"``
     when its standard deviation is below ``min_std`` 8-bit levels (black, saturated, covered lens),
     ``"noise"`` when more than ``max_noise_ratio`` of its variance is pixel-to-pixel detail
-    (``x - box3(x)``; white noise 0.48-0.79 after the crop's resampling, simulator frames
-    0.008-0.08), ``"non-finite"`` for NaN/inf, else ``""``.
+    (``x - box3(x)``; uniform noise 0.68-0.90 after the crop's resampling, the bench's frames
+    0.007-0.11: ``benchmarks/measure_frame_check.py``), ``"non-finite"`` for NaN/inf, else ``""``.
 
     ``inside`` (``CropMaps.inside``) limits the statistics to the pixels that show the frame: the
     padding of a crop reaching past the frame's edge (zeros, or the faded edge of ``roi.pad_fill``) would
@@ -376,17 +396,13 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
         return True, ""
     if not np.all(np.isfinite(plane)):
         return False, NON_FINITE
-    shown = plane if inside is None else plane[inside]
-    if shown.size == 0:
+    measured = crop_statistics(plane, levels_per_unit, inside)
+    if measured is None:
         return False, FLAT
-    var = float(shown.var())
-    if var <= 0.0 or np.sqrt(var) * levels_per_unit < config.min_std:  # (min_std 0 lets a flat crop this far)
+    std_levels, detail_share = measured
+    if std_levels <= 0.0 or std_levels < config.min_std:  # (min_std 0 lets a flat crop this far)
         return False, FLAT
-    detail = plane - cv2.blur(plane, (3, 3), borderType=cv2.BORDER_REFLECT)
-    if inside is not None:  # pixels whose 3x3 box shows the frame: the padding's edge is no detail
-        core = cv2.erode(inside.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-        detail = detail[core if core.any() else inside]
-    if float(detail.var()) / var > config.max_noise_ratio:
+    if detail_share > config.max_noise_ratio:
         return False, NOISE
     return True, ""
 

@@ -297,6 +297,14 @@ def test_measure_single_view(model, capsys, monkeypatch):
                      r"frame check\)$", out, re.M), out
 
 
+def test_measure_frame_check(model, capsys, monkeypatch):
+    out = run_script("measure_frame_check", "--model-dir", model, *SIZES, "--pairs-per-sequence", "1",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    # one pair: each camera's cold crop and its person crop, 4 crops of each kind; the garbage is rejected
+    assert re.search(r"^ +bench frame +scene +4 ", out, re.M), out
+    assert re.search(r"^ +uniform noise +garbage +4 +[\d.]+ / +[\d.]+ +[\d.]+ / [\d.]+ / [\d.]+ +0 / 4$", out, re.M), out
+
+
 def test_measure_one_camera(model, capsys, monkeypatch):
     out = run_script("measure_one_camera", "--model-dir", model, *SIZES, "--rooms", "1",
                      capsys=capsys, monkeypatch=monkeypatch)

@@ -9,7 +9,7 @@ import pytest
 
 from ghnerf_runtime.config import FrameCheckConfig, Joints3DConfig, RoiConfig, TrackingConfig
 from ghnerf_runtime.errors import ConfigError, ShapeError
-from ghnerf_runtime.estimator import check_crop
+from ghnerf_runtime.estimator import check_crop, crop_statistics
 from ghnerf_runtime.geometry import Camera, look_at
 from ghnerf_runtime.joints3d import depth_centroid_joints, query_grid, triangulate_joints, volumetric_joints
 from ghnerf_runtime.keypoints import model_to_heatmap_pixels
@@ -518,6 +518,24 @@ def test_frame_check_flags_flat_and_noise_but_not_images():
     bad[3, 3] = np.nan
     assert check_crop(bad, 255.0, cfg) == (False, "non-finite")
     assert check_crop(np.zeros((128, 128), np.float32), 255.0, FrameCheckConfig(enabled=False)) == (True, "")
+
+
+def test_the_frame_checks_statistics_are_what_its_verdict_compares():
+    """``crop_statistics``: the standard deviation in levels and the detail share that ``check_crop`` holds to its
+    thresholds (``benchmarks/measure_frame_check.py`` prints them), over the pixels that show the frame."""
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[:128, :128]
+    image = (0.5 + 0.3 * np.sin(xx / 9.0) * np.cos(yy / 13.0)).astype(np.float32)
+    std, share = crop_statistics(image, 255.0)
+    assert std == pytest.approx(255.0 * float(image.std()), rel=1e-5) and share < 0.01
+    noise = rng.random((128, 128)).astype(np.float32)
+    assert crop_statistics(noise, 255.0)[1] > FrameCheckConfig().max_noise_ratio
+    assert crop_statistics(np.full((8, 8), 0.5, np.float32), 255.0) == (0.0, float("inf"))
+    assert crop_statistics(image, 255.0, np.zeros(image.shape, bool)) is None
+    half = np.zeros(image.shape, bool)
+    half[:, :64] = True
+    padded = np.where(half, noise, 0.0).astype(np.float32)  # zero padding beside the frame's noise
+    assert crop_statistics(padded, 255.0, half)[0] == pytest.approx(255.0 * float(noise[:, :64].std()), rel=1e-5)
 
 
 def test_frame_check_judges_only_the_pixels_that_show_the_frame():
