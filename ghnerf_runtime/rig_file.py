@@ -82,6 +82,17 @@ MAX_RIG_FILE_BYTES = 1 << 20
 #: Largest image width or height: the runtime's remap tables (OpenCV's fixed-point maps) address
 #: pixels with 16-bit integers. It also keeps absurd sizes (10**400) from overflowing the float checks.
 MAX_IMAGE_SIDE = 32767
+#: Most metres of depth one pixel of disparity may move a point at the working volume's centre before loading warns
+#: that the pair is too narrow for its distance (``z**2 / (f * b)``, :func:`depth_per_disparity_m`). Measured on the
+#: simulated scene at 3 m (``benchmarks/measure_baseline.py``, docs/rig-file.md): 0.24 m/px (a 10 cm pair, the
+#: narrowest the model learnt) gave 67 mm MPJPE, 0.39 (6 cm) 82 mm, 0.79 (3 cm) a quarter of the pairs with no joint
+#: and 1.2 (2 cm) nearly every joint missing, all loading without a word. The example rig's is 0.13.
+MAX_DEPTH_PER_DISPARITY_M = 0.3
+#: Heights above the floor (the rig frame's ``-y``, metres) a camera may stand at without a warning: a low tripod to a
+#: high ceiling mount (ceilings are about 3 m; halls and gyms higher). The runtime reads the floor at y = 0: the
+#: skeleton prior's inputs keep each joint's height above it, and a rig whose origin was moved 50 m up loaded and
+#: gave every joint missing (docs/rig-file.md, "Conventions").
+CAMERA_HEIGHT_RANGE_M = (0.1, 6.0)
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
 _TOP_OPTIONAL = ("metadata",)
@@ -106,6 +117,12 @@ __all__ = [
     "distortion_problem",
     "volume_reach_problem",
     "lens_fold_warning",
+    "rig_warnings",
+    "depth_per_disparity_m",
+    "narrow_pair_warning",
+    "camera_height_warning",
+    "MAX_DEPTH_PER_DISPARITY_M",
+    "CAMERA_HEIGHT_RANGE_M",
     "PRINCIPAL_POINT_TOLERANCE",
     "MAX_DISTORTION",
     "MAX_SKEW_SHARE",
@@ -346,10 +363,54 @@ def _rig_from_dict(data: Any, *, path: str | os.PathLike | None, warn: bool) -> 
         chk._raise(f"cameras[{far[0]}].t", far[1])
     if too_far := volume_reach_problem(rig):
         chk._raise("working_volume", too_far)
-    for cam in cameras if warn else ():
-        if cam.fold_inside_image():
-            log.warning("%s%s", f"{path}: " if path else "", lens_fold_warning(cam))
+    for message in rig_warnings(rig) if warn else ():
+        log.warning("%s%s", f"{path}: " if path else "", message)
     return rig
+
+
+def rig_warnings(rig: Rig) -> list[str]:
+    """What loading warns of in a rig it accepts: a lens model folding inside its image, a pair too narrow for its
+    working distance, a camera at an implausible height above the floor."""
+    out = [lens_fold_warning(cam) for cam in rig.cameras if cam.fold_inside_image()]
+    if narrow := narrow_pair_warning(rig):
+        out.append(narrow)
+    out.extend(filter(None, (camera_height_warning(cam) for cam in rig.cameras)))
+    return out
+
+
+def depth_per_disparity_m(rig: Rig, depth_m: float) -> float:
+    """Metres of depth one pixel of disparity moves a point ``depth_m`` from the pair: ``z**2 / (f * b)``, the
+    rectified-stereo approximation (``f`` the pair's mean focal length in pixels, ``b`` the baseline)."""
+    a, b = rig.pair
+    focal = float(np.mean([a.K[0, 0], a.K[1, 1], b.K[0, 0], b.K[1, 1]]))
+    return depth_m ** 2 / (focal * rig.baseline)
+
+
+def narrow_pair_warning(rig: Rig) -> str | None:
+    """Why the pair is too narrow for where it looks (one pixel of disparity over
+    :data:`MAX_DEPTH_PER_DISPARITY_M` of depth at the working volume's centre), or None."""
+    a, b = rig.pair
+    distance = float(np.linalg.norm(rig.volume.center - 0.5 * (a.center + b.center)))
+    per_px = depth_per_disparity_m(rig, distance)
+    if per_px <= MAX_DEPTH_PER_DISPARITY_M:
+        return None
+    return (f"cameras {a.name!r} and {b.name!r} are {rig.baseline * 1e3:.0f} mm apart, {distance:.2f} m from the "
+            f"working volume's centre: one pixel of disparity there is {per_px:.2f} m of depth (over "
+            f"{MAX_DEPTH_PER_DISPARITY_M:g} m, MAX_DEPTH_PER_DISPARITY_M), so the 3D joints will be far off or "
+            "missing (docs/rig-file.md, \"Baseline\"). Mount the cameras farther apart")
+
+
+def camera_height_warning(cam: Camera) -> str | None:
+    """Why ``cam`` stands where no rig's camera does (its height above the floor, ``-y``, outside
+    :data:`CAMERA_HEIGHT_RANGE_M`), or None."""
+    lo, hi = CAMERA_HEIGHT_RANGE_M
+    height = -float(cam.center[1])
+    if lo <= height <= hi:
+        return None
+    return (f"camera {cam.name!r} stands {round(height, 2) + 0.0:.2f} m above the floor (y = 0, y down), outside the {lo:g}-{hi:g} m "
+            "(CAMERA_HEIGHT_RANGE_M) of a tripod to a ceiling mount: the runtime reads heights from the floor (the "
+            "skeleton prior) and every joint may come out missing. Is the origin on the floor below the cameras' "
+            "midpoint, y pointing down? Level the rig (calibration.level.level_rig, ghcal import --camera-height)")
 
 
 def lens_fold_warning(cam: Camera) -> str:

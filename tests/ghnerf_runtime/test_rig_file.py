@@ -14,9 +14,13 @@ from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (
+    MAX_DEPTH_PER_DISPARITY_M,
+    camera_height_warning,
+    depth_per_disparity_m,
     dumps_rig,
     load_rig,
     loads_rig,
+    narrow_pair_warning,
     rig_from_dict,
     rig_to_dict,
     save_rig,
@@ -671,3 +675,64 @@ def test_skews_of_real_sensors_load(example_dict, share):
         cam["K"][0][1] = share * cam["K"][0][0]
     rig = rig_from_dict(example_dict, path="rig.json")
     assert rig.cameras[0].K[0, 1] == example_dict["cameras"][0]["K"][0][1]
+
+
+def _moved_camera(cam: dict, shift_m) -> None:
+    """Move ``cam``'s centre by ``shift_m`` (rig frame), its rotation kept: ``t' = t - R @ shift``."""
+    cam["t"] = (np.array(cam["t"]) - np.array(cam["R"]) @ np.array(shift_m, float)).tolist()
+
+
+def test_a_pair_too_narrow_for_its_working_distance_loads_with_a_warning_naming_the_cameras(example_dict, caplog):
+    """A 2 cm pair 2.75 m from its volume's centre (0.47 m of depth per pixel of disparity) loaded without a word,
+    and on the simulated scene such a pair gives nearly every joint missing (benchmarks/measure_baseline.py)."""
+    _moved_camera(example_dict["cameras"][1], [-0.055, 0.0, 0.0])  # 75 mm apart -> 20 mm
+    with caplog.at_level("WARNING"):
+        rig = rig_from_dict(example_dict, path="narrow.json")
+    assert abs(rig.baseline - 0.02) < 1e-9
+    messages = [r.getMessage() for r in caplog.records]
+    assert len(messages) == 1, messages
+    assert messages[0].startswith("narrow.json: cameras 'left' and 'right' are 20 mm apart, 2.75 m from the working "
+                                  "volume's centre: one pixel of disparity there is 0.47 m of depth (over 0.3 m")
+    assert narrow_pair_warning(rig_from_dict(json.loads(EXAMPLE.read_text()))) is None  # the example's 7.5 cm: 0.13
+
+
+def test_the_warning_on_a_narrow_pair_follows_the_working_distance_not_the_baseline_alone(example_dict):
+    """The same 2 cm pair whose volume lies 1 m ahead has 0.06 m of depth per pixel there: no warning."""
+    _moved_camera(example_dict["cameras"][1], [-0.055, 0.0, 0.0])
+    example_dict["working_volume"] = {"min": [-0.5, -1.5, 0.7], "max": [0.5, 0.05, 1.3]}
+    rig = rig_from_dict(example_dict, path="near.json")
+    assert depth_per_disparity_m(rig, 1.0) < MAX_DEPTH_PER_DISPARITY_M and narrow_pair_warning(rig) is None
+
+
+def test_a_rig_whose_floor_is_not_at_y_0_loads_with_a_warning_naming_the_file_the_camera_and_its_height(
+        example_dict, caplog):
+    """The origin moved 50 m up (cameras and volume alike): it loaded without a word, and the skeleton prior, which
+    reads heights from the floor at y = 0, then gave every joint missing."""
+    for cam in example_dict["cameras"]:
+        _moved_camera(cam, [0.0, -50.0, 0.0])
+    vol = example_dict["working_volume"]
+    vol["min"][1] -= 50.0
+    vol["max"][1] -= 50.0
+    with caplog.at_level("WARNING"):
+        rig_from_dict(example_dict, path="high.json")
+    messages = [r.getMessage() for r in caplog.records]
+    assert len(messages) == 2, messages
+    for name, message in zip(("left", "right"), messages):
+        assert message.startswith(f"high.json: camera {name!r} stands 51.20 m above the floor (y = 0, y down), "
+                                  "outside the 0.1-6 m (CAMERA_HEIGHT_RANGE_M)"), message
+
+
+@pytest.mark.parametrize("height_m", [-1.2, 0.0, 0.05, 6.5])
+def test_a_camera_below_the_floor_on_it_or_above_any_ceiling_is_warned_about(example_dict, height_m):
+    cam = example_dict["cameras"][0]
+    _moved_camera(cam, [0.0, 1.2 - height_m, 0.0])  # the example's left camera stands 1.2 m high
+    rig = rig_from_dict(example_dict, path="odd.json")
+    assert camera_height_warning(rig.cameras[0]).startswith(f"camera 'left' stands {height_m:.2f} m above the floor")
+    assert camera_height_warning(rig.cameras[1]) is None
+
+
+@pytest.mark.parametrize("height_m", [0.11, 0.3, 3.0, 5.99])
+def test_cameras_from_a_low_tripod_to_a_high_ceiling_load_without_a_height_warning(example_dict, height_m):
+    for cam in example_dict["cameras"]:
+        _moved_camera(cam, [0.0, 1.2 - height_m, 0.0])
+    assert camera_height_warning(rig_from_dict(example_dict).cameras[0]) is None
