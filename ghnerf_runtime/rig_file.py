@@ -88,11 +88,17 @@ MAX_IMAGE_SIDE = 32767
 #: narrowest the model learnt) gave 67 mm MPJPE, 0.39 (6 cm) 82 mm, 0.79 (3 cm) a quarter of the pairs with no joint
 #: and 1.2 (2 cm) nearly every joint missing, all loading without a word. The example rig's is 0.13.
 MAX_DEPTH_PER_DISPARITY_M = 0.3
-#: Heights above the floor (the rig frame's ``-y``, metres) a camera may stand at without a warning: a low tripod to a
-#: high ceiling mount (ceilings are about 3 m; halls and gyms higher). The runtime reads the floor at y = 0: the
-#: skeleton prior's inputs keep each joint's height above it, and a rig whose origin was moved 50 m up loaded and
-#: gave every joint missing (docs/rig-file.md, "Conventions").
-CAMERA_HEIGHT_RANGE_M = (0.1, 6.0)
+#: Heights above the floor (the rig frame's ``-y``, metres) a camera may stand at without a warning: a camera on the
+#: floor to a hall's ceiling (rooms' ceilings are about 3 m), the range ``ghcal solve``'s floor view and ``ghcal
+#: solve/import --camera-height`` accept, so a rig they level is not warned about. The runtime reads the floor at
+#: y = 0: the skeleton prior's inputs keep each joint's height above it, and a rig whose origin was moved 50 m up
+#: loaded and gave every joint missing (docs/rig-file.md, "Baseline and camera height").
+CAMERA_HEIGHT_RANGE_M = (0.05, 10.0)
+#: Farthest the working volume's y range may lie from the floor (y = 0) before loading warns that a person standing
+#: on it is outside the volume: the default ``joints3d.max_outside_box_m``, past which a joint outside the volume is
+#: missing. The rig frame moved 1 m up (cameras 2.3 m high: no height warning) gave 142 mm MPJPE against 30 mm, 3 m up
+#: 507 mm (``benchmarks/measure_baseline.py``): the skeleton prior reads each joint's height above y = 0.
+MAX_VOLUME_FLOOR_GAP_M = 0.5
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
 _TOP_OPTIONAL = ("metadata",)
@@ -123,6 +129,8 @@ __all__ = [
     "camera_height_warning",
     "MAX_DEPTH_PER_DISPARITY_M",
     "CAMERA_HEIGHT_RANGE_M",
+    "volume_floor_warning",
+    "MAX_VOLUME_FLOOR_GAP_M",
     "PRINCIPAL_POINT_TOLERANCE",
     "MAX_DISTORTION",
     "MAX_SKEW_SHARE",
@@ -375,6 +383,8 @@ def rig_warnings(rig: Rig) -> list[str]:
     if narrow := narrow_pair_warning(rig):
         out.append(narrow)
     out.extend(filter(None, (camera_height_warning(cam) for cam in rig.cameras)))
+    if floor := volume_floor_warning(rig):
+        out.append(floor)
     return out
 
 
@@ -397,7 +407,21 @@ def narrow_pair_warning(rig: Rig) -> str | None:
     return (f"cameras {a.name!r} and {b.name!r} are {rig.baseline * 1e3:.0f} mm apart, {distance:.2f} m from the "
             f"working volume's centre: one pixel of disparity there is {per_px:.2f} m of depth (over "
             f"{MAX_DEPTH_PER_DISPARITY_M:g} m, MAX_DEPTH_PER_DISPARITY_M), so the 3D joints will be far off or "
-            "missing (docs/rig-file.md, \"Baseline\"). Mount the cameras farther apart")
+            "missing (docs/rig-file.md, \"Baseline and camera height\"). Mount the cameras farther apart")
+
+
+def volume_floor_warning(rig: Rig) -> str | None:
+    """Why a person standing on the floor (y = 0) would be outside ``rig``'s working volume (its y range more than
+    :data:`MAX_VOLUME_FLOOR_GAP_M` from the floor), or None."""
+    top, bottom = float(rig.volume.min_corner[1]), float(rig.volume.max_corner[1])  # y down: min is the top
+    gap = -bottom if bottom < 0.0 else top
+    if gap <= MAX_VOLUME_FLOOR_GAP_M:
+        return None
+    where = "above" if bottom < 0.0 else "below"
+    return (f"working volume: y from {top:g} to {bottom:g} lies {gap:.2f} m {where} the floor (y = 0, y down; over "
+            f"{MAX_VOLUME_FLOOR_GAP_M:g} m, MAX_VOLUME_FLOOR_GAP_M): a person standing on the floor is outside it, "
+            "their joints missing, and the skeleton prior reads heights from y = 0. Is the origin on the floor, y "
+            "pointing down? A standing person's volume reaches y = 0 (docs/examples/rig.json: -2.2 to 0.05)")
 
 
 def camera_height_warning(cam: Camera) -> str | None:
@@ -408,7 +432,7 @@ def camera_height_warning(cam: Camera) -> str | None:
     if lo <= height <= hi:
         return None
     return (f"camera {cam.name!r} stands {round(height, 2) + 0.0:.2f} m above the floor (y = 0, y down), outside the {lo:g}-{hi:g} m "
-            "(CAMERA_HEIGHT_RANGE_M) of a tripod to a ceiling mount: the runtime reads heights from the floor (the "
+            "(CAMERA_HEIGHT_RANGE_M) of a camera on the floor to a hall's ceiling: the runtime reads heights from the floor (the "
             "skeleton prior) and every joint may come out missing. Is the origin on the floor below the cameras' "
             "midpoint, y pointing down? Level the rig (calibration.level.level_rig, ghcal import --camera-height)")
 
