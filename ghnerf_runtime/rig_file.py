@@ -431,10 +431,12 @@ def camera_height_warning(cam: Camera) -> str | None:
     height = -float(cam.center[1])
     if lo <= height <= hi:
         return None
-    return (f"camera {cam.name!r} stands {round(height, 2) + 0.0:.2f} m above the floor (y = 0, y down), outside the {lo:g}-{hi:g} m "
-            "(CAMERA_HEIGHT_RANGE_M) of a camera on the floor to a hall's ceiling: the runtime reads heights from the floor (the "
-            "skeleton prior) and every joint may come out missing. Is the origin on the floor below the cameras' "
-            "midpoint, y pointing down? Level the rig (calibration.level.level_rig, ghcal import --camera-height)")
+    shown = round(height, 2) + 0.0  # + 0.0: a camera on the floor to rounding shows 0.00, not -0.00
+    return (f"camera {cam.name!r} stands {shown:.2f} m above the floor (y = 0, y down), outside the {lo:g}-{hi:g} m "
+            "(CAMERA_HEIGHT_RANGE_M) of a camera on the floor to a hall's ceiling: the runtime reads heights from the "
+            "floor (the skeleton prior) and every joint may come out missing. Is the origin on the floor below the "
+            "cameras' midpoint, y pointing down? Level the rig (calibration.level.level_rig, "
+            "ghcal import --camera-height)")
 
 
 def lens_fold_warning(cam: Camera) -> str:
