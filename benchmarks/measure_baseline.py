@@ -7,8 +7,9 @@ The simulator's default rig (``drivers.sim.RigPlacement()``: 640x480, 80 degrees
 at the subject ``--distance`` ahead) with the pair's centres moved to each baseline, filming the bench's held-out
 people (``ghnerf-bench runtime``'s scenes, motions and first instants, placed in this rig's volume). Each
 (baseline, sequence) runs cold in its own estimator, the runtime's defaults (``EstimatorConfig()``). It prints per
-baseline the depth one pixel of disparity moves a point at the working distance (``depth_per_disparity_m``: what
-``load_rig``'s narrow-pair warning reads, docs/rig-file.md), the MPJPE of the joints found, the share of joints
+baseline the angle at which the pair's rays meet at the working volume's centre (``rig_file.pair_angle_deg``: what
+``load_rig``'s narrow-pair warning reads, docs/rig-file.md), the depth one pixel of disparity moves a point at the
+working distance (``depth_per_disparity_px``), the MPJPE of the joints found, the share of joints
 found and the share of pairs with no 3D joint at all. ``RigPlacement`` refuses baselines under 5 cm, so the
 cameras are placed here as it places them. Then, per ``--lifts``, the default 1.2 m rig's frame moved that many metres
 up (cameras and working volume alike, the same images): the floor no longer at y = 0, where the runtime reads it
@@ -24,12 +25,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE  # noqa: E402
+from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE, depth_per_disparity_px  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, look_at  # noqa: E402
 from ghnerf_runtime.metrics import mpjpe  # noqa: E402
-from ghnerf_runtime.rig_file import depth_per_disparity_m  # noqa: E402
+from ghnerf_runtime.rig_file import pair_angle_deg  # noqa: E402
 
 
 def rig_with_baseline(baseline_m: float, distance_m: float) -> Rig:
@@ -90,16 +91,17 @@ def main(argv=None) -> int:
     session = load_session(cfg)
     print(f"{args.sequences} held-out-like sequences x {args.frames} frames, {args.precision}, the simulator's "
           f"default rig, subject {args.distance:g} m ahead, each sequence cold")
-    print("| baseline m | depth per px of disparity at the subject, m | MPJPE mm | joints found | "
-          "pairs with no joint |")
-    print("|---|---|---|---|---|")
+    print("| baseline m | rays' angle at the volume's centre, degrees | depth per px of disparity at the subject, m | "
+          "MPJPE mm | joints found | pairs with no joint |")
+    print("|---|---|---|---|---|---|")
     for baseline in (float(b) for b in args.baselines.split(",")):
         rig = rig_with_baseline(baseline, args.distance)
         runs = [run_sequence(session, cfg, rig, k, args.frames) for k in range(args.sequences)]
         pred, found, truth = (np.concatenate(a) for a in zip(*runs))
         score = mpjpe(pred, truth, np.ones(found.shape, bool), pred_valid=found)
         value = f"{score.value:.0f}" if found.any() else "-"
-        print(f"| {baseline:g} | {depth_per_disparity_m(rig, args.distance):.3f} | {value} | "
+        print(f"| {baseline:g} | {pair_angle_deg(rig, rig.volume.center):.2f} | "
+              f"{depth_per_disparity_px(rig, args.distance):.3f} | {value} | "
               f"{found.mean():.3f} | {float((~found.any(axis=1)).mean()):.3f} |", flush=True)
     print("\n| frame moved up, m | cameras above the floor y = 0, m | MPJPE mm | joints found | pairs with no joint |")
     print("|---|---|---|---|---|")

@@ -82,12 +82,15 @@ MAX_RIG_FILE_BYTES = 1 << 20
 #: Largest image width or height: the runtime's remap tables (OpenCV's fixed-point maps) address
 #: pixels with 16-bit integers. It also keeps absurd sizes (10**400) from overflowing the float checks.
 MAX_IMAGE_SIDE = 32767
-#: Most metres of depth one pixel of disparity may move a point at the working volume's centre before loading warns
-#: that the pair is too narrow for its distance (``z**2 / (f * b)``, :func:`depth_per_disparity_m`). Measured on the
-#: simulated scene at 3 m (``benchmarks/measure_baseline.py``, docs/rig-file.md): 0.24 m/px (a 10 cm pair, the
-#: narrowest the model learnt) gave 67 mm MPJPE, 0.39 (6 cm) 82 mm, 0.79 (3 cm) a quarter of the pairs with no joint
-#: and 1.2 (2 cm) nearly every joint missing, all loading without a word. The example rig's is 0.13.
-MAX_DEPTH_PER_DISPARITY_M = 0.3
+#: Smallest angle (degrees) between the pair's lines of sight to the working volume's centre before loading warns that
+#: the pair is too narrow for its distance (baseline over distance, in radians, for a pair facing the volume). Twice the
+#: default ``joints3d.min_ray_angle_deg`` (0.5), which drops a joint whose rays meet at less: the angle shrinks further
+#: towards the volume's far side. Measured on the simulated scene at 3 m (``benchmarks/measure_baseline.py``,
+#: docs/rig-file.md): 1.9 degrees (a 10 cm pair, the narrowest the model learnt) gave 67 mm MPJPE, 1.14 (6 cm) 82 mm,
+#: 0.57 (3 cm) a quarter of the pairs with no joint and 0.38 (2 cm) nearly every joint missing, all loading without a
+#: word. An angle, not a depth per pixel: the runtime's 2D errors scale with the person's crop, not the sensor's
+#: pixels. The example rig's is 1.56.
+MIN_PAIR_ANGLE_DEG = 1.0
 #: Heights above the floor (the rig frame's ``-y``, metres) a camera may stand at without a warning: a camera on the
 #: floor to a hall's ceiling (rooms' ceilings are about 3 m), the range ``ghcal solve``'s floor view and ``ghcal
 #: solve/import --camera-height`` accept, so a rig they level is not warned about. The runtime reads the floor at
@@ -124,10 +127,10 @@ __all__ = [
     "volume_reach_problem",
     "lens_fold_warning",
     "rig_warnings",
-    "depth_per_disparity_m",
+    "pair_angle_deg",
     "narrow_pair_warning",
     "camera_height_warning",
-    "MAX_DEPTH_PER_DISPARITY_M",
+    "MIN_PAIR_ANGLE_DEG",
     "CAMERA_HEIGHT_RANGE_M",
     "volume_floor_warning",
     "MAX_VOLUME_FLOOR_GAP_M",
@@ -388,26 +391,28 @@ def rig_warnings(rig: Rig) -> list[str]:
     return out
 
 
-def depth_per_disparity_m(rig: Rig, depth_m: float) -> float:
-    """Metres of depth one pixel of disparity moves a point ``depth_m`` from the pair: ``z**2 / (f * b)``, the
-    rectified-stereo approximation (``f`` the pair's mean focal length in pixels, ``b`` the baseline)."""
-    a, b = rig.pair
-    focal = float(np.mean([a.K[0, 0], a.K[1, 1], b.K[0, 0], b.K[1, 1]]))
-    return depth_m ** 2 / (focal * rig.baseline)
+def pair_angle_deg(rig: Rig, point: np.ndarray) -> float:
+    """The angle (degrees) between the lines from ``point`` to the pair's two camera centres: the angle at which
+    the pair's rays to ``point`` meet."""
+    a, b = (cam.center - np.asarray(point, float) for cam in rig.pair)
+    cos = float(a @ b) / (float(np.linalg.norm(a)) * float(np.linalg.norm(b)))
+    return math.degrees(math.acos(min(1.0, max(-1.0, cos))))
 
 
 def narrow_pair_warning(rig: Rig) -> str | None:
-    """Why the pair is too narrow for where it looks (one pixel of disparity over
-    :data:`MAX_DEPTH_PER_DISPARITY_M` of depth at the working volume's centre), or None."""
+    """Why the pair is too narrow for where it looks (its lines of sight to the working volume's centre under
+    :data:`MIN_PAIR_ANGLE_DEG` apart), or None."""
     a, b = rig.pair
-    distance = float(np.linalg.norm(rig.volume.center - 0.5 * (a.center + b.center)))
-    per_px = depth_per_disparity_m(rig, distance)
-    if per_px <= MAX_DEPTH_PER_DISPARITY_M:
+    centre = rig.volume.center
+    angle = pair_angle_deg(rig, centre)
+    if angle >= MIN_PAIR_ANGLE_DEG:
         return None
-    return (f"cameras {a.name!r} and {b.name!r} are {rig.baseline * 1e3:.0f} mm apart, {distance:.2f} m from the "
-            f"working volume's centre: one pixel of disparity there is {per_px:.2f} m of depth (over "
-            f"{MAX_DEPTH_PER_DISPARITY_M:g} m, MAX_DEPTH_PER_DISPARITY_M), so the 3D joints will be far off or "
-            "missing (docs/rig-file.md, \"Baseline and camera height\"). Mount the cameras farther apart")
+    distance = float(np.linalg.norm(centre - 0.5 * (a.center + b.center)))
+    return (f"cameras {a.name!r} and {b.name!r} are {rig.baseline * 1e3:.0f} mm apart and {distance:.2f} m from the "
+            f"working volume's centre: their rays meet there at {angle:.2f} degrees (under {MIN_PAIR_ANGLE_DEG:g}, "
+            "MIN_PAIR_ANGLE_DEG), so the 3D joints will be far off in depth, or missing where their rays meet under "
+            "joints3d.min_ray_angle_deg (docs/rig-file.md, \"Baseline and camera height\"). Mount the cameras "
+            "farther apart")
 
 
 def volume_floor_warning(rig: Rig) -> str | None:

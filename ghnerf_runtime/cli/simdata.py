@@ -28,7 +28,7 @@ import numpy as np
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.metrics import acceleration_error, left_right_swaps, mpjpe, mpjpe_by_visibility, pck, \
     visibility_class
-from ghnerf_runtime.rig_file import depth_per_disparity_m, dumps_rig, loads_rig, save_rig
+from ghnerf_runtime.rig_file import dumps_rig, loads_rig, save_rig
 
 log = logging.getLogger(__name__)
 
@@ -303,7 +303,9 @@ def depth_per_disparity_px(rig: Rig, depth_m: float) -> float:
         >>> round(depth_per_disparity_px(rig, 3.0), 4)
         0.018
     """
-    return depth_per_disparity_m(rig, depth_m)  # what load_rig's narrow-pair warning reads
+    a, b = rig.pair
+    focal = float(np.mean([a.K[0, 0], a.K[1, 1], b.K[0, 0], b.K[1, 1]]))
+    return depth_m ** 2 / (focal * rig.baseline)
 
 
 def percentiles(values, qs=(50, 99)) -> dict:

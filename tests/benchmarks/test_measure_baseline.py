@@ -29,5 +29,5 @@ def test_a_lifted_rig_keeps_every_pixel_of_a_point_lifted_with_it():
 def test_the_command_line_runs(tiny_model_dir, scratch_cache, capsys, monkeypatch):  # noqa: F811
     out = run_script("measure_baseline", "--model-dir", str(tiny_model_dir), "--sequences", "1", "--frames", "1",
                      "--baselines", "0.02,0.6", "--lifts", "0,50", capsys=capsys, monkeypatch=monkeypatch)
-    assert "| 0.02 | 1.180 |" in out and "| 0.6 | 0.039 |" in out, out
+    assert "| 0.02 | 0.38 | 1.180 |" in out and "| 0.6 | 11.37 | 0.039 |" in out, out
     assert "| 50 | 51.30 |" in out, out

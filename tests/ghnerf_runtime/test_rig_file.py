@@ -14,14 +14,14 @@ from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (
-    MAX_DEPTH_PER_DISPARITY_M,
+    MIN_PAIR_ANGLE_DEG,
     camera_height_warning,
     volume_floor_warning,
-    depth_per_disparity_m,
     dumps_rig,
     load_rig,
     loads_rig,
     narrow_pair_warning,
+    pair_angle_deg,
     rig_from_dict,
     rig_to_dict,
     save_rig,
@@ -684,25 +684,38 @@ def _moved_camera(cam: dict, shift_m) -> None:
 
 
 def test_a_pair_too_narrow_for_its_working_distance_loads_with_a_warning_naming_the_cameras(example_dict, caplog):
-    """A 2 cm pair 2.75 m from its volume's centre (0.47 m of depth per pixel of disparity) loaded without a word,
-    and on the simulated scene such a pair gives nearly every joint missing (benchmarks/measure_baseline.py)."""
+    """A 2 cm pair 2.75 m from its volume's centre (rays meeting there at 0.42 degrees) loaded without a word, and
+    on the simulated scene such a pair gives nearly every joint missing (benchmarks/measure_baseline.py)."""
     _moved_camera(example_dict["cameras"][1], [-0.055, 0.0, 0.0])  # 75 mm apart -> 20 mm
     with caplog.at_level("WARNING"):
         rig = rig_from_dict(example_dict, path="narrow.json")
     assert abs(rig.baseline - 0.02) < 1e-9
     messages = [r.getMessage() for r in caplog.records]
     assert len(messages) == 1, messages
-    assert messages[0].startswith("narrow.json: cameras 'left' and 'right' are 20 mm apart, 2.75 m from the working "
-                                  "volume's centre: one pixel of disparity there is 0.47 m of depth (over 0.3 m")
-    assert narrow_pair_warning(rig_from_dict(json.loads(EXAMPLE.read_text()))) is None  # the example's 7.5 cm: 0.13
+    assert messages[0].startswith("narrow.json: cameras 'left' and 'right' are 20 mm apart and 2.75 m from the "
+                                  "working volume's centre: their rays meet there at 0.42 degrees (under 1, "
+                                  "MIN_PAIR_ANGLE_DEG)"), messages[0]
+    example = rig_from_dict(json.loads(EXAMPLE.read_text()))
+    assert narrow_pair_warning(example) is None
+    assert pair_angle_deg(example, example.volume.center) == pytest.approx(1.56, abs=0.005)
 
 
 def test_the_warning_on_a_narrow_pair_follows_the_working_distance_not_the_baseline_alone(example_dict):
-    """The same 2 cm pair whose volume lies 1 m ahead has 0.06 m of depth per pixel there: no warning."""
+    """The same 2 cm pair whose volume's centre lies 0.9 m away sees it at 1.3 degrees: no warning."""
     _moved_camera(example_dict["cameras"][1], [-0.055, 0.0, 0.0])
-    example_dict["working_volume"] = {"min": [-0.5, -1.5, 0.7], "max": [0.5, 0.05, 1.3]}
+    example_dict["working_volume"] = {"min": [-0.5, -1.5, 0.5], "max": [0.5, 0.05, 1.0]}
     rig = rig_from_dict(example_dict, path="near.json")
-    assert depth_per_disparity_m(rig, 1.0) < MAX_DEPTH_PER_DISPARITY_M and narrow_pair_warning(rig) is None
+    assert pair_angle_deg(rig, rig.volume.center) > MIN_PAIR_ANGLE_DEG and narrow_pair_warning(rig) is None
+
+
+@pytest.mark.parametrize("baseline_m, distance_m", [(0.1, 5.0), (0.02, 0.5), (1.2, 3.0)])
+def test_the_pair_angle_is_the_baseline_over_the_distance_for_a_point_straight_ahead(baseline_m, distance_m):
+    K = [[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]]
+    cams = tuple(Camera(n, 640, 480, K, [], np.eye(3), np.array([-x, 1.2, 0.0]))
+                 for n, x in (("l", -baseline_m / 2), ("r", baseline_m / 2)))
+    rig = Rig(cams, WorkingVolume(np.array([-1.0, -2.0, 1.0]), np.array([1.0, 0.0, 6.0])))
+    expected = np.degrees(2 * np.arctan(baseline_m / 2 / distance_m))
+    assert pair_angle_deg(rig, [0.0, -1.2, distance_m]) == pytest.approx(expected, rel=1e-9)
 
 
 def test_a_rig_whose_floor_is_not_at_y_0_loads_with_a_warning_naming_the_file_the_camera_and_its_height(
