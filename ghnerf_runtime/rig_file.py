@@ -82,6 +82,26 @@ MAX_RIG_FILE_BYTES = 1 << 20
 #: Largest image width or height: the runtime's remap tables (OpenCV's fixed-point maps) address
 #: pixels with 16-bit integers. It also keeps absurd sizes (10**400) from overflowing the float checks.
 MAX_IMAGE_SIDE = 32767
+#: Smallest angle (degrees) between the pair's lines of sight to the working volume's centre before loading warns that
+#: the pair is too narrow for its distance (baseline over distance, in radians, for a pair facing the volume). Twice the
+#: default ``joints3d.min_ray_angle_deg`` (0.5), which drops a joint whose rays meet at less: the angle shrinks further
+#: towards the volume's far side. Measured on the simulated scene at 3 m (``benchmarks/measure_baseline.py``,
+#: docs/rig-file.md): 1.9 degrees (a 10 cm pair, the narrowest the model learnt) gave 67 mm MPJPE, 1.14 (6 cm) 82 mm,
+#: 0.57 (3 cm) a quarter of the pairs with no joint and 0.38 (2 cm) nearly every joint missing, all loading without a
+#: word. An angle, not a depth per pixel: the runtime's 2D errors scale with the person's crop, not the sensor's
+#: pixels. The example rig's is 1.56.
+MIN_PAIR_ANGLE_DEG = 1.0
+#: Heights above the floor (the rig frame's ``-y``, metres) a camera may stand at without a warning: a camera on the
+#: floor to a hall's ceiling (rooms' ceilings are about 3 m), the range ``ghcal solve``'s floor view and ``ghcal
+#: solve/import --camera-height`` accept, so a rig they level is not warned about. The runtime reads the floor at
+#: y = 0: the skeleton prior's inputs keep each joint's height above it, and a rig whose origin was moved 50 m up
+#: loaded and gave every joint missing (docs/rig-file.md, "Baseline and camera height").
+CAMERA_HEIGHT_RANGE_M = (0.05, 10.0)
+#: Farthest the working volume's y range may lie from the floor (y = 0) before loading warns that a person standing
+#: on it is outside the volume: the default ``joints3d.max_outside_box_m``, past which a joint outside the volume is
+#: missing. The rig frame moved 1 m up (cameras 2.3 m high: no height warning) gave 142 mm MPJPE against 30 mm, 3 m up
+#: 507 mm (``benchmarks/measure_baseline.py``): the skeleton prior reads each joint's height above y = 0.
+MAX_VOLUME_FLOOR_GAP_M = 0.5
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
 _TOP_OPTIONAL = ("metadata",)
@@ -106,6 +126,14 @@ __all__ = [
     "distortion_problem",
     "volume_reach_problem",
     "lens_fold_warning",
+    "rig_warnings",
+    "pair_angle_deg",
+    "narrow_pair_warning",
+    "camera_height_warning",
+    "MIN_PAIR_ANGLE_DEG",
+    "CAMERA_HEIGHT_RANGE_M",
+    "volume_floor_warning",
+    "MAX_VOLUME_FLOOR_GAP_M",
     "PRINCIPAL_POINT_TOLERANCE",
     "MAX_DISTORTION",
     "MAX_SKEW_SHARE",
@@ -346,10 +374,74 @@ def _rig_from_dict(data: Any, *, path: str | os.PathLike | None, warn: bool) -> 
         chk._raise(f"cameras[{far[0]}].t", far[1])
     if too_far := volume_reach_problem(rig):
         chk._raise("working_volume", too_far)
-    for cam in cameras if warn else ():
-        if cam.fold_inside_image():
-            log.warning("%s%s", f"{path}: " if path else "", lens_fold_warning(cam))
+    for message in rig_warnings(rig) if warn else ():
+        log.warning("%s%s", f"{path}: " if path else "", message)
     return rig
+
+
+def rig_warnings(rig: Rig) -> list[str]:
+    """What loading warns of in a rig it accepts: a lens model folding inside its image, a pair too narrow for its
+    working distance, a camera at an implausible height above the floor."""
+    out = [lens_fold_warning(cam) for cam in rig.cameras if cam.fold_inside_image()]
+    if narrow := narrow_pair_warning(rig):
+        out.append(narrow)
+    out.extend(filter(None, (camera_height_warning(cam) for cam in rig.cameras)))
+    if floor := volume_floor_warning(rig):
+        out.append(floor)
+    return out
+
+
+def pair_angle_deg(rig: Rig, point: np.ndarray) -> float:
+    """The angle (degrees) between the lines from ``point`` to the pair's two camera centres: the angle at which
+    the pair's rays to ``point`` meet."""
+    a, b = (cam.center - np.asarray(point, float) for cam in rig.pair)
+    cos = float(a @ b) / (float(np.linalg.norm(a)) * float(np.linalg.norm(b)))
+    return math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+
+
+def narrow_pair_warning(rig: Rig) -> str | None:
+    """Why the pair is too narrow for where it looks (its lines of sight to the working volume's centre under
+    :data:`MIN_PAIR_ANGLE_DEG` apart), or None."""
+    a, b = rig.pair
+    centre = rig.volume.center
+    angle = pair_angle_deg(rig, centre)
+    if angle >= MIN_PAIR_ANGLE_DEG:
+        return None
+    distance = float(np.linalg.norm(centre - 0.5 * (a.center + b.center)))
+    return (f"cameras {a.name!r} and {b.name!r} are {rig.baseline * 1e3:.0f} mm apart and {distance:.2f} m from the "
+            f"working volume's centre: their rays meet there at {angle:.2f} degrees (under {MIN_PAIR_ANGLE_DEG:g}, "
+            "MIN_PAIR_ANGLE_DEG), so the 3D joints will be far off in depth, or missing where their rays meet under "
+            "joints3d.min_ray_angle_deg (docs/rig-file.md, \"Baseline and camera height\"). Mount the cameras "
+            "farther apart")
+
+
+def volume_floor_warning(rig: Rig) -> str | None:
+    """Why a person standing on the floor (y = 0) would be outside ``rig``'s working volume (its y range more than
+    :data:`MAX_VOLUME_FLOOR_GAP_M` from the floor), or None."""
+    top, bottom = float(rig.volume.min_corner[1]), float(rig.volume.max_corner[1])  # y down: min is the top
+    gap = -bottom if bottom < 0.0 else top
+    if gap <= MAX_VOLUME_FLOOR_GAP_M:
+        return None
+    where = "above" if bottom < 0.0 else "below"
+    return (f"working volume: y from {top:g} to {bottom:g} lies {gap:.2f} m {where} the floor (y = 0, y down; over "
+            f"{MAX_VOLUME_FLOOR_GAP_M:g} m, MAX_VOLUME_FLOOR_GAP_M): a person standing on the floor is outside it, "
+            "their joints missing, and the skeleton prior reads heights from y = 0. Is the origin on the floor, y "
+            "pointing down? A standing person's volume reaches y = 0 (docs/examples/rig.json: -2.2 to 0.05)")
+
+
+def camera_height_warning(cam: Camera) -> str | None:
+    """Why ``cam`` stands where no rig's camera does (its height above the floor, ``-y``, outside
+    :data:`CAMERA_HEIGHT_RANGE_M`), or None."""
+    lo, hi = CAMERA_HEIGHT_RANGE_M
+    height = -float(cam.center[1])
+    if lo <= height <= hi:
+        return None
+    shown = round(height, 2) + 0.0  # + 0.0: a camera on the floor to rounding shows 0.00, not -0.00
+    return (f"camera {cam.name!r} stands {shown:.2f} m above the floor (y = 0, y down), outside the {lo:g}-{hi:g} m "
+            "(CAMERA_HEIGHT_RANGE_M) of a camera on the floor to a hall's ceiling: the runtime reads heights from the "
+            "floor (the skeleton prior) and every joint may come out missing. Is the origin on the floor below the "
+            "cameras' midpoint, y pointing down? Level the rig (calibration.level.level_rig, "
+            "ghcal import --camera-height)")
 
 
 def lens_fold_warning(cam: Camera) -> str:

@@ -14,9 +14,14 @@ from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (
+    MIN_PAIR_ANGLE_DEG,
+    camera_height_warning,
+    volume_floor_warning,
     dumps_rig,
     load_rig,
     loads_rig,
+    narrow_pair_warning,
+    pair_angle_deg,
     rig_from_dict,
     rig_to_dict,
     save_rig,
@@ -671,3 +676,107 @@ def test_skews_of_real_sensors_load(example_dict, share):
         cam["K"][0][1] = share * cam["K"][0][0]
     rig = rig_from_dict(example_dict, path="rig.json")
     assert rig.cameras[0].K[0, 1] == example_dict["cameras"][0]["K"][0][1]
+
+
+def _moved_camera(cam: dict, shift_m) -> None:
+    """Move ``cam``'s centre by ``shift_m`` (rig frame), its rotation kept: ``t' = t - R @ shift``."""
+    cam["t"] = (np.array(cam["t"]) - np.array(cam["R"]) @ np.array(shift_m, float)).tolist()
+
+
+def test_a_pair_too_narrow_for_its_working_distance_loads_with_a_warning_naming_the_cameras(example_dict, caplog):
+    """A 2 cm pair 2.75 m from its volume's centre (rays meeting there at 0.42 degrees) loaded without a word, and
+    on the simulated scene such a pair gives nearly every joint missing (benchmarks/measure_baseline.py)."""
+    _moved_camera(example_dict["cameras"][1], [-0.055, 0.0, 0.0])  # 75 mm apart -> 20 mm
+    with caplog.at_level("WARNING"):
+        rig = rig_from_dict(example_dict, path="narrow.json")
+    assert abs(rig.baseline - 0.02) < 1e-9
+    messages = [r.getMessage() for r in caplog.records]
+    assert len(messages) == 1, messages
+    assert messages[0].startswith("narrow.json: cameras 'left' and 'right' are 20 mm apart and 2.75 m from the "
+                                  "working volume's centre: their rays meet there at 0.42 degrees (under 1, "
+                                  "MIN_PAIR_ANGLE_DEG)"), messages[0]
+    example = rig_from_dict(json.loads(EXAMPLE.read_text()))
+    assert narrow_pair_warning(example) is None
+    assert pair_angle_deg(example, example.volume.center) == pytest.approx(1.56, abs=0.005)
+
+
+def test_the_warning_on_a_narrow_pair_follows_the_working_distance_not_the_baseline_alone(example_dict):
+    """The same 2 cm pair whose volume's centre lies 0.9 m away sees it at 1.3 degrees: no warning."""
+    _moved_camera(example_dict["cameras"][1], [-0.055, 0.0, 0.0])
+    example_dict["working_volume"] = {"min": [-0.5, -1.5, 0.5], "max": [0.5, 0.05, 1.0]}
+    rig = rig_from_dict(example_dict, path="near.json")
+    assert pair_angle_deg(rig, rig.volume.center) > MIN_PAIR_ANGLE_DEG and narrow_pair_warning(rig) is None
+
+
+@pytest.mark.parametrize("baseline_m, distance_m", [(0.1, 5.0), (0.02, 0.5), (1.2, 3.0)])
+def test_the_pair_angle_is_the_baseline_over_the_distance_for_a_point_straight_ahead(baseline_m, distance_m):
+    K = [[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]]
+    cams = tuple(Camera(n, 640, 480, K, [], np.eye(3), np.array([-x, 1.2, 0.0]))
+                 for n, x in (("l", -baseline_m / 2), ("r", baseline_m / 2)))
+    rig = Rig(cams, WorkingVolume(np.array([-1.0, -2.0, 1.0]), np.array([1.0, 0.0, 6.0])))
+    expected = np.degrees(2 * np.arctan(baseline_m / 2 / distance_m))
+    assert pair_angle_deg(rig, [0.0, -1.2, distance_m]) == pytest.approx(expected, rel=1e-9)
+
+
+def test_a_rig_whose_floor_is_not_at_y_0_loads_with_a_warning_naming_the_file_the_camera_and_its_height(
+        example_dict, caplog):
+    """The origin moved 50 m up (cameras and volume alike): it loaded without a word, and the skeleton prior, which
+    reads heights from the floor at y = 0, then gave every joint missing."""
+    for cam in example_dict["cameras"]:
+        _moved_camera(cam, [0.0, -50.0, 0.0])
+    vol = example_dict["working_volume"]
+    vol["min"][1] -= 50.0
+    vol["max"][1] -= 50.0
+    with caplog.at_level("WARNING"):
+        rig_from_dict(example_dict, path="high.json")
+    messages = [r.getMessage() for r in caplog.records]
+    assert len(messages) == 3, messages
+    assert messages[2].startswith("high.json: working volume: y from -52.2 to -49.95 lies 49.95 m above the floor")
+    for name, message in zip(("left", "right"), messages):
+        assert message.startswith(f"high.json: camera {name!r} stands 51.20 m above the floor (y = 0, y down), "
+                                  "outside the 0.05-10 m (CAMERA_HEIGHT_RANGE_M)"), message
+
+
+@pytest.mark.parametrize("height_m", [-1.2, 0.0, 0.03, 10.5])
+def test_a_camera_below_the_floor_on_it_or_above_any_ceiling_is_warned_about(example_dict, height_m):
+    cam = example_dict["cameras"][0]
+    _moved_camera(cam, [0.0, 1.2 - height_m, 0.0])  # the example's left camera stands 1.2 m high
+    rig = rig_from_dict(example_dict, path="odd.json")
+    assert camera_height_warning(rig.cameras[0]).startswith(f"camera 'left' stands {height_m:.2f} m above the floor")
+    assert camera_height_warning(rig.cameras[1]) is None
+
+
+@pytest.mark.parametrize("height_m", [0.06, 0.3, 3.0, 9.99])
+def test_cameras_from_the_floor_to_a_hall_s_ceiling_load_without_a_height_warning(example_dict, height_m):
+    for cam in example_dict["cameras"]:
+        _moved_camera(cam, [0.0, 1.2 - height_m, 0.0])
+    assert camera_height_warning(rig_from_dict(example_dict).cameras[0]) is None
+
+
+@pytest.mark.parametrize("lift_m, gap", [(1.0, "0.95 m above"), (-3.0, "0.80 m below")])
+def test_a_working_volume_away_from_the_floor_is_warned_about_where_the_cameras_heights_are_plausible(
+        example_dict, caplog, lift_m, gap):
+    """The rig frame moved 1 m up (cameras 2.2 m high, a real mount): no height warning, and on the simulated scene
+    the MPJPE went from 30 to 142 mm (benchmarks/measure_baseline.py). The volume then lies 0.95 m above the floor;
+    moved 3 m down, under it."""
+    for cam in example_dict["cameras"]:
+        _moved_camera(cam, [0.0, -lift_m, 0.0])
+    vol = example_dict["working_volume"]
+    vol["min"][1] -= lift_m
+    vol["max"][1] -= lift_m
+    if lift_m < 0:  # cameras below the floor are warned about too; put them back up to see the volume's own
+        for cam in example_dict["cameras"]:
+            _moved_camera(cam, [0.0, lift_m, 0.0])
+    with caplog.at_level("WARNING"):
+        rig_from_dict(example_dict, path="lifted.json")
+    messages = [r.getMessage() for r in caplog.records]
+    assert len(messages) == 1, messages
+    assert messages[0].startswith("lifted.json: working volume: y from ") and f"lies {gap} the floor" in messages[0]
+
+
+def test_the_volume_s_floor_gap_is_the_default_gate_on_joints_outside_the_volume():
+    """Past it a person standing on the floor has joints the default gate drops (docs/rig-file.md)."""
+    from ghnerf_runtime.config import Joints3DConfig
+    from ghnerf_runtime.rig_file import MAX_VOLUME_FLOOR_GAP_M
+
+    assert MAX_VOLUME_FLOOR_GAP_M == Joints3DConfig().max_outside_box_m

@@ -1,0 +1,119 @@
+"""MPJPE against the stereo pair's baseline, at the simulated rig's working distance (3 m).
+
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_baseline.py [--model-dir models] [--sequences 4]
+        [--frames 8] [--baselines 0.02,0.03,0.04,0.06,0.1,0.2,0.6] [--distance 3.0] [--lifts 0,1,3,50]
+
+The simulator's default rig (``drivers.sim.RigPlacement()``: 640x480, 80 degrees, 1.3 m high, both cameras aimed
+at the subject ``--distance`` ahead) with the pair's centres moved to each baseline, filming the bench's held-out
+people (``ghnerf-bench runtime``'s scenes, motions and first instants, placed in this rig's volume). Each
+(baseline, sequence) runs cold in its own estimator, the runtime's defaults (``EstimatorConfig()``). It prints per
+baseline the angle at which the pair's rays meet at the working volume's centre (``rig_file.pair_angle_deg``: what
+``load_rig``'s narrow-pair warning reads, docs/rig-file.md), the depth one pixel of disparity moves a point at the
+working distance (``depth_per_disparity_px``), the MPJPE of the joints found, the share of joints
+found and the share of pairs with no 3D joint at all. ``RigPlacement`` refuses baselines under 5 cm, so the
+cameras are placed here as it places them. Then, per ``--lifts``, the default 1.2 m rig's frame moved that many metres
+up (cameras and working volume alike, the same images): the floor no longer at y = 0, where the runtime reads it
+(``load_rig``'s camera height warning). A tool, not a test.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE, depth_per_disparity_px  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, look_at  # noqa: E402
+from ghnerf_runtime.metrics import mpjpe  # noqa: E402
+from ghnerf_runtime.rig_file import pair_angle_deg  # noqa: E402
+
+
+def rig_with_baseline(baseline_m: float, distance_m: float) -> Rig:
+    """The simulator's default rig at ``distance_m``, its cameras ``baseline_m`` apart (any baseline: the
+    placement's own 5 cm floor does not apply), aimed at the target as ``RigPlacement.build`` aims them."""
+    import drivers.sim as sim  # a tool: the runtime library never imports drivers
+
+    placement = sim.RigPlacement(distance_m=distance_m)
+    base = placement.build(rig_id=f"baseline-{baseline_m:g}")
+    cams = []
+    for cam, sign in zip(base.pair, (-1.0, 1.0)):
+        eye = np.array([sign * baseline_m / 2, -placement.camera_height_m, 0.0])
+        R, t = look_at(eye, placement.target)
+        cams.append(Camera(cam.name, cam.width, cam.height, cam.K, cam.dist, R, t))
+    return Rig(tuple(cams), base.volume, base.rig_id)
+
+
+def lifted(rig: Rig, lift_m: float) -> Rig:
+    """``rig`` with its frame's origin moved ``lift_m`` metres down (y down): cameras and volume ``lift_m`` higher
+    above the floor the runtime reads at y = 0, the geometry between them unchanged."""
+    shift = np.array([0.0, -lift_m, 0.0])
+    cams = tuple(Camera(c.name, c.width, c.height, c.K, c.dist, c.R, c.t - c.R @ shift) for c in rig.cameras)
+    volume = WorkingVolume(rig.volume.min_corner + shift, rig.volume.max_corner + shift)
+    return Rig(cams, volume, f"{rig.rig_id}-lifted-{lift_m:g}")
+
+
+def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0, lift_m: float = 0.0):
+    """Predicted joints, found mask and truth of bench scene ``k`` filmed by ``rig``, one cold estimator given
+    ``rig`` :func:`lifted` by ``lift_m`` (truth in ``rig``'s frame)."""
+    import drivers.sim as sim
+
+    seed = SEED_BASE + k
+    scene = sim.random_scene(seed, volume=rig.volume, motions=HELD_OUT_MOTIONS)
+    t0 = float(np.random.default_rng([seed, 7]).uniform(0.0, scene.period_s))
+    est = Estimator(session, lifted(rig, lift_m) if lift_m else rig, cfg)
+    pred, found, truth = [], [], []
+    for i in range(frames):
+        t = t0 + i / fps
+        r = est.estimate([scene.render(cam, t, with_truth=False)[0] for cam in rig.pair], sequence=i)
+        pred.append(r.joints_3d + [0.0, lift_m, 0.0])
+        found.append(~r.missing)
+        truth.append(scene.joints_3d(t))
+    est.close()
+    return np.array(pred), np.array(found), np.array(truth)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--precision", default="int8")
+    ap.add_argument("--sequences", type=int, default=4)
+    ap.add_argument("--frames", type=int, default=8)
+    ap.add_argument("--distance", type=float, default=3.0, help="the subject's distance ahead, metres")
+    ap.add_argument("--baselines", default="0.02,0.03,0.04,0.06,0.1,0.2,0.6", help="metres, comma-separated")
+    ap.add_argument("--lifts", default="0,1,3,50", help="metres the default rig's frame is moved up, comma-separated")
+    args = ap.parse_args(argv)
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision))
+    session = load_session(cfg)
+    print(f"{args.sequences} held-out-like sequences x {args.frames} frames, {args.precision}, the simulator's "
+          f"default rig, subject {args.distance:g} m ahead, each sequence cold")
+    print("| baseline m | rays' angle at the volume's centre, degrees | depth per px of disparity at the subject, m | "
+          "MPJPE mm | joints found | pairs with no joint |")
+    print("|---|---|---|---|---|---|")
+    for baseline in (float(b) for b in args.baselines.split(",")):
+        rig = rig_with_baseline(baseline, args.distance)
+        runs = [run_sequence(session, cfg, rig, k, args.frames) for k in range(args.sequences)]
+        pred, found, truth = (np.concatenate(a) for a in zip(*runs))
+        score = mpjpe(pred, truth, np.ones(found.shape, bool), pred_valid=found)
+        value = f"{score.value:.0f}" if found.any() else "-"
+        print(f"| {baseline:g} | {pair_angle_deg(rig, rig.volume.center):.2f} | "
+              f"{depth_per_disparity_px(rig, args.distance):.3f} | {value} | "
+              f"{found.mean():.3f} | {float((~found.any(axis=1)).mean()):.3f} |", flush=True)
+    print("\n| frame moved up, m | cameras above the floor y = 0, m | MPJPE mm | joints found | pairs with no joint |")
+    print("|---|---|---|---|---|")
+    rig = rig_with_baseline(1.2, args.distance)
+    for lift in (float(v) for v in args.lifts.split(",")):
+        runs = [run_sequence(session, cfg, rig, k, args.frames, lift_m=lift) for k in range(args.sequences)]
+        pred, found, truth = (np.concatenate(a) for a in zip(*runs))
+        value = f"{mpjpe(pred, truth, np.ones(found.shape, bool), pred_valid=found).value:.0f}" if found.any() else "-"
+        print(f"| {lift:g} | {-lifted(rig, lift).cameras[0].center[1]:.2f} | {value} | {found.mean():.3f} | "
+              f"{float((~found.any(axis=1)).mean()):.3f} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
