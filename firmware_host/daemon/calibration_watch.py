@@ -33,11 +33,17 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["CalibrationWatch", "FloorWatch", "HandednessWatch", "CLEAR_RATIO", "status_words", "symptoms"]
+__all__ = ["CalibrationWatch", "FloorWatch", "HandednessWatch", "CLEAR_RATIO", "RECALIBRATE", "SWAP_CAMERAS",
+           "fixes", "status_words", "symptoms"]
 
 #: A suspect calibration fits again once the median (its distance from the floor) is under this share of
 #: the limit.
 CLEAR_RATIO = 0.75
+#: What to do about a symptom, said before it: a camera moved needs a new calibration, the cameras' inputs exchanged
+#: only need the plugs or the names in rig.url the right way round (a new calibration would not help: it would be
+#: solved from the exchanged views and fit them).
+RECALIBRATE = "recalibrate (ghcal)"
+SWAP_CAMERAS = "swap the cameras' plugs or names in rig.url"
 
 
 def symptoms(checks) -> str:
@@ -46,17 +52,37 @@ def symptoms(checks) -> str:
     return ", ".join(c.symptom() for c in checks if c.suspect)
 
 
+def _symptoms_by_fix(checks) -> dict[str, list[str]]:
+    """The suspect checks' symptoms grouped under their fix, in the checks' order."""
+    grouped: dict[str, list[str]] = {}
+    for check in checks:
+        if check.suspect:
+            grouped.setdefault(check.fix, []).append(check.symptom())
+    return grouped
+
+
+def fixes(checks) -> str:
+    """What to do about the suspect checks (``recalibrate (ghcal)``; two fixes joined by ``, and ``); empty when
+    none is suspect."""
+    return ", and ".join(_symptoms_by_fix(checks))
+
+
 def status_words(checks) -> str:
-    """The STATUS= line's words for the checks that are suspect, each symptom named (empty when none is)."""
-    named = symptoms(checks)
-    return "; calibration suspect: recalibrate (ghcal), " + named if named else ""
+    """The STATUS= line's words for the checks that are suspect: each fix, then the symptoms it answers
+    (``; calibration suspect: recalibrate (ghcal), 1.46 px > 0.8``; empty when none is)."""
+    grouped = _symptoms_by_fix(checks)
+    said = "; ".join(f"{fix}, {', '.join(named)}" for fix, named in grouped.items())
+    return "; calibration suspect: " + said if said else ""
 
 
 class _RollingCheck:
     """The median of the last ``window`` figures of one symptom, and whether it is past ``limit`` (``None``: never).
 
-    Subclasses say how far a median is from fitting (:meth:`_distance`) and name things for their reports.
+    Subclasses say how far a median is from fitting (:meth:`_distance`) and name things for their reports, and
+    ``fix`` what the user should do while it is suspect.
     """
+
+    fix = RECALIBRATE
 
     def __init__(self, window: int, limit: Optional[float]) -> None:
         self.window = int(window)
@@ -218,6 +244,8 @@ class HandednessWatch(_RollingCheck):
         >>> watch.report()
         {'handedness_median': 0.8, 'handedness_pairs': 3, 'max_mirror': 0.2, 'exchanged_suspect': False}
     """
+
+    fix = SWAP_CAMERAS  # the rig file is right; the frames come in under each other's names
 
     def __init__(self, window: int, max_mirror: Optional[float]) -> None:
         super().__init__(window, max_mirror)
