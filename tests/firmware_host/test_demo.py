@@ -200,7 +200,7 @@ def test_the_demo_s_calibration_check_says_when_the_cameras_look_exchanged():
     pair = lambda hand: SimpleNamespace(reprojection_px_median=0.3, lowest_foot_m=0.01, handedness=hand)  # noqa
     lines = [check.add(k, pair(-0.7)) for k in range(3)]
     assert lines[:2] == [None, None] and lines[2].startswith(
-        "pair 2: CALIBRATION SUSPECT (cameras look exchanged (the skeleton is a mirror image: handedness -0.70 < -0.2))")
+        "pair 2: CALIBRATION SUSPECT (cameras look exchanged (mirror image: handedness -0.70 < -0.2))")
     assert check.suspect and check.flagged == 1
 
 
@@ -216,7 +216,7 @@ def test_the_demo_names_the_fix_for_exchanged_cameras_not_a_recalibration():
     assert "SUSPECT" in verdict and "swap the cameras' plugs or names in rig.url" in verdict, verdict
     assert "recalibrate" not in verdict, verdict
     assert check.band() == ("CALIBRATION SUSPECT: swap the cameras' plugs or names in rig.url",
-                            "cameras look exchanged (the skeleton is a mirror image: handedness -0.70 < -0.2)")
+                            "cameras look exchanged (mirror image: handedness -0.70 < -0.2)")
 
 
 @pytest.mark.parametrize("make", [False, True], ids=["absent", "empty"])

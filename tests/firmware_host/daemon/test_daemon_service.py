@@ -1966,8 +1966,8 @@ def test_exchanged_cameras_flag_the_calibration_on_the_link(sim_url, tmp_path, m
     assert calibration["suspect"] and calibration["exchanged_suspect"]
     assert not calibration["px_suspect"] and not calibration["floor_suspect"]
     assert calibration["handedness_median"] == -0.7 and calibration["handedness_pairs"] == 3
-    assert "; calibration suspect: swap the cameras' plugs or names in rig.url, cameras look exchanged (the skeleton " \
-           "is a mirror image: handedness -0.70 < -0.2)" in run.daemon.health.status_line()
+    assert "; calibration suspect: swap the cameras' plugs or names in rig.url, cameras look exchanged (mirror " \
+           "image: handedness -0.70 < -0.2)" in run.daemon.health.status_line()
     assert calibration["fix"] == "swap the cameras' plugs or names in rig.url"
 
 
