@@ -627,11 +627,10 @@ class Daemon:
         if suspect:
             _log.warning("calibration suspect: the cameras look exchanged: the triangulated person is a mirror image "
                          "(handedness %.2f, median over the last %d pairs; +1 a person, -1 a mirror image; "
-                         "health.calibration_max_mirror %g): the left camera's frames come in as the right's; exchange "
-                         "the cameras' plugs or their names in rig.url, no recalibration is needed (docs/calibration.md, "
-                         "\"Cameras exchanged\"). For a rig that is not a mirror image of itself, or a subject who "
-                         "performs facing away, set health.calibration_max_mirror null", watch.median, len(watch.values),
-                         watch.max_mirror)
+                         "health.calibration_max_mirror %g): the left camera's frames come in as the right's; "
+                         "exchange the cameras' plugs or their names in rig.url, no recalibration is needed "
+                         "(docs/calibration.md, \"Cameras exchanged\"). For a subject who performs facing away, set "
+                         "health.calibration_max_mirror null", watch.median, len(watch.values), watch.max_mirror)
         elif suspect is not None and watch.max_mirror is None:
             _log.info("calibration handedness check off (health.calibration_max_mirror null)")
         elif suspect is not None:
