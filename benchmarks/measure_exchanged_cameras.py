@@ -2,6 +2,7 @@
 
     PYTHONPATH=$PWD /work/main/.venv/bin/python benchmarks/measure_exchanged_cameras.py [--model-dir models]
                                                                    [--sequences 10] [--frames 30] [--window 30]
+                                                                   [--heading-deg 180] [--rig higher|toed-in|wide]
 
 The simulator films the bench's held-out-like scenes (``ghnerf-bench runtime``'s recipe and cache: held-out motions,
 random rig placements, every rig symmetric about its centre plane, both cameras aimed at one point). Each sequence is
@@ -12,6 +13,13 @@ handedness (``PairResult.handedness``: +1 a person, -1 a mirror image; the pairs
 pairs (:mod:`firmware_host.daemon.calibration_watch`, the daemon's limits, a ``--window`` window each): the
 sequences each flagged, and for the handedness check the pairs read until it did. Only sequences with a full window
 of handedness figures are judged (the daemon waits for a full window). A tool, not a test.
+
+``--heading-deg`` and ``--rig`` render the same scenes afresh (no cache), each person turned to that heading (180: their
+back to the rig for the whole take; the motion's own turns stay) or filmed by another rig than the bench's: ``higher``
+raises the second camera 0.3 m (both still aimed at one point: the rig is no longer a mirror image of itself),
+``toed-in`` turns the second camera 8 degrees further towards the first's side, ``wide`` is the bench's rig at a 1.2 m
+baseline (symmetric). ``--face-seen`` counts only the figures of pairs whose nose and an eye peaked at the presence
+threshold in both views.
 """
 from __future__ import annotations
 
@@ -25,11 +33,61 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch  # noqa: E402
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX  # noqa: E402
-from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
+from ghnerf_runtime.body25 import JOINT_INDEX  # noqa: E402
+from ghnerf_runtime.cli.simdata import Sequence, bench_rig_and_scene, load_sequences  # noqa: E402
+from ghnerf_runtime.geometry import Camera, Rig, look_at  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 
 SETTINGS = ("as filmed", "exchanged")
+RIGS = ("bench", "higher", "toed-in", "wide")
+RAISE_M = 0.3  # --rig higher: how much higher the second camera is
+TOE_DEG = 8.0  # --rig toed-in: how much further the second camera turns towards the first's side
+
+
+def _aimed(cam: Camera, eye: np.ndarray, target: np.ndarray) -> Camera:
+    R, t = look_at(eye, target)
+    return Camera(cam.name, cam.width, cam.height, cam.K, cam.dist, R, t)
+
+
+def variant_rig(placement, kind: str, rig_id: str) -> Rig:
+    """The bench rig changed as ``--rig`` says (see the module's docstring)."""
+    if kind == "wide":
+        from dataclasses import replace
+        return replace(placement, baseline_m=1.2).build(rig_id=rig_id)
+    rig = placement.build(rig_id=rig_id)
+    first, second = rig.pair
+    eye, target = second.center.copy(), placement.target.copy()
+    if kind == "higher":
+        eye[1] -= RAISE_M  # the rig frame's y points down
+    elif kind == "toed-in":
+        yaw = np.radians(TOE_DEG)  # turn the aim about the camera's own vertical, towards -x
+        d = target - eye
+        c, s = np.cos(yaw), np.sin(yaw)
+        target = eye + np.array([d[0] * c - d[2] * s, d[1], d[0] * s + d[2] * c])
+    return Rig((first, _aimed(second, eye, target)), rig.volume, rig_id, metadata=dict(rig.metadata, variant=kind))
+
+
+def render_variant(k: int, frames: int, heading_deg, rig_kind: str, fps: float = 30.0) -> Sequence:
+    """Bench sequence ``k`` rendered afresh: the person turned to ``heading_deg`` (None: as drawn), the rig as
+    ``rig_kind`` says."""
+    from dataclasses import replace
+    from drivers.sim import SimScene  # tool only
+    rig, scene, t0, placement = bench_rig_and_scene(k)
+    if heading_deg is not None:
+        scene = SimScene(replace(scene.config, heading_deg=float(heading_deg)))
+    if rig_kind != "bench":
+        rig = variant_rig(placement, rig_kind, rig.rig_id)
+    h, w = rig.pair[0].height, rig.pair[0].width
+    imgs, j3 = np.empty((frames, 2, h, w, 3), np.uint8), np.empty((frames, 25, 3))
+    for i in range(frames):
+        t = t0 + i / fps
+        for c, cam in enumerate(rig.pair):
+            imgs[i, c] = scene.render(cam, t)[0]
+        j3[i] = scene.joints_3d(t)
+    info = {"index": k, "motion": str(scene.config.motion), "distance_m": placement.distance_m,
+            "baseline_m": rig.baseline, "fps": fps, "t0": t0}
+    return Sequence(rig, imgs, j3, np.zeros((frames, 2, 25, 2)), np.zeros((frames, 2, 25), bool), info)
 
 
 def watches(w: int) -> dict:
@@ -46,6 +104,23 @@ def run_sequence(est: Estimator, seq, exchanged: bool) -> list:
         left, right = np.array(seq.images[i, 0]), np.array(seq.images[i, 1])
         out.append(est.estimate([right, left] if exchanged else [left, right], timestamp_s=t0 + i / fps))
     return out
+
+
+NOSE, EYES = JOINT_INDEX["Nose"], (JOINT_INDEX["REye"], JOINT_INDEX["LEye"])
+
+
+def face_seen(result, threshold: float) -> bool:
+    """The nose and an eye peaked at the presence threshold in both views: the person's face towards the rig (the 3D
+    joints are no guide: the skeleton prior places a face whatever the views show; both eyes in both views were
+    rarer than that even facing the rig, a head turned a little hides one)."""
+    def strong(j: int) -> bool:
+        return all(float(c[j]) >= threshold for c in result.confidence_2d.values())
+    return strong(NOSE) and any(strong(j) for j in EYES)
+
+
+def _without_figure(result):
+    from dataclasses import replace
+    return replace(result, handedness=None)
 
 
 def judge(results: list, window: int) -> dict:
@@ -78,12 +153,20 @@ def main(argv=None) -> int:
     ap.add_argument("--per-sequence", action="store_true", help="also a line per sequence: its handedness figures' "
                                                                "median as filmed and exchanged")
     ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--heading-deg", type=float, help="render afresh, every person turned so (180: back to the rig)")
+    ap.add_argument("--rig", choices=RIGS, default="bench", help="render afresh on this rig (module docstring)")
+    ap.add_argument("--face-seen", action="store_true", help="count only pairs with the nose and an eye seen")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir))
     session = load_session(cfg)
+    threshold = cfg.presence.threshold(cfg.heatmaps.source)
     tally = {s: {"found": [], "err": [], "hands": [], "rolled": [], "pairs": 0, "judged": 0, "flags": [],
                  "flagged_at": []} for s in SETTINGS}
-    for seq in load_sequences(args.sequences, args.frames, cache_dir=args.cache):
+    if args.heading_deg is None and args.rig == "bench":
+        sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache)
+    else:
+        sequences = (render_variant(k, args.frames, args.heading_deg, args.rig) for k in range(args.sequences))
+    for seq in sequences:
         line = (f"  sequence {seq.info['index']:3d} ({seq.info['motion']}, {seq.info['distance_m']:.2f} m away, "
                 f"baseline {seq.info['baseline_m']:.2f} m):")
         for setting in SETTINGS:
@@ -95,6 +178,8 @@ def main(argv=None) -> int:
                 acc["found"].append(int(ok.sum()))
                 acc["err"] += list(1000 * np.linalg.norm(r.joints_3d[ok] - seq.joints_3d[i][ok], axis=1))
             acc["pairs"] += len(results)
+            if args.face_seen:
+                results = [r if face_seen(r, threshold) else _without_figure(r) for r in results]
             verdict = judge(results, args.window)
             h = verdict["hands"]
             line += f" {setting} {len(h):3d} figures, median " + (f"{np.median(h):5.2f}" if h else "    -") + ";"
@@ -107,8 +192,11 @@ def main(argv=None) -> int:
                     acc["flagged_at"].append(verdict["flagged_at"])
         if args.per_sequence:
             print(line)
-    print(f"{args.sequences} held-out-like sequences x {args.frames} pairs, {args.model_dir}, windows of {args.window} "
-          f"figures (handedness: +1 a person, -1 a mirror image; limit -{CALIBRATION_MAX_MIRROR:g}):")
+    scenes = "" if args.heading_deg is None else f", heading {args.heading_deg:g} deg"
+    scenes += "" if args.rig == "bench" else f", rig {args.rig}"
+    scenes += ", pairs with the face seen only" if args.face_seen else ""
+    print(f"{args.sequences} held-out-like sequences x {args.frames} pairs{scenes}, {args.model_dir}, windows of "
+          f"{args.window} figures (handedness: +1 a person, -1 a mirror image; limit -{CALIBRATION_MAX_MIRROR:g}):")
     print(f"  {'setting':>9} | 3D joints | MPJPE mm | pairs with a figure | per pair: median   p10   p90 | windows: "
           f"min   max | sequences judged | flagged by px / floor / handedness | pairs to flag: median max")
     for setting, acc in tally.items():

@@ -65,7 +65,7 @@ import drivers
 from drivers.sim.demo import draw_truth
 from drivers.url import redact_url
 from drivers.url_paths import url_files
-from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch, symptoms
+from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch, fixes, symptoms
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
     CALIBRATION_WINDOW
 from firmware_host.errors import FirmwareHostError
@@ -252,6 +252,14 @@ class _CalibrationCheck:
         """The suspect checks' words (``1.46 px > 0.8, feet 0.18 m below the floor > 0.1 m``); empty when none is."""
         return symptoms((self.view, self.floor, self.handedness))
 
+    def fixes(self) -> str:
+        """What to do about them (``recalibrate (ghcal)``; the cameras exchanged: swap their plugs or names)."""
+        return fixes((self.view, self.floor, self.handedness))
+
+    def band(self) -> tuple[str, ...]:
+        """The picture's red band while suspect: what to do, then the symptoms (empty when not suspect)."""
+        return (f"CALIBRATION SUSPECT: {self.fixes()}", self.symptoms()) if self.suspect else ()
+
     def add(self, pair_sequence: int, result: PairResult) -> str | None:
         """Count one estimate; returns the line to print when the verdict changes (else None)."""
         was = self.suspect
@@ -264,8 +272,7 @@ class _CalibrationCheck:
             return None
         if self.suspect:
             return (f"pair {pair_sequence}: CALIBRATION SUSPECT ({self.symptoms()}): the frames streamed from here "
-                    f"carry CALIBRATION_SUSPECT; recalibrate (ghcal; docs/calibration.md, \"When the rig no longer "
-                    f"fits\")")
+                    f"carry CALIBRATION_SUSPECT; {self.fixes()} (docs/calibration.md)")
         return f"pair {pair_sequence}: the calibration fits again"
 
     def _state(self, check: CalibrationWatch | FloorWatch, figure: str, limit: str) -> str:
@@ -281,7 +288,7 @@ class _CalibrationCheck:
         parts = [f"views' agreement: {self._state(view, peaks, f'{view.max_px:g} px')}",
                  f"feet: {self._state(floor, floor.words(), f'{floor.max_floor_m:g} m')}"]
         if self.suspect:
-            verdict = f"SUSPECT ({self.symptoms()}): recalibrate (ghcal; docs/calibration.md)"
+            verdict = f"SUSPECT ({self.symptoms()}): {self.fixes()} (docs/calibration.md)"
         elif any(len(c.values) >= c.window for c in (self.view, self.floor)):
             verdict = "fits"
         else:
@@ -303,17 +310,18 @@ def _draw_estimate(image: np.ndarray, uv: np.ndarray, missing: np.ndarray) -> No
             cv2.drawMarker(image, (int(u), int(v)), ESTIMATE_BGR, cv2.MARKER_TILTED_CROSS, 10, 2, cv2.LINE_AA)
 
 
-def _draw_suspect(panel: np.ndarray, symptoms: str) -> None:
-    """A red band across the foot of ``panel`` (in place) saying the calibration is suspect, and why."""
+def _draw_suspect(panel: np.ndarray, lines: tuple[str, ...]) -> None:
+    """A red band across the foot of ``panel`` (in place) saying the calibration is suspect, what to do, and why
+    (:meth:`_CalibrationCheck.band`)."""
     h = panel.shape[0]
     cv2.rectangle(panel, (0, h - SUSPECT_BAND_PX), (panel.shape[1] - 1, h - 1), SUSPECT_BGR, cv2.FILLED)
-    for k, text in enumerate(("CALIBRATION SUSPECT: recalibrate (ghcal)", symptoms)):
+    for k, text in enumerate(lines):
         cv2.putText(panel, text, (10, h - SUSPECT_BAND_PX + 18 + 20 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
                     (255, 255, 255), 1, cv2.LINE_AA)
 
 
-def _annotated(pair: drivers.FramePair, result: PairResult | None = None, suspect: str = "") -> np.ndarray:
-    """Both views side by side with what was drawn on them; ``suspect``: the calibration check's symptoms while it
+def _annotated(pair: drivers.FramePair, result: PairResult | None = None, suspect: tuple[str, ...] = ()) -> np.ndarray:
+    """Both views side by side with what was drawn on them; ``suspect``: the calibration check's band lines while it
     finds the calibration suspect (a red band across each view's foot), empty otherwise."""
     panels = []
     for frame in pair.frames:
@@ -566,7 +574,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     print(f"driver counters: {source.stats}")
     print(f"sink {redact_url(sink_url)}: {sink_stats}")
     png = args.out / "sim_pair.png"
-    suspect = calibration.symptoms() if estimator is not None else ""  # as the check stood at the last estimate
+    suspect = calibration.band() if estimator is not None else ()  # as the check stood at the last estimate
     picture_lost = False
     if last_pair is not None:
         picture_lost = not _write_picture(png, last_pair, last_result, suspect)
@@ -609,7 +617,7 @@ def _counted_estimate(pair: drivers.FramePair, result: PairResult, tally: _Tally
     return estimate_frame(pair, result, sequence=numbers.take(), calibration_suspect=calibration.suspect)
 
 
-def _write_picture(png: Path, pair: drivers.FramePair, result: PairResult | None, suspect: str) -> bool:
+def _write_picture(png: Path, pair: drivers.FramePair, result: PairResult | None, suspect: tuple[str, ...]) -> bool:
     """The last pair drawn into ``png``, said on stdout; False where it could not be written."""
     if not cv2.imwrite(str(png), _annotated(pair, result, suspect)):
         return False

@@ -33,30 +33,52 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["CalibrationWatch", "FloorWatch", "HandednessWatch", "CLEAR_RATIO", "status_words", "symptoms"]
+__all__ = ["CalibrationWatch", "FloorWatch", "HandednessWatch", "CLEAR_RATIO", "RECALIBRATE", "SWAP_CAMERAS",
+           "fixes", "status_words", "symptoms"]
 
 #: A suspect calibration fits again once the median (its distance from the floor) is under this share of
 #: the limit.
 CLEAR_RATIO = 0.75
+#: What to do about a symptom: a camera moved needs a new calibration, the cameras' inputs exchanged only need the plugs
+#: or the names in rig.url the right way round (a new calibration would be solved from the exchanged views and fit
+#: them). The exchange comes first where both are suspect: it moves the feet off the floor too (8 of the 17 exchanged
+#: 30-pair takes flagged the floor check: docs/calibration.md, "Cameras exchanged"), and those clear once it is undone.
+RECALIBRATE = "recalibrate (ghcal)"
+SWAP_CAMERAS = "swap the cameras' plugs or names in rig.url"
+_FIX_ORDER = (SWAP_CAMERAS, RECALIBRATE)
 
 
 def symptoms(checks) -> str:
     """The suspect checks' symptoms, comma-separated (``1.46 px > 0.8, feet 0.18 m below the floor > 0.1 m``;
-    empty when none is): the daemon's STATUS= line and ``ghnerf-demo``'s verdict say them alike."""
-    return ", ".join(c.symptom() for c in checks if c.suspect)
+    empty when none is), those of the first fix first: the daemon's STATUS= line and ``ghnerf-demo``'s verdict say
+    them alike."""
+    suspect = [c for c in checks if c.suspect]
+    suspect.sort(key=lambda c: _FIX_ORDER.index(c.fix))  # stable: the checks' own order within a fix
+    return ", ".join(c.symptom() for c in suspect)
+
+
+def fixes(checks) -> str:
+    """What to do first about the suspect checks (``recalibrate (ghcal)``, or with the cameras exchanged
+    ``swap the cameras' plugs or names in rig.url``); empty when none is suspect."""
+    wanted = {c.fix for c in checks if c.suspect}
+    return next((fix for fix in _FIX_ORDER if fix in wanted), "")
 
 
 def status_words(checks) -> str:
-    """The STATUS= line's words for the checks that are suspect, each symptom named (empty when none is)."""
+    """The STATUS= line's words for the checks that are suspect: what to do first, then each symptom
+    (``; calibration suspect: recalibrate (ghcal), 1.46 px > 0.8``; empty when none is)."""
     named = symptoms(checks)
-    return "; calibration suspect: recalibrate (ghcal), " + named if named else ""
+    return f"; calibration suspect: {fixes(checks)}, {named}" if named else ""
 
 
 class _RollingCheck:
     """The median of the last ``window`` figures of one symptom, and whether it is past ``limit`` (``None``: never).
 
-    Subclasses say how far a median is from fitting (:meth:`_distance`) and name things for their reports.
+    Subclasses say how far a median is from fitting (:meth:`_distance`) and name things for their reports, and
+    ``fix`` what the user should do while it is suspect.
     """
+
+    fix = RECALIBRATE
 
     def __init__(self, window: int, limit: Optional[float]) -> None:
         self.window = int(window)
@@ -219,6 +241,8 @@ class HandednessWatch(_RollingCheck):
         {'handedness_median': 0.8, 'handedness_pairs': 3, 'max_mirror': 0.2, 'exchanged_suspect': False}
     """
 
+    fix = SWAP_CAMERAS  # the rig file is right; the frames come in under each other's names
+
     def __init__(self, window: int, max_mirror: Optional[float]) -> None:
         super().__init__(window, max_mirror)
 
@@ -237,5 +261,5 @@ class HandednessWatch(_RollingCheck):
 
     def symptom(self) -> str:
         """What is wrong while suspect, for the STATUS= line (empty otherwise)."""
-        return (f"cameras look exchanged (the skeleton is a mirror image: handedness {self.median:.2f} < "
-                f"-{self.max_mirror:g})" if self.suspect else "")
+        return (f"cameras look exchanged (mirror image: handedness {self.median:.2f} < -{self.max_mirror:g})"
+                if self.suspect else "")

@@ -61,10 +61,12 @@ CALIBRATION_MAX_PX = 0.8
 #: docs/calibration.md "The feet on the floor".
 CALIBRATION_MAX_FLOOR_M = 0.05
 #: How far below 0 the 30-pair median of the pairs' handedness (PairResult.handedness: +1 a person, -1 a mirror
-#: image) may go before the cameras look exchanged (a symmetric rig's left camera fed as its right). Not a setting:
-#: on the simulated rig the true rig's 30-figure windows stayed at +0.14 or more, the exchanged rig's at -0.02 or
-#: less over 30-pair takes (-0.35 or less over 150-pair ones), and every exchanged take with a full window was flagged
-#: (benchmarks/measure_exchanged_cameras.py, docs/calibration.md "Cameras exchanged"). The window is
+#: image) may go before the cameras look exchanged (a symmetric rig's left camera fed as its right): the default
+#: of HealthConfig.calibration_max_mirror. On the simulated rig the true rig's 30-figure windows stayed at +0.14 or
+#: more, the exchanged rig's at -0.02 or less over 30-pair takes (-0.35 or less over 150-pair ones), and every exchanged take with a full window was flagged
+#: (benchmarks/measure_exchanged_cameras.py, docs/calibration.md "Cameras exchanged"); on three rigs made not
+#: symmetric (--rig higher, toed-in, wide) the true rig's windows stayed at +0.06 or more. A person with their back to
+#: the rig gives few figures, near 0 (a short window read -0.21): set it null for such a subject. The window is
 #: health.calibration_window.
 CALIBRATION_MAX_MIRROR = 0.2
 
@@ -167,6 +169,10 @@ class HealthConfig:
             feet off the floor. ``null``: no floor check (people standing on a stage, lying on a bed: not on the
             rig's floor at y = 0). The foot's height counts from ``estimator.joints3d.foot_standing_m`` (bare feet by
             default); shoes' soles or a mat: ``ghnerf-daemon --measure-floor`` measures the value to set.
+        calibration_max_mirror: how far below 0 the median over ``calibration_window`` pairs of the pairs'
+            handedness (``PairResult.handedness``: +1 a person, -1 a mirror image) may go before the cameras look
+            exchanged (the fix is the plugs or the names in ``rig.url``, not a recalibration). ``null``: no check, for a
+            rig that is not a mirror image of itself, or a subject who performs with their back to the rig.
     """
 
     status_file: str | None = None
@@ -177,6 +183,7 @@ class HealthConfig:
     calibration_window: int = CALIBRATION_WINDOW
     calibration_max_px: float | None = CALIBRATION_MAX_PX
     calibration_max_floor_m: float | None = CALIBRATION_MAX_FLOOR_M
+    calibration_max_mirror: float | None = CALIBRATION_MAX_MIRROR
 
     def __post_init__(self) -> None:
         if self.status_file is not None and (not isinstance(self.status_file, str) or not self.status_file):
@@ -200,6 +207,13 @@ class HealthConfig:
                 _fail("calibration_max_floor_m", "must be a number of metres in (0, 10], or null for no floor check",
                       limit)
             object.__setattr__(self, "calibration_max_floor_m", float(limit))
+        if self.calibration_max_mirror is not None:
+            limit = self.calibration_max_mirror
+            # handedness lies in [-1, 1]: a limit of 1 or more could never be passed
+            if isinstance(limit, bool) or not isinstance(limit, (int, float)) or not 0 < limit < 1:
+                _fail("calibration_max_mirror", "must be a number in (0, 1) (how far below 0 the handedness median "
+                      "may go), or null for no check", limit)
+            object.__setattr__(self, "calibration_max_mirror", float(limit))
 
 
 @dataclass(frozen=True)

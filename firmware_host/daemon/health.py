@@ -20,7 +20,8 @@ from typing import Any, Iterable, Optional
 import numpy as np
 
 from drivers.url import redact_url
-from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch, status_words
+from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch, fixes, \
+    status_words
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
     CALIBRATION_WINDOW
 from ghnerf_runtime.frame_reasons import REASONS
@@ -126,15 +127,18 @@ class Health:
         return bool(self.calibration.suspect or self.floor.suspect or self.handedness.suspect)
 
     def _calibration_report(self) -> dict[str, Any]:
-        """The status file's ``calibration``: each check's figures, ``suspect`` for either (``px_suspect`` and
-        ``floor_suspect`` say which)."""
+        """The status file's ``calibration``: each check's figures, ``suspect`` for any (``px_suspect``,
+        ``floor_suspect`` and ``exchanged_suspect`` say which), ``fix`` what to do (null when none is suspect)."""
         px = self.calibration.report()
         return {**px, "px_suspect": px["suspect"], **self.floor.report(), **self.handedness.report(),
-                "suspect": self.calibration_suspect}
+                "suspect": self.calibration_suspect, "fix": fixes(self._calibration_checks()) or None}
+
+    def _calibration_checks(self) -> tuple:
+        return self.calibration, self.floor, self.handedness
 
     def _calibration_status(self) -> str:
         """The STATUS= line's words while either check is suspect, naming each symptom (empty otherwise)."""
-        return status_words((self.calibration, self.floor, self.handedness))
+        return status_words(self._calibration_checks())
 
     def estimated(self, total_ms: float, found: float, flags: frozenset[str] = frozenset(),
                   someone_else: Optional[bool] = None) -> None:

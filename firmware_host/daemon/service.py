@@ -30,6 +30,9 @@ What it rides out, and how (each is counted in the health report, ``docs/daemon.
   triangulated foot joint, ``health.calibration_max_floor_m`` from the floor) the status file and systemd's
   STATUS say "calibration suspect: recalibrate (ghcal)" with the symptom, and the log warns once
   (:mod:`firmware_host.daemon.calibration_watch`); the joints still flow;
+* **the cameras' inputs exchanged** (plugs or names in ``rig.url``) on a symmetric rig: the triangulated person is a
+  mirror image; below ``-health.calibration_max_mirror`` the same flag is raised, and the STATUS and status file say
+  "swap the cameras' plugs or names in rig.url" instead (a recalibration would fit the exchanged views);
 * **a hang** of the loop itself: :class:`~firmware_host.daemon.notify.HangWatchdog` stops systemd's
   watchdog pings and systemd restarts the service;
 * **a camera stuck in a device call** the rig's close could not end (an opencv:// grab that hangs): the
@@ -243,7 +246,7 @@ class Daemon:
         self.health = Health(clock=clock, rig_url=redact_url(config.rig.url))
         self.health.calibration.configure(config.health.calibration_window, config.health.calibration_max_px)
         self.health.floor.configure(config.health.calibration_window, config.health.calibration_max_floor_m)
-        self.health.handedness.configure(config.health.calibration_window, self.health.handedness.max_mirror)
+        self.health.handedness.configure(config.health.calibration_window, config.health.calibration_max_mirror)
         # Woken often enough to flag a stuck estimate within about half of slow_estimate_s.
         self.watchdog = HangWatchdog(self.notifier, config.health.loop_allowance_s, clock=clock,
                                      interval_s=min(config.health.slow_estimate_s / 2, 1.0),
@@ -623,9 +626,13 @@ class Daemon:
         watch = self.health.handedness
         if suspect:
             _log.warning("calibration suspect: the cameras look exchanged: the triangulated person is a mirror image "
-                         "(handedness %.2f, median over the last %d pairs; +1 a person, -1 a mirror image): the left "
-                         "camera's frames come in as the right's; exchange the cameras' plugs or names in rig.url "
-                         "(docs/calibration.md, \"Cameras exchanged\")", watch.median, len(watch.values))
+                         "(handedness %.2f, median over the last %d pairs; +1 a person, -1 a mirror image; "
+                         "health.calibration_max_mirror %g): the left camera's frames come in as the right's; "
+                         "exchange the cameras' plugs or their names in rig.url, no recalibration is needed "
+                         "(docs/calibration.md, \"Cameras exchanged\"). For a subject who performs facing away, set "
+                         "health.calibration_max_mirror null", watch.median, len(watch.values), watch.max_mirror)
+        elif suspect is not None and watch.max_mirror is None:
+            _log.info("calibration handedness check off (health.calibration_max_mirror null)")
         elif suspect is not None:
             _log.info("the cameras no longer look exchanged: handedness %.2f over the last %d pairs",
                       watch.median if watch.median is not None else 0.0, len(watch.values))
@@ -838,7 +845,7 @@ class Daemon:
             self._floor_changed(self.health.floor.configure(new.health.calibration_window,
                                                             new.health.calibration_max_floor_m))
             self._handedness_changed(self.health.handedness.configure(new.health.calibration_window,
-                                                                      self.health.handedness.max_mirror))
+                                                                      new.health.calibration_max_mirror))
             self._sync_calibration()
             self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
             self._next_status = 0.0

@@ -215,6 +215,38 @@ def test_measure_exchanged_cameras(model, capsys, monkeypatch):
     assert re.search(r"^  +as filmed \| .*\n  +exchanged \| ", out, re.M), out
 
 
+
+def test_measure_exchanged_cameras_with_the_person_facing_away_and_the_face_gate(model, capsys, monkeypatch):
+    out = run_script("measure_exchanged_cameras", "--model-dir", model, "--sequences", "1", "--frames", "2",
+                     "--window", "2", "--heading-deg", "180", "--face-seen", capsys=capsys, monkeypatch=monkeypatch)
+    assert "1 held-out-like sequences x 2 pairs, heading 180 deg, pairs with the face seen only" in out, out
+
+
+@pytest.mark.parametrize("kind", ["higher", "toed-in", "wide"])
+def test_measure_exchanged_cameras_rigs_change_the_second_camera_only(kind):
+    """--rig: the first camera stays the bench's; ``higher`` raises the second by RAISE_M still aimed at the target,
+    ``toed-in`` turns its axis TOE_DEG towards the first's side, ``wide`` is a 1.2 m baseline."""
+    mod = runpy.run_path(str(BENCH / "measure_exchanged_cameras.py"))
+    from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+
+    rig, _, _, placement = bench_rig_and_scene(0)
+    changed = mod["variant_rig"](placement, kind, "r")
+    (a0, b0), (a1, b1) = rig.pair, changed.pair
+    if kind == "wide":
+        assert changed.baseline == pytest.approx(1.2)
+        return
+    assert np.allclose(a0.R, a1.R) and np.allclose(a0.t, a1.t)
+    axis0, axis1 = b0.R[2], b1.R[2]  # the optical axes in the rig frame
+    if kind == "higher":
+        assert b1.center[1] == pytest.approx(b0.center[1] - mod["RAISE_M"])  # y points down
+        aim = placement.target - b1.center
+        assert np.allclose(axis1, aim / np.linalg.norm(aim))
+    else:
+        assert np.allclose(b1.center, b0.center)
+        assert np.degrees(np.arccos(np.clip(axis0 @ axis1, -1, 1))) == pytest.approx(mod["TOE_DEG"], abs=0.5)
+        assert axis1[0] < axis0[0]  # turned towards -x, the first camera's side
+
+
 def test_measure_mounting(model, capsys, monkeypatch):
     out = run_script("measure_mounting", "--model-dir", model, "--sequences", "1", "--frames", "2", "--rolls", "0,90",
                      capsys=capsys, monkeypatch=monkeypatch)

@@ -161,7 +161,7 @@ def test_a_suspect_calibration_is_streamed_printed_and_drawn(tmp_path, capsys, s
     changes = re.findall(r"^pair (\d+): CALIBRATION SUSPECT \(2\.00 px > 0\.8\): the frames streamed from here "
                          r"carry CALIBRATION_SUSPECT; recalibrate \(ghcal", out, re.M)
     assert changes == [str(results[2].sequence)], out
-    assert re.search(rf"^calibration check: SUSPECT \(2\.00 px > 0\.8\): recalibrate \(ghcal; docs/calibration.md\); "
+    assert re.search(rf"^calibration check: SUSPECT \(2\.00 px > 0\.8\): recalibrate \(ghcal\) \(docs/calibration.md\); "
                      rf"views' agreement: peaks 2\.00 px apart \(median of the last 3 pairs, limit 0\.8 px\); feet: "
                      rf"feet 0\.03 m above the floor .*; {estimated - 2} of the {estimated} frames streamed carry "
                      rf"CALIBRATION_SUSPECT$", out, re.M), out
@@ -200,8 +200,23 @@ def test_the_demo_s_calibration_check_says_when_the_cameras_look_exchanged():
     pair = lambda hand: SimpleNamespace(reprojection_px_median=0.3, lowest_foot_m=0.01, handedness=hand)  # noqa
     lines = [check.add(k, pair(-0.7)) for k in range(3)]
     assert lines[:2] == [None, None] and lines[2].startswith(
-        "pair 2: CALIBRATION SUSPECT (cameras look exchanged (the skeleton is a mirror image: handedness -0.70 < -0.2))")
+        "pair 2: CALIBRATION SUSPECT (cameras look exchanged (mirror image: handedness -0.70 < -0.2))")
     assert check.suspect and check.flagged == 1
+
+
+
+def test_the_demo_names_the_fix_for_exchanged_cameras_not_a_recalibration():
+    """Exchanged cameras need their plugs or names swapped; a new calibration would be solved from the exchanged views
+    (since session 65's follow-up the line, the verdict and the picture's band say so; they said recalibrate)."""
+    check = demo._CalibrationCheck(window=3)
+    pair = lambda hand: SimpleNamespace(reprojection_px_median=0.3, lowest_foot_m=0.01, handedness=hand)  # noqa
+    line = [check.add(k, pair(-0.7)) for k in range(3)][2]
+    assert "swap the cameras' plugs or names in rig.url" in line and "recalibrate" not in line, line
+    verdict = check.report(3)
+    assert "SUSPECT" in verdict and "swap the cameras' plugs or names in rig.url" in verdict, verdict
+    assert "recalibrate" not in verdict, verdict
+    assert check.band() == ("CALIBRATION SUSPECT: swap the cameras' plugs or names in rig.url",
+                            "cameras look exchanged (mirror image: handedness -0.70 < -0.2)")
 
 
 @pytest.mark.parametrize("make", [False, True], ids=["absent", "empty"])

@@ -88,7 +88,8 @@ def test_the_status_file_and_line_say_it():
                                      "floor_pairs": 0, "max_floor_m": CALIBRATION_MAX_FLOOR_M, "floor_suspect": False,
                                      # since session 65: the cameras' inputs exchanged (HandednessWatch)
                                      "handedness_median": None, "handedness_pairs": 0,
-                                     "max_mirror": CALIBRATION_MAX_MIRROR, "exchanged_suspect": False}
+                                     "max_mirror": CALIBRATION_MAX_MIRROR, "exchanged_suspect": False,
+                                     "fix": "recalibrate (ghcal)"}  # since session 65's follow-up: what to do
     assert "; calibration suspect: recalibrate (ghcal), 1.46 px > 0.8" in health.status_line()
     # a refused reload and a long state keep the warning whole, and the state its STATUS_KEEP
     health.reload_error = "reload refused: " + "x" * 300
@@ -193,6 +194,21 @@ def test_the_floor_key_and_its_checks():
             daemon_config_from_dict({"sinks": [SINK], "health": {"calibration_max_floor_m": value}})
 
 
+def test_the_exchanged_cameras_limit_is_a_setting_null_turns_it_off_and_bad_values_name_the_field():
+    """health.calibration_max_mirror (since session 65's follow-up; the limit was a constant): the default, null (a rig
+    built mirror-imaged, a subject who performs facing away), and the refusals naming the key and the value."""
+    cfg = daemon_config_from_dict({"sinks": [SINK]})
+    assert cfg.health.calibration_max_mirror == CALIBRATION_MAX_MIRROR == 0.2
+    off = daemon_config_from_dict({"sinks": [SINK], "health": {"calibration_max_mirror": None}})
+    assert off.health.calibration_max_mirror is None
+    half = daemon_config_from_dict({"sinks": [SINK], "health": {"calibration_max_mirror": 0.5}})
+    assert half.health.calibration_max_mirror == 0.5
+    for value in (0, -0.2, 1, 1.5, "0.2", True, float("nan"), float("inf")):
+        with pytest.raises(DaemonConfigError, match=r"^health.calibration_max_mirror: must be a number in \(0, 1\) "
+                                                    rf".*or null for no check, got {value!r}"):
+            daemon_config_from_dict({"sinks": [SINK], "health": {"calibration_max_mirror": value}})
+
+
 def _person(n: int, seed: int = 0) -> np.ndarray:
     """Per-pair handedness as the true rig gave it (benchmarks/measure_exchanged_cameras.py: median +0.83, 10 % under
     +0.58), with a few pairs read the wrong way (a peak on the wrong foot, the head turned)."""
@@ -209,7 +225,7 @@ def test_a_person_never_raises_the_handedness_check_and_a_mirror_image_does_once
     raised = _feed(watch, mirrored)  # once about half the window is mirrored (the person's odd pairs hasten it)
     assert [change for _, change in raised] == [True] and raised[0][0] <= CALIBRATION_WINDOW // 2, raised
     assert watch.suspect and watch.report()["exchanged_suspect"] and watch.median < -CALIBRATION_MAX_MIRROR
-    assert watch.symptom().startswith("cameras look exchanged (the skeleton is a mirror image: handedness -0.")
+    assert watch.symptom().startswith("cameras look exchanged (mirror image: handedness -0.")
     cleared = _feed(watch, _person(60, seed=2))  # plugged back: clears once
     assert [change for _, change in cleared] == [False] and cleared[0][0] <= CALIBRATION_WINDOW // 2 + 1, cleared
 
@@ -238,7 +254,35 @@ def test_a_mirror_image_makes_the_calibration_suspect_and_the_line_says_the_came
     assert calibration["handedness_median"] == -0.76 and calibration["handedness_pairs"] == 3
     assert health.calibration_suspect
     line = health.status_line()
-    assert line.endswith("; calibration suspect: recalibrate (ghcal), cameras look exchanged (the skeleton is a "
-                         "mirror image: handedness -0.76 < -0.2)") and len(line) <= STATUS_MAX, line
+    assert line.endswith("; calibration suspect: swap the cameras' plugs or names in rig.url, cameras look exchanged "
+                         "(mirror image: handedness -0.76 < -0.2)") and len(line) <= STATUS_MAX, line
+    assert len(line) - len(line.split("; calibration")[0]) <= STATUS_MAX - STATUS_KEEP  # the state keeps its share
+    assert calibration["fix"] == "swap the cameras' plugs or names in rig.url"
     health.handedness.reset()
     assert not health.calibration_suspect and "calibration" not in health.status_line()
+
+
+def test_the_exchange_comes_first_when_a_camera_also_looks_moved_and_the_line_fits():
+    """An exchanged rig moves the feet off the floor too (8 of 17 exchanged takes): swapping the plugs or names is what
+    to do first, the other symptoms follow (they clear once it is done, or then say recalibrate). All three suspect
+    still fit systemd's line (since session 65's follow-up; the line said recalibrate for all three, and ran to 200
+    characters with the state cut to 24)."""
+    health = Health(clock=lambda: 0.0)
+    health.calibration.configure(3, 0.8)
+    health.floor.configure(3, 0.05)
+    health.handedness.configure(3, 0.2)
+    health.enter(State.RUNNING)
+    assert health.report()["calibration"]["fix"] is None
+    for _ in range(3):
+        health.estimated(100.0, 1.0)
+        health.calibration.add(1.46)
+        health.floor.add(-0.18)
+    assert health.report()["calibration"]["fix"] == "recalibrate (ghcal)"
+    for _ in range(3):
+        health.handedness.add(-0.76)
+    line = health.status_line()
+    assert line.endswith("; calibration suspect: swap the cameras' plugs or names in rig.url, cameras look exchanged "
+                         "(mirror image: handedness -0.76 < -0.2), 1.46 px > 0.8, feet 0.18 m below the floor > "
+                         "0.05 m"), line
+    assert line.startswith("running: ") and len(line) <= STATUS_MAX, line
+    assert health.report()["calibration"]["fix"] == "swap the cameras' plugs or names in rig.url"

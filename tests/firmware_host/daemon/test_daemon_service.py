@@ -288,15 +288,15 @@ class _SceneEstimator(_CountingEstimator):
                        reprojection_px_median=3.0 if self.n >= 6 else 0.2)
 
 
-def _flags_on_the_link(estimator, sim_url, tmp_path, monkeypatch):
-    """Run the daemon on ``estimator`` (calibration window 3, 1 px) for 14 pairs; its memory sink's messages and the
-    JOINTS' scene flags by sequence number (seq k is the k-th estimate, no pair rejected: keyed by it, a frame the
-    sink dropped cannot shift the rest)."""
+def _flags_on_the_link(estimator, sim_url, tmp_path, monkeypatch, **health):
+    """Run the daemon on ``estimator`` (calibration window 3, 1 px; ``health``: other health settings) for 14 pairs;
+    its memory sink's messages and the JOINTS' scene flags by sequence number (seq k is the k-th estimate, no pair
+    rejected: keyed by it, a frame the sink dropped cannot shift the rest)."""
     import firmware_host.daemon.service as service
 
     monkeypatch.setattr(service, "load_session", lambda config: object())
     monkeypatch.setattr(service, "Estimator", estimator)
-    cfg = _config({"url": sim_url}, tmp_path, calibration_window=3, calibration_max_px=1.0)
+    cfg = _config({"url": sim_url}, tmp_path, **{"calibration_window": 3, "calibration_max_px": 1.0, **health})
     with _Running(cfg, tmp_path) as run:
         wait_until(lambda: run.daemon.health.pairs_estimated >= 14, timeout=60, what="14 estimated pairs")
         sink = run.daemon.sinks["memory://?status_s=0.05"]
@@ -1966,5 +1966,23 @@ def test_exchanged_cameras_flag_the_calibration_on_the_link(sim_url, tmp_path, m
     assert calibration["suspect"] and calibration["exchanged_suspect"]
     assert not calibration["px_suspect"] and not calibration["floor_suspect"]
     assert calibration["handedness_median"] == -0.7 and calibration["handedness_pairs"] == 3
-    assert "cameras look exchanged (the skeleton is a mirror image: handedness -0.70 < -0.2)" in \
-        run.daemon.health.status_line()
+    assert "; calibration suspect: swap the cameras' plugs or names in rig.url, cameras look exchanged (mirror " \
+           "image: handedness -0.70 < -0.2)" in run.daemon.health.status_line()
+    assert calibration["fix"] == "swap the cameras' plugs or names in rig.url"
+
+
+def test_health_calibration_max_mirror_sets_the_exchanged_cameras_check_and_null_turns_it_off(sim_url, tmp_path,
+                                                                                              monkeypatch):
+    """A rig built mirror-imaged, or a subject who performs facing away, reads as a mirror image: the key turns the
+    check off (since session 65's follow-up; the limit was a constant the daemon always used)."""
+    run, messages, flags = _flags_on_the_link(_ExchangedEstimator, sim_url, tmp_path, monkeypatch,
+                                              calibration_max_mirror=None)
+    assert not any(f & Flags.CALIBRATION_SUSPECT for f in flags.values())
+    calibration = run.daemon.health.report()["calibration"]
+    assert calibration["max_mirror"] is None and not calibration["exchanged_suspect"]
+    assert calibration["handedness_median"] == -0.7 and calibration["fix"] is None
+    (tmp_path / "looser").mkdir()  # a second daemon: its own notify socket
+    run, messages, flags = _flags_on_the_link(_ExchangedEstimator, sim_url, tmp_path / "looser", monkeypatch,
+                                              calibration_max_mirror=0.75)  # -0.7 is not below -0.75
+    assert run.daemon.health.report()["calibration"]["max_mirror"] == 0.75
+    assert not any(f & Flags.CALIBRATION_SUSPECT for f in flags.values())
