@@ -231,18 +231,26 @@ class Health:
             line = f"waiting for the rig: {self.last_error}"
         else:
             line = self.state
-        # a rig that no longer fits its calibration is said whatever else the line holds (about 55 characters,
-        # 95 with both symptoms),
-        # and so is a refused reload, cut to leave the state its STATUS_KEEP
-        calibration = self._calibration_status()
-        room = min(120, STATUS_MAX - STATUS_KEEP - len(calibration))
-        refused = calibration + (f"; {self.reload_error}"[:room] if self.reload_error else "")
-        down = _sinks_down(sinks or {}, STATUS_MAX - len(refused) - min(len(line), STATUS_KEEP))
-        return line[:STATUS_MAX - len(refused) - len(down)] + down + refused
+        return _fit_status(line, self._calibration_status(), self.reload_error, sinks or {})
 
 
 #: systemd shows this much of the status line; the daemon's state keeps at least STATUS_KEEP of it.
 STATUS_MAX, STATUS_KEEP = 200, 60
+
+
+def _fit_status(line: str, calibration: str, reload_error: Optional[str], sinks: dict[str, Any]) -> str:
+    """The state's ``line``, the sinks down, the calibration's words and a refused reload within STATUS_MAX.
+
+    A rig that no longer fits its calibration is said whatever else the line holds (about 55 characters, up to
+    about 185 with all three symptoms: it then takes part of the state's STATUS_KEEP); a refused reload gets what
+    is left of the rest once the state has its STATUS_KEEP, the sinks down what is left after both. Every room is
+    at least 0: a negative slice would keep all but the end of a part instead of none of it."""
+    calibration = calibration[:STATUS_MAX]
+    reload_room = max(0, min(120, STATUS_MAX - STATUS_KEEP - len(calibration)))
+    refused = calibration + (f"; {reload_error}"[:reload_room] if reload_error else "")
+    state_keep = min(len(line), STATUS_KEEP)
+    down = _sinks_down(sinks, max(0, STATUS_MAX - len(refused) - state_keep))
+    return line[:max(0, STATUS_MAX - len(refused) - len(down))] + down + refused
 
 
 def _shown_sinks(sinks: dict[str, Any]) -> dict[str, Any]:
