@@ -19,6 +19,7 @@ from drivers.frames import Frame, FramePair
 from drivers.pairing import DropPolicy, FramePairer, PairingConfig, PairingStats
 from drivers.url import RigUrl
 from ghnerf_runtime.geometry import Rig
+from ghnerf_runtime.rig_file import rig_warnings
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +38,8 @@ class RigSource(abc.ABC):
             :meth:`_set_rig` in :meth:`_open` (a constructor must not open hardware).
         pairing: timestamp tolerance and drop policy.
         clock: time source for timeouts (and, in simulated backends, for timing).
+        rig_built: the backend built ``rig`` in memory (``sim://``'s placement); ``False`` for one read from a rig
+            file or handed in by the caller, which ``load_rig`` has already warned about.
     """
 
     #: URL scheme this backend answers to.
@@ -53,9 +56,11 @@ class RigSource(abc.ABC):
     live_timestamps: bool = True
 
     def __init__(
-        self, rig: Rig | None, *, pairing: PairingConfig | None = None, clock: Clock | None = None
+        self, rig: Rig | None, *, pairing: PairingConfig | None = None, clock: Clock | None = None,
+        rig_built: bool = False,
     ) -> None:
         self._rig: Rig | None = None
+        self._rig_built = False  # see _set_rig
         self.clock: Clock = clock or MonotonicClock()
         self.pairing = pairing or PairingConfig()
         self._pairer: FramePairer | None = None  # built with the rig: it pairs the rig's camera names
@@ -63,11 +68,14 @@ class RigSource(abc.ABC):
         self._closed = False
         self._held_error: RigDisconnectedError | EndOfStream | None = None  # see _take_frame
         if rig is not None:
-            self._set_rig(rig)
+            self._set_rig(rig, built=rig_built)
 
-    def _set_rig(self, rig: Rig) -> None:
-        """Adopt the rig (at construction, or in :meth:`_open` once the device told us its calibration)."""
+    def _set_rig(self, rig: Rig, *, built: bool = False) -> None:
+        """Adopt the rig (at construction, or in :meth:`_open` once the device told us its calibration).
+        ``built``: the backend made it in memory (a placement, a device's calibration, a nominal rig), not
+        ``load_rig``: :meth:`open` then logs ``rig_file.rig_warnings`` once, as loading a rig file does."""
         self._rig = rig
+        self._rig_built = built
         self._pairer = FramePairer((rig.pair[0].name, rig.pair[1].name), self.pairing)
 
     # ------------------------------------------------------------------ hooks
@@ -151,7 +159,15 @@ class RigSource(abc.ABC):
                 self._close()
                 raise RigOperationError(f"{type(self).__name__}._open() did not set the rig")
             self._is_open = True
+            if self._rig_built:
+                self._warn_of_rig()
         return self
+
+    def _warn_of_rig(self) -> None:
+        """What ``load_rig`` would warn of in the rig this backend built (a narrow ``sim://?baseline=``, a
+        camera's height): the one check for every backend's in-memory rig."""
+        for message in rig_warnings(self._rig):
+            log.warning("%s:// rig %r: %s", self.scheme, self._rig.rig_id, message)
 
     def read(self, timeout_s: float = 1.0) -> FramePair:
         """Block until the next synchronised pair, at most ``timeout_s`` seconds.

@@ -596,7 +596,7 @@ class OpenCVRigSource(RigSource):
         if self._fixed_rig is None:
             log.warning("opencv://: no rig= given: a nominal, uncalibrated rig (%g deg field of view) names the "
                         "cameras; calibrate with ghcal before trusting 3D joints", o.hfov_deg)
-        self._set_rig(rig)
+        self._set_rig(rig, built=self._fixed_rig is None)
 
     def _first_frames(self) -> list[tuple[int, int]]:
         """Wait for each camera's first frame (kept for the reader); their sizes. A camera that fails or

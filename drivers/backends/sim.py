@@ -318,7 +318,7 @@ class SimRigSource(RigSource):
         self.options = options
         self._scene = SimScene(options.scene)  # validates the motion (BVH) now, not at open
         rig: Rig = options.placement.build(rig_id="sim")
-        super().__init__(rig, pairing=pairing or options.pairing, clock=clock)
+        super().__init__(rig, pairing=pairing or options.pairing, clock=clock, rig_built=True)
         self.period_s = self._scene.period_s
         self.loop_periods, self.loop_frames = _loop_length(self.period_s, options.timing.fps)
         _check_subject_in_view(self._scene, rig, options.placement)

@@ -292,3 +292,19 @@ def test_a_cache_folder_not_made_yet_is_taken(tmp_path):
 
     options = SimOptions.from_url(RigUrl.parse(f"sim://?{SMALL}&cache={tmp_path / 'new' / 'cache'}"))
     assert options.cache_root == tmp_path / "new" / "cache"
+
+
+def test_a_rig_built_from_the_url_is_warned_of_at_open_as_a_rig_file_would_be(caplog):
+    """``sim://?baseline=0.05`` puts the pair's rays 0.95 degrees apart at the subject: ``load_rig`` warns of such a
+    rig file, and since session 65's second review the rig a backend builds in memory gets the same check, once, at
+    open (drivers.base.RigSource.open); the default placement gets no word."""
+    for url, warned in ((f"sim://?{SMALL}&cache=off&baseline=0.05", 1), (f"sim://?{SMALL}&cache=off", 0)):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="drivers.base"):
+            source = create_rig_source(url, clock=ManualClock())
+            assert not caplog.records  # at open, not when the URL is parsed
+            with source.open():
+                source.open()  # opening again: no second word
+        narrow = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+        assert len(narrow) == warned and len(caplog.records) == warned, caplog.text
+        assert all(m.startswith("sim:// rig 'sim': cameras ") and "50 mm apart" in m for m in narrow), narrow

@@ -152,7 +152,7 @@ class DepthaiRigSource(RigSource):
             except Exception as e:  # noqa: BLE001 - the start failure is the error to report
                 log.debug("depthai: closing after a failed start also failed: %s", e)
             raise
-        self._set_rig(rig)
+        self._set_rig(rig, built=self._fixed_rig is None)
         self._link = link
         self._device_id = device_id
         self._device_name = device_name
