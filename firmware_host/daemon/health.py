@@ -137,7 +137,8 @@ class Health:
         return self.calibration, self.floor, self.handedness
 
     def _calibration_status(self) -> str:
-        """The STATUS= line's words while either check is suspect, naming each symptom (empty otherwise)."""
+        """The STATUS= line's words while any check is suspect: what to do first, then each symptom (empty
+        otherwise)."""
         return status_words(self._calibration_checks())
 
     def estimated(self, total_ms: float, found: float, flags: frozenset[str] = frozenset(),
