@@ -275,7 +275,7 @@ class _CalibrationCheck:
                     f"carry CALIBRATION_SUSPECT; {self.fixes()} (docs/calibration.md)")
         return f"pair {pair_sequence}: the calibration fits again"
 
-    def _state(self, check: CalibrationWatch | FloorWatch, figure: str, limit: str) -> str:
+    def _state(self, check: CalibrationWatch | FloorWatch | HandednessWatch, figure: str, limit: str) -> str:
         n = len(check.values)
         if n < check.window:  # no verdict before the window is full, as in the daemon
             return f"{n} of the {check.window} pairs it needs, not judged"
@@ -285,11 +285,14 @@ class _CalibrationCheck:
         """The summary line: the verdict at the end, each check's figure, how many frames were flagged."""
         view, floor = self.view, self.floor
         peaks = f"peaks {view.median_px or 0.0:.2f} px apart"  # used only once the window is full
+        hand = self.handedness
+        mirror = f"handedness {hand.median or 0.0:+.2f}"  # used only once the window is full
         parts = [f"views' agreement: {self._state(view, peaks, f'{view.max_px:g} px')}",
-                 f"feet: {self._state(floor, floor.words(), f'{floor.max_floor_m:g} m')}"]
+                 f"feet: {self._state(floor, floor.words(), f'{floor.max_floor_m:g} m')}",
+                 f"mirror image: {self._state(hand, mirror, f'-{hand.max_mirror:g}')}"]
         if self.suspect:
             verdict = f"SUSPECT ({self.symptoms()}): {self.fixes()} (docs/calibration.md)"
-        elif any(len(c.values) >= c.window for c in (self.view, self.floor)):
+        elif any(len(c.values) >= c.window for c in (self.view, self.floor, self.handedness)):
             verdict = "fits"
         else:
             verdict = "not judged (too few pairs measured; run longer with --seconds)"

@@ -178,7 +178,7 @@ def test_the_calibration_check_says_when_it_changes_and_how_it_stands():
     assert [check.add(k, pair(0.3, 0.02)) for k in range(3)] == [None] * 3
     assert check.report(3) == ("calibration check: fits; views' agreement: peaks 0.30 px apart (median of the last 3 "
                                "pairs, limit 0.8 px); feet: feet 0.02 m above the floor (median of the last 3 pairs, "
-                               "limit 0.05 m)")
+                               "limit 0.05 m); mirror image: 0 of the 3 pairs it needs, not judged")
     # a pan: the views still meet, the feet sink below the floor (the floor check's symptom, in its words)
     lines = [check.add(k, pair(0.3, -0.2)) for k in range(3, 6)]
     assert lines[0] is None and lines[2] is None
@@ -203,6 +203,17 @@ def test_the_demo_s_calibration_check_says_when_the_cameras_look_exchanged():
         "pair 2: CALIBRATION SUSPECT (cameras look exchanged (mirror image: handedness -0.70 < -0.2))")
     assert check.suspect and check.flagged == 1
 
+
+def test_the_demo_s_verdict_shows_the_handedness_check_and_a_full_window_of_it_alone_is_judged():
+    """The summary line named the views' agreement and the feet only, and said "not judged" while the handedness
+    window alone was full (until session 65's second review): a subject whose feet were out of view and whose peaks
+    gave no px figure got no word on the check that was judging."""
+    check = demo._CalibrationCheck(window=3)
+    pair = lambda hand: SimpleNamespace(reprojection_px_median=None, lowest_foot_m=None, handedness=hand)  # noqa
+    assert [check.add(k, pair(0.8)) for k in range(3)] == [None] * 3
+    assert check.report(3) == ("calibration check: fits; views' agreement: 0 of the 3 pairs it needs, not judged; "
+                               "feet: 0 of the 3 pairs it needs, not judged; mirror image: handedness +0.80 (median of "
+                               "the last 3 pairs, limit -0.2)")
 
 
 def test_the_demo_names_the_fix_for_exchanged_cameras_not_a_recalibration():
