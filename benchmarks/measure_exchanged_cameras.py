@@ -34,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch  # noqa: E402
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX  # noqa: E402
 from ghnerf_runtime.body25 import JOINT_INDEX  # noqa: E402
-from ghnerf_runtime.cli.simdata import Sequence, bench_rig_and_scene, load_sequences  # noqa: E402
+from ghnerf_runtime.cli.simdata import Sequence, bench_rig_and_scene, load_sequences, render_frames  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig, look_at  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -78,16 +78,9 @@ def render_variant(k: int, frames: int, heading_deg, rig_kind: str, fps: float =
         scene = SimScene(replace(scene.config, heading_deg=float(heading_deg)))
     if rig_kind != "bench":
         rig = variant_rig(placement, rig_kind, rig.rig_id)
-    h, w = rig.pair[0].height, rig.pair[0].width
-    imgs, j3 = np.empty((frames, 2, h, w, 3), np.uint8), np.empty((frames, 25, 3))
-    for i in range(frames):
-        t = t0 + i / fps
-        for c, cam in enumerate(rig.pair):
-            imgs[i, c] = scene.render(cam, t)[0]
-        j3[i] = scene.joints_3d(t)
     info = {"index": k, "motion": str(scene.config.motion), "distance_m": placement.distance_m,
             "baseline_m": rig.baseline, "fps": fps, "t0": t0}
-    return Sequence(rig, imgs, j3, np.zeros((frames, 2, 25, 2)), np.zeros((frames, 2, 25), bool), info)
+    return render_frames(rig, scene, t0, frames, fps, info)
 
 
 def watches(w: int) -> dict:

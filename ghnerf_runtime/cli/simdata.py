@@ -33,7 +33,7 @@ from ghnerf_runtime.rig_file import dumps_rig, loads_rig, save_rig
 log = logging.getLogger(__name__)
 
 __all__ = ["SEED_BASE", "HELD_OUT_MOTIONS", "SEEN_MOTIONS", "Sequence", "load_sequences", "bench_rig_and_scene",
-           "Accuracy", "default_cache_dir", "write_sim_example", "percentiles", "depth_per_disparity_px"]
+           "render_frames", "Accuracy", "default_cache_dir", "write_sim_example", "percentiles", "depth_per_disparity_px"]
 
 #: Scene seeds of the bench sequences: 3 * 2**50 + k, outside every dataset split's range.
 SEED_BASE = 3 * 2 ** 50
@@ -93,8 +93,17 @@ def bench_rig_and_scene(k: int, width: int = 640, height: int = 480, motions: tu
 def _render_sequence(k: int, frames: int, fps: float, width: int, height: int, motions: tuple[str, ...],
                      seed_base: int) -> Sequence:
     rig, scene, t0, placement = bench_rig_and_scene(k, width, height, motions, seed_base)
-    seed = seed_base + k
-    imgs = np.empty((frames, 2, height, width, 3), np.uint8)
+    info = {"index": k, "scene_seed": seed_base + k, "motion": str(scene.config.motion),
+            "baseline_m": placement.baseline_m, "distance_m": placement.distance_m, "fps": fps, "t0": t0}
+    return render_frames(rig, scene, t0, frames, fps, info)
+
+
+def render_frames(rig, scene, t0: float, frames: int, fps: float, info: dict) -> Sequence:
+    """``frames`` pairs of ``scene`` (a ``drivers.sim.SimScene``) filmed by ``rig.pair`` from scene time ``t0`` at
+    ``fps``, with their truth: a bench sequence's frames, or those of a tool that changes its rig or scene
+    (``benchmarks/measure_exchanged_cameras.py``)."""
+    h, w = rig.pair[0].height, rig.pair[0].width
+    imgs = np.empty((frames, 2, h, w, 3), np.uint8)
     j3 = np.empty((frames, 25, 3))
     j2 = np.empty((frames, 2, 25, 2))
     vis = np.empty((frames, 2, 25), bool)
@@ -106,8 +115,6 @@ def _render_sequence(k: int, frames: int, fps: float, width: int, height: int, m
             j2[i, c] = truth.joints_2d
             vis[i, c] = truth.visible
         j3[i] = scene.joints_3d(t)
-    info = {"index": k, "scene_seed": seed, "motion": str(scene.config.motion), "baseline_m": placement.baseline_m,
-            "distance_m": placement.distance_m, "fps": fps, "t0": t0}
     return Sequence(rig, imgs, j3, j2, vis, info)
 
 

@@ -215,6 +215,17 @@ def test_measure_exchanged_cameras(model, capsys, monkeypatch):
     assert re.search(r"^  +as filmed \| .*\n  +exchanged \| ", out, re.M), out
 
 
+def test_measure_exchanged_cameras_renders_the_bench_sequence_as_load_sequences_does():
+    """Its own rendering (for --heading-deg and --rig) is simdata.render_frames, the bench's: as drawn, on the bench's
+    rig, its frames and truth are the bench sequence's (a copy of the render loop kept no 2D truth)."""
+    from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE, _render_sequence
+
+    mod = runpy.run_path(str(BENCH / "measure_exchanged_cameras.py"))
+    ours = mod["render_variant"](0, 1, None, "bench")
+    bench = _render_sequence(0, 1, 30.0, 640, 480, HELD_OUT_MOTIONS, SEED_BASE)
+    assert np.array_equal(ours.images, bench.images) and np.array_equal(ours.joints_3d, bench.joints_3d)
+    assert np.array_equal(ours.joints_2d, bench.joints_2d) and np.array_equal(ours.visible, bench.visible)
+
 
 def test_measure_exchanged_cameras_with_the_person_facing_away_and_the_face_gate(model, capsys, monkeypatch):
     out = run_script("measure_exchanged_cameras", "--model-dir", model, "--sequences", "1", "--frames", "2",
