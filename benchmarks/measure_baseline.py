@@ -58,8 +58,9 @@ def lifted(rig: Rig, lift_m: float) -> Rig:
 
 
 def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0, lift_m: float = 0.0):
-    """Predicted joints, found mask and truth of bench scene ``k`` filmed by ``rig``, one cold estimator given
-    ``rig`` :func:`lifted` by ``lift_m`` (truth in ``rig``'s frame)."""
+    """Predicted joints, found mask and truth of bench sequence ``k``'s scene seed (its person, clothes, motion and
+    room, drawn in ``rig``'s volume; its first instant from that seed alone, not the bench sequence's) filmed by
+    ``rig``, one cold estimator given ``rig`` :func:`lifted` by ``lift_m`` (truth in ``rig``'s frame)."""
     import drivers.sim as sim
 
     seed = SEED_BASE + k
