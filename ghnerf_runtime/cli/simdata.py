@@ -33,7 +33,8 @@ from ghnerf_runtime.rig_file import dumps_rig, loads_rig, save_rig
 log = logging.getLogger(__name__)
 
 __all__ = ["SEED_BASE", "HELD_OUT_MOTIONS", "SEEN_MOTIONS", "Sequence", "load_sequences", "bench_rig_and_scene",
-           "render_frames", "Accuracy", "default_cache_dir", "write_sim_example", "percentiles", "depth_per_disparity_px"]
+           "render_frames", "Accuracy", "default_cache_dir", "write_sim_example", "percentiles",
+           "depth_per_disparity_px"]
 
 #: Scene seeds of the bench sequences: 3 * 2**50 + k, outside every dataset split's range.
 SEED_BASE = 3 * 2 ** 50
