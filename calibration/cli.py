@@ -313,6 +313,16 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------ capture
+# Capture stamps are whole nanoseconds read as float seconds: frame 3 of a 10 fps video minus frame 0 came to
+# 0.29999999999999993 s for about half of the frame numbers, and a pose held exactly --still-s was not yet held.
+CAPTURE_TIME_SLACK_S = 1e-6
+
+
+def _sooner_than(elapsed_s: float, wanted_s: float) -> bool:
+    """Whether ``elapsed_s`` of capture time falls short of ``wanted_s``, beyond the stamps' rounding."""
+    return elapsed_s < wanted_s - CAPTURE_TIME_SLACK_S
+
+
 def _still_since(view: BoardView | None, reference: BoardView | None, *, median_px: float = STILL_MEDIAN_PX,
                  p90_px: float = STILL_P90_PX) -> bool:
     """Whether ``view`` shows the board where ``reference`` did: robust to detection jitter (a corner or
@@ -491,7 +501,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
             if args.floor:
                 # Both cameras, and the board lying still: not the board carried into place.
                 if all(_still_since(v, r) for v, r in zip(found, resting)):
-                    if now - steady_since < args.steady_s:
+                    if _sooner_than(now - steady_since, args.steady_s):
                         continue
                 else:
                     resting = found if all(v is not None for v in found) else [None, None]
@@ -506,7 +516,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
                 if not _held_since(found, holding):
                     holding, holding_since = found, now
                     continue
-                if now - holding_since < args.still_s or now - last_kept_at < args.interval_s:
+                if _sooner_than(now - holding_since, args.still_s) or _sooner_than(now - last_kept_at, args.interval_s):
                     continue
                 moves = [_largest_move_px(v, last) for v, last in zip(found, last_views)]
                 known = [m for m in moves if m is not None]

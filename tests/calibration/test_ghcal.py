@@ -628,6 +628,16 @@ def test_capture_of_the_stand_in_videos_keeps_every_pose_on_a_slow_host(truth, t
     _capture_every_pose(url, tmp_path, len(names), capsys)
 
 
+def test_a_pose_held_exactly_the_still_time_is_kept(truth, tmp_path, capsys):
+    # 4 frames at 10 fps: the pose's last frame is 0.3 s (--still-s) after its first. Stamps are whole
+    # nanoseconds, and in float seconds frame k+3 minus frame k fell short of 0.3 for about half of the k:
+    # poses 1 and 2 (frames 4..7 and 8..11) were never held long enough and only pose 0 was kept.
+    images = calibration_views(truth, BOARD, count=3, edge_count=0, seed=7, floor_view=False)
+    names = sorted(images[truth.pair[0].name])
+    url = _webcam_videos(truth, tmp_path, images, names, frames_per_pose=4)
+    _capture_every_pose(url, tmp_path, len(names), capsys)
+
+
 # ------------------------------------------------------------------ review fixes: board, order, report, floor view
 def _copy_capture(capture: Path, dest: Path, *, board: bool = True, rename: dict[str, str] | None = None) -> Path:
     """A copy of the capture fixture: without its board.json, or with views renamed (``old -> new``)."""
