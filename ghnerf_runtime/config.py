@@ -381,8 +381,16 @@ class FrameCheckConfig:
         max_noise_ratio: share of the crop's variance that is pixel-scale detail
             (``var(x - box3(x)) / var(x)``). Measured on model inputs (session 65,
             ``benchmarks/measure_frame_check.py --sequences 30``): uniform noise 0.68-0.90 (depending
-            on how the crop resamples it), the bench's frames 0.007-0.11. Above this the crop is
-            treated as noise: no joints from that camera.
+            on how the crop resamples it), the bench's frames 0.007-0.11. Above this, and above
+            ``max_coarse_noise_ratio`` too, the crop is treated as noise: no joints from that camera.
+        max_coarse_noise_ratio: the same share measured on the crop's 2x2 block means
+            (``estimator.coarse_detail_share``), asked only of a crop above ``max_noise_ratio``. Averaging
+            quarters pixel-to-pixel sensor noise and keeps a scene. Measured (session 65,
+            ``benchmarks/measure_frame_check.py --sequences 30``) on the crops the fine share rejects: garbage
+            (per-pixel, 2x2-block or smoothed noise) 0.64 or more; scenes with sensor noise of 40 or 60 levels
+            0.33 / 0.44 at most, a sensor at 1/200 of the bench's light and gain x200 0.38 (at 1/400 and
+            x400 up to 0.59, where the joints are poor anyway). 0 restores the rule before session 65 (the
+            fine share alone).
         single_view_2d: when one camera's crop fails and the other's passes, still report the
             passing camera's 2D joints, from the encoder heatmaps of models that have them (one
             view gives no depth: every 3D joint is missing, and there is no novel view). Likewise
@@ -395,6 +403,7 @@ class FrameCheckConfig:
     enabled: bool = True
     min_std: float = 2.0
     max_noise_ratio: float = 0.3
+    max_coarse_noise_ratio: float = 0.5
     single_view_2d: bool = True
 
     def __post_init__(self) -> None:
@@ -402,6 +411,7 @@ class FrameCheckConfig:
         _boolean(self, "single_view_2d")
         _number(self, "min_std", 0.0, 128.0)
         _number(self, "max_noise_ratio", 0.0, 1.0, lo_open=True)
+        _number(self, "max_coarse_noise_ratio", 0.0, 1.0)
 
 
 @dataclass(frozen=True)

@@ -106,8 +106,8 @@ from ghnerf_runtime.subject import STILL_SEVERAL_MIN_JOINTS, SubjectSelector, gu
     picks_subject
 from ghnerf_runtime.two_people import TORSO_LIMBS_M, reads_as_two_people, torso_excess
 
-__all__ = ["Estimator", "PairResult", "check_crop", "crop_statistics", "check_model_files", "load_session",
-           "KEYPOINT_STAGES", "NOVEL_STAGES", "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
+__all__ = ["Estimator", "PairResult", "check_crop", "crop_statistics", "coarse_detail_share", "check_model_files",
+           "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES", "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
            "NOVEL_MATTE_STAGE", "joints_shown_twice"]
 
 log = logging.getLogger(__name__)
@@ -358,6 +358,15 @@ def _levels_per_unit(norm: Normalisation) -> float:
     return scale
 
 
+def _detail_share(plane: np.ndarray, inside: np.ndarray | None, var: float) -> float:
+    """``var(x - box3(x)) / var`` over the pixels whose 3x3 box lies ``inside`` (all of them when ``None``)."""
+    detail = plane - cv2.blur(plane, (3, 3), borderType=cv2.BORDER_REFLECT)
+    if inside is not None:  # pixels whose 3x3 box shows the frame: the padding's edge is no detail
+        core = cv2.erode(inside.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        detail = detail[core if core.any() else inside]
+    return float(detail.var()) / var
+
+
 def crop_statistics(plane: np.ndarray, levels_per_unit: float,
                     inside: np.ndarray | None = None) -> tuple[float, float] | None:
     """The frame check's two measures of a finite model-input plane ``(S, S)``: its standard deviation in 8-bit
@@ -371,11 +380,32 @@ def crop_statistics(plane: np.ndarray, levels_per_unit: float,
     var = float(shown.var())
     if var <= 0.0:
         return 0.0, float("inf")
-    detail = plane - cv2.blur(plane, (3, 3), borderType=cv2.BORDER_REFLECT)
-    if inside is not None:  # pixels whose 3x3 box shows the frame: the padding's edge is no detail
-        core = cv2.erode(inside.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-        detail = detail[core if core.any() else inside]
-    return float(np.sqrt(var) * levels_per_unit), float(detail.var()) / var
+    return float(np.sqrt(var) * levels_per_unit), _detail_share(plane, inside, var)
+
+
+def _halved(plane: np.ndarray, inside: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """The plane's 2x2 block means (an odd last row or column dropped) and the blocks wholly ``inside``
+    (cv2's area resize: NumPy's reductions over a reshaped plane cost 0.4 ms each at 128 x 128)."""
+    h, w = plane.shape[0] // 2, plane.shape[1] // 2
+    half = cv2.resize(plane[:2 * h, :2 * w], (w, h), interpolation=cv2.INTER_AREA)
+    if inside is None:
+        return half, None
+    shown = cv2.resize(inside[:2 * h, :2 * w].astype(np.uint8) * 255, (w, h), interpolation=cv2.INTER_AREA)
+    return half, shown == 255  # a block with a pixel outside averages to 191 or less
+
+
+def coarse_detail_share(plane: np.ndarray, inside: np.ndarray | None = None) -> float:
+    """The detail share of :func:`crop_statistics` measured on the plane's 2x2 block means, over the blocks wholly
+    ``inside``. Averaging 2x2 pixels keeps a scene's structure and quarters the variance of pixel-to-pixel sensor
+    noise, so a dim scene shot at high gain measures as a scene here, while noise, whether per pixel, in 2x2 blocks
+    or smoothed, stays noise (``benchmarks/measure_frame_check.py``). ``inf`` where no block shows the frame or the
+    blocks do not vary."""
+    half, shown = _halved(plane, inside)
+    values = half if shown is None else half[shown]
+    var = float(values.var()) if values.size else 0.0
+    if var <= 0.0:
+        return float("inf")
+    return _detail_share(half, shown, var)
 
 
 def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConfig,
@@ -385,8 +415,10 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
     Returns ``(ok, reason)``, the reason a word of :mod:`ghnerf_runtime.frame_reasons`: ``"flat"``
     when its standard deviation is below ``min_std`` 8-bit levels (black, saturated, covered lens),
     ``"noise"`` when more than ``max_noise_ratio`` of its variance is pixel-to-pixel detail
-    (``x - box3(x)``; uniform noise 0.68-0.90 after the crop's resampling, the bench's frames
-    0.007-0.11: ``benchmarks/measure_frame_check.py``), ``"non-finite"`` for NaN/inf, else ``""``.
+    (``x - box3(x)``) and so is more than ``max_coarse_noise_ratio`` of its 2x2 block means'
+    (:func:`coarse_detail_share`; of the crops the fine share rejects, garbage measures 0.64 or more there, a
+    scene under sensor noise of 60 levels 0.44 at most: ``benchmarks/measure_frame_check.py --sequences 30``);
+    ``"non-finite"`` for NaN/inf, else ``""``.
 
     ``inside`` (``CropMaps.inside``) limits the statistics to the pixels that show the frame: the
     padding of a crop reaching past the frame's edge (zeros, or the faded edge of ``roi.pad_fill``) would
@@ -402,7 +434,8 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
     std_levels, detail_share = measured
     if std_levels <= 0.0 or std_levels < config.min_std:  # (min_std 0 lets a flat crop this far)
         return False, FLAT
-    if detail_share > config.max_noise_ratio:
+    # the coarse share only where the fine one fails: it spares noisy scenes and costs good frames nothing
+    if detail_share > config.max_noise_ratio and coarse_detail_share(plane, inside) > config.max_coarse_noise_ratio:
         return False, NOISE
     return True, ""
 

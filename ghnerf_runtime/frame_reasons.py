@@ -12,7 +12,9 @@ __all__ = ["FLAT", "NOISE", "NON_FINITE", "REASONS"]
 #: or a crop that shows none of the frame. (The check measures contrast only, not brightness: a black
 #: and a white crop are both "flat".)
 FLAT = "flat"
-#: More than ``frame_check.max_noise_ratio`` of the variance is pixel-to-pixel detail (a stream of garbage).
+#: More than ``frame_check.max_noise_ratio`` of the variance is pixel-to-pixel detail, and more than
+#: ``frame_check.max_coarse_noise_ratio`` of its 2x2 block means' is too (a stream of garbage; a very dark room at
+#: very high gain, docs/runtime.md "Frame check").
 NOISE = "noise"
 #: NaN or infinity in the model input.
 NON_FINITE = "non-finite"

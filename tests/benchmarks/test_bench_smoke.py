@@ -345,7 +345,29 @@ def test_measure_frame_check(model, capsys, monkeypatch):
                      capsys=capsys, monkeypatch=monkeypatch)
     # one pair: each camera's cold crop and its person crop, 4 crops of each kind; the garbage is rejected
     assert re.search(r"^ +bench frame +scene +4 ", out, re.M), out
-    assert re.search(r"^ +uniform noise +garbage +4 +[\d.]+ / +[\d.]+ +[\d.]+ / [\d.]+ / [\d.]+ +0 / 4$", out, re.M), out
+    # columns: std; fine share; coarse share; rejected flat / noise / noise by the fine share alone
+    assert re.search(r"^ +uniform noise +garbage +4 +[\d.]+ / +[\d.]+ +[\d.]+ / [\d.]+ / [\d.]+ +[\d.]+ / [\d.]+ / "
+                     r"[\d.]+ +0 / 4 / 4$", out, re.M), out
+    assert re.search(r"^ +light x0.005 gain x200 +scene +4 ", out, re.M), out  # the sensor model's kinds
+
+
+def test_measure_noisy_scenes(model, capsys, monkeypatch):
+    out = run_script("measure_noisy_scenes", "--model-dir", model, *SIZES, "--rooms", "1",
+                     "--kinds", "bench frame,light x0.005 gain x200", capsys=capsys, monkeypatch=monkeypatch)
+    for kind in ("bench frame", "light x0.005 gain x200"):
+        for rule in ("fine and coarse", "fine alone"):
+            assert re.search(rf"^ +{kind} +{rule} +[\d.]+ +[\d.na]+ +[\d.na]+ +[\d.na]+ \([\d.]+\) +\d of 1 "
+                             rf"\(\d of 2\)$", out, re.M), out
+    err = run_script_failing("measure_noisy_scenes", "--model-dir", model, "--kinds", "moonlight",
+                             capsys=capsys, monkeypatch=monkeypatch)
+    assert "unknown kind(s) ['moonlight']" in err, err
+
+
+def test_time_frame_check(capsys, monkeypatch):
+    out = run_script("time_frame_check", "--size", "32", "--repeats", "3", "--rounds", "1",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^ +scene +ok +[\d.]+ +[\d.]+$", out, re.M), out
+    assert re.search(r"^ +uniform noise +noise +[\d.]+ +[\d.]+$", out, re.M), out
 
 
 def test_measure_one_camera(model, capsys, monkeypatch):

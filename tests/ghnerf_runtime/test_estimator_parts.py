@@ -4,12 +4,13 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
 from ghnerf_runtime.config import FrameCheckConfig, Joints3DConfig, RoiConfig, TrackingConfig
 from ghnerf_runtime.errors import ConfigError, ShapeError
-from ghnerf_runtime.estimator import check_crop, crop_statistics
+from ghnerf_runtime.estimator import check_crop, coarse_detail_share, crop_statistics
 from ghnerf_runtime.geometry import Camera, look_at
 from ghnerf_runtime.joints3d import depth_centroid_joints, query_grid, triangulate_joints, volumetric_joints
 from ghnerf_runtime.keypoints import model_to_heatmap_pixels
@@ -553,6 +554,42 @@ def test_frame_check_judges_only_the_pixels_that_show_the_frame():
     noise = np.where(inside, np.random.default_rng(0).random((128, 128)), 0.0).astype(np.float32)
     assert check_crop(noise, 255.0, cfg, inside) == (False, "noise")
     assert check_crop(image, 255.0, cfg, np.zeros((128, 128), bool)) == (False, "flat")  # shows nothing
+
+
+def test_frame_check_keeps_a_scene_under_heavy_sensor_noise_and_rejects_every_kind_of_garbage():
+    """A dim scene at high gain: per-pixel noise puts more than ``max_noise_ratio`` of the crop's variance in
+    pixel-to-pixel detail (the rule before session 65 said ``noise``), but the 2x2 block means keep the scene
+    (``coarse_detail_share``). Noise per pixel, in 2x2 blocks, smoothed, or a pixel checkerboard stays ``noise``."""
+    cfg = FrameCheckConfig()
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[:128, :128]
+    scene = (0.5 + 0.3 * np.sin(xx / 9.0) * np.cos(yy / 13.0)).astype(np.float32)
+    noisy = (scene + rng.normal(0.0, 0.15, scene.shape)).astype(np.float32)  # sensor noise of 38 levels
+    assert crop_statistics(noisy, 255.0)[1] > cfg.max_noise_ratio  # the fine share alone calls it noise
+    assert coarse_detail_share(noisy) < 0.3
+    assert check_crop(noisy, 255.0, cfg) == (True, "")
+    inside = np.zeros(scene.shape, bool)
+    inside[:, 40:] = True  # padding beside the frame does not change the verdict
+    assert check_crop(np.where(inside, noisy, 0.0).astype(np.float32), 255.0, cfg, inside) == (True, "")
+    assert check_crop(noisy, 255.0, FrameCheckConfig(max_coarse_noise_ratio=0.0)) == (False, "noise")  # old rule
+    blocks = np.repeat(np.repeat(rng.random((64, 64)), 2, axis=0), 2, axis=1).astype(np.float32)
+    smoothed = cv2.GaussianBlur(rng.random((128, 128)).astype(np.float32), (0, 0), 0.7)
+    checkerboard = ((xx + yy) % 2).astype(np.float32)  # no variance left in its block means
+    garbage = {"uniform": rng.random((128, 128)).astype(np.float32), "2x2 blocks": blocks,
+               "smoothed": smoothed, "checkerboard": checkerboard}
+    for name, plane in garbage.items():
+        assert check_crop(plane, 255.0, cfg) == (False, "noise"), name
+        assert check_crop(np.where(inside, plane, 0.0).astype(np.float32), 255.0, cfg, inside) == (False, "noise"), \
+            name
+    assert coarse_detail_share(checkerboard) == float("inf")
+    assert coarse_detail_share(noisy[:127, :127]) == pytest.approx(coarse_detail_share(noisy[:126, :126]))
+
+
+def test_frame_check_config_names_a_coarse_noise_ratio_out_of_range():
+    with pytest.raises(ConfigError, match="max_coarse_noise_ratio"):
+        FrameCheckConfig(max_coarse_noise_ratio=1.5)
+    with pytest.raises(ConfigError, match="max_coarse_noise_ratio"):
+        FrameCheckConfig(max_coarse_noise_ratio=float("nan"))
 
 
 def test_a_skewed_camera_on_its_side_still_gives_an_upright_pinhole():
