@@ -32,6 +32,7 @@ from firmware_host.daemon.calibration_watch import CLEAR_RATIO
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW, \
     DAEMON_PATH_KEYS
 from firmware_host.daemon.measure_floor import DEFAULT_PAIRS, READS_PER_PAIR
+from firmware_host.daemon.health import STATUS_KEEP, STATUS_MAX, STATUS_RELOAD_MAX
 from firmware_host.daemon.memory import MMAP_THRESHOLD
 from firmware_host.daemon.sandbox import HOME_FOLDERS, PRIVATE_TMP_FOLDERS
 from firmware_host.daemon.service import MAX_FAILED_RUNS, SIZE_MISMATCH_OPENS
@@ -131,6 +132,11 @@ def _doc(name: str) -> str:
     ("docs/geometry.md", f"in {REACH_RIM_POINTS} points (`REACH_RIM_POINTS`)"),
     ("docs/protocol.md", f"at most {LATE_WINDOW} (`LATE_WINDOW`) behind the newest"),
     ("docs/daemon.md", f"at most {LATE_WINDOW} behind the newest (`LATE_WINDOW`)"),
+    # the STATUS= line's share-out (health._fit_status)
+    ("docs/daemon.md", f"The line stays within systemd's {STATUS_MAX} characters"),
+    ("docs/daemon.md", f"the state keeps {STATUS_KEEP} characters where they leave it that"),
+    ("docs/daemon.md", f"a refused reload then gets the rest (at most {STATUS_RELOAD_MAX} characters, "
+                       "`STATUS_RELOAD_MAX`)"),
     ("docs/rig-file.md", f"at most {MAX_DISTORTION:g} in magnitude (`MAX_DISTORTION`"),
     ("docs/rig-file.md", f"files over {MAX_RIG_FILE_BYTES / (1 << 20):g} MiB (`MAX_RIG_FILE_BYTES`"),
     ("docs/rig-file.md", f"under {MIN_PAIR_ANGLE_DEG:g} degree (`MIN_PAIR_ANGLE_DEG`,"),

@@ -63,7 +63,8 @@ CALIBRATION_MAX_FLOOR_M = 0.05
 #: How far below 0 the 30-pair median of the pairs' handedness (PairResult.handedness: +1 a person, -1 a mirror
 #: image) may go before the cameras look exchanged (a symmetric rig's left camera fed as its right): the default
 #: of HealthConfig.calibration_max_mirror. On the simulated rig the true rig's 30-figure windows stayed at +0.14 or
-#: more, the exchanged rig's at -0.02 or less over 30-pair takes (-0.35 or less over 150-pair ones), and every exchanged take with a full window was flagged
+#: more, the exchanged rig's at -0.02 or less over 30-pair takes (-0.35 or less over 150-pair ones), and every
+#: exchanged take with a full window was flagged
 #: (benchmarks/measure_exchanged_cameras.py, docs/calibration.md "Cameras exchanged"); on three rigs made not
 #: symmetric (--rig higher, toed-in, wide) the true rig's windows stayed at +0.06 or more. A person with their back to
 #: the rig gives few figures, near 0 (a short window read -0.21): set it null for such a subject. The window is

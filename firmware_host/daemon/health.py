@@ -237,6 +237,9 @@ class Health:
 
 #: systemd shows this much of the status line; the daemon's state keeps at least STATUS_KEEP of it.
 STATUS_MAX, STATUS_KEEP = 200, 60
+#: A refused reload's part of the status line at most ("; " and its error cut there): with the state's STATUS_KEEP
+#: it leaves the sinks down some of the line too.
+STATUS_RELOAD_MAX = 120
 
 
 def _fit_status(line: str, calibration: str, reload_error: Optional[str], sinks: dict[str, Any]) -> str:
@@ -244,10 +247,11 @@ def _fit_status(line: str, calibration: str, reload_error: Optional[str], sinks:
 
     A rig that no longer fits its calibration is said whatever else the line holds (about 55 characters, up to
     about 185 with all three symptoms: it then takes part of the state's STATUS_KEEP); a refused reload gets what
-    is left of the rest once the state has its STATUS_KEEP, the sinks down what is left after both. Every room is
-    at least 0: a negative slice would keep all but the end of a part instead of none of it."""
+    is left of the rest once the state has its STATUS_KEEP (at most STATUS_RELOAD_MAX), the sinks down what is
+    left after both. Every room is at least 0: a negative slice would keep all but the end of a part instead of
+    none of it."""
     calibration = calibration[:STATUS_MAX]
-    reload_room = max(0, min(120, STATUS_MAX - STATUS_KEEP - len(calibration)))
+    reload_room = max(0, min(STATUS_RELOAD_MAX, STATUS_MAX - STATUS_KEEP - len(calibration)))
     refused = calibration + (f"; {reload_error}"[:reload_room] if reload_error else "")
     state_keep = min(len(line), STATUS_KEEP)
     down = _sinks_down(sinks, max(0, STATUS_MAX - len(refused) - state_keep))

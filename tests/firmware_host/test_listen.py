@@ -347,25 +347,31 @@ def test_the_help_names_the_counters_in_the_words_the_line_prints(capsys):
     assert f"up to {listen.LATE_WINDOW} behind the newest" in text
 
 
+def _port_reading(data: bytes, *, then: BaseException):
+    """A port for :func:`listen.main` that reads ``data`` once, then raises ``then`` (an unplugged serial port's
+    ListenError, a Ctrl-C's KeyboardInterrupt)."""
+    class Port:
+        reads = [data]
+
+        def read(self, timeout_s: float) -> bytes:
+            if self.reads:
+                return self.reads.pop()
+            raise then
+
+        def close(self) -> None:
+            pass
+    return Port()
+
+
 def test_a_port_that_fails_while_read_still_ends_with_the_totals(monkeypatch, capsys):
     # an unplugged serial port: the error, exit 2, and nothing of what had arrived (the totals were lost)
     sink = open_sink("memory://", rig_id="pty")
     for seq in (0, 1, 3):
         sink.send(make_frame(seq))
     sink.close()
-
-    class Unplugged:
-        reads = [sink.read()]
-
-        def read(self, timeout_s: float) -> bytes:
-            if self.reads:
-                return self.reads.pop()
-            raise listen.ListenError("serial:///dev/ttyACM0: read failed: [Errno 5] Input/output error")
-
-        def close(self) -> None:
-            pass
-
-    monkeypatch.setattr(listen, "open_port", lambda url: Unplugged())
+    unplugged = _port_reading(sink.read(), then=listen.ListenError(
+        "serial:///dev/ttyACM0: read failed: [Errno 5] Input/output error"))
+    monkeypatch.setattr(listen, "open_port", lambda url: unplugged)
     assert listen.main(["serial:///dev/ttyACM0", "--json"]) == 2
     err = capsys.readouterr().err.splitlines()
     assert err == ["ghnerf-listen: error: serial:///dev/ttyACM0: read failed: [Errno 5] Input/output error",
@@ -649,18 +655,9 @@ def test_joints_of_an_unknown_joint_set_are_counted_apart_from_the_joints_presen
 def test_the_totals_count_joints_of_an_unknown_joint_set(monkeypatch, capsys):
     from firmware_host.protocol.encoder import encode
 
-    class Port:
-        reads = [b"".join(encode(m) for m in (_joints_of_set(0, 0, 25), _joints_of_set(1, 7, 10)))]
-
-        def read(self, timeout_s: float) -> bytes:
-            if self.reads:
-                return self.reads.pop()
-            raise KeyboardInterrupt
-
-        def close(self) -> None:
-            pass
-
-    monkeypatch.setattr(listen, "open_port", lambda url: Port())
+    port = _port_reading(b"".join(encode(m) for m in (_joints_of_set(0, 0, 25), _joints_of_set(1, 7, 10))),
+                         then=KeyboardInterrupt())
+    monkeypatch.setattr(listen, "open_port", lambda url: port)
     assert listen.main(["udp://:9870", "--json"]) == 0
     assert capsys.readouterr().err.splitlines() == [
         "2 JOINTS messages, 0 sequence gaps (lost), 0 late (reordered), 0 duplicate, 1 of joint_set 7 (unknown)"]

@@ -262,16 +262,22 @@ def test_a_mirror_image_makes_the_calibration_suspect_and_the_line_says_the_came
     assert not health.calibration_suspect and "calibration" not in health.status_line()
 
 
-def test_the_exchange_comes_first_when_a_camera_also_looks_moved_and_the_line_fits():
-    """An exchanged rig moves the feet off the floor too (8 of 17 exchanged takes): swapping the plugs or names is what
-    to do first, the other symptoms follow (they clear once it is done, or then say recalibrate). All three suspect
-    still fit systemd's line (since session 65's follow-up; the line said recalibrate for all three, and ran to 200
-    characters with the state cut to 24)."""
+def _running_with_windows_of_3() -> Health:
+    """A running daemon's health whose three calibration checks judge windows of 3 pairs (0.8 px, 0.05 m, 0.2)."""
     health = Health(clock=lambda: 0.0)
     health.calibration.configure(3, 0.8)
     health.floor.configure(3, 0.05)
     health.handedness.configure(3, 0.2)
     health.enter(State.RUNNING)
+    return health
+
+
+def test_the_exchange_comes_first_when_a_camera_also_looks_moved_and_the_line_fits():
+    """An exchanged rig moves the feet off the floor too (8 of 17 exchanged takes): swapping the plugs or names is what
+    to do first, the other symptoms follow (they clear once it is done, or then say recalibrate). All three suspect
+    still fit systemd's line (since session 65's follow-up; the line said recalibrate for all three, and ran to 200
+    characters with the state cut to 24)."""
+    health = _running_with_windows_of_3()
     assert health.report()["calibration"]["fix"] is None
     for _ in range(3):
         health.estimated(100.0, 1.0)
@@ -292,11 +298,7 @@ def test_all_three_symptoms_a_refused_reload_and_a_sink_down_still_fit_the_line(
     """The worst case: the calibration's words (about 185 characters) leave no room for the refused reload nor the
     sink down; both are left out, not sliced with a negative room (until session 65's second review that kept all
     but the last characters of the refusal, and the line ran to 241)."""
-    health = Health(clock=lambda: 0.0)
-    health.calibration.configure(3, 0.8)
-    health.floor.configure(3, 0.05)
-    health.handedness.configure(3, 0.2)
-    health.enter(State.RUNNING)
+    health = _running_with_windows_of_3()
     for _ in range(3):
         health.estimated(100.0, 1.0)
         health.calibration.add(12.46)

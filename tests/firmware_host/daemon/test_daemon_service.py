@@ -273,10 +273,9 @@ def test_seqs_stay_contiguous_through_reopens_and_rejected_pairs(sim_url, tmp_pa
     assert report["pairs"]["read"] == health.pairs_estimated + health.estimate_errors
 
 
-class _SceneEstimator(_CountingEstimator):
-    """No rejected pairs; pairs 2, 3 (counting from 0) with two people in view, pair 4 a prior fallback, and from
-    pair 6 on views 3 px apart (a camera moved: the median of the calibration check's window of 3 passes 1 px
-    at pair 7)."""
+class _ScriptedEstimator(_CountingEstimator):
+    """No rejected pairs; each pair's result is the parent's with :meth:`_figures` of its number ``n`` (counting
+    from 0) replaced: what a test scripts, pair by pair."""
 
     def estimate(self, images, *, sequence: int, timestamp_s: float):
         from dataclasses import replace
@@ -284,8 +283,18 @@ class _SceneEstimator(_CountingEstimator):
         self.n = getattr(self, "n", -1) + 1
         self.calls = 0  # the parent's third call is a FrameError: never reached
         result = super().estimate(images, sequence=sequence, timestamp_s=timestamp_s)
-        return replace(result, several_people=self.n in (2, 3), prior_fallback=self.n == 4,
-                       reprojection_px_median=3.0 if self.n >= 6 else 0.2)
+        return replace(result, **self._figures(self.n))
+
+    def _figures(self, n: int) -> dict:
+        raise NotImplementedError
+
+
+class _SceneEstimator(_ScriptedEstimator):
+    """Pairs 2, 3 (counting from 0) with two people in view, pair 4 a prior fallback, and from pair 6 on views 3 px
+    apart (a camera moved: the median of the calibration check's window of 3 passes 1 px at pair 7)."""
+
+    def _figures(self, n: int) -> dict:
+        return dict(several_people=n in (2, 3), prior_fallback=n == 4, reprojection_px_median=3.0 if n >= 6 else 0.2)
 
 
 def _flags_on_the_link(estimator, sim_url, tmp_path, monkeypatch, **health):
@@ -329,18 +338,12 @@ def test_what_the_status_file_says_of_a_frame_reaches_the_receiver(sim_url, tmp_
     assert report["estimator"]["flagged"] == {"several_people": 2, "prior_fallback": 1, "single_view": 0}
 
 
-class _PannedEstimator(_CountingEstimator):
+class _PannedEstimator(_ScriptedEstimator):
     """Views that always meet (0.2 px), no feet in view for pairs 0-2, feet on the floor for 3-5 and 0.3 m below
     it from pair 6 on (a camera panned: the median of the floor check's window of 3 passes 0.05 m at pair 7)."""
 
-    def estimate(self, images, *, sequence: int, timestamp_s: float):
-        from dataclasses import replace
-
-        self.n = getattr(self, "n", -1) + 1
-        self.calls = 0  # the parent's third call is a FrameError: never reached
-        result = super().estimate(images, sequence=sequence, timestamp_s=timestamp_s)
-        return replace(result, reprojection_px_median=0.2,
-                       lowest_foot_m=None if self.n < 3 else -0.3 if self.n >= 6 else 0.02)
+    def _figures(self, n: int) -> dict:
+        return dict(reprojection_px_median=0.2, lowest_foot_m=None if n < 3 else -0.3 if n >= 6 else 0.02)
 
 
 def test_feet_off_the_floor_flag_the_calibration_on_the_link(sim_url, tmp_path, monkeypatch):
@@ -773,21 +776,16 @@ def test_a_sink_url_with_camera_names_is_refused_at_start(tmp_path):
 
 
 # ---------------------------------------------------------------- reloading the config (SIGHUP)
-class _ScanningEstimator(_CountingEstimator):
-    """No rejected pairs; with ``presence.scan_every_s`` set, every other pair's (held) scan answer says someone
-    else is near, and without it there is no answer (``someone_else`` None), as the estimator's."""
+class _ScanningEstimator(_ScriptedEstimator):
+    """With ``presence.scan_every_s`` set, every other pair's (held) scan answer says someone else is near, and
+    without it there is no answer (``someone_else`` None), as the estimator's."""
 
     def __init__(self, session, rig, config, **options) -> None:
         super().__init__(session, rig, config, **options)
         self.scans = config.presence.scan_every_s > 0
 
-    def estimate(self, images, *, sequence: int, timestamp_s: float):
-        from dataclasses import replace
-
-        self.calls = 0  # the parent's third call is a FrameError: never reached
-        self.n = getattr(self, "n", -1) + 1
-        result = super().estimate(images, sequence=sequence, timestamp_s=timestamp_s)
-        return replace(result, someone_else=(self.n % 2 == 1) if self.scans else None)
+    def _figures(self, n: int) -> dict:
+        return dict(someone_else=(n % 2 == 1) if self.scans else None)
 
 
 def test_someone_else_reaches_the_link_and_hello_says_whether_the_scan_runs(sim_url, tmp_path, monkeypatch):
@@ -1937,20 +1935,14 @@ def test_a_camera_whose_frames_arrive_ten_frames_late_is_said_to_need_max_pendin
     assert run.daemon.health.rig_lost == 0
 
 
-
-class _ExchangedEstimator(_CountingEstimator):
+class _ExchangedEstimator(_ScriptedEstimator):
     """Views that meet (0.2 px) and feet on the floor throughout, no handedness for pairs 0-2, a person (+0.8) for 3-5
     and a mirror image (-0.7) from pair 6 on: the cameras' inputs exchanged on a symmetric rig (the median of the
     handedness check's window of 3 passes -0.2 at pair 7)."""
 
-    def estimate(self, images, *, sequence: int, timestamp_s: float):
-        from dataclasses import replace
-
-        self.n = getattr(self, "n", -1) + 1
-        self.calls = 0  # the parent's third call is a FrameError: never reached
-        result = super().estimate(images, sequence=sequence, timestamp_s=timestamp_s)
-        return replace(result, reprojection_px_median=0.2, lowest_foot_m=0.01,
-                       handedness=None if self.n < 3 else -0.7 if self.n >= 6 else 0.8)
+    def _figures(self, n: int) -> dict:
+        return dict(reprojection_px_median=0.2, lowest_foot_m=0.01,
+                    handedness=None if n < 3 else -0.7 if n >= 6 else 0.8)
 
 
 def test_exchanged_cameras_flag_the_calibration_on_the_link(sim_url, tmp_path, monkeypatch):
