@@ -45,6 +45,7 @@ FORWARD_CUES: tuple[tuple[tuple[int, ...], tuple[int, ...]], ...] = (
     ((_J["RBigToe"], _J["RSmallToe"]), (_J["RAnkle"],)),
     ((_J["LBigToe"], _J["LSmallToe"]), (_J["LAnkle"],)),
 )
+#: Shortest span (metres) given a direction: joints closer than a micrometre are one point (a repeated peak).
 _TINY_M = 1e-6
 
 
