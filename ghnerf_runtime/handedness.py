@@ -110,4 +110,4 @@ def handedness(points: np.ndarray, found: np.ndarray) -> float | None:
         cue = None if ahead is None or behind is None else _unit(ahead - behind)
         if cue is not None:
             cosines.append(float(np.dot(cue, facing)))
-    return float(np.clip(np.mean(cosines), -1.0, 1.0)) if cosines else None
+    return min(1.0, max(-1.0, sum(cosines) / len(cosines))) if cosines else None  # (np.clip: 5 us of a scalar)
