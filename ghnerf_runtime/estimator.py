@@ -1980,11 +1980,11 @@ class Estimator:
         # the views' agreement, from the peaks the presence gate calls strong (phantom peaks of an empty room are
         # weaker), whatever the 3D method: it tells of the rig, not of the method
         pres = self.config.presence
+        strong_peak = pres.threshold(self.config.heatmaps.source)  # the presence gate's peak threshold
         # one DLT of the peaks for the joints and the prior's inputs, in the crop cameras' kept terms
         solution = solve_two_view_peaks(uv_model, kp.confidence, kp.valid, crops, cfg,
                                         terms=self._crop_terms_for(crops).two_view)
-        tri, self._agreement = triangulate_joints_checked(uv_model, kp.confidence, kp.valid, crops, cfg,
-                                                          pres.threshold(self.config.heatmaps.source),
+        tri, self._agreement = triangulate_joints_checked(uv_model, kp.confidence, kp.valid, crops, cfg, strong_peak,
                                                           pres.min_joints, solution=solution)
         in_boxes = self._gate_to_boxes(tri, regions)  # the presence gate's
         # The floor check's feet are not box-gated (as the px figure is taken before the reprojection gate): a camera
@@ -1992,18 +1992,16 @@ class Estimator:
         # read as 4.8 m, the feet 0.7-0.8 m under the floor), and the box gates dropped exactly the joints that show it.
         # A joint far from the person's own body is dropped instead (a foot paired with the wrong peak lies metres
         # off), and someone must be there by the peaks (the presence gate, on those joints), not by the boxes.
-        someone = tri if not pres.enabled else gate_presence(tri, pres.min_joints,
-                                                             pres.threshold(self.config.heatmaps.source))
+        someone = tri if not pres.enabled else gate_presence(tri, pres.min_joints, strong_peak)
         near = near_the_body(someone, _FLOOR_BODY_M)
         self._lowest_foot = self._lowest_foot_m(near, kp, regions)
         # the cameras' inputs exchanged on a symmetric rig triangulate a mirror image (ghnerf_runtime.handedness):
         # read from the same strong, near joints as the feet, not the prior's (which always answers a person)
-        strong_seen = near.valid & np.all(kp.valid & (kp.confidence >= pres.threshold(self.config.heatmaps.source)),
-                                          axis=0)
+        strong_seen = near.valid & np.all(kp.valid & (kp.confidence >= strong_peak), axis=0)
         self._handedness = handedness(near.points, strong_seen)
         # two people's joints in one skeleton (two_people.mixed_torso), from the peaks strong in both views (a weak
         # peak may be noise's): asked whatever the 3D method, as the maps' second peaks are (_finish_pass)
-        strong = tri.valid & np.all(kp.confidence >= pres.threshold(self.config.heatmaps.source), axis=0)
+        strong = tri.valid & np.all(kp.confidence >= strong_peak, axis=0)
         # each torso limb's excess over one body's, as the rule reads it (its part along the line of sight discounted:
         # the depth error grows with depth over baseline) and as measured (what the benchmarks print beside it)
         read = torso_excess(tri.points, strong, self._centres)
@@ -2019,9 +2017,7 @@ class Estimator:
             if self.skeleton_prior is not None:
                 # Someone there? Asked of the peaks (the presence gate's thresholds are the peaks'), never of
                 # the prior, which was trained on people only and places a skeleton in any noise.
-                pres = self.config.presence
-                if pres.enabled and not gate_presence(in_boxes, pres.min_joints,
-                                                      pres.threshold(self.config.heatmaps.source)).valid.any():
+                if pres.enabled and not gate_presence(in_boxes, pres.min_joints, strong_peak).valid.any():
                     return Joints3D.missing(len(tri.valid), tri.reprojection_px.shape[-1])
                 return self._with_prior(tri, uv_model, kp, crops, solution)
             if not cfg.single_view_fallback or tri.valid.all():

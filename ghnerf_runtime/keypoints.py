@@ -212,6 +212,11 @@ def _patch3(maps: np.ndarray, pad: int, iy: np.ndarray, ix: np.ndarray, which: n
     return maps[which[:, None, None], rows, cols].astype(np.float64)
 
 
+#: Smallest determinant of a log-quadratic fit's Hessian (negative along x) read as a maximum: a smaller one is a
+#: ridge, flat along some direction, whose vertex lies arbitrarily far along it.
+_MIN_MAXIMUM_DET = 1e-12
+
+
 def _newton_log(patch: np.ndarray, edge_x: np.ndarray, edge_y: np.ndarray) -> np.ndarray:
     """Subpixel offsets ``(N, 2)`` (dx, dy) of the maximum of a quadratic fitted to ``log(patch)``.
 
@@ -228,7 +233,7 @@ def _newton_log(patch: np.ndarray, edge_x: np.ndarray, edge_y: np.ndarray) -> np
     hyy = f[:, 2, 1] - 2 * f[:, 1, 1] + f[:, 0, 1]
     hxy = 0.25 * (f[:, 2, 2] - f[:, 2, 0] - f[:, 0, 2] + f[:, 0, 0])
     det = hxx * hyy - hxy * hxy
-    full = (hxx < 0) & (det > 1e-12) & ~edge_x & ~edge_y  # negative definite: a true maximum
+    full = (hxx < 0) & (det > _MIN_MAXIMUM_DET) & ~edge_x & ~edge_y  # negative definite: a true maximum
     safe_det = np.where(full, det, 1.0)
     dx_axis = np.where((hxx < 0) & ~edge_x, -gx / np.where(hxx < 0, hxx, -1.0), 0.0)
     dy_axis = np.where((hyy < 0) & ~edge_y, -gy / np.where(hyy < 0, hyy, -1.0), 0.0)
@@ -368,7 +373,7 @@ def _flank_fit(raw: np.ndarray, plateau: np.ndarray, flank: np.ndarray) -> np.nd
     if np.sqrt(np.mean(np.square(value * (np.log(value) - terms @ c)))) > FLANK_MAX_RMS:
         return None
     hessian = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
-    if not (hessian[0, 0] < 0 and np.linalg.det(hessian) > 1e-12):
+    if not (hessian[0, 0] < 0 and np.linalg.det(hessian) > _MIN_MAXIMUM_DET):
         return None
     vertex = np.linalg.solve(hessian, -c[1:3]) + [x0, y0]
     inside = (px.min() - FLANK_REACH <= vertex[0] <= px.max() + FLANK_REACH

@@ -393,10 +393,13 @@ def rig_warnings(rig: Rig) -> list[str]:
 
 def pair_angle_deg(rig: Rig, point: np.ndarray) -> float:
     """The angle (degrees) between the lines from ``point`` to the pair's two camera centres: the angle at which
-    the pair's rays to ``point`` meet."""
+    the pair's rays to ``point`` meet. NaN where ``point`` is a camera's centre (no line of sight from it): a
+    working volume centred on a camera divided by zero and failed the load with ZeroDivisionError."""
     a, b = (cam.center - np.asarray(point, float) for cam in rig.pair)
-    cos = float(a @ b) / (float(np.linalg.norm(a)) * float(np.linalg.norm(b)))
-    return math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+    lengths = float(np.linalg.norm(a)) * float(np.linalg.norm(b))
+    if lengths == 0.0:
+        return math.nan
+    return math.degrees(math.acos(min(1.0, max(-1.0, float(a @ b) / lengths))))
 
 
 def narrow_pair_warning(rig: Rig) -> str | None:
@@ -405,7 +408,7 @@ def narrow_pair_warning(rig: Rig) -> str | None:
     a, b = rig.pair
     centre = rig.volume.center
     angle = pair_angle_deg(rig, centre)
-    if angle >= MIN_PAIR_ANGLE_DEG:
+    if not angle < MIN_PAIR_ANGLE_DEG:  # (NaN: the centre on a camera has no angle to judge)
         return None
     distance = float(np.linalg.norm(centre - 0.5 * (a.center + b.center)))
     return (f"cameras {a.name!r} and {b.name!r} are {rig.baseline * 1e3:.0f} mm apart and {distance:.2f} m from the "

@@ -108,3 +108,19 @@ def test_the_cameras_exchanged_on_a_symmetric_rig_are_flagged_and_the_true_rig_i
         assert not px.suspect, (exchanged, px.median)  # the views meet either way: the px check cannot tell
         # (the watch judges full windows: the median is compared here as the daemon would once it has one)
         assert (hands.median < -CALIBRATION_MAX_MIRROR) is exchanged, (exchanged, hands.median, figures)
+
+
+def test_a_cue_straight_ahead_reads_within_the_range_a_pair_result_takes():
+    """A nose straight ahead of the neck on a square torso, turned any way: its figure rounded to 1 + 2e-16 in a
+    third of the turns, and ``PairResult`` (which holds the figure to [-1, 1]) raised ValueError on the pair."""
+    P, found = np.zeros((25, 3)), np.zeros(25, bool)
+    for name, p in {"Neck": (0, -1.5, 0), "MidHip": (0, -1, 0), "LHip": (0.1, -1, 0), "RHip": (-0.1, -1, 0),
+                    "Nose": (0, -1.5, -0.1)}.items():
+        P[JOINT_INDEX[name]], found[JOINT_INDEX[name]] = p, True
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        turn, _r = np.linalg.qr(rng.normal(size=(3, 3)))
+        turn *= np.sign(np.linalg.det(turn))  # a rotation, no mirror
+        for figure in (handedness(P @ turn.T + rng.normal(size=3), found),
+                       handedness((P @ turn.T) * [1, 1, -1], found)):
+            assert -1.0 <= figure <= 1.0 and abs(abs(figure) - 1.0) < 1e-12, figure

@@ -415,8 +415,9 @@ def test_a_blob_past_one_keeps_its_peak():
 def test_a_saturated_top_is_placed_at_its_centre(sigma, gain, across, noise):
     """A blob whose top saturates (a sigmoid at 1.0 in float32 past a logit of 17; an int8 output at its largest
     value) is a plateau: the fit took the filtered map's highest pixel, which rounding picks anywhere on it, up to
-    2 px off for sigma 2, 100-fold, inside the map and 2.6 px on its edge. Its flank is a Gaussian's samples: placed
-    by them, within 0.001 px noise-free, 0.3 px with noise of 0.02."""
+    2.0 px off for sigma 2, 100-fold, inside the map and 3.0 px on its edge (these blobs through session 64's
+    decoder). Its flank is a Gaussian's samples: placed by them, within 0.001 px noise-free, 0.3 px with noise of
+    0.02."""
     rng = np.random.default_rng(3)
     yy, xx = np.mgrid[:32, :32]
     centres = np.stack([rng.uniform(*across, size=30), rng.uniform(10.0, 22.0, size=30)], axis=-1)

@@ -780,3 +780,16 @@ def test_the_volume_s_floor_gap_is_the_default_gate_on_joints_outside_the_volume
     from ghnerf_runtime.rig_file import MAX_VOLUME_FLOOR_GAP_M
 
     assert MAX_VOLUME_FLOOR_GAP_M == Joints3DConfig().max_outside_box_m
+
+
+def test_a_working_volume_centred_on_a_camera_loads_without_a_narrow_pair_warning(example_dict, caplog):
+    """The pair's angle at a camera's own centre has no line of sight to measure: it divided by zero, and the load
+    failed with a bare ZeroDivisionError rather than loading (or refusing with a RigFileError)."""
+    cam = example_dict["cameras"][0]
+    cam["R"], cam["t"] = np.eye(3).tolist(), [0.0, 0.0, 0.0]
+    example_dict["working_volume"] = {"min": [-1.0, -1.0, -1.0], "max": [1.0, 1.0, 1.0]}
+    with caplog.at_level("WARNING"):
+        rig = rig_from_dict(example_dict, path="centred.json")
+    assert np.isnan(pair_angle_deg(rig, rig.volume.center))
+    assert narrow_pair_warning(rig) is None
+    assert not any("MIN_PAIR_ANGLE_DEG" in r.getMessage() for r in caplog.records)
