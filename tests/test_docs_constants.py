@@ -61,9 +61,8 @@ from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M
 from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_BLOCK_VOLUME, MIN_RAY_ANGLE_FLOOR_DEG, \
     MIN_ROW_SHARE
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
-from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MIN_PAIR_ANGLE_DEG,
-                                     MAX_VOLUME_FLOOR_GAP_M,
-                                     MAX_RIG_FILE_BYTES, MAX_SKEW_SHARE)
+from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MAX_RIG_FILE_BYTES, MAX_SKEW_SHARE,
+                                     MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG)
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
 from ghnerf_runtime.proxy_matte import BONE_M
 from ghnerf_runtime.two_people import BODY_RADIUS_M, BONE_SLACK_M, MAX_LIMB_M, MIN_APART_M, MIXED_TORSO_SLACK_M, \
@@ -134,7 +133,8 @@ def _doc(name: str) -> str:
     ("docs/rig-file.md", f"at most {MAX_DISTORTION:g} in magnitude (`MAX_DISTORTION`"),
     ("docs/rig-file.md", f"files over {MAX_RIG_FILE_BYTES / (1 << 20):g} MiB (`MAX_RIG_FILE_BYTES`"),
     ("docs/rig-file.md", f"under {MIN_PAIR_ANGLE_DEG:g} degree (`MIN_PAIR_ANGLE_DEG`,"),
-    ("docs/rig-file.md", f"outside {CAMERA_HEIGHT_RANGE_M[0]:g}-{CAMERA_HEIGHT_RANGE_M[1]:g} m (`CAMERA_HEIGHT_RANGE_M`:"),
+    ("docs/rig-file.md", f"outside {CAMERA_HEIGHT_RANGE_M[0]:g}-{CAMERA_HEIGHT_RANGE_M[1]:g} m "
+                         "(`CAMERA_HEIGHT_RANGE_M`:"),
     ("docs/rig-file.md", f"more than {MAX_VOLUME_FLOOR_GAP_M:g} m from the floor (`MAX_VOLUME_FLOOR_GAP_M`"),
     ("docs/rig-file.md", f"outside {CAMERA_HEIGHT_RANGE_M[0]:g}-{CAMERA_HEIGHT_RANGE_M[1]:g} m above the floor "
                          "(`CAMERA_HEIGHT_RANGE_M`)"),
