@@ -11,7 +11,7 @@ between:
 
 * the PNG and the same image re-saved as JPEG at quality 95, 85 and 75 (a re-saved image);
 * the pose rendered twice with other sensor noise (a still board exposed twice, or a burst's two frames);
-* the pose with the board moved 1, 2 and 5 mm along its own x (the smallest move a person makes on purpose);
+* the pose with the board moved 1, 2 and 5 mm along its own x (a nudge: still the same pose to the lens's fit);
 * each view and the nearest other view of the capture (distinct poses).
 
 and how many ids the two images of one pose did not share. A tool, not a test.

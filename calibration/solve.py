@@ -82,8 +82,10 @@ SIDES_SHARE = 0.5
 #: many pixels of the other's, and they share at least half of each one's corners. On ghcal synth's rendered views
 #: (benchmarks/measure_repeated_views.py, 3 seeds) one pose's two images lay at most 1.84 px apart (re-saved as JPEG
 #: of quality 75; 1.11 px at quality 95, 0.75 px rendered twice with other sensor noise: a still board exposed
-#: twice), a board moved 5 mm at most 3.0 px (median 2.3), and each view at least 33 px from the capture's nearest
-#: other view (median 91 px): a re-saved image and a frame grabbed twice are caught, a view moved on purpose is not.
+#: twice), a board moved 5 mm at most 2.99 px (median 2.3), and each view at least 33 px from the capture's nearest
+#: other view (median 91 px): a re-saved image and a frame grabbed twice are caught, and so is a board nudged by a
+#: few millimetres (no pose the fit lacks: a 1 mm nudge is within a re-saved copy's spread, so no threshold could
+#: tell them apart); the poses a capture's views take are not.
 #: 0.5 px would have missed over a tenth of the still board's second exposures (90th percentile 0.53 px) and of the
 #: quality-85 copies (0.61 px).
 REPEAT_PX = 3.0
