@@ -30,15 +30,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from calibration.board import BoardSpec  # noqa: E402
 from calibration.detect import BoardDetector, BoardView  # noqa: E402
 from calibration.render import board_poses_both_see, calibration_views, example_rig, render_board  # noqa: E402
+from calibration.solve import corner_gaps  # noqa: E402
 
 
 def _largest_px(a: BoardView, b: BoardView) -> tuple[float, int]:
-    """The largest distance over the ids both found, and how many ids only one of them found."""
-    shared, ia, ib = np.intersect1d(a.ids, b.ids, return_indices=True)
-    if shared.size == 0:
-        return float("inf"), len(a) + len(b)
-    gap = float(np.max(np.linalg.norm(a.corners[ia] - b.corners[ib], axis=1)))
-    return gap, len(a) + len(b) - 2 * int(shared.size)
+    """The largest distance over the ids both found (``same_pose``'s measure), and how many ids only one of them
+    found."""
+    gaps = corner_gaps(a, b)
+    largest = float(gaps.max()) if gaps.size else float("inf")
+    return largest, len(a) + len(b) - 2 * gaps.size
 
 
 def _resaved(image: np.ndarray, quality: int) -> np.ndarray:
