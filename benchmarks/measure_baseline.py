@@ -11,9 +11,9 @@ baseline the angle at which the pair's rays meet at the working volume's centre 
 ``load_rig``'s narrow-pair warning reads, docs/rig-file.md), the depth one pixel of disparity moves a point at the
 working distance (``depth_per_disparity_px``), the MPJPE of the joints found, the share of joints
 found and the share of pairs with no 3D joint at all. ``RigPlacement`` refuses baselines under 5 cm, so the
-cameras are placed here as it places them. Then, per ``--lifts``, the default 1.2 m rig's frame moved that many metres
-up (cameras and working volume alike, the same images): the floor no longer at y = 0, where the runtime reads it
-(``load_rig``'s camera height warning). A tool, not a test.
+cameras are placed here as it places them. Then, per ``--lifts``, the default rig (its own baseline, 1.2 m) with
+its frame moved that many metres up (cameras and working volume alike, the same images): the floor no longer at
+y = 0, where the runtime reads it (``load_rig``'s camera height warning). A tool, not a test.
 """
 from __future__ import annotations
 
@@ -78,6 +78,21 @@ def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0,
     return np.array(pred), np.array(found), np.array(truth)
 
 
+def default_baseline_m() -> float:
+    """The simulator's default rig's baseline (``drivers.sim.RigPlacement``'s, 1.2 m), the one ``--lifts`` moves."""
+    import drivers.sim as sim
+
+    return sim.RigPlacement().baseline_m
+
+
+def score_cells(runs) -> str:
+    """The table's last three cells over :func:`run_sequence`'s ``runs``: MPJPE mm ("-" with no joint found), the
+    share of joints found and the share of pairs with no joint at all."""
+    pred, found, truth = (np.concatenate(a) for a in zip(*runs))
+    value = f"{mpjpe(pred, truth, np.ones(found.shape, bool), pred_valid=found).value:.0f}" if found.any() else "-"
+    return f"{value} | {found.mean():.3f} | {float((~found.any(axis=1)).mean()):.3f}"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", default="models")
@@ -98,21 +113,14 @@ def main(argv=None) -> int:
     for baseline in (float(b) for b in args.baselines.split(",")):
         rig = rig_with_baseline(baseline, args.distance)
         runs = [run_sequence(session, cfg, rig, k, args.frames) for k in range(args.sequences)]
-        pred, found, truth = (np.concatenate(a) for a in zip(*runs))
-        score = mpjpe(pred, truth, np.ones(found.shape, bool), pred_valid=found)
-        value = f"{score.value:.0f}" if found.any() else "-"
         print(f"| {baseline:g} | {pair_angle_deg(rig, rig.volume.center):.2f} | "
-              f"{depth_per_disparity_px(rig, args.distance):.3f} | {value} | "
-              f"{found.mean():.3f} | {float((~found.any(axis=1)).mean()):.3f} |", flush=True)
+              f"{depth_per_disparity_px(rig, args.distance):.3f} | {score_cells(runs)} |", flush=True)
     print("\n| frame moved up, m | cameras above the floor y = 0, m | MPJPE mm | joints found | pairs with no joint |")
     print("|---|---|---|---|---|")
-    rig = rig_with_baseline(1.2, args.distance)
+    rig = rig_with_baseline(default_baseline_m(), args.distance)
     for lift in (float(v) for v in args.lifts.split(",")):
         runs = [run_sequence(session, cfg, rig, k, args.frames, lift_m=lift) for k in range(args.sequences)]
-        pred, found, truth = (np.concatenate(a) for a in zip(*runs))
-        value = f"{mpjpe(pred, truth, np.ones(found.shape, bool), pred_valid=found).value:.0f}" if found.any() else "-"
-        print(f"| {lift:g} | {-lifted(rig, lift).cameras[0].center[1]:.2f} | {value} | {found.mean():.3f} | "
-              f"{float((~found.any(axis=1)).mean()):.3f} |", flush=True)
+        print(f"| {lift:g} | {-lifted(rig, lift).cameras[0].center[1]:.2f} | {score_cells(runs)} |", flush=True)
     return 0
 
 

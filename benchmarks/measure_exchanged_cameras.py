@@ -1,4 +1,4 @@
-"""The two cameras' inputs exchanged on a symmetric rig: what the runtime reports, and how soon the daemon's checks say so.
+"""The two cameras' inputs exchanged on a symmetric rig: what the runtime reports, how soon the daemon's checks say so.
 
     PYTHONPATH=$PWD /work/main/.venv/bin/python benchmarks/measure_exchanged_cameras.py [--model-dir models]
                                                                    [--sequences 10] [--frames 30] [--window 30]
@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +33,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch  # noqa: E402
-from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX  # noqa: E402
+from firmware_host.daemon.config import (CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR,  # noqa: E402
+                                         CALIBRATION_MAX_PX)
 from ghnerf_runtime.body25 import JOINT_INDEX  # noqa: E402
 from ghnerf_runtime.cli.simdata import Sequence, bench_rig_and_scene, load_sequences, render_frames  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig, look_at  # noqa: E402
@@ -43,6 +45,7 @@ SETTINGS = ("as filmed", "exchanged")
 RIGS = ("bench", "higher", "toed-in", "wide")
 RAISE_M = 0.3  # --rig higher: how much higher the second camera is
 TOE_DEG = 8.0  # --rig toed-in: how much further the second camera turns towards the first's side
+WIDE_BASELINE_M = 1.2  # --rig wide: the simulator's default rig's (RigPlacement.baseline_m), at the bench's placement
 
 
 def _aimed(cam: Camera, eye: np.ndarray, target: np.ndarray) -> Camera:
@@ -53,8 +56,7 @@ def _aimed(cam: Camera, eye: np.ndarray, target: np.ndarray) -> Camera:
 def variant_rig(placement, kind: str, rig_id: str) -> Rig:
     """The bench rig changed as ``--rig`` says (see the module's docstring)."""
     if kind == "wide":
-        from dataclasses import replace
-        return replace(placement, baseline_m=1.2).build(rig_id=rig_id)
+        return replace(placement, baseline_m=WIDE_BASELINE_M).build(rig_id=rig_id)
     rig = placement.build(rig_id=rig_id)
     first, second = rig.pair
     eye, target = second.center.copy(), placement.target.copy()
@@ -71,7 +73,6 @@ def variant_rig(placement, kind: str, rig_id: str) -> Rig:
 def render_variant(k: int, frames: int, heading_deg, rig_kind: str, fps: float = 30.0) -> Sequence:
     """Bench sequence ``k`` rendered afresh: the person turned to ``heading_deg`` (None: as drawn), the rig as
     ``rig_kind`` says."""
-    from dataclasses import replace
     from drivers.sim import SimScene  # tool only
     rig, scene, t0, placement = bench_rig_and_scene(k)
     if heading_deg is not None:
@@ -112,7 +113,6 @@ def face_seen(result, threshold: float) -> bool:
 
 
 def _without_figure(result):
-    from dataclasses import replace
     return replace(result, handedness=None)
 
 

@@ -2,7 +2,7 @@
 
     PYTHONPATH=$PWD /work/main/.venv/bin/python benchmarks/measure_left_right.py [--model-dir models]
                                     [--sequences 10] [--frames 30] [--precisions int8,fp32] [--flip-tests on,off]
-                                    [--mirrored on,off]
+                                    [--mirrored off,on] [--per-sequence] [--cache DIR]
 
 The bench's held-out-like scenes (``ghnerf-bench runtime``'s recipe and cache). For every left/right pair of BODY_25
 joints it prints the share of pairs where each side is found (a 2D joint reported, its peak above the decoder's
@@ -12,9 +12,9 @@ threshold) in view 0, view 1 and both, per source:
 * ``<precision> flip on|off``: the runtime's own 2D joints (``PairResult.missing_2d``), default settings otherwise;
 * ``... mirrored`` (with the flip test off only: :data:`FLIP_TEST_MIRRORED_NOTE`): every crop the keypoint graph
   reads is mirrored left to right before it runs, and its heatmaps mirrored back in place only, their channels left
-  as the model named them. The model then sees a mirror-image
-  person, whose right side is the filmed person's left: a channel's rate follows the *scene's side* if the scene
-  makes the difference (the rates of R and L exchange), the *channel* if the model does (they stay).
+  as the model named them. The model then sees a mirror-image person, whose right side is the filmed person's left:
+  a channel's rate follows the *scene's side* if the scene makes the difference (the rates of R and L exchange), the
+  *channel* if the model does (they stay).
 
 A tool, not a test; the figures are in docs/model.md ("Left and right joints").
 """

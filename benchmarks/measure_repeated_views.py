@@ -11,7 +11,7 @@ between:
 
 * the PNG and the same image re-saved as JPEG at quality 95, 85 and 75 (a re-saved image);
 * the pose rendered twice with other sensor noise (a still board exposed twice, or a burst's two frames);
-* the pose with the board moved 1, 2 and 5 mm along its own x (the smallest move a person makes on purpose);
+* the pose with the board moved 1, 2 and 5 mm along its own x (a nudge: still the same pose to the lens's fit);
 * each view and the nearest other view of the capture (distinct poses).
 
 and how many ids the two images of one pose did not share. A tool, not a test.
@@ -30,15 +30,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from calibration.board import BoardSpec  # noqa: E402
 from calibration.detect import BoardDetector, BoardView  # noqa: E402
 from calibration.render import board_poses_both_see, calibration_views, example_rig, render_board  # noqa: E402
+from calibration.solve import corner_gaps  # noqa: E402
 
 
 def _largest_px(a: BoardView, b: BoardView) -> tuple[float, int]:
-    """The largest distance over the ids both found, and how many ids only one of them found."""
-    shared, ia, ib = np.intersect1d(a.ids, b.ids, return_indices=True)
-    if shared.size == 0:
-        return float("inf"), len(a) + len(b)
-    gap = float(np.max(np.linalg.norm(a.corners[ia] - b.corners[ib], axis=1)))
-    return gap, len(a) + len(b) - 2 * int(shared.size)
+    """The largest distance over the ids both found (``same_pose``'s measure), and how many ids only one of them
+    found."""
+    gaps = corner_gaps(a, b)
+    largest = float(gaps.max()) if gaps.size else float("inf")
+    return largest, len(a) + len(b) - 2 * gaps.size
 
 
 def _resaved(image: np.ndarray, quality: int) -> np.ndarray:

@@ -21,7 +21,7 @@ from calibration.check import CheckLimits
 from calibration.cli import STALL_NOTE_S
 from calibration.capture import MISMATCH_TRIES
 from calibration.consensus import CONSENSUS_DEG, CONSENSUS_MM
-from calibration.solve import COVERAGE_GRID, MIN_VIEWS, USUAL_PITCH_DEG
+from calibration.solve import COVERAGE_GRID, MIN_VIEWS, REPEAT_PX, USUAL_PITCH_DEG
 from calibration.detect import PATTERN_CHECK_MARKERS
 from drivers.backends.depthai.options import DEFAULT_MOUNT_HEIGHT_M, DepthaiOptions
 from drivers.backends.depthai.source import SLOW_SHARE
@@ -29,8 +29,8 @@ from drivers.backends.replay import MIN_SPEED
 from drivers.url import whole_number
 from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.calibration_watch import CLEAR_RATIO
-from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW, \
-    DAEMON_PATH_KEYS
+from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
+    CALIBRATION_WINDOW, DAEMON_PATH_KEYS
 from firmware_host.daemon.measure_floor import DEFAULT_PAIRS, READS_PER_PAIR
 from firmware_host.daemon.health import STATUS_KEEP, STATUS_MAX, STATUS_RELOAD_MAX
 from firmware_host.daemon.memory import MMAP_THRESHOLD
@@ -53,7 +53,7 @@ from ghnerf_runtime.body_lie import KEPT_TURN_SECTOR_DEG, KEPT_TURN_STEP_DEG, TU
     TURN_MIN_FROM_SIGHT_DEG, TURN_NEAR_LIE_DEG
 from ghnerf_runtime.estimator import (_FLOOR_BODY_M, _FLOOR_EDGE_FRAC, _NEAR_LIE_STEP_DEG,
                                       _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M,
-                                      STILL_SEVERAL_MIN_JOINTS, PairResult)
+                                      MAX_TIME_STEP_S, STILL_SEVERAL_MIN_JOINTS, PairResult)
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.camera import REACH_RIM_POINTS, UNDISTORT_POLISH
 from ghnerf_runtime.geometry.orbit import AXES_PIVOT_DROP_M, AXES_PIVOT_HOLD_M, PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
@@ -62,9 +62,8 @@ from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M
 from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_BLOCK_VOLUME, MIN_RAY_ANGLE_FLOOR_DEG, \
     MIN_ROW_SHARE
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
-from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MIN_PAIR_ANGLE_DEG,
-                                     MAX_VOLUME_FLOOR_GAP_M,
-                                     MAX_RIG_FILE_BYTES, MAX_SKEW_SHARE)
+from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MAX_RIG_FILE_BYTES, MAX_SKEW_SHARE,
+                                     MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG)
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
 from ghnerf_runtime.proxy_matte import BONE_M
 from ghnerf_runtime.two_people import BODY_RADIUS_M, BONE_SLACK_M, MAX_LIMB_M, MIN_APART_M, MIXED_TORSO_SLACK_M, \
@@ -140,7 +139,15 @@ def _doc(name: str) -> str:
     ("docs/rig-file.md", f"at most {MAX_DISTORTION:g} in magnitude (`MAX_DISTORTION`"),
     ("docs/rig-file.md", f"files over {MAX_RIG_FILE_BYTES / (1 << 20):g} MiB (`MAX_RIG_FILE_BYTES`"),
     ("docs/rig-file.md", f"under {MIN_PAIR_ANGLE_DEG:g} degree (`MIN_PAIR_ANGLE_DEG`,"),
-    ("docs/rig-file.md", f"outside {CAMERA_HEIGHT_RANGE_M[0]:g}-{CAMERA_HEIGHT_RANGE_M[1]:g} m (`CAMERA_HEIGHT_RANGE_M`:"),
+    # session 65's constants the docs quote: the repeated-view threshold, the handedness check's limit and its
+    # clearing point, the capture time's coarsest step
+    ("docs/calibration.md", f"within {REPEAT_PX:g} px of the other's, `REPEAT_PX`"),
+    ("docs/calibration.md", f"below -{CALIBRATION_MAX_MIRROR:g} (`health.calibration_max_mirror`, "
+                            f"{CALIBRATION_MAX_MIRROR:g};"),
+    ("docs/calibration.md", f"it clears above -{CALIBRATION_MAX_MIRROR * CLEAR_RATIO:g}."),
+    ("docs/runtime.md", f"coarser than {MAX_TIME_STEP_S * 1e3:g} ms at its value (`estimator.MAX_TIME_STEP_S`)"),
+    ("docs/rig-file.md", f"outside {CAMERA_HEIGHT_RANGE_M[0]:g}-{CAMERA_HEIGHT_RANGE_M[1]:g} m "
+                         "(`CAMERA_HEIGHT_RANGE_M`:"),
     ("docs/rig-file.md", f"more than {MAX_VOLUME_FLOOR_GAP_M:g} m from the floor (`MAX_VOLUME_FLOOR_GAP_M`"),
     ("docs/rig-file.md", f"outside {CAMERA_HEIGHT_RANGE_M[0]:g}-{CAMERA_HEIGHT_RANGE_M[1]:g} m above the floor "
                          "(`CAMERA_HEIGHT_RANGE_M`)"),

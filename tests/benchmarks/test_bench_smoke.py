@@ -236,7 +236,7 @@ def test_measure_exchanged_cameras_with_the_person_facing_away_and_the_face_gate
 @pytest.mark.parametrize("kind", ["higher", "toed-in", "wide"])
 def test_measure_exchanged_cameras_rigs_change_the_second_camera_only(kind):
     """--rig: the first camera stays the bench's; ``higher`` raises the second by RAISE_M still aimed at the target,
-    ``toed-in`` turns its axis TOE_DEG towards the first's side, ``wide`` is a 1.2 m baseline."""
+    ``toed-in`` turns its axis TOE_DEG towards the first's side, ``wide`` is a WIDE_BASELINE_M baseline."""
     mod = runpy.run_path(str(BENCH / "measure_exchanged_cameras.py"))
     from ghnerf_runtime.cli.simdata import bench_rig_and_scene
 
@@ -244,7 +244,7 @@ def test_measure_exchanged_cameras_rigs_change_the_second_camera_only(kind):
     changed = mod["variant_rig"](placement, kind, "r")
     (a0, b0), (a1, b1) = rig.pair, changed.pair
     if kind == "wide":
-        assert changed.baseline == pytest.approx(1.2)
+        assert changed.baseline == pytest.approx(mod["WIDE_BASELINE_M"]) != rig.baseline
         return
     assert np.allclose(a0.R, a1.R) and np.allclose(a0.t, a1.t)
     axis0, axis1 = b0.R[2], b1.R[2]  # the optical axes in the rig frame
