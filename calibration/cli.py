@@ -50,7 +50,7 @@ from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancesto
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
-from ghnerf_runtime.rig_file import load_rig, save_rig, write_bytes_atomic, write_text_atomic
+from ghnerf_runtime.rig_file import CAMERA_HEIGHT_RANGE_M, load_rig, save_rig, write_bytes_atomic, write_text_atomic
 from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser"]
@@ -1137,7 +1137,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "--lens: for views whose fitted p1/p2 fold the lens model inside the image")
     p.add_argument("--floor-view", help="the view (file name without suffix) of the board lying on the floor")
     p.add_argument("--board-thickness", type=_finite(0.0, 0.1), default=0.0, help="metres, for the floor view")
-    p.add_argument("--camera-height", type=_finite(0.05, 10.0),
+    p.add_argument("--camera-height", type=_finite(*CAMERA_HEIGHT_RANGE_M),
                    help="instead of a floor view: the first camera above the floor, m")
     _add_tilt(p)
     p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, rig frame)")
@@ -1171,7 +1171,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "and stereo_calib files, which do not say (an anipose file ghcal export wrote records it)")
     p.add_argument("--extrinsics", type=user_path, help="stereo_calib's extrinsics.yml, when R and T are not in FILE")
     p.add_argument("--image-size", help="WIDTHxHEIGHT for cameras whose entry states no image size")
-    p.add_argument("--camera-height", type=_finite(0.05, 10.0),
+    p.add_argument("--camera-height", type=_finite(*CAMERA_HEIGHT_RANGE_M),
                    help="level the rig: the first camera's height above the floor, m (without it the rig keeps "
                         "the file's frame: levelled where the file records a levelling its poses show, as ghcal "
                         "export writes for a levelled rig; else the tool's own, and a warning says so)")

@@ -31,7 +31,7 @@ from calibration.errors import SolveError
 from calibration.level import LEVEL_VOLUME, level_rig
 from ghnerf_runtime.geometry.camera import Camera, fold_terms_text, folded_by_tangential
 from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M, Rig, WorkingVolume
-from ghnerf_runtime.rig_file import principal_point_problem
+from ghnerf_runtime.rig_file import CAMERA_HEIGHT_RANGE_M, principal_point_problem
 
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
            "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "fold_warning", "MIN_VIEWS", "MAX_PAIR_PX",
@@ -621,7 +621,7 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
             floor = floor_from_view(board, views[seen_by[0]][floor_view], intr[seen_by[0]],
                                     board_thickness_m=board_thickness_m)
             method = "floor view, one camera"
-        if not 0.05 < floor.height_m < 10.0:
+        if not CAMERA_HEIGHT_RANGE_M[0] <= floor.height_m <= CAMERA_HEIGHT_RANGE_M[1]:  # as --camera-height
             raise SolveError(f"the floor view puts camera {seen_by[0]!r} {floor.height_m:.2f} m above the floor: "
                              "is the board lying flat on the floor, and is the board definition right?")
         rig = level_rig(tool_rig, camera_height_m=floor.height_m, pitch_deg=floor.pitch_deg,
