@@ -3,6 +3,8 @@ of the pairs' view agreement and of their lower foot's height, its config keys, 
 and systemd's STATUS line say."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -13,6 +15,7 @@ from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX
 from firmware_host.daemon.health import STATUS_KEEP, STATUS_MAX, Health, State
 
 SINK = "memory://"
+_DAEMON_DOC = Path(__file__).resolve().parents[3] / "docs" / "daemon.md"
 
 
 def _feed(watch, values) -> list[tuple[int, bool]]:
@@ -295,7 +298,7 @@ def test_the_exchange_comes_first_when_a_camera_also_looks_moved_and_the_line_fi
 
 
 def test_all_three_symptoms_a_refused_reload_and_a_sink_down_still_fit_the_line():
-    """The worst case: the calibration's words (about 185 characters) leave no room for the refused reload nor the
+    """The worst case: the calibration's words (184 characters, quoted by docs/daemon.md) leave no room for the refused reload nor the
     sink down; both are left out, not sliced with a negative room (until session 65's second review that kept all
     but the last characters of the refusal, and the line ran to 241)."""
     health = _running_with_windows_of_3()
@@ -307,6 +310,8 @@ def test_all_three_symptoms_a_refused_reload_and_a_sink_down_still_fit_the_line(
     health.reload_error = "reload refused: /etc/ghnerf/daemon.json: rig.ulr: unknown key"
     words = health._calibration_status()
     assert len(words) > STATUS_MAX - STATUS_KEEP, words  # the case: the state's share is already taken
+    # docs/daemon.md quotes this length, naming this test
+    assert f"symptoms at once ({len(words)} characters with the figures of" in _DAEMON_DOC.read_text(), len(words)
     sinks = {"udp://10.0.0.2:9000": {"state": "down", "last_error": "udp://10.0.0.2:9000: unavailable: no route"}}
     for shown in (None, sinks):
         line = health.status_line(shown)
