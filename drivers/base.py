@@ -67,6 +67,7 @@ class RigSource(abc.ABC):
         self._is_open = False
         self._closed = False
         self._held_error: RigDisconnectedError | EndOfStream | None = None  # see _take_frame
+        self._rig_warnings_logged: set[str] | None = None  # see log_rig_warnings_once
         if rig is not None:
             self._set_rig(rig, built=rig_built)
 
@@ -163,11 +164,28 @@ class RigSource(abc.ABC):
                 self._warn_of_rig()
         return self
 
+    def log_rig_warnings_once(self, logged: set[str]) -> None:
+        """Log each warning about the rig at most once over every source handed the same ``logged`` set, which
+        this source adds to. A daemon reopens its rig after each lost camera, and each open repeated the same
+        warnings in the journal; a source given no set (a one-shot tool's) warns at each open, once."""
+        self._rig_warnings_logged = logged
+
+    def _rig_warning(self, logger: logging.Logger, fmt: str, *args: object) -> None:
+        """``logger.warning(fmt, *args)``, unless a source sharing :meth:`log_rig_warnings_once`'s set logged
+        the same text already."""
+        logged = self._rig_warnings_logged
+        if logged is not None:
+            text = fmt % args
+            if text in logged:
+                return
+            logged.add(text)
+        logger.warning(fmt, *args)
+
     def _warn_of_rig(self) -> None:
         """What ``load_rig`` would warn of in the rig this backend built (a narrow ``sim://?baseline=``, a
         camera's height): the one check for every backend's in-memory rig."""
         for message in rig_warnings(self._rig):
-            log.warning("%s:// rig %r: %s", self.scheme, self._rig.rig_id, message)
+            self._rig_warning(log, "%s:// rig %r: %s", self.scheme, self._rig.rig_id, message)
 
     def read(self, timeout_s: float = 1.0) -> FramePair:
         """Block until the next synchronised pair, at most ``timeout_s`` seconds.

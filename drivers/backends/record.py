@@ -384,6 +384,10 @@ class RecordingRigSource(RigSource):
             writes_dropped=writer.writes_dropped if writer else 0,
         )
 
+    def log_rig_warnings_once(self, logged: set[str]) -> None:
+        super().log_rig_warnings_once(logged)
+        self.inner.log_rig_warnings_once(logged)  # the inner source builds the rig and warns of it
+
     def _open(self) -> None:
         self.inner.open()
         try:

@@ -253,6 +253,8 @@ class Daemon:
                                      on_tick=self._on_watchdog_tick)
         self._clock = clock
         self._rig_kwargs = dict(rig_kwargs or {})
+        # The rig warnings already in the journal: each reopen after a lost camera logged them again
+        self._rig_warnings_logged: set[str] = set()
         self._sink_kwargs = dict(sink_kwargs or {})
         self._session: Any = None
         self._estimator: Optional[Estimator] = None
@@ -404,6 +406,7 @@ class Daemon:
             try:
                 with self.watchdog.allow(self.config.health.open_allowance_s, "opening the rig"):
                     source = drivers.create_rig_source(rig_cfg.url, **self._rig_kwargs)
+                    source.log_rig_warnings_once(self._rig_warnings_logged)
                     source.open()
                     self._estimator_for(source.rig)
                     self._open_sinks(source.rig)

@@ -143,6 +143,27 @@ def test_without_a_rig_file_a_nominal_rig_names_the_cameras(takes):
     assert pair.images[0].shape == (SIZE[1], SIZE[0], 3)
 
 
+
+def test_the_nominal_rig_warning_is_logged_once_by_sources_sharing_a_logged_set(takes, caplog):
+    """A daemon reopens its rig after each lost camera: the nominal-rig warning, logged at each open, repeated in the
+    journal (session 65's follow-up). Sources sharing ``log_rig_warnings_once``'s set say it once; a one-shot tool's
+    source, given none, still says it at its open."""
+    first, second, _, _ = takes[0]
+    url = f"opencv://?first={first}&second={second}"
+    logged: set[str] = set()
+    with caplog.at_level(logging.WARNING, logger="drivers"):
+        for _ in range(3):
+            source = create_rig_source(url)
+            source.log_rig_warnings_once(logged)
+            with source.open():
+                pass
+        shared = [r for r in caplog.records if "nominal, uncalibrated rig" in r.getMessage()]
+        caplog.clear()
+        with open_rig(url):
+            pass
+        alone = [r for r in caplog.records if "nominal, uncalibrated rig" in r.getMessage()]
+    assert len(shared) == 1 and len(alone) == 1, caplog.text
+
 @pytest.mark.parametrize("query, message", [
     ("", "option first="),
     ("first=0", "option second="),

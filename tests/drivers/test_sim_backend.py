@@ -308,3 +308,26 @@ def test_a_rig_built_from_the_url_is_warned_of_at_open_as_a_rig_file_would_be(ca
         narrow = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
         assert len(narrow) == warned and len(caplog.records) == warned, caplog.text
         assert all(m.startswith("sim:// rig 'sim': cameras ") and "50 mm apart" in m for m in narrow), narrow
+
+
+@pytest.mark.parametrize("prefix", ["", "record+"])
+def test_sources_sharing_a_logged_set_warn_of_their_rig_once(caplog, tmp_path, prefix):
+    """A daemon reopens its rig after each lost camera, through a new source each time: sources handed the same
+    ``log_rig_warnings_once`` set warn once over all the opens (each open logged the narrow pair again, session 65's
+    follow-up); a source without one, a one-shot tool's, still warns at its open. The recorder passes the set to the
+    source it wraps, which builds the rig."""
+    url = f"{prefix}sim://?{SMALL}&cache=off&baseline=0.05"
+    logged: set[str] = set()
+    with caplog.at_level(logging.WARNING, logger="drivers"):
+        for k in range(3):
+            source = create_rig_source(url, clock=ManualClock(), **({"out": tmp_path / f"take{k}"} if prefix else {}))
+            source.log_rig_warnings_once(logged)
+            with source.open():
+                pass
+        shared = [r for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+        caplog.clear()
+        with create_rig_source(url, clock=ManualClock(), **({"out": tmp_path / "one"} if prefix else {})).open():
+            pass
+        alone = [r for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+    assert len(shared) == 1 and len(logged) == 1, [r.getMessage() for r in shared]
+    assert len(alone) == 1, caplog.text

@@ -250,6 +250,18 @@ class _CountingEstimator:
         pass
 
 
+def test_a_rig_warning_is_logged_once_through_reopens(sim_url, tmp_path, caplog):
+    """A narrow pair (``baseline=0.05``) is warned of at the rig's open; the daemon reopens its rig after each lost
+    camera, and each reopen logged the same warning again (session 65's follow-up): once per daemon run now."""
+    cfg = _config({"url": f"{sim_url}&baseline=0.05&unplug_after_s=0.4", "reopen_min_s": 0.01}, tmp_path)
+    with caplog.at_level(logging.WARNING, logger="drivers"):
+        with _Running(cfg, tmp_path) as run:
+            wait_until(lambda: run.daemon.health.rig_opens >= 3, timeout=60, what="two reopens")
+            assert run.finish() == 0
+    narrow = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+    assert len(narrow) == 1, narrow
+
+
 def test_seqs_stay_contiguous_through_reopens_and_rejected_pairs(sim_url, tmp_path, monkeypatch):
     """Each reopen starts the driver's pair numbers at 0 again and a rejected pair sends nothing: neither
     shows on the wire, where seq counts the frames the daemon sent (a gap: lost after the daemon)."""
