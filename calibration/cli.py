@@ -376,6 +376,29 @@ def _write_view(folders: list[Path], name: str, images: Sequence[np.ndarray]) ->
             tmp.unlink(missing_ok=True)
 
 
+def every_frame_of_two_videos(url: str) -> str:
+    """``url`` with ``policy=all`` added where it plays two video files (``opencv://``) and names no ``policy``.
+
+    A capture from recordings is not live: under the driver's default ``latest`` the videos play on at their
+    rate, and a host whose board detection is slower than a held pose skips it (fewer views, without a word).
+    Live cameras, other schemes and a URL that chooses its ``policy`` are left as they are; a URL that does not
+    parse is too (opening it reports the error)."""
+    from drivers.backends.opencv import is_video_file
+    from drivers.errors import RigConfigError
+    from drivers.url import RigUrl
+
+    try:
+        parsed = RigUrl.parse(url)
+    except RigConfigError:
+        return url
+    specs = [parsed.options.get(option) for option in ("first", "second")]
+    if parsed.scheme != "opencv" or "policy" in parsed.options or not all(specs):
+        return url
+    if not all(is_video_file(spec) for spec in specs):
+        return url
+    return url + ("&" if "?" in url else "?") + "policy=all"
+
+
 def cmd_capture(args: argparse.Namespace) -> int:
     import drivers
     from drivers.url import redact_url
@@ -404,7 +427,12 @@ def cmd_capture(args: argparse.Namespace) -> int:
         names = sorted({p.stem for p in earlier})
         raise UsageError(f"{out} already holds {len(names)} views from an earlier capture ({names[0]}-{names[-1]}): "
                          "capture into a new folder, or pass --append to add to them (the cameras not moved since)")
-    source = drivers.create_rig_source(args.url)
+    url = every_frame_of_two_videos(args.url)
+    if url != args.url:
+        print(f"{PROG}: note: reading every frame of the two videos (policy=all added to --url: a capture slower "
+              "than the videos would skip held poses); add policy=latest to play them at their rate",
+              file=sys.stderr)
+    source = drivers.create_rig_source(url)
     shown_url = redact_url(args.url)  # a camera URL may carry a password (rtsp://user:pass@..., token=)
     read_to_its_end = False  # the capture ended without a stop (caught below) or an error on its way out
     try:

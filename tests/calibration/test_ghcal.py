@@ -555,11 +555,12 @@ def test_the_stream_limits_match_the_protocol():
 
 
 def _webcam_videos(truth, tmp_path: Path, images: dict[str, dict[str, np.ndarray]], names: list[str], *,
-                   frames_per_pose: int) -> str:
+                   frames_per_pose: int, policy: str | None = "all") -> str:
     """Two 10 fps videos standing in for the webcams, each pose held for ``frames_per_pose`` frames, then moved;
     the ``opencv://`` URL of both. ``policy=all``: every frame reaches the capture (a video waits for the reader),
-    so what it keeps does not depend on the host's speed; under the default ``latest`` a video is played at its
-    rate whatever the reader keeps up with, and a loaded host dropped the frames of a held pose."""
+    so what it keeps does not depend on the host's speed; under ``latest`` a video is played at its rate whatever
+    the reader keeps up with, and a loaded host dropped the frames of a held pose. ``policy=None``: the URL a user
+    types, without the option (``ghcal capture`` adds ``policy=all`` for two videos)."""
     videos = {}
     for cam in truth.pair:
         videos[cam.name] = tmp_path / f"{cam.name}.avi"
@@ -569,18 +570,21 @@ def _webcam_videos(truth, tmp_path: Path, images: dict[str, dict[str, np.ndarray
             for _ in range(frames_per_pose):
                 writer.write(cv2.cvtColor(images[cam.name][name], cv2.COLOR_GRAY2BGR))
         writer.release()
-    return f"opencv://?first={videos['left']}&second={videos['right']}&policy=all"
+    return f"opencv://?first={videos['left']}&second={videos['right']}" + (f"&policy={policy}" if policy else "")
 
 
-def _capture_every_pose(url: str, tmp_path: Path, poses: int, capsys) -> tuple[Path, Path]:
+def _capture_every_pose(url: str, tmp_path: Path, poses: int, capsys, *, note: str | None = None) -> tuple[Path, Path]:
     """``ghcal capture`` of ``url`` asking for two views more than its ``poses``: every pose kept once (the held
-    copies add nothing), then the videos' end stops it. The capture folder and the board file."""
+    copies add nothing), then the videos' end stops it (and ``note`` said, where given). The capture folder and
+    the board file."""
     board = tmp_path / "board.json"
     board.write_text(json.dumps(BOARD.to_dict()))
     out = tmp_path / "capture"
     assert cli.main(["capture", "--url", url, "--board", str(board), "--out", str(out),
                      "--count", str(poses + 2), "--interval-s", "0.3"]) == 0
-    assert f"kept {poses} of {poses + 2} views: the stream ended" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"kept {poses} of {poses + 2} views: the stream ended" in err
+    assert note is None or note in err, err
     assert len(list((out / "left").iterdir())) == len(list((out / "right").iterdir())) == poses
     return out, board
 
@@ -626,6 +630,36 @@ def test_capture_of_the_stand_in_videos_keeps_every_pose_on_a_slow_host(truth, t
     names = sorted(images[truth.pair[0].name])
     url = _webcam_videos(truth, tmp_path, images, names, frames_per_pose=5)  # 0.5 s: --still-s 0.3 and more
     _capture_every_pose(url, tmp_path, len(names), capsys)
+
+
+def test_capture_of_two_videos_reads_every_frame_without_policy_in_the_url(truth, tmp_path, capsys, monkeypatch):
+    # A user's URL of two recorded videos names no policy=: under the driver's default ``latest`` the videos
+    # played on at their rate while each pair's detection took longer than a pose is held, and 0 or 1 of the 3
+    # poses were kept without a word. ghcal capture reads two videos' every frame unless the URL says otherwise.
+    import time
+
+    detect = BoardDetector.detect
+
+    def slow_detect(self, image):
+        time.sleep(0.25)  # two images a pair: 0.5 s, as long as a pose is held
+        return detect(self, image)
+
+    monkeypatch.setattr(BoardDetector, "detect", slow_detect)
+    images = calibration_views(truth, BOARD, count=3, edge_count=0, seed=7, floor_view=False)
+    names = sorted(images[truth.pair[0].name])
+    url = _webcam_videos(truth, tmp_path, images, names, frames_per_pose=5, policy=None)
+    _capture_every_pose(url, tmp_path, len(names), capsys, note="reading every frame of the two videos (policy=all")
+
+
+def test_only_two_videos_without_a_policy_get_policy_all():
+    videos = "opencv://?first=take/a.avi&second=take/b.avi"
+    assert cli.every_frame_of_two_videos(videos) == videos + "&policy=all"
+    for unchanged in (videos + "&policy=latest", videos + "&policy=all",  # the URL's own choice
+                      "opencv://?first=/dev/video0&second=/dev/video2",  # live webcams
+                      "opencv://?first=0&second=take/b.avi",  # one live camera: the pair is paced by it
+                      "opencv://?first=rtsp%3A%2F%2Fcam1%2Fs&second=rtsp%3A%2F%2Fcam2%2Fs",  # network streams
+                      "replay://take", "sim://", "opencv://?first=a.avi&second=b.avi#x"):  # other schemes; no parse
+        assert cli.every_frame_of_two_videos(unchanged) == unchanged
 
 
 def test_a_pose_held_exactly_the_still_time_is_kept(truth, tmp_path, capsys):
