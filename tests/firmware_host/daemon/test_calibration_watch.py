@@ -298,9 +298,9 @@ def test_the_exchange_comes_first_when_a_camera_also_looks_moved_and_the_line_fi
 
 
 def test_all_three_symptoms_a_refused_reload_and_a_sink_down_still_fit_the_line():
-    """The worst case: the calibration's words (184 characters, quoted by docs/daemon.md) leave no room for the refused reload nor the
-    sink down; both are left out, not sliced with a negative room (until session 65's second review that kept all
-    but the last characters of the refusal, and the line ran to 241)."""
+    """The worst case: the calibration's words (184 characters, quoted by docs/daemon.md) leave no room for the
+    refused reload nor the sink down; both are left out, not sliced with a negative room (until session 65's second
+    review that kept all but the last characters of the refusal, and the line ran to 241)."""
     health = _running_with_windows_of_3()
     for _ in range(3):
         health.estimated(100.0, 1.0)
