@@ -32,6 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.measure_calibration_drift import rolling_medians  # noqa: E402
 from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch  # noqa: E402
 from firmware_host.daemon.config import (CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR,  # noqa: E402
                                          CALIBRATION_MAX_PX)
@@ -128,13 +129,6 @@ def judge(results: list, window: int) -> dict:
             flagged_at = n
     return {"hands": hands, "flagged_at": flagged_at,
             "ever": {k: c.suspect or (k == "hand" and flagged_at is not None) for k, c in checks.items()}}
-
-
-def rolling_medians(values: list, window: int) -> list:
-    v = np.asarray(values, float)
-    if v.size <= window:
-        return [float(np.median(v))] if v.size else []
-    return [float(np.median(v[k:k + window])) for k in range(v.size - window + 1)]
 
 
 def main(argv=None) -> int:

@@ -44,21 +44,6 @@ def _summary(out: str) -> tuple[int, int, int]:
     return int(m[1]), int(m[2]), int(m[3])
 
 
-@pytest.fixture
-def recorded(monkeypatch):
-    """Every PairResult the demo's estimator returns, in order."""
-    results = []
-    original = Estimator.estimate
-
-    def estimate(self, *args, **kwargs):
-        result = original(self, *args, **kwargs)
-        results.append(result)
-        return result
-
-    monkeypatch.setattr(Estimator, "estimate", estimate)
-    return results
-
-
 @needs_model
 def test_streams_estimated_joints_and_prints_the_summary(tmp_path, capsys, sim_url, recorded):
     rc = demo.main(["--url", sim_url, "--seconds", "1.5", "--out", str(tmp_path), "--model-dir", str(MODELS)])
