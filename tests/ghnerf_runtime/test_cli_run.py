@@ -809,16 +809,19 @@ def test_a_still_pair_refines_its_cold_start_by_default(capsys):
 
 
 class _StubEstimator:
-    """Answers ``estimate`` with a minimal result, raising ``fail`` at pair ``fail_at`` (a mid-run error)."""
+    """Answers ``estimate`` with a minimal result, raising ``fail`` at pair ``fail_at`` (a mid-run error), and
+    appending each pair's ``timestamp_s`` to ``times`` when given."""
 
     size = 64
 
-    def __init__(self, fail_at: int | None = None, fail: BaseException | None = None):
-        self.fail_at, self.fail = fail_at, fail
+    def __init__(self, fail_at: int | None = None, fail: BaseException | None = None, times: list | None = None):
+        self.fail_at, self.fail, self.times = fail_at, fail, times
         self.session = type("S", (), {"describe": staticmethod(lambda: {})})()
 
     def estimate_then_view(self, images, *, sequence, novel_view=None, timestamp_s=None):
         """Estimator.estimate_then_view: the result, and no novel view to finish."""
+        if self.times is not None:
+            self.times.append(timestamp_s)
         if sequence == self.fail_at:
             raise self.fail
         return type("R", (), {"to_json": lambda r: {"sequence": sequence}, "num_found": 0, "novel_view": None,
@@ -1029,16 +1032,10 @@ def test_a_video_without_a_usable_frame_rate_is_timed_at_30_fps(monkeypatch, tmp
     FrameError since the estimator refuses it, which ended the run at its first pair)."""
     times = []
 
-    class _Timed(_StubEstimator):
-        def estimate_then_view(self, images, *, sequence, novel_view=None, timestamp_s=None):
-            times.append(timestamp_s)
-            return super().estimate_then_view(images, sequence=sequence, novel_view=novel_view,
-                                              timestamp_s=timestamp_s)
-
     # frames without presentation times (NaN), so each step is a frame at the rate
     monkeypatch.setattr(cli_run.cv2, "VideoCapture", _video_with_times([float("nan")] * 3, rate))
     monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
-    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _Timed())
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _StubEstimator(times=times))
     assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "j.jsonl")]) == 0
     assert times == pytest.approx([0.0, 1 / 30, 2 / 30])
 
@@ -1061,15 +1058,9 @@ def test_each_video_is_opened_once_its_rate_read_where_it_is_opened(monkeypatch,
 
     times = []
 
-    class _Timed(_StubEstimator):
-        def estimate_then_view(self, images, *, sequence, novel_view=None, timestamp_s=None):
-            times.append(timestamp_s)
-            return super().estimate_then_view(images, sequence=sequence, novel_view=novel_view,
-                                              timestamp_s=timestamp_s)
-
     monkeypatch.setattr(cli_run.cv2, "VideoCapture", _Counted)
     monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
-    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _Timed())
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _StubEstimator(times=times))
     assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "j.jsonl")]) == 0
     assert [cap.path for cap in opened] == ["a.mp4", "b.mp4"]
     assert all(cap.released for cap in opened)
@@ -1113,15 +1104,9 @@ def test_video_pairs_are_timed_by_their_frames_presentation_times(monkeypatch, t
     pts_ms = [0.0, 33.0, 70.0, float("nan"), 140.0, 140.0, 210.0]
     times = []
 
-    class _Timed(_StubEstimator):
-        def estimate_then_view(self, images, *, sequence, novel_view=None, timestamp_s=None):
-            times.append(timestamp_s)
-            return super().estimate_then_view(images, sequence=sequence, novel_view=novel_view,
-                                              timestamp_s=timestamp_s)
-
     monkeypatch.setattr(cli_run.cv2, "VideoCapture", _video_with_times(pts_ms, 1000.0))
     monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
-    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _Timed())
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _StubEstimator(times=times))
     assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "j.jsonl")]) == 0
     assert times == pytest.approx([0.0, 0.033, 0.070, 0.071, 0.140, 0.141, 0.210])
 
