@@ -89,6 +89,7 @@ from firmware_host.service_unit import read_only_hint
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.registry import sink_class
 from firmware_host.sinks.url import parse_url
+from firmware_host.sinks.usb_claims import UsbClaims
 from ghnerf_runtime.config import config_to_dict
 from ghnerf_runtime.errors import FrameError, ModelError, ModelRunError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, load_session
@@ -260,6 +261,9 @@ class Daemon:
         self._estimator: Optional[Estimator] = None
         self._rig_text: Optional[str] = None
         self._sinks: dict[str, Sink] = {}
+        # Which usb:// sink holds which board's interface: a board named by serial= in one URL and port= in
+        # another, plugged in after the config check, is named to the second sink, not met as EBUSY for ever.
+        self._usb_claims = UsbClaims()
         self._sinks_for: Optional[tuple[str, tuple[str, ...]]] = None  # (rig_id, camera names)
         self._backoff_s = config.rig.reopen_min_s
         self._steady = False  # the open rig has delivered pairs for rig.stall_s (the backoff was reset)
@@ -694,8 +698,11 @@ class Daemon:
         kw = dict(self._sink_kwargs)
         kw["cameras"] = key[1]  # 2D joints are keyed by index in rig.pair order
         kw["scene_flags"] = announced_scene_flags(config.estimator)
-        if "rig_id" not in parse_url(url).query:
+        parsed = parse_url(url)
+        if "rig_id" not in parsed.query:
             kw["rig_id"] = key[0]
+        if parsed.scheme == "usb":
+            kw["claims"] = self._usb_claims
         sink = sink_class(url).from_url(url, **kw)  # type: ignore[attr-defined]
         carried = self._carried_gaps.get(url, 0)  # dropped from the dict once the sink starts (_start_sink)
         if carried:  # frames the sink it replaces lost at close: its first frame says so, not a silent gap

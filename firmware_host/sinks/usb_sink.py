@@ -19,6 +19,12 @@ second stall drops it); a timeout or a short write drops the frame, and the next
 released and searched for again with backoff. One frame holds the worker at most ``2 * timeout_ms``
 (the write and its retry); ``send()`` never waits for it.
 
+Two sinks of one daemon on one board: the daemon passes every usb:// sink one ``claims=``
+(:class:`~firmware_host.sinks.usb_claims.UsbClaims`); a sink takes its interface there before claiming it, and
+one that finds it held by another sink (a board named by ``serial=`` in one URL and by ``port=`` in the other,
+plugged in after the config was read) fails to connect with :class:`~firmware_host.sinks.usb_claims.UsbBoardTaken`,
+naming both sinks, both names and the board, and waits: the other may let go.
+
 A kernel driver bound to the interface (cdc_acm on a CDC board) is detached to
 claim it and attached again when the sink lets the device go, so its
 /dev/ttyACM* comes back once the daemon stops.
@@ -37,6 +43,7 @@ from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWrit
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.url import SinkUrl, int_in, integer, parse_url
+from firmware_host.sinks.usb_claims import Claimant, InterfaceOfBoard, UsbBoardTaken, UsbClaims
 from firmware_host.sinks.usb_select import (BoardName, NoMatch, PortPath, describe, parse_port, parse_serial,
                                              port_of, select)
 
@@ -93,9 +100,7 @@ def claimed_interface(url: str) -> Optional[ClaimedInterface]:
     sink = _unstarted_sink(url)
     if sink is None:
         return None
-    board = (BoardName("serial", sink.serial) if sink.serial is not None
-             else BoardName("port", sink.port) if sink.port is not None else None)
-    return ClaimedInterface(f"{sink.vid:04x}:{sink.pid:04x}", board, sink.interface)
+    return ClaimedInterface(sink.vid_pid, sink.board_name, sink.interface)
 
 
 def named_board_now(url: str, backend: Any = None) -> Optional[PortPath]:
@@ -121,11 +126,14 @@ class UsbSink(ProtocolSink):
     def __init__(
         self, url: str, vid: int, pid: int, ep: int, interface: int, timeout_ms: int,
         options: SinkOptions, backend: Any = None, serial: Optional[str] = None, port: Optional[PortPath] = None,
+        claims: Optional[UsbClaims] = None,
     ) -> None:
         super().__init__(url, options)
         self.vid, self.pid, self.ep, self.interface, self.timeout_ms = vid, pid, ep, interface, timeout_ms
         self.serial, self.port = serial, port  # at most one: which of several devices of VID:PID
         self._backend = backend
+        self._claims = claims  # the daemon's: which of its sinks holds which interface (None: not checked)
+        self._held: Optional[InterfaceOfBoard] = None  # what this sink took in _claims
         self._dev: Optional[usb.core.Device] = None
         self._detached = False  # the sink detached the interface's kernel driver: attach it again on release
         self._warned_several = False  # "several devices match" is said once per sink, not on every reconnect
@@ -146,10 +154,23 @@ class UsbSink(ProtocolSink):
         if serial is not None and port is not None:  # two answers to "which board" could disagree
             raise SinkConfigError(url, "port", str(port), f"give serial= or port=, not both (serial={serial!r})")
         backend = kw.pop("backend", None)
+        claims = kw.pop("claims", None)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()
         reject_unknown_kw(url, kw)
-        return cls(url, vid, pid, ep, interface, timeout_ms, options, backend, serial, port)
+        return cls(url, vid, pid, ep, interface, timeout_ms, options, backend, serial, port, claims)
+
+    @property
+    def vid_pid(self) -> str:
+        """``"1209:0001"``: the IDs as numbers, however the URL spelled them."""
+        return f"{self.vid:04x}:{self.pid:04x}"
+
+    @property
+    def board_name(self) -> Optional[BoardName]:
+        """How the URL names its board (``serial=``, ``port=``); None: the first libusb lists."""
+        if self.serial is not None:
+            return BoardName("serial", self.serial)
+        return None if self.port is None else BoardName("port", self.port)
 
     def _get_backend(self) -> Any:
         if self._backend is None:
@@ -181,7 +202,7 @@ class UsbSink(ProtocolSink):
         except (SinkUnavailableError, ImportError):  # no libusb here: no board can be seen either
             return None
         try:
-            dev = select(found, self.serial, self.port, f"{self.vid:04x}:{self.pid:04x}")
+            dev = select(found, self.serial, self.port, self.vid_pid)
         except NoMatch:
             return None
         try:
@@ -192,19 +213,21 @@ class UsbSink(ProtocolSink):
     def _connect(self) -> None:
         found = self._find_all()
         dev = self._choose(found)
+        self._take_interface(dev)
         try:
             self._configure(dev)
         except (usb.core.USBError, ValueError) as e:
             self._reattach(dev)
             usb.util.dispose_resources(dev)
+            self._let_interface_go()
             # The device is there but not as the URL describes it (interface, ep) or is held by another
             # program; the base class warns once per outage and per new error, as for any failed connect.
-            raise SinkUnavailableError(self.url, f"cannot claim {self.vid:04x}:{self.pid:04x}: {e}") from e
+            raise SinkUnavailableError(self.url, f"cannot claim {self.vid_pid}: {e}") from e
         self._dev = dev
 
     def _choose(self, found: list) -> usb.core.Device:
         """The device to claim: the one the selector names, else the first libusb lists."""
-        ids = f"{self.vid:04x}:{self.pid:04x}"
+        ids = self.vid_pid
         if self.serial is not None or self.port is not None:
             try:
                 return select(found, self.serial, self.port, ids)
@@ -220,6 +243,30 @@ class UsbSink(ProtocolSink):
                          "?port=BUS-PORT (as listed) or ?serial=", self.shown, len(found), ids,
                          ", ".join(describe(d) for d in found), dev.bus, dev.address)
         return dev
+
+    def _take_interface(self, dev: usb.core.Device) -> None:
+        """Take this sink's interface of ``dev`` in the daemon's claims before the kernel is asked: another of its
+        sinks on it (one board named two ways) is named, not met as EBUSY on every retry. Nothing on the board is
+        touched when it is refused.
+
+        :raises UsbBoardTaken: another sink of this daemon holds it.
+        """
+        if self._claims is None:
+            return
+        port = port_of(dev)
+        where = f"port {port}" if port is not None else f"bus {dev.bus} address {dev.address} (port unknown)"
+        wanted = InterfaceOfBoard(self.vid_pid, where, self.interface)
+        holder = self._claims.take(wanted, Claimant(self, self.url, self.board_name))
+        if holder is not None:
+            usb.util.dispose_resources(dev)  # reading its serial may have opened it
+            raise UsbBoardTaken(self.url, self.board_name, holder, wanted)
+        self._held = wanted
+
+    def _let_interface_go(self) -> None:
+        """Give back what :meth:`_take_interface` took: another sink of the daemon may have it now."""
+        held, self._held = self._held, None
+        if held is not None and self._claims is not None:
+            self._claims.let_go(held, self)
 
     def _configure(self, dev: usb.core.Device) -> None:
         try:
@@ -251,6 +298,7 @@ class UsbSink(ProtocolSink):
                 pass  # the device is probably gone
             self._reattach(dev)
             usb.util.dispose_resources(dev)
+        self._let_interface_go()  # after the kernel's claim is released: the next sink's claim then succeeds
 
     def _reattach(self, dev: usb.core.Device) -> None:
         """Give the interface back to the kernel driver this sink detached; must not raise."""

@@ -17,7 +17,10 @@ on an open handle raises USBError with errno ENODEV, also after it comes back:
 a replugged device needs a new handle); a kernel driver bound to the interface
 (``kernel_driver``, as cdc_acm holds a CDC board's /dev/ttyACM*): claiming
 fails with EBUSY until it is detached, and ``attach_kernel_driver`` binds it
-again; an interface another program holds (``held_elsewhere``: EBUSY); several
+again; an interface another program holds (``held_elsewhere``: EBUSY); an
+interface claimed through another open handle (``claimers``: EBUSY, as Linux's
+usbfs answers a second open of the device, in this process or another, until
+the first releases it or is closed); several
 devices of one VID:PID (``FakeBackend(first, second)``, listed in that order,
 told apart by ``address``, ``bus`` and ``port_numbers``); a serial number string
 (``serial``: iSerialNumber is 3 when set, 0 when None) read through pyusb's own
@@ -57,6 +60,7 @@ class FakeDevice:
     stalled: bool = False
     configuration: int = 0  # 0 = unconfigured
     claimed: set = field(default_factory=set)
+    claimers: dict = field(default_factory=dict)  # interface -> the open handle that claimed it
     generation: int = 0  # bumped on every unplug: old handles go stale
     writes: int = 0
     halts_cleared: int = 0
@@ -84,6 +88,7 @@ class FakeDevice:
             self.generation += 1
             self.configuration = 0
             self.claimed.clear()
+            self.claimers.clear()
 
     def plug(self) -> None:
         with self.lock:
@@ -175,7 +180,11 @@ class FakeBackend(usb.backend.IBackend):
         return SimpleNamespace(device=dev, generation=dev.generation)
 
     def close_device(self, dev_handle):
-        dev_handle.device.open_handles -= 1
+        dev = dev_handle.device
+        dev.open_handles -= 1
+        for intf in [i for i, holder in dev.claimers.items() if holder is dev_handle]:  # closing releases
+            dev.claimed.discard(intf)
+            del dev.claimers[intf]
 
     def set_configuration(self, dev_handle, config_value):
         self._check(dev_handle).configuration = config_value
@@ -185,12 +194,17 @@ class FakeBackend(usb.backend.IBackend):
 
     def claim_interface(self, dev_handle, intf):
         dev = self._check(dev_handle)
-        if dev.kernel_driver or dev.held_elsewhere:
+        other_handle = dev.claimers.get(intf, dev_handle) is not dev_handle
+        if dev.kernel_driver or dev.held_elsewhere or other_handle:
             raise usb.core.USBError("Resource busy", error_code=-6, errno=errno.EBUSY)
         dev.claimed.add(intf)
+        dev.claimers[intf] = dev_handle
 
     def release_interface(self, dev_handle, intf):
-        self._check(dev_handle).claimed.discard(intf)
+        dev = self._check(dev_handle)
+        if dev.claimers.get(intf) is dev_handle:
+            dev.claimed.discard(intf)
+            del dev.claimers[intf]
 
     def is_kernel_driver_active(self, dev_handle, intf):
         return self._check(dev_handle).kernel_driver

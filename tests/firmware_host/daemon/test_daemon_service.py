@@ -1170,6 +1170,49 @@ def test_a_sink_removed_while_the_rig_is_away_is_closed_at_once(tmp_path):
         daemon._close_sinks()
 
 
+def test_one_usb_board_plugged_in_after_the_load_is_refused_to_its_second_name_in_the_status_file(
+        tmp_path, monkeypatch):
+    """One board named by one sink's ``serial=`` and another's ``port=``, plugged in after the config check: the
+    second sink waited at connect for ever, its error the kernel's ``Resource busy`` (session 65 refused the pair
+    only when the board was there at load). Now its status names the other sink, both names and the board, and it
+    takes the board once a reload removes the other sink."""
+    import libusb_package
+    from drivers.sim.placement import RigPlacement
+    from tests.firmware_host.fake_usb_backend import FakeBackend, two_boards
+
+    board = two_boards()[0]
+    board.present = False  # unplugged at load: the config check cannot tell the two names apart
+    monkeypatch.setattr(libusb_package, "get_libusb1_backend", lambda: FakeBackend(board))
+    by_serial, by_port = "usb://1209:0001?ep=0x01&serial=ABC123", "usb://1209:0001?ep=0x01&port=1-1.4"
+    configs = _Configs()
+    daemon = Daemon(_config({"url": "sim://"}, tmp_path, sinks=[by_serial, by_port]), notifier=SystemdNotifier({}),
+                    sink_kwargs={"backoff": FAST_BACKOFF}, reload_config=configs)
+    rig = RigPlacement().build()
+    daemon._session, daemon._estimator = object(), _StubEstimator(rig)
+    try:
+        daemon._open_sinks(rig)
+        board.plug()
+        sinks = daemon.sinks
+        wait_until(lambda: any(s.stats().state == "up" for s in sinks.values()), what="one sink up")
+        holder, waiter = sorted(sinks, key=lambda url: sinks[url].stats().state != "up")
+        wait_until(lambda: sinks[waiter].stats().connect_failures >= 3, what="refused connects")
+        daemon._tick(force=True, tell_systemd=False)
+        shown = json.loads((tmp_path / "status.json").read_text())["sinks"][waiter]
+        names = {by_serial: "serial='ABC123'", by_port: "port=1-1.4"}
+        assert shown["state"] == "down" and shown["last_error"] == (
+            f"{waiter}: unavailable: interface 0 of the 1209:0001 board at port 1-1.4 is held by another sink of "
+            f"this daemon, {holder}, which names it {names[holder]}; this sink names it {names[waiter]}: two names "
+            "of one board; remove one of the two sinks or name another board (this one takes the board once the "
+            "other lets it go: a reload that removes it, the board moved)")
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[waiter])  # the holder removed
+        daemon.request_reload()
+        assert daemon._maybe_reload(None) == ["sinks"]
+        assert sinks[waiter].wait_connected(5)
+    finally:
+        daemon._close_sinks()
+    assert not board.claimed and board.open_handles == 0
+
+
 def test_an_estimator_reload_while_the_rig_is_away_is_built_for_the_last_rig(tmp_path, monkeypatch):
     import firmware_host.daemon.service as service
     from drivers.sim.placement import RigPlacement

@@ -1,0 +1,113 @@
+"""Two usb:// sinks of one daemon on one board (one URL's serial=, the other's port=): the second is told which sink
+holds the board, once, and takes it when that one lets go (firmware_host/sinks/usb_claims.py)."""
+from __future__ import annotations
+
+import logging
+
+import pytest
+
+from firmware_host.sinks import open_sink
+from firmware_host.sinks.usb_claims import Claimant, InterfaceOfBoard, UsbClaims
+from firmware_host.sinks.usb_select import BoardName
+from tests.firmware_host.fake_usb_backend import FakeBackend, two_boards
+from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, joints_seqs, make_frame, messages_of, wait_until
+
+BY_SERIAL = "usb://1209:0001?ep=0x01&serial=ABC123"
+BY_PORT = "usb://1209:1?ep=0x01&port=1-1.4"
+NAMES = {BY_SERIAL: "serial='ABC123'", BY_PORT: "port=1-1.4"}
+
+
+def test_without_the_daemons_claims_the_second_sink_meets_the_kernels_ebusy() -> None:
+    """What session 65 left when the board is plugged in after the config check (sinks opened apart still meet it):
+    the fake answers a second handle's claim as usbfs does, and the error names neither the other sink nor the
+    board."""
+    board = two_boards()[0]
+    first = open_sink(BY_SERIAL, backend=FakeBackend(board), backoff=FAST_BACKOFF)
+    try:
+        assert first.wait_connected(5)
+        second = open_sink(BY_PORT, backend=FakeBackend(board), backoff=FAST_BACKOFF)
+        wait_until(lambda: second.stats().connect_failures >= 2, what="two refused connects")
+        assert (second.close().last_error or "").endswith("cannot claim 1209:0001: [Errno 16] Resource busy")
+    finally:
+        first.close()
+
+
+@pytest.mark.parametrize(("holder_url", "waiter_url"), [(BY_SERIAL, BY_PORT), (BY_PORT, BY_SERIAL)])
+def test_a_board_named_by_serial_and_by_port_is_refused_to_the_second_sink_naming_both_once(
+        holder_url: str, waiter_url: str, caplog: pytest.LogCaptureFixture) -> None:
+    board = two_boards()[0]
+    claims = UsbClaims()
+    holder = open_sink(holder_url, backend=FakeBackend(board), backoff=FAST_BACKOFF, claims=claims)
+    try:
+        assert holder.wait_connected(5)
+        with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+            waiter = open_sink(waiter_url, backend=FakeBackend(board), backoff=FAST_BACKOFF, claims=claims)
+            wait_until(lambda: waiter.stats().connect_failures >= 5, what="five refused connects")
+        stats = waiter.stats()
+        assert stats.state == "down"
+        assert stats.last_error == (
+            f"{waiter_url}: unavailable: interface 0 of the 1209:0001 board at port 1-1.4 is held by another sink of "
+            f"this daemon, {holder_url}, which names it {NAMES[holder_url]}; this sink names it {NAMES[waiter_url]}: "
+            "two names of one board; remove one of the two sinks or name another board (this one takes the board "
+            "once the other lets it go: a reload that removes it, the board moved)")
+        said = [r for r in caplog.records if "held by another sink" in r.getMessage()]
+        assert [r.levelno for r in said if r.levelno >= logging.WARNING] == [logging.WARNING]  # once, not per retry
+        assert len(said) >= 5  # the repeats at DEBUG
+        assert board.claimed == {0}  # the holder's claim, untouched by the refused sink
+        holder.send(make_frame(0))
+        assert holder.wait_drained(5)
+        assert joints_seqs(messages_of(board.take())) == [0]
+        holder.close()  # as a reload that removes it does: the waiting sink takes the board
+        assert waiter.wait_connected(5)
+        waiter.send(make_frame(1))
+        assert waiter.wait_drained(5)
+        waiter.close()
+    finally:
+        holder.close()
+    assert joints_seqs(messages_of(board.take())) == [1]
+    assert not board.claimed and board.open_handles == 0
+
+
+def test_two_boards_named_apart_by_serial_and_by_port_both_stream() -> None:
+    first, second = two_boards()
+    claims = UsbClaims()
+    sinks = [open_sink(url, backend=FakeBackend(first, second), backoff=FAST_BACKOFF, claims=claims)
+             for url in ("usb://1209:0001?ep=0x01&serial=XYZ789", BY_PORT)]
+    for seq, sink in enumerate(sinks):
+        assert sink.wait_connected(5)
+        sink.send(make_frame(seq))
+        assert sink.wait_drained(5)
+        sink.close()
+    assert joints_seqs(messages_of(second.take())) == [0] and joints_seqs(messages_of(first.take())) == [1]
+
+
+def test_a_sink_whose_claim_the_kernel_refuses_lets_the_interface_go() -> None:
+    """Another program holds the board: each sink meets EBUSY and holds nothing in the daemon's claims, so the
+    other sink's error is the kernel's, not "held by another sink"."""
+    board = two_boards()[0]
+    board.held_elsewhere = True
+    claims = UsbClaims()
+    sinks = [open_sink(url, backend=FakeBackend(board), backoff=FAST_BACKOFF, claims=claims)
+             for url in (BY_SERIAL, BY_PORT)]
+    try:
+        for sink in sinks:
+            wait_until(lambda: sink.stats().connect_failures >= 3, what="three refused connects")
+            assert (sink.stats().last_error or "").endswith("Resource busy")
+    finally:
+        for sink in sinks:
+            sink.close()
+
+
+def test_only_the_holder_lets_its_claim_go() -> None:
+    claims = UsbClaims()
+    interface = InterfaceOfBoard("1209:0001", "port 1-1.4", 0)
+    first, second = object(), object()
+    mine = Claimant(first, BY_SERIAL, BoardName("serial", "ABC123"))
+    assert claims.take(interface, mine) is None
+    assert claims.take(interface, mine) is None  # its own again: a reconnect
+    assert claims.take(interface, Claimant(second, BY_PORT, None)) == mine
+    claims.let_go(interface, second)  # not its claim: it stays
+    assert claims.take(interface._replace(interface=1), Claimant(second, BY_PORT, None)) is None  # another interface
+    assert claims.take(interface, Claimant(second, BY_PORT, None)) == mine
+    claims.let_go(interface, first)
+    assert claims.take(interface, Claimant(second, BY_PORT, None)) is None
