@@ -390,6 +390,8 @@ def test_two_boards_with_one_serial_are_not_guessed_between() -> None:
     stats = sink.close()
     assert "2 devices 1209:0001 have serial 'ABC123'" in (stats.last_error or "")
     assert "choose one by port=" in (stats.last_error or "")
+    # the ports to choose from are named
+    assert "port 1-1.4 serial 'ABC123'; bus 1 address 9 port 1-2 serial 'ABC123'" in (stats.last_error or "")
     assert not first.claimed and not second.claimed and first.open_handles == second.open_handles == 0
 
 
