@@ -266,10 +266,10 @@ def _climb(maps: np.ndarray, iy: np.ndarray, ix: np.ndarray, steps: int) -> tupl
     return iy, ix
 
 
-def _refine_quadratic(maps: np.ndarray, padded: np.ndarray, pad: int, iy: np.ndarray, ix: np.ndarray,
-                      sigma: float, which: np.ndarray) -> np.ndarray:
+def _refine_quadratic(maps: np.ndarray, maxima: np.ndarray, padded: np.ndarray, pad: int, iy: np.ndarray,
+                      ix: np.ndarray, sigma: float, which: np.ndarray) -> np.ndarray:
     """Log-quadratic refinement, on the filtered map except near the map edge; returns positions ``(N, 2)`` of
-    the pixels ``(iy, ix)``, pixel ``k`` in map ``which[k]``.
+    the pixels ``(iy, ix)``, pixel ``k`` in map ``which[k]`` (``maxima``: each map's maximum, :func:`_scaled_to_one`).
 
     Where the filter kernel (radius ``ceil(3 sigma)``) reaches past the edge, its zero border
     pulls the filtered peak inwards (0.2-1.2 px at the edge for blobs of sigma 1.5-3 px, 2 px and
@@ -292,9 +292,9 @@ def _refine_quadratic(maps: np.ndarray, padded: np.ndarray, pad: int, iy: np.nda
         patch[near] = _patch3(maps, 0, iy[near], ix[near], which[near])
     # One fit for all: an axis with no outer neighbour is only flagged on the raw (edge) patches.
     offset = _newton_log(patch, near & ((ix == 0) | (ix == w - 1)), near & ((iy == 0) | (iy == h - 1)))
-    flat = _flat_tops(maps, which, top_iy, top_ix)
+    flat = _flat_tops(maps, maxima, which, top_iy, top_ix)
     if near.any():  # a plateau by the edge may show its ties at the raw maximum the climb reached instead
-        flat[near] |= _flat_tops(maps, which[near], iy[near], ix[near])
+        flat[near] |= _flat_tops(maps, maxima, which[near], iy[near], ix[near])
     return _place_flat_tops(maps, padded, pad, which, top_iy, top_ix, flat, np.stack([ix, iy], axis=-1) + offset)
 
 
@@ -324,12 +324,12 @@ FLAT_TOP_TIES_BELOW_ONE = 5
 EXCESS_MIN_PLATEAU = 5
 
 
-def _flat_tops(maps: np.ndarray, which: np.ndarray, iy: np.ndarray, ix: np.ndarray) -> np.ndarray:
-    """``(N,)`` bool: pixel ``k`` of map ``which[k]`` lies on a plateau at that map's maximum (at least
-    :data:`FLAT_TOP_TIES`, or :data:`FLAT_TOP_TIES_BELOW_ONE` for a maximum under 1, pixels of its raw 3x3
+def _flat_tops(maps: np.ndarray, maxima: np.ndarray, which: np.ndarray, iy: np.ndarray, ix: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: pixel ``k`` of map ``which[k]`` lies on a plateau at that map's maximum (``maxima``, one a map:
+    at least :data:`FLAT_TOP_TIES`, or :data:`FLAT_TOP_TIES_BELOW_ONE` for a maximum under 1, pixels of its raw 3x3
     neighbourhood at it): a saturated top (a sigmoid at 1.0 in float32 past a logit of 17, a map past 1 scaled by its
     maximum)."""
-    top = maps.reshape(len(maps), -1).max(axis=1)[which]
+    top = maxima[which]
     ties = (_patch3(maps, 0, iy, ix, which) == top[:, None, None]).sum(axis=(1, 2))
     return ties >= np.where(top >= 1.0, FLAT_TOP_TIES, FLAT_TOP_TIES_BELOW_ONE)
 
@@ -497,6 +497,17 @@ def _runner_up_in_region(filtered: np.ndarray, padded: np.ndarray, pad: int, in_
     return values, out_y, out_x
 
 
+def _scaled_to_one(maps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(N, H, W)`` maps of values >= 0 as float32, each above 1 scaled down by its maximum, and each map's maximum
+    after that (``(N,)`` float32, as ``maps.max(axis=(1, 2))`` of the result gives it: x / x is exactly 1 and the cast
+    keeps the order), which the flat-top check then need not take again (:func:`decode_keypoints` says why scaled)."""
+    maxima = maps.max(axis=(1, 2))
+    if (maxima > 1.0).any():
+        maps = maps / np.where(maxima > 1.0, maxima, 1.0)[:, None, None]
+        maxima = np.minimum(maxima, 1.0)
+    return maps.astype(np.float32, copy=False), maxima.astype(np.float32)
+
+
 def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None = None) -> Keypoints2D:
     """Decode one keypoint per joint heatmap (single person).
 
@@ -540,11 +551,7 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
     # clipped: clipping flattened a blob's top into a plateau whose first pixel became the peak (2.3 px
     # off for a blob of peak 255, sigma 2). Scaled before the float32 cast, which turned a finite float64
     # value past 3.4e38 into inf and so dropped its joint instead.
-    maps = np.maximum(maps, 0.0)
-    top = maps.max(axis=(1, 2))
-    if (top > 1.0).any():
-        maps = maps / np.where(top > 1.0, top, 1.0)[:, None, None]
-    maps = maps.astype(np.float32, copy=False)
+    maps, maxima = _scaled_to_one(np.maximum(maps, 0.0))
 
     padded, pad = _filter(maps, cfg.sigma)
     filtered = padded[:, pad:pad + h, pad:pad + w]
@@ -579,7 +586,7 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
         top = np.concatenate([top, labels[multi, ry, rx]])
 
     if cfg.refine == "quadratic":
-        uv = _refine_quadratic(maps, padded, pad, iy, ix, cfg.sigma, which)
+        uv = _refine_quadratic(maps, maxima, padded, pad, iy, ix, cfg.sigma, which)
     elif cfg.refine == "centroid":
         uv = np.stack([ix, iy], axis=-1) + _refine_centroid(padded, pad, labels, top, iy, ix, cfg.centroid_radius,
                                                             which)

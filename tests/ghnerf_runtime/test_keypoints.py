@@ -582,3 +582,27 @@ def test_decoding_takes_no_nonzero_of_a_3d_array(monkeypatch):
     for name in ("uv", "confidence", "valid", "runner_up", "runner_up_uv"):
         assert np.array_equal(getattr(got, name), getattr(want, name)), name
     assert got.runner_up[0] > 0  # the second blob was looked at as a runner-up
+
+
+_scaled_values = st.sampled_from([0.0, 1e-30, 6e-8, 0.3, 0.999, 1.0, 1.0000001, 1.5, 255.0, 65504.0, 1e30, 1e300])
+
+
+@settings(max_examples=80, deadline=None)
+@given(dtype=st.sampled_from([np.float16, np.float32, np.float64, np.uint8, np.int32]),
+       shape=st.tuples(st.integers(1, 4), st.integers(1, 6), st.integers(1, 6)), data=st.data())
+def test_the_maxima_the_scaling_hands_on_are_those_of_the_maps_it_returns(dtype, shape, data):
+    """The flat-top check takes each map's maximum from the scaling (it took it again from the maps, since session
+    66 it does not): bit for bit the maximum of the float32 maps the scaling returns, maps past 1 (1 exactly: x / x),
+    under 1, of half, single, double or integer values, past float32's range."""
+    values = data.draw(st.lists(_scaled_values | st.floats(0.0, 2.0), min_size=int(np.prod(shape)),
+                                max_size=int(np.prod(shape))))
+    with np.errstate(over="ignore"), warnings.catch_warnings():  # (past a dtype's range: its largest or inf)
+        warnings.simplefilter("ignore")
+        raw = np.array(values, np.float64).reshape(shape)
+        maps = raw.astype(dtype) if np.issubdtype(dtype, np.floating) else np.clip(raw, 0, 255).astype(dtype)
+    maps = np.where(np.isfinite(maps), maps, 0)  # (the decoder zeroes a map with a non-finite value first)
+    scaled, maxima = keypoints._scaled_to_one(np.maximum(maps, 0.0))
+    assert scaled.dtype == maxima.dtype == np.float32 and maxima.shape == (shape[0],)
+    want = scaled.max(axis=(1, 2))
+    assert np.array_equal(maxima.view(np.uint32), want.view(np.uint32)), (maxima, want)
+    assert np.all(maxima <= 1.0)
