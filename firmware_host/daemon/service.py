@@ -76,6 +76,7 @@ import numpy as np
 
 import drivers
 from drivers.url import RigUrl, redact_url
+from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
 from firmware_host.daemon.health import Health, State, scene_flags_of, write_status_file
 from firmware_host.daemon.memory import pin_mmap_threshold, return_freed_memory
@@ -104,6 +105,54 @@ __all__ = ["Daemon", "DaemonStartError", "check_sink_urls", "load_model", "check
 
 #: The parts of the config a reload tells apart ("rig": its fields but the url).
 _PARTS = ("rig.url", "rig", "sinks", "estimator", "health", "log_level")
+
+#: One of the three calibration checks (firmware_host.daemon.calibration_watch).
+_Watch = CalibrationWatch | FloorWatch | HandednessWatch
+
+
+@dataclasses.dataclass(frozen=True)
+class _CheckWords:
+    """What the journal says when one calibration check's verdict changes (:meth:`Daemon._check_changed`): warned
+    once on the way to suspect (``calibration suspect: <symptom>: <fix>``), then once when it fits again or is turned
+    off (``setting`` null). ``symptom`` and ``fits_again`` are :meth:`str.format` templates of :func:`_figures`."""
+
+    check: str  # the check's name, for "... off"
+    setting: str  # the health key whose null turns it off
+    symptom: str
+    fix: str
+    fits_again: str
+
+
+_PX_WORDS = _CheckWords(
+    check="calibration check", setting="health.calibration_max_px",
+    symptom="the two views' peaks are {median:.2f} px apart over the last {pairs} pairs (health.calibration_max_px "
+            "{limit:g})",
+    fix="a camera has moved since calibration; recalibrate (ghcal, docs/calibration.md) and restart",
+    fits_again="calibration fits again: the views' peaks are {median:.2f} px apart over the last {pairs} pairs")
+_FLOOR_WORDS = _CheckWords(
+    check="calibration floor check", setting="health.calibration_max_floor_m",
+    symptom="{feet} (the lower triangulated foot, median over the last {pairs} pairs with feet in view; "
+            "health.calibration_max_floor_m {limit:g})",
+    fix="a camera has turned since calibration (a pan moves the depth, not the views' agreement); recalibrate (ghcal, "
+        "docs/calibration.md) and restart. Where people stand above the floor (a stage, a bed), set "
+        "health.calibration_max_floor_m null",
+    fits_again="calibration fits the floor again: {feet} over the last {pairs} pairs")
+_HANDEDNESS_WORDS = _CheckWords(
+    check="calibration handedness check", setting="health.calibration_max_mirror",
+    symptom="the cameras look exchanged: the triangulated person is a mirror image (handedness {median:.2f}, median "
+            "over the last {pairs} pairs; +1 a person, -1 a mirror image; health.calibration_max_mirror {limit:g})",
+    fix="the left camera's frames come in as the right's; exchange the cameras' plugs or their names in rig.url, no "
+        "recalibration is needed (docs/calibration.md, \"Cameras exchanged\"). For a subject who performs facing "
+        "away, set health.calibration_max_mirror null",
+    fits_again="the cameras no longer look exchanged: handedness {median:.2f} over the last {pairs} pairs")
+
+
+def _figures(watch: _Watch) -> dict[str, Any]:
+    """What a check's log templates name: its median (0 where it has none), the pairs it counts, its limit, and for
+    the floor check where the feet are (:meth:`FloorWatch.words`)."""
+    median = watch.median
+    return {"median": 0.0 if median is None else median, "pairs": len(watch.values), "limit": watch.limit,
+            "feet": watch.words() if isinstance(watch, FloorWatch) else ""}
 
 
 def _part(config: DaemonConfig, name: str) -> Any:
@@ -587,9 +636,10 @@ class Daemon:
             self.health.estimated(result.timing_ms["total"], float(np.mean(~np.asarray(result.missing, bool))),
                                   scene_flags_of(result), result.someone_else)
             self.health.frames_checked(result.frame_reason)
-            self._calibration_changed(self.health.calibration.add(result.reprojection_px_median))
-            self._floor_changed(self.health.floor.add(result.lowest_foot_m))
-            self._handedness_changed(self.health.handedness.add(result.handedness))
+            health = self.health
+            self._check_changed(_PX_WORDS, health.calibration, health.calibration.add(result.reprojection_px_median))
+            self._check_changed(_FLOOR_WORDS, health.floor, health.floor.add(result.lowest_foot_m))
+            self._check_changed(_HANDEDNESS_WORDS, health.handedness, health.handedness.add(result.handedness))
             self._sync_calibration()
             self.health.estimator_stalled = took > self.config.health.slow_estimate_s
             self.health.camera_fault = False
@@ -600,49 +650,15 @@ class Daemon:
                 sink.send(frame)
         return False
 
-    def _calibration_changed(self, suspect: Optional[bool]) -> None:
-        """Log the calibration check's verdict when it changes (not every pair: the status file has the figure)."""
-        watch = self.health.calibration
+    def _check_changed(self, words: _CheckWords, watch: _Watch, suspect: Optional[bool]) -> None:
+        """Log a calibration check's verdict when it changes (not every pair: the status file has the figure):
+        ``suspect`` is ``watch``'s answer to the pair or the reload, said in ``words``."""
         if suspect:
-            _log.warning("calibration suspect: the two views' peaks are %.2f px apart over the last %d pairs "
-                         "(health.calibration_max_px %g): a camera has moved since calibration; recalibrate (ghcal, "
-                         "docs/calibration.md) and restart", watch.median_px, len(watch.values), watch.max_px)
-        elif suspect is not None and watch.max_px is None:
-            _log.info("calibration check off (health.calibration_max_px null)")
+            _log.warning("calibration suspect: %s: %s", words.symptom.format_map(_figures(watch)), words.fix)
+        elif suspect is not None and watch.limit is None:
+            _log.info("%s off (%s null)", words.check, words.setting)
         elif suspect is not None:
-            _log.info("calibration fits again: the views' peaks are %.2f px apart over the last %d pairs",
-                      watch.median_px if watch.median_px is not None else 0.0, len(watch.values))
-
-    def _floor_changed(self, suspect: Optional[bool]) -> None:
-        """Log the floor check's verdict when it changes, in words that say which symptom (the px check's are
-        :meth:`_calibration_changed`'s)."""
-        watch = self.health.floor
-        if suspect:
-            _log.warning("calibration suspect: %s (the lower triangulated foot, median over the last %d pairs "
-                         "with feet in view; health.calibration_max_floor_m %g): a camera has turned since "
-                         "calibration (a pan moves the depth, not the views' agreement); recalibrate (ghcal, "
-                         "docs/calibration.md) and restart. Where people stand above the floor (a stage, a bed), set "
-                         "health.calibration_max_floor_m null", watch.words(), len(watch.values), watch.max_floor_m)
-        elif suspect is not None and watch.max_floor_m is None:
-            _log.info("calibration floor check off (health.calibration_max_floor_m null)")
-        elif suspect is not None:
-            _log.info("calibration fits the floor again: %s over the last %d pairs", watch.words(), len(watch.values))
-
-    def _handedness_changed(self, suspect: Optional[bool]) -> None:
-        """Log the handedness check's verdict when it changes: the cameras' inputs look exchanged, or no longer do."""
-        watch = self.health.handedness
-        if suspect:
-            _log.warning("calibration suspect: the cameras look exchanged: the triangulated person is a mirror image "
-                         "(handedness %.2f, median over the last %d pairs; +1 a person, -1 a mirror image; "
-                         "health.calibration_max_mirror %g): the left camera's frames come in as the right's; "
-                         "exchange the cameras' plugs or their names in rig.url, no recalibration is needed "
-                         "(docs/calibration.md, \"Cameras exchanged\"). For a subject who performs facing away, set "
-                         "health.calibration_max_mirror null", watch.median, len(watch.values), watch.max_mirror)
-        elif suspect is not None and watch.max_mirror is None:
-            _log.info("calibration handedness check off (health.calibration_max_mirror null)")
-        elif suspect is not None:
-            _log.info("the cameras no longer look exchanged: handedness %.2f over the last %d pairs",
-                      watch.median if watch.median is not None else 0.0, len(watch.values))
+            _log.info("%s", words.fits_again.format_map(_figures(watch)))
 
     def _reset_calibration(self) -> None:
         """The calibration checks start afresh (another calibration, model or settings), and the sinks hear it."""
@@ -850,12 +866,13 @@ class Daemon:
             for url, sink in added.items():
                 self._start_sink(url, sink)
         if "health" in changed:
-            self._calibration_changed(self.health.calibration.configure(new.health.calibration_window,
-                                                                        new.health.calibration_max_px))
-            self._floor_changed(self.health.floor.configure(new.health.calibration_window,
-                                                            new.health.calibration_max_floor_m))
-            self._handedness_changed(self.health.handedness.configure(new.health.calibration_window,
-                                                                      new.health.calibration_max_mirror))
+            health, window = self.health, new.health.calibration_window
+            self._check_changed(_PX_WORDS, health.calibration,
+                                health.calibration.configure(window, new.health.calibration_max_px))
+            self._check_changed(_FLOOR_WORDS, health.floor,
+                                health.floor.configure(window, new.health.calibration_max_floor_m))
+            self._check_changed(_HANDEDNESS_WORDS, health.handedness,
+                                health.handedness.configure(window, new.health.calibration_max_mirror))
             self._sync_calibration()
             self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
             self._next_status = 0.0

@@ -317,3 +317,53 @@ def test_all_three_symptoms_a_refused_reload_and_a_sink_down_still_fit_the_line(
         line = health.status_line(shown)
         assert len(line) == STATUS_MAX and line.endswith(words), line  # what to do about the rig is kept whole
         assert line.startswith("running: ") and "reload refused" not in line and "sink" not in line, line
+
+
+#: What the journal says of each check (since session 66 one table in the daemon, firmware_host.daemon.service's
+#: _CheckWords; before, three methods of one shape): suspect, fitting again, suspect again, turned off.
+_JOURNAL = {
+    "calibration": (
+        "WARNING calibration suspect: the two views' peaks are 1.46 px apart over the last 3 pairs "
+        "(health.calibration_max_px 0.8): a camera has moved since calibration; recalibrate (ghcal, docs/calibration.md) "
+        "and restart",
+        "INFO calibration fits again: the views' peaks are 0.20 px apart over the last 3 pairs",
+        "INFO calibration check off (health.calibration_max_px null)"),
+    "floor": (
+        "WARNING calibration suspect: feet 0.18 m below the floor (the lower triangulated foot, median over the last 3 "
+        "pairs with feet in view; health.calibration_max_floor_m 0.05): a camera has turned since calibration (a pan "
+        "moves the depth, not the views' agreement); recalibrate (ghcal, docs/calibration.md) and restart. Where people "
+        "stand above the floor (a stage, a bed), set health.calibration_max_floor_m null",
+        "INFO calibration fits the floor again: feet 0.01 m above the floor over the last 3 pairs",
+        "INFO calibration floor check off (health.calibration_max_floor_m null)"),
+    "handedness": (
+        "WARNING calibration suspect: the cameras look exchanged: the triangulated person is a mirror image (handedness "
+        "-0.76, median over the last 3 pairs; +1 a person, -1 a mirror image; health.calibration_max_mirror 0.2): the "
+        "left camera's frames come in as the right's; exchange the cameras' plugs or their names in rig.url, no "
+        "recalibration is needed (docs/calibration.md, \"Cameras exchanged\"). For a subject who performs facing away, "
+        "set health.calibration_max_mirror null",
+        "INFO the cameras no longer look exchanged: handedness 0.80 over the last 3 pairs",
+        "INFO calibration handedness check off (health.calibration_max_mirror null)"),
+}
+
+
+@pytest.mark.parametrize("check, bad, good, limit, words", [
+    ("calibration", 1.46, 0.2, 0.8, "_PX_WORDS"), ("floor", -0.184, 0.01, 0.05, "_FLOOR_WORDS"),
+    ("handedness", -0.76, 0.8, 0.2, "_HANDEDNESS_WORDS")])
+def test_the_journal_says_each_check_s_changes_once_with_its_symptom_fix_and_key(caplog, check, bad, good, limit,
+                                                                                 words):
+    """Each change of a check's verdict is logged once (not every pair), the warning naming the symptom with its
+    figures, what to do and the key that turns the check off; fitting again and turned off (a reload setting the key
+    null) are said at info."""
+    from firmware_host.daemon import service
+    from firmware_host.daemon.notify import SystemdNotifier
+
+    daemon = service.Daemon(daemon_config_from_dict({"sinks": [SINK]}), notifier=SystemdNotifier({}))
+    watch = getattr(daemon.health, check)
+    watch.configure(3, limit)
+    said = lambda suspect: daemon._check_changed(getattr(service, words), watch, suspect)  # noqa: E731
+    caplog.set_level("INFO", logger="ghnerf.daemon")
+    for value in (bad, bad, bad, good, good, good, good, bad, bad, bad):
+        said(watch.add(value))
+    said(watch.configure(3, None))
+    suspect, fits_again, off = _JOURNAL[check]
+    assert [f"{r.levelname} {r.getMessage()}" for r in caplog.records] == [suspect, fits_again, suspect, off]
