@@ -1996,7 +1996,9 @@ class Estimator:
         near = near_the_body(someone, _FLOOR_BODY_M)
         self._lowest_foot = self._lowest_foot_m(near, kp, regions)
         # the cameras' inputs exchanged on a symmetric rig triangulate a mirror image (ghnerf_runtime.handedness):
-        # read from the same strong, near joints as the feet, not the prior's (which always answers a person)
+        # read from the same strong, near joints as the feet, not the prior's (which always answers a person). Read on
+        # every pair: whether it is several_people (whose figure _finish_pass drops) is not known yet, the torso check
+        # below and the selector's after this return decide it
         strong_seen = near.valid & np.all(kp.valid & (kp.confidence >= strong_peak), axis=0)
         self._handedness = handedness(near.points, strong_seen)
         # two people's joints in one skeleton (two_people.mixed_torso), from the peaks strong in both views (a weak
