@@ -19,6 +19,7 @@ from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS
 from ghnerf_runtime.config import EstimatorConfig
 from ghnerf_runtime.estimator import _FLOOR_BODY_M, Estimator
 from ghnerf_runtime.joints3d import Joints3D, near_the_body
+from tests.ghnerf_runtime.sim_takes import pair_images
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -35,7 +36,7 @@ def _daemon_after_a_window(pan_deg: float, seed: int):
         for i in range(CALIBRATION_WINDOW):
             t = i / 30.0
             oracle.set_people(person.joints_3d(t))
-            r = est.estimate(tuple(person.render(c, t, with_truth=False)[0] for c in true.pair), timestamp_s=t)
+            r = est.estimate(pair_images(person, true, t), timestamp_s=t)
             health.calibration.add(r.reprojection_px_median)
             health.floor.add(r.lowest_foot_m)
             results.append(r)
@@ -122,5 +123,5 @@ def test_a_stray_foot_on_the_true_rig_does_not_sink_the_floor():
             t = i / 30.0
             joints = person.joints_3d(t)
             oracle.set_truth(joints)
-            r = est.estimate(tuple(person.render(c, t, with_truth=False)[0] for c in rig.pair), timestamp_s=t)
+            r = est.estimate(pair_images(person, rig, t), timestamp_s=t)
             assert r.lowest_foot_m is not None and abs(r.lowest_foot_m) < 0.05, r.lowest_foot_m

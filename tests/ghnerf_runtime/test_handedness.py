@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from ghnerf_runtime.body25 import FLIP_INDEX, JOINT_INDEX
-from ghnerf_runtime.config import EstimatorConfig, SessionConfig
 from ghnerf_runtime.handedness import handedness
+from tests.ghnerf_runtime.sim_takes import shipped_model_take
 
 REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"
@@ -84,16 +84,11 @@ def test_the_cameras_exchanged_on_a_symmetric_rig_are_flagged_and_the_true_rig_i
     the median over ``calibration_window`` figures is below ``-CALIBRATION_MAX_MIRROR`` (-0.61 on this take, every pair
     with a figure; the px median 0.57 against 0.8); as filmed it is not (+0.61, 0.17 px). Before session 65 the pair had
     no handedness and nothing told the two apart."""
-    sim = pytest.importorskip("drivers.sim")
     from firmware_host.daemon.calibration_watch import CalibrationWatch, HandednessWatch
     from firmware_host.daemon.config import CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
-    from ghnerf_runtime.estimator import Estimator, load_session
+    from ghnerf_runtime.estimator import Estimator
 
-    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), warmup=False))
-    session = load_session(cfg)
-    rig = sim.RigPlacement().build()
-    scene = sim.SimScene(sim.SceneConfig(seed=2, motion="wave"))
-    shots = [[scene.render(c, 0.1 * k, with_truth=False)[0] for c in rig.pair] for k in range(CALIBRATION_WINDOW)]
+    cfg, session, rig, shots = shipped_model_take([0.1 * k for k in range(CALIBRATION_WINDOW)])
     for exchanged in (False, True):
         hands, px = HandednessWatch(CALIBRATION_WINDOW, CALIBRATION_MAX_MIRROR), CalibrationWatch(CALIBRATION_WINDOW,
                                                                                                   CALIBRATION_MAX_PX)

@@ -15,6 +15,7 @@ from ghnerf_runtime.config import ConfigError, EstimatorConfig, HeatmapsConfig, 
 from ghnerf_runtime.errors import ModelError
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.others_scan import ScanClock, box_cells, someone_else, strong_joints_outside, subject_box
+from tests.ghnerf_runtime.sim_takes import pair_images, two_people
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -100,8 +101,7 @@ def test_the_scan_needs_encoder_heatmaps_said_at_load():
 def _joining(config: EstimatorConfig, alone: int = 3, pairs: int = 4, where: tuple = SIDE_BY_SIDE) -> list:
     """The results of ``alone`` pairs of the first person, then ``pairs`` with the second beside them."""
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=where[0]))
-    other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=where[1]))
+    first, other = two_people(1, where)
     oracle = TwoPeopleOracle(edge128_contract())
     out = []
     with Estimator(oracle, rig, config) as est:
@@ -109,7 +109,7 @@ def _joining(config: EstimatorConfig, alone: int = 3, pairs: int = 4, where: tup
             t = i / 30.0
             a, b = first.joints_3d(t), other.joints_3d(t)
             oracle.set_people(a, b) if i >= alone else oracle.set_people(a)
-            images = tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair)
+            images = pair_images(first, rig, t)
             out.append(est.estimate(images, timestamp_s=t))
     return out
 

@@ -14,6 +14,7 @@ from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.joints3d import Joints3D
 from ghnerf_runtime.subject import SubjectSelector, guessed_joints, picks_subject
+from tests.ghnerf_runtime.sim_takes import pair_images, two_people
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -50,14 +51,13 @@ def test_a_flagged_pair_s_pairings_pass_the_estimator_s_own_gates_and_floor_chec
     override holds, as benchmarks/measure_foot_spread.py's does): two people side by side flag every pair, and the
     subject's pairings go through them."""
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=4, motion="wave", position_xz=(-0.5, 3.0)))
-    other = sim.SimScene(sim.SceneConfig(seed=1004, motion="wave", position_xz=(0.5, 3.4)))
+    first, other = two_people(4, ((-0.5, 3.0), (0.5, 3.4)))
     oracle = TwoPeopleOracle(edge128_contract())
     with _CountedGates(oracle, rig, EstimatorConfig()) as est:
         for i in range(2):
             t = i / 30.0
             oracle.set_people(first.joints_3d(t), other.joints_3d(t))
-            images = tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair)
+            images = pair_images(first, rig, t)
             assert est.estimate(images, timestamp_s=t).several_people
         assert est.pairings_gated >= 2 and est.floor_checks >= 2, (est.pairings_gated, est.floor_checks)
 

@@ -24,6 +24,7 @@ from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.subject import SubjectSelector
 from ghnerf_runtime import two_people as T
 from ghnerf_runtime.two_people import TIE_M, pick_person, split_people
+from tests.ghnerf_runtime.sim_takes import pair_images, two_people
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -44,8 +45,7 @@ def _scene(seed: int, alone: int, pairs: int, config: EstimatorConfig = Estimato
     person shows no peak of in that view; ``occlude``: each person's joints behind the other's body show no peak in
     that view (``TwoPeopleOracle.occlude``)."""
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=where[0]))
-    other = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=where[1]))
+    first, other = two_people(seed, where)
     held = turned(turned(rig, 1, "pan", pan_deg), 1, "tilt", tilt_deg)
     oracle = (TwoPeopleOracle(edge128_contract()) if held is rig and not hidden
               else FilmedTwoPeopleOracle(edge128_contract(), rig, held, hidden))
@@ -56,7 +56,7 @@ def _scene(seed: int, alone: int, pairs: int, config: EstimatorConfig = Estimato
             t = i / 30.0
             a, b = first.joints_3d(t), other.joints_3d(t)
             oracle.set_people(a, b) if second and i >= alone else oracle.set_people(a)
-            images = tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair)
+            images = pair_images(first, rig, t)
             r = est.estimate(images, timestamp_s=t)
             if i >= alone:
                 out.append((r, a, b))
@@ -309,15 +309,14 @@ def test_two_people_with_pick_subject_none_do_not_search_the_crop_turns():
     reported by design until one person is alone, which no turn changes. Now none search, the pairs as before."""
     for seed in (1, 2):
         rig = sim.RigPlacement().build()
-        people = [sim.SimScene(sim.SceneConfig(seed=seed + 1000 * k, motion="wave", position_xz=CLOSE[k]))
-                  for k in (0, 1)]
+        people = two_people(seed, CLOSE)
         oracle = TwoPeopleOracle(edge128_contract())
         with Estimator(oracle, rig, NOBODY) as est:
             assert est.config.roi.turn_search  # (on by default for a model with encoder heatmaps)
             for i in range(6):  # the old rule searched on the first and the sixth
                 t = i / 30.0
                 oracle.set_people(*(p.joints_3d(t) for p in people))
-                r = est.estimate(tuple(people[0].render(c, t, with_truth=False)[0] for c in rig.pair), timestamp_s=t)
+                r = est.estimate(pair_images(people[0], rig, t), timestamp_s=t)
                 assert r.several_people and r.num_found == 0
             assert est.turn_searches == 0
 
@@ -521,8 +520,7 @@ def _two_from_the_first_pair(config: EstimatorConfig, prior, pairs: int = 4, ora
     """``pairs`` pairs of two people standing at ``where`` (default: NEAR_THE_LINE) from the first pair through
     ``oracle`` (default: the two-people oracle) with ``prior``."""
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=where[0]))
-    other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=where[1]))
+    first, other = two_people(1, where)
     oracle = TwoPeopleOracle(edge128_contract()) if oracle is None else oracle
     oracle.skeleton_prior = prior
     results, last_call = [], []
@@ -532,7 +530,7 @@ def _two_from_the_first_pair(config: EstimatorConfig, prior, pairs: int = 4, ora
             a, b = first.joints_3d(t), other.joints_3d(t)
             oracle.set_people(a, b)
             # no capture time: reported unsmoothed, so the answer can be compared as it is
-            r = est.estimate(tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair))
+            r = est.estimate(pair_images(first, rig, t))
             results.append((r, a, b))
             last_call.append(len(prior.fed) - 1)
     return rig, results, last_call
@@ -691,15 +689,14 @@ def test_a_flagged_pair_with_fewer_subject_pairings_than_the_presence_gate_asks_
     config = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior=prior))
     assert config.presence.min_joints > _FewPairingsEstimator.kept
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=NEAR_THE_LINE[0]))
-    other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=NEAR_THE_LINE[1]))
+    first, other = two_people(1, NEAR_THE_LINE)
     oracle = TwoPeopleOracle(edge128_contract())
     oracle.skeleton_prior = _PeaksPrior() if prior == "on" else None
     with _FewPairingsEstimator(oracle, rig, config) as est:
         for i in range(3):
             t = i / 30.0
             oracle.set_people(first.joints_3d(t), other.joints_3d(t))
-            r = est.estimate(tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair), timestamp_s=t)
+            r = est.estimate(pair_images(first, rig, t), timestamp_s=t)
             assert r.several_people and r.num_found == 0, (i, r.num_found)
             for cam in rig.pair:
                 assert r.missing_2d[cam.name].all() and not r.confidence_2d[cam.name].any()
@@ -1016,14 +1013,13 @@ def test_two_people_s_floor_figure_leaves_out_feet_past_the_crop_s_edge():
     rig = sim.RigPlacement().build()
     figures = []
     for seed in (1, 2):
-        first = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(-0.5, 2.5)))
-        other = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=(0.5, 4.0)))
+        first, other = two_people(seed, ((-0.5, 2.5), (0.5, 4.0)))
         oracle = TwoPeopleOracle(edge128_contract())
         with _BothPeoplesFeet(oracle, rig, EstimatorConfig()) as est:
             for i in range(8):
                 t = i / 30.0
                 oracle.set_people(first.joints_3d(t), other.joints_3d(t))
-                r = est.estimate(tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair), timestamp_s=t)
+                r = est.estimate(pair_images(first, rig, t), timestamp_s=t)
                 assert r.several_people
                 figures.append(r.lowest_foot_m)
     assert all(f is not None for f in figures), figures
@@ -1072,8 +1068,7 @@ def test_two_people_s_matched_px_figure_on_the_true_rig_and_below_the_gate_is_th
     for tilt_deg, near in ((0.0, 0.05), (2.0, 0.2)):
         rig = sim.RigPlacement().build()
         held = turned(rig, 1, "tilt", tilt_deg)
-        first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=SIDE_BY_SIDE[0]))
-        other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=SIDE_BY_SIDE[1]))
+        first, other = two_people(1, SIDE_BY_SIDE)
         results = {}
         for both in (False, True):
             oracle = FilmedTwoPeopleOracle(edge128_contract(), rig, held)
@@ -1083,7 +1078,7 @@ def test_two_people_s_matched_px_figure_on_the_true_rig_and_below_the_gate_is_th
                     t = i / 30.0
                     oracle.set_people(first.joints_3d(t), other.joints_3d(t)) if both else \
                         oracle.set_people(first.joints_3d(t))
-                    images = tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair)
+                    images = pair_images(first, rig, t)
                     results[both].append(est.estimate(images, timestamp_s=t))
         for r, alone in zip(results[True], results[False], strict=True):
             assert r.several_people and r.num_found > 0 and not alone.several_people
@@ -1149,8 +1144,7 @@ def test_mixed_torso_tells_a_torso_of_two_people_from_one_body():
     for seed in (1, 2, 3):
         for where, swapped in ((CLOSE, (LEFT_LEG,)), (far_close, (LEFT_LEG,)),
                                (SIDE_BY_SIDE, (LEFT_LEG, [neck], [r_hip]))):
-            scene = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=where[0]))
-            other = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=where[1]))
+            scene, other = two_people(seed, where)
             for t in (0.0, 0.5, 1.0):
                 a, b = scene.joints_3d(t), other.joints_3d(t)
                 found = np.ones(25, bool)
@@ -1230,8 +1224,7 @@ def test_one_person_s_hip_read_off_along_the_line_of_sight_is_two_people_s_only_
             sight = joints[l_hip] - eye
             joints[l_hip] += 0.7 * sight / np.linalg.norm(sight)
             oracle.set_truth(joints)
-            results.append(est.estimate(tuple(scene.render(c, t, with_truth=False)[0] for c in rig.pair),
-                                        timestamp_s=t))
+            results.append(est.estimate(pair_images(scene, rig, t), timestamp_s=t))
     seen = [(r.several_people, r.num_found) for r in results]
     if flagged:
         assert all(several for several, _ in seen[1:]), seen
@@ -1251,8 +1244,7 @@ def test_a_skeleton_of_two_people_whose_maps_show_no_joint_twice_is_flagged_and_
     pass a cold pass still reports it (its coarse crop cannot tell, as for a cold pass showing a joint twice) and the
     tracked pass after it, flagged, nobody; the track dropped, the next pair is cold again."""
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=2, motion="wave", position_xz=CLOSE[0]))
-    other = sim.SimScene(sim.SceneConfig(seed=1002, motion="wave", position_xz=CLOSE[1]))
+    first, other = two_people(2, CLOSE)
     oracle = OracleSession(edge128_contract())
     results = []
     with Estimator(oracle, rig, config) as est:
@@ -1261,8 +1253,7 @@ def test_a_skeleton_of_two_people_whose_maps_show_no_joint_twice_is_flagged_and_
             mixed = first.joints_3d(t)
             mixed[LEFT_LEG] = other.joints_3d(t)[LEFT_LEG]
             oracle.set_truth(mixed)
-            results.append(est.estimate(tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair),
-                                        timestamp_s=t))
+            results.append(est.estimate(pair_images(first, rig, t), timestamp_s=t))
     seen = [(r.several_people, r.num_found) for r in results]
     if config.tracking.refine_cold_start:
         assert seen == [(True, 0)] * len(results), seen
@@ -1288,8 +1279,7 @@ def test_the_shipped_model_s_two_people_0_6_m_apart_with_pick_subject_none_repor
     root = Path(__file__).resolve().parents[2]
     config = replace(NOBODY, session=replace(NOBODY.session, model_dir=str(root / "models"), warmup=False))
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=2, motion="wave", position_xz=CLOSE[0]))
-    other = sim.SimScene(sim.SceneConfig(seed=1002, motion="wave", position_xz=CLOSE[1]))
+    first, other = two_people(2, CLOSE)
     with Estimator(load_session(config), rig, config) as est:
         for i in range(3):
             t = i / 30.0
@@ -1311,8 +1301,7 @@ def test_the_shipped_model_s_subject_0_6_m_apart_reports_no_joint_whose_peak_in_
     config = EstimatorConfig()
     config = replace(config, session=replace(config.session, model_dir=str(root / "models"), warmup=False))
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=CLOSE[0]))
-    other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=CLOSE[1]))
+    first, other = two_people(1, CLOSE)
     off = []
     with Estimator(load_session(config), rig, config) as est:
         for i in range(3):
@@ -1338,8 +1327,7 @@ def test_the_shipped_model_s_subject_0_6_m_apart_is_given_no_left_shoulder_at_th
     config = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on"))
     config = replace(config, session=replace(config.session, model_dir=str(root / "models"), warmup=False))
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=CLOSE[0]))
-    other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=CLOSE[1]))
+    first, other = two_people(1, CLOSE)
     ls = JOINT_NAMES.index("LShoulder")
     with Estimator(load_session(config), rig, config) as est:
         for i in range(6):
@@ -1364,8 +1352,7 @@ def test_the_shipped_model_s_subject_0_6_m_apart_reports_no_left_wrist_read_from
     config = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="off"))
     config = replace(config, session=replace(config.session, model_dir=str(root / "models"), warmup=False))
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=CLOSE[0]))
-    other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=CLOSE[1]))
+    first, other = two_people(1, CLOSE)
     lw, rw = JOINT_NAMES.index("LWrist"), JOINT_NAMES.index("RWrist")
     with Estimator(load_session(config), rig, config) as est:
         for i in range(3):
@@ -1464,8 +1451,7 @@ def test_a_flagged_pass_solves_its_pairings_once_in_the_crop_cameras_kept_terms(
     for name in reused:
         same_as_fresh(name)
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=2, motion="wave", position_xz=SIDE_BY_SIDE[0]))
-    other = sim.SimScene(sim.SceneConfig(seed=1002, motion="wave", position_xz=SIDE_BY_SIDE[1]))
+    first, other = two_people(2, SIDE_BY_SIDE)
     oracle = TwoPeopleOracle(edge128_contract())
     oracle.skeleton_prior = _InputsBuildingPrior()
     flagged = 0
@@ -1474,7 +1460,7 @@ def test_a_flagged_pass_solves_its_pairings_once_in_the_crop_cameras_kept_terms(
             t = i / 30.0
             a, b = first.joints_3d(t), other.joints_3d(t)
             oracle.set_people(a, b) if i >= alone else oracle.set_people(a)
-            r = est.estimate(tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair), timestamp_s=t)
+            r = est.estimate(pair_images(first, rig, t), timestamp_s=t)
             flagged += int(r.several_people)
     assert flagged >= 2 and reused["keep_tracked_subject"] and (reused["both_people"] or reused["subject_figures"])
     assert built and all(built), "camera terms computed outside the estimator's kept crop terms"

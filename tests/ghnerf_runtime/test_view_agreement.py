@@ -10,11 +10,12 @@ import pytest
 
 from benchmarks.measure_calibration_drift import turned
 from ghnerf_runtime.body25 import FEET, FLOOR_JOINTS, JOINT_INDEX
-from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig, SessionConfig
+from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.geometry import Camera, look_at
 from ghnerf_runtime.geometry.triangulation import triangulate_two_views
 from ghnerf_runtime.joints3d import Joints3D, lower_foot_m, lowest_height_m, triangulate_joints, \
     triangulate_joints_checked
+from tests.ghnerf_runtime.sim_takes import shipped_model_take
 
 REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"
@@ -94,14 +95,9 @@ def test_the_joints_are_the_gated_solver_s():
 def test_the_shipped_model_s_pairs_tell_a_tilted_rig_file_from_the_true_one():
     """The simulator films through the true rig; the estimator given the rig with its second camera tilted 2
     degrees finds joints still (the gate lets them through), but its pairs' agreement says the rig moved."""
-    sim = pytest.importorskip("drivers.sim")
-    from ghnerf_runtime.estimator import Estimator, load_session
+    from ghnerf_runtime.estimator import Estimator
 
-    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), warmup=False))
-    session = load_session(cfg)
-    rig = sim.RigPlacement().build()
-    scene = sim.SimScene(sim.SceneConfig(seed=2, motion="wave"))
-    shots = [[scene.render(c, t, with_truth=False)[0] for c in rig.pair] for t in (0.0, 0.1, 0.2, 0.3)]
+    cfg, session, rig, shots = shipped_model_take((0.0, 0.1, 0.2, 0.3))
     medians = {}
     for name, r in (("true", rig), ("tilted", turned(rig, 1, "tilt", 2.0))):
         with Estimator(session, r, cfg) as est:
@@ -157,16 +153,11 @@ def test_a_one_degree_pan_is_flagged_within_the_window_and_the_true_rig_is_not()
     against 0.1 m: on this take 0.03 m above the floor through the true rig, 0.05 and 0.04 m below for these pans,
     under the limit. (The pans the other way read 0.045 and 0.05 m above the floor here, at the limit: a 1 degree
     pan is caught in most placements, not all: docs/calibration.md, "The feet on the floor".)"""
-    sim = pytest.importorskip("drivers.sim")
     from firmware_host.daemon.calibration_watch import FloorWatch
     from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_WINDOW
-    from ghnerf_runtime.estimator import Estimator, load_session
+    from ghnerf_runtime.estimator import Estimator
 
-    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), warmup=False))
-    session = load_session(cfg)
-    rig = sim.RigPlacement().build()
-    scene = sim.SimScene(sim.SceneConfig(seed=2, motion="wave"))
-    shots = [[scene.render(c, 0.1 * k, with_truth=False)[0] for c in rig.pair] for k in range(CALIBRATION_WINDOW)]
+    cfg, session, rig, shots = shipped_model_take([0.1 * k for k in range(CALIBRATION_WINDOW)])
     for camera, degrees in ((1, 0.0), (1, 1.0), (0, -1.0)):
         watch = FloorWatch(CALIBRATION_WINDOW, CALIBRATION_MAX_FLOOR_M)
         with Estimator(session, turned(rig, camera, "pan", degrees), cfg) as est:
@@ -184,15 +175,10 @@ def test_the_shipped_model_s_triangulated_feet_tell_a_panned_rig_file_and_cut_fe
     it, or float as far above it panned the other way. The reported joints are the skeleton prior's, whose feet stay
     near the floor whatever the calibration: the figure is the triangulation's. Frames that cut the feet off
     (the model puts their peaks at the frame's edge, up to 0.8 m above the floor) give no figure."""
-    sim = pytest.importorskip("drivers.sim")
-    from ghnerf_runtime.estimator import Estimator, load_session
+    from ghnerf_runtime.estimator import Estimator
     from ghnerf_runtime.geometry import Rig
 
-    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), warmup=False))
-    session = load_session(cfg)
-    rig = sim.RigPlacement().build()
-    scene = sim.SimScene(sim.SceneConfig(seed=2, motion="wave"))
-    shots = [[scene.render(c, t, with_truth=False)[0] for c in rig.pair] for t in (0.0, 0.1, 0.2, 0.3)]
+    cfg, session, rig, shots = shipped_model_take((0.0, 0.1, 0.2, 0.3))
     feet, reported, px = {}, {}, {}
     for name, r in (("true", rig), ("pan", turned(rig, 1, "pan", 2.0)), ("pan back", turned(rig, 1, "pan", -2.0))):
         with Estimator(session, r, cfg) as est:
