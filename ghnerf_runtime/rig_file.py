@@ -601,8 +601,9 @@ def dumps_rig(rig: Rig, *, path: str | os.PathLike | None = None) -> str:
     return _emit(rig_to_dict(rig, path=path), 0) + "\n"
 
 
-def loads_rig(text: str, *, path: str | os.PathLike | None = None) -> Rig:
-    """Parse and validate rig file text. ``path`` is used only in error messages."""
+def loads_rig(text: str, *, path: str | os.PathLike | None = None, warn: bool = True) -> Rig:
+    """Parse and validate rig file text. ``path`` is used only in messages; ``warn=False`` logs none of
+    :func:`rig_warnings` (the caller logs them: a rig source, once per daemon run)."""
     where = None if path is None else str(path)
     if not text.strip():  # JSON's "Expecting value" at line 1 did not say so
         raise RigFileError("the file is empty", path=where)
@@ -611,11 +612,11 @@ def loads_rig(text: str, *, path: str | os.PathLike | None = None) -> Rig:
         data = loads_remembering(text)
     except JsonTextError as e:  # invalid, nested thousands deep, or an integer past 4300 digits
         raise RigFileError(str(e), path=where) from e
-    return rig_from_dict(data, path=path)
+    return _rig_from_dict(data, path=path, warn=warn)
 
 
-def load_rig(path: str | os.PathLike) -> Rig:
-    """Read and validate a rig file.
+def load_rig(path: str | os.PathLike, *, warn: bool = True) -> Rig:
+    """Read and validate a rig file; ``warn=False`` logs none of :func:`rig_warnings` (the caller logs them).
 
     Raises:
         RigFileError: the file cannot be read, is not UTF-8, is not valid JSON (the message
@@ -640,7 +641,7 @@ def load_rig(path: str | os.PathLike) -> Rig:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         raise RigFileError(f"not UTF-8 text (byte {e.start}): {e.reason}", path=str(path)) from e
-    return loads_rig(text, path=path)
+    return loads_rig(text, path=path, warn=warn)
 
 
 def save_rig(rig: Rig, path: str | os.PathLike) -> None:
