@@ -1,19 +1,23 @@
-"""MPJPE against the stereo pair's baseline, at the simulated rig's working distance (3 m).
+"""MPJPE against the stereo pair's baseline (or angle), at the simulated rig's working distance or several, per lens.
 
     PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_baseline.py [--model-dir models] [--sequences 4]
-        [--frames 8] [--baselines 0.02,0.03,0.04,0.06,0.1,0.2,0.6] [--distance 3.0] [--lifts 0,1,3,50]
+        [--frames 8] [--baselines 0.02,0.03,0.04,0.06,0.1,0.2,0.6 | --angles 0.5,1,2] [--distances 3]
+        [--hfovs 80] [--lifts 0,1,3,50]
 
 The simulator's default rig (``drivers.sim.RigPlacement()``: 640x480, 80 degrees, 1.3 m high, both cameras aimed
-at the subject ``--distance`` ahead) with the pair's centres moved to each baseline, filming the bench's held-out
-people (``ghnerf-bench runtime``'s scenes, motions and first instants, placed in this rig's volume). Each
-(baseline, sequence) runs cold in its own estimator, the runtime's defaults (``EstimatorConfig()``). It prints per
-baseline the angle at which the pair's rays meet at the working volume's centre (``rig_file.pair_angle_deg``: what
-``load_rig``'s narrow-pair warning reads, docs/rig-file.md), the depth one pixel of disparity moves a point at the
-working distance (``depth_per_disparity_px``), the MPJPE of the joints found, the share of joints
-found and the share of pairs with no 3D joint at all. ``RigPlacement`` refuses baselines under 5 cm, so the
-cameras are placed here as it places them. Then, per ``--lifts``, the default rig (its own baseline, 1.2 m) with
-its frame moved that many metres up (cameras and working volume alike, the same images): the floor no longer at
-y = 0, where the runtime reads it (``load_rig``'s camera height warning). A tool, not a test.
+at the subject ``--distances`` ahead) with the pair's centres moved to each baseline, filming the bench's held-out
+people (``ghnerf-bench runtime``'s scenes, motions and first instants, placed in this rig's volume). ``--hfovs``
+swaps the lens (the horizontal field of view; the image size stays); ``--angles`` asks for the angle at which the
+pair's rays meet at the working volume's centre instead of a baseline, so that rows of other distances and lenses
+compare the same pair angle (session 66: does ``load_rig``'s 1-degree bound, measured with one lens at 3 m, hold
+for others?). Each (distance, lens, baseline, sequence) runs cold in its own estimator, the runtime's defaults
+(``EstimatorConfig()``). It prints per row that angle (``rig_file.pair_angle_deg``: what ``load_rig``'s narrow-pair
+warning reads, docs/rig-file.md), the depth one pixel of disparity moves a point at the working distance
+(``depth_per_disparity_px``), the MPJPE of the joints found, the share of joints found and the share of pairs with
+no 3D joint at all. ``RigPlacement`` refuses baselines under 5 cm, so the cameras are placed here as it places
+them. Then, per ``--lifts`` (``""``: none), the default rig (its own baseline, 1.2 m; the first distance, 80 degrees)
+with its frame moved that many metres up (cameras and working volume alike, the same images): the floor no longer
+at y = 0, where the runtime reads it (``load_rig``'s camera height warning). A tool, not a test.
 """
 from __future__ import annotations
 
@@ -33,12 +37,13 @@ from ghnerf_runtime.metrics import mpjpe  # noqa: E402
 from ghnerf_runtime.rig_file import pair_angle_deg  # noqa: E402
 
 
-def rig_with_baseline(baseline_m: float, distance_m: float) -> Rig:
-    """The simulator's default rig at ``distance_m``, its cameras ``baseline_m`` apart (any baseline: the
-    placement's own 5 cm floor does not apply), aimed at the target as ``RigPlacement.build`` aims them."""
+def rig_with_baseline(baseline_m: float, distance_m: float, hfov_deg: float = 80.0) -> Rig:
+    """The simulator's default rig at ``distance_m`` with an ``hfov_deg`` lens, its cameras ``baseline_m`` apart (any
+    baseline: the placement's own 5 cm floor does not apply), aimed at the target as ``RigPlacement.build`` aims
+    them."""
     import drivers.sim as sim  # a tool: the runtime library never imports drivers
 
-    placement = sim.RigPlacement(distance_m=distance_m)
+    placement = sim.RigPlacement(distance_m=distance_m, hfov_deg=hfov_deg)
     base = placement.build(rig_id=f"baseline-{baseline_m:g}")
     cams = []
     for cam, sign in zip(base.pair, (-1.0, 1.0)):
@@ -46,6 +51,15 @@ def rig_with_baseline(baseline_m: float, distance_m: float) -> Rig:
         R, t = look_at(eye, placement.target)
         cams.append(Camera(cam.name, cam.width, cam.height, cam.K, cam.dist, R, t))
     return Rig(tuple(cams), base.volume, base.rig_id)
+
+
+def baseline_for_angle(angle_deg: float, distance_m: float, hfov_deg: float) -> float:
+    """The baseline at which :func:`rig_with_baseline`'s pair sees its working volume's centre ``angle_deg`` apart:
+    the centre lies on the pair's perpendicular bisector, so the angle is ``2 atan(b / 2 / d)``, ``d`` from the
+    pair's midpoint (which the baseline does not move) to the centre."""
+    rig = rig_with_baseline(1.0, distance_m, hfov_deg)
+    reach = float(np.linalg.norm(rig.volume.center - 0.5 * (rig.pair[0].center + rig.pair[1].center)))
+    return 2.0 * reach * float(np.tan(np.radians(angle_deg) / 2.0))
 
 
 def lifted(rig: Rig, lift_m: float) -> Rig:
@@ -93,32 +107,61 @@ def score_cells(runs) -> str:
     return f"{value} | {found.mean():.3f} | {float((~found.any(axis=1)).mean()):.3f}"
 
 
+def floats(text: str) -> list[float]:
+    """A comma-separated list of numbers ("" is none)."""
+    return [float(v) for v in text.split(",") if v.strip()]
+
+
+def baseline_rows(args) -> list[tuple[float, float, float]]:
+    """(distance m, lens hfov degrees, baseline m) per row of the first table: every ``--distances`` x ``--hfovs`` x
+    ``--baselines``, or x ``--angles`` (each turned into the baseline giving that angle there) where given."""
+    rows = []
+    for distance in floats(args.distances):
+        for hfov in floats(args.hfovs):
+            if args.angles:
+                rows.extend((distance, hfov, baseline_for_angle(a, distance, hfov)) for a in floats(args.angles))
+            else:
+                rows.extend((distance, hfov, b) for b in floats(args.baselines))
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", default="models")
     ap.add_argument("--precision", default="int8")
     ap.add_argument("--sequences", type=int, default=4)
     ap.add_argument("--frames", type=int, default=8)
-    ap.add_argument("--distance", type=float, default=3.0, help="the subject's distance ahead, metres")
+    ap.add_argument("--distances", default="3", help="the subject's distance ahead, metres, comma-separated (1.5-8); "
+                                                     "the first is the --lifts rig's")
+    ap.add_argument("--hfovs", default="80", help="the lens's horizontal field of view, degrees, comma-separated "
+                                                  "(20-150; the simulator's default 80)")
     ap.add_argument("--baselines", default="0.02,0.03,0.04,0.06,0.1,0.2,0.6", help="metres, comma-separated")
-    ap.add_argument("--lifts", default="0,1,3,50", help="metres the default rig's frame is moved up, comma-separated")
+    ap.add_argument("--angles", default="", help="instead of --baselines: the pair's angle at the working volume's "
+                                                 "centre, degrees, comma-separated (each distance and lens its own "
+                                                 "baselines)")
+    ap.add_argument("--lifts", default="0,1,3,50", help="metres the default rig's frame is moved up, comma-separated "
+                                                        "(\"\": no such table)")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision))
     session = load_session(cfg)
     print(f"{args.sequences} held-out-like sequences x {args.frames} frames, {args.precision}, the simulator's "
-          f"default rig, subject {args.distance:g} m ahead, each sequence cold")
-    print("| baseline m | rays' angle at the volume's centre, degrees | depth per px of disparity at the subject, m | "
-          "MPJPE mm | joints found | pairs with no joint |")
-    print("|---|---|---|---|---|---|")
-    for baseline in (float(b) for b in args.baselines.split(",")):
-        rig = rig_with_baseline(baseline, args.distance)
+          "default rig (640x480), each sequence cold")
+    print("| subject ahead, m | lens hfov, degrees | focal, px | baseline m | rays' angle at the volume's centre, "
+          "degrees | depth per px of disparity at the subject, m | MPJPE mm | joints found | pairs with no joint |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for distance, hfov, baseline in baseline_rows(args):
+        rig = rig_with_baseline(baseline, distance, hfov)
         runs = [run_sequence(session, cfg, rig, k, args.frames) for k in range(args.sequences)]
-        print(f"| {baseline:g} | {pair_angle_deg(rig, rig.volume.center):.2f} | "
-              f"{depth_per_disparity_px(rig, args.distance):.3f} | {score_cells(runs)} |", flush=True)
+        print(f"| {distance:g} | {hfov:g} | {rig.pair[0].K[0, 0]:.0f} | {baseline:.3g} | "
+              f"{pair_angle_deg(rig, rig.volume.center):.2f} | {depth_per_disparity_px(rig, distance):.3f} | "
+              f"{score_cells(runs)} |", flush=True)
+    lifts = floats(args.lifts)
+    if not lifts:
+        return 0
     print("\n| frame moved up, m | cameras above the floor y = 0, m | MPJPE mm | joints found | pairs with no joint |")
     print("|---|---|---|---|---|")
-    rig = rig_with_baseline(default_baseline_m(), args.distance)
-    for lift in (float(v) for v in args.lifts.split(",")):
+    rig = rig_with_baseline(default_baseline_m(), floats(args.distances)[0])
+    for lift in lifts:
         runs = [run_sequence(session, cfg, rig, k, args.frames, lift_m=lift) for k in range(args.sequences)]
         print(f"| {lift:g} | {-lifted(rig, lift).cameras[0].center[1]:.2f} | {score_cells(runs)} |", flush=True)
     return 0

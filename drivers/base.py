@@ -10,6 +10,7 @@ from __future__ import annotations
 import abc
 import logging
 import math
+import os
 from collections.abc import Iterator
 from typing import ClassVar
 
@@ -39,7 +40,8 @@ class RigSource(abc.ABC):
         pairing: timestamp tolerance and drop policy.
         clock: time source for timeouts (and, in simulated backends, for timing).
         rig_built: the backend built ``rig`` in memory (``sim://``'s placement); ``False`` for one read from a rig
-            file or handed in by the caller, which ``load_rig`` has already warned about.
+            file (read with ``load_rig(path, warn=False)`` and named with :meth:`_rig_read_from`, it is warned of
+            at open) or handed in by the caller, which ``load_rig`` has already warned about.
     """
 
     #: URL scheme this backend answers to.
@@ -68,6 +70,7 @@ class RigSource(abc.ABC):
         self._closed = False
         self._held_error: RigDisconnectedError | EndOfStream | None = None  # see _take_frame
         self._rig_warnings_logged: set[str] | None = None  # see log_rig_warnings_once
+        self._rig_file: str | None = None  # see _rig_read_from
         if rig is not None:
             self._set_rig(rig, built=rig_built)
 
@@ -160,9 +163,16 @@ class RigSource(abc.ABC):
                 self._close()
                 raise RigOperationError(f"{type(self).__name__}._open() did not set the rig")
             self._is_open = True
-            if self._rig_built:
+            if self._rig_built or self._rig_file is not None:
                 self._warn_of_rig()
         return self
+
+    def _rig_read_from(self, path: str | os.PathLike) -> None:
+        """The rig handed in was read from ``path`` with ``load_rig(path, warn=False)``: :meth:`open` logs the
+        file's warnings instead, naming the file as ``load_rig`` does, so that sources sharing
+        :meth:`log_rig_warnings_once`'s set log them once (a daemon creates a source at each reopen, and
+        ``load_rig`` warned at each)."""
+        self._rig_file = str(path)
 
     def log_rig_warnings_once(self, logged: set[str]) -> None:
         """Log each warning about the rig at most once over every source handed the same ``logged`` set, which
@@ -183,9 +193,13 @@ class RigSource(abc.ABC):
 
     def _warn_of_rig(self) -> None:
         """What ``load_rig`` would warn of in the rig this backend built (a narrow ``sim://?baseline=``, a
-        camera's height): the one check for every backend's in-memory rig."""
+        camera's height): the one check for every backend's in-memory rig, and for a rig file read without its
+        warnings (:meth:`_rig_read_from`)."""
         for message in rig_warnings(self._rig):
-            self._rig_warning(log, "%s:// rig %r: %s", self.scheme, self._rig.rig_id, message)
+            if self._rig_built:
+                self._rig_warning(log, "%s:// rig %r: %s", self.scheme, self._rig.rig_id, message)
+            else:  # read from a file: worded as load_rig words it
+                self._rig_warning(log, "%s: %s", self._rig_file, message)
 
     def read(self, timeout_s: float = 1.0) -> FramePair:
         """Block until the next synchronised pair, at most ``timeout_s`` seconds.

@@ -539,12 +539,16 @@ class OpenCVRigSource(RigSource):
                  capture_factory: Callable[[int | str, int], Any] = cv2.VideoCapture,
                  pairing: PairingConfig | None = None, clock: Clock | None = None) -> "OpenCVRigSource":
         options = OpenCVOptions.from_url(url)
-        if rig is None and options.rig_path is not None:
+        from_file = rig is None and options.rig_path is not None
+        if from_file:
             try:
-                rig = load_rig(options.rig_path)
+                rig = load_rig(options.rig_path, warn=False)  # warned of at open, once per daemon run
             except RigFileError as e:
                 raise RigConfigError(f"rig URL {url.url!r}: option rig={options.rig_path}: {e}") from e
-        return cls(options, rig=rig, capture_factory=capture_factory, pairing=pairing, clock=clock)
+        source = cls(options, rig=rig, capture_factory=capture_factory, pairing=pairing, clock=clock)
+        if from_file:
+            source._rig_read_from(options.rig_path)
+        return source
 
     @property
     def stats(self) -> OpenCVRigStats:

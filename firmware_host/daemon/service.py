@@ -303,7 +303,8 @@ class Daemon:
                                      on_tick=self._on_watchdog_tick)
         self._clock = clock
         self._rig_kwargs = dict(rig_kwargs or {})
-        # The rig warnings already in the journal: each reopen after a lost camera logged them again
+        # The rig warnings already in the journal for this rig.url: each reopen after a lost camera logged them
+        # again. A reload to another rig.url empties it, so a rig returned to is warned of again (_reload_checked).
         self._rig_warnings_logged: set[str] = set()
         self._sink_kwargs = dict(sink_kwargs or {})
         self._session: Any = None
@@ -849,6 +850,9 @@ class Daemon:
         # Accepted: swap, touching only what changed (nothing below raises).
         old_status_file = self.config.health.status_file
         self.config = new
+        if "rig.url" in changed:
+            # The journal's last warnings are another rig's now: the rig returned to warns again, once
+            self._rig_warnings_logged = set()
         if "estimator" in changed:  # (then ``estimator`` is a new one, or None)
             if self._estimator is not None:
                 self._estimator.close()

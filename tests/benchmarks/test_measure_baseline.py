@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.measure_baseline import lifted, rig_with_baseline
+from benchmarks.measure_baseline import baseline_for_angle, lifted, rig_with_baseline
+from ghnerf_runtime.rig_file import pair_angle_deg
 from tests.benchmarks.test_bench_smoke import run_script, scratch_cache  # noqa: F401
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
@@ -15,6 +16,15 @@ def test_the_rig_has_the_baseline_asked_for_below_the_simulator_s_own_floor(base
     rig = rig_with_baseline(baseline_m, 3.0)
     assert rig.baseline == pytest.approx(baseline_m, abs=1e-12)
     assert [-c.center[1] for c in rig.pair] == pytest.approx([1.3, 1.3])
+
+
+@pytest.mark.parametrize("angle_deg, distance_m, hfov_deg", [(0.5, 1.5, 50.0), (1.0, 3.0, 80.0), (4.0, 5.0, 110.0)])
+def test_the_baseline_for_an_angle_gives_that_angle_at_the_volume_s_centre(angle_deg, distance_m, hfov_deg):
+    """The lens and distance rows of the table (session 66) compare pairs at the same angle: the baseline is chosen
+    for it, whatever the lens and distance."""
+    rig = rig_with_baseline(baseline_for_angle(angle_deg, distance_m, hfov_deg), distance_m, hfov_deg)
+    assert pair_angle_deg(rig, rig.volume.center) == pytest.approx(angle_deg, rel=1e-9)
+    assert rig.pair[0].K[0, 0] == pytest.approx(320.0 / np.tan(np.radians(hfov_deg) / 2), rel=1e-3)
 
 
 def test_a_lifted_rig_keeps_every_pixel_of_a_point_lifted_with_it():
@@ -29,5 +39,15 @@ def test_a_lifted_rig_keeps_every_pixel_of_a_point_lifted_with_it():
 def test_the_command_line_runs(tiny_model_dir, scratch_cache, capsys, monkeypatch):  # noqa: F811
     out = run_script("measure_baseline", "--model-dir", str(tiny_model_dir), "--sequences", "1", "--frames", "1",
                      "--baselines", "0.02,0.6", "--lifts", "0,50", capsys=capsys, monkeypatch=monkeypatch)
-    assert "| 0.02 | 0.38 | 1.180 |" in out and "| 0.6 | 11.37 | 0.039 |" in out, out
+    assert "| 3 | 80 | 381 | 0.02 | 0.38 | 1.180 |" in out and "| 3 | 80 | 381 | 0.6 | 11.37 | 0.039 |" in out, out
     assert "| 50 | 51.30 |" in out, out
+
+
+def test_the_command_line_takes_angles_distances_and_lenses(tiny_model_dir, scratch_cache, capsys,  # noqa: F811
+                                                            monkeypatch):
+    out = run_script("measure_baseline", "--model-dir", str(tiny_model_dir), "--sequences", "1", "--frames", "1",
+                     "--distances", "3,5", "--hfovs", "110", "--angles", "1", "--lifts", "", capsys=capsys,
+                     monkeypatch=monkeypatch)
+    assert "| 3 | 110 | 224 | 0.0526 | 1.00 | 0.764 |" in out, out
+    assert "| 5 | 110 | 224 | 0.0874 | 1.00 | 1.277 |" in out, out
+    assert "frame moved up" not in out, out

@@ -164,6 +164,33 @@ def test_the_nominal_rig_warning_is_logged_once_by_sources_sharing_a_logged_set(
         alone = [r for r in caplog.records if "nominal, uncalibrated rig" in r.getMessage()]
     assert len(shared) == 1 and len(alone) == 1, caplog.text
 
+def test_a_rig_file_s_warning_is_logged_at_open_once_by_sources_sharing_a_logged_set(takes, tmp_path, caplog):
+    """A daemon creates a source at each reopen after a lost camera, and ``load_rig`` warned of a narrow rig file
+    at each creation, the journal repeating it (session 66): it is logged at open now, worded as ``load_rig``
+    words it, once over the sources sharing ``log_rig_warnings_once``'s set; a one-shot tool's source, given none,
+    still says it once."""
+    from drivers.sim import RigPlacement
+
+    first, second, _, _ = takes[0]
+    narrow = tmp_path / "narrow.json"
+    save_rig(RigPlacement(width=SIZE[0], height=SIZE[1], baseline_m=0.05).build("narrow"), narrow)
+    url = f"opencv://?first={first}&second={second}&rig={narrow}"
+    logged: set[str] = set()
+    with caplog.at_level(logging.WARNING):
+        for _ in range(3):
+            source = create_rig_source(url)
+            source.log_rig_warnings_once(logged)
+            with source.open():
+                pass
+        shared = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+        caplog.clear()
+        with open_rig(url):
+            pass
+        alone = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+    assert len(shared) == 1 and len(alone) == 1, caplog.text
+    assert shared[0].startswith(f"{narrow}: cameras 'left' and 'right' are 50 mm apart"), shared
+
+
 @pytest.mark.parametrize("query, message", [
     ("", "option first="),
     ("first=0", "option second="),

@@ -356,6 +356,28 @@ def test_rig_file_overrides_the_device_calibration(tmp_path, rig):
         create_rig_source(f"depthai://?rig={tmp_path / 'nope.json'}")
 
 
+def test_a_rig_file_s_warnings_are_logged_at_open_once_by_sources_sharing_a_logged_set(tmp_path, rig, caplog):
+    """``load_rig`` warned of a rig file at each ``create_rig_source``, which a daemon calls at each reopen: the
+    journal repeated the warnings (session 66). Here the rig's frame moved 50 m up: each camera's height is
+    warned of once over two opens sharing ``log_rig_warnings_once``'s set, naming the file."""
+    from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume
+    from ghnerf_runtime.rig_file import save_rig
+
+    shift = np.array([0.0, -50.0, 0.0])
+    cams = tuple(Camera(c.name, c.width, c.height, c.K, c.dist, c.R, c.t - c.R @ shift) for c in rig.cameras)
+    path = tmp_path / "high.json"
+    save_rig(Rig(cams, WorkingVolume(rig.volume.min_corner + shift, rig.volume.max_corner + shift), "high"), path)
+    logged: set[str] = set()
+    with caplog.at_level(logging.WARNING):
+        for _ in range(2):
+            source = create_rig_source(f"depthai://?width=160&height=100&rig={path}", link_factory=HostPipelineLink)
+            source.log_rig_warnings_once(logged)
+            with source.open():
+                pass
+    heights = [r.getMessage() for r in caplog.records if "CAMERA_HEIGHT_RANGE_M" in r.getMessage()]
+    assert [m.split(" stands")[0] for m in heights] == [f"{path}: camera 'left'", f"{path}: camera 'right'"], heights
+
+
 def test_mount_roll_reaches_the_rig_from_the_device_calibration():
     with open_rig(f"{URL}&mount_roll=180", link_factory=HostPipelineLink) as source:
         left = source.rig.pair[0]

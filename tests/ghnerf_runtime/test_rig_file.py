@@ -708,6 +708,22 @@ def test_the_warning_on_a_narrow_pair_follows_the_working_distance_not_the_basel
     assert pair_angle_deg(rig, rig.volume.center) > MIN_PAIR_ANGLE_DEG and narrow_pair_warning(rig) is None
 
 
+@pytest.mark.parametrize("focal_scale", [0.5, 1.0, 2.0])
+def test_the_warning_on_a_narrow_pair_does_not_follow_the_lens(example_dict, focal_scale):
+    """Session 66 measured the bound with 50- to 110-degree lenses at 3 and 5 m (docs/rig-file.md): the pairs lost
+    their joints at 0.5 degree and kept them from 0.75 whatever the depth per pixel of disparity, so a wider or
+    narrower lens on the same pair neither raises nor clears the warning."""
+    for cam in example_dict["cameras"]:
+        K = np.array(cam["K"])
+        K[0, 0] *= focal_scale
+        K[1, 1] *= focal_scale
+        cam["K"] = K.tolist()
+    narrow = json.loads(json.dumps(example_dict))
+    _moved_camera(narrow["cameras"][1], [-0.055, 0.0, 0.0])  # 75 mm apart -> 20 mm
+    assert narrow_pair_warning(rig_from_dict(narrow)) is not None
+    assert narrow_pair_warning(rig_from_dict(example_dict)) is None
+
+
 @pytest.mark.parametrize("baseline_m, distance_m", [(0.1, 5.0), (0.02, 0.5), (1.2, 3.0)])
 def test_the_pair_angle_is_the_baseline_over_the_distance_for_a_point_straight_ahead(baseline_m, distance_m):
     K = [[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]]

@@ -123,13 +123,15 @@ class DepthaiRigSource(RigSource):
         options = DepthaiOptions.from_url(url)
         if rig is None and options.rig_path is not None:
             try:
-                rig = load_rig(options.rig_path)
+                rig = load_rig(options.rig_path, warn=False)  # warned of at open, once per daemon run
             except RigFileError as e:
                 raise RigConfigError(f"rig URL {url.url!r}: option rig={options.rig_path}: {e}") from e
             try:
-                return cls(options, rig=rig, link_factory=link_factory, pairing=pairing, clock=clock)
+                source = cls(options, rig=rig, link_factory=link_factory, pairing=pairing, clock=clock)
             except RigConfigError as e:  # the rig file's size against the stream's: name the URL and the file
                 raise RigConfigError(f"rig URL {url.url!r}: option rig={options.rig_path}: {e}") from e
+            source._rig_read_from(options.rig_path)
+            return source
         return cls(options, rig=rig, link_factory=link_factory, pairing=pairing, clock=clock)
 
     def _request(self) -> StereoRequest:

@@ -262,6 +262,26 @@ def test_a_rig_warning_is_logged_once_through_reopens(sim_url, tmp_path, caplog)
     assert len(narrow) == 1, narrow
 
 
+def test_a_reload_back_to_a_rig_seen_earlier_warns_of_it_again(sim_url, tmp_path, caplog):
+    """Reloaded from a narrow pair (``baseline=0.05``) to another rig.url and back, the daemon runs the first rig
+    again: its warning was not logged again, so the journal since the last reload said nothing of the rig in use
+    (session 66). Reopens of one rig.url still log it once."""
+    narrow = {"url": f"{sim_url}&baseline=0.05", "reopen_min_s": 0.01}
+    other = {"url": f"{sim_url}&baseline=1.2", "reopen_min_s": 0.01}  # no warning
+    configs = _Configs()
+    with caplog.at_level(logging.WARNING, logger="drivers"):
+        with _Running(_config(narrow, tmp_path), tmp_path, reload_config=configs) as run:
+            for reloads, rig in enumerate((other, narrow), start=1):
+                wait_until(lambda: run.daemon.health.rig_opens == reloads, timeout=60, what=f"open {reloads}")
+                configs.next = _config(rig, tmp_path)
+                run.daemon.request_reload()
+                wait_until(lambda: run.daemon.health.reloads == reloads, timeout=60, what=f"reload {reloads}")
+            wait_until(lambda: run.daemon.health.rig_opens == 3, timeout=60, what="the first rig opened again")
+            assert run.finish() == 0
+    warned = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+    assert len(warned) == 2 and all("are 50 mm apart" in m for m in warned), warned
+
+
 def test_seqs_stay_contiguous_through_reopens_and_rejected_pairs(sim_url, tmp_path, monkeypatch):
     """Each reopen starts the driver's pair numbers at 0 again and a rejected pair sends nothing: neither
     shows on the wire, where seq counts the frames the daemon sent (a gap: lost after the daemon)."""
