@@ -377,18 +377,22 @@ def _write_view(folders: list[Path], name: str, images: Sequence[np.ndarray]) ->
 
 
 def every_frame_of_two_videos(url: str) -> str:
-    """``url`` with ``policy=all`` added where it plays two video files (``opencv://``) and names no ``policy``.
+    """``url`` with ``policy=all`` added where it plays two video files (``opencv://``) and names no ``policy``,
+    also wrapped (``record+opencv://...``: any wrapper of :data:`drivers.registry.WRAPPERS`).
 
     A capture from recordings is not live: under the driver's default ``latest`` the videos play on at their
     rate, and a host whose board detection is slower than a held pose skips it (fewer views, without a word).
     Live cameras, other schemes and a URL that chooses its ``policy`` are left as they are; a URL that does not
-    parse is too (opening it reports the error)."""
+    parse is too (opening it reports the error). Before session 66 a wrapped URL kept ``latest``: recording the
+    calibration while capturing it (``record+``) dropped the held poses and the take's frames alike."""
     from drivers.backends.opencv import is_video_file
     from drivers.errors import RigConfigError
+    from drivers.registry import innermost_url
     from drivers.url import RigUrl
 
     try:
-        parsed = RigUrl.parse(url)
+        # the wrappers' options share the query with the backend's, so the option added reaches the backend
+        parsed = RigUrl.parse(innermost_url(url))
     except RigConfigError:
         return url
     specs = [parsed.options.get(option) for option in ("first", "second")]
