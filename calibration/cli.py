@@ -377,18 +377,22 @@ def _write_view(folders: list[Path], name: str, images: Sequence[np.ndarray]) ->
 
 
 def every_frame_of_two_videos(url: str) -> str:
-    """``url`` with ``policy=all`` added where it plays two video files (``opencv://``) and names no ``policy``.
+    """``url`` with ``policy=all`` added where it plays two video files (``opencv://``) and names no ``policy``,
+    also wrapped (``record+opencv://...``: any wrapper of :data:`drivers.registry.WRAPPERS`).
 
     A capture from recordings is not live: under the driver's default ``latest`` the videos play on at their
     rate, and a host whose board detection is slower than a held pose skips it (fewer views, without a word).
     Live cameras, other schemes and a URL that chooses its ``policy`` are left as they are; a URL that does not
-    parse is too (opening it reports the error)."""
+    parse is too (opening it reports the error). Before session 66 a wrapped URL kept ``latest``: recording the
+    calibration while capturing it (``record+``) dropped the held poses and the take's frames alike."""
     from drivers.backends.opencv import is_video_file
     from drivers.errors import RigConfigError
+    from drivers.registry import innermost_url
     from drivers.url import RigUrl
 
     try:
-        parsed = RigUrl.parse(url)
+        # the wrappers' options share the query with the backend's, so the option added reaches the backend
+        parsed = RigUrl.parse(innermost_url(url))
     except RigConfigError:
         return url
     specs = [parsed.options.get(option) for option in ("first", "second")]
@@ -632,6 +636,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     for cam in names:
         extra = f"; no board in {', '.join(missed[cam])}" if missed[cam] else ""
         print(f"{cam}: the board found in {len(views[cam])} of {len(views[cam]) + len(missed[cam])} images{extra}")
+    _refuse_exchanged_sizes(out, views, Path(args.images))
     blind = [cam for cam in names if not views[cam]]
     if blind:  # said as such: it was blamed on the floor view, or on too few views ("15-30 is usual")
         raise UsageError(f"camera {blind[0]!r} found the board in none of its {len(missed[blind[0]])} images "
@@ -676,6 +681,34 @@ def cmd_solve(args: argparse.Namespace) -> int:
     _say_kept(kept)
     print(f"wrote {out} and {report_path}")
     return 0
+
+
+def _replaced_rig(out: Path):
+    """The rig file at ``out`` that ``solve`` is to replace, loaded; None where there is none, or one that does not
+    load (it is replaced whatever it holds)."""
+    if not out.is_file():
+        return None
+    try:
+        return load_rig(out)
+    except RigFileError:
+        return None
+
+
+def _refuse_exchanged_sizes(out: Path, views: dict, images: Path) -> None:
+    """Refuse views whose folders hold each the other camera's images, said from the sizes of the rig file ``solve``
+    would replace (:func:`~calibration.check.sized_as_exchanged`, as ``check`` says it): solved as they were, the
+    rig gave each camera the other's lens, image size and pose, and replaced the rig that fit the cameras.
+
+    :raises UsageError: naming both folders, both sizes, the rig file and the fix.
+    """
+    replaced = _replaced_rig(out)
+    if replaced is None or not sized_as_exchanged(replaced, views):
+        return
+    raise UsageError(f"{_exchanged_sizes_evidence(replaced, str(out), images)} ({out} being the rig file this solve "
+                     "would replace). Exchange the two folders' images (a tool that named the cameras the other way "
+                     "round), then solve again: solved from them as they are, the rig would give each camera the "
+                     "other's lens, image size and pose. If the cameras were exchanged on purpose (first= and second= "
+                     f"swapped in the rig URL), give --out another path, or move {out} away first")
 
 
 def _say_kept(kept: dict[Path, Path | None]) -> None:
@@ -1027,17 +1060,23 @@ def _exchanged_sizes_words(rig, rig_path: str, board: BoardSpec, views: dict, im
                            thickness: float, floor_view: str) -> str:
     """The error for folders whose images are each the other camera's size (:func:`sized_as_exchanged`): the
     sizes as the evidence, and whether the rig fits the views exchanged (within ``limits``)."""
-    a, b = rig.pair
     report = exchanged_report(rig, board, views, board_thickness_m=thickness, floor_view=floor_view)
     reasons = check_failures(report, limits) if report["pairs"] else ["no pair to measure"]
     scale = "not measured" if report.get("scale") is None else f"{report['scale']:.4f}"
     fit = (f"exchanged, the rig fits them (reprojection {report['reprojection_px_rms']:.3f} px rms, scale {scale})"
            if not reasons else
            f"exchanged, the rig does not fit them either ({'; '.join(reasons)}): calibrate again once they are")
+    return (f"{_exchanged_sizes_evidence(rig, rig_path, images)}; {fit}. Exchange the two folders' images (a tool "
+            "that named the cameras the other way round), then check again")
+
+
+def _exchanged_sizes_evidence(rig, rig_path: str, images: Path) -> str:
+    """The sizes that show the folders exchanged (:func:`sized_as_exchanged`), one wording for ``check`` and
+    ``solve``: each folder, the size of its images, and the camera of ``rig_path`` whose size that is."""
+    a, b = rig.pair
     return (f"the folders look exchanged: every image in {images / a.name} is {b.width}x{b.height}, the size of "
             f"camera {b.name!r} in {rig_path}, and every image in {images / b.name} {a.width}x{a.height}, camera "
-            f"{a.name!r}'s; {fit}. Exchange the two folders' images (a tool that named the cameras the other way "
-            "round), then check again")
+            f"{a.name!r}'s")
 
 
 # ------------------------------------------------------------------ main

@@ -1,6 +1,8 @@
 """Backend registry: URL scheme -> (module, class), imported only when chosen.
 
-``record+<url>`` wraps any other URL in the recorder (pyserial's ``spy://`` idea).
+A wrapper's prefix wraps any other URL's source in its own: ``record+<url>`` in the recorder (pyserial's
+``spy://`` idea). :data:`WRAPPERS` lists them; :func:`innermost_url` is the URL of the backend that delivers the
+frames, for a caller that asks what a URL plays (``ghcal capture``: two video files or live cameras?).
 """
 from __future__ import annotations
 
@@ -21,18 +23,42 @@ BACKENDS: dict[str, tuple[str, str]] = {
 
 RECORD_PREFIX = "record+"
 
+#: URL prefix -> (module, class name) of the sources that wrap another URL's source; each class has
+#: ``wrap(inner_url, factory, **kwargs)``. Nothing is imported until chosen.
+WRAPPERS: dict[str, tuple[str, str]] = {
+    RECORD_PREFIX: ("drivers.backends.record", "RecordingRigSource"),
+}
+
+
+def _import_class(what: str, module_name: str, class_name: str) -> type:
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as e:
+        raise BackendNotAvailableError(f"rig backend {what!r} cannot be loaded: {e}") from e
+    return getattr(module, class_name)
+
+
+def wrapper_prefix(url: str) -> str | None:
+    """The prefix of :data:`WRAPPERS` that ``url`` starts with; None for a URL no wrapper wraps."""
+    return next((prefix for prefix in WRAPPERS if url.startswith(prefix)), None)
+
+
+def innermost_url(url: str) -> str:
+    """``url`` without the prefixes of the wrappers around it (``record+opencv://?first=a.mp4&out=take`` ->
+    ``opencv://?first=a.mp4&out=take``): the URL of the backend that delivers the frames, the wrappers' own
+    options still in its query. A URL no wrapper wraps comes back as given."""
+    while (prefix := wrapper_prefix(url)) is not None:
+        url = url[len(prefix):]
+    return url
+
 
 def backend_class(scheme: str, backends: dict[str, tuple[str, str]] | None = None) -> type[RigSource]:
     """Import and return the class for ``scheme``."""
     table = BACKENDS if backends is None else backends
     if scheme not in table:
-        raise BackendNotAvailableError(f"unknown rig backend {scheme!r}; known: {sorted(table)} (and record+<url>)")
-    module_name, class_name = table[scheme]
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as e:
-        raise BackendNotAvailableError(f"rig backend {scheme!r} cannot be loaded: {e}") from e
-    return getattr(module, class_name)
+        wrapped = ", ".join(f"{prefix}<url>" for prefix in WRAPPERS)
+        raise BackendNotAvailableError(f"unknown rig backend {scheme!r}; known: {sorted(table)} (and {wrapped})")
+    return _import_class(scheme, *table[scheme])
 
 
 def open_rig(url: str, **kwargs) -> RigSource:
@@ -49,10 +75,9 @@ def open_rig(url: str, **kwargs) -> RigSource:
 def create_rig_source(url: str, **kwargs) -> RigSource:
     """Like :func:`open_rig` but returns the source unopened."""
     check_url_paths(url)  # a NUL byte or a name too long: one line, not a traceback from the backend
-    if url.startswith(RECORD_PREFIX):
-        from drivers.backends.record import RecordingRigSource
-
-        inner_url = RigUrl.parse(url[len(RECORD_PREFIX):])
-        return RecordingRigSource.wrap(inner_url, create_rig_source, **kwargs)
+    prefix = wrapper_prefix(url)
+    if prefix is not None:
+        wrapper = _import_class(prefix, *WRAPPERS[prefix])
+        return wrapper.wrap(RigUrl.parse(url[len(prefix):]), create_rig_source, **kwargs)
     parsed = RigUrl.parse(url)
     return backend_class(parsed.scheme).from_url(parsed, **kwargs)

@@ -662,6 +662,42 @@ def test_only_two_videos_without_a_policy_get_policy_all():
         assert cli.every_frame_of_two_videos(unchanged) == unchanged
 
 
+def test_two_videos_recorded_as_they_are_captured_get_policy_all_too(monkeypatch):
+    # record+opencv:// of two videos (the calibration recorded as it is captured) kept the driver's ``latest``: the
+    # wrapper's scheme hid the two files, and the held poses were dropped as without the recorder
+    from drivers import registry
+
+    videos = "record+opencv://?first=take/a.avi&second=take/b.avi&out=rec"
+    assert cli.every_frame_of_two_videos(videos) == videos + "&policy=all"
+    for unchanged in (videos + "&policy=latest", "record+opencv://?first=/dev/video0&second=/dev/video2&out=rec",
+                      "record+replay://take?out=rec", "record+sim://?out=rec"):
+        assert cli.every_frame_of_two_videos(unchanged) == unchanged
+    # every wrapper the registry knows, not the one prefix
+    monkeypatch.setitem(registry.WRAPPERS, "spy+", registry.WRAPPERS[registry.RECORD_PREFIX])
+    assert cli.every_frame_of_two_videos("spy+" + videos) == "spy+" + videos + "&policy=all"
+
+
+def test_a_capture_of_two_videos_through_the_recorder_reads_every_frame(truth, tmp_path, capsys, monkeypatch):
+    # as test_capture_of_two_videos_reads_every_frame_without_policy_in_the_url, the URL wrapped in record+: on the
+    # old code 0 or 1 of the 3 poses were kept
+    import time
+
+    detect = BoardDetector.detect
+
+    def slow_detect(self, image):
+        time.sleep(0.25)  # two images a pair: 0.5 s, as long as a pose is held
+        return detect(self, image)
+
+    monkeypatch.setattr(BoardDetector, "detect", slow_detect)
+    images = calibration_views(truth, BOARD, count=3, edge_count=0, seed=7, floor_view=False)
+    names = sorted(images[truth.pair[0].name])
+    take = tmp_path / "take"
+    url = "record+" + _webcam_videos(truth, tmp_path, images, names, frames_per_pose=5, policy=None) + f"&out={take}"
+    _capture_every_pose(url, tmp_path, len(names), capsys, note="reading every frame of the two videos (policy=all")
+    manifest = json.loads((take / "manifest.json").read_text())
+    assert manifest["complete"] and manifest["counters"]["frames_written"] == 2 * 5 * len(names), manifest
+
+
 def test_a_pose_held_exactly_the_still_time_is_kept(truth, tmp_path, capsys):
     # 4 frames at 10 fps: the pose's last frame is 0.3 s (--still-s) after its first. Stamps are whole
     # nanoseconds, and in float seconds frame k+3 minus frame k fell short of 0.3 for about half of the k:

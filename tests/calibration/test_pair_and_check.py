@@ -493,6 +493,61 @@ def test_folders_exchanged_between_cameras_of_two_sizes_are_said_so(sized_rig, t
     assert "exchanged, the rig does not fit them either (reprojection" in err and "over 0.1 px" in err
 
 
+def _solve_cli(views: dict, tmp_path, monkeypatch) -> tuple[int, Path]:
+    """``ghcal solve`` of ``views`` (the detection stood in for) into ``tmp_path/rig.json``, levelled by a typed
+    height: its exit status, and the images' folder."""
+    images = tmp_path / "capture"
+    for cam, named in views.items():
+        (images / cam).mkdir(parents=True, exist_ok=True)
+        for name in named:
+            (images / cam / f"{name}.png").touch()  # listed by name
+    (tmp_path / "board.json").write_text(json.dumps(BOARD.to_dict()))
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {cam: [] for cam in views}))
+    rc = cli.main(["solve", "--images", str(images), "--board", str(tmp_path / "board.json"), "--out",
+                   str(tmp_path / "rig.json"), "--cameras", "left,right", "--camera-height", "1.4", "--pitch", "9"])
+    return rc, images
+
+
+def test_solve_refuses_folders_exchanged_by_the_sizes_of_the_rig_it_replaces(sized_rig, tmp_path, capsys,
+                                                                             monkeypatch):
+    # the solve gave each camera the other's lens, image size and pose, and replaced the rig that fit the cameras,
+    # with at most the sides warning; check said "the folders look exchanged" from the same sizes
+    from ghnerf_runtime.rig_file import save_rig
+
+    views = _views(sized_rig, _facing_poses(sized_rig, 10, seed=7), noise_px=0.1)
+    rig_path = tmp_path / "rig.json"
+    save_rig(sized_rig, rig_path)
+    before = rig_path.read_bytes()
+    rc, images = _solve_cli(_exchanged(views), tmp_path, monkeypatch)
+    err = capsys.readouterr().err
+    assert rc == 2 and (
+        f"the folders look exchanged: every image in {images / 'left'} is 640x400, the size of camera 'right' in "
+        f"{rig_path}, and every image in {images / 'right'} 960x600, camera 'left''s ({rig_path} being the rig file "
+        "this solve would replace). Exchange the two folders' images") in err, err
+    assert "move" in err and "give --out another path" in err
+    assert rig_path.read_bytes() == before and not (tmp_path / "rig.prev.json").exists()  # nothing written
+    assert not (tmp_path / "rig.report.json").exists()
+
+
+def test_solve_checks_the_sizes_only_against_a_rig_file_it_replaces(sized_rig, tmp_path, capsys, monkeypatch):
+    from ghnerf_runtime.rig_file import save_rig
+
+    views = _views(sized_rig, _facing_poses(sized_rig, 10, seed=7), noise_px=0.1)
+    # the folders named right: solved, the previous rig kept beside the new one
+    save_rig(sized_rig, tmp_path / "rig.json")
+    assert _solve_cli(views, tmp_path, monkeypatch)[0] == 0
+    assert (tmp_path / "rig.prev.json").exists() and "look exchanged" not in capsys.readouterr().err
+    # no rig file to replace, or one that does not load: nothing to say the sizes by (the sides warning remains)
+    for there in (None, "not a rig file"):
+        folder = tmp_path / f"case{there is not None}"
+        folder.mkdir()
+        if there is not None:
+            (folder / "rig.json").write_text(there)
+        assert _solve_cli(_exchanged(views), folder, monkeypatch)[0] == 0
+        said = capsys.readouterr()
+        assert "look exchanged" not in said.err and "warning: sides: camera 'left' came out" in said.out
+
+
 @pytest.mark.parametrize("exchanged", [False, True])
 def test_a_left_camera_solved_on_the_right_is_warned_about(level_rig, exchanged):
     # each folder holding the other camera's images solves as well as the right ones (the rig file then gives each

@@ -72,3 +72,34 @@ def test_opening_sim_and_replay_never_imports_depthai(tmp_path):
         """
     )
     assert out.strip().splitlines()[-1] == "False"
+
+
+def test_innermost_url_takes_off_every_wrapper_the_registry_knows(monkeypatch):
+    from drivers import registry
+
+    assert registry.innermost_url("record+opencv://?first=a.avi&out=take") == "opencv://?first=a.avi&out=take"
+    assert registry.innermost_url("opencv://?first=a.avi") == "opencv://?first=a.avi"
+    assert registry.innermost_url("replay://record+x") == "replay://record+x"  # a prefix only at the start
+    monkeypatch.setitem(registry.WRAPPERS, "spy+", ("drivers.backends.record", "RecordingRigSource"))
+    assert registry.innermost_url("spy+record+sim://?fps=30") == "sim://?fps=30"
+
+
+def test_create_rig_source_wraps_through_the_registry_s_wrappers(monkeypatch):
+    # the wrappers are one table (drivers.registry.WRAPPERS), read by create_rig_source and innermost_url alike
+    from drivers import registry
+    from drivers.backends.record import RecordingRigSource
+
+    wrapped = []
+
+    class Spy(RecordingRigSource):
+        @classmethod
+        def wrap(cls, inner_url, factory, **kwargs):
+            wrapped.append(inner_url.url)
+            return factory(f"{inner_url.scheme}://{inner_url.target}", **kwargs)
+
+    monkeypatch.setitem(registry.WRAPPERS, "spy+", (__name__, "_SPY"))
+    monkeypatch.setattr(sys.modules[__name__], "_SPY", Spy, raising=False)
+    source = create_rig_source("spy+sim://")
+    assert wrapped == ["sim://"] and source.scheme == "sim"
+    with pytest.raises(BackendNotAvailableError, match="record\\+<url>, spy\\+<url>"):
+        create_rig_source("v4l2:///dev/video0")
