@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from ghnerf_runtime import avif_header, image_files, tiff_header
+from ghnerf_runtime import avif_header, image_files, tiff_compression, tiff_header
 from ghnerf_runtime.image_files import AS_STORED, decode_image_or_none, read_image_or_none
 from tests.exif_images import exif_orientation, jpeg_turned, png_turned
 from tests.odd_images import avif_transform, avif_with_properties, riff_chunk, tiff_laid_out, webp_extended
@@ -343,3 +343,18 @@ def test_the_read_and_its_reason_take_the_one_choice_of_reader(tmp_path, monkeyp
     file_reads.clear()
     assert read_image_or_none(path, cv2.IMREAD_COLOR) is not None and not file_reads
     assert image_files.decoded_from_memory_because(path) == "told so"
+
+
+def test_a_webp_compressed_tiff_is_refused_or_read_as_the_build_s_probe_says(tmp_path, monkeypatch):
+    """Compression 50001 (WebP), which OpenCV 5.0.0 leaves out and 5.1 includes, follows the installed build's
+    probe (``tiff_compression.decoded``): refused, naming the codec, where the probe fails; handed to OpenCV where
+    it decodes (faked here: a build without the codec then gives None, not a refusal)."""
+    path = tmp_path / "view.tiff"
+    path.write_bytes(tiff_compression.webp_sample())
+    for decodes in (False, True):
+        tiff_compression.decoded.cache_clear()
+        monkeypatch.setattr(tiff_compression, "decodes_sample", lambda sample, decodes=decodes: decodes)
+        refusal = image_files.tiff_compression_refusal(path)
+        assert (refusal is None) == decodes
+        assert decodes or "Compression 50001 (WebP)" in image_files.unread_because(path, cv2.IMREAD_COLOR)
+    tiff_compression.decoded.cache_clear()
