@@ -40,6 +40,7 @@ from ghnerf_runtime.image_files import (
     read_image_or_none,
     samples_not_8_bit,
     tiff_compression_refusal,
+    tiff_data_refusal,
 )
 from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
@@ -657,6 +658,9 @@ def load_image(path: Path) -> np.ndarray:
         compression = tiff_compression_refusal(path)
         if compression is not None:
             raise RefusedLayoutError(f"recording image {path} does not decode: it is {compression}")
+        data = tiff_data_refusal(path)
+        if data is not None:
+            raise RigOperationError(f"recording image {path} is corrupt: {data}")
         samples = samples_not_8_bit(path)  # a valid float TIFF was called corrupt
         if samples is not None:
             raise RigOperationError(f"recording image {path} does not decode: it has {samples}")

@@ -264,8 +264,8 @@ class ReplayRigSource(RigSource):
             if broken:
                 first = broken[0]
                 log.warning("recording %s: dropped %d journal row(s) whose files are missing, empty or cut short "
-                            "(written after the last flush before the take was cut short), first: %s line %d (image %s)",
-                            directory, len(broken), directory / FRAMES, first.line, first.image)
+                            "(written after the last flush before the take was cut short), first: %s line %d "
+                            "(image %s)", directory, len(broken), directory / FRAMES, first.line, first.image)
             log.warning("recording %s was not closed cleanly; playing the %d frames it holds", directory, len(rows))
         return cls(
             directory, manifest, rows, speed=speed, loop=loop, keep_time=keep_time,

@@ -35,7 +35,14 @@ from drivers.backends.recording_format import (
 )
 from benchmarks import time_replay_open
 from drivers.url import RigUrl
-from tests.odd_images import bmp_built, riff_chunk, tiff_entries, tiff_laid_out, webp_extended
+from tests.odd_images import (
+    bmp_built,
+    riff_chunk,
+    tiff_entries,
+    tiff_laid_out,
+    tiff_with_strip_count,
+    webp_extended,
+)
 
 SIM = "sim://?width=40&height=30&jitter_ms=1.5&offset_ms=2&drop=0.1&seed=8&policy=all"
 
@@ -1341,3 +1348,14 @@ def test_the_recording_doc_quotes_the_refusal_of_a_resized_take_as_open_words_it
         assert made_up in quoted, made_up
         quoted = quoted.replace(made_up, here)
     assert quoted == str(info.value)
+
+
+def test_a_recorded_tiff_whose_uncompressed_strip_is_short_is_a_corrupt_frame_naming_the_strip(tmp_path):
+    """Session 66: OpenCV 5.0 delivered it with its last rows black (a frame of wrong pixels, no error); load_image
+    refuses it from its header, naming the file and the strip."""
+    path = tmp_path / "00000003.tiff"
+    path.write_bytes(tiff_with_strip_count(1, 1, lambda count, size, offset: count - 1))
+    with pytest.raises(RigOperationError) as info:
+        load_image(path)
+    assert str(info.value) == (f"recording image {path} is corrupt: its strip 2 holds 4223 of the 4224 bytes its "
+                               f"pixels need (uncompressed): OpenCV would deliver the rest black")
