@@ -23,6 +23,13 @@ A TIFF whose compression OpenCV does not decode is None too, told from its heade
 tiff_compression``): for most such values (JPEG 2000's 34712, any unregistered one) OpenCV returned an image of
 the stored size holding zeros, an all-black frame, having only logged libtiff's error;
 :func:`tiff_compression_refusal` says why (:func:`unread_because`, for any read that failed).
+
+A TIFF whose strips or tiles do not hold their data is None too, told from its header (:func:`tiff_data_refusal`):
+one running past the file's end (cut short; OpenCV gave None already, the cause unnamed), or, uncompressed and of
+several strips or tiles, one holding fewer bytes than its rows need (OpenCV delivered the rest black, libtiff only
+warning). Garbage inside compressed data (LZW, deflate, PackBits) gives no such sign: OpenCV decodes it partly
+black or scrambled, cv2.imread and cv2.imdecode alike, libtiff's errors only logged (measured in session 66), and
+nothing short of decoding the data again could tell.
 """
 from __future__ import annotations
 
@@ -37,7 +44,7 @@ from ghnerf_runtime import avif_header, tiff_compression, tiff_header
 from ghnerf_runtime.path_check import is_utf8
 
 __all__ = ["AS_STORED", "decode_image_or_none", "decoded_from_memory_because", "read_image_or_none",
-           "samples_not_8_bit", "tiff_compression_refusal", "unread_because"]
+           "samples_not_8_bit", "tiff_compression_refusal", "tiff_data_refusal", "unread_because"]
 
 #: The decode flag that keeps an image's pixels as stored (IMREAD_UNCHANGED never turns them anyway), a JPEG's,
 #: PNG's or WebP's EXIF orientation ignored; a TIFF's Orientation tag and an AVIF's irot and imir need more
@@ -83,8 +90,8 @@ def _resets_unless_refused(f: BinaryIO, flags: int) -> list[tuple[int, bytes]] |
     f.seek(0)
     if head not in tiff_header.LAYOUTS:
         return _turn_resets(f)
-    tags = tiff_header.read_tags(f, _DECODE_TAGS)
-    if _tiff_refuses(tags, flags):
+    tags = tiff_header.read_tags(f, _DECODE_TAGS | _DATA_TAGS, unlimited=tiff_header.IMAGE_DATA_TAGS)
+    if _tiff_refuses(tags, flags) or _data_refusal(f, tags) is not None:
         return None
     reset = tiff_header.upright_reset(tags)
     return [] if reset is None else [reset]
@@ -122,6 +129,77 @@ def tiff_compression_refusal(path: str | os.PathLike) -> str | None:
         return None
 
 
+#: The tags telling how many bytes an uncompressed strip or tile holds: SamplesPerPixel, RowsPerStrip,
+#: PlanarConfiguration, TileWidth, TileLength (with the size, BitsPerSample and Compression).
+_SAMPLES, _ROWS_PER_STRIP, _PLANAR, _TILE_WIDTH, _TILE_LENGTH = 277, 278, 284, 322, 323
+_DATA_TAGS = frozenset({tiff_header.WIDTH, tiff_header.HEIGHT, tiff_header.BITS_PER_SAMPLE, tiff_header.COMPRESSION,
+                        _SAMPLES, _ROWS_PER_STRIP, _PLANAR, _TILE_WIDTH, _TILE_LENGTH}) | tiff_header.IMAGE_DATA_TAGS
+_UNCOMPRESSED, _SEPARATE_PLANES = 1, 2
+
+
+def tiff_data_refusal(path: str | os.PathLike) -> str | None:
+    """Why a TIFF's strips or tiles do not hold its image (:func:`_data_refusal`), e.g. "its strip 3 runs past
+    the file's end (to byte 12554 of 12454): cut short"; None for another image, a TIFF whose data is there, or a
+    file that cannot be opened."""
+    try:
+        with open(path, "rb") as f:
+            return _data_refusal(f, tiff_header.read_tags(f, _DATA_TAGS, unlimited=tiff_header.IMAGE_DATA_TAGS))
+    except (OSError, ValueError):  # ValueError: a NUL byte in the path
+        return None
+
+
+def _data_refusal(f: BinaryIO, tags: tiff_header.DirectoryTags | None) -> str | None:
+    """Why the first directory (its ``tags`` read, :data:`_DATA_TAGS`) of the TIFF ``f`` does not hold its image:
+    a strip or tile running past the file's end, or one uncompressed holding fewer bytes than it needs
+    (:func:`_bytes_needed`); None where it does, or for a directory whose strips cannot be read (libtiff refuses
+    those itself)."""
+    data = None if tags is None else tiff_header.image_data_in(tags)
+    if data is None:
+        return None
+    size = f.seek(0, 2)
+    for number, (offset, count) in enumerate(zip(data.offsets, data.counts), start=1):
+        if offset + count > size:
+            return f"its {data.kind} {number} runs past the file's end (to byte {offset + count} of {size}): cut short"
+    needed = _bytes_needed(tags, data)
+    for number, count in enumerate(data.counts, start=1):
+        if needed is not None and count < needed[number - 1]:
+            return (f"its {data.kind} {number} holds {count} of the {needed[number - 1]} bytes its pixels need "
+                    f"(uncompressed): OpenCV would deliver the rest black")
+    return None
+
+
+def _single(tags: tiff_header.DirectoryTags, tag: int, default: int | None = None) -> int | None:
+    """A tag's one value; ``default`` where it is absent; None where it has several."""
+    entry = tags.get(tag)
+    if entry is None:
+        return default
+    return entry.values[0] if len(entry.values) == 1 else None
+
+
+def _bytes_needed(tags: tiff_header.DirectoryTags, data: tiff_header.ImageData) -> list[int] | None:
+    """How many bytes each uncompressed strip or tile holds at least: its rows (a strip's, the last one's fewer;
+    a tile's, all of them) of its samples (one plane's where the samples are in separate planes). None where the
+    data is compressed (its size is the codec's), the header does not say, or there is one strip: libtiff then
+    takes a byte count too small for a wrong one and reads the rows the file holds (checked in session 66)."""
+    width, height = _single(tags, tiff_header.WIDTH), _single(tags, tiff_header.HEIGHT)
+    samples, planar = _single(tags, _SAMPLES, 1), _single(tags, _PLANAR, 1)
+    bits = tags.get(tiff_header.BITS_PER_SAMPLE)
+    if (_single(tags, tiff_header.COMPRESSION, _UNCOMPRESSED) != _UNCOMPRESSED or None in (width, height, samples,
+            planar) or bits is None or not width or not height or (not data.tiled and len(data.counts) == 1)):
+        return None
+    chunk_samples = 1 if planar == _SEPARATE_PLANES else samples
+    if data.tiled:
+        tile_width, tile_length = _single(tags, _TILE_WIDTH), _single(tags, _TILE_LENGTH)
+        if not tile_width or not tile_length:
+            return None
+        return [(tile_width * chunk_samples * max(bits.values) + 7) // 8 * tile_length] * len(data.counts)
+    rows_per_strip = min(_single(tags, _ROWS_PER_STRIP, height) or height, height)
+    row_bytes = (width * chunk_samples * max(bits.values) + 7) // 8
+    strips_a_plane = -(-height // rows_per_strip)
+    return [min(rows_per_strip, height - (n % strips_a_plane) * rows_per_strip) * row_bytes
+            for n in range(len(data.counts))]
+
+
 def _samples_wider_than(tags: tiff_header.DirectoryTags, bits: int) -> bool:
     """Whether a TIFF whose first directory's ``tags`` were read gives samples of more than ``bits`` bits; False
     for a header that cannot be read."""
@@ -145,12 +223,16 @@ def samples_not_8_bit(path: str | os.PathLike) -> str | None:
 def unread_because(path: str | os.PathLike, flags: int) -> str | None:
     """Why :func:`read_image_or_none` gave None for ``path`` read with ``flags``, where the file is a valid image
     OpenCV does not read so: "it is a TIFF of Compression 34712 (JPEG 2000), ..." (:func:`tiff_compression_refusal`),
-    or, read to 8 bits, "it has float32 samples (...)" (:func:`samples_not_8_bit`); None for a corrupt, missing or
-    unknown file. The one place for every caller's error: ZJU-MoCap's frames were "missing or unreadable" whatever the
-    cause. Call it once the read failed: the sample check decodes the file again."""
+    a TIFF whose strips do not hold its image: "its strip 2 runs past the file's end ..." (:func:`tiff_data_refusal`),
+    or, read to 8 bits, "it has float32 samples (...)" (:func:`samples_not_8_bit`); None for a file corrupt
+    otherwise, missing or unknown. The one place for every caller's error: ZJU-MoCap's frames were "missing or
+    unreadable" whatever the cause. Call it once the read failed: the sample check decodes the file again."""
     compression = tiff_compression_refusal(path)
     if compression is not None:
         return f"it is {compression}"
+    data = tiff_data_refusal(path)
+    if data is not None:
+        return data
     samples = samples_not_8_bit(path) if _decodes_to_8_bits(flags) else None
     return None if samples is None else f"it has {samples}"
 

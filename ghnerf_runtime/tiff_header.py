@@ -21,8 +21,10 @@ from dataclasses import dataclass
 from typing import BinaryIO
 
 __all__ = [
-    "BITS_PER_SAMPLE", "COMPRESSION", "HEIGHT", "LAYOUTS", "ORIENTATION", "UPRIGHT", "DirectoryTags", "TiffEntry",
-    "TiffLayout", "WIDTH", "first_directory", "first_directory_end", "orientation_reset", "read_tags", "upright_reset",
+    "BITS_PER_SAMPLE", "COMPRESSION", "HEIGHT", "LAYOUTS", "ORIENTATION", "UPRIGHT", "DirectoryTags", "ImageData",
+    "IMAGE_DATA_TAGS", "TiffEntry", "TiffLayout", "WIDTH", "first_directory", "first_directory_end", "image_data_in",
+    "orientation_reset",
+    "read_tags", "upright_reset",
 ]
 
 #: The tags read here: ImageWidth, ImageLength, BitsPerSample, Compression, Orientation.
@@ -111,20 +113,51 @@ def first_directory(f: BinaryIO, layout: TiffLayout, tags: frozenset[int]) -> di
     return None if unread else found
 
 
-def read_tags(f: BinaryIO, tags: frozenset[int]) -> DirectoryTags | None:
+def read_tags(f: BinaryIO, tags: frozenset[int], unlimited: frozenset[int] = frozenset()) -> DirectoryTags | None:
     """The entries of ``tags`` in the first directory of ``f`` (at its start), each read as :func:`first_directory`
-    reads it alone (none where the directory cannot be read); None where ``f`` is no TIFF."""
+    reads it alone (none where the directory cannot be read), those ``unlimited`` of any number of values (a
+    strip's offsets, one a strip: read within the file's length); None where ``f`` is no TIFF."""
     layout = LAYOUTS.get(f.read(4))
     if layout is None:
         return None
-    walked = _walk_tags(f, layout, tags)
+    walked = _walk_tags(f, layout, tags, unlimited)
     found, unread = walked if walked is not None else ({}, set())
     return DirectoryTags(layout, {tag: entry for tag, entry in found.items() if tag not in unread})
 
 
-def _walk_tags(f: BinaryIO, layout: TiffLayout, tags: frozenset[int]) -> tuple[dict[int, TiffEntry], set[int]] | None:
+@dataclass(frozen=True)
+class ImageData:
+    """Where a TIFF's first directory's image data is: each strip's or tile's offset and byte count."""
+
+    tiled: bool
+    offsets: tuple[int, ...]
+    counts: tuple[int, ...]
+
+    @property
+    def kind(self) -> str:
+        return "tile" if self.tiled else "strip"
+
+
+#: The tags giving where the image data is (StripOffsets, StripByteCounts, TileOffsets, TileByteCounts): read
+#: with :func:`read_tags` among its ``unlimited`` (one value a strip or tile), for :func:`image_data_in`.
+IMAGE_DATA_TAGS = _IMAGE_DATA_TAG_SET
+
+
+def image_data_in(tags: DirectoryTags) -> ImageData | None:
+    """The strips or tiles of a first directory whose :data:`IMAGE_DATA_TAGS` were read (``unlimited``); None
+    where they were not read or do not pair up (libtiff refuses such a directory)."""
+    for tiled, (offsets_tag, counts_tag) in zip((False, True), _IMAGE_DATA_TAGS):
+        offsets, counts = tags.get(offsets_tag), tags.get(counts_tag)
+        if offsets is not None and counts is not None and len(offsets.values) == len(counts.values):
+            return ImageData(tiled, offsets.values, counts.values)
+    return None
+
+
+def _walk_tags(f: BinaryIO, layout: TiffLayout, tags: frozenset[int],
+               unlimited: frozenset[int] = frozenset()) -> tuple[dict[int, TiffEntry], set[int]] | None:
     """The entries of ``tags`` in the first directory (``f`` just past the byte order and version), and the tags
-    that cannot be read (repeated, not of unsigned integers, values cut short); None where the directory cannot."""
+    that cannot be read (repeated, not of unsigned integers, values cut short, more than :data:`MOST_VALUES` but
+    for those ``unlimited``); None where the directory cannot."""
     directory = _first_directory_entries(f, layout)
     if directory is None:
         return None
@@ -136,7 +169,8 @@ def _walk_tags(f: BinaryIO, layout: TiffLayout, tags: frozenset[int]) -> tuple[d
         if tag not in tags or tag in unread:
             continue
         field_at = at + layout.entry_head_size
-        values = _integers(f, layout, kind, number, entries[field_at:at + layout.entry_size])
+        most = None if tag in unlimited else MOST_VALUES
+        values = _integers(f, layout, kind, number, entries[field_at:at + layout.entry_size], most)
         if values is None or tag in found:
             unread.add(tag)
             continue

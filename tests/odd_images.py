@@ -1,10 +1,13 @@
 """Image files OpenCV treats oddly, built byte by byte (no files from elsewhere)."""
 from __future__ import annotations
 
+import io
 import struct
 
 import cv2
 import numpy as np
+
+from ghnerf_runtime import tiff_header
 
 #: OpenCV's default limit on a decoded image's side (CV_IO_MAX_IMAGE_WIDTH/HEIGHT)
 OPENCV_MAX_SIDE = 1 << 20
@@ -205,3 +208,21 @@ def _move_item_data(out: bytearray, iloc_at: int, shift: int) -> None:
             at += index_size
             struct.pack_into(code, out, at, struct.unpack_from(code, out, at)[0] + shift)
             at += offset_size + length_size
+
+
+#: A 64x64 image: OpenCV writes it in two strips (42 rows, then 22), whatever the compression.
+STRIPS_IMAGE = np.random.default_rng(66).integers(1, 256, (64, 64, 3), np.uint8)
+
+
+def tiff_with_strip_count(compression: int, strip: int, count_of) -> bytes:
+    """:data:`STRIPS_IMAGE` as OpenCV writes a TIFF of ``compression``, strip ``strip`` (from 0)'s byte count set to
+    ``count_of(count, file size, offset)``, in place (SHORT or LONG, in the entry or where it points)."""
+    data = bytearray(cv2.imencode(".tiff", STRIPS_IMAGE, [cv2.IMWRITE_TIFF_COMPRESSION, compression])[1].tobytes())
+    tags = tiff_header.read_tags(io.BytesIO(bytes(data)), tiff_header.IMAGE_DATA_TAGS,
+                                 unlimited=tiff_header.IMAGE_DATA_TAGS)
+    offsets, counts = tags.get(273), tags.get(279)
+    code = "<H" if counts.kind == 3 else "<I"
+    size = struct.calcsize(code)
+    at = counts.field_at if size * len(counts.values) <= 4 else struct.unpack_from("<I", data, counts.field_at)[0]
+    struct.pack_into(code, data, at + size * strip, count_of(counts.values[strip], len(data), offsets.values[strip]))
+    return bytes(data)

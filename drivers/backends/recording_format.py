@@ -21,6 +21,7 @@ import re
 import struct
 import zipfile
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -39,6 +40,7 @@ from ghnerf_runtime.image_files import (
     read_image_or_none,
     samples_not_8_bit,
     tiff_compression_refusal,
+    tiff_data_refusal,
 )
 from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
@@ -279,9 +281,20 @@ def drop_broken_rows(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameR
     fsync the rows a power cut tore need not be the last ones: every broken row is dropped, wherever it is.
     A ``complete: true`` take promises whole files, so there any broken row is reported when it is opened.
     """
-    kept = [row for row in rows
-            if all(payload_is_whole(directory / rel) for rel in (row.image, row.truth) if rel is not None)]
-    return kept, len(rows) - len(kept)
+    kept, dropped = broken_rows_split(directory, rows)
+    return kept, len(dropped)
+
+
+def broken_rows_split(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], list[FrameRow]]:
+    """``rows`` split into those whose files are whole and those whose image (:func:`image_is_whole`) or truth
+    (:func:`payload_is_whole`) is missing, empty or cut short, each in journal order: the dropped ones are named
+    in replay's warning."""
+    kept, dropped = [], []
+    for row in rows:
+        whole = image_is_whole(directory / row.image) and (row.truth is None
+                                                           or payload_is_whole(directory / row.truth))
+        (kept if whole else dropped).append(row)
+    return kept, dropped
 
 
 def file_is_whole(path: Path) -> bool:
@@ -292,12 +305,22 @@ def file_is_whole(path: Path) -> bool:
         return False
 
 
+#: How a payload file is told whole from its start: its open file and its size.
+_WholeCheck = Callable[[BinaryIO, int], bool]
+
 #: How each payload file ends, and how far from its end that starts: PNG's IEND chunk (empty: its length, type
 #: and CRC), JPEG's end-of-image marker, the npz's zip end-of-central-directory record (no archive comment is
 #: written). A BMP, TIFF or WebP has no end mark: its header says how long it is (:data:`_WALKS`).
 _PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
 _TRAILERS = {".png": (_PNG_END, len(_PNG_END)), ".jpg": (b"\xff\xd9", 2), ".jpeg": (b"\xff\xd9", 2),
              ".npz": (b"PK\x05\x06", 22)}
+
+
+def image_is_whole(path: Path) -> bool:
+    """:func:`payload_is_whole` for an image, where a suffix it does not know (``.jpe``, ``.dib``, ``.pam``, ``.pfm``,
+    ``.sr``, ``.exr``, ``.hdr``, ``.jp2``, ``.gif``, ...) is whole where the file decodes (:func:`_decodes`): a
+    file cut short was only checked for being there and not empty, then played and a corrupt frame."""
+    return _is_whole(path, _decodes)
 
 
 def payload_is_whole(path: Path) -> bool:
@@ -310,10 +333,17 @@ def payload_is_whole(path: Path) -> bool:
     end marker is whole where its segments also reach its first scan, and where more scans follow its scans reach
     it too (:data:`_END_CONFIRMS`): one cut at the end of an EXIF thumbnail, or in a segment between a progressive
     JPEG's scans, may end on the same bytes. A BMP, TIFF or WebP is whole when it is as long as its header
-    says. The suffix is matched whatever its case (``.JPG``).
+    says. The suffix is matched whatever its case (``.JPG``). Another suffix: there and not empty
+    (:func:`image_is_whole` decodes such an image).
     """
+    return _is_whole(path, None)
+
+
+def _is_whole(path: Path, unknown_suffix: _WholeCheck | None) -> bool:
+    """:func:`payload_is_whole`, a file of a suffix it does not know checked by ``unknown_suffix`` (else there and
+    not empty)."""
     suffix = path.suffix.lower()
-    trailer, walk = _TRAILERS.get(suffix), _WALKS.get(suffix)
+    trailer, walk = _TRAILERS.get(suffix), _WALKS.get(suffix, unknown_suffix)
     if trailer is None and walk is None:
         return file_is_whole(path)
     try:
@@ -488,18 +518,19 @@ def _pnm_holds_its_pixels(f: BinaryIO, size: int) -> bool:
     height samples (one or three, of two bytes where maxval is 256 or more; a PBM's rows of bits padded to a byte),
     from right after the one whitespace byte ending its header, as OpenCV reads it. Numbers follow whitespace and
     ``#`` comments. An ASCII one (P1 to P3), or one whose header runs past :data:`_PNM_HEADER_MOST`, is whole
-    where it is not empty: its length cannot be told from its header."""
+    where it decodes (:func:`_decodes`): its length cannot be told from its header, and OpenCV 5.0 decodes none
+    cut short (a sample cut in its digits, or the separator after the last one lost: None)."""
     head = f.read(_PNM_HEADER_MOST)
     magic = head[:2]
     if magic in _PNM_ASCII:
-        return size > 0
+        return _decodes(f, size)
     if magic not in _PNM_SAMPLES:
         return False
     numbers, at = [], 2
     for _ in range(2 if magic == b"P4" else 3):  # width, height (and maxval, but for a PBM)
         token = _PNM_TOKEN.match(head, at)
-        if token is None:
-            return len(head) == _PNM_HEADER_MOST  # cut in its header, unless too long a header to read
+        if token is None:  # cut in its header, unless too long a header to read
+            return len(head) == _PNM_HEADER_MOST and _decodes(f, size)
         numbers.append(int(token.group(1)))
         at = token.end()  # past the one whitespace byte after the number
     return size >= at + _pnm_pixel_bytes(magic, numbers)
@@ -512,6 +543,16 @@ def _pnm_pixel_bytes(magic: bytes, numbers: list[int]) -> int:
         return (width + 7) // 8 * height
     sample_bytes = 2 if numbers[2] >= _PNM_BYTES_16_BIT_MAXVAL else 1
     return width * height * _PNM_SAMPLES[magic] * sample_bytes
+
+
+def _decodes(f: BinaryIO, size: int) -> bool:
+    """Whether an image whose length its header does not give (an ASCII PNM) or whose format is not walked here
+    decodes, as :func:`load_image` decodes it from memory: the whole file is read and decoded, so only for those.
+    OpenCV 5.0 decodes none of these cut short (checked in session 66 for ASCII PNM, Sun raster, Radiance HDR,
+    JPEG 2000, GIF, PAM, PFM, ``.jpe`` and ``.dib`` cut at half, 90%, 99% and one byte short)."""
+    f.seek(0)
+    data = np.frombuffer(f.read(), np.uint8)
+    return data.size > 0 and decode_image_or_none(data, _DECODE_FLAGS) is not None
 
 
 def _avif_holds_its_item_data(f: BinaryIO, size: int) -> bool:
@@ -617,6 +658,9 @@ def load_image(path: Path) -> np.ndarray:
         compression = tiff_compression_refusal(path)
         if compression is not None:
             raise RefusedLayoutError(f"recording image {path} does not decode: it is {compression}")
+        data = tiff_data_refusal(path)
+        if data is not None:
+            raise RigOperationError(f"recording image {path} is corrupt: {data}")
         samples = samples_not_8_bit(path)  # a valid float TIFF was called corrupt
         if samples is not None:
             raise RigOperationError(f"recording image {path} does not decode: it has {samples}")

@@ -30,7 +30,7 @@ pass shifts timestamps by the recording's span (plus one frame period: the media
 successive distinct stamps, else 1/30 s) and indices by the
 per-camera index span (last - first + 1), so both keep increasing per camera. A take that was not closed cleanly plays without the rows
 whose files are missing, empty or cut short
-(:func:`~drivers.backends.recording_format.drop_broken_rows`). Layout and
+(:func:`~drivers.backends.recording_format.broken_rows_split`; the warning names the first). Layout and
 validation: docs/recording-format.md.
 
 Image sizes: a take with any image of another size than its rig camera's (every image measured at
@@ -59,7 +59,7 @@ from drivers.backends.recording_format import (
     Manifest,
     RefusedLayoutError,
     UndecodableImageError,
-    drop_broken_rows,
+    broken_rows_split,
     file_is_whole,
     image_size,
     load_image,
@@ -260,10 +260,12 @@ class ReplayRigSource(RigSource):
         manifest = read_manifest(directory)
         rows = read_rows(directory, manifest)
         if not manifest.complete:
-            rows, broken = drop_broken_rows(directory, rows)
+            rows, broken = broken_rows_split(directory, rows)
             if broken:
+                first = broken[0]
                 log.warning("recording %s: dropped %d journal row(s) whose files are missing, empty or cut short "
-                            "(written after the last flush before the take was cut short)", directory, broken)
+                            "(written after the last flush before the take was cut short), first: %s line %d "
+                            "(image %s)", directory, len(broken), directory / FRAMES, first.line, first.image)
             log.warning("recording %s was not closed cleanly; playing the %d frames it holds", directory, len(rows))
         return cls(
             directory, manifest, rows, speed=speed, loop=loop, keep_time=keep_time,

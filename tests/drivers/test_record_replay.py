@@ -28,13 +28,21 @@ from drivers.backends.recording_format import (
     FRAMES,
     MANIFEST,
     encode_image,
+    image_is_whole,
     load_image,
     payload_is_whole,
     read_manifest,
 )
 from benchmarks import time_replay_open
 from drivers.url import RigUrl
-from tests.odd_images import bmp_built, riff_chunk, tiff_entries, tiff_laid_out, webp_extended
+from tests.odd_images import (
+    bmp_built,
+    riff_chunk,
+    tiff_entries,
+    tiff_laid_out,
+    tiff_with_strip_count,
+    webp_extended,
+)
 
 SIM = "sim://?width=40&height=30&jitter_ms=1.5&offset_ms=2&drop=0.1&seed=8&policy=all"
 
@@ -814,13 +822,58 @@ def test_pnm_and_avif_suffixes_are_checked_whatever_their_case(tmp_path, name):
         assert payload_is_whole(path) == whole, (len(cut), len(data))
 
 
-def test_an_ascii_pnm_is_whole_where_it_is_not_empty_and_a_header_too_long_to_read_is_not_checked(tmp_path):
-    """P1 to P3 give no length: cut or not, they are checked for being there and not empty only; so is a binary
-    one whose header (its comments) runs past the 4096 bytes read."""
+def ascii_pnms() -> dict[str, bytes]:
+    """A 16x12 image as ASCII PPM, PGM and PBM (P3, P2, P1) as OpenCV writes them (each sample followed by a space
+    or a line end)."""
+    image = np.random.default_rng(15).integers(0, 256, (12, 16, 3), np.uint8)
+    plain = [cv2.IMWRITE_PXM_BINARY, 0]
+    return {".ppm": cv2.imencode(".ppm", image, plain)[1].tobytes(),
+            ".pgm": cv2.imencode(".pgm", image[:, :, 0], plain)[1].tobytes(),
+            ".pbm": cv2.imencode(".pbm", image[:, :, 0], plain)[1].tobytes()}
+
+
+@pytest.mark.parametrize("suffix", sorted(ascii_pnms()))
+def test_an_ascii_pnm_cut_short_is_not_whole(tmp_path, suffix):
+    """P1 to P3 give no length: before session 66 any not empty was whole (a take cut short played its last frame,
+    then a corrupt frame). Now decoded: cut after every byte, whole exactly where OpenCV decodes it (the whole file,
+    or all but bytes after the last sample's separator), and never where a sample is lost."""
+    data = ascii_pnms()[suffix]
+    path = tmp_path / f"image{suffix}"
+    for end in range(1, len(data) + 1):
+        path.write_bytes(data[:end])
+        decodes = cv2.imdecode(np.frombuffer(data[:end], np.uint8), cv2.IMREAD_COLOR) is not None
+        assert payload_is_whole(path) == decodes, end
+    assert payload_is_whole(path)
+    path.write_bytes(data[:-3])  # the last sample cut in its digits (P1: lost)
+    assert not payload_is_whole(path)
+
+
+def test_a_binary_pnm_whose_header_is_too_long_to_read_is_whole_where_it_decodes(tmp_path):
+    """A header of comments past the 4096 bytes read: decoded, not taken as whole (its pixels lost: not whole)."""
     path = tmp_path / "image.ppm"
-    long_header = b"P6\n" + b"#" * 5000 + b"\n40 30\n255\n"
-    for data in (b"P3\n2 1\n255\n0 0 0 255 255 255\n", b"P3\n2 1\n25", long_header, long_header[:4500]):
+    long_header = b"P6\n" + b"#" * 5000 + b"\n4 3\n255\n"
+    for data, whole in ((long_header + bytes(36), True), (long_header + bytes(35), False), (long_header, False),
+                        (long_header[:4500], False)):
         path.write_bytes(data)
+        assert payload_is_whole(path) == whole, len(data)
+
+
+#: Formats OpenCV writes whose suffix no walk here knows: each is whole where it decodes (image_is_whole).
+RARER_SUFFIXES = (".sr", ".ras", ".pam", ".pfm", ".hdr", ".jp2", ".gif", ".jpe", ".dib")
+
+
+@pytest.mark.parametrize("suffix", RARER_SUFFIXES)
+def test_an_image_of_a_rarer_suffix_cut_short_is_not_whole(tmp_path, suffix):
+    """Before session 66 such a file was whole where not empty: now an image is decoded (image_is_whole); a truth
+    file (payload_is_whole) of another suffix is still checked for being there and not empty only."""
+    image = np.random.default_rng(16).integers(0, 256, (48, 64, 3), np.uint8)  # (JPEG 2000: at least 32x32)
+    data = cv2.imencode(suffix, image.astype(np.float32) / 255 if suffix in (".pfm", ".hdr") else image)[1].tobytes()
+    path = tmp_path / f"image{suffix}"
+    path.write_bytes(data)
+    assert image_is_whole(path)
+    for end in (len(data) // 2, len(data) - 1):
+        path.write_bytes(data[:end])
+        assert not image_is_whole(path), end
         assert payload_is_whole(path)
 
 
@@ -909,6 +962,21 @@ def test_an_interrupted_take_plays_other_tools_files_with_a_trailer_and_drops_on
     cut.write_bytes(cut.read_bytes()[:-30])  # its last pixels (PNG: its image data's end, CRC and IEND)
     assert _frames_played_when_interrupted(copy_of_take, caplog) == len(rows) - 1
     assert "dropped 1 journal row(s)" in caplog.text
+
+
+@pytest.mark.parametrize("suffix", [".ppm", ".sr", ".pam"])
+def test_an_interrupted_take_drops_its_last_frame_cut_short_in_a_rarer_format_naming_it(copy_of_take, caplog,
+                                                                                       suffix):
+    """A take cut short by a power loss, its files ASCII PPMs (or Sun raster, PAM), its last frame's file cut
+    short: before session 66 played, then a corrupt frame at its end; dropped now, the warning naming it (the user
+    replays what the take holds, as for a PNG cut short: the frame was never whole)."""
+    params = [cv2.IMWRITE_PXM_BINARY, 0] if suffix == ".ppm" else []
+    as_take_of(copy_of_take, suffix, lambda image: cv2.imencode(suffix, image, params)[1].tobytes())
+    rows = journal(copy_of_take)
+    last = max(rows, key=lambda row: row["index"])["image"]
+    (copy_of_take / last).write_bytes((copy_of_take / last).read_bytes()[:-3])
+    assert _frames_played_when_interrupted(copy_of_take, caplog) == len(rows) - 1
+    assert "dropped 1 journal row(s)" in caplog.text and f"(image {last})" in caplog.text
 
 
 def test_complete_is_marked_only_once_the_take_is_on_disk(tmp_path, sim_cache, monkeypatch):
@@ -1280,3 +1348,14 @@ def test_the_recording_doc_quotes_the_refusal_of_a_resized_take_as_open_words_it
         assert made_up in quoted, made_up
         quoted = quoted.replace(made_up, here)
     assert quoted == str(info.value)
+
+
+def test_a_recorded_tiff_whose_uncompressed_strip_is_short_is_a_corrupt_frame_naming_the_strip(tmp_path):
+    """Session 66: OpenCV 5.0 delivered it with its last rows black (a frame of wrong pixels, no error); load_image
+    refuses it from its header, naming the file and the strip."""
+    path = tmp_path / "00000003.tiff"
+    path.write_bytes(tiff_with_strip_count(1, 1, lambda count, size, offset: count - 1))
+    with pytest.raises(RigOperationError) as info:
+        load_image(path)
+    assert str(info.value) == (f"recording image {path} is corrupt: its strip 2 holds 4223 of the 4224 bytes its "
+                               f"pixels need (uncompressed): OpenCV would deliver the rest black")

@@ -40,8 +40,8 @@ def uncompressed_tagged(compression: int) -> bytes:
 
 def test_each_compression_opencv_writes_is_one_it_decodes():
     """cv2.imwrite writes none, LZW, JPEG, both deflates and PackBits (and LZW where asked for DNG's lossy JPEG or
-    JPEG XL); an OpenCV built with more codecs (LZMA, Zstandard, WebP, ...) writes those too, and its DECODED must
-    then grow."""
+    JPEG XL); an OpenCV built with more codecs (LZMA, Zstandard, WebP, ...) writes those too: one probed (WebP) is
+    then decoded() by the probe, another must join the probes."""
     written = set()
     with opencv_silent():
         for compression in sorted(tiff_compression.NAMES):
@@ -50,8 +50,8 @@ def test_each_compression_opencv_writes_is_one_it_decodes():
                 if ok and tiff_entries(data.tobytes())[259][1] == (compression,) \
                         and cv2.imdecode(data, cv2.IMREAD_COLOR) is not None:
                     written.add(compression)
-    assert written == {1, 5, 7, 8, 32773, 32946}
-    assert written <= tiff_compression.DECODED
+    assert written - set(tiff_compression.PROBED) == {1, 5, 7, 8, 32773, 32946}  # (5.1 writes WebP too)
+    assert written <= tiff_compression.decoded()
 
 
 def test_opencv_reads_a_tiff_of_a_compression_it_has_no_codec_for_as_an_image_of_zeros():
@@ -66,14 +66,14 @@ def test_opencv_reads_a_tiff_of_a_compression_it_has_no_codec_for_as_an_image_of
 
 
 def test_no_compression_outside_decoded_decodes_and_none_inside_it_is_read_as_zeros():
-    """Every Compression value (65536), on a small uncompressed TIFF: one outside DECODED never gives the image
+    """Every Compression value (65536), on a small uncompressed TIFF: one outside decoded() never gives the image
     (None, or zeros: refusing it loses nothing), and one inside it that cv2.imwrite does not write fails on 8-bit
     data (None: CCITT fax is 1-bit, ThunderScan 4-bit, NeXT 2-bit, SGILog LogLuv), never an image of zeros."""
     black, decoded_as_zeros = [], []
     with opencv_silent():
         for compression in range(1 << 16):
             image = cv2.imdecode(np.frombuffer(uncompressed_tagged(compression), np.uint8), cv2.IMREAD_COLOR)
-            if compression not in tiff_compression.DECODED:
+            if compression not in tiff_compression.decoded():
                 if image is not None and image.any():
                     black.append(compression)
             elif compression not in (1, 5, 7, 8, 32773, 32946) and image is not None:
@@ -92,4 +92,56 @@ def test_a_compression_not_decoded_is_refused_by_number_and_name(compression, sa
 
 
 def test_a_compression_decoded_is_not_refused():
-    assert all(tiff_compression.refusal(compression) is None for compression in tiff_compression.DECODED)
+    assert all(tiff_compression.refusal(compression) is None for compression in tiff_compression.decoded())
+
+
+# ------------------------------------------------------------------ optional codecs, probed (session 66)
+@pytest.fixture
+def fresh_probe():
+    """:func:`tiff_compression.decoded` probed anew in the test (its cache cleared before and after it)."""
+    tiff_compression.decoded.cache_clear()
+    yield
+    tiff_compression.decoded.cache_clear()
+
+
+@pytest.mark.parametrize(("compression", "packed"), [
+    (1, lambda strip: strip), (8, __import__("zlib").compress)], ids=["none", "deflate"])
+def test_the_probe_s_tiff_layout_decodes_under_a_built_in_codec(compression, packed):
+    """The WebP sample's layout (one 8-bit RGB strip, built byte by byte) with a codec every build has decodes to
+    the probe's image: where a build fails the WebP sample, it is the codec it lacks, not the layout."""
+    image = tiff_compression._probe_image()
+    strip = packed(image[..., ::-1].tobytes())  # stored RGB
+    assert tiff_compression.decodes_sample(tiff_compression.single_strip_rgb_tiff(8, 8, compression, strip))
+
+
+def test_webp_is_decoded_exactly_where_the_installed_build_decodes_the_probe_s_sample(fresh_probe):
+    """OpenCV 5.0.0 (the wheel installed in session 66) lacks libtiff's WebP codec: refused, its message saying so.
+    A build including it (5.1) decodes the sample and accepts 50001; either way the probe and the build agree."""
+    build_decodes = cv2.imdecode(np.frombuffer(tiff_compression.webp_sample(), np.uint8), cv2.IMREAD_COLOR) is not None
+    assert (50001 in tiff_compression.decoded()) == build_decodes
+    if not build_decodes:
+        assert "built without that codec" in tiff_compression.refusal(50001)
+
+
+def test_a_build_whose_probe_decodes_webp_accepts_it(fresh_probe, monkeypatch):
+    """Faked where the installed build lacks the codec: a probe that decodes the sample makes 50001 decoded (not
+    refused), and leaves the compressions no probe names refused."""
+    monkeypatch.setattr(tiff_compression, "decodes_sample", lambda sample: bool(sample))
+    assert 50001 in tiff_compression.decoded() and tiff_compression.refusal(50001) is None
+    assert tiff_compression.refusal(34712) is not None and tiff_compression.refusal(50000) is not None
+
+
+def test_a_build_whose_probe_fails_refuses_webp_naming_the_codec_it_lacks(fresh_probe, monkeypatch):
+    monkeypatch.setattr(tiff_compression, "decodes_sample", lambda sample: False)
+    assert tiff_compression.refusal(50001) == (
+        f"a TIFF of Compression 50001 (WebP), which OpenCV {cv2.__version__}'s libtiff does not decode (its libtiff "
+        f"was built without that codec, as a decode of a sample showed; an OpenCV build that includes it decodes "
+        f"the file as it is): rewrite it uncompressed or with LZW, deflate or PackBits")
+
+
+def test_the_probe_runs_once_a_process(fresh_probe, monkeypatch):
+    probes = []
+    monkeypatch.setattr(tiff_compression, "decodes_sample", lambda sample: probes.append(sample) or False)
+    for _ in range(3):
+        tiff_compression.refusal(50001)
+    assert tiff_compression.refusal(1) is None and len(probes) == len(tiff_compression.PROBED)
