@@ -3,6 +3,7 @@
     PYTHONPATH=$PWD /work/main/.venv/bin/python benchmarks/measure_exchanged_cameras.py [--model-dir models]
                                                                    [--sequences 10] [--frames 30] [--window 30]
                                                                    [--heading-deg 180] [--rig higher|toed-in|wide]
+                                                                   [--only 25 ...]
 
 The simulator films the bench's held-out-like scenes (``ghnerf-bench runtime``'s recipe and cache: held-out motions,
 random rig placements, every rig symmetric about its centre plane, both cameras aimed at one point). Each sequence is
@@ -12,14 +13,17 @@ handedness (``PairResult.handedness``: +1 a person, -1 a mirror image; the pairs
 ``--window`` consecutive figures of one sequence, and per sequence the daemon's three calibration checks run over its
 pairs (:mod:`firmware_host.daemon.calibration_watch`, the daemon's limits, a ``--window`` window each): the
 sequences each flagged, and for the handedness check the pairs read until it did. Only sequences with a full window
-of handedness figures are judged (the daemon waits for a full window). A tool, not a test.
+of handedness figures are judged (the daemon waits for a full window). Last, the pairs' heel peaks as filmed, by the
+way the true person faces (a heel at the presence threshold in both views gives no figure since session 66:
+``ghnerf_runtime.handedness.BACK_JOINTS``). A tool, not a test.
 
 ``--heading-deg`` and ``--rig`` render the same scenes afresh (no cache), each person turned to that heading (180: their
 back to the rig for the whole take; the motion's own turns stay) or filmed by another rig than the bench's: ``higher``
 raises the second camera 0.3 m (both still aimed at one point: the rig is no longer a mirror image of itself),
 ``toed-in`` turns the second camera 8 degrees further towards the first's side, ``wide`` is the bench's rig at a 1.2 m
 baseline (symmetric). ``--face-seen`` counts only the figures of pairs whose nose and an eye peaked at the presence
-threshold in both views.
+threshold in both views. ``--only`` renders just the bench sequences named (afresh), in place of the first
+``--sequences``: a long take of one scene without the others'.
 """
 from __future__ import annotations
 
@@ -102,6 +106,22 @@ def run_sequence(est: Estimator, seq, exchanged: bool) -> list:
 
 
 NOSE, EYES = JOINT_INDEX["Nose"], (JOINT_INDEX["REye"], JOINT_INDEX["LEye"])
+HEELS = (JOINT_INDEX["LHeel"], JOINT_INDEX["RHeel"])
+FACING_COS = 0.5  # a person "faces the rig" (or away) with the torso turned within 60 degrees of it
+
+
+def true_facing_z(joints: np.ndarray) -> float:
+    """The depth part of the way a true skeleton's torso faces (unit; -1: straight at the rig, +1: its back to it),
+    from the hips' left and the neck's up as ``ghnerf_runtime.handedness`` reads them."""
+    J = JOINT_INDEX
+    facing = np.cross(joints[J["LHip"]] - joints[J["RHip"]], joints[J["Neck"]] - joints[J["MidHip"]])
+    return float(facing[2] / np.linalg.norm(facing))
+
+
+def heel_peak(result) -> float:
+    """The stronger heel's peak in the view where it is weaker: what ``handedness.BACK_JOINTS`` reads (at the
+    presence threshold in both views, a pair gives no figure)."""
+    return min(max(float(c[j]) for j in HEELS) for c in result.confidence_2d.values())
 
 
 def face_seen(result, threshold: float) -> bool:
@@ -143,16 +163,21 @@ def main(argv=None) -> int:
     ap.add_argument("--heading-deg", type=float, help="render afresh, every person turned so (180: back to the rig)")
     ap.add_argument("--rig", choices=RIGS, default="bench", help="render afresh on this rig (module docstring)")
     ap.add_argument("--face-seen", action="store_true", help="count only pairs with the nose and an eye seen")
+    ap.add_argument("--only", type=int, nargs="+", metavar="K", help="render afresh just these bench sequences")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir))
     session = load_session(cfg)
     threshold = cfg.presence.threshold(cfg.heatmaps.source)
     tally = {s: {"found": [], "err": [], "hands": [], "rolled": [], "pairs": 0, "judged": 0, "flags": [],
                  "flagged_at": []} for s in SETTINGS}
-    if args.heading_deg is None and args.rig == "bench":
+    heels = {"facing the rig": [], "facing away": []}  # the heel peaks of the pairs as filmed, by the true facing
+    if args.only:
+        args.sequences = len(args.only)  # (the summary's counts are over the sequences run)
+    if args.heading_deg is None and args.rig == "bench" and not args.only:
         sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache)
     else:
-        sequences = (render_variant(k, args.frames, args.heading_deg, args.rig) for k in range(args.sequences))
+        indices = args.only or range(args.sequences)
+        sequences = (render_variant(k, args.frames, args.heading_deg, args.rig) for k in indices)
     for seq in sequences:
         line = (f"  sequence {seq.info['index']:3d} ({seq.info['motion']}, {seq.info['distance_m']:.2f} m away, "
                 f"baseline {seq.info['baseline_m']:.2f} m):")
@@ -165,6 +190,11 @@ def main(argv=None) -> int:
                 acc["found"].append(int(ok.sum()))
                 acc["err"] += list(1000 * np.linalg.norm(r.joints_3d[ok] - seq.joints_3d[i][ok], axis=1))
             acc["pairs"] += len(results)
+            if setting == "as filmed":
+                for i, r in enumerate(results):
+                    z = true_facing_z(seq.joints_3d[i])
+                    if abs(z) >= FACING_COS:
+                        heels["facing away" if z > 0 else "facing the rig"].append(heel_peak(r))
             if args.face_seen:
                 results = [r if face_seen(r, threshold) else _without_figure(r) for r in results]
             verdict = judge(results, args.window)
@@ -182,6 +212,7 @@ def main(argv=None) -> int:
     scenes = "" if args.heading_deg is None else f", heading {args.heading_deg:g} deg"
     scenes += "" if args.rig == "bench" else f", rig {args.rig}"
     scenes += ", pairs with the face seen only" if args.face_seen else ""
+    scenes += f", sequences {' '.join(map(str, args.only))} only" if args.only else ""
     print(f"{args.sequences} held-out-like sequences x {args.frames} pairs{scenes}, {args.model_dir}, windows of "
           f"{args.window} figures (handedness: +1 a person, -1 a mirror image; limit -{CALIBRATION_MAX_MIRROR:g}):")
     print(f"  {'setting':>9} | 3D joints | MPJPE mm | pairs with a figure | per pair: median   p10   p90 | windows: "
@@ -197,6 +228,12 @@ def main(argv=None) -> int:
         print(f"  {setting:>9} | {np.mean(acc['found']):5.1f}/25 | {mpjpe} | {h.size:5d}/{acc['pairs']:<5d}"
               f"       | {' ' * 9}{per} | {' ' * 5}{rolled} | {acc['judged']:8d}/{args.sequences:<7d} | "
               f"{counts:>34} | {' ' * 9}{when}")
+    print(f"  heel peaks as filmed (the stronger heel in its weaker view; limit {threshold:g} in both views gives no "
+          f"figure), by the true facing within {np.degrees(np.arccos(FACING_COS)):.0f} degrees:")
+    for facing, peaks in heels.items():
+        p = (f"median {np.median(peaks):.2f}, p10 {np.percentile(peaks, 10):.2f}, p90 {np.percentile(peaks, 90):.2f}, "
+             f"{np.mean(np.asarray(peaks) >= threshold):.0%} at the limit" if peaks else "-")
+        print(f"    {facing:>14}: {len(peaks):5d} pairs, {p}")
     return 0
 
 

@@ -248,8 +248,10 @@ class PairResult:
             from peaks of at least the presence threshold in both views, near the body), not the skeleton prior's
             (which answers a person whatever the triangulation). Negative over a window when the two cameras' inputs are
             exchanged on a symmetric rig (the daemon watches it: docs/calibration.md, "Cameras exchanged").
-            ``None``: too few torso joints or no nose or toes so found, nobody, a frame rejected, or two people in
-            view (``several_people``: the joints may be both people's). Not in :meth:`to_json` (not streamed).
+            ``None``: too few torso joints or no nose or toes so found, a heel so found (since session 66: the
+            person's back to the rig, where the model may read a back as a front, a mirror image), nobody, a frame
+            rejected, or two people in view (``several_people``: the joints may be both people's). Not in
+            :meth:`to_json` (not streamed).
     """
 
     sequence: int

@@ -20,7 +20,7 @@ import numpy as np
 
 from ghnerf_runtime.body25 import JOINT_INDEX
 
-__all__ = ["handedness", "LEFTWARD_PAIRS", "FORWARD_CUES"]
+__all__ = ["handedness", "LEFTWARD_PAIRS", "FORWARD_CUES", "BACK_JOINTS"]
 
 _J = JOINT_INDEX
 #: (a, b) pairs whose ``a - b`` points to the person's left: the shoulders and hips, through the neck and the mid-hip
@@ -45,6 +45,15 @@ FORWARD_CUES: tuple[tuple[tuple[int, ...], tuple[int, ...]], ...] = (
     ((_J["RBigToe"], _J["RSmallToe"]), (_J["RAnkle"],)),
     ((_J["LBigToe"], _J["LSmallToe"]), (_J["LAnkle"],)),
 )
+#: Joints the model finds only on a person's back: a heel at the presence threshold in both views shows the cameras the
+#: backs of the feet (on the bench's 30-pair takes none of 240 pairs of a person facing the rig had one, 63 % of 326
+#: facing away and 95 % of 900 with the back to the rig did). There the model reads a back as a front in some takes,
+#: left and right the other way round with a nose on the back of the head: a true mirror image on a true rig (a
+#: 300-pair take with the back to the rig was flagged after 35 pairs, its windows -0.34 to -0.01; of four such takes
+#: exchanged one was flagged, two read above 0). Such a pair gives no figure rather than a wrong one:
+#: ``benchmarks/measure_exchanged_cameras.py --sequences 30 --frames 30 [--heading-deg 180]`` and ``--only 10 11 25 28
+#: --frames 300 --heading-deg 180``, session 66 (docs/calibration.md, "Cameras exchanged").
+BACK_JOINTS: tuple[int, ...] = (_J["LHeel"], _J["RHeel"])
 #: Shortest span (metres) given a direction: joints closer than a micrometre are one point (a repeated peak).
 _TINY_M = 1e-6
 
@@ -84,7 +93,8 @@ def handedness(points: np.ndarray, found: np.ndarray) -> float | None:
     direction ``left x up`` (the rig frame is x right, y down, z forward: right-handed): the cosine between them,
     times the sine of the angle between the unit left and up axes (a skewed torso reads weaker). Within [-1, 1]
     (clipped: a cue straight ahead read 1 + 2e-16 by rounding, which ``PairResult`` refused). ``None`` when the
-    torso gives no axes or no cue is found.
+    torso gives no axes or no cue is found, or when a heel is (:data:`BACK_JOINTS`: the person's back to the rig, where
+    the model's left and right and its nose are not to be trusted).
 
     Args:
         points: ``(25, 3)`` BODY_25 joints, metres.
@@ -99,6 +109,8 @@ def handedness(points: np.ndarray, found: np.ndarray) -> float | None:
         >>> round(handedness(P, ok), 2), round(handedness(P * [1, 1, -1], ok), 2)  # and its mirror in depth
         (0.71, -0.71)
     """
+    if any(found[j] for j in BACK_JOINTS):
+        return None
     axes = _body_axes(points, found)
     if axes is None:
         return None

@@ -233,6 +233,16 @@ def test_measure_exchanged_cameras_with_the_person_facing_away_and_the_face_gate
     assert "1 held-out-like sequences x 2 pairs, heading 180 deg, pairs with the face seen only" in out, out
 
 
+def test_measure_exchanged_cameras_one_named_sequence_and_the_heel_peaks(model, capsys, monkeypatch):
+    """--only renders just the bench sequences named (a long take of one scene); the heel peaks (what gives no figure
+    since session 66) are printed by the true facing."""
+    out = run_script("measure_exchanged_cameras", "--model-dir", model, "--only", "25", "--frames", "2", "--window",
+                     "2", "--heading-deg", "180", "--per-sequence", capsys=capsys, monkeypatch=monkeypatch)
+    assert "1 held-out-like sequences x 2 pairs, heading 180 deg, sequences 25 only" in out, out
+    assert re.search(r"^  sequence +25 \(", out, re.M) and not re.search(r"^  sequence +0 \(", out, re.M), out
+    assert re.search(r"^ +facing away: +2 pairs, median ", out, re.M), out
+
+
 @pytest.mark.parametrize("kind", ["higher", "toed-in", "wide"])
 def test_measure_exchanged_cameras_rigs_change_the_second_camera_only(kind):
     """--rig: the first camera stays the bench's; ``higher`` raises the second by RAISE_M still aimed at the target,
