@@ -143,6 +143,7 @@ def test_a_person_with_their_back_to_the_rig_gives_no_mirror_figures():
     from dataclasses import replace
 
     from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+    from ghnerf_runtime.config import EstimatorConfig, SessionConfig
     from ghnerf_runtime.estimator import Estimator, load_session
 
     cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), warmup=False))
