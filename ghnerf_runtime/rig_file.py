@@ -113,10 +113,11 @@ STANDING_PERSON_M = 1.8
 #: the pair must show before loading warns that the person does not fit the view (their head or feet cut). Measured
 #: with the simulator's rig through a 50-degree lens, the pair 4 degrees apart (``benchmarks/measure_baseline.py``,
 #: docs/rig-file.md "A person who does not fit the view"): 0.62 of the height in view (the subject 1.5 m ahead) lost
-#: 67 % of the pairs (no joint at all), 0.81 (2 m) 38 %, the whole height (2.5 m: 5 %; 3 m: none); through 80-130-degree
-#: lenses the whole height was in view from 1.5 m on. Not higher: ``ghcal synth``'s rig (calibration.render.example_rig)
-#: shows 0.84 (its head cut), and a shipped rig is not warned of; the bench's simulated placements (2000 of
-#: ``RigPlacement.random``) show 0.97 at least, the example rig and the simulator's default the whole height.
+#: 67 % of the pairs (no joint at all), 0.78 (2 m) 38 %, 0.97 (2.5 m) 5 %, the whole height (3 m) none; through
+#: 80-130-degree lenses the whole height was in view from 1.5 m on. Not higher: ``ghcal synth``'s rig
+#: (calibration.render.example_rig) shows 0.84 (its head cut), and a shipped rig is not warned of; the bench's
+#: simulated placements (2000 of ``RigPlacement.random``) show 0.97 at least, the example rig and the simulator's
+#: default the whole height.
 MIN_PERSON_IN_VIEW_SHARE = 0.75
 #: Points along the standing person's height that :func:`person_in_view_share` projects: every 5 cm of 1.8 m.
 _PERSON_SAMPLES = 37
