@@ -107,7 +107,7 @@ CAMERA_HEIGHT_RANGE_M = (0.05, 10.0)
 #: 507 mm (``benchmarks/measure_baseline.py``): the skeleton prior reads each joint's height above y = 0.
 MAX_VOLUME_FLOOR_GAP_M = 0.5
 #: Height (metres) of the standing person whose view :func:`person_in_view_share` judges: a tall adult (the simulator's
-#: people are 1.6-2.0 m), standing on the working volume's floor at its centre.
+#: people are 1.6-2.0 m), standing on the floor (y = 0) at the working volume's centre (:func:`standing_person`).
 STANDING_PERSON_M = 1.8
 #: Smallest share of :data:`STANDING_PERSON_M`'s height, standing at the working volume's centre, that each camera of
 #: the pair must show before loading warns that the person does not fit the view (their head or feet cut). Measured
