@@ -2,7 +2,7 @@
 
     PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_baseline.py [--model-dir models] [--sequences 4]
         [--frames 8] [--baselines 0.02,0.03,0.04,0.06,0.1,0.2,0.6 | --angles 0.5,1,2] [--distances 3]
-        [--hfovs 80] [--lifts 0,1,3,50]
+        [--hfovs 80] [--rigs docs/examples/rig.json] [--lifts 0,1,3,50]
 
 The simulator's default rig (``drivers.sim.RigPlacement()``: 640x480, 80 degrees, 1.3 m high, both cameras aimed
 at the subject ``--distances`` ahead) with the pair's centres moved to each baseline, filming the bench's held-out
@@ -13,11 +13,14 @@ compare the same pair angle (session 66: does ``load_rig``'s 1-degree bound, mea
 for others?). Each (distance, lens, baseline, sequence) runs cold in its own estimator, the runtime's defaults
 (``EstimatorConfig()``). It prints per row that angle (``rig_file.pair_angle_deg``: what ``load_rig``'s narrow-pair
 warning reads, docs/rig-file.md), the depth one pixel of disparity moves a point at the working distance
-(``depth_per_disparity_px``), the MPJPE of the joints found, the share of joints found and the share of pairs with
-no 3D joint at all. ``RigPlacement`` refuses baselines under 5 cm, so the cameras are placed here as it places
-them. Then, per ``--lifts`` (``""``: none), the default rig (its own baseline, 1.2 m; the first distance, 80 degrees)
-with its frame moved that many metres up (cameras and working volume alike, the same images): the floor no longer
-at y = 0, where the runtime reads it (``load_rig``'s camera height warning). A tool, not a test.
+(``depth_per_disparity_px``), how a person standing at the volume's centre is framed (``framing_cells``: the share
+of their height in view, what ``load_rig``'s framing warning reads, and their height in image and model pixels), the
+MPJPE of the joints found, the share of joints found and the share of pairs with no 3D joint at all; ``--rigs``
+adds a row per rig file, its own pair filming the same people drawn in its own working volume. ``RigPlacement``
+refuses baselines under 5 cm, so the cameras are placed here as it places them. Then, per ``--lifts`` (``""``:
+none), the default rig (its own baseline, 1.2 m; the first distance, 80 degrees) with its frame moved that many
+metres up (cameras and working volume alike, the same images): the floor no longer at y = 0, where the runtime
+reads it (``load_rig``'s camera height warning). A tool, not a test.
 """
 from __future__ import annotations
 
@@ -34,7 +37,8 @@ from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, look_at  # noqa: E402
 from ghnerf_runtime.metrics import mpjpe  # noqa: E402
-from ghnerf_runtime.rig_file import pair_angle_deg  # noqa: E402
+from ghnerf_runtime.preprocess import roi_from_volume  # noqa: E402
+from ghnerf_runtime.rig_file import load_rig, pair_angle_deg, person_in_view_share, standing_person  # noqa: E402
 
 
 def rig_with_baseline(baseline_m: float, distance_m: float, hfov_deg: float = 80.0) -> Rig:
@@ -107,6 +111,21 @@ def score_cells(runs) -> str:
     return f"{value} | {found.mean():.3f} | {float((~found.any(axis=1)).mean()):.3f}"
 
 
+def framing_cells(rig: Rig, model_px: int) -> str:
+    """The framing cells of a row, each the pair's worse camera: the share of a standing person's height at the working
+    volume's centre inside the image (``rig_file.person_in_view_share``: what ``load_rig``'s warning reads), that
+    person's height in image pixels (pinhole) and in the model's input pixels through the cold-start crop (the volume
+    projected, ``roi_from_volume``, resized to the model's ``model_px``: what a pair with no track sees)."""
+    share = min(person_in_view_share(cam, rig.volume) for cam in rig.pair)
+    heights = []
+    for cam in rig.pair:
+        feet_head = cam.project(standing_person(rig.volume, samples=2), distort=False)[0]
+        heights.append(float(np.linalg.norm(feet_head[1] - feet_head[0])))
+    crops = [roi_from_volume(cam, rig.volume).size for cam in rig.pair]
+    in_model = min(h * model_px / size for h, size in zip(heights, crops))
+    return f"{share:.2f} | {min(heights):.0f} | {in_model:.0f}"
+
+
 def floats(text: str) -> list[float]:
     """A comma-separated list of numbers ("" is none)."""
     return [float(v) for v in text.split(",") if v.strip()]
@@ -125,6 +144,20 @@ def baseline_rows(args) -> list[tuple[float, float, float]]:
     return rows
 
 
+def print_rig_files(args, session, cfg) -> None:
+    """The table of ``--rigs``: each rig file's own pair, framing and scores on the same people."""
+    paths = [p for p in args.rigs.split(",") if p.strip()]
+    if not paths:
+        return
+    print("\n| rig file | standing person in view, share | person tall, image px | person tall in the cold crop, "
+          "model px | MPJPE mm | joints found | pairs with no joint |")
+    print("|---|---|---|---|---|---|---|")
+    for path in paths:
+        rig = load_rig(path)
+        runs = [run_sequence(session, cfg, rig, k, args.frames) for k in range(args.sequences)]
+        print(f"| {path} | {framing_cells(rig, session.contract.width)} | {score_cells(runs)} |", flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", default="models")
@@ -139,6 +172,8 @@ def main(argv=None) -> int:
     ap.add_argument("--angles", default="", help="instead of --baselines: the pair's angle at the working volume's "
                                                  "centre, degrees, comma-separated (each distance and lens its own "
                                                  "baselines)")
+    ap.add_argument("--rigs", default="", help="rig files whose own pair films the same people (drawn in each file's "
+                                               "working volume), comma-separated: one row each (\"\": none)")
     ap.add_argument("--lifts", default="0,1,3,50", help="metres the default rig's frame is moved up, comma-separated "
                                                         "(\"\": no such table)")
     args = ap.parse_args(argv)
@@ -147,14 +182,16 @@ def main(argv=None) -> int:
     print(f"{args.sequences} held-out-like sequences x {args.frames} frames, {args.precision}, the simulator's "
           "default rig (640x480), each sequence cold")
     print("| subject ahead, m | lens hfov, degrees | focal, px | baseline m | rays' angle at the volume's centre, "
-          "degrees | depth per px of disparity at the subject, m | MPJPE mm | joints found | pairs with no joint |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "degrees | depth per px of disparity at the subject, m | standing person in view, share | person tall, "
+          "image px | person tall in the cold crop, model px | MPJPE mm | joints found | pairs with no joint |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for distance, hfov, baseline in baseline_rows(args):
         rig = rig_with_baseline(baseline, distance, hfov)
         runs = [run_sequence(session, cfg, rig, k, args.frames) for k in range(args.sequences)]
         print(f"| {distance:g} | {hfov:g} | {rig.pair[0].K[0, 0]:.0f} | {baseline:.3g} | "
               f"{pair_angle_deg(rig, rig.volume.center):.2f} | {depth_per_disparity_px(rig, distance):.3f} | "
-              f"{score_cells(runs)} |", flush=True)
+              f"{framing_cells(rig, session.contract.width)} | {score_cells(runs)} |", flush=True)
+    print_rig_files(args, session, cfg)
     lifts = floats(args.lifts)
     if not lifts:
         return 0

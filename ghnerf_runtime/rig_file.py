@@ -106,6 +106,21 @@ CAMERA_HEIGHT_RANGE_M = (0.05, 10.0)
 #: missing. The rig frame moved 1 m up (cameras 2.3 m high: no height warning) gave 142 mm MPJPE against 30 mm, 3 m up
 #: 507 mm (``benchmarks/measure_baseline.py``): the skeleton prior reads each joint's height above y = 0.
 MAX_VOLUME_FLOOR_GAP_M = 0.5
+#: Height (metres) of the standing person whose view :func:`person_in_view_share` judges: a tall adult (the simulator's
+#: people are 1.6-2.0 m), standing on the floor (y = 0) at the working volume's centre (:func:`standing_person`).
+STANDING_PERSON_M = 1.8
+#: Smallest share of :data:`STANDING_PERSON_M`'s height, standing at the working volume's centre, that each camera of
+#: the pair must show before loading warns that the person does not fit the view (their head or feet cut). Measured
+#: with the simulator's rig through a 50-degree lens, the pair 4 degrees apart (``benchmarks/measure_baseline.py``,
+#: docs/rig-file.md "A person who does not fit the view"): 0.62 of the height in view (the subject 1.5 m ahead) lost
+#: 67 % of the pairs (no joint at all), 0.78 (2 m) 38 %, 0.97 (2.5 m) 5 %, the whole height (3 m) none; through
+#: 80-130-degree lenses the whole height was in view from 1.5 m on. Not higher: ``ghcal synth``'s rig
+#: (calibration.render.example_rig) shows 0.84 (its head cut), and a shipped rig is not warned of; the bench's
+#: simulated placements (2000 of ``RigPlacement.random``) show 0.97 at least, the example rig and the simulator's
+#: default the whole height.
+MIN_PERSON_IN_VIEW_SHARE = 0.75
+#: Points along the standing person's height that :func:`person_in_view_share` projects: every 5 cm of 1.8 m.
+_PERSON_SAMPLES = 37
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
 _TOP_OPTIONAL = ("metadata",)
@@ -138,6 +153,11 @@ __all__ = [
     "CAMERA_HEIGHT_RANGE_M",
     "volume_floor_warning",
     "MAX_VOLUME_FLOOR_GAP_M",
+    "standing_person",
+    "person_in_view_share",
+    "person_outside_view_warning",
+    "STANDING_PERSON_M",
+    "MIN_PERSON_IN_VIEW_SHARE",
     "PRINCIPAL_POINT_TOLERANCE",
     "MAX_DISTORTION",
     "MAX_SKEW_SHARE",
@@ -385,13 +405,16 @@ def _rig_from_dict(data: Any, *, path: str | os.PathLike | None, warn: bool) -> 
 
 def rig_warnings(rig: Rig) -> list[str]:
     """What loading warns of in a rig it accepts: a lens model folding inside its image, a pair too narrow for its
-    working distance, a camera at an implausible height above the floor."""
+    working distance, a camera at an implausible height above the floor, a working volume off the floor, a person
+    standing at the volume's centre who does not fit the pair's views."""
     out = [lens_fold_warning(cam) for cam in rig.cameras if cam.fold_inside_image()]
     if narrow := narrow_pair_warning(rig):
         out.append(narrow)
     out.extend(filter(None, (camera_height_warning(cam) for cam in rig.cameras)))
     if floor := volume_floor_warning(rig):
         out.append(floor)
+    elif outside := person_outside_view_warning(rig):  # (a volume off the floor holds no one standing: said above)
+        out.append(outside)
     return out
 
 
@@ -434,6 +457,42 @@ def volume_floor_warning(rig: Rig) -> str | None:
             f"{MAX_VOLUME_FLOOR_GAP_M:g} m, MAX_VOLUME_FLOOR_GAP_M): a person standing on the floor is outside it, "
             "their joints missing, and the skeleton prior reads heights from y = 0. Is the origin on the floor, y "
             "pointing down? A standing person's volume reaches y = 0 (docs/examples/rig.json: -2.2 to 0.05)")
+
+
+def standing_person(volume: WorkingVolume, samples: int = _PERSON_SAMPLES) -> np.ndarray:
+    """``(samples, 3)`` points from the feet to the head of a :data:`STANDING_PERSON_M` person standing at ``volume``'s
+    centre's x and z on the floor (y = 0, y down), or on the volume's nearest y to it where the volume does not reach
+    the floor (then within :data:`MAX_VOLUME_FLOOR_GAP_M` of it, or :func:`volume_floor_warning` speaks)."""
+    centre = volume.center
+    feet = min(max(0.0, float(volume.min_corner[1])), float(volume.max_corner[1]))
+    heights = np.linspace(0.0, STANDING_PERSON_M, samples)
+    return np.stack([np.full(samples, centre[0]), feet - heights, np.full(samples, centre[2])], axis=-1)
+
+
+def person_in_view_share(cam: Camera, volume: WorkingVolume) -> float:
+    """The share of the height of a person standing at ``volume``'s centre (:func:`standing_person`) that lies inside
+    ``cam``'s image, lens model included (a point behind the camera or past the lens's fold counts as outside)."""
+    uv, _ = cam.project(standing_person(volume))
+    with np.errstate(invalid="ignore"):  # NaN pixels: outside
+        inside = ((uv[:, 0] >= -0.5) & (uv[:, 0] <= cam.width - 0.5)
+                  & (uv[:, 1] >= -0.5) & (uv[:, 1] <= cam.height - 0.5))
+    return float(inside.mean())
+
+
+def person_outside_view_warning(rig: Rig) -> str | None:
+    """Why a person standing at the working volume's centre does not fit the pair's views (under
+    :data:`MIN_PERSON_IN_VIEW_SHARE` of their height inside a camera's image), naming each such camera, or None."""
+    shares = [(cam.name, person_in_view_share(cam, rig.volume)) for cam in rig.pair]
+    cut = [f"camera {name!r} shows {share:.0%} of their height" for name, share in shares
+           if share < MIN_PERSON_IN_VIEW_SHARE]
+    if not cut:
+        return None
+    centre = rig.volume.center
+    return (f"a {STANDING_PERSON_M:g} m person standing at the working volume's centre (x {centre[0]:.2f}, z "
+            f"{centre[2]:.2f} m) does not fit the view: {'; '.join(cut)} (under {MIN_PERSON_IN_VIEW_SHARE:.0%}, "
+            "MIN_PERSON_IN_VIEW_SHARE), so their cut joints are missing and whole pairs may have none (docs/rig-file.md, "
+            "\"A person who does not fit the view\"). Move the cameras farther from the volume, fit wider lenses or aim "
+            "the cameras at the volume's centre")
 
 
 def camera_height_warning(cam: Camera) -> str | None:

@@ -51,3 +51,17 @@ def test_the_command_line_takes_angles_distances_and_lenses(tiny_model_dir, scra
     assert "| 3 | 110 | 224 | 0.0526 | 1.00 | 0.764 |" in out, out
     assert "| 5 | 110 | 224 | 0.0874 | 1.00 | 1.277 |" in out, out
     assert "frame moved up" not in out, out
+
+
+def test_the_command_line_prints_the_framing_and_takes_rig_files(tiny_model_dir, scratch_cache, capsys,  # noqa: F811
+                                                                 monkeypatch):
+    """The framing columns (docs/rig-file.md, "A person who does not fit the view"): through a 50-degree lens at
+    1.5 m a standing person shows 62 % of their height, 783 pixels tall; ``--rigs`` adds the example rig's row."""
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "rig.json"
+    out = run_script("measure_baseline", "--model-dir", str(tiny_model_dir), "--sequences", "1", "--frames", "1",
+                     "--distances", "1.5", "--hfovs", "50", "--angles", "4", "--rigs", str(example), "--lifts", "",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert "| 1.5 | 50 | 686 | 0.107 | 4.00 | 0.031 | 0.62 | 783 | " in out, out
+    assert f"| {example} | 1.00 | 517 | " in out, out
