@@ -490,9 +490,9 @@ def person_outside_view_warning(rig: Rig) -> str | None:
     centre = rig.volume.center
     return (f"a {STANDING_PERSON_M:g} m person standing at the working volume's centre (x {centre[0]:.2f}, z "
             f"{centre[2]:.2f} m) does not fit the view: {'; '.join(cut)} (under {MIN_PERSON_IN_VIEW_SHARE:.0%}, "
-            "MIN_PERSON_IN_VIEW_SHARE), so their cut joints are missing and whole pairs may have none (docs/rig-file.md, "
-            "\"A person who does not fit the view\"). Move the cameras farther from the volume, fit wider lenses or aim "
-            "the cameras at the volume's centre")
+            "MIN_PERSON_IN_VIEW_SHARE), so their cut joints are missing and whole pairs may have none "
+            "(docs/rig-file.md, \"A person who does not fit the view\"). Move the cameras farther from the volume, "
+            "fit wider lenses or aim the cameras at the volume's centre")
 
 
 def camera_height_warning(cam: Camera) -> str | None:
