@@ -62,7 +62,11 @@ sight discounted for the depth error), against ``MIXED_TORSO_SLACK_M``: docs/two
 ``--scan-every-s SECONDS`` sets ``presence.scan_every_s`` (the whole working volume scanned for anyone besides the
 tracked subject, ``PairResult.someone_else``; 0.001 scans every tracked pair): each row adds the pairs scanned and
 those that said someone else is there, and ``--one-person-model``'s line the same (docs/two-people.md, "Anyone else
-near?", session 64).
+near?", session 64). Since session 66 a row with the second person also says where the scans' crops put them
+(:class:`ScanWatch`, :func:`second_in_scan`, :func:`own_peaks`): their joints inside the subject's blanked cells, their
+distance in heatmap cells from the first person's same joint, and the joints whose maps show a peak of their own
+(what the scan misses a person behind the subject for); a row of one person, the joints whose maps show a peak away
+from their own joint (what a cue of peaks beside the subject would find with nobody else there).
 
 With ``--calibration`` it measures the daemon's calibration figures (``lowest_foot_m``, ``reprojection_px_median``)
 on two people's pairs against the reported person's alone at the same instants, the rig file's second camera turned
@@ -85,6 +89,7 @@ from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # n
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS  # noqa: E402
 from ghnerf_runtime.config import PICK_SUBJECT_RULES, SKELETON_PRIOR_MODES, EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, joints_shown_twice, load_session  # noqa: E402
+from ghnerf_runtime.others_scan import box_cells, subject_box  # noqa: E402
 from ghnerf_runtime.two_people import MIXED_TORSO_SLACK_M, TORSO_LIMBS_M  # noqa: E402
 
 #: A reported joint this close to a person's is theirs (m).
@@ -118,6 +123,61 @@ def torso_spread(excess: list) -> str:
             f"mixed_torso reads it (along the line of sight over two_people.depth_scale): median {np.median(read):+.2f}"
             f", max {read.max():+.2f} m, {over} over the {MIXED_TORSO_SLACK_M:g} m slack"
             + ("" if over else f", the least margin under it {MIXED_TORSO_SLACK_M - read.max():.2f} m"))
+
+
+#: ``--scan-every-s``: a scan's peak this close to a person's joint (heatmap cells) is theirs.
+OWN_PEAK_CELLS = 1.5
+
+
+def second_in_scan(P: np.ndarray, box: np.ndarray, stride: int, first: np.ndarray,
+                   second: np.ndarray) -> tuple[int, float]:
+    """Where a scan's crop (camera ``P``, ``(3, 4)``, heatmap cells of ``stride`` pixels) shows the second person:
+    how many of ``second``'s joints (``(J, 3)``) project into the subject's blanked cells (``box``, the scan's
+    :func:`~ghnerf_runtime.others_scan.subject_box`; :func:`~ghnerf_runtime.others_scan.box_cells`), and the median
+    distance in cells between each of their joints and ``first``'s same joint: a person the scan cannot tell,
+    blanked out, or their peaks within a Gaussian's reach of the subject's (``--scan-every-s``)."""
+    u0, v0, u1, v1 = box_cells(P, box, stride)
+    uv = [project_cells(P, joints, stride) for joints in (first, second)]
+    inside = (uv[1][:, 0] >= u0) & (uv[1][:, 0] < u1 + 1) & (uv[1][:, 1] >= v0) & (uv[1][:, 1] < v1 + 1)
+    return int(inside.sum()), float(np.median(np.linalg.norm(uv[0] - uv[1], axis=1)))
+
+
+def own_peaks(heat: np.ndarray, first_cells: np.ndarray, second_cells: np.ndarray, threshold: float) -> int:
+    """How many joints of one view's scan heatmaps ``(J, H, W)`` show a peak of the second person's own: a local
+    maximum (of its 3 x 3 cells) of at least ``threshold`` within :data:`OWN_PEAK_CELLS` of their joint
+    (``second_cells``, ``(J, 2)`` in cells: :func:`project_cells`) and farther than that from the first's
+    (``first_cells``); a peak both people share is not theirs."""
+    peaks = strong_peaks(heat, threshold)
+    near_second, near_first = near_cells(heat.shape, second_cells), near_cells(heat.shape, first_cells)
+    return int((peaks & near_second & ~near_first).any(axis=(1, 2)).sum())
+
+
+def peaks_away(heat: np.ndarray, cells: np.ndarray, threshold: float) -> int:
+    """How many joints of one view's scan heatmaps ``(J, H, W)`` show a peak (as :func:`own_peaks`) farther than
+    :data:`OWN_PEAK_CELLS` from the one person's joint (``cells``, ``(J, 2)``): on one person alone, what a cue of
+    peaks outside the subject's own joints would find with nobody else there."""
+    return int((strong_peaks(heat, threshold) & ~near_cells(heat.shape, cells)).any(axis=(1, 2)).sum())
+
+
+def strong_peaks(heat: np.ndarray, threshold: float) -> np.ndarray:
+    """``(J, H, W)``: the cells of ``heat`` at least ``threshold`` and as high as any of their 3 x 3 neighbours."""
+    J, H, W = heat.shape
+    padded = np.pad(np.asarray(heat, np.float32), ((0, 0), (1, 1), (1, 1)), constant_values=-np.inf)
+    around = np.max([padded[:, dy:dy + H, dx:dx + W] for dy in range(3) for dx in range(3)], axis=0)
+    return (heat >= around) & (heat >= threshold)
+
+
+def near_cells(shape: tuple, cells: np.ndarray) -> np.ndarray:
+    """``(J, H, W)``: the cells (their centres) within :data:`OWN_PEAK_CELLS` of each joint's ``cells`` ``(J, 2)``."""
+    _, H, W = shape
+    rows, cols = np.mgrid[0:H, 0:W] + 0.5  # cell centres, as the cells' coordinates count them
+    return np.hypot(cols[None] - cells[:, 0, None, None], rows[None] - cells[:, 1, None, None]) <= OWN_PEAK_CELLS
+
+
+def project_cells(P: np.ndarray, points: np.ndarray, stride: int) -> np.ndarray:
+    """``(J, 2)``: ``points`` ``(J, 3)`` through the crop camera ``P`` ``(3, 4)``, in heatmap cells."""
+    p = np.concatenate([np.asarray(points, np.float64), np.ones((len(points), 1))], axis=1) @ np.asarray(P).T
+    return p[:, :2] / p[:, 2:] / stride
 
 
 def hidden_behind(front: np.ndarray, back: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -245,6 +305,38 @@ class SubjectPairings:
         raise LookupError(f"pair {result.sequence}: none of its {len(self.passes)} passes is the one reported")
 
 
+class ScanWatch:
+    """What a pair's ``presence.scan_every_s`` scan looked at: its crops' cameras (``crops_P``, ``(2, 3, 4)``), their
+    heatmaps (``heat``, ``(2, J, H, W)``) and the subject's box it blanked (``box``), None where the pair did not
+    scan. Installs itself on ``est``."""
+
+    def __init__(self, est) -> None:
+        self.crops_P: np.ndarray | None = None
+        self.heat: np.ndarray | None = None
+        self.box: np.ndarray | None = None
+        scan, volume = est._scan_for_others, est._volume_heatmaps
+
+        def scanning(images, p, *a, **k):
+            self.box = subject_box(p.j3.points, p.j3.valid) if p.j3 is not None else None
+            return scan(images, p, *a, **k)
+
+        def reading(images):
+            heat, crops = volume(images)
+            if heat is not None:
+                self.crops_P = np.stack([np.asarray(c.P, np.float64) for c in crops])
+                self.heat = np.asarray(heat, np.float32)
+            return heat, crops
+
+        est._scan_for_others, est._volume_heatmaps = scanning, reading
+
+    def clear(self) -> None:
+        self.crops_P = self.heat = self.box = None
+
+    def looked(self) -> bool:
+        """Whether this pair's scan ran the keypoint graph on the subject's box (a due scan on a tracked pair)."""
+        return self.crops_P is not None and self.box is not None
+
+
 def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = EstimatorConfig(), swap: bool = False,
             places: tuple = PLACES, model_dir: str | None = None,
             second: bool = True, occlude: bool = False) -> tuple[dict[str, float], int]:
@@ -275,7 +367,8 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
         config = replace(config, session=replace(config.session, model_dir=model_dir))
         session = load_session(config)  # once: every scene's estimator shares it
     counts = {"reported": 0, "first": 0, "second": 0, "neither": 0, "nearer_mm": 0.0, "flagged": 0,
-              "scanned": 0, "someone_else": 0,
+              "scanned": 0, "someone_else": 0, "scan_inside": np.zeros(2), "scan_apart": [], "scan_own": np.zeros(2),
+              "scan_alone": 0, "scan_away": np.zeros(2),
               "flagged_joints": 0, "flagged_mm": 0.0,
               "followed_first": 0, "followed_second": 0, "stable": 0,
               "passes": 0, "twice_view0": 0, "twice_view1": 0, "twice_both": 0, "hidden_view0": 0.0,
@@ -315,6 +408,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 return decide(kp, held)
 
             est.subject_selector.several_people = counting
+            scan = ScanWatch(est)  # what this pair's scan looked at (its crops and the subject's box)
             pairings = SubjectPairings(est)  # the subject's joints from their own pairings, the reported pass's
             for i in range(alone + pairs):
                 t = i / 30.0
@@ -330,6 +424,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 else:  # the model sees both: each person over the first's room, the nearer one's pixel in front
                     images = tuple(sim.render_people((first, other), c, t) for c in rig.pair)
                 pairings.passes.clear()
+                scan.clear()
                 r = est.estimate(images, timestamp_s=t)
                 if i < alone:
                     continue
@@ -350,6 +445,20 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 counts["flagged"] += int(r.several_people)
                 counts["scanned"] += int(r.someone_else is not None)
                 counts["someone_else"] += int(bool(r.someone_else))
+                if not together and scan.looked():  # one person: their maps' peaks away from their own joints
+                    counts["scan_alone"] += 1
+                    for v, P in enumerate(scan.crops_P):
+                        own = project_cells(P, a, est.contract.heatmap_stride)
+                        counts["scan_away"][v] += peaks_away(scan.heat[v], own, config.presence.threshold("encoder"))
+                if together and scan.looked():
+                    for v, P in enumerate(scan.crops_P):
+                        inside, apart_cells = second_in_scan(P, scan.box, est.contract.heatmap_stride, a, b)
+                        counts["scan_inside"][v] += inside
+                        counts["scan_apart"].append(apart_cells)
+                        stride = est.contract.heatmap_stride
+                        counts["scan_own"][v] += own_peaks(scan.heat[v], project_cells(P, a, stride),
+                                                           project_cells(P, b, stride),
+                                                           config.presence.threshold("encoder"))
                 if r.several_people:  # the subject's alone: its pairings' (the prior's fed their peaks, with it)
                     counts["flagged_joints"] += int(found.sum())
                     counts["flagged_mm"] += float(nearer[found].sum()) * 1000.0
@@ -560,8 +669,19 @@ def scanned(counts: dict, pairs: int) -> str:
     """The row's ``presence.scan_every_s`` figures: pairs scanned (a ``someone_else`` answer) and those saying yes."""
     if not counts["scanned"]:
         return ""
+    looked = len(counts.get("scan_apart", ())) // 2
+    where = "" if not looked else (
+        f"; the second person's joints inside the subject's blanked cells, per scan, view 0 "
+        f"{counts['scan_inside'][0] / looked:.1f}, view 1 {counts['scan_inside'][1] / looked:.1f} of 25, each joint "
+        f"{np.median(counts['scan_apart']):.1f} cells from the first's (median), with a peak of their own "
+        f"(within {OWN_PEAK_CELLS:g} cells of theirs, not of the first's) view 0 {counts['scan_own'][0] / looked:.1f}, "
+        f"view 1 {counts['scan_own'][1] / looked:.1f}")
+    alone = counts.get("scan_alone", 0)
+    if alone:
+        where += (f"; the joints with a peak away from the person's own (farther than {OWN_PEAK_CELLS:g} cells), per "
+                  f"scan, view 0 {counts['scan_away'][0] / alone:.1f}, view 1 {counts['scan_away'][1] / alone:.1f}")
     return (f"; someone_else on {counts['someone_else']} of {counts['scanned']} pairs with a scan's answer "
-            f"({counts['someone_else'] / counts['scanned']:.0%}; {pairs} pairs)")
+            f"({counts['someone_else'] / counts['scanned']:.0%}; {pairs} pairs)" + where)
 
 
 def main(argv=None) -> int:

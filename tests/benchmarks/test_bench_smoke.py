@@ -508,10 +508,14 @@ def test_measure_two_people(capsys, monkeypatch):
 def test_measure_two_people_counts_the_scan_s_answers(capsys, monkeypatch):
     # docs/two-people.md, "Anyone else near?" (session 64): --scan-every-s adds each row's pairs with a scan's answer
     # and those saying someone else is there; the oracle's second person a metre beside is told on every pair after
-    # the cold start's (which starts the scan clock: no answer)
+    # the cold start's (which starts the scan clock: no answer); since session 66 also where the scans' crops put the
+    # second person: inside the subject's blanked cells or not, and how far from the subject's joints
     out = run_script("measure_two_people", "--scenes", "1", "--pairs", "3", "--alone", "0", "--scan-every-s", "0.001",
                      capsys=capsys, monkeypatch=monkeypatch)
-    assert re.search(r"^3 pairs of two people .*; someone_else on 2 of 2 pairs with a scan's answer \(100%; 3 pairs\)$",
+    assert re.search(r"^3 pairs of two people .*; someone_else on 2 of 2 pairs with a scan's answer \(100%; 3 pairs\); "
+                     r"the second person's joints inside the subject's blanked cells, per scan, view 0 \d+\.\d, view 1 "
+                     r"\d+\.\d of 25, each joint \d+\.\d cells from the first's \(median\), with a peak of their own "
+                     r"\(within 1\.5 cells of theirs, not of the first's\) view 0 \d+\.\d, view 1 \d+\.\d$",
                      out, re.M), out
     plain = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", "--alone", "0", capsys=capsys,
                        monkeypatch=monkeypatch)
