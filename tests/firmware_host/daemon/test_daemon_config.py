@@ -83,6 +83,17 @@ def test_errors_name_the_key(data, key):
     assert _error(data).startswith(key)
 
 
+def test_a_recorder_inside_another_wrapper_is_refused_too(monkeypatch):
+    """The daemon refused a rig URL starting with ``record+``: one whose recorder sat inside another wrapper of the
+    registry (``spy+record+...``) passed, to fail at the second open on the take folder the first one filled."""
+    from drivers import registry
+
+    monkeypatch.setitem(registry.WRAPPERS, "spy+", registry.WRAPPERS[registry.RECORD_PREFIX])
+    assert _error({"sinks": [SINK], "rig": {"url": "spy+record+sim://?out=/tmp/x"}}).startswith(
+        "rig.url: record+ is not supported")
+    assert daemon_config_from_dict({"sinks": [SINK], "rig": {"url": "replay:///tmp/record+x"}})  # not a prefix
+
+
 @pytest.mark.parametrize("sinks, said", [
     (["memory://viewer:hunter2@here", "memory://viewer:hunter2@here"],
      "sinks: lists a URL twice, got ['memory://viewer:***@here', 'memory://viewer:***@here']"),
