@@ -378,7 +378,7 @@ def _write_view(folders: list[Path], name: str, images: Sequence[np.ndarray]) ->
 
 def every_frame_of_two_videos(url: str) -> str:
     """``url`` with ``policy=all`` added where it plays two video files (``opencv://``) and names no ``policy``,
-    also wrapped (``record+opencv://...``: any wrapper of :data:`drivers.registry.WRAPPERS`).
+    also wrapped (``record+opencv://...``: any wrapper of :data:`drivers.wrappers.WRAPPERS`).
 
     A capture from recordings is not live: under the driver's default ``latest`` the videos play on at their
     rate, and a host whose board detection is slower than a held pose skips it (fewer views, without a word).

@@ -1,8 +1,9 @@
 """Backend registry: URL scheme -> (module, class), imported only when chosen.
 
-A wrapper's prefix wraps any other URL's source in its own: ``record+<url>`` in the recorder (pyserial's
-``spy://`` idea). :data:`WRAPPERS` lists them; :func:`innermost_url` is the URL of the backend that delivers the
-frames, for a caller that asks what a URL plays (``ghcal capture``: two video files or live cameras?).
+A wrapper's prefix wraps any other URL's source in its own: ``record+<url>`` in the recorder. The prefixes are
+:mod:`drivers.wrappers`' table (:data:`WRAPPERS`, re-exported here with :func:`innermost_url`, the URL of the
+backend that delivers the frames, for a caller that asks what a URL plays: ``ghcal capture``'s two video files or
+live cameras?).
 """
 from __future__ import annotations
 
@@ -12,6 +13,10 @@ from drivers.base import RigSource
 from drivers.errors import BackendNotAvailableError
 from drivers.url import RigUrl
 from drivers.url_paths import check_url_paths
+from drivers.wrappers import RECORD_PREFIX, WRAPPERS, innermost_url, wrapper_prefix
+
+__all__ = ["BACKENDS", "RECORD_PREFIX", "WRAPPERS", "backend_class", "create_rig_source", "innermost_url",
+           "open_rig", "wrapper_prefix"]
 
 #: scheme -> (module, class name). Extend by adding an entry; nothing is imported until chosen.
 BACKENDS: dict[str, tuple[str, str]] = {
@@ -21,14 +26,6 @@ BACKENDS: dict[str, tuple[str, str]] = {
     "opencv": ("drivers.backends.opencv", "OpenCVRigSource"),
 }
 
-RECORD_PREFIX = "record+"
-
-#: URL prefix -> (module, class name) of the sources that wrap another URL's source; each class has
-#: ``wrap(inner_url, factory, **kwargs)``. Nothing is imported until chosen.
-WRAPPERS: dict[str, tuple[str, str]] = {
-    RECORD_PREFIX: ("drivers.backends.record", "RecordingRigSource"),
-}
-
 
 def _import_class(what: str, module_name: str, class_name: str) -> type:
     try:
@@ -36,20 +33,6 @@ def _import_class(what: str, module_name: str, class_name: str) -> type:
     except ImportError as e:
         raise BackendNotAvailableError(f"rig backend {what!r} cannot be loaded: {e}") from e
     return getattr(module, class_name)
-
-
-def wrapper_prefix(url: str) -> str | None:
-    """The prefix of :data:`WRAPPERS` that ``url`` starts with; None for a URL no wrapper wraps."""
-    return next((prefix for prefix in WRAPPERS if url.startswith(prefix)), None)
-
-
-def innermost_url(url: str) -> str:
-    """``url`` without the prefixes of the wrappers around it (``record+opencv://?first=a.mp4&out=take`` ->
-    ``opencv://?first=a.mp4&out=take``): the URL of the backend that delivers the frames, the wrappers' own
-    options still in its query. A URL no wrapper wraps comes back as given."""
-    while (prefix := wrapper_prefix(url)) is not None:
-        url = url[len(prefix):]
-    return url
 
 
 def backend_class(scheme: str, backends: dict[str, tuple[str, str]] | None = None) -> type[RigSource]:

@@ -17,14 +17,10 @@ from urllib.parse import quote, unquote
 
 from drivers.errors import RigConfigError
 from drivers.url import RigUrl, redact_url, unquote_keeping_bytes
+from drivers.wrappers import WRAPPER_FILE_OPTIONS, innermost_url, wrapper_prefixes
 from ghnerf_runtime.path_check import path_problem, shown
 
 __all__ = ["FileParts", "FILE_PARTS", "check_url_paths", "rig_url_from_folder", "url_files", "url_path_problem"]
-
-#: What ``record+`` takes from the URL it wraps that names a file: the take's folder.
-RECORD_PREFIX = "record+"
-RECORD_FILE_OPTIONS = ("out",)
-
 
 def _any_path(value: str) -> bool:
     return True
@@ -57,8 +53,8 @@ class FileParts:
     options: Mapping[str, Callable[[str], bool]] = field(default_factory=dict)
 
 
-#: Every scheme of ``drivers.registry.BACKENDS`` (a test keeps the two in step). ``record+`` URLs are not
-#: here: the daemon, the one program whose config file holds a rig URL, refuses them.
+#: Every scheme of ``drivers.registry.BACKENDS`` (a test keeps the two in step). Wrapped URLs (:mod:`drivers.wrappers`)
+#: are not here: the daemon, the one program whose config file holds a rig URL, refuses the recorder's.
 FILE_PARTS: Mapping[str, FileParts] = {
     "replay": FileParts(target=True),
     "sim": FileParts(options={"bvh": _any_path, "cache": _not_off}),
@@ -84,16 +80,19 @@ def url_files(url: str) -> list[tuple[str, str]]:
 
 
 def _files_of_any(url: str) -> list[tuple[str, str]]:
-    """:func:`url_files`, and for a ``record+`` URL also its ``out=`` folder."""
-    if not url.startswith(RECORD_PREFIX):
+    """:func:`url_files`, and for a wrapped URL (``record+...``) also the files its wrappers' options name
+    (:data:`drivers.wrappers.WRAPPER_FILE_OPTIONS`: the recorder's ``out=`` folder), each wrapper's, however many
+    wrap it."""
+    prefixes = wrapper_prefixes(url)
+    inner = innermost_url(url)
+    if not prefixes:
         return url_files(url)
-    inner = url[len(RECORD_PREFIX):]
     try:
         options = RigUrl.parse(inner).options
     except RigConfigError:
         return []
-    recorded = [(name, options[name]) for name in RECORD_FILE_OPTIONS if options.get(name)]
-    return recorded + url_files(inner)
+    names = dict.fromkeys(name for prefix in prefixes for name in WRAPPER_FILE_OPTIONS.get(prefix, ()))
+    return [(name, options[name]) for name in names if options.get(name)] + url_files(inner)
 
 
 def check_url_paths(url: str) -> None:

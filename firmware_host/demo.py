@@ -65,6 +65,7 @@ import drivers
 from drivers.sim.demo import draw_truth
 from drivers.url import redact_url
 from drivers.url_paths import url_files
+from drivers.wrappers import innermost_url
 from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch, fixes, symptoms
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
     CALIBRATION_WINDOW
@@ -434,7 +435,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         sink_path.unlink(missing_ok=True)  # the file sink appends: keep this run only
         sink_url = sink_path.as_uri()  # percent-encoded: a space or "#" in --out stays part of the path
 
-    scheme = args.url.removeprefix("record+").partition("://")[0]
+    scheme = innermost_url(args.url).partition("://")[0]
     # a camera URL may carry a password (rtsp://user:pass@..., token=): shown without it
     print(f"opening {redact_url(args.url)}"
           + (" (the first open pre-renders the motion loop; later opens use the cache)" if scheme == "sim" else ""))
@@ -657,7 +658,7 @@ def _refuse_clashing_outputs(parser: argparse.ArgumentParser, args: argparse.Nam
     videos, the --config file) appended joint lines to it, and one on ``OUT/sim_pair.png`` was replaced by the
     picture: refused before anything is opened, as the daemon refuses its sinks there
     (:func:`ghnerf_runtime.cli.output_path.output_clash`, one check for both)."""
-    rig_files = {f"--url's {part}=": path for part, path in url_files(args.url.removeprefix("record+"))
+    rig_files = {f"--url's {part}=": path for part, path in url_files(innermost_url(args.url))
                  if part != "target"}
     clash = output_clash({"--sink": _sink_file(args.sink), "--out's sim_pair.png": args.out / "sim_pair.png"},
                          {"--config": args.config, **rig_files})

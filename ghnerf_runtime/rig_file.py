@@ -312,12 +312,13 @@ def _shape_of(value: Any) -> tuple | None:
 
 
 # --------------------------------------------------------------------------- dict <-> Rig
-def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
+def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None, warn: bool = True) -> Rig:
     """Validate a parsed rig document and build the :class:`Rig`.
 
     Args:
         data: the parsed JSON document (a dict).
-        path: the file it came from, used only in error messages.
+        path: the file it came from, used only in messages.
+        warn: log :func:`rig_warnings`; ``False`` where the caller logs them (a rig source, once per daemon run).
 
     Returns:
         The rig; cameras keep the file's order (the first two are the stereo pair).
@@ -330,7 +331,7 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
             working volume with ``max <= min`` or reaching farther from a camera than the model's
             near/far resolve (:func:`volume_reach_problem`), duplicate camera names.
     """
-    return _rig_from_dict(data, path=path, warn=True)
+    return _rig_from_dict(data, path=path, warn=warn)
 
 
 def _rig_from_dict(data: Any, *, path: str | os.PathLike | None, warn: bool) -> Rig:

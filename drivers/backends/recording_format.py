@@ -137,8 +137,9 @@ def _fail(path: Path, field_name: str | None, message: str) -> RigInitialization
     return RigInitializationError(f"{where}: {message}")
 
 
-def read_manifest(directory: Path) -> Manifest:
-    """Load and validate ``manifest.json``.
+def read_manifest(directory: Path, *, warn: bool = True) -> Manifest:
+    """Load and validate ``manifest.json``. ``warn=False`` logs none of the rig's warnings
+    (:func:`ghnerf_runtime.rig_file.rig_warnings`): ``replay://`` logs them at its open, once per daemon run.
 
     Raises:
         RigInitializationError: naming the file and field (missing, unknown or ill-typed key,
@@ -176,7 +177,7 @@ def read_manifest(directory: Path) -> Manifest:
         if not isinstance(data[key], kind):
             raise _fail(path, key, f"must be a {kind.__name__}, got {data[key]!r}")
     try:
-        rig = rig_from_dict(data["rig"])
+        rig = rig_from_dict(data["rig"], warn=warn)
     except RigFileError as e:
         raise _fail(path, f"rig.{e.field}" if e.field else "rig", str(e)) from e
     return Manifest(rig, data["image_format"], data["source"], data["created_utc"], data["complete"], data["counters"])

@@ -257,7 +257,8 @@ class ReplayRigSource(RigSource):
         options = take_pairing_options(url, policy=DropPolicy.ALL)
         url.finish()
         directory = Path(url.target)
-        manifest = read_manifest(directory)
+        # warned of at open, once per daemon run: the daemon creates a source at each reopen and each reload's check
+        manifest = read_manifest(directory, warn=False)
         rows = read_rows(directory, manifest)
         if not manifest.complete:
             rows, broken = broken_rows_split(directory, rows)
@@ -267,10 +268,12 @@ class ReplayRigSource(RigSource):
                             "(written after the last flush before the take was cut short), first: %s line %d "
                             "(image %s)", directory, len(broken), directory / FRAMES, first.line, first.image)
             log.warning("recording %s was not closed cleanly; playing the %d frames it holds", directory, len(rows))
-        return cls(
+        source = cls(
             directory, manifest, rows, speed=speed, loop=loop, keep_time=keep_time,
             pairing=pairing or options.config(), clock=clock,
         )
+        source._rig_read_from(directory / MANIFEST)
+        return source
 
     def _loop_spans(self) -> tuple[int, dict[str, int]]:
         """How far timestamps and per-camera indices move on each loop pass."""

@@ -116,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def check_config(config: DaemonConfig, source: str | os.PathLike | None = None,
-                 from_folder: Collection[str] = ()) -> None:
+                 from_folder: Collection[str] = (), *, warn_of_rig: bool = False) -> None:
     """What can be checked without hardware or the model: the URLs parse for their backends, the model folder holds
     graphs (and the skeleton prior or painter the config turns ``on``). It loads no model: the start and every
     reload run these checks and then load it themselves (once), and build the estimator on it, which checks the
@@ -127,10 +127,14 @@ def check_config(config: DaemonConfig, source: str | os.PathLike | None = None,
     (:func:`~firmware_host.daemon.config.load_daemon_config_noting_paths`), for the hint on where they were read
     from: given only where the value that fails is one of them.
 
+    ``warn_of_rig``: log the warnings of the rig file or take ``rig.url`` names (``--validate-config``, which opens
+    no rig). The start and the reloads leave them to the rig's open, which logs each once per ``rig.url``: the
+    check logged them again at the start and at every reload.
+
     :raises DaemonConfigError: naming the key.
     """
     try:
-        _check_rig_url(config.rig.url)
+        _check_rig_url(config.rig.url, warn_of_rig=warn_of_rig)
     except DaemonConfigError as e:  # a file it names, read from the config file's folder: say so, as for models
         raise DaemonConfigError(e.message + _where_url_read(e.message, config.rig.url, source, from_folder),
                                 key="rig.url") from None
@@ -170,9 +174,9 @@ def _check_optional_model_files(config: DaemonConfig, model_dir: Path) -> None:
                                 key="estimator.novel_view.painter")
 
 
-def _check_rig_url(text: str) -> None:
+def _check_rig_url(text: str, *, warn_of_rig: bool) -> None:
     """:func:`check_config` of ``rig.url``: it parses for its backend, a rig file it names loads and fits the
-    joint stream, webcams come with their calibration.
+    joint stream, webcams come with their calibration. ``warn_of_rig``: the rig file's (or take's) warnings too.
 
     :raises DaemonConfigError: keyed ``rig.url``.
     """
@@ -193,7 +197,7 @@ def _check_rig_url(text: str) -> None:
     manifest = Path(url.target) / MANIFEST if url.scheme == "replay" and url.target else None
     if manifest is not None and manifest.is_file():  # a take of such cameras carries the same nominal rig
         try:
-            nominal = is_nominal_rig(read_manifest(manifest.parent).rig)
+            nominal = is_nominal_rig(read_manifest(manifest.parent, warn=warn_of_rig).rig)
         except drivers.DriverError:
             nominal = False  # the source reports a broken take itself, naming the field
         if nominal:
@@ -207,7 +211,7 @@ def _check_rig_url(text: str) -> None:
             raise DaemonConfigError(str(size_error), key="rig.url")
     if rig_file:  # a calibration of our own (ghcal): the stream announces its id and camera names
         try:
-            rig = load_rig(rig_file)
+            rig = load_rig(rig_file, warn=warn_of_rig)
         except RuntimeErrorBase as e:
             raise DaemonConfigError(f"{e}{service_hint(rig_file)}", key="rig.url") from None
         names = [("rig id", rig.rig_id, MAX_RIG_ID_LEN)] + [("camera name", c.name, MAX_CAMERA_NAME_LEN)
@@ -286,11 +290,11 @@ def check_model(config: DaemonConfig) -> str:
             f"roi.turn_search {'on' if roi.turn_search else 'off'})")
 
 
-def read_checked_config(path: str) -> DaemonConfig:
+def read_checked_config(path: str, *, warn_of_rig: bool = False) -> DaemonConfig:
     """Load the config file and run :func:`check_config` on it; every error names the file and the key."""
     config, from_folder = load_daemon_config_noting_paths(path)
     try:
-        check_config(config, path, from_folder)
+        check_config(config, path, from_folder, warn_of_rig=warn_of_rig)
     except DaemonConfigError as e:
         raise DaemonConfigError(str(e), key=str(path)) from None
     return config
@@ -412,7 +416,7 @@ def _validate(path: str, *, with_model: bool) -> int:
     :raises DaemonConfigError: naming the file and the key.
     """
     with _stdout_for_the_json_alone():  # a depthai:// URL loads depthai, which may log to stdout
-        config = read_checked_config(path)
+        config = read_checked_config(path, warn_of_rig=True)  # no rig opens to warn of it
         checked = "model: not loaded (--no-model), its folder holds graph files"
         if with_model:
             try:

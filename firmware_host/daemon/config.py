@@ -32,6 +32,7 @@ from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, 
 from drivers.errors import RigConfigError
 from drivers.url import RigUrl, redact_url, unquote_keeping_bytes, with_kept_bytes_escaped
 from drivers.url_paths import rig_url_from_folder, url_files, url_path_problem
+from drivers.wrappers import RECORD_PREFIX, wrapper_prefixes
 from ghnerf_runtime.config_paths import impossible_path, paths_from_file, values_from_file
 from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.path_check import path_problem, shown
@@ -128,10 +129,10 @@ class RigConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.url, str) or "://" not in self.url:
             _fail("url", "must be a rig URL such as 'depthai://' or 'sim://?fps=30'", redact_url(self.url))
-        if self.url.startswith("record+"):
+        if RECORD_PREFIX in wrapper_prefixes(self.url):  # outermost or inside another wrapper
             # A recorder needs an empty out= folder, and the daemon reopens the rig after every unplug.
-            _fail("url", "record+ is not supported by the daemon (each reopen would need a new out= folder); "
-                         "record with ghnerf-demo --url record+... instead", redact_url(self.url))
+            _fail("url", f"{RECORD_PREFIX} is not supported by the daemon (each reopen would need a new out= folder); "
+                         f"record with ghnerf-demo --url {RECORD_PREFIX}... instead", redact_url(self.url))
         _seconds(self, "read_timeout_s", 0.01, 60.0)
         _seconds(self, "stall_s", 0.1, 3600.0)
         if self.stall_s < self.read_timeout_s:

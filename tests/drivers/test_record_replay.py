@@ -168,6 +168,33 @@ def test_a_recorder_tells_its_inner_replays_kind_of_stamps(take, tmp_path):
     assert not create_rig_source(f"record+replay://{out}?keep_time=1&out={tmp_path / 'b'}").live_timestamps
 
 
+def test_a_take_s_rig_warning_is_logged_at_open_once_by_sources_sharing_a_logged_set(tmp_path, sim_cache, caplog):
+    """``replay://`` read its take's manifest with ``rig_from_dict``, which warned of the rig (here a narrow pair) at
+    each ``create_rig_source``: the daemon creates a source at each reopen (each loop of the take, each lost
+    camera) and at each reload's check of the URL, and the journal repeated the warning (session 66). It is logged
+    at open now, naming the manifest, once over the sources sharing ``log_rig_warnings_once``'s set, as a rig file
+    named in ``opencv://`` is; a source only created (a check) says nothing, a one-shot tool's open says it once."""
+    take = tmp_path / "narrow"
+    record(take, sim_cache, pairs=3, sim=f"{SIM}&baseline=0.05")  # (sim:// warns of the rig it builds, too)
+    url = f"replay://{take}?speed=free"
+    logged: set[str] = set()
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        create_rig_source(url)  # the daemon's check of a reloaded rig.url: opens nothing
+        for _ in range(3):
+            source = create_rig_source(url)
+            source.log_rig_warnings_once(logged)
+            with source.open():
+                pass
+        shared = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+        caplog.clear()
+        with open_rig(url):
+            pass
+        alone = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+    assert len(shared) == 1 and len(alone) == 1, caplog.text
+    assert shared[0].startswith(f"{take / MANIFEST}: cameras 'left' and 'right' are 50 mm apart"), shared
+
+
 def test_speed_factor_scales_waiting(take):
     out, live, _ = take
     clock = ManualClock()

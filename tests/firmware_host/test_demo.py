@@ -521,6 +521,21 @@ def test_a_file_sink_on_a_file_the_run_reads_is_refused(tmp_path, capsys):
     assert rig.read_text() == config.read_text() == "{}" and not (tmp_path / "out").exists()
 
 
+def test_a_file_sink_on_a_file_a_wrapped_url_reads_is_refused(tmp_path, capsys, monkeypatch):
+    """The demo took ``record+`` off the URL's start to find the files it reads: inside another wrapper of the
+    registry (``spy+record+...``) the rig= file went unseen, and a --sink on it appended joint lines to the
+    calibration. Every wrapper is taken off now (drivers.wrappers.innermost_url)."""
+    from drivers import registry
+
+    monkeypatch.setitem(registry.WRAPPERS, "spy+", registry.WRAPPERS[registry.RECORD_PREFIX])
+    rig = tmp_path / "rig.json"
+    rig.write_text("{}")
+    url = f"spy+record+opencv://?first=0&second=1&rig={rig}&out={tmp_path / 'take'}"
+    err = _refused(["--url", url, "--sink", f"file://{rig}", "--out", str(tmp_path / "out")], capsys)
+    assert f"error: --sink {rig} is the file --url's rig= reads" in err
+    assert rig.read_text() == "{}" and not (tmp_path / "out").exists()
+
+
 def test_a_file_sink_on_the_demo_picture_is_refused(tmp_path, capsys, sim_url):
     """The joint lines were replaced by the PNG at the run's end (exit 0)."""
     err = _refused(["--truth-only", "--url", sim_url, "--seconds", "0.3", "--out", str(tmp_path),

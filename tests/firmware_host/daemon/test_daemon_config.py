@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import os
 import re
 import stat
@@ -81,6 +82,17 @@ def test_minimal_config_takes_the_defaults():
 ])
 def test_errors_name_the_key(data, key):
     assert _error(data).startswith(key)
+
+
+def test_a_recorder_inside_another_wrapper_is_refused_too(monkeypatch):
+    """The daemon refused a rig URL starting with ``record+``: one whose recorder sat inside another wrapper of the
+    registry (``spy+record+...``) passed, to fail at the second open on the take folder the first one filled."""
+    from drivers import registry
+
+    monkeypatch.setitem(registry.WRAPPERS, "spy+", registry.WRAPPERS[registry.RECORD_PREFIX])
+    assert _error({"sinks": [SINK], "rig": {"url": "spy+record+sim://?out=/tmp/x"}}).startswith(
+        "rig.url: record+ is not supported")
+    assert daemon_config_from_dict({"sinks": [SINK], "rig": {"url": "replay:///tmp/record+x"}})  # not a prefix
 
 
 @pytest.mark.parametrize("sinks, said", [
@@ -336,6 +348,35 @@ def test_file_errors_name_the_file(tmp_path):
     typo.write_text(json.dumps({"sinks": [SINK], "rig": {"urll": "sim://"}}))
     with pytest.raises(DaemonConfigError, match=f"^{typo}: rig.urll: unknown key"):
         load_daemon_config(typo)
+
+
+def test_the_check_of_rig_url_leaves_the_rig_s_warnings_to_its_open(tmp_path, caplog):
+    """The daemon checks its config at the start and at every reload (``check_config``), and the check read a take's
+    manifest (twice: the source it creates, the nominal-rig check) and a ``rig=`` file with their warnings: the
+    journal repeated a narrow pair's at every reload, and at the start before the open said it. The open logs them,
+    once per ``rig.url``; ``--validate-config``, which opens no rig, asks for them (``warn_of_rig``), once."""
+    import drivers
+    from drivers.sim import RigPlacement
+    from ghnerf_runtime.rig_file import save_rig
+
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "x.onnx").write_bytes(b"not checked here")
+    take, narrow = tmp_path / "take", tmp_path / "narrow.json"
+    url = f"sim://?width=40&height=30&baseline=0.05&policy=all&cache={tmp_path / 'cache'}"
+    with drivers.open_rig(f"record+{url}&out={take}") as rig:
+        rig.read(timeout_s=5)
+    save_rig(RigPlacement(width=40, height=30, baseline_m=0.05).build("narrow"), narrow)
+    for rig_url in (f"replay://{take}", f"opencv://?first=0&second=1&rig={narrow}"):
+        config = daemon_config_from_dict({"rig": {"url": rig_url}, "sinks": [SINK],
+                                          "estimator": {"session": {"model_dir": str(models)}}})
+        caplog.clear()
+        with caplog.at_level(logging.WARNING):
+            check_config(config)
+            assert [r for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()] == [], caplog.text
+            check_config(config, warn_of_rig=True)
+            asked = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+        assert len(asked) == 1, (rig_url, caplog.text)
 
 
 def test_check_config_names_bad_urls_and_models(tmp_path, monkeypatch):

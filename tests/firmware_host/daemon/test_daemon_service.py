@@ -262,6 +262,24 @@ def test_a_rig_warning_is_logged_once_through_reopens(sim_url, tmp_path, caplog)
     assert len(narrow) == 1, narrow
 
 
+def test_a_take_s_rig_warning_is_logged_once_through_reopens(sim_url, tmp_path, caplog):
+    """``replay://`` warned of its take's rig (a narrow pair, read from the manifest) each time the daemon created
+    its source: at each start over of a take played with ``exit_at_end`` false, as at each reopen after a fault
+    (session 66). Once per ``rig.url`` now, as a rig file named in ``opencv://`` is."""
+    take = tmp_path / "take"
+    with drivers.open_rig(f"record+{sim_url}&baseline=0.05&policy=all&out={take}") as rig:
+        for _ in range(6):
+            rig.read(timeout_s=5)
+    cfg = _config({"url": f"replay://{take}", "exit_at_end": False, "reopen_min_s": 0.01}, tmp_path)
+    caplog.clear()  # (the recording's sim:// warned of the rig it built)
+    with caplog.at_level(logging.WARNING, logger="drivers"):
+        with _Running(cfg, tmp_path) as run:
+            wait_until(lambda: run.daemon.health.rig_opens >= 3, timeout=60, what="the take started over twice")
+            assert run.finish() == 0
+    narrow = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+    assert len(narrow) == 1 and narrow[0].startswith(f"{take}/manifest.json: cameras"), narrow
+
+
 def test_a_reload_back_to_a_rig_seen_earlier_warns_of_it_again(sim_url, tmp_path, caplog):
     """Reloaded from a narrow pair (``baseline=0.05``) to another rig.url and back, the daemon runs the first rig
     again: its warning was not logged again, so the journal since the last reload said nothing of the rig in use
