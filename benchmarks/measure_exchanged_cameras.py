@@ -4,6 +4,8 @@
                                                                    [--sequences 10] [--frames 30] [--window 30]
                                                                    [--heading-deg 180] [--rig higher|toed-in|wide]
                                                                    [--only 25 ...]
+                                                                   [--pose lying_x|lying_z|upside_down]
+                                                                   [--second DX,DZ]
 
 The simulator films the bench's held-out-like scenes (``ghnerf-bench runtime``'s recipe and cache: held-out motions,
 random rig placements, every rig symmetric about its centre plane, both cameras aimed at one point). Each sequence is
@@ -24,6 +26,14 @@ raises the second camera 0.3 m (both still aimed at one point: the rig is no lon
 baseline (symmetric). ``--face-seen`` counts only the figures of pairs whose nose and an eye peaked at the presence
 threshold in both views. ``--only`` renders just the bench sequences named (afresh), in place of the first
 ``--sequences``: a long take of one scene without the others'.
+
+``--pose`` renders every pair's body turned as ``benchmarks/measure_lying_rendered.py``'s poses turn it (``lying_x``:
+lying along the line of sight, ``lying_z``: lying across the view, ``upside_down``: a handstand's silhouette; turned
+about the body's box centre, set on the floor, moved into the working volume), the motion playing on. ``--second
+DX,DZ`` adds a second person (bench scene ``k + 1000``'s body, look, motion and heading) standing ``DX`` metres
+towards the rig's centre line from the subject and ``DZ`` further away, rendered into the subject's room (the nearer
+person's pixel in front, :func:`drivers.sim.render_people`); the summary then counts the pairs the runtime called
+``several_people`` (which give no figure) and those figures the pairs it did not call so gave.
 """
 from __future__ import annotations
 
@@ -48,6 +58,7 @@ from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 
 SETTINGS = ("as filmed", "exchanged")
 RIGS = ("bench", "higher", "toed-in", "wide")
+POSES = ("lying_x", "lying_z", "upside_down")  # --pose: benchmarks/measure_lying_rendered.py's turned poses
 RAISE_M = 0.3  # --rig higher: how much higher the second camera is
 TOE_DEG = 8.0  # --rig toed-in: how much further the second camera turns towards the first's side
 WIDE_BASELINE_M = 1.2  # --rig wide: the simulator's default rig's (RigPlacement.baseline_m), at the bench's placement
@@ -75,9 +86,41 @@ def variant_rig(placement, kind: str, rig_id: str) -> Rig:
     return Rig((first, _aimed(second, eye, target)), rig.volume, rig_id, metadata=dict(rig.metadata, variant=kind))
 
 
-def render_variant(k: int, frames: int, heading_deg, rig_kind: str, fps: float = 30.0) -> Sequence:
+def second_person(k: int, scene, offset_xz: tuple[float, float]):
+    """Bench scene ``k + 1000``'s person standing ``offset_xz`` from scene's: ``dx`` towards the rig's centre line
+    (x = 0, where both cameras see most), ``dz`` further away."""
+    from drivers.sim import SimScene  # tool only
+    x, z = scene.config.position_xz
+    dx, dz = offset_xz
+    place = (x - dx if x > 0 else x + dx, z + dz)
+    return SimScene(replace(bench_rig_and_scene(k + 1000)[1].config, position_xz=place))
+
+
+def render_people_frames(rig, scenes: list, t0: float, frames: int, fps: float, info: dict, pose: str | None) -> Sequence:
+    """``frames`` pairs of ``scenes``' people (the first the subject, whose room, sensor and truth they are) from
+    ``t0`` at ``fps``, each body turned to ``pose`` (None: as posed); :func:`render_frames`'s sequence otherwise."""
+    from benchmarks.measure_lying_rendered import posed_as  # tool only
+    from drivers.sim.render import composite_nearest
+    h, w = rig.pair[0].height, rig.pair[0].width
+    imgs = np.empty((frames, 2, h, w, 3), np.uint8)
+    j3, j2, vis = np.empty((frames, 25, 3)), np.empty((frames, 2, 25, 2)), np.empty((frames, 2, 25), bool)
+    for i in range(frames):
+        t = t0 + i / fps
+        bodies = [s.posed(t) if pose is None else posed_as(s.posed(t), pose, rig.volume) for s in scenes]
+        for c, cam in enumerate(rig.pair):
+            layers = [s.renderer.render(b, cam) for s, b in zip(scenes, bodies)]
+            radiance = layers[0][0] if len(layers) == 1 else composite_nearest(
+                [image for image, _ in layers], [truth.depth for _, truth in layers])
+            imgs[i, c] = scenes[0].capture(radiance, cam, t)
+            j2[i, c], vis[i, c] = layers[0][1].joints_2d, layers[0][1].visible
+        j3[i] = bodies[0].joints
+    return Sequence(rig, imgs, j3, j2, vis, info)
+
+
+def render_variant(k: int, frames: int, heading_deg, rig_kind: str, fps: float = 30.0, pose: str | None = None,
+                   second_xz: tuple[float, float] | None = None) -> Sequence:
     """Bench sequence ``k`` rendered afresh: the person turned to ``heading_deg`` (None: as drawn), the rig as
-    ``rig_kind`` says."""
+    ``rig_kind`` says, the body turned to ``pose`` (None: upright), a second person ``second_xz`` away (None: alone)."""
     from drivers.sim import SimScene  # tool only
     rig, scene, t0, placement = bench_rig_and_scene(k)
     if heading_deg is not None:
@@ -86,7 +129,19 @@ def render_variant(k: int, frames: int, heading_deg, rig_kind: str, fps: float =
         rig = variant_rig(placement, rig_kind, rig.rig_id)
     info = {"index": k, "motion": str(scene.config.motion), "distance_m": placement.distance_m,
             "baseline_m": rig.baseline, "fps": fps, "t0": t0}
-    return render_frames(rig, scene, t0, frames, fps, info)
+    if pose is None and second_xz is None:
+        return render_frames(rig, scene, t0, frames, fps, info)
+    scenes = [scene] + ([] if second_xz is None else [second_person(k, scene, second_xz)])
+    return render_people_frames(rig, scenes, t0, frames, fps, info, pose)
+
+
+def offset_xz(text: str) -> tuple[float, float]:
+    """``--second``'s ``DX,DZ``."""
+    try:
+        dx, dz = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--second wants DX,DZ in metres (like 1.0,0.4), got {text!r}") from None
+    return dx, dz
 
 
 def watches(w: int) -> dict:
@@ -164,20 +219,24 @@ def main(argv=None) -> int:
     ap.add_argument("--rig", choices=RIGS, default="bench", help="render afresh on this rig (module docstring)")
     ap.add_argument("--face-seen", action="store_true", help="count only pairs with the nose and an eye seen")
     ap.add_argument("--only", type=int, nargs="+", metavar="K", help="render afresh just these bench sequences")
+    ap.add_argument("--pose", choices=POSES, help="render afresh, every body turned so (lying, upside down)")
+    ap.add_argument("--second", type=offset_xz, metavar="DX,DZ",
+                    help="render afresh with a second person DX m towards the centre line and DZ m further away")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir))
     session = load_session(cfg)
     threshold = cfg.presence.threshold(cfg.heatmaps.source)
     tally = {s: {"found": [], "err": [], "hands": [], "rolled": [], "pairs": 0, "judged": 0, "flags": [],
-                 "flagged_at": []} for s in SETTINGS}
+                 "flagged_at": [], "several": 0, "several_with_figure": 0} for s in SETTINGS}
     heels = {"facing the rig": [], "facing away": []}  # the heel peaks of the pairs as filmed, by the true facing
     if args.only:
         args.sequences = len(args.only)  # (the summary's counts are over the sequences run)
-    if args.heading_deg is None and args.rig == "bench" and not args.only:
+    if args.heading_deg is None and args.rig == "bench" and not (args.only or args.pose or args.second):
         sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache)
     else:
         indices = args.only or range(args.sequences)
-        sequences = (render_variant(k, args.frames, args.heading_deg, args.rig) for k in indices)
+        sequences = (render_variant(k, args.frames, args.heading_deg, args.rig, pose=args.pose,
+                                    second_xz=args.second) for k in indices)
     for seq in sequences:
         line = (f"  sequence {seq.info['index']:3d} ({seq.info['motion']}, {seq.info['distance_m']:.2f} m away, "
                 f"baseline {seq.info['baseline_m']:.2f} m):")
@@ -190,6 +249,8 @@ def main(argv=None) -> int:
                 acc["found"].append(int(ok.sum()))
                 acc["err"] += list(1000 * np.linalg.norm(r.joints_3d[ok] - seq.joints_3d[i][ok], axis=1))
             acc["pairs"] += len(results)
+            acc["several"] += sum(r.several_people for r in results)
+            acc["several_with_figure"] += sum(r.several_people and r.handedness is not None for r in results)
             if setting == "as filmed":
                 for i, r in enumerate(results):
                     z = true_facing_z(seq.joints_3d[i])
@@ -213,6 +274,8 @@ def main(argv=None) -> int:
     scenes += "" if args.rig == "bench" else f", rig {args.rig}"
     scenes += ", pairs with the face seen only" if args.face_seen else ""
     scenes += f", sequences {' '.join(map(str, args.only))} only" if args.only else ""
+    scenes += f", pose {args.pose}" if args.pose else ""
+    scenes += f", a second person {args.second[0]:g} m across and {args.second[1]:g} m behind" if args.second else ""
     print(f"{args.sequences} held-out-like sequences x {args.frames} pairs{scenes}, {args.model_dir}, windows of "
           f"{args.window} figures (handedness: +1 a person, -1 a mirror image; limit -{CALIBRATION_MAX_MIRROR:g}):")
     print(f"  {'setting':>9} | 3D joints | MPJPE mm | pairs with a figure | per pair: median   p10   p90 | windows: "
@@ -228,6 +291,10 @@ def main(argv=None) -> int:
         print(f"  {setting:>9} | {np.mean(acc['found']):5.1f}/25 | {mpjpe} | {h.size:5d}/{acc['pairs']:<5d}"
               f"       | {' ' * 9}{per} | {' ' * 5}{rolled} | {acc['judged']:8d}/{args.sequences:<7d} | "
               f"{counts:>34} | {' ' * 9}{when}")
+    if args.second:
+        for setting, acc in tally.items():
+            print(f"  {setting:>9}: {acc['several']} of {acc['pairs']} pairs several_people "
+                  f"({acc['several_with_figure']} of them with a figure)")
     print(f"  heel peaks as filmed (the stronger heel in its weaker view; limit {threshold:g} in both views gives no "
           f"figure), by the true facing within {np.degrees(np.arccos(FACING_COS)):.0f} degrees:")
     for facing, peaks in heels.items():

@@ -9,18 +9,20 @@ left-to-right axis and its up axis, points to its back, where the nose and the t
 
 :func:`handedness` reads that from a pair's triangulated joints (before the skeleton prior, which was trained on
 people and answers a person's handedness whatever the triangulation: measured, it hid the mirror entirely). The
-figure is in the body's own frame, so turning round, bending, lying or a handstand leave it as it is; a mirror image
-turns its sign. A few dot products a pair.
+figure is in the body's own frame, so turning round, bending or a handstand leave it as it is; a mirror image turns
+its sign. A body lying (:data:`LYING_BAND_DEG`) gives none: there the model's left and right are not to be trusted. A
+few dot products a pair.
 """
 from __future__ import annotations
 
+import math
 from typing import Sequence
 
 import numpy as np
 
 from ghnerf_runtime.body25 import JOINT_INDEX
 
-__all__ = ["handedness", "LEFTWARD_PAIRS", "FORWARD_CUES", "BACK_JOINTS"]
+__all__ = ["handedness", "LEFTWARD_PAIRS", "FORWARD_CUES", "BACK_JOINTS", "LYING_BAND_DEG"]
 
 _J = JOINT_INDEX
 #: (a, b) pairs whose ``a - b`` points to the person's left: the shoulders and hips, through the neck and the mid-hip
@@ -54,6 +56,16 @@ FORWARD_CUES: tuple[tuple[tuple[int, ...], tuple[int, ...]], ...] = (
 #: ``benchmarks/measure_exchanged_cameras.py --sequences 30 --frames 30 [--heading-deg 180]`` and ``--only 10 11 25 28
 #: --frames 300 --heading-deg 180``, session 66 (docs/calibration.md, "Cameras exchanged").
 BACK_JOINTS: tuple[int, ...] = (_J["LHeel"], _J["RHeel"])
+#: A body whose up axis lies within this many degrees of level (tilted 45 to 135 degrees from upright; the rig frame's
+#: y is along gravity) gives no figure: someone lying, where the model reads left and right the other way round in a
+#: view in some takes (its crops turned by ``roi.turn_search`` or not), most of all lying face up or down. Measured
+#: (``benchmarks/measure_exchanged_cameras.py --sequences 20 --frames 30 --pose lying_z`` and ``--only 2 6 3 7
+#: --frames 150 --pose lying_z``, session 66): lying across the view the true rig's per-pair median was +0.62 but the
+#: exchanged rig's -0.08 (no sign to read), and two 150-pair takes of a person lying face down or up on the true rig
+#: read -0.29 and -0.23 over about 100 figures each: flagged as exchanged. Upright people tilt under 11 degrees on the
+#: bench's motions (their truth), and upside down (a handstand, 180) the figure kept its sign (+0.76 / -0.72).
+LYING_BAND_DEG = 45.0
+_LEVEL_MAX_UP_Y = math.sin(math.radians(LYING_BAND_DEG))  # |up . gravity| of an axis within the band of level
 #: Shortest span (metres) given a direction: joints closer than a micrometre are one point (a repeated peak).
 _TINY_M = 1e-6
 
@@ -86,6 +98,12 @@ def _body_axes(points: np.ndarray, found: np.ndarray) -> tuple[np.ndarray, np.nd
     return None if left is None or up is None else (left, up)
 
 
+def _lies(up: np.ndarray) -> bool:
+    """Whether unit up axis ``up`` (rig frame, y down along gravity) lies within :data:`LYING_BAND_DEG` of level
+    (a reflection in depth, the cameras exchanged, leaves its height as it is: both rigs drop the same pairs)."""
+    return abs(float(up[1])) < _LEVEL_MAX_UP_Y
+
+
 def handedness(points: np.ndarray, found: np.ndarray) -> float | None:
     """How much a skeleton faces the way a person's left and up axes say it should: +1 a person, -1 a mirror image.
 
@@ -93,8 +111,8 @@ def handedness(points: np.ndarray, found: np.ndarray) -> float | None:
     direction ``left x up`` (the rig frame is x right, y down, z forward: right-handed): the cosine between them,
     times the sine of the angle between the unit left and up axes (a skewed torso reads weaker). Within [-1, 1]
     (clipped: a cue straight ahead read 1 + 2e-16 by rounding, which ``PairResult`` refused). ``None`` when the
-    torso gives no axes or no cue is found, or when a heel is (:data:`BACK_JOINTS`: the person's back to the rig, where
-    the model's left and right and its nose are not to be trusted).
+    torso gives no axes or no cue is found, when a heel is (:data:`BACK_JOINTS`: the person's back to the rig, where
+    the model's left and right and its nose are not to be trusted), or when the body lies (:data:`LYING_BAND_DEG`).
 
     Args:
         points: ``(25, 3)`` BODY_25 joints, metres.
@@ -115,6 +133,8 @@ def handedness(points: np.ndarray, found: np.ndarray) -> float | None:
     if axes is None:
         return None
     left, up = axes
+    if _lies(up):
+        return None
     facing = _cross(left, up)
     cosines = []
     for front, back in FORWARD_CUES:

@@ -48,6 +48,7 @@ from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import FOOT_STANDING_M, MAX_FOOT_STANDING_M, MIN_CUTOFF_HZ, Joints3DConfig, RoiConfig, \
     TrackingConfig
+from ghnerf_runtime.handedness import LYING_BAND_DEG
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
 from ghnerf_runtime.body_lie import KEPT_TURN_SECTOR_DEG, KEPT_TURN_STEP_DEG, TURN_LIE_TOLERANCE_DEG, \
     TURN_MIN_FROM_SIGHT_DEG, TURN_NEAR_LIE_DEG
@@ -145,6 +146,9 @@ def _doc(name: str) -> str:
     ("docs/calibration.md", f"below -{CALIBRATION_MAX_MIRROR:g} (`health.calibration_max_mirror`, "
                             f"{CALIBRATION_MAX_MIRROR:g};"),
     ("docs/calibration.md", f"it clears above -{CALIBRATION_MAX_MIRROR * CLEAR_RATIO:g}."),
+    # session 66's: a body lying gives no handedness figure
+    ("docs/calibration.md", f"its up axis within {LYING_BAND_DEG:g} degrees of level, `handedness.LYING_BAND_DEG`"),
+    ("docs/calibration.md", f"within {LYING_BAND_DEG:g} degrees of level; the rig frame's y is along"),
     ("docs/runtime.md", f"coarser than {MAX_TIME_STEP_S * 1e3:g} ms at its value (`estimator.MAX_TIME_STEP_S`)"),
     ("docs/rig-file.md", f"outside {CAMERA_HEIGHT_RANGE_M[0]:g}-{CAMERA_HEIGHT_RANGE_M[1]:g} m "
                          "(`CAMERA_HEIGHT_RANGE_M`:"),

@@ -243,6 +243,39 @@ def test_measure_exchanged_cameras_one_named_sequence_and_the_heel_peaks(model, 
     assert re.search(r"^ +facing away: +2 pairs, median ", out, re.M), out
 
 
+def test_measure_exchanged_cameras_lying_and_two_people(model, capsys, monkeypatch):
+    """--pose turns every body as measure_lying_rendered's poses do; --second adds a second person and counts the
+    several_people pairs, none of which has a handedness figure."""
+    out = run_script("measure_exchanged_cameras", "--model-dir", model, "--sequences", "1", "--frames", "2",
+                     "--window", "2", "--pose", "lying_z", capsys=capsys, monkeypatch=monkeypatch)
+    assert "1 held-out-like sequences x 2 pairs, pose lying_z," in out, out
+    out = run_script("measure_exchanged_cameras", "--model-dir", model, "--sequences", "1", "--frames", "2",
+                     "--window", "2", "--second", "1.0,0.4", capsys=capsys, monkeypatch=monkeypatch)
+    assert "a second person 1 m across and 0.4 m behind" in out, out
+    assert re.search(r"^  +as filmed: \d+ of 2 pairs several_people \(0 of them with a figure\)", out, re.M), out
+
+
+def test_measure_exchanged_cameras_poses_and_second_person_render_the_truth_they_show():
+    """--pose: the truth is the turned body's (lying across the view: its head and feet level, at the floor's
+    height or above); --second: the subject's truth and room, a second person drawn in (the pictures differ), standing
+    towards the centre line."""
+    mod = runpy.run_path(str(BENCH / "measure_exchanged_cameras.py"))
+    from ghnerf_runtime.body25 import JOINT_INDEX as J
+
+    alone = mod["render_variant"](0, 1, None, "bench")
+    lying = mod["render_variant"](0, 1, None, "bench", pose="lying_z")
+    head, feet = lying.joints_3d[0, J["Neck"]], lying.joints_3d[0, [J["LAnkle"], J["RAnkle"]]].mean(axis=0)
+    assert abs(head[1] - feet[1]) < 0.4 < abs(head[0] - feet[0]) and lying.joints_3d[0, :, 1].max() <= 0
+    two = mod["render_variant"](0, 1, None, "bench", second_xz=(1.0, 0.4))
+    assert np.array_equal(two.joints_3d, alone.joints_3d) and not np.array_equal(two.images, alone.images)
+    from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+
+    scene = bench_rig_and_scene(0)[1]
+    other = mod["second_person"](0, scene, (1.0, 0.4))
+    (x, z), (x2, z2) = scene.config.position_xz, other.config.position_xz
+    assert abs(x2) < abs(x) + 1.0 and abs(abs(x2 - x) - 1.0) < 1e-9 and z2 == pytest.approx(z + 0.4)
+
+
 @pytest.mark.parametrize("kind", ["higher", "toed-in", "wide"])
 def test_measure_exchanged_cameras_rigs_change_the_second_camera_only(kind):
     """--rig: the first camera stays the bench's; ``higher`` raises the second by RAISE_M still aimed at the target,

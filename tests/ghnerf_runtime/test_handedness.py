@@ -44,14 +44,28 @@ def test_a_person_reads_positive_and_every_mirror_of_them_negative(seed, motion)
         assert handedness(mirrored, ALL) < -0.5, axis
 
 
-@pytest.mark.parametrize("axis, degrees", [(1, 180), (1, 90), (0, 90), (2, 90), (0, 180), (0, 40)],
-                         ids=["turned round", "side on", "lying on the back or front", "lying on a side",
-                              "upside down", "bowing"])
-def test_turning_lying_or_bending_leave_a_person_a_person(axis, degrees):
-    """The figure is in the body's own frame: a whole-body rotation leaves it as it was."""
+@pytest.mark.parametrize("axis, degrees", [(1, 180), (1, 90), (0, 180), (2, 180), (0, 40), (2, -40)],
+                         ids=["turned round", "side on", "upside down facing away", "upside down", "bowing",
+                              "leaning sideways"])
+def test_turning_bending_or_a_handstand_leave_a_person_a_person(axis, degrees):
+    """The figure is in the body's own frame: a whole-body rotation that does not lay the body down leaves it as it
+    was."""
     P = _person()
     assert handedness(_turned(P, axis, degrees), ALL) == pytest.approx(handedness(P, ALL), abs=1e-9)
     assert handedness(_turned(P, axis, degrees), ALL) > 0.5
+
+
+@pytest.mark.parametrize("axis, degrees", [(0, 90), (0, -90), (2, 90), (2, -90), (0, 50), (2, 130)],
+                         ids=["lying on the back", "lying on the front", "lying on a side", "lying on the other side",
+                              "bent over past 45 degrees", "nearly upside down, 40 degrees short"])
+def test_a_body_lying_gives_no_figure(axis, degrees):
+    """Someone lying (the up axis within LYING_BAND_DEG of level): the model reads their left and right the other way
+    round in a view in some takes, and lying across the view the true rig's figures read -0.29 and -0.23 over 150-pair
+    takes (flagged as exchanged), the exchanged rig's median -0.08: no figure, whether a person or a mirror image
+    (``measure_exchanged_cameras.py --pose lying_z``, docs/calibration.md). Before, a figure as upright."""
+    P = _turned(_person(), axis, degrees)
+    assert handedness(P, ALL) is None
+    assert handedness(P * [1, 1, -1], ALL) is None  # the cameras exchanged: the same pairs give none
 
 
 def test_left_and_right_read_the_other_way_round_in_both_views_read_as_a_mirror():
@@ -114,12 +128,16 @@ def test_a_cue_straight_ahead_reads_within_the_range_a_pair_result_takes():
                     "Nose": (0, -1.5, -0.1)}.items():
         P[JOINT_INDEX[name]], found[JOINT_INDEX[name]] = p, True
     rng = np.random.default_rng(0)
-    for _ in range(50):
+    read = 0
+    for _ in range(100):
         turn, _r = np.linalg.qr(rng.normal(size=(3, 3)))
         turn *= np.sign(np.linalg.det(turn))  # a rotation, no mirror
         for figure in (handedness(P @ turn.T + rng.normal(size=3), found),
                        handedness((P @ turn.T) * [1, 1, -1], found)):
-            assert -1.0 <= figure <= 1.0 and abs(abs(figure) - 1.0) < 1e-12, figure
+            if figure is not None:  # (None: turned to lie, LYING_BAND_DEG)
+                read += 1
+                assert -1.0 <= figure <= 1.0 and abs(abs(figure) - 1.0) < 1e-12, figure
+    assert read >= 40, read
 
 
 @pytest.mark.parametrize("heels", [("LHeel",), ("RHeel",), ("LHeel", "RHeel")])
