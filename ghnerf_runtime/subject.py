@@ -201,7 +201,10 @@ class SubjectSelector:
             # (no track: a cold pass retried after a several_people tracked pass, picked as without a track)
             near = (centre_of(track.joints[None], np.where(track.valid, 0, -1)) if cold_several and track is not None
                     else None)
-            return self._picked_subject(none, kp, uv_model, crops, regions, near, solution)
+            # a refining pass flagged where its cold pass, on the working volume's coarser crop, was not: nothing
+            # to split there is one person's peaks with a few of the other's (_one_shown)
+            return self._picked_subject(none, kp, uv_model, crops, regions, near, solution,
+                                        one_shown=cold_several is False)
         step = np.linalg.norm(j3.points - track.joints, axis=-1)
         near = track.valid & (step <= cfg.max_track_step_m)
         kept = Joints3D(j3.points, j3.confidence, j3.valid & near, j3.reprojection_px).sanitised()
@@ -295,20 +298,23 @@ class SubjectSelector:
         return self._from_pairings(kept, kp, pairs, best, found)
 
     def _picked_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
-                        regions: Regions, near: np.ndarray | None = None, solution: TwoViewSolution | None = None
-                        ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
+                        regions: Regions, near: np.ndarray | None = None, solution: TwoViewSolution | None = None,
+                        one_shown: bool = False) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """A ``several_people`` pair without a track: the pairings (:meth:`_pairings`) split into two people
         (:func:`~ghnerf_runtime.two_people.split_people`), and the one ``joints3d.pick_subject`` names
         (:func:`~ghnerf_runtime.two_people.pick_person`) of those with enough joints to pass the presence gate
         (``presence.min_joints``) is reported, as :meth:`_tracked_candidates` reports the tracked subject's; the
         track then follows that person. Nobody (``kept``) where neither has enough. ``near`` (a floor point,
-        x and z): the person whose centre is nearer it instead of the rule's."""
+        x and z): the person whose centre is nearer it instead of the rule's. ``one_shown``: where the split finds no
+        two people, the one person the decoded peaks show (:meth:`_one_shown`) instead of nobody."""
         J = len(kept.valid)
         pairs = self._pairings(kp, uv_model, crops, regions, solution)
         points = pairs[0].points.reshape(4, J, 3)
         people = split_people(points, pairs[0].valid.reshape(4, J))
         pres = self.config.presence
         need = pres.min_joints if pres.enabled else 1
+        if one_shown and (people < 0).all():  # nothing to split: one person's peaks, the other's hidden or merged
+            return self._one_shown(kept, kp, pairs, need)
         centres = [centre_of(points, p) if np.count_nonzero(p >= 0) >= need else None for p in people]
         below = floor_xz(0.5 * (self.rig.pair[0].center + self.rig.pair[1].center))  # the cameras' midpoint
         towards = floor_xz(self.rig.volume.center) - below
@@ -326,6 +332,22 @@ class SubjectSelector:
         # and one peak is not read as both sides' joints
         return self._from_pairings(kept, kp, pairs, best,
                                    one_skeleton_each_side(points[best, np.arange(J)], people[who] >= 0))
+
+    def _one_shown(self, kept: Joints3D, kp: Keypoints2D, pairs: tuple, need: int
+                   ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
+        """A pass refining a cold pass not flagged, flagged itself, whose pairings hold no joint twice
+        (``split_people`` has nobody to tell apart): flagged by its torso (``two_people.mixed_torso``), each view's
+        peaks are one person's but for a few joints where a view drew the other's instead, which lie off that
+        person's limbs (the torso's more than a limb's reach). The decoded peaks' joints that make one skeleton
+        (:func:`one_skeleton_each_side`) are the subject's; nobody (``kept``) with fewer than ``need``. Before
+        session 66 such a pass reported nobody and dropped its track, so with a person a metre behind the subject
+        along one camera's line of sight every pair started cold again (docs/two-people.md, "Anyone else near?")."""
+        J = len(kept.valid)
+        decoded = pairs[0].points.reshape(4, J, 3)[0]  # PAIRINGS[0]: the decoded peak in both views
+        found = one_skeleton_each_side(decoded, pairs[0].valid.reshape(4, J)[0])
+        if np.count_nonzero(found) < need:
+            return kept, None, Joints3D.missing(J, kept.reprojection_px.shape[-1])
+        return self._from_pairings(kept, kp, pairs, np.zeros(J, int), found)
 
     def _seen_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                       regions: Regions, behind: int, solution: TwoViewSolution | None = None
