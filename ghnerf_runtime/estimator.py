@@ -1255,7 +1255,8 @@ class Estimator:
     def _tiles_for_small_people(self, rig: Rig) -> tuple[Regions, ...]:
         """The working volume's tiles (``tracking.volume_tiles``) where the whole volume's crop shows a person
         standing at its centre under ``tracking.cold_tiles_below_share`` of the crop's side tall (a volume wide and
-        near the cameras, whose crop covers the image); none otherwise (then the option costs nothing) or with tracking off."""
+        near the cameras, whose crop covers the image); none otherwise (then the option costs nothing) or with
+        tracking off."""
         t = self.config.tracking
         if not t.enabled or t.cold_tiles_below_share <= 0:
             return ()

@@ -37,9 +37,11 @@ from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.preprocess import Roi, crop_camera, roi_from_joints, roi_from_volume
 
 __all__ = ["Track", "Regions", "SubjectTracker", "keep_roi", "plan_regions", "snap_roi", "track_from_joints",
-           "volume_regions", "box_corners", "cold_person_share", "volume_tiles", "COLD_TILE_SPLITS", "COLD_TILE_OVERLAP_M"]
+           "volume_regions", "box_corners", "cold_person_share", "volume_tiles", "COLD_TILE_SPLITS",
+           "COLD_TILE_OVERLAP_M"]
 
-#: ``tracking.cold_tiles_below_share``: the working volume's tiles, this many along x (left/right) and along z (near/far)
+#: ``tracking.cold_tiles_below_share``: the working volume's tiles, this many along x (left/right) and along z
+#: (near/far)
 COLD_TILE_SPLITS = (2, 2)
 #: and how far each tile reaches past its share of the volume where it meets another: the sim's people keep their
 #: pelvis 0.3 m inside the volume, and a person straddling a cut is then wholly inside one tile

@@ -14,3 +14,4 @@ def test_the_command_line_runs(tiny_model_dir, scratch_cache, capsys, monkeypatc
     assert [r.split("|")[2].strip() for r in rows] == ["tiles (default)", "no tiles", "ratio"], out
     # the example rig's cold crop draws a person at 0.40 of its side: every empty-room pair searches a tile
     assert rows[0].rstrip(" |").endswith("/ 2") and rows[1].rstrip(" |").endswith("0 / 0"), out
+    assert " of 2 | " in rows[0] and " of 2 | " in rows[1], out

@@ -1,5 +1,5 @@
-"""``tracking.cold_tiles_below_share``: a cold pair that finds nobody, on a rig whose cold crop (the whole working volume)
-draws a person too small for the model, searches one of the volume's tiles (docs/runtime.md, "Cold tiles").
+"""``tracking.cold_tiles_below_share``: a cold pair that finds nobody, on a rig whose cold crop (the whole working
+volume) draws a person too small for the model, searches one of the volume's tiles (docs/runtime.md, "Cold tiles").
 
 The oracle here is blind to people under :data:`BLIND_BELOW_PX` model pixels tall, as the shipped model, trained on
 people of about 63 such pixels and more, misses those of 51 (docs/rig-file.md, "A person who does not fit the view").
@@ -66,7 +66,8 @@ def test_the_example_rigs_cold_crop_draws_a_person_small_and_its_tiles_larger(ex
     assert len(tiles) == COLD_TILE_SPLITS[0] * COLD_TILE_SPLITS[1]
     for tile in tiles:
         assert all(t.size < w.size for t, w in zip(tile.rois, volume_regions(example_rig, RoiConfig()).rois))
-        assert np.all(tile.box[0] >= example_rig.volume.min_corner) and np.all(tile.box[1] <= example_rig.volume.max_corner)
+        assert np.all(tile.box[0] >= example_rig.volume.min_corner)
+        assert np.all(tile.box[1] <= example_rig.volume.max_corner)
     # together they cover the volume
     lo, hi = np.min([t.box[0] for t in tiles], axis=0), np.max([t.box[1] for t in tiles], axis=0)
     np.testing.assert_allclose(lo, example_rig.volume.min_corner)
