@@ -342,6 +342,16 @@ class TrackingConfig:
         max_gap_s: a track older than this, by the pairs' capture times (``estimate(timestamp_s=)``),
             is dropped, as is one when time runs backwards (a looped recording): the subject may be
             anywhere by now.
+        cold_tiles_below_share: where the cold-start crop (the whole working volume projected) shows a 1.8 m
+            person standing at the volume's centre under this share of the crop's side tall (a volume wide and
+            near the cameras: the example rig's and ``ghcal synth``'s, 0.40, 51 of the model's 128 input pixels;
+            0.47 is 60 of them), a cold pair that finds
+            nobody runs one more pass through one of the volume's tiles (``tracking.volume_tiles``: left/right
+            halves by near/far halves, each grown 0.3 m into its neighbours), the next tile each such pair, and
+            tracks from there once someone is found. The model learnt people of about 0.49 of its input and more
+            (63 of 128 pixels) and misses the smaller ones (docs/runtime.md, "Cold tiles"); rigs whose cold crop
+            frames that person at this or more, the bench's and the simulator's default (0.52), never run it. A
+            share, not pixels, so that it means the same at any model resolution. 0 disables.
     """
 
     enabled: bool = True
@@ -354,9 +364,11 @@ class TrackingConfig:
     follow_encoder: bool = True
     retry_cold: bool = True
     max_gap_s: float = 0.5
+    cold_tiles_below_share: float = 0.47
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
+        _number(self, "cold_tiles_below_share", 0.0, 1.0)
         _boolean(self, "retry_cold")
         _number(self, "max_gap_s", 0.0, 3600.0, lo_open=True)
         _boolean(self, "refine_cold_start")

@@ -101,7 +101,7 @@ from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import PriorCameras, disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
-from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners
+from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners, cold_person_share, volume_tiles
 from ghnerf_runtime.subject import STILL_SEVERAL_MIN_JOINTS, SubjectSelector, guessed_joints, joints_shown_twice, \
     picks_subject
 from ghnerf_runtime.two_people import TORSO_LIMBS_M, reads_as_two_people, torso_excess
@@ -754,6 +754,12 @@ class Estimator:
         self._centres = np.stack([c.center for c in rig.pair]).astype(np.float64)
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
                                       (self._cams[0].roll_deg, self._cams[1].roll_deg))
+        # tracking.cold_tiles_below_share: the working volume's tiles (none where its whole crop frames a person well
+        # enough), one searched per cold pair that finds nobody, in turn
+        self._cold_tiles = self._tiles_for_small_people(rig)
+        self._next_tile = 0
+        self.cold_tile_passes = 0  # cold pairs that searched a tile, and those whose tile found someone
+        self.cold_tiles_found = 0
         # roi.turn_search: each camera's crop turn (degrees on top of roi.upright's) and, per turn, the camera
         # state (its own remap tables) and per pair of turns a tracker (volume crops sized for that turn)
         self._turns: tuple[int, int] = (0, 0)
@@ -865,6 +871,7 @@ class Estimator:
         self._turn_check_wait = 0
         self._kept_axis = None
         self._crop_terms = None
+        self._next_tile = 0
         self._forget_scan()
         if self._smoother is not None:
             self._smoother.reset()
@@ -1030,6 +1037,8 @@ class Estimator:
         cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
         turns_read = self._turns  # the crops' turns this pair's tracked pass read (a change resets the smoothing)
         p = self._refined(images, p, sequence, timing, novel_view)
+        if cold_pass and self._turns == (0, 0) and self._cold_tiles and self._finds_nobody(p):
+            p = self._tile_search(images, p, sequence, timing, novel_view)
         leave_turn = cold_pass and self._turns != (0, 0) and self._weak_pass(p)
         if cold_pass and self._turns != (0, 0) and not leave_turn and self._turn_misreads(p):
             self.turns_refused += 1
@@ -1241,6 +1250,42 @@ class Estimator:
             return self._pass(images, self.tracker.regions(), sequence, timing, novel_view,
                               cold_several=p.several_people)
         return p
+
+    # -------------------------------------------------------------- cold tiles (tracking.cold_tiles_below_share)
+    def _tiles_for_small_people(self, rig: Rig) -> tuple[Regions, ...]:
+        """The working volume's tiles (``tracking.volume_tiles``) where the whole volume's crop shows a person
+        standing at its centre under ``tracking.cold_tiles_below_share`` of the crop's side tall (a volume wide and
+        near the cameras, whose crop covers the image); none otherwise (then the option costs nothing) or with
+        tracking off."""
+        t = self.config.tracking
+        if not t.enabled or t.cold_tiles_below_share <= 0:
+            return ()
+        if cold_person_share(rig, self.tracker.volume_regions) >= t.cold_tiles_below_share:
+            return ()
+        return volume_tiles(rig, self.config.roi, self.tracker.rolls)
+
+    @staticmethod
+    def _finds_nobody(p: "_Pass") -> bool:
+        """Whether ``p`` passed both frames and found nobody, not even in one view: a tile may show someone the
+        whole volume's crop drew too small (a rejected frame or a person seen by one camera is no such case)."""
+        if p.j3 is None or not all(p.frame_ok.values()) or p.single_view is not None:
+            return False
+        return not (p.someone and bool(p.j3.valid.any()))
+
+    def _tile_search(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
+                     novel_view: NovelViewRequest | None) -> "_Pass":
+        """After ``p``, a cold pass that found nobody: the pass through the next working-volume tile (one a pair, in
+        turn), refined on its subject when it finds someone (and then that tile is searched first when the track is
+        lost again); else ``p``."""
+        k = self._next_tile % len(self._cold_tiles)
+        self.cold_tile_passes += 1
+        q = self._pass(images, self._cold_tiles[k], sequence, timing, novel_view)
+        if not (q.j3 is not None and q.someone and q.j3.valid.any()):
+            self._next_tile = k + 1
+            return p
+        self.cold_tiles_found += 1
+        self._next_tile = k
+        return self._refined(images, q, sequence, timing, novel_view)
 
     def _weak_pass(self, p: "_Pass") -> bool:
         """Whether ``roi.turn_search`` tries turned crops after ``p``, a cold pair's pass (refined or not) or a

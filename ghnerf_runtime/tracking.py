@@ -33,11 +33,19 @@ import numpy as np
 
 from ghnerf_runtime.config import RoiConfig, TrackingConfig
 from ghnerf_runtime.errors import GeometryError, ShapeError
-from ghnerf_runtime.geometry.rig import Rig
+from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.preprocess import Roi, crop_camera, roi_from_joints, roi_from_volume
 
 __all__ = ["Track", "Regions", "SubjectTracker", "keep_roi", "plan_regions", "snap_roi", "track_from_joints",
-           "volume_regions", "box_corners"]
+           "volume_regions", "box_corners", "cold_person_share", "volume_tiles", "COLD_TILE_SPLITS",
+           "COLD_TILE_OVERLAP_M"]
+
+#: ``tracking.cold_tiles_below_share``: the working volume's tiles, this many along x (left/right) and along z
+#: (near/far)
+COLD_TILE_SPLITS = (2, 2)
+#: and how far each tile reaches past its share of the volume where it meets another: the sim's people keep their
+#: pelvis 0.3 m inside the volume, and a person straddling a cut is then wholly inside one tile
+COLD_TILE_OVERLAP_M = 0.3
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,6 +204,40 @@ def volume_regions(rig: Rig, roi_config: RoiConfig, rolls: tuple[float, float] =
             raise GeometryError(f"rig {rig.rig_id!r}: the working volume is not visible in camera "
                                 f"{cam.name!r} ({e})") from e
     return Regions(tuple(rois), np.stack([volume.min_corner, volume.max_corner]), False)
+
+
+def cold_person_share(rig: Rig, regions: Regions) -> float:
+    """The height of a person standing at the working volume's centre (``rig_file.standing_person``) as a share of
+    the side of ``regions``' crops, the pair's worse camera: what a cold pass sees of them (the model learnt people of
+    about 0.49 of its input and more, 63 of 128 pixels, at 2.2-4 m)."""
+    from ghnerf_runtime.rig_file import standing_person  # (rig_file is the loader's; a local import keeps it so)
+
+    heights = []
+    for cam, roi in zip(rig.pair, regions.rois):
+        feet_head = cam.project(standing_person(rig.volume, samples=2), distort=False)[0]
+        heights.append(float(np.linalg.norm(feet_head[1] - feet_head[0])) / roi.size)
+    return min(heights)
+
+
+def volume_tiles(rig: Rig, roi_config: RoiConfig, rolls: tuple[float, float] = (0.0, 0.0)) -> tuple[Regions, ...]:
+    """The working volume cut into :data:`COLD_TILE_SPLITS` sub-volumes (left/right, near/far), each grown by
+    :data:`COLD_TILE_OVERLAP_M` into its neighbours, as cold-start regions (``tracking.cold_tiles_below_share``): each
+    tile's crop is smaller than the whole volume's, so a person in it is larger in the model's input. A tile not
+    visible in a camera is left out."""
+    lo, hi = rig.volume.min_corner, rig.volume.max_corner
+    xs = np.linspace(lo[0], hi[0], COLD_TILE_SPLITS[0] + 1)
+    zs = np.linspace(lo[2], hi[2], COLD_TILE_SPLITS[1] + 1)
+    tiles = []
+    for i in range(COLD_TILE_SPLITS[0]):
+        for k in range(COLD_TILE_SPLITS[1]):
+            a = np.array([max(lo[0], xs[i] - COLD_TILE_OVERLAP_M), lo[1], max(lo[2], zs[k] - COLD_TILE_OVERLAP_M)])
+            b = np.array([min(hi[0], xs[i + 1] + COLD_TILE_OVERLAP_M), hi[1],
+                          min(hi[2], zs[k + 1] + COLD_TILE_OVERLAP_M)])
+            try:
+                tiles.append(volume_regions(Rig(rig.cameras, WorkingVolume(a, b), rig.rig_id), roi_config, rolls))
+            except GeometryError:
+                continue
+    return tuple(tiles)
 
 
 class SubjectTracker:

@@ -1,0 +1,125 @@
+"""``tracking.cold_tiles_below_share``: a cold pair that finds nobody, on a rig whose cold crop (the whole working
+volume) draws a person too small for the model, searches one of the volume's tiles (docs/runtime.md, "Cold tiles").
+
+The oracle here is blind to people under :data:`BLIND_BELOW_PX` model pixels tall, as the shipped model, trained on
+people of about 63 such pixels and more, misses those of 51 (docs/rig-file.md, "A person who does not fit the view").
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+from benchmarks.empty_rooms import empty_room_pair
+from ghnerf_runtime.config import ConfigError, EstimatorConfig, RoiConfig, TrackingConfig
+from ghnerf_runtime.estimator import Estimator
+from ghnerf_runtime.rig_file import load_rig
+from ghnerf_runtime.tracking import COLD_TILE_SPLITS, cold_person_share, volume_regions, volume_tiles
+
+sim = pytest.importorskip("drivers.sim")
+
+EXAMPLE_RIG = Path(__file__).resolve().parents[2] / "docs" / "examples" / "rig.json"
+#: the blind oracle's bound: a person shorter than this in either crop, model pixels, is not seen
+BLIND_BELOW_PX = 60.0
+
+
+class SmallPeopleBlindOracle(OracleSession):
+    """The oracle, answering no heatmap where the person is under :data:`BLIND_BELOW_PX` model pixels tall in a
+    source crop (their joints' vertical extent through ``src_P``)."""
+
+    def run(self, graph, feeds):
+        out = super().run(graph, feeds)
+        if graph in ("encoder", "human") and self.truth is not None and self._too_small(feeds["src_P"]):
+            out["encoder_heatmaps"] = np.zeros_like(out["encoder_heatmaps"])
+        return out
+
+    def _too_small(self, src_P) -> bool:
+        homog = np.concatenate([self.truth, np.ones((len(self.truth), 1))], axis=1)
+        heights = []
+        for P in np.asarray(src_P, np.float64):
+            p = homog @ P.T
+            v = p[:, 1] / p[:, 2]
+            heights.append(float(v.max() - v.min()))
+        return min(heights) < BLIND_BELOW_PX
+
+
+@pytest.fixture(scope="module")
+def example_rig():
+    return load_rig(EXAMPLE_RIG, warn=False)
+
+
+@pytest.fixture(scope="module")
+def far_person(example_rig):
+    """One frame pair of a person standing 4 m ahead, 0.8 m left, through the example rig, and their joints: 38 model
+    pixels tall through the whole volume's crop, 52-56 through the near tiles', 68 through the far ones'."""
+    scene = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(-0.8, 4.0)))
+    images = tuple(scene.render(cam, 0.0, with_truth=False)[0] for cam in example_rig.pair)
+    return images, scene.joints_3d(0.0)
+
+
+def test_the_example_rigs_cold_crop_draws_a_person_small_and_its_tiles_larger(example_rig):
+    whole = cold_person_share(example_rig, volume_regions(example_rig, RoiConfig()))
+    tiles = volume_tiles(example_rig, RoiConfig())
+    assert 0.38 < whole < 0.42  # 51 of 128 model pixels (docs/rig-file.md)
+    assert len(tiles) == COLD_TILE_SPLITS[0] * COLD_TILE_SPLITS[1]
+    for tile in tiles:
+        assert all(t.size < w.size for t, w in zip(tile.rois, volume_regions(example_rig, RoiConfig()).rois))
+        assert np.all(tile.box[0] >= example_rig.volume.min_corner)
+        assert np.all(tile.box[1] <= example_rig.volume.max_corner)
+    # together they cover the volume
+    lo, hi = np.min([t.box[0] for t in tiles], axis=0), np.max([t.box[1] for t in tiles], axis=0)
+    np.testing.assert_allclose(lo, example_rig.volume.min_corner)
+    np.testing.assert_allclose(hi, example_rig.volume.max_corner)
+
+
+def test_a_person_too_small_in_the_cold_crop_is_found_through_a_tile_then_tracked(example_rig, far_person):
+    images, joints = far_person
+    oracle = SmallPeopleBlindOracle(edge128_contract())
+    est = Estimator(oracle, example_rig, EstimatorConfig())
+    oracle.set_truth(joints)
+    results = [est.estimate(images) for _ in range(6)]
+    found = [int((~r.missing).sum()) for r in results]
+    # before the tiles, the whole volume's crop drew them at 41 model pixels: no pair found them
+    assert max(found) > 0, found
+    first = next(i for i, n in enumerate(found) if n > 0)
+    assert first == 1  # one tile a pair: the near left one, then the far left one
+    assert all(r.tracked for r in results[first:])  # refined on the subject's crop, then tracked
+    assert est.cold_tiles_found == 1 and est.cold_tile_passes == first + 1
+    err = np.linalg.norm(results[-1].joints_3d - joints, axis=1)[~results[-1].missing]
+    assert np.median(err) < 0.05
+
+
+def test_an_empty_room_pays_one_tile_pass_a_pair(example_rig):
+    images = empty_room_pair(example_rig, 11, 0.2)
+
+    def encoder_runs(below: float) -> tuple[int, Estimator]:
+        oracle = SmallPeopleBlindOracle(edge128_contract())
+        est = Estimator(oracle, example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_below_share=below)))
+        oracle.set_truth(None)
+        for _ in range(3):
+            assert est.estimate(images).missing.all()
+        return sum(oracle.run_counts.get(g, 0) for g in ("encoder", "human")), est
+
+    plain, off = encoder_runs(0.0)
+    tiled, on = encoder_runs(0.47)
+    assert off.cold_tile_passes == 0 and on.cold_tile_passes == 3
+    assert tiled == plain + 3
+    assert on._next_tile == 3  # one tile after the other
+
+
+def test_a_rig_whose_cold_crop_frames_a_person_has_no_tiles():
+    rig = sim.RigPlacement().build()  # the simulator's default: 0.52, 67 of 128 model pixels
+    oracle = SmallPeopleBlindOracle(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig())
+    assert est._cold_tiles == ()
+    oracle.set_truth(None)
+    est.estimate(empty_room_pair(rig, 11, 0.2))
+    assert est.cold_tile_passes == 0
+
+
+@pytest.mark.parametrize("value", [-0.1, float("nan"), 1.5])
+def test_cold_tiles_below_share_out_of_range_is_refused(value):
+    with pytest.raises(ConfigError, match="cold_tiles_below_share"):
+        TrackingConfig(cold_tiles_below_share=value)
