@@ -10,7 +10,8 @@ left-to-right axis and its up axis, points to its back, where the nose and the t
 :func:`handedness` reads that from a pair's triangulated joints (before the skeleton prior, which was trained on
 people and answers a person's handedness whatever the triangulation: measured, it hid the mirror entirely). The
 figure is in the body's own frame, so turning round, bending or a handstand leave it as it is; a mirror image turns
-its sign. A body lying (:data:`LYING_BAND_DEG`) gives none: there the model's left and right are not to be trusted. A
+its sign. A body lying (:data:`LYING_BAND_DEG`), or whose found joints span too little of its width to give its left
+(:data:`MIN_LEFT_SPAN_M`: side-on) gives none: there the model's left and right are not to be trusted. A
 few dot products a pair.
 """
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 
 from ghnerf_runtime.body25 import JOINT_INDEX
 
-__all__ = ["handedness", "LEFTWARD_PAIRS", "FORWARD_CUES", "BACK_JOINTS", "LYING_BAND_DEG"]
+__all__ = ["handedness", "LEFTWARD_PAIRS", "FORWARD_CUES", "BACK_JOINTS", "LYING_BAND_DEG", "MIN_LEFT_SPAN_M"]
 
 _J = JOINT_INDEX
 #: (a, b) pairs whose ``a - b`` points to the person's left: the shoulders and hips, through the neck and the mid-hip
@@ -66,6 +67,15 @@ BACK_JOINTS: tuple[int, ...] = (_J["LHeel"], _J["RHeel"])
 #: bench's motions (their truth), and upside down (a handstand, 180) the figure kept its sign (+0.76 / -0.72).
 LYING_BAND_DEG = 45.0
 _LEVEL_MAX_UP_Y = math.sin(math.radians(LYING_BAND_DEG))  # |up . gravity| of an axis within the band of level
+#: Shortest sum of the found :data:`LEFTWARD_PAIRS` spans (metres) that gives a left axis: joints that span less of the
+#: body's width than this give no figure. Side-on the cameras see one side: the far shoulder and hip hidden, the left
+#: axis came from the ankles (or a near half-span) a few centimetres apart along the line of sight, and its sign was
+#: noise or the model's labels (the near foot read as the far one in both views): the true rig of sequence 25 at heading
+#: 270 was flagged after 103 pairs (windows down to -0.64). With the rule it reads +0.89 to +0.91 over 62 figures of
+#: 150, the exchanged rig is still flagged (after 43 pairs), and the bench's takes keep 547 of their 548 figures (13 of
+#: 13 exchanged takes judged flagged): ``benchmarks/measure_exchanged_cameras.py --only 25 --frames 150 --heading-deg
+#: 270`` and ``--sequences 30 --frames 30``, session 66 (docs/calibration.md, "Cameras exchanged").
+MIN_LEFT_SPAN_M = 0.1
 #: Shortest span (metres) given a direction: joints closer than a micrometre are one point (a repeated peak).
 _TINY_M = 1e-6
 
@@ -86,7 +96,8 @@ def _mean_of(points: np.ndarray, found: np.ndarray, joints: Sequence[int]) -> np
 
 
 def _body_axes(points: np.ndarray, found: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """The person's leftward and upward unit axes from the found torso joints (None: too few of them)."""
+    """The person's leftward and upward unit axes from the found torso joints (None: too few of them, or the leftward
+    spans summing under :data:`MIN_LEFT_SPAN_M`)."""
     leftward = [points[a] - points[b] for a, b in LEFTWARD_PAIRS if found[a] and found[b]]
     top = points[_TOP] if found[_TOP] else _mean_of(points, found, _SHOULDERS)
     bottom = _mean_of(points, found, _HIPS)
@@ -94,7 +105,10 @@ def _body_axes(points: np.ndarray, found: np.ndarray) -> tuple[np.ndarray, np.nd
         bottom = _mean_of(points, found, _KNEES)
     if not leftward or top is None or bottom is None:
         return None
-    left, up = _unit(sum(leftward)), _unit(top - bottom)
+    summed = sum(leftward)
+    if float(summed @ summed) < MIN_LEFT_SPAN_M ** 2:  # too little of the body's width to tell its left by
+        return None
+    left, up = _unit(summed), _unit(top - bottom)
     return None if left is None or up is None else (left, up)
 
 
@@ -111,7 +125,8 @@ def handedness(points: np.ndarray, found: np.ndarray) -> float | None:
     direction ``left x up`` (the rig frame is x right, y down, z forward: right-handed): the cosine between them,
     times the sine of the angle between the unit left and up axes (a skewed torso reads weaker). Within [-1, 1]
     (clipped: a cue straight ahead read 1 + 2e-16 by rounding, which ``PairResult`` refused). ``None`` when the
-    torso gives no axes or no cue is found, when a heel is (:data:`BACK_JOINTS`: the person's back to the rig, where
+    torso gives no axes (its found spans summing under :data:`MIN_LEFT_SPAN_M` of width among them: side-on, one
+    side seen) or no cue is found, when a heel is (:data:`BACK_JOINTS`: the person's back to the rig, where
     the model's left and right and its nose are not to be trusted), or when the body lies (:data:`LYING_BAND_DEG`).
 
     Args:
