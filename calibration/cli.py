@@ -387,7 +387,7 @@ def every_frame_of_two_videos(url: str) -> str:
     calibration while capturing it (``record+``) dropped the held poses and the take's frames alike."""
     from drivers.backends.opencv import is_video_file
     from drivers.errors import RigConfigError
-    from drivers.registry import innermost_url
+    from drivers.wrappers import innermost_url
     from drivers.url import RigUrl
 
     try:

@@ -731,7 +731,7 @@ _TIFF_UNCOMPRESSED = 1
 _LIBTIFF_READ_BUFFER_STEP = 1024
 _TIFF_BITS_DECODED = frozenset({8, 16})
 #: The TIFF compressions whose header gives the size, those cv2.imwrite writes (none, LZW, JPEG, Adobe and old
-#: deflate, PackBits): another one that OpenCV decodes (CCITT fax, ...; ghnerf_runtime.tiff_compression.DECODED)
+#: deflate, PackBits): another one that OpenCV decodes (CCITT fax, ...; ghnerf_runtime.tiff_compression.decoded)
 #: is decoded to tell, as a BMP layout OpenCV does not read is, and one it does not decode has no size (its read
 #: names the compression: load_image).
 _TIFF_COMPRESSIONS = frozenset({1, 5, 7, 8, 32946, 32773})
