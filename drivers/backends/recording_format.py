@@ -274,22 +274,15 @@ def _json_value(text: str) -> Any:
     return value
 
 
-def drop_broken_rows(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], int]:
-    """A take cut short (``complete: false``): ``rows`` without those whose image or truth file is missing,
-    empty or cut short (:func:`payload_is_whole`), and how many were dropped.
+def broken_rows_split(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], list[FrameRow]]:
+    """A take cut short (``complete: false``): ``rows`` split into those whose files are whole and those whose image
+    (:func:`image_is_whole`) or truth (:func:`payload_is_whole`) is missing, empty or cut short, each in journal
+    order: the dropped ones are named in replay's warning.
 
     Journal rows can reach the disk before their files, and with several writer threads and no per-frame
     fsync the rows a power cut tore need not be the last ones: every broken row is dropped, wherever it is.
     A ``complete: true`` take promises whole files, so there any broken row is reported when it is opened.
     """
-    kept, dropped = broken_rows_split(directory, rows)
-    return kept, len(dropped)
-
-
-def broken_rows_split(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], list[FrameRow]]:
-    """``rows`` split into those whose files are whole and those whose image (:func:`image_is_whole`) or truth
-    (:func:`payload_is_whole`) is missing, empty or cut short, each in journal order: the dropped ones are named
-    in replay's warning."""
     kept, dropped = [], []
     for row in rows:
         whole = image_is_whole(directory / row.image) and (row.truth is None
