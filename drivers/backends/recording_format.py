@@ -652,9 +652,9 @@ def load_image(path: Path) -> np.ndarray:
         compression = tiff_compression_refusal(path)
         if compression is not None:
             raise RefusedLayoutError(f"recording image {path} does not decode: it is {compression}")
-        data = tiff_data_refusal(path)
-        if data is not None:
-            raise RigOperationError(f"recording image {path} is corrupt: {data}")
+        strips = tiff_data_refusal(path)
+        if strips is not None:
+            raise RigOperationError(f"recording image {path} is corrupt: {strips}")
         samples = samples_not_8_bit(path)  # a valid float TIFF was called corrupt
         if samples is not None:
             raise RigOperationError(f"recording image {path} does not decode: it has {samples}")
