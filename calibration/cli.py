@@ -387,7 +387,7 @@ def every_frame_of_two_videos(url: str) -> str:
     calibration while capturing it (``record+``) dropped the held poses and the take's frames alike."""
     from drivers.backends.opencv import is_video_file
     from drivers.errors import RigConfigError
-    from drivers.registry import innermost_url
+    from drivers.wrappers import innermost_url
     from drivers.url import RigUrl
 
     try:
@@ -685,11 +685,12 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
 def _replaced_rig(out: Path):
     """The rig file at ``out`` that ``solve`` is to replace, loaded; None where there is none, or one that does not
-    load (it is replaced whatever it holds)."""
+    load (it is replaced whatever it holds). Read without its warnings: they are the old calibration's, and logged
+    here they read as the new one's."""
     if not out.is_file():
         return None
     try:
-        return load_rig(out)
+        return load_rig(out, warn=False)
     except RigFileError:
         return None
 

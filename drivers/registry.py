@@ -1,9 +1,8 @@
 """Backend registry: URL scheme -> (module, class), imported only when chosen.
 
 A wrapper's prefix wraps any other URL's source in its own: ``record+<url>`` in the recorder. The prefixes are
-:mod:`drivers.wrappers`' table (:data:`WRAPPERS`, re-exported here with :func:`innermost_url`, the URL of the
-backend that delivers the frames, for a caller that asks what a URL plays: ``ghcal capture``'s two video files or
-live cameras?).
+:mod:`drivers.wrappers`' table, which builds them here; a caller that asks what a URL plays (``ghcal capture``'s
+two video files or live cameras?) imports :func:`drivers.wrappers.innermost_url` from there, the one import path.
 """
 from __future__ import annotations
 
@@ -13,10 +12,9 @@ from drivers.base import RigSource
 from drivers.errors import BackendNotAvailableError
 from drivers.url import RigUrl
 from drivers.url_paths import check_url_paths
-from drivers.wrappers import RECORD_PREFIX, WRAPPERS, innermost_url, wrapper_prefix
+from drivers.wrappers import WRAPPERS, wrapper_prefix
 
-__all__ = ["BACKENDS", "RECORD_PREFIX", "WRAPPERS", "backend_class", "create_rig_source", "innermost_url",
-           "open_rig", "wrapper_prefix"]
+__all__ = ["BACKENDS", "backend_class", "create_rig_source", "open_rig"]
 
 #: scheme -> (module, class name). Extend by adding an entry; nothing is imported until chosen.
 BACKENDS: dict[str, tuple[str, str]] = {

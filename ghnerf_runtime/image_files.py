@@ -161,9 +161,11 @@ def _data_refusal(f: BinaryIO, tags: tiff_header.DirectoryTags | None) -> str | 
         if offset + count > size:
             return f"its {data.kind} {number} runs past the file's end (to byte {offset + count} of {size}): cut short"
     needed = _bytes_needed(tags, data)
-    for number, count in enumerate(data.counts, start=1):
-        if needed is not None and count < needed[number - 1]:
-            return (f"its {data.kind} {number} holds {count} of the {needed[number - 1]} bytes its pixels need "
+    if needed is None:  # compressed, or one strip: nothing to count (a decode's hot path, every strip else)
+        return None
+    for number, (count, need) in enumerate(zip(data.counts, needed), start=1):
+        if count < need:
+            return (f"its {data.kind} {number} holds {count} of the {need} bytes its pixels need "
                     f"(uncompressed): OpenCV would deliver the rest black")
     return None
 

@@ -318,7 +318,8 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None, warn: boo
     Args:
         data: the parsed JSON document (a dict).
         path: the file it came from, used only in messages.
-        warn: log :func:`rig_warnings`; ``False`` where the caller logs them (a rig source, once per daemon run).
+        warn: log :func:`rig_warnings`; ``False`` where the caller logs them (a rig source, once per daemon run)
+            or reads its own text back (:func:`save_rig`).
 
     Returns:
         The rig; cameras keep the file's order (the first two are the stereo pair).
@@ -331,11 +332,6 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None, warn: boo
             working volume with ``max <= min`` or reaching farther from a camera than the model's
             near/far resolve (:func:`volume_reach_problem`), duplicate camera names.
     """
-    return _rig_from_dict(data, path=path, warn=warn)
-
-
-def _rig_from_dict(data: Any, *, path: str | os.PathLike | None, warn: bool) -> Rig:
-    """:func:`rig_from_dict`; ``warn=False`` (:func:`save_rig`'s check of its own text) logs no lens warning."""
     chk = _Checker(None if path is None else str(path))
     if not isinstance(data, dict):
         chk._raise(None, f"the document must be a JSON object, got {type(data).__name__} {_show(data)}")
@@ -672,7 +668,7 @@ def loads_rig(text: str, *, path: str | os.PathLike | None = None, warn: bool = 
         data = loads_remembering(text)
     except JsonTextError as e:  # invalid, nested thousands deep, or an integer past 4300 digits
         raise RigFileError(str(e), path=where) from e
-    return _rig_from_dict(data, path=path, warn=warn)
+    return rig_from_dict(data, path=path, warn=warn)
 
 
 def load_rig(path: str | os.PathLike, *, warn: bool = True) -> Rig:
@@ -718,7 +714,7 @@ def save_rig(rig: Rig, path: str | os.PathLike) -> None:
     text = dumps_rig(rig, path=path)
     # a file the reader refuses is worse than none: read the text back with the reader's every check (a Camera
     # accepts what the file may not hold, such as a 40000-pixel side from an imported calibration)
-    _rig_from_dict(json.loads(text, object_pairs_hook=remember_repeats), path=path, warn=False)
+    rig_from_dict(json.loads(text, object_pairs_hook=remember_repeats), path=path, warn=False)
     write_text_atomic(path, text)
 
 

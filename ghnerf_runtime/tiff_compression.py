@@ -117,7 +117,12 @@ def decodes_sample(sample: bytes) -> bool:
 @functools.cache
 def decoded() -> frozenset[int]:
     """The Compression values the installed OpenCV decodes: :data:`BUILT_IN`, and each of :data:`PROBED` whose
-    sample it decodes. Probed once per process (a few tiny decodes; the build does not change while it runs)."""
+    sample it decodes. Probed once per process (a few tiny decodes; the build does not change while it runs).
+
+    The cache is a memo of a fact about the process (which OpenCV it imported), not state that changes: like
+    ``cv2.__version__`` it holds for the process's life, so it is kept here rather than on an object every reader of
+    an image (``image_files``, replay, ``ghcal``, the data loaders: free functions) would have to be handed. A test
+    that changes :data:`PROBED` or fakes the decode clears it (``decoded.cache_clear()``)."""
     return BUILT_IN | {compression for compression, sample in PROBED.items() if decodes_sample(sample())}
 
 

@@ -274,22 +274,15 @@ def _json_value(text: str) -> Any:
     return value
 
 
-def drop_broken_rows(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], int]:
-    """A take cut short (``complete: false``): ``rows`` without those whose image or truth file is missing,
-    empty or cut short (:func:`payload_is_whole`), and how many were dropped.
+def broken_rows_split(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], list[FrameRow]]:
+    """A take cut short (``complete: false``): ``rows`` split into those whose files are whole and those whose image
+    (:func:`image_is_whole`) or truth (:func:`payload_is_whole`) is missing, empty or cut short, each in journal
+    order: the dropped ones are named in replay's warning.
 
     Journal rows can reach the disk before their files, and with several writer threads and no per-frame
     fsync the rows a power cut tore need not be the last ones: every broken row is dropped, wherever it is.
     A ``complete: true`` take promises whole files, so there any broken row is reported when it is opened.
     """
-    kept, dropped = broken_rows_split(directory, rows)
-    return kept, len(dropped)
-
-
-def broken_rows_split(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], list[FrameRow]]:
-    """``rows`` split into those whose files are whole and those whose image (:func:`image_is_whole`) or truth
-    (:func:`payload_is_whole`) is missing, empty or cut short, each in journal order: the dropped ones are named
-    in replay's warning."""
     kept, dropped = [], []
     for row in rows:
         whole = image_is_whole(directory / row.image) and (row.truth is None
@@ -659,9 +652,9 @@ def load_image(path: Path) -> np.ndarray:
         compression = tiff_compression_refusal(path)
         if compression is not None:
             raise RefusedLayoutError(f"recording image {path} does not decode: it is {compression}")
-        data = tiff_data_refusal(path)
-        if data is not None:
-            raise RigOperationError(f"recording image {path} is corrupt: {data}")
+        strips = tiff_data_refusal(path)
+        if strips is not None:
+            raise RigOperationError(f"recording image {path} is corrupt: {strips}")
         samples = samples_not_8_bit(path)  # a valid float TIFF was called corrupt
         if samples is not None:
             raise RigOperationError(f"recording image {path} does not decode: it has {samples}")
@@ -731,7 +724,7 @@ _TIFF_UNCOMPRESSED = 1
 _LIBTIFF_READ_BUFFER_STEP = 1024
 _TIFF_BITS_DECODED = frozenset({8, 16})
 #: The TIFF compressions whose header gives the size, those cv2.imwrite writes (none, LZW, JPEG, Adobe and old
-#: deflate, PackBits): another one that OpenCV decodes (CCITT fax, ...; ghnerf_runtime.tiff_compression.DECODED)
+#: deflate, PackBits): another one that OpenCV decodes (CCITT fax, ...; ghnerf_runtime.tiff_compression.decoded)
 #: is decoded to tell, as a BMP layout OpenCV does not read is, and one it does not decode has no size (its read
 #: names the compression: load_image).
 _TIFF_COMPRESSIONS = frozenset({1, 5, 7, 8, 32946, 32773})

@@ -174,7 +174,8 @@ class HealthConfig:
         calibration_max_mirror: how far below 0 the median over ``calibration_window`` pairs of the pairs'
             handedness (``PairResult.handedness``: +1 a person, -1 a mirror image) may go before the cameras look
             exchanged (the fix is the plugs or the names in ``rig.url``, not a recalibration). ``null``: no check, for a
-            rig that is not a mirror image of itself, or a subject who performs with their back to the rig.
+            rig that is not a mirror image of itself (built far from symmetric). A subject with their back to the rig
+            needs none since session 66: a heel seen gives no figure (``ghnerf_runtime.handedness.BACK_JOINTS``).
     """
 
     status_file: str | None = None

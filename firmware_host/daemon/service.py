@@ -142,8 +142,8 @@ _HANDEDNESS_WORDS = _CheckWords(
     symptom="the cameras look exchanged: the triangulated person is a mirror image (handedness {median:.2f}, median "
             "over the last {pairs} pairs; +1 a person, -1 a mirror image; health.calibration_max_mirror {limit:g})",
     fix="the left camera's frames come in as the right's; exchange the cameras' plugs or their names in rig.url, no "
-        "recalibration is needed (docs/calibration.md, \"Cameras exchanged\"). For a subject who performs facing "
-        "away, set health.calibration_max_mirror null",
+        "recalibration is needed (docs/calibration.md, \"Cameras exchanged\"). On a rig built far from symmetric "
+        "(a camera above the person, one beside the other), set health.calibration_max_mirror null",
     fits_again="the cameras no longer look exchanged: handedness {median:.2f} over the last {pairs} pairs")
 
 

@@ -665,7 +665,7 @@ def test_only_two_videos_without_a_policy_get_policy_all():
 def test_two_videos_recorded_as_they_are_captured_get_policy_all_too(monkeypatch):
     # record+opencv:// of two videos (the calibration recorded as it is captured) kept the driver's ``latest``: the
     # wrapper's scheme hid the two files, and the held poses were dropped as without the recorder
-    from drivers import registry
+    from drivers import wrappers
 
     videos = "record+opencv://?first=take/a.avi&second=take/b.avi&out=rec"
     assert cli.every_frame_of_two_videos(videos) == videos + "&policy=all"
@@ -673,7 +673,7 @@ def test_two_videos_recorded_as_they_are_captured_get_policy_all_too(monkeypatch
                       "record+replay://take?out=rec", "record+sim://?out=rec"):
         assert cli.every_frame_of_two_videos(unchanged) == unchanged
     # every wrapper the registry knows, not the one prefix
-    monkeypatch.setitem(registry.WRAPPERS, "spy+", registry.WRAPPERS[registry.RECORD_PREFIX])
+    monkeypatch.setitem(wrappers.WRAPPERS, "spy+", wrappers.WRAPPERS[wrappers.RECORD_PREFIX])
     assert cli.every_frame_of_two_videos("spy+" + videos) == "spy+" + videos + "&policy=all"
 
 

@@ -688,3 +688,22 @@ def test_a_rendered_image_re_saved_as_jpeg_is_the_same_pose_and_a_moved_board_is
                                             render_board(cam, board, R, t + 0.02 * R[:, 0], seed=1))]
     assert solve.same_pose(views[0], views[1]) and solve.same_pose(views[0], views[2])
     assert not solve.same_pose(views[0], views[3])
+
+
+def test_solve_reads_the_rig_it_replaces_without_its_warnings(sized_rig, tmp_path, capsys, monkeypatch, caplog):
+    # session 66's review: the size check loaded the rig file it is to replace with load_rig's warnings, so a solve
+    # logged what was wrong with the old calibration (here a working volume off the floor) as if of the new one
+    import logging
+
+    from ghnerf_runtime.geometry.rig import WorkingVolume
+    from ghnerf_runtime.rig_file import rig_warnings, save_rig
+
+    lo, hi = sized_rig.volume.min_corner, sized_rig.volume.max_corner
+    off_floor = Rig(sized_rig.cameras, WorkingVolume(lo - [0, 1.0, 0], hi - [0, 1.0, 0]))
+    assert rig_warnings(off_floor)  # the old rig has something to warn of
+    save_rig(off_floor, tmp_path / "rig.json")
+    views = _views(sized_rig, _facing_poses(sized_rig, 10, seed=7), noise_px=0.1)
+    with caplog.at_level(logging.WARNING, logger="ghnerf_runtime.rig_file"):
+        rc, _ = _solve_cli(_exchanged(views), tmp_path, monkeypatch)  # refused before anything is solved
+    assert rc == 2 and "look exchanged" in capsys.readouterr().err
+    assert not [r for r in caplog.records if r.name == "ghnerf_runtime.rig_file"], caplog.text

@@ -75,18 +75,18 @@ def test_opening_sim_and_replay_never_imports_depthai(tmp_path):
 
 
 def test_innermost_url_takes_off_every_wrapper_the_registry_knows(monkeypatch):
-    from drivers import registry
+    from drivers import wrappers
 
-    assert registry.innermost_url("record+opencv://?first=a.avi&out=take") == "opencv://?first=a.avi&out=take"
-    assert registry.innermost_url("opencv://?first=a.avi") == "opencv://?first=a.avi"
-    assert registry.innermost_url("replay://record+x") == "replay://record+x"  # a prefix only at the start
-    monkeypatch.setitem(registry.WRAPPERS, "spy+", ("drivers.backends.record", "RecordingRigSource"))
-    assert registry.innermost_url("spy+record+sim://?fps=30") == "sim://?fps=30"
+    assert wrappers.innermost_url("record+opencv://?first=a.avi&out=take") == "opencv://?first=a.avi&out=take"
+    assert wrappers.innermost_url("opencv://?first=a.avi") == "opencv://?first=a.avi"
+    assert wrappers.innermost_url("replay://record+x") == "replay://record+x"  # a prefix only at the start
+    monkeypatch.setitem(wrappers.WRAPPERS, "spy+", ("drivers.backends.record", "RecordingRigSource"))
+    assert wrappers.innermost_url("spy+record+sim://?fps=30") == "sim://?fps=30"
 
 
 def test_create_rig_source_wraps_through_the_registry_s_wrappers(monkeypatch):
-    # the wrappers are one table (drivers.registry.WRAPPERS), read by create_rig_source and innermost_url alike
-    from drivers import registry
+    # the wrappers are one table (drivers.wrappers.WRAPPERS), read by create_rig_source and innermost_url alike
+    from drivers import wrappers
     from drivers.backends.record import RecordingRigSource
 
     wrapped = []
@@ -97,9 +97,20 @@ def test_create_rig_source_wraps_through_the_registry_s_wrappers(monkeypatch):
             wrapped.append(inner_url.url)
             return factory(f"{inner_url.scheme}://{inner_url.target}", **kwargs)
 
-    monkeypatch.setitem(registry.WRAPPERS, "spy+", (__name__, "_SPY"))
+    monkeypatch.setitem(wrappers.WRAPPERS, "spy+", (__name__, "_SPY"))
     monkeypatch.setattr(sys.modules[__name__], "_SPY", Spy, raising=False)
     source = create_rig_source("spy+sim://")
     assert wrapped == ["sim://"] and source.scheme == "sim"
     with pytest.raises(BackendNotAvailableError, match="record\\+<url>, spy\\+<url>"):
         create_rig_source("v4l2:///dev/video0")
+
+
+def test_the_wrappers_helpers_have_one_import_path():
+    """The review of session 66's merges: the registry re-exported ``innermost_url`` and ``RECORD_PREFIX`` from
+    :mod:`drivers.wrappers`, and ``ghcal capture`` imported the one from the registry while the demo and the daemon's
+    config imported it from ``drivers.wrappers``: two ways to one function. Code imports them from
+    ``drivers.wrappers`` only."""
+    from drivers import registry
+
+    assert not hasattr(registry, "innermost_url") and not hasattr(registry, "RECORD_PREFIX")
+    assert set(registry.__all__) == {"BACKENDS", "backend_class", "create_rig_source", "open_rig"}

@@ -57,7 +57,7 @@ def test_a_relative_path_with_a_byte_that_is_not_utf8_keeps_its_escape():
 
 def test_every_wrapper_says_which_of_its_options_are_files():
     # as for the backends: a wrapper's folder option left out would go unchecked (a NUL byte: a traceback)
-    from drivers.registry import WRAPPERS
+    from drivers.wrappers import WRAPPERS
     from drivers.wrappers import WRAPPER_FILE_OPTIONS
 
     assert set(WRAPPER_FILE_OPTIONS) == set(WRAPPERS)
@@ -67,11 +67,11 @@ def test_a_recorder_s_folder_is_checked_inside_another_wrapper(monkeypatch):
     """The check of a wrapped URL's files read ``record+`` off its start only: in ``spy+record+...`` neither the
     recorder's ``out=`` nor the inner backend's files were looked at, and a NUL byte in them reached the backend
     (a ValueError's traceback). Every wrapper of the registry's table is taken off now."""
-    from drivers import registry
+    from drivers import wrappers
     from drivers.errors import RigConfigError
     from drivers.url_paths import check_url_paths
 
-    monkeypatch.setitem(registry.WRAPPERS, "spy+", registry.WRAPPERS[registry.RECORD_PREFIX])
+    monkeypatch.setitem(wrappers.WRAPPERS, "spy+", wrappers.WRAPPERS[wrappers.RECORD_PREFIX])
     with pytest.raises(RigConfigError, match="option out= 'a\\\\x00b'"):
         check_url_paths("spy+record+sim://?out=a%00b")
     with pytest.raises(RigConfigError, match="option bvh= 'w\\\\x00.bvh'"):

@@ -525,9 +525,9 @@ def test_a_file_sink_on_a_file_a_wrapped_url_reads_is_refused(tmp_path, capsys, 
     """The demo took ``record+`` off the URL's start to find the files it reads: inside another wrapper of the
     registry (``spy+record+...``) the rig= file went unseen, and a --sink on it appended joint lines to the
     calibration. Every wrapper is taken off now (drivers.wrappers.innermost_url)."""
-    from drivers import registry
+    from drivers import wrappers
 
-    monkeypatch.setitem(registry.WRAPPERS, "spy+", registry.WRAPPERS[registry.RECORD_PREFIX])
+    monkeypatch.setitem(wrappers.WRAPPERS, "spy+", wrappers.WRAPPERS[wrappers.RECORD_PREFIX])
     rig = tmp_path / "rig.json"
     rig.write_text("{}")
     url = f"spy+record+opencv://?first=0&second=1&rig={rig}&out={tmp_path / 'take'}"

@@ -40,5 +40,5 @@ def shipped_model_take(times: Sequence[float]) -> tuple[EstimatorConfig, Any, Ri
     session = load_session(cfg)
     rig = sim.RigPlacement().build()
     scene = sim.SimScene(sim.SceneConfig(seed=2, motion="wave"))
-    shots = [[scene.render(c, t, with_truth=False)[0] for c in rig.pair] for t in times]
+    shots = [list(pair_images(scene, rig, t)) for t in times]
     return cfg, session, rig, shots

@@ -199,7 +199,8 @@ def test_the_floor_key_and_its_checks():
 
 def test_the_exchanged_cameras_limit_is_a_setting_null_turns_it_off_and_bad_values_name_the_field():
     """health.calibration_max_mirror (since session 65's follow-up; the limit was a constant): the default, null (a rig
-    built mirror-imaged, a subject who performs facing away), and the refusals naming the key and the value."""
+    built mirror-imaged or far from symmetric; a subject with their back to the rig gives no figure since session 66),
+    and the refusals naming the key and the value."""
     cfg = daemon_config_from_dict({"sinks": [SINK]})
     assert cfg.health.calibration_max_mirror == CALIBRATION_MAX_MIRROR == 0.2
     off = daemon_config_from_dict({"sinks": [SINK], "health": {"calibration_max_mirror": None}})
@@ -339,8 +340,8 @@ _JOURNAL = {
         "WARNING calibration suspect: the cameras look exchanged: the triangulated person is a mirror image (handedness "
         "-0.76, median over the last 3 pairs; +1 a person, -1 a mirror image; health.calibration_max_mirror 0.2): the "
         "left camera's frames come in as the right's; exchange the cameras' plugs or their names in rig.url, no "
-        "recalibration is needed (docs/calibration.md, \"Cameras exchanged\"). For a subject who performs facing away, "
-        "set health.calibration_max_mirror null",
+        "recalibration is needed (docs/calibration.md, \"Cameras exchanged\"). On a rig built far from symmetric (a "
+        "camera above the person, one beside the other), set health.calibration_max_mirror null",
         "INFO the cameras no longer look exchanged: handedness 0.80 over the last 3 pairs",
         "INFO calibration handedness check off (health.calibration_max_mirror null)"),
 }

@@ -87,9 +87,9 @@ def test_errors_name_the_key(data, key):
 def test_a_recorder_inside_another_wrapper_is_refused_too(monkeypatch):
     """The daemon refused a rig URL starting with ``record+``: one whose recorder sat inside another wrapper of the
     registry (``spy+record+...``) passed, to fail at the second open on the take folder the first one filled."""
-    from drivers import registry
+    from drivers import wrappers
 
-    monkeypatch.setitem(registry.WRAPPERS, "spy+", registry.WRAPPERS[registry.RECORD_PREFIX])
+    monkeypatch.setitem(wrappers.WRAPPERS, "spy+", wrappers.WRAPPERS[wrappers.RECORD_PREFIX])
     assert _error({"sinks": [SINK], "rig": {"url": "spy+record+sim://?out=/tmp/x"}}).startswith(
         "rig.url: record+ is not supported")
     assert daemon_config_from_dict({"sinks": [SINK], "rig": {"url": "replay:///tmp/record+x"}})  # not a prefix

@@ -2058,8 +2058,9 @@ def test_exchanged_cameras_flag_the_calibration_on_the_link(sim_url, tmp_path, m
 
 def test_health_calibration_max_mirror_sets_the_exchanged_cameras_check_and_null_turns_it_off(sim_url, tmp_path,
                                                                                               monkeypatch):
-    """A rig built mirror-imaged, or a subject who performs facing away, reads as a mirror image: the key turns the
-    check off (since session 65's follow-up; the limit was a constant the daemon always used)."""
+    """A rig built mirror-imaged reads as a mirror image (a subject with their back to the rig gives no figure since
+    session 66's heel rule): the key turns the check off (since session 65's follow-up; the limit was a constant the
+    daemon always used)."""
     run, messages, flags = _flags_on_the_link(_ExchangedEstimator, sim_url, tmp_path, monkeypatch,
                                               calibration_max_mirror=None)
     assert not any(f & Flags.CALIBRATION_SUSPECT for f in flags.values())
