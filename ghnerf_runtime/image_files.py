@@ -22,7 +22,7 @@ naming the file was skipped for a traceback naming none. replay:// reads its fil
 A TIFF whose compression OpenCV does not decode is None too, told from its header (``ghnerf_runtime.
 tiff_compression``): for most such values (JPEG 2000's 34712, any unregistered one) OpenCV returned an image of
 the stored size holding zeros, an all-black frame, having only logged libtiff's error;
-:func:`tiff_compression_refusal` says why (:func:`unread_because`, for any read that failed).
+:func:`tiff_compression_refusal` says why (:func:`unread_cause`, the one chain of causes for any read that failed).
 
 A TIFF whose strips or tiles do not hold their data is None too, told from its header (:func:`tiff_data_refusal`):
 one running past the file's end (cut short; OpenCV gave None already, the cause unnamed), or, uncompressed and of
@@ -33,8 +33,10 @@ nothing short of decoding the data again could tell.
 """
 from __future__ import annotations
 
+import enum
 import io
 import os
+from dataclasses import dataclass
 from typing import BinaryIO
 
 import cv2
@@ -43,8 +45,9 @@ import numpy as np
 from ghnerf_runtime import avif_header, tiff_compression, tiff_header
 from ghnerf_runtime.path_check import is_utf8
 
-__all__ = ["AS_STORED", "decode_image_or_none", "decoded_from_memory_because", "read_image_or_none",
-           "samples_not_8_bit", "tiff_compression_refusal", "tiff_data_refusal", "unread_because"]
+__all__ = ["AS_STORED", "UnreadCause", "UnreadKind", "decode_image_or_none", "decoded_from_memory_because",
+           "read_image_or_none", "samples_not_8_bit", "tiff_compression_refusal", "tiff_data_refusal",
+           "unread_because", "unread_cause"]
 
 #: The decode flag that keeps an image's pixels as stored (IMREAD_UNCHANGED never turns them anyway), a JPEG's,
 #: PNG's or WebP's EXIF orientation ignored; a TIFF's Orientation tag and an AVIF's irot and imir need more
@@ -222,21 +225,52 @@ def samples_not_8_bit(path: str | os.PathLike) -> str | None:
             f"{'' if channels == 1 else 's'}): only 8- or 16-bit images decode to 8 bits")
 
 
-def unread_because(path: str | os.PathLike, flags: int) -> str | None:
-    """Why :func:`read_image_or_none` gave None for ``path`` read with ``flags``, where the file is a valid image
-    OpenCV does not read so: "it is a TIFF of Compression 34712 (JPEG 2000), ..." (:func:`tiff_compression_refusal`),
-    a TIFF whose strips do not hold its image: "its strip 2 runs past the file's end ..." (:func:`tiff_data_refusal`),
-    or, read to 8 bits, "it has float32 samples (...)" (:func:`samples_not_8_bit`); None for a file corrupt
-    otherwise, missing or unknown. The one place for every caller's error: ZJU-MoCap's frames were "missing or
-    unreadable" whatever the cause. Call it once the read failed: the sample check decodes the file again."""
+class UnreadKind(enum.Enum):
+    """What an :class:`UnreadCause` says of the file, for a caller whose error tells them apart (replay's
+    ``load_image``: a layout it refuses, a corrupt frame)."""
+
+    #: A valid image of a layout this OpenCV does not decode, whatever the read's flags (a TIFF's compression).
+    REFUSED_LAYOUT = "refused layout"
+    #: A file that does not hold its image (a TIFF's strip cut short or holding too few bytes): corrupt.
+    DAMAGED = "damaged"
+    #: A valid image that this OpenCV decodes, but not with the read's flags (float samples read to 8 bits).
+    NOT_WITH_THESE_FLAGS = "not with these flags"
+
+
+@dataclass(frozen=True)
+class UnreadCause:
+    """Why an image file did not read, where the file says (:func:`unread_cause`): ``text`` phrased to follow its
+    name and a colon ("it is a TIFF of Compression 34712 (JPEG 2000), ...", "its strip 2 runs past ...", "it has
+    float32 samples (...)"), and its ``kind``."""
+
+    text: str
+    kind: UnreadKind
+
+
+def unread_cause(path: str | os.PathLike, flags: int) -> UnreadCause | None:
+    """Why :func:`read_image_or_none` (or :func:`decode_image_or_none` of its bytes) gave None for ``path`` read
+    with ``flags``, where the file says: a TIFF of a compression OpenCV does not decode
+    (:func:`tiff_compression_refusal`), a TIFF whose strips do not hold its image (:func:`tiff_data_refusal`), or,
+    read to 8 bits, samples that do not decode so (:func:`samples_not_8_bit`); None for a file corrupt otherwise,
+    missing or unknown. The one chain of causes for every caller (ghnerf-run, ghcal, the ZJU-MoCap reader through
+    :func:`unread_because`; replay's ``load_image``): a new cause is added here. Call it once the read failed: the
+    sample check decodes the file again."""
     compression = tiff_compression_refusal(path)
     if compression is not None:
-        return f"it is {compression}"
+        return UnreadCause(f"it is {compression}", UnreadKind.REFUSED_LAYOUT)
     data = tiff_data_refusal(path)
     if data is not None:
-        return data
+        return UnreadCause(data, UnreadKind.DAMAGED)
     samples = samples_not_8_bit(path) if _decodes_to_8_bits(flags) else None
-    return None if samples is None else f"it has {samples}"
+    return None if samples is None else UnreadCause(f"it has {samples}", UnreadKind.NOT_WITH_THESE_FLAGS)
+
+
+def unread_because(path: str | os.PathLike, flags: int) -> str | None:
+    """The text of :func:`unread_cause`: "it is a TIFF of Compression 34712 (JPEG 2000), ...", "its strip 2 runs
+    past the file's end ...", "it has float32 samples (...)"; None for a file corrupt otherwise, missing or unknown.
+    Every caller's error names it: ZJU-MoCap's frames were "missing or unreadable" whatever the cause."""
+    cause = unread_cause(path, flags)
+    return None if cause is None else cause.text
 
 
 def decoded_from_memory_because(path: str | os.PathLike) -> str | None:

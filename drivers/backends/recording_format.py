@@ -21,9 +21,10 @@ import re
 import struct
 import zipfile
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any, BinaryIO
 
 import cv2
@@ -35,12 +36,11 @@ from ghnerf_runtime import avif_header, tiff_header
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.image_files import (
+    UnreadKind,
     decode_image_or_none,
     decoded_from_memory_because,
     read_image_or_none,
-    samples_not_8_bit,
-    tiff_compression_refusal,
-    tiff_data_refusal,
+    unread_cause,
 )
 from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
@@ -649,17 +649,30 @@ def load_image(path: Path) -> np.ndarray:
         refusal = tiff_decoding_refusal(path)  # read only for one that failed
         if refusal is not None:
             return _read_from_the_file(path, refusal)
-        compression = tiff_compression_refusal(path)
-        if compression is not None:
-            raise RefusedLayoutError(f"recording image {path} does not decode: it is {compression}")
-        strips = tiff_data_refusal(path)
-        if strips is not None:
-            raise RigOperationError(f"recording image {path} is corrupt: {strips}")
-        samples = samples_not_8_bit(path)  # a valid float TIFF was called corrupt
-        if samples is not None:
-            raise RigOperationError(f"recording image {path} does not decode: it has {samples}")
-        raise RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it)")
+        raise _unread_error(path)
     return image
+
+
+def _unread_error(path: Path) -> RigOperationError:
+    """The error of a recorded image that did not decode (but for a layout refused from memory only): the cause
+    the file gives (``ghnerf_runtime.image_files.unread_cause``, the chain every reader shares), typed by its kind
+    (:data:`_UNREAD_ERRORS`), else "corrupt"."""
+    cause = unread_cause(path, _DECODE_FLAGS)
+    if cause is None:
+        return RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it)")
+    error_type, verb = _UNREAD_ERRORS[cause.kind]
+    return error_type(f"recording image {path} {verb}: {cause.text}")
+
+
+#: A recorded image's error and verb for each kind of :class:`UnreadCause`: a valid image of a layout this OpenCV
+#: refuses is a :class:`RefusedLayoutError` (a take of only those is refused at its open, the remedy named); a
+#: damaged one is corrupt; a valid one of samples that do not decode to 8 bits (a float TIFF, called corrupt
+#: before session 63) is named by them.
+_UNREAD_ERRORS: Mapping[UnreadKind, tuple[type[RigOperationError], str]] = MappingProxyType({
+    UnreadKind.REFUSED_LAYOUT: (RefusedLayoutError, "does not decode"),
+    UnreadKind.DAMAGED: (RigOperationError, "is corrupt"),
+    UnreadKind.NOT_WITH_THESE_FLAGS: (RigOperationError, "does not decode"),
+})
 
 
 def _read_from_the_file(path: Path, refusal: str) -> np.ndarray:

@@ -884,6 +884,26 @@ def test_a_tiff_of_a_compression_opencv_does_not_decode_is_a_frame_naming_it_not
     assert "TIFF" not in captured.err + captured.out  # nothing decoded: libtiff says nothing
 
 
+@pytest.mark.parametrize(("chain_step", "error_type", "verb", "text"), [
+    ("tiff_compression_refusal", recording_format.RefusedLayoutError, "does not decode", "it is a new layout"),
+    ("tiff_data_refusal", RigOperationError, "is corrupt", "a new cause"),
+])
+def test_load_image_names_the_cause_the_shared_chain_gives(tmp_path, monkeypatch, chain_step, error_type, verb,
+                                                           text):
+    """load_image repeated image_files' chain of causes with its own calls (compression, strips, samples), so a
+    cause added to the chain reached ghnerf-run, ghcal and the ZJU-MoCap reader but not replay: a step of the chain
+    changed (here, to name a corrupt PNG) now reaches load_image too, typed by its kind."""
+    path = tmp_path / "image.png"
+    path.write_bytes(b"\x89PNG\r\n\x1a\n cut")
+    with pytest.raises(RigOperationError, match=re.escape(f"recording image {path} is corrupt (OpenCV cannot")):
+        load_image(path)
+    monkeypatch.setattr(image_files, chain_step, lambda p: text.removeprefix("it is "))
+    with pytest.raises(error_type) as info:
+        load_image(path)
+    assert type(info.value) is error_type and str(info.value) == f"recording image {path} {verb}: {text}"
+    assert image_files.unread_because(path, cv2.IMREAD_COLOR) == text
+
+
 def test_a_take_with_one_jpeg_2000_tiff_plays_it_as_a_corrupt_frame_naming_the_compression(tmp_path):
     """It played as a black frame, estimated as any other; now its read fails, naming the file and the
     compression, and the next read goes on."""

@@ -454,3 +454,24 @@ def test_an_uncompressed_tile_holding_fewer_bytes_than_a_tile_is_refused(tmp_pat
     assert read_image_or_none(path, cv2.IMREAD_COLOR) is None
     assert image_files.unread_because(path, cv2.IMREAD_COLOR).startswith(
         f"its tile {len(counts)} holds 767 of the 768 bytes its pixels need")
+
+
+def test_each_cause_of_an_unread_image_says_what_it_makes_of_the_file(tmp_path):
+    """unread_cause, the one chain of causes (replay's load_image types its error by the kind, where it repeated
+    the chain with its own calls): a compression this OpenCV does not decode is a refused layout, a strip short of
+    its bytes a damaged file, float samples read to 8 bits a read these flags cannot make; unread_because is its
+    text, and a corrupt file has no cause."""
+    jpeg2000, short_strip, floats, corrupt = (tmp_path / name for name in ("j2k.tiff", "strip.tiff", "float.tiff",
+                                                                           "corrupt.png"))
+    jpeg2000.write_bytes(tiff_of_compression(stored_image(3), 34712))
+    short_strip.write_bytes(tiff_with_strip_count(1, 1, lambda count, size, offset: count - 1))
+    assert cv2.imwrite(str(floats), np.full((6, 8), 0.5, np.float32))
+    corrupt.write_bytes(b"\x89PNG\r\n\x1a\n cut")
+    for path, kind, start in [(jpeg2000, image_files.UnreadKind.REFUSED_LAYOUT, "it is a TIFF of Compression 34712"),
+                              (short_strip, image_files.UnreadKind.DAMAGED, "its strip 2 holds 4223 of the 4224"),
+                              (floats, image_files.UnreadKind.NOT_WITH_THESE_FLAGS, "it has float32 samples")]:
+        cause = image_files.unread_cause(path, cv2.IMREAD_COLOR)
+        assert cause.kind is kind and cause.text.startswith(start), path
+        assert image_files.unread_because(path, cv2.IMREAD_COLOR) == cause.text
+    assert image_files.unread_cause(floats, cv2.IMREAD_UNCHANGED) is None
+    assert image_files.unread_cause(corrupt, cv2.IMREAD_COLOR) is None
