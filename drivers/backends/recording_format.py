@@ -626,7 +626,8 @@ _DECODE_FLAGS = cv2.IMREAD_COLOR
 
 class RefusedLayoutError(RigOperationError):
     """A recorded image that is valid, but of a layout this OpenCV does not decode: a TIFF of a compression it
-    does not decode (``ghnerf_runtime.tiff_compression``), or one it does not decode from memory
+    does not decode (``ghnerf_runtime.tiff_compression``) or of samples that do not decode to 8 bits (float or
+    32-bit), or one it does not decode from memory
     (:func:`tiff_decoding_refusal`) which its file reader cannot be given either (:func:`load_image`); raised by
     its read, a corrupt frame as any image that does not decode, its message naming the cause and the remedy."""
 
@@ -665,13 +666,13 @@ def _unread_error(path: Path) -> RigOperationError:
 
 
 #: A recorded image's error and verb for each kind of :class:`UnreadCause`: a valid image of a layout this OpenCV
-#: refuses is a :class:`RefusedLayoutError` (a take of only those is refused at its open, the remedy named); a
-#: damaged one is corrupt; a valid one of samples that do not decode to 8 bits (a float TIFF, called corrupt
-#: before session 63) is named by them.
+#: refuses is a :class:`RefusedLayoutError` (a take of only those is refused at its open, the remedy named), and so
+#: is a valid one of samples that do not decode to 8 bits (a float TIFF: called corrupt before session 63, and a
+#: take of only those refused at open as corrupt before session 66); a damaged one is corrupt.
 _UNREAD_ERRORS: Mapping[UnreadKind, tuple[type[RigOperationError], str]] = MappingProxyType({
     UnreadKind.REFUSED_LAYOUT: (RefusedLayoutError, "does not decode"),
     UnreadKind.DAMAGED: (RigOperationError, "is corrupt"),
-    UnreadKind.NOT_WITH_THESE_FLAGS: (RigOperationError, "does not decode"),
+    UnreadKind.NOT_WITH_THESE_FLAGS: (RefusedLayoutError, "does not decode"),
 })
 
 

@@ -816,6 +816,26 @@ def test_a_take_with_one_tiled_tiff_no_reader_decodes_plays_it_as_a_corrupt_fram
     assert str(bad) in str(errors[0]) and not isinstance(errors[0], RigInitializationError)
 
 
+def test_a_take_one_camera_of_which_is_float_tiffs_is_refused_at_open_naming_their_samples(tmp_path):
+    """Valid TIFFs of float samples, which do not decode to 8 bits: the take was refused at open calling the first
+    file corrupt (a RigInitializationError); since session 66 it names their samples, an UndecodableImageError."""
+    take = write_take(tmp_path / "take", "jpg", frames=3)
+    floats = []
+    for path in sorted(take.glob("images/left/*.jpg")):
+        floats.append(path.with_suffix(".tiff"))
+        assert cv2.imwrite(str(floats[-1]), cv2.imread(str(path)).astype(np.float32) / 255)
+        path.unlink()
+    journal = take / FRAMES
+    journal.write_text("".join(line.replace(".jpg", ".tiff") if '"left"' in line else line
+                               for line in journal.read_text().splitlines(keepends=True)))
+    source = create_rig_source(f"replay://{take}?speed=free")
+    with pytest.raises(RigInitializationError,
+                       match=rf"camera 'left': none of its 3 images decode.*3 of a layout this OpenCV refuses; first: "
+                             rf"recording image {re.escape(str(floats[0]))} does not decode: it has float32 samples"):
+        source.open()
+    assert isinstance(source.size_error(), recording_format.UndecodableImageError)
+
+
 def test_a_take_whose_tiled_tiffs_are_all_corrupt_is_refused_at_open_naming_one_as_corrupt(tmp_path):
     """Nothing of it would play: refused at open, as a take of valid images no reader decodes is, but the file
     called corrupt (it was called valid, the remedy a rewrite of its tiles)."""
