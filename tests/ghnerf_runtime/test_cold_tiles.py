@@ -123,3 +123,20 @@ def test_a_rig_whose_cold_crop_frames_a_person_has_no_tiles():
 def test_cold_tiles_below_share_out_of_range_is_refused(value):
     with pytest.raises(ConfigError, match="cold_tiles_below_share"):
         TrackingConfig(cold_tiles_below_share=value)
+
+
+def test_a_lost_track_is_retried_cold_then_searched_from_the_tile_that_found_the_subject(example_rig, far_person):
+    """docs/runtime.md, "Cold tiles": a tracked pair that loses its subject is retried cold (``tracking.retry_cold``)
+    and, finding nobody there either, searches a tile, first the one that found the subject."""
+    images, joints = far_person
+    oracle = SmallPeopleBlindOracle(edge128_contract())
+    est = Estimator(oracle, example_rig, EstimatorConfig())
+    oracle.set_truth(joints)
+    for _ in range(3):
+        est.estimate(images)
+    assert est.tracker.track is not None and est.cold_tiles_found == 1
+    found_in, passes = est._next_tile, est.cold_tile_passes
+    oracle.set_truth(None)  # the subject has left: the tracked crop, the working volume's and the tile show nobody
+    assert est.estimate(empty_room_pair(example_rig, 11, 0.2)).missing.all()
+    assert est.cold_tile_passes == passes + 1 and est.cold_tiles_found == 1
+    assert est._next_tile == found_in + 1  # that tile was searched, the next one is searched next
