@@ -75,15 +75,21 @@ def lifted(rig: Rig, lift_m: float) -> Rig:
     return Rig(cams, volume, f"{rig.rig_id}-lifted-{lift_m:g}")
 
 
-def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0, lift_m: float = 0.0):
-    """Predicted joints, found mask and truth of bench sequence ``k``'s scene seed (its person, clothes, motion and
-    room, drawn in ``rig``'s volume; its first instant from that seed alone, not the bench sequence's) filmed by
-    ``rig``, one cold estimator given ``rig`` :func:`lifted` by ``lift_m`` (truth in ``rig``'s frame)."""
-    import drivers.sim as sim
+def bench_scene_in(rig: Rig, k: int):
+    """Bench sequence ``k``'s scene seed (its person, clothes, motion and room) drawn in ``rig``'s volume, and its
+    first instant (seconds, from that seed alone, not the bench sequence's): what ``--rigs`` films, and
+    ``benchmarks/measure_cold_tiles.py`` too."""
+    import drivers.sim as sim  # a tool: the runtime library never imports drivers
 
     seed = SEED_BASE + k
     scene = sim.random_scene(seed, volume=rig.volume, motions=HELD_OUT_MOTIONS)
-    t0 = float(np.random.default_rng([seed, 7]).uniform(0.0, scene.period_s))
+    return scene, float(np.random.default_rng([seed, 7]).uniform(0.0, scene.period_s))
+
+
+def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0, lift_m: float = 0.0):
+    """Predicted joints, found mask and truth of bench sequence ``k``'s scene (:func:`bench_scene_in`) filmed by
+    ``rig``, one cold estimator given ``rig`` :func:`lifted` by ``lift_m`` (truth in ``rig``'s frame)."""
+    scene, t0 = bench_scene_in(rig, k)
     est = Estimator(session, lifted(rig, lift_m) if lift_m else rig, cfg)
     pred, found, truth = [], [], []
     for i in range(frames):

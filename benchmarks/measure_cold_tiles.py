@@ -25,7 +25,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.empty_rooms import empty_room_pair  # noqa: E402
-from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE  # noqa: E402
+from benchmarks.measure_baseline import bench_scene_in  # noqa: E402
+from ghnerf_runtime.cli.simdata import SEED_BASE  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig, TrackingConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.rig_file import load_rig  # noqa: E402
@@ -41,11 +42,7 @@ def timed(est: Estimator, images) -> tuple[float, bool, bool]:
 
 def people_pairs(rig, k: int, frames: int):
     """Bench sequence ``k``'s person drawn in ``rig``'s volume, ``frames`` pairs at 30 fps (measure_baseline's)."""
-    import drivers.sim as sim  # a tool: the runtime library never imports drivers
-
-    seed = SEED_BASE + k
-    scene = sim.random_scene(seed, volume=rig.volume, motions=HELD_OUT_MOTIONS)
-    t0 = float(np.random.default_rng([seed, 7]).uniform(0.0, scene.period_s))
+    scene, t0 = bench_scene_in(rig, k)
     return [[scene.render(cam, t0 + i / 30.0, with_truth=False)[0] for cam in rig.pair] for i in range(frames)]
 
 

@@ -76,6 +76,7 @@ _LEVEL_MAX_UP_Y = math.sin(math.radians(LYING_BAND_DEG))  # |up . gravity| of an
 #: 13 exchanged takes judged flagged): ``benchmarks/measure_exchanged_cameras.py --only 25 --frames 150 --heading-deg
 #: 270`` and ``--sequences 30 --frames 30``, session 66 (docs/calibration.md, "Cameras exchanged").
 MIN_LEFT_SPAN_M = 0.1
+_MIN_LEFT_SPAN_SQ = MIN_LEFT_SPAN_M ** 2  # (squared once: the summed span is compared squared on every pair)
 #: Shortest span (metres) given a direction: joints closer than a micrometre are one point (a repeated peak).
 _TINY_M = 1e-6
 
@@ -106,7 +107,7 @@ def _body_axes(points: np.ndarray, found: np.ndarray) -> tuple[np.ndarray, np.nd
     if not leftward or top is None or bottom is None:
         return None
     summed = sum(leftward)
-    if float(summed @ summed) < MIN_LEFT_SPAN_M ** 2:  # too little of the body's width to tell its left by
+    if float(summed @ summed) < _MIN_LEFT_SPAN_SQ:  # too little of the body's width to tell its left by
         return None
     left, up = _unit(summed), _unit(top - bottom)
     return None if left is None or up is None else (left, up)

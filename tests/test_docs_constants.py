@@ -67,6 +67,7 @@ from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MAX_
                                      MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG)
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
 from ghnerf_runtime.proxy_matte import BONE_M
+from ghnerf_runtime.tracking import COLD_TILE_OVERLAP_M, COLD_TILE_SPLITS
 from ghnerf_runtime.two_people import BODY_RADIUS_M, BONE_SLACK_M, MAX_LIMB_M, MIN_APART_M, MIXED_TORSO_SLACK_M, \
     SLACK_DEPTH_BASELINES, TIE_M, TORSO_LIMBS_M, TORSO_TWINS_APART_M, TWIN_SAME_M
 from training.data.errors import DatasetError
@@ -79,6 +80,7 @@ RAY = Joints3DConfig().min_ray_angle_deg
 DISAGREE = Joints3DConfig().max_prior_disagreement_m
 PRIOR_GATE = Joints3DConfig().max_prior_error_m
 TRACK_CONF = TrackingConfig().min_confidence
+COLD_SHARE = TrackingConfig().cold_tiles_below_share
 SOLVER_RAY = inspect.signature(triangulate_dlt).parameters["min_ray_angle_deg"].default
 
 
@@ -319,6 +321,13 @@ def _doc(name: str) -> str:
     ("docs/calibration.md", f"within {_FLOOR_BODY_M:g} m across the floor (x, z) of the"),
     ("docs/runtime.md", f"within {_FLOOR_BODY_M:g} m across the floor of the median of the person's triangulated "
                         "joints"),
+    # session 66: the cold tiles (tracking.cold_tiles_below_share, tracking.volume_tiles; a 128-pixel model input)
+    ("docs/runtime.md", f"`tracking.cold_tiles_below_share` ({COLD_SHARE:g}: {COLD_SHARE * 128:.0f} of 128 model "
+                        "pixels)"),
+    ("docs/runtime.md", f"Rigs whose cold crop frames that person at {COLD_SHARE:g} or more have no tiles"),
+    ("docs/runtime.md", f"cuts the volume into {_words(COLD_TILE_SPLITS[0] * COLD_TILE_SPLITS[1])} tiles"),
+    ("docs/runtime.md", f"`COLD_TILE_SPLITS`, each grown `COLD_TILE_OVERLAP_M` = {COLD_TILE_OVERLAP_M:g} m into"),
+    ("docs/rig-file.md", f"under {COLD_SHARE * 128:.0f} model pixels ({COLD_SHARE:g} of the crop, the tiles' bound)"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"

@@ -45,6 +45,13 @@ class SmallPeopleBlindOracle(OracleSession):
         return min(heights) < BLIND_BELOW_PX
 
 
+def blind_estimator(rig, config: EstimatorConfig | None = None) -> tuple[SmallPeopleBlindOracle, Estimator]:
+    """A :class:`SmallPeopleBlindOracle` and an estimator on it through ``rig`` (the runtime's defaults unless
+    ``config``)."""
+    oracle = SmallPeopleBlindOracle(edge128_contract())
+    return oracle, Estimator(oracle, rig, EstimatorConfig() if config is None else config)
+
+
 @pytest.fixture(scope="module")
 def example_rig():
     return load_rig(EXAMPLE_RIG, warn=False)
@@ -76,12 +83,11 @@ def test_the_example_rigs_cold_crop_draws_a_person_small_and_its_tiles_larger(ex
 
 def test_a_person_too_small_in_the_cold_crop_is_found_through_a_tile_then_tracked(example_rig, far_person):
     images, joints = far_person
-    oracle = SmallPeopleBlindOracle(edge128_contract())
-    est = Estimator(oracle, example_rig, EstimatorConfig())
+    oracle, est = blind_estimator(example_rig)
     oracle.set_truth(joints)
     results = [est.estimate(images) for _ in range(6)]
     found = [int((~r.missing).sum()) for r in results]
-    # before the tiles, the whole volume's crop drew them at 41 model pixels: no pair found them
+    # before the tiles, the whole volume's crop drew them at 38 model pixels: no pair found them
     assert max(found) > 0, found
     first = next(i for i, n in enumerate(found) if n > 0)
     assert first == 1  # one tile a pair: the near left one, then the far left one
@@ -95,8 +101,8 @@ def test_an_empty_room_pays_one_tile_pass_a_pair(example_rig):
     images = empty_room_pair(example_rig, 11, 0.2)
 
     def encoder_runs(below: float) -> tuple[int, Estimator]:
-        oracle = SmallPeopleBlindOracle(edge128_contract())
-        est = Estimator(oracle, example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_below_share=below)))
+        config = EstimatorConfig(tracking=TrackingConfig(cold_tiles_below_share=below))
+        oracle, est = blind_estimator(example_rig, config)
         oracle.set_truth(None)
         for _ in range(3):
             assert est.estimate(images).missing.all()
@@ -111,8 +117,7 @@ def test_an_empty_room_pays_one_tile_pass_a_pair(example_rig):
 
 def test_a_rig_whose_cold_crop_frames_a_person_has_no_tiles():
     rig = sim.RigPlacement().build()  # the simulator's default: 0.52, 67 of 128 model pixels
-    oracle = SmallPeopleBlindOracle(edge128_contract())
-    est = Estimator(oracle, rig, EstimatorConfig())
+    oracle, est = blind_estimator(rig)
     assert est._cold_tiles == ()
     oracle.set_truth(None)
     est.estimate(empty_room_pair(rig, 11, 0.2))
@@ -123,3 +128,19 @@ def test_a_rig_whose_cold_crop_frames_a_person_has_no_tiles():
 def test_cold_tiles_below_share_out_of_range_is_refused(value):
     with pytest.raises(ConfigError, match="cold_tiles_below_share"):
         TrackingConfig(cold_tiles_below_share=value)
+
+
+def test_a_lost_track_is_retried_cold_then_searched_from_the_tile_that_found_the_subject(example_rig, far_person):
+    """docs/runtime.md, "Cold tiles": a tracked pair that loses its subject is retried cold (``tracking.retry_cold``)
+    and, finding nobody there either, searches a tile, first the one that found the subject."""
+    images, joints = far_person
+    oracle, est = blind_estimator(example_rig)
+    oracle.set_truth(joints)
+    for _ in range(3):
+        est.estimate(images)
+    assert est.tracker.track is not None and est.cold_tiles_found == 1
+    found_in, passes = est._next_tile, est.cold_tile_passes
+    oracle.set_truth(None)  # the subject has left: the tracked crop, the working volume's and the tile show nobody
+    assert est.estimate(empty_room_pair(example_rig, 11, 0.2)).missing.all()
+    assert est.cold_tile_passes == passes + 1 and est.cold_tiles_found == 1
+    assert est._next_tile == found_in + 1  # that tile was searched, the next one is searched next
