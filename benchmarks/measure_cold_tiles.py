@@ -1,17 +1,21 @@
 """What ``tracking.cold_tiles_below_share`` costs: per-pair time of cold pairs, with people and in empty rooms.
 
     PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_cold_tiles.py [--model-dir models] [--sequences 6]
-        [--frames 10] [--rooms 6] [--pairs 5] --rigs docs/examples/rig.json,synth_rig.json
+        [--frames 10] [--rooms 6] [--pairs 5] [--walk-in-after 0] [--rest-every N]
+        --rigs docs/examples/rig.json,synth_rig.json
 
-Per rig file, the runtime's defaults against the same with ``cold_tiles_below_share = 0`` (no tiles), the two
-interleaved pair by pair, each its own estimator: ``--sequences`` of the bench's held-out people drawn in the rig's
-volume (as ``benchmarks/measure_baseline.py --rigs`` films them, ``--frames`` pairs each, one estimator per sequence)
-and ``--rooms`` empty rooms (``benchmarks/empty_rooms.py``, the rig's view of a scene's room with nobody in it,
-``--pairs`` pairs each, every one cold). It prints the median ms of the people's cold pairs (those that began without
-a track: the first of each sequence, and every one after a pair that found nobody), how many there were, the mean ms
-per pair over all the people's pairs, the share of pairs with no joint, the empty rooms' median ms per pair and
-their pairs that reported a joint (a phantom), the ratios of the two configs and the passes through a tile. A tool,
-not a test.
+Per rig file, the runtime's defaults (or ``--rest-every``'s ``cold_tiles_rest_every``) against the same with
+``cold_tiles_rest_every = 1`` (tiles that never rest) and with ``cold_tiles_below_share = 0`` (no tiles), interleaved
+pair by pair, each its own estimator: ``--sequences`` of the bench's held-out people drawn in the rig's volume (as
+``benchmarks/measure_baseline.py --rigs`` films them, ``--frames`` pairs each, one estimator per sequence), each after
+``--walk-in-after`` pairs of its own room with nobody in it (the person walks in), and ``--rooms`` empty rooms
+(``benchmarks/empty_rooms.py``, the rig's view of a scene's room with nobody in it, ``--pairs`` pairs each, every one
+cold). It prints the median ms of the people's cold pairs (those that began without a track: the first of each
+sequence, and every one after a pair that found nobody, the empty ones before the person included), how many there
+were, the mean ms per pair over all those pairs, the share of the person's pairs with no joint, the median pairs each
+person took to be found (0: on their first pair; in brackets the most, the sequence's length where never), the empty
+rooms' median and mean ms per pair (a resting search mixes pairs with a tile pass and pairs without), their pairs that
+reported a joint (a phantom), the ratios to no tiles and the passes through a tile. A tool, not a test.
 """
 from __future__ import annotations
 
@@ -24,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.empty_rooms import empty_room_pair  # noqa: E402
+from benchmarks.empty_rooms import empty_room_pair, scene_without_person  # noqa: E402
 from benchmarks.measure_baseline import bench_scene_in  # noqa: E402
 from ghnerf_runtime.cli.simdata import SEED_BASE  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig, TrackingConfig  # noqa: E402
@@ -40,26 +44,34 @@ def timed(est: Estimator, images) -> tuple[float, bool, bool]:
     return 1e3 * (time.perf_counter() - t), cold, bool(result.missing.all())
 
 
-def people_pairs(rig, k: int, frames: int):
-    """Bench sequence ``k``'s person drawn in ``rig``'s volume, ``frames`` pairs at 30 fps (measure_baseline's)."""
+def people_pairs(rig, k: int, frames: int, empty_first: int = 0):
+    """Bench sequence ``k``'s person drawn in ``rig``'s volume, ``frames`` pairs at 30 fps (measure_baseline's),
+    after ``empty_first`` pairs of the same room with nobody in it (the person walks in)."""
     scene, t0 = bench_scene_in(rig, k)
-    return [[scene.render(cam, t0 + i / 30.0, with_truth=False)[0] for cam in rig.pair] for i in range(frames)]
+    empty = [scene_without_person(scene, rig.pair, t0 + (i - empty_first) / 30.0) for i in range(empty_first)]
+    return empty + [[scene.render(cam, t0 + i / 30.0, with_truth=False)[0] for cam in rig.pair]
+                    for i in range(frames)]
 
 
-def measure(session, configs: dict, rig, streams) -> dict:
-    """Per config: (cold pairs' ms, empty or not-empty marks, tile passes); ``streams`` is a list of pair lists, each
-    run by one fresh estimator per config, the configs interleaved pair by pair."""
-    out = {name: {"ms": [], "cold_ms": [], "no_joint": [], "tiles": 0} for name in configs}
+def measure(session, configs: dict, rig, streams, empty_first: int = 0) -> dict:
+    """Per config: (cold pairs' ms, empty or not-empty marks, tile passes, pairs until found); ``streams`` is a list
+    of pair lists, each run by one fresh estimator per config, the configs interleaved pair by pair; the first
+    ``empty_first`` pairs of each show nobody (timed, not marked)."""
+    out = {name: {"ms": [], "cold_ms": [], "no_joint": [], "tiles": 0, "until_found": []} for name in configs}
     for pairs in streams:
         ests = {name: Estimator(session, rig, cfg) for name, cfg in configs.items()}
-        for images in pairs:
+        nobody = {name: [] for name in configs}
+        for i, images in enumerate(pairs):
             for name, est in ests.items():
                 ms, cold, none = timed(est, images)
                 out[name]["ms"].append(ms)
-                out[name]["no_joint"].append(none)
+                if i >= empty_first:
+                    nobody[name].append(none)
                 if cold:
                     out[name]["cold_ms"].append(ms)
         for name, est in ests.items():
+            out[name]["no_joint"] += nobody[name]
+            out[name]["until_found"].append(nobody[name].index(False) if False in nobody[name] else len(nobody[name]))
             out[name]["tiles"] += est.cold_tile_passes
             est.close()
     return out
@@ -73,33 +85,49 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=10)
     ap.add_argument("--rooms", type=int, default=6)
     ap.add_argument("--pairs", type=int, default=5)
+    ap.add_argument("--walk-in-after", type=int, default=0, help="empty pairs before each sequence's person")
+    ap.add_argument("--rest-every", type=int, default=None, help="the resting config's cold_tiles_rest_every "
+                    "(default: the runtime's)")
     ap.add_argument("--rigs", default="docs/examples/rig.json", help="rig files, comma-separated")
     args = ap.parse_args(argv)
     base = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision))
-    configs = {"tiles (default)": base,
+    default_rest = base.tracking.cold_tiles_rest_every
+    rest = default_rest if args.rest_every is None else args.rest_every
+    resting = EstimatorConfig(session=base.session, tracking=TrackingConfig(cold_tiles_rest_every=rest))
+    configs = {f"tiles, rest every {rest}{' (default)' if rest == default_rest else ''}": resting,
+               "tiles, no rest": EstimatorConfig(session=base.session,
+                                                 tracking=TrackingConfig(cold_tiles_rest_every=1)),
                "no tiles": EstimatorConfig(session=base.session, tracking=TrackingConfig(cold_tiles_below_share=0.0))}
     session = load_session(base)
-    print(f"{args.precision}; {args.sequences} people x {args.frames} pairs, {args.rooms} empty rooms x {args.pairs} "
-          "pairs; median ms per pair, the configs interleaved")
+    print(f"{args.precision}; {args.sequences} people x {args.frames} pairs after {args.walk_in_after} empty, "
+          f"{args.rooms} empty rooms x {args.pairs} pairs; median ms per pair, the configs interleaved")
     print("| rig file | config | people's cold pairs | their median ms | people's mean ms per pair | pairs with no "
-          "joint | empty-room median ms | empty-room pairs with a joint | tile passes (people / rooms) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "joint | pairs until found, median (max) | empty-room median ms | empty-room mean ms per pair | "
+          "empty-room pairs with a joint | "
+          "tile passes (people / rooms) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for path in [p for p in args.rigs.split(",") if p.strip()]:
         rig = load_rig(path, warn=False)
-        people = measure(session, configs, rig, [people_pairs(rig, k, args.frames) for k in range(args.sequences)])
+        people = measure(session, configs, rig,
+                         [people_pairs(rig, k, args.frames, args.walk_in_after) for k in range(args.sequences)],
+                         args.walk_in_after)
         rooms = measure(session, configs, rig,
                         [[empty_room_pair(rig, SEED_BASE + r, 0.2)] * args.pairs for r in range(args.rooms)])
         for name in configs:
             p, r = people[name], rooms[name]
             print(f"| {path} | {name} | {len(p['cold_ms'])} | {np.median(p['cold_ms']):.1f} | {np.mean(p['ms']):.1f} | "
-                  f"{np.mean(p['no_joint']):.3f} | {np.median(r['ms']):.1f} | {len(r['ms']) - sum(r['no_joint'])} of "
+                  f"{np.mean(p['no_joint']):.3f} | {np.median(p['until_found']):g} ({max(p['until_found'])}) | "
+                  f"{np.median(r['ms']):.1f} | {np.mean(r['ms']):.1f} | {len(r['ms']) - sum(r['no_joint'])} of "
                   f"{len(r['ms'])} | {p['tiles']} / {r['tiles']} |",
                   flush=True)
-        on, off = (people[n] for n in configs), (rooms[n] for n in configs)
-        (p_on, p_off), (r_on, r_off) = on, off
-        print(f"| {path} | ratio | | {np.median(p_on['cold_ms']) / np.median(p_off['cold_ms']):.2f} | "
-              f"{np.mean(p_on['ms']) / np.mean(p_off['ms']):.2f} | | "
-              f"{np.median(r_on['ms']) / np.median(r_off['ms']):.2f} | | |", flush=True)
+        p_off, r_off = people["no tiles"], rooms["no tiles"]
+        for name in list(configs)[:-1]:
+            p_on, r_on = people[name], rooms[name]
+            print(f"| {path} | ratio, {name.split(' (')[0]} / no tiles | | "
+                  f"{np.median(p_on['cold_ms']) / np.median(p_off['cold_ms']):.2f} | "
+                  f"{np.mean(p_on['ms']) / np.mean(p_off['ms']):.2f} | | | "
+                  f"{np.median(r_on['ms']) / np.median(r_off['ms']):.2f} | "
+                  f"{np.mean(r_on['ms']) / np.mean(r_off['ms']):.2f} | | |", flush=True)
     return 0
 
 

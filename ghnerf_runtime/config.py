@@ -352,6 +352,10 @@ class TrackingConfig:
             (63 of 128 pixels) and misses the smaller ones (docs/runtime.md, "Cold tiles"); rigs whose cold crop
             frames that person at this or more, the bench's and the simulator's default (0.52), never run it. A
             share, not pixels, so that it means the same at any model resolution. 0 disables.
+        cold_tiles_rest_every: once a whole round of tiles (each of them once, in a row) found nobody, only every
+            this-many-th cold pair that finds nobody searches a tile (an empty room pays a tile pass on that share of
+            its pairs, not on all); every pair searches again once a tile finds someone or a pair sees anyone
+            (any joint, or a person in one view). 1 never rests (docs/runtime.md, "Cold tiles").
     """
 
     enabled: bool = True
@@ -365,10 +369,12 @@ class TrackingConfig:
     retry_cold: bool = True
     max_gap_s: float = 0.5
     cold_tiles_below_share: float = 0.47
+    cold_tiles_rest_every: int = 4
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
         _number(self, "cold_tiles_below_share", 0.0, 1.0)
+        _integer(self, "cold_tiles_rest_every", 1, 1000)
         _boolean(self, "retry_cold")
         _number(self, "max_gap_s", 0.0, 3600.0, lo_open=True)
         _boolean(self, "refine_cold_start")

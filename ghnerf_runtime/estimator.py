@@ -758,6 +758,8 @@ class Estimator:
         # enough), one searched per cold pair that finds nobody, in turn
         self._cold_tiles = self._tiles_for_small_people(rig)
         self._next_tile = 0
+        self._tiles_missed = 0  # tile passes in a row that found nobody (a whole round of them: the search rests)
+        self._tile_rest_wait = 0  # cold pairs left that do not search a tile (tracking.cold_tiles_rest_every)
         self.cold_tile_passes = 0  # cold pairs that searched a tile, and those whose tile found someone
         self.cold_tiles_found = 0
         # roi.turn_search: each camera's crop turn (degrees on top of roi.upright's) and, per turn, the camera
@@ -872,6 +874,7 @@ class Estimator:
         self._kept_axis = None
         self._crop_terms = None
         self._next_tile = 0
+        self._wake_tiles()
         self._forget_scan()
         if self._smoother is not None:
             self._smoother.reset()
@@ -1037,8 +1040,12 @@ class Estimator:
         cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
         turns_read = self._turns  # the crops' turns this pair's tracked pass read (a change resets the smoothing)
         p = self._refined(images, p, sequence, timing, novel_view)
-        if cold_pass and self._turns == (0, 0) and self._cold_tiles and self._finds_nobody(p):
-            p = self._tile_search(images, p, sequence, timing, novel_view)
+        if cold_pass and self._turns == (0, 0) and self._cold_tiles:
+            if not self._finds_nobody(p):
+                if self._sees_anyone(p):
+                    self._wake_tiles()
+            elif self._tiles_awake():
+                p = self._tile_search(images, p, sequence, timing, novel_view)
         leave_turn = cold_pass and self._turns != (0, 0) and self._weak_pass(p)
         if cold_pass and self._turns != (0, 0) and not leave_turn and self._turn_misreads(p):
             self.turns_refused += 1
@@ -1282,10 +1289,36 @@ class Estimator:
         q = self._pass(images, self._cold_tiles[k], sequence, timing, novel_view)
         if not (q.j3 is not None and q.someone and q.j3.valid.any()):
             self._next_tile = k + 1
+            self._tile_missed()
             return p
         self.cold_tiles_found += 1
         self._next_tile = k
+        self._wake_tiles()
         return self._refined(images, q, sequence, timing, novel_view)
+
+    @staticmethod
+    def _sees_anyone(p: "_Pass") -> bool:
+        """Whether ``p`` reported anyone: a joint, or a person's 2D joints in one view."""
+        return p.single_view is not None or (p.j3 is not None and p.someone and bool(p.j3.valid.any()))
+
+    def _tiles_awake(self) -> bool:
+        """Whether this cold pair that found nobody searches a tile: always, until a whole round of tiles found
+        nobody; then only every ``tracking.cold_tiles_rest_every``-th such pair (an empty room stays empty)."""
+        if self._tile_rest_wait > 0:
+            self._tile_rest_wait -= 1
+            return False
+        return True
+
+    def _tile_missed(self) -> None:
+        """A tile pass found nobody: after a whole round of such passes, the next pairs rest."""
+        self._tiles_missed += 1
+        if self._tiles_missed >= len(self._cold_tiles):
+            self._tile_rest_wait = self.config.tracking.cold_tiles_rest_every - 1
+
+    def _wake_tiles(self) -> None:
+        """Someone was seen (or the estimator reset): every cold pair that finds nobody searches a tile again."""
+        self._tiles_missed = 0
+        self._tile_rest_wait = 0
 
     def _weak_pass(self, p: "_Pass") -> bool:
         """Whether ``roi.turn_search`` tries turned crops after ``p``, a cold pair's pass (refined or not) or a

@@ -11,7 +11,24 @@ def test_the_command_line_runs(tiny_model_dir, scratch_cache, capsys, monkeypatc
                      "--sequences", "1", "--frames", "2", "--rooms", "1", "--pairs", "2",
                      "--rigs", "docs/examples/rig.json", capsys=capsys, monkeypatch=monkeypatch)
     rows = [line for line in out.splitlines() if line.startswith("| docs/examples/rig.json |")]
-    assert [r.split("|")[2].strip() for r in rows] == ["tiles (default)", "no tiles", "ratio"], out
-    # the example rig's cold crop draws a person at 0.40 of its side: every empty-room pair searches a tile
-    assert rows[0].rstrip(" |").endswith("/ 2") and rows[1].rstrip(" |").endswith("0 / 0"), out
-    assert " of 2 | " in rows[0] and " of 2 | " in rows[1], out
+    assert [r.split("|")[2].strip() for r in rows] == [
+        "tiles, rest every 4 (default)", "tiles, no rest", "no tiles",
+        "ratio, tiles, rest every 4 / no tiles", "ratio, tiles, no rest / no tiles"], out
+    # the example rig's cold crop draws a person at 0.40 of its side: every empty-room pair searches a tile (two pairs:
+    # not yet a whole round of four tiles, so the default does not rest)
+    assert rows[0].rstrip(" |").endswith("/ 2") and rows[1].rstrip(" |").endswith("/ 2"), out
+    assert rows[2].rstrip(" |").endswith("0 / 0"), out
+    assert all(" of 2 | " in r for r in rows[:3]), out
+
+
+def test_a_person_walking_in_is_counted_from_their_first_pair(tiny_model_dir, scratch_cache, capsys,  # noqa: F811
+                                                             monkeypatch):
+    out = run_script("measure_cold_tiles", "--model-dir", str(tiny_model_dir), "--precision", "fp32",
+                     "--sequences", "1", "--frames", "2", "--rooms", "1", "--pairs", "1", "--walk-in-after", "5",
+                     "--rigs", "docs/examples/rig.json", capsys=capsys, monkeypatch=monkeypatch)
+    rows = [line for line in out.splitlines() if line.startswith("| docs/examples/rig.json |")]
+    assert "after 5 empty" in out, out
+    # all seven pairs timed (cold here), the share with no joint and the pairs until found of the person's two only
+    assert all(r.split("|")[3].strip() == "7" for r in rows[:3]), out
+    assert all(float(r.split("|")[6]) in (0.0, 0.5, 1.0) for r in rows[:3]), out
+    assert all(r.split("|")[7].split()[0] in ("0", "1", "2") for r in rows[:3]), out

@@ -144,3 +144,66 @@ def test_a_lost_track_is_retried_cold_then_searched_from_the_tile_that_found_the
     assert est.estimate(empty_room_pair(example_rig, 11, 0.2)).missing.all()
     assert est.cold_tile_passes == passes + 1 and est.cold_tiles_found == 1
     assert est._next_tile == found_in + 1  # that tile was searched, the next one is searched next
+
+
+def test_an_empty_room_rests_the_tiles_after_a_whole_round(example_rig):
+    """After the four tiles found nobody in a row, only every ``cold_tiles_rest_every``-th cold pair searches."""
+    images = empty_room_pair(example_rig, 11, 0.2)
+    oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=3)))
+    oracle.set_truth(None)
+    passes = []
+    for _ in range(13):
+        assert est.estimate(images).missing.all()
+        passes.append(est.cold_tile_passes)
+    # pairs 1-4 search each tile once; then pairs 7, 10, 13 (every 3rd)
+    assert passes == [1, 2, 3, 4, 4, 4, 5, 5, 5, 6, 6, 6, 7]
+
+
+def test_a_person_walking_into_a_resting_room_is_found_and_tracked(example_rig, far_person):
+    images, joints = far_person
+    empty = empty_room_pair(example_rig, 11, 0.2)
+    oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=3)))
+    oracle.set_truth(None)
+    for _ in range(5):
+        est.estimate(empty)
+    assert est._tile_rest_wait > 0  # resting
+    oracle.set_truth(joints)
+    found = [int((~est.estimate(images).missing).sum()) for _ in range(12)]
+    first = next(i for i, n in enumerate(found) if n > 0)
+    assert first < 12 and all(n > 0 for n in found[first:])
+    assert est._tiles_missed == 0 and est._tile_rest_wait == 0  # awake again
+
+
+def test_a_reset_wakes_resting_tiles(example_rig):
+    _, est = blind_estimator(example_rig)
+    est._tiles_missed, est._tile_rest_wait = 4, 3
+    est.reset()
+    assert est._tiles_missed == 0 and est._tile_rest_wait == 0
+    assert est._tiles_awake()
+
+
+@pytest.mark.parametrize("value", [0, -1, 1.5])
+def test_cold_tiles_rest_every_out_of_range_is_refused(value):
+    with pytest.raises(ConfigError, match="cold_tiles_rest_every"):
+        TrackingConfig(cold_tiles_rest_every=value)
+
+
+def test_a_person_the_whole_volume_finds_wakes_the_tiles(example_rig):
+    """A resting estimator whose whole-volume pass finds someone (near enough to be drawn large) searches the tiles on
+    every cold pair again once they are gone."""
+    near = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(0.0, 2.0)))
+    near_images = tuple(near.render(cam, 0.0, with_truth=False)[0] for cam in example_rig.pair)
+    empty = empty_room_pair(example_rig, 11, 0.2)
+    oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=3)))
+    oracle.set_truth(None)
+    for _ in range(5):
+        est.estimate(empty)
+    assert est._tile_rest_wait > 0
+    oracle.set_truth(near.joints_3d(0.0))
+    passes = est.cold_tile_passes
+    assert not est.estimate(near_images).missing.all()
+    assert est.cold_tile_passes == passes  # found by the whole volume's crop, no tile needed
+    oracle.set_truth(None)
+    for _ in range(2):
+        est.estimate(empty)
+    assert est.cold_tile_passes == passes + 2  # awake: one tile a pair again
