@@ -1271,23 +1271,21 @@ class Estimator:
             return ()
         return volume_tiles(rig, self.config.roi, self.tracker.rolls)
 
-    @staticmethod
-    def _finds_nobody(p: "_Pass") -> bool:
+    def _finds_nobody(self, p: "_Pass") -> bool:
         """Whether ``p`` passed both frames and found nobody, not even in one view: a tile may show someone the
         whole volume's crop drew too small (a rejected frame or a person seen by one camera is no such case)."""
-        if p.j3 is None or not all(p.frame_ok.values()) or p.single_view is not None:
-            return False
-        return not (p.someone and bool(p.j3.valid.any()))
+        return p.j3 is not None and all(p.frame_ok.values()) and not self._sees_anyone(p)
 
     def _tile_search(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
                      novel_view: NovelViewRequest | None) -> "_Pass":
         """After ``p``, a cold pass that found nobody: the pass through the next working-volume tile (one a pair, in
         turn), refined on its subject when it finds someone (and then that tile is searched first when the track is
-        lost again); else ``p``."""
+        lost again); a person the tile shows one camera only is that pass's answer too (the tracker follows that
+        view from it); else ``p``."""
         k = self._next_tile % len(self._cold_tiles)
         self.cold_tile_passes += 1
         q = self._pass(images, self._cold_tiles[k], sequence, timing, novel_view)
-        if not (q.j3 is not None and q.someone and q.j3.valid.any()):
+        if not self._sees_anyone(q):
             self._next_tile = k + 1
             self._tile_missed()
             return p

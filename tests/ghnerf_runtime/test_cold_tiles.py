@@ -97,6 +97,32 @@ def test_a_person_too_small_in_the_cold_crop_is_found_through_a_tile_then_tracke
     assert np.median(err) < 0.05
 
 
+class OneViewOracle(SmallPeopleBlindOracle):
+    """The blind oracle with the second camera's heatmaps empty: a person only the first camera shows."""
+
+    def run(self, graph, feeds):
+        out = super().run(graph, feeds)
+        if graph in ("encoder", "human"):
+            out["encoder_heatmaps"] = out["encoder_heatmaps"].copy()
+            out["encoder_heatmaps"][1] = 0.0
+        return out
+
+
+def test_a_person_a_tile_shows_one_camera_only_is_the_pair_s_answer(example_rig, far_person):
+    """A tile pass seeing the person in one view was thrown away (the pair reported the whole volume's nothing, and
+    the next tile was searched next) while the tracker followed that view: now it is the pair's answer, the tile
+    that saw them kept first."""
+    images, joints = far_person
+    oracle = OneViewOracle(edge128_contract())
+    est = Estimator(oracle, example_rig, EstimatorConfig())
+    oracle.set_truth(joints)
+    results = [est.estimate(images) for _ in range(2)]
+    first = results[1]  # the near left tile draws them too small; the far left one shows them to camera 0
+    assert first.single_view == example_rig.pair[0].name
+    assert not first.missing_2d[first.single_view].all()
+    assert est.cold_tiles_found == 1 and est._next_tile == 1
+
+
 def test_an_empty_room_pays_one_tile_pass_a_pair(example_rig):
     images = empty_room_pair(example_rig, 11, 0.2)
 
