@@ -23,8 +23,7 @@ from typing import BinaryIO
 __all__ = [
     "BITS_PER_SAMPLE", "COMPRESSION", "HEIGHT", "LAYOUTS", "ORIENTATION", "UPRIGHT", "DirectoryTags", "ImageData",
     "IMAGE_DATA_TAGS", "TiffEntry", "TiffLayout", "WIDTH", "first_directory", "first_directory_end", "image_data_in",
-    "orientation_reset",
-    "read_tags", "upright_reset",
+    "orientation_reset", "read_tags", "upright_reset",
 ]
 
 #: The tags read here: ImageWidth, ImageLength, BitsPerSample, Compression, Orientation.
