@@ -57,6 +57,8 @@ def name(compression: int) -> str:
     return NAMES.get(compression, "unregistered")
 
 
+#: libtiff's Compression value for WebP (tiff.h's COMPRESSION_WEBP), the one optional codec probed.
+_WEBP = 50001
 #: The image a probe's sample holds: one grey, 8-bit BGR (WebP's lossless mode keeps it exactly).
 _PROBE_SIDE, _PROBE_LEVEL = 8, 97
 
@@ -72,7 +74,7 @@ def webp_sample() -> bytes:
     ok, webp = cv2.imencode(".webp", _probe_image(), [cv2.IMWRITE_WEBP_QUALITY, 101])  # above 100: lossless
     if not ok:
         return b""  # no WebP encoder either: the probe fails, and 50001 is refused
-    return single_strip_rgb_tiff(_PROBE_SIDE, _PROBE_SIDE, 50001, webp.tobytes())
+    return single_strip_rgb_tiff(_PROBE_SIDE, _PROBE_SIDE, _WEBP, webp.tobytes())
 
 
 def single_strip_rgb_tiff(width: int, height: int, compression: int, strip: bytes) -> bytes:
@@ -94,7 +96,7 @@ def single_strip_rgb_tiff(width: int, height: int, compression: int, strip: byte
 
 #: The optional codecs a build may include, each with the builder of a tiny TIFF compressed by it whose decode
 #: tells (:func:`decoded`). WebP: OpenCV 5.1's wheels are reported to include it, 5.0.0's leave it out.
-PROBED: dict[int, Callable[[], bytes]] = {50001: webp_sample}
+PROBED: dict[int, Callable[[], bytes]] = {_WEBP: webp_sample}
 
 
 def decodes_sample(sample: bytes) -> bool:
