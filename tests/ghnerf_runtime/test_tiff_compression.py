@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import struct
+import zlib
 
 import cv2
 import numpy as np
@@ -105,7 +106,7 @@ def fresh_probe():
 
 
 @pytest.mark.parametrize(("compression", "packed"), [
-    (1, lambda strip: strip), (8, __import__("zlib").compress)], ids=["none", "deflate"])
+    (1, lambda strip: strip), (8, zlib.compress)], ids=["none", "deflate"])
 def test_the_probe_s_tiff_layout_decodes_under_a_built_in_codec(compression, packed):
     """The WebP sample's layout (one 8-bit RGB strip, built byte by byte) with a codec every build has decodes to
     the probe's image: where a build fails the WebP sample, it is the codec it lacks, not the layout."""
