@@ -1250,7 +1250,8 @@ def _first_with_the_second_s_left_leg(config: EstimatorConfig, pairs: int = 4):
         return results, est.tracker.drops
 
 
-@pytest.mark.parametrize("config", [NOBODY, replace(NOBODY, tracking=replace(NOBODY.tracking, refine_cold_start=False))],
+@pytest.mark.parametrize("config", [NOBODY, replace(NOBODY, tracking=replace(NOBODY.tracking,
+                                                                            refine_cold_start=False))],
                          ids=["none", "none-no-refine"])
 def test_a_skeleton_of_two_people_whose_maps_show_no_joint_twice_is_flagged_and_not_reported(config):
     """Each view's peak of a joint is whichever person's is stronger there, and both views may agree on it: the
