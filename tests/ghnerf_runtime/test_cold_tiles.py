@@ -17,6 +17,7 @@ from ghnerf_runtime.config import ConfigError, EstimatorConfig, RoiConfig, Track
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.tracking import COLD_TILE_SPLITS, cold_person_share, volume_regions, volume_tiles
+from tests.ghnerf_runtime.sim_takes import pair_images
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -62,7 +63,7 @@ def far_person(example_rig):
     """One frame pair of a person standing 4 m ahead, 0.8 m left, through the example rig, and their joints: 38 model
     pixels tall through the whole volume's crop, 52-56 through the near tiles', 68 through the far ones'."""
     scene = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(-0.8, 4.0)))
-    images = tuple(scene.render(cam, 0.0, with_truth=False)[0] for cam in example_rig.pair)
+    images = pair_images(scene, example_rig, 0.0)
     return images, scene.joints_3d(0.0)
 
 
@@ -218,7 +219,7 @@ def test_a_person_the_whole_volume_finds_wakes_the_tiles(example_rig):
     """A resting estimator whose whole-volume pass finds someone (near enough to be drawn large) searches the tiles on
     every cold pair again once they are gone."""
     near = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(0.0, 2.0)))
-    near_images = tuple(near.render(cam, 0.0, with_truth=False)[0] for cam in example_rig.pair)
+    near_images = pair_images(near, example_rig, 0.0)
     empty = empty_room_pair(example_rig, 11, 0.2)
     oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=3)))
     oracle.set_truth(None)
