@@ -713,11 +713,7 @@ def test_the_warning_on_a_narrow_pair_does_not_follow_the_lens(example_dict, foc
     """Session 66 measured the bound with 50- to 110-degree lenses at 3 and 5 m (docs/rig-file.md): the pairs lost
     their joints at 0.5 degree and kept them from 0.75 whatever the depth per pixel of disparity, so a wider or
     narrower lens on the same pair neither raises nor clears the warning."""
-    for cam in example_dict["cameras"]:
-        K = np.array(cam["K"])
-        K[0, 0] *= focal_scale
-        K[1, 1] *= focal_scale
-        cam["K"] = K.tolist()
+    _scaled_focal(example_dict, focal_scale)
     narrow = json.loads(json.dumps(example_dict))
     _moved_camera(narrow["cameras"][1], [-0.055, 0.0, 0.0])  # 75 mm apart -> 20 mm
     assert narrow_pair_warning(rig_from_dict(narrow)) is not None
