@@ -2,17 +2,13 @@
 the two cameras' inputs are exchanged on a symmetric rig (docs/calibration.md, "Cameras exchanged")."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from ghnerf_runtime.body25 import FLIP_INDEX, JOINT_INDEX
 from ghnerf_runtime.handedness import handedness
-from tests.ghnerf_runtime.sim_takes import shipped_model_take
+from tests.ghnerf_runtime.sim_takes import MODELS, shipped_model_take
 
-REPO = Path(__file__).resolve().parents[2]
-MODELS = REPO / "models"
 #: Every joint but the heels: the joints the model finds on a person facing the rig (a heel shows their back)
 ALL = np.array([name not in ("LHeel", "RHeel") for name in JOINT_INDEX])
 
