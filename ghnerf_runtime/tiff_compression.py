@@ -25,14 +25,15 @@ accepts that compression, one that does not refuses it, naming the build.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import cv2
 import numpy as np
 
-__all__ = ["BUILT_IN", "NAMES", "PROBED", "decoded", "decodes_sample", "name", "refusal",
+__all__ = ["BUILT_IN", "NAMES", "PROBED", "decoded", "decodes_sample", "name", "opencv_log_silenced", "refusal",
            "single_strip_rgb_tiff", "webp_sample"]
 
 #: The Compression values (tag 259) every OpenCV 5 build's libtiff decodes (its built-in codecs): none, CCITT
@@ -105,15 +106,24 @@ def decodes_sample(sample: bytes) -> bool:
     it."""
     if not sample:
         return False
+    with opencv_log_silenced():
+        try:
+            image = cv2.imdecode(np.frombuffer(sample, np.uint8), cv2.IMREAD_COLOR)
+        except cv2.error:
+            image = None
+    return image is not None and np.array_equal(image, _probe_image())
+
+
+@contextlib.contextmanager
+def opencv_log_silenced() -> Iterator[None]:
+    """OpenCV's log (libtiff's warnings and errors, which it only logs) off inside the block, its level restored
+    after: for a decode whose failure is expected and told otherwise."""
     level = cv2.utils.logging.getLogLevel()
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     try:
-        image = cv2.imdecode(np.frombuffer(sample, np.uint8), cv2.IMREAD_COLOR)
-    except cv2.error:
-        image = None
+        yield
     finally:
         cv2.utils.logging.setLogLevel(level)
-    return image is not None and np.array_equal(image, _probe_image())
 
 
 @functools.cache

@@ -3,7 +3,6 @@ a JPEG, PNG or WebP (OpenCV ignores it given IMREAD_IGNORE_ORIENTATION), and a T
 TIFF decoder turns the image by it whatever the flags: the tag is set to 1 in a copy of the bytes first), and an
 AVIF's rotate and mirror properties (made "no turn" in a copy the same way, though OpenCV 5.0 applies neither)."""
 import builtins
-import contextlib
 import io
 import os
 import struct
@@ -55,17 +54,6 @@ def tagged_tiff(image: np.ndarray, orientation: int, order: str = "<", big: bool
     ``orientation`` of entry type ``kind`` (3 SHORT, 4 LONG, 16 LONG8)."""
     data = cv2.imencode(".tiff", image)[1].tobytes()
     return tiff_laid_out(data, order, big, {274: (kind, (orientation,))})
-
-
-@contextlib.contextmanager
-def opencv_silenced():
-    """OpenCV's log (libtiff's warnings and errors) off for a while."""
-    level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
-    try:
-        yield
-    finally:
-        cv2.utils.logging.setLogLevel(level)
 
 
 def as_array(data: bytes) -> np.ndarray:
@@ -400,7 +388,7 @@ def test_an_uncompressed_strip_holding_fewer_bytes_than_its_rows_is_refused_not_
     """Strip 2 (22 rows of 64 RGB pixels: 4224 bytes) said to hold half of them: OpenCV 5.0 delivered the image with
     the rest black, libtiff only warning. Refused now, from the header, the strip named."""
     data = tiff_with_strip_count(1, 1, lambda count, size, offset: count // 2)
-    with opencv_silenced():
+    with tiff_compression.opencv_log_silenced():
         part_black = cv2.imdecode(as_array(data), cv2.IMREAD_COLOR)
     assert part_black is not None and (part_black == 0).all(axis=2).any()  # what OpenCV 5.0 delivers
     path = tmp_path / "view.tiff"
@@ -436,7 +424,7 @@ def test_garbage_in_a_tiff_s_compressed_data_gives_no_sign_opencv_reads_it_part_
     path = tmp_path / "view.tiff"
     path.write_bytes(bytes(data))
     assert image_files.tiff_data_refusal(path) is None
-    with opencv_silenced():
+    with tiff_compression.opencv_log_silenced():
         for image in (cv2.imread(str(path), cv2.IMREAD_COLOR), read_image_or_none(path, cv2.IMREAD_COLOR)):
             assert image is not None and (image == 0).all(axis=2).any()
 

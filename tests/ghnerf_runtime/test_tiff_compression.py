@@ -17,17 +17,6 @@ from tests.odd_images import tiff_entries
 IMAGE = np.random.default_rng(64).integers(1, 256, (16, 16, 3), np.uint8)
 
 
-@contextlib.contextmanager
-def opencv_silent():
-    """OpenCV's log (libtiff's errors, one a decode here) off for a while."""
-    level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
-    try:
-        yield
-    finally:
-        cv2.utils.logging.setLogLevel(level)
-
-
 def uncompressed_tagged(compression: int) -> bytes:
     """:data:`IMAGE` as an uncompressed TIFF (as OpenCV writes one) whose Compression says ``compression``."""
     data = bytearray(cv2.imencode(".tiff", IMAGE, [cv2.IMWRITE_TIFF_COMPRESSION, 1])[1].tobytes())
@@ -44,7 +33,7 @@ def test_each_compression_opencv_writes_is_one_it_decodes():
     JPEG XL); an OpenCV built with more codecs (LZMA, Zstandard, WebP, ...) writes those too: one probed (WebP) is
     then decoded() by the probe, another must join the probes."""
     written = set()
-    with opencv_silent():
+    with tiff_compression.opencv_log_silenced():
         for compression in sorted(tiff_compression.NAMES):
             with contextlib.suppress(cv2.error):
                 ok, data = cv2.imencode(".tiff", IMAGE, [cv2.IMWRITE_TIFF_COMPRESSION, compression])
@@ -59,7 +48,7 @@ def test_opencv_reads_a_tiff_of_a_compression_it_has_no_codec_for_as_an_image_of
     """The reason for the refusal (docs/recording-format.md, "Images"): JPEG 2000 (34712) and any unregistered
     value decode to the stored size, every sample zero, libtiff's error only logged. Should an OpenCV release fail
     on them instead, this test says so."""
-    with opencv_silent():
+    with tiff_compression.opencv_log_silenced():
         for compression in (34712, 65000):
             data = np.frombuffer(uncompressed_tagged(compression), np.uint8)
             decoded = cv2.imdecode(data, cv2.IMREAD_COLOR)
@@ -71,7 +60,7 @@ def test_no_compression_outside_decoded_decodes_and_none_inside_it_is_read_as_ze
     (None, or zeros: refusing it loses nothing), and one inside it that cv2.imwrite does not write fails on 8-bit
     data (None: CCITT fax is 1-bit, ThunderScan 4-bit, NeXT 2-bit, SGILog LogLuv), never an image of zeros."""
     black, decoded_as_zeros = [], []
-    with opencv_silent():
+    with tiff_compression.opencv_log_silenced():
         for compression in range(1 << 16):
             image = cv2.imdecode(np.frombuffer(uncompressed_tagged(compression), np.uint8), cv2.IMREAD_COLOR)
             if compression not in tiff_compression.decoded():
@@ -146,3 +135,11 @@ def test_the_probe_runs_once_a_process(fresh_probe, monkeypatch):
     for _ in range(3):
         tiff_compression.refusal(50001)
     assert tiff_compression.refusal(1) is None and len(probes) == len(tiff_compression.PROBED)
+
+
+def test_opencv_s_log_is_silent_inside_the_block_and_restored_after_even_on_an_error():
+    before = cv2.utils.logging.getLogLevel()
+    with pytest.raises(cv2.error), tiff_compression.opencv_log_silenced():
+        assert cv2.utils.logging.getLogLevel() == cv2.utils.logging.LOG_LEVEL_SILENT
+        raise cv2.error("a decode that fails")
+    assert cv2.utils.logging.getLogLevel() == before
