@@ -119,8 +119,10 @@ STANDING_PERSON_M = 1.8
 #: simulated placements (2000 of ``RigPlacement.random``) show 0.97 at least, the example rig and the simulator's
 #: default the whole height.
 MIN_PERSON_IN_VIEW_SHARE = 0.75
-#: Points along the standing person's height that :func:`person_in_view_share` projects: every 5 cm of 1.8 m.
-_PERSON_SAMPLES = 37
+#: Spacing (metres) of the points along the standing person's height that :func:`person_in_view_share` projects,
+#: and so their number (37 for 1.8 m): the share's step.
+_PERSON_STEP_M = 0.05
+_PERSON_SAMPLES = round(STANDING_PERSON_M / _PERSON_STEP_M) + 1
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
 _TOP_OPTIONAL = ("metadata",)
@@ -470,6 +472,7 @@ def person_in_view_share(cam: Camera, volume: WorkingVolume) -> float:
     """The share of the height of a person standing at ``volume``'s centre (:func:`standing_person`) that lies inside
     ``cam``'s image, lens model included (a point behind the camera or past the lens's fold counts as outside)."""
     uv, _ = cam.project(standing_person(volume))
+    # the image's edges: pixel centres at whole numbers, so from -0.5 to the side less 0.5
     with np.errstate(invalid="ignore"):  # NaN pixels: outside
         inside = ((uv[:, 0] >= -0.5) & (uv[:, 0] <= cam.width - 0.5)
                   & (uv[:, 1] >= -0.5) & (uv[:, 1] <= cam.height - 0.5))
