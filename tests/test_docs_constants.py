@@ -81,6 +81,7 @@ DISAGREE = Joints3DConfig().max_prior_disagreement_m
 PRIOR_GATE = Joints3DConfig().max_prior_error_m
 TRACK_CONF = TrackingConfig().min_confidence
 COLD_SHARE = TrackingConfig().cold_tiles_below_share
+COLD_REST = TrackingConfig().cold_tiles_rest_every
 SOLVER_RAY = inspect.signature(triangulate_dlt).parameters["min_ray_angle_deg"].default
 
 
@@ -328,6 +329,8 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"cuts the volume into {_words(COLD_TILE_SPLITS[0] * COLD_TILE_SPLITS[1])} tiles"),
     ("docs/runtime.md", f"`COLD_TILE_SPLITS`, each grown `COLD_TILE_OVERLAP_M` = {COLD_TILE_OVERLAP_M:g} m into"),
     ("docs/rig-file.md", f"under {COLD_SHARE * 128:.0f} model pixels ({COLD_SHARE:g} of the crop, the tiles' bound)"),
+    ("docs/runtime.md", f"(`tracking.cold_tiles_rest_every`, default {COLD_REST}, session 66)"),
+    ("docs/runtime.md", f'"cold_tiles_rest_every": {COLD_REST}}}'),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"
