@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,7 +23,7 @@ from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.subject import SubjectSelector
 from ghnerf_runtime import two_people as T
 from ghnerf_runtime.two_people import TIE_M, pick_person, split_people
-from tests.ghnerf_runtime.sim_takes import pair_images, two_people
+from tests.ghnerf_runtime.sim_takes import MODELS, pair_images, two_people
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -1291,8 +1290,7 @@ def test_a_skeleton_of_two_people_whose_maps_show_no_joint_twice_reports_its_one
     assert drops == 0
 
 
-needs_model = pytest.mark.skipif(not (Path(__file__).resolve().parents[2] / "models" / "model_card.json").is_file(),
-                                 reason="no trained model in models/")
+needs_model = pytest.mark.skipif(not (MODELS / "model_card.json").is_file(), reason="no trained model in models/")
 
 
 @needs_model
@@ -1305,8 +1303,7 @@ def test_the_shipped_model_s_two_people_0_6_m_apart_with_pick_subject_none_repor
     nobody reported."""
     from ghnerf_runtime.estimator import load_session
 
-    root = Path(__file__).resolve().parents[2]
-    config = replace(NOBODY, session=replace(NOBODY.session, model_dir=str(root / "models"), warmup=False))
+    config = replace(NOBODY, session=replace(NOBODY.session, model_dir=str(MODELS), warmup=False))
     rig = sim.RigPlacement().build()
     first, other = two_people(2, CLOSE)
     with Estimator(load_session(config), rig, config) as est:
@@ -1326,9 +1323,8 @@ def test_the_shipped_model_keeps_tracking_a_subject_with_someone_a_metre_behind_
     answer). Now the decoded peaks' one skeleton is the subject's, reported and tracked from pair to pair."""
     from ghnerf_runtime.estimator import load_session
 
-    root = Path(__file__).resolve().parents[2]
     config = EstimatorConfig()
-    config = replace(config, session=replace(config.session, model_dir=str(root / "models"), warmup=False))
+    config = replace(config, session=replace(config.session, model_dir=str(MODELS), warmup=False))
     rig = sim.RigPlacement().build()
     first, other = two_people(3, ((0.0, 2.8), behind_place((0.0, 2.8), 1.0)))
     with Estimator(load_session(config), rig, config) as est:
@@ -1352,9 +1348,8 @@ def test_the_shipped_model_s_subject_0_6_m_apart_reports_no_joint_whose_peak_in_
     now; docs/two-people.md, "Fewer, right joints"), none at the other person's."""
     from ghnerf_runtime.estimator import load_session
 
-    root = Path(__file__).resolve().parents[2]
     config = EstimatorConfig()
-    config = replace(config, session=replace(config.session, model_dir=str(root / "models"), warmup=False))
+    config = replace(config, session=replace(config.session, model_dir=str(MODELS), warmup=False))
     rig = sim.RigPlacement().build()
     first, other = two_people(1, CLOSE)
     off = []
@@ -1378,9 +1373,8 @@ def test_the_shipped_model_s_subject_0_6_m_apart_is_given_no_left_shoulder_at_th
     models --alone 0 --places=-0.3,3.0,0.3,3.4 --by-joint``: docs/two-people.md, "Held apart")."""
     from ghnerf_runtime.estimator import load_session
 
-    root = Path(__file__).resolve().parents[2]
     config = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on"))
-    config = replace(config, session=replace(config.session, model_dir=str(root / "models"), warmup=False))
+    config = replace(config, session=replace(config.session, model_dir=str(MODELS), warmup=False))
     rig = sim.RigPlacement().build()
     first, other = two_people(1, CLOSE)
     ls = JOINT_NAMES.index("LShoulder")
@@ -1403,9 +1397,8 @@ def test_the_shipped_model_s_subject_0_6_m_apart_reports_no_left_wrist_read_from
     docs/two-people.md, "One peak, two sides")."""
     from ghnerf_runtime.estimator import load_session
 
-    root = Path(__file__).resolve().parents[2]
     config = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="off"))
-    config = replace(config, session=replace(config.session, model_dir=str(root / "models"), warmup=False))
+    config = replace(config, session=replace(config.session, model_dir=str(MODELS), warmup=False))
     rig = sim.RigPlacement().build()
     first, other = two_people(1, CLOSE)
     lw, rw = JOINT_NAMES.index("LWrist"), JOINT_NAMES.index("RWrist")
