@@ -96,7 +96,8 @@ def second_person(k: int, scene, offset_xz: tuple[float, float]):
     return SimScene(replace(bench_rig_and_scene(k + 1000)[1].config, position_xz=place))
 
 
-def render_people_frames(rig, scenes: list, t0: float, frames: int, fps: float, info: dict, pose: str | None) -> Sequence:
+def render_people_frames(rig, scenes: list, t0: float, frames: int, fps: float, info: dict,
+                         pose: str | None) -> Sequence:
     """``frames`` pairs of ``scenes``' people (the first the subject, whose room, sensor and truth they are) from
     ``t0`` at ``fps``, each body turned to ``pose`` (None: as posed); :func:`render_frames`'s sequence otherwise."""
     from benchmarks.measure_lying_rendered import posed_as  # tool only
