@@ -64,7 +64,8 @@ from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_BLOCK_VO
     MIN_ROW_SHARE
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
 from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MAX_RIG_FILE_BYTES, MAX_SKEW_SHARE,
-                                     MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG)
+                                     MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG, MIN_PERSON_IN_VIEW_SHARE,
+                                     STANDING_PERSON_M, _PERSON_SAMPLES)
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
 from ghnerf_runtime.proxy_matte import BONE_M
 from ghnerf_runtime.tracking import COLD_TILE_OVERLAP_M, COLD_TILE_SPLITS
@@ -328,6 +329,10 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"cuts the volume into {_words(COLD_TILE_SPLITS[0] * COLD_TILE_SPLITS[1])} tiles"),
     ("docs/runtime.md", f"`COLD_TILE_SPLITS`, each grown `COLD_TILE_OVERLAP_M` = {COLD_TILE_OVERLAP_M:g} m into"),
     ("docs/rig-file.md", f"under {COLD_SHARE * 128:.0f} model pixels ({COLD_SHARE:g} of the crop, the tiles' bound)"),
+    # session 66: the framing warning (a standing person at the volume's centre who does not fit the view)
+    ("docs/rig-file.md", f"warns where a {STANDING_PERSON_M:g} m person (`STANDING_PERSON_M`)"),
+    ("docs/rig-file.md", f"shows under {MIN_PERSON_IN_VIEW_SHARE * 100:g} % of their height"),
+    ("docs/rig-file.md", f"`rig_file.person_in_view_share`: {_PERSON_SAMPLES} points from the feet"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"
