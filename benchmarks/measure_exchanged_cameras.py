@@ -55,6 +55,7 @@ from ghnerf_runtime.cli.simdata import Sequence, bench_rig_and_scene, load_seque
 from ghnerf_runtime.geometry import Camera, Rig, look_at  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+from ghnerf_runtime.handedness import BACK_JOINTS  # noqa: E402
 
 SETTINGS = ("as filmed", "exchanged")
 RIGS = ("bench", "higher", "toed-in", "wide")
@@ -162,7 +163,6 @@ def run_sequence(est: Estimator, seq, exchanged: bool) -> list:
 
 
 NOSE, EYES = JOINT_INDEX["Nose"], (JOINT_INDEX["REye"], JOINT_INDEX["LEye"])
-HEELS = (JOINT_INDEX["LHeel"], JOINT_INDEX["RHeel"])
 FACING_COS = 0.5  # a person "faces the rig" (or away) with the torso turned within 60 degrees of it
 
 
@@ -177,7 +177,7 @@ def true_facing_z(joints: np.ndarray) -> float:
 def heel_peak(result) -> float:
     """The stronger heel's peak in the view where it is weaker: what ``handedness.BACK_JOINTS`` reads (at the
     presence threshold in both views, a pair gives no figure)."""
-    return min(max(float(c[j]) for j in HEELS) for c in result.confidence_2d.values())
+    return min(max(float(c[j]) for j in BACK_JOINTS) for c in result.confidence_2d.values())
 
 
 def face_seen(result, threshold: float) -> bool:
