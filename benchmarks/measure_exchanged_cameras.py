@@ -87,14 +87,19 @@ def variant_rig(placement, kind: str, rig_id: str) -> Rig:
     return Rig((first, _aimed(second, eye, target)), rig.volume, rig_id, metadata=dict(rig.metadata, variant=kind))
 
 
+#: ``--second``: the second person is bench scene ``k`` + this, far past the sequences a run films (30 in the docs'
+#: runs), so not the subject of another sequence of the run.
+SECOND_PERSON_SCENE = 1000
+
+
 def second_person(k: int, scene, offset_xz: tuple[float, float]):
-    """Bench scene ``k + 1000``'s person standing ``offset_xz`` from scene's: ``dx`` towards the rig's centre line
-    (x = 0, where both cameras see most), ``dz`` further away."""
+    """Bench scene ``k +`` :data:`SECOND_PERSON_SCENE`'s person standing ``offset_xz`` from scene's: ``dx`` towards
+    the rig's centre line (x = 0, where both cameras see most), ``dz`` further away."""
     from drivers.sim import SimScene  # tool only
     x, z = scene.config.position_xz
     dx, dz = offset_xz
     place = (x - dx if x > 0 else x + dx, z + dz)
-    return SimScene(replace(bench_rig_and_scene(k + 1000)[1].config, position_xz=place))
+    return SimScene(replace(bench_rig_and_scene(k + SECOND_PERSON_SCENE)[1].config, position_xz=place))
 
 
 def render_people_frames(rig, scenes: list, t0: float, frames: int, fps: float, info: dict,
