@@ -84,6 +84,7 @@ DISAGREE = Joints3DConfig().max_prior_disagreement_m
 PRIOR_GATE = Joints3DConfig().max_prior_error_m
 TRACK_CONF = TrackingConfig().min_confidence
 COLD_SHARE = TrackingConfig().cold_tiles_below_share
+COLD_REST = TrackingConfig().cold_tiles_rest_every
 SOLVER_RAY = inspect.signature(triangulate_dlt).parameters["min_ray_angle_deg"].default
 
 
@@ -331,6 +332,8 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"cuts the volume into {_words(COLD_TILE_SPLITS[0] * COLD_TILE_SPLITS[1])} tiles"),
     ("docs/runtime.md", f"`COLD_TILE_SPLITS`, each grown `COLD_TILE_OVERLAP_M` = {COLD_TILE_OVERLAP_M:g} m into"),
     ("docs/rig-file.md", f"under {COLD_SHARE * 128:.0f} model pixels ({COLD_SHARE:g} of the crop, the tiles' bound)"),
+    ("docs/runtime.md", f"(`tracking.cold_tiles_rest_every`, default {COLD_REST}, session 66)"),
+    ("docs/runtime.md", f"| docs/examples/rig.json | tiles, rest every {COLD_REST} (default) |"),
     # session 66: why the scan tells nobody behind the subject (the blanked box, the benchmark's own-peak radius)
     ("docs/two-people.md", f"the reported joints' box grown {SUBJECT_MARGIN_M:g} m every way "
                            "(`others_scan.SUBJECT_MARGIN_M`"),
