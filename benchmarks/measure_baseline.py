@@ -137,6 +137,12 @@ def floats(text: str) -> list[float]:
     return [float(v) for v in text.split(",") if v.strip()]
 
 
+def rig_paths(text: str) -> list[str]:
+    """``--rigs``: a comma-separated list of rig files ("" is none), as ``benchmarks/measure_cold_tiles.py`` reads
+    it too."""
+    return [p for p in text.split(",") if p.strip()]
+
+
 def baseline_rows(args) -> list[tuple[float, float, float]]:
     """(distance m, lens hfov degrees, baseline m) per row of the first table: every ``--distances`` x ``--hfovs`` x
     ``--baselines``, or x ``--angles`` (each turned into the baseline giving that angle there) where given."""
@@ -152,7 +158,7 @@ def baseline_rows(args) -> list[tuple[float, float, float]]:
 
 def print_rig_files(args, session, cfg) -> None:
     """The table of ``--rigs``: each rig file's own pair, framing and scores on the same people."""
-    paths = [p for p in args.rigs.split(",") if p.strip()]
+    paths = rig_paths(args.rigs)
     if not paths:
         return
     print("\n| rig file | standing person in view, share | person tall, image px | person tall in the cold crop, "

@@ -29,7 +29,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.empty_rooms import empty_room_pair, scene_without_person  # noqa: E402
-from benchmarks.measure_baseline import bench_scene_in  # noqa: E402
+from benchmarks.measure_baseline import bench_scene_in, rig_paths  # noqa: E402
 from ghnerf_runtime.cli.simdata import SEED_BASE  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig, TrackingConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -106,7 +106,7 @@ def main(argv=None) -> int:
           "empty-room pairs with a joint | "
           "tile passes (people / rooms) |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    for path in [p for p in args.rigs.split(",") if p.strip()]:
+    for path in rig_paths(args.rigs):
         rig = load_rig(path, warn=False)
         people = measure(session, configs, rig,
                          [people_pairs(rig, k, args.frames, args.walk_in_after) for k in range(args.sequences)],

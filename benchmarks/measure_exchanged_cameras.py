@@ -55,6 +55,7 @@ from ghnerf_runtime.cli.simdata import Sequence, bench_rig_and_scene, load_seque
 from ghnerf_runtime.geometry import Camera, Rig, look_at  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+from ghnerf_runtime.handedness import BACK_JOINTS  # noqa: E402
 
 SETTINGS = ("as filmed", "exchanged")
 RIGS = ("bench", "higher", "toed-in", "wide")
@@ -86,17 +87,23 @@ def variant_rig(placement, kind: str, rig_id: str) -> Rig:
     return Rig((first, _aimed(second, eye, target)), rig.volume, rig_id, metadata=dict(rig.metadata, variant=kind))
 
 
+#: ``--second``: the second person is bench scene ``k`` + this, far past the sequences a run films (30 in the docs'
+#: runs), so not the subject of another sequence of the run.
+SECOND_PERSON_SCENE = 1000
+
+
 def second_person(k: int, scene, offset_xz: tuple[float, float]):
-    """Bench scene ``k + 1000``'s person standing ``offset_xz`` from scene's: ``dx`` towards the rig's centre line
-    (x = 0, where both cameras see most), ``dz`` further away."""
+    """Bench scene ``k +`` :data:`SECOND_PERSON_SCENE`'s person standing ``offset_xz`` from scene's: ``dx`` towards
+    the rig's centre line (x = 0, where both cameras see most), ``dz`` further away."""
     from drivers.sim import SimScene  # tool only
     x, z = scene.config.position_xz
     dx, dz = offset_xz
     place = (x - dx if x > 0 else x + dx, z + dz)
-    return SimScene(replace(bench_rig_and_scene(k + 1000)[1].config, position_xz=place))
+    return SimScene(replace(bench_rig_and_scene(k + SECOND_PERSON_SCENE)[1].config, position_xz=place))
 
 
-def render_people_frames(rig, scenes: list, t0: float, frames: int, fps: float, info: dict, pose: str | None) -> Sequence:
+def render_people_frames(rig, scenes: list, t0: float, frames: int, fps: float, info: dict,
+                         pose: str | None) -> Sequence:
     """``frames`` pairs of ``scenes``' people (the first the subject, whose room, sensor and truth they are) from
     ``t0`` at ``fps``, each body turned to ``pose`` (None: as posed); :func:`render_frames`'s sequence otherwise."""
     from benchmarks.measure_lying_rendered import posed_as  # tool only
@@ -161,7 +168,6 @@ def run_sequence(est: Estimator, seq, exchanged: bool) -> list:
 
 
 NOSE, EYES = JOINT_INDEX["Nose"], (JOINT_INDEX["REye"], JOINT_INDEX["LEye"])
-HEELS = (JOINT_INDEX["LHeel"], JOINT_INDEX["RHeel"])
 FACING_COS = 0.5  # a person "faces the rig" (or away) with the torso turned within 60 degrees of it
 
 
@@ -176,7 +182,7 @@ def true_facing_z(joints: np.ndarray) -> float:
 def heel_peak(result) -> float:
     """The stronger heel's peak in the view where it is weaker: what ``handedness.BACK_JOINTS`` reads (at the
     presence threshold in both views, a pair gives no figure)."""
-    return min(max(float(c[j]) for j in HEELS) for c in result.confidence_2d.values())
+    return min(max(float(c[j]) for j in BACK_JOINTS) for c in result.confidence_2d.values())
 
 
 def face_seen(result, threshold: float) -> bool:

@@ -337,6 +337,24 @@ class ScanWatch:
         return self.crops_P is not None and self.box is not None
 
 
+def tally_scan(counts: dict, scan: ScanWatch, stride: int, threshold: float, subject: np.ndarray,
+               second: np.ndarray | None) -> None:
+    """Add one looked-at scan (:meth:`ScanWatch.looked`) to ``counts``: with a ``second`` person, where each view's
+    crop put them (:func:`second_in_scan`, :func:`own_peaks`); alone (None), the ``subject``'s peaks away from
+    their own joints (:func:`peaks_away`)."""
+    if second is None:
+        counts["scan_alone"] += 1
+    for v, P in enumerate(scan.crops_P):
+        own = project_cells(P, subject, stride)
+        if second is None:
+            counts["scan_away"][v] += peaks_away(scan.heat[v], own, threshold)
+            continue
+        inside, apart_cells = second_in_scan(P, scan.box, stride, subject, second)
+        counts["scan_inside"][v] += inside
+        counts["scan_apart"].append(apart_cells)
+        counts["scan_own"][v] += own_peaks(scan.heat[v], own, project_cells(P, second, stride), threshold)
+
+
 def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = EstimatorConfig(), swap: bool = False,
             places: tuple = PLACES, model_dir: str | None = None,
             second: bool = True, occlude: bool = False) -> tuple[dict[str, float], int]:
@@ -445,20 +463,9 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 counts["flagged"] += int(r.several_people)
                 counts["scanned"] += int(r.someone_else is not None)
                 counts["someone_else"] += int(bool(r.someone_else))
-                if not together and scan.looked():  # one person: their maps' peaks away from their own joints
-                    counts["scan_alone"] += 1
-                    for v, P in enumerate(scan.crops_P):
-                        own = project_cells(P, a, est.contract.heatmap_stride)
-                        counts["scan_away"][v] += peaks_away(scan.heat[v], own, config.presence.threshold("encoder"))
-                if together and scan.looked():
-                    for v, P in enumerate(scan.crops_P):
-                        inside, apart_cells = second_in_scan(P, scan.box, est.contract.heatmap_stride, a, b)
-                        counts["scan_inside"][v] += inside
-                        counts["scan_apart"].append(apart_cells)
-                        stride = est.contract.heatmap_stride
-                        counts["scan_own"][v] += own_peaks(scan.heat[v], project_cells(P, a, stride),
-                                                           project_cells(P, b, stride),
-                                                           config.presence.threshold("encoder"))
+                if scan.looked():  # what the scan's crops showed of each person
+                    tally_scan(counts, scan, est.contract.heatmap_stride, config.presence.threshold("encoder"),
+                               a, b if together else None)
                 if r.several_people:  # the subject's alone: its pairings' (the prior's fed their peaks, with it)
                     counts["flagged_joints"] += int(found.sum())
                     counts["flagged_mm"] += float(nearer[found].sum()) * 1000.0

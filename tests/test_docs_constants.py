@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.measure_two_people import OWN_PEAK_CELLS
 from calibration.board import MIN_CORNERS, BoardSpec
 from calibration.check import CheckLimits
 from calibration.cli import STALL_NOTE_S
@@ -63,8 +64,10 @@ from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M
 from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_BLOCK_VOLUME, MIN_RAY_ANGLE_FLOOR_DEG, \
     MIN_ROW_SHARE
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
+from ghnerf_runtime.others_scan import SUBJECT_MARGIN_M
 from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MAX_RIG_FILE_BYTES, MAX_SKEW_SHARE,
-                                     MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG)
+                                     MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG, MIN_PERSON_IN_VIEW_SHARE,
+                                     STANDING_PERSON_M, _PERSON_SAMPLES)
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
 from ghnerf_runtime.proxy_matte import BONE_M
 from ghnerf_runtime.tracking import COLD_TILE_OVERLAP_M, COLD_TILE_SPLITS
@@ -331,6 +334,17 @@ def _doc(name: str) -> str:
     ("docs/rig-file.md", f"under {COLD_SHARE * 128:.0f} model pixels ({COLD_SHARE:g} of the crop, the tiles' bound)"),
     ("docs/runtime.md", f"(`tracking.cold_tiles_rest_every`, default {COLD_REST}, session 66)"),
     ("docs/runtime.md", f'"cold_tiles_rest_every": {COLD_REST}}}'),
+    ("docs/runtime.md", f"| docs/examples/rig.json | tiles, rest every {COLD_REST} (default) |"),
+    # session 66: why the scan tells nobody behind the subject (the blanked box, the benchmark's own-peak radius)
+    ("docs/two-people.md", f"the reported joints' box grown {SUBJECT_MARGIN_M:g} m every way "
+                           "(`others_scan.SUBJECT_MARGIN_M`"),
+    ("docs/two-people.md", f"the subject's box grown {SUBJECT_MARGIN_M:g} m covers every one of their joints"),
+    ("docs/two-people.md", f"within {OWN_PEAK_CELLS:g} cells of their joint and not within {OWN_PEAK_CELLS:g} of the"),
+    ("docs/two-people.md", f"peak farther than {OWN_PEAK_CELLS:g} cells from that person's joint"),
+    # session 66: the framing warning (a standing person at the volume's centre who does not fit the view)
+    ("docs/rig-file.md", f"warns where a {STANDING_PERSON_M:g} m person (`STANDING_PERSON_M`)"),
+    ("docs/rig-file.md", f"shows under {MIN_PERSON_IN_VIEW_SHARE * 100:g} % of their height"),
+    ("docs/rig-file.md", f"`rig_file.person_in_view_share`: {_PERSON_SAMPLES} points from the feet"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"
