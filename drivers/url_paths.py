@@ -22,6 +22,7 @@ from ghnerf_runtime.path_check import path_problem, shown
 
 __all__ = ["FileParts", "FILE_PARTS", "check_url_paths", "rig_url_from_folder", "url_files", "url_path_problem"]
 
+
 def _any_path(value: str) -> bool:
     return True
 

@@ -33,6 +33,7 @@ from drivers.backends.depthai.link import StereoRequest
 from drivers.backends.depthai.options import DepthaiOptions
 from drivers.url import RigUrl
 from tests.drivers.depthai_host import HostPipelineLink, ScriptedLink, image_group, stamp
+from tests.drivers.reopens import open_sources_sharing_a_logged_set
 
 URL = "depthai://?width=160&height=100&mount_height=1.2"
 
@@ -367,13 +368,9 @@ def test_a_rig_file_s_warnings_are_logged_at_open_once_by_sources_sharing_a_logg
     cams = tuple(Camera(c.name, c.width, c.height, c.K, c.dist, c.R, c.t - c.R @ shift) for c in rig.cameras)
     path = tmp_path / "high.json"
     save_rig(Rig(cams, WorkingVolume(rig.volume.min_corner + shift, rig.volume.max_corner + shift), "high"), path)
-    logged: set[str] = set()
+    url = f"depthai://?width=160&height=100&rig={path}"
     with caplog.at_level(logging.WARNING):
-        for _ in range(2):
-            source = create_rig_source(f"depthai://?width=160&height=100&rig={path}", link_factory=HostPipelineLink)
-            source.log_rig_warnings_once(logged)
-            with source.open():
-                pass
+        open_sources_sharing_a_logged_set(lambda _: create_rig_source(url, link_factory=HostPipelineLink), 2)
     heights = [r.getMessage() for r in caplog.records if "CAMERA_HEIGHT_RANGE_M" in r.getMessage()]
     assert [m.split(" stands")[0] for m in heights] == [f"{path}: camera 'left'", f"{path}: camera 'right'"], heights
 

@@ -35,6 +35,7 @@ from drivers.backends.recording_format import (
 )
 from benchmarks import time_replay_open
 from drivers.url import RigUrl
+from tests.drivers.reopens import open_sources_sharing_a_logged_set
 from tests.odd_images import (
     bmp_built,
     riff_chunk,
@@ -177,15 +178,10 @@ def test_a_take_s_rig_warning_is_logged_at_open_once_by_sources_sharing_a_logged
     take = tmp_path / "narrow"
     record(take, sim_cache, pairs=3, sim=f"{SIM}&baseline=0.05")  # (sim:// warns of the rig it builds, too)
     url = f"replay://{take}?speed=free"
-    logged: set[str] = set()
     caplog.clear()
     with caplog.at_level(logging.WARNING):
         create_rig_source(url)  # the daemon's check of a reloaded rig.url: opens nothing
-        for _ in range(3):
-            source = create_rig_source(url)
-            source.log_rig_warnings_once(logged)
-            with source.open():
-                pass
+        open_sources_sharing_a_logged_set(lambda _: create_rig_source(url), 3)
         shared = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
         caplog.clear()
         with open_rig(url):

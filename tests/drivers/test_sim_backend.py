@@ -7,6 +7,7 @@ import pytest
 from drivers import ManualClock, RigConfigError, create_rig_source, open_rig
 from drivers.backends.sim_loop import default_cache_root
 from drivers.sim import SAMPLE_BVH, SceneConfig, SensorModel, SimScene
+from tests.drivers.reopens import open_sources_sharing_a_logged_set
 
 SMALL = "width=48&height=36"
 
@@ -317,13 +318,9 @@ def test_sources_sharing_a_logged_set_warn_of_their_rig_once(caplog, tmp_path, p
     follow-up); a source without one, a one-shot tool's, still warns at its open. The recorder passes the set to the
     source it wraps, which builds the rig."""
     url = f"{prefix}sim://?{SMALL}&cache=off&baseline=0.05"
-    logged: set[str] = set()
     with caplog.at_level(logging.WARNING, logger="drivers"):
-        for k in range(3):
-            source = create_rig_source(url, clock=ManualClock(), **({"out": tmp_path / f"take{k}"} if prefix else {}))
-            source.log_rig_warnings_once(logged)
-            with source.open():
-                pass
+        logged = open_sources_sharing_a_logged_set(lambda k: create_rig_source(
+            url, clock=ManualClock(), **({"out": tmp_path / f"take{k}"} if prefix else {})), 3)
         shared = [r for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
         caplog.clear()
         with create_rig_source(url, clock=ManualClock(), **({"out": tmp_path / "one"} if prefix else {})).open():

@@ -57,8 +57,7 @@ def test_a_relative_path_with_a_byte_that_is_not_utf8_keeps_its_escape():
 
 def test_every_wrapper_says_which_of_its_options_are_files():
     # as for the backends: a wrapper's folder option left out would go unchecked (a NUL byte: a traceback)
-    from drivers.wrappers import WRAPPERS
-    from drivers.wrappers import WRAPPER_FILE_OPTIONS
+    from drivers.wrappers import WRAPPER_FILE_OPTIONS, WRAPPERS
 
     assert set(WRAPPER_FILE_OPTIONS) == set(WRAPPERS)
 

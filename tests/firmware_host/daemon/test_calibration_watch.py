@@ -325,23 +325,24 @@ def test_all_three_symptoms_a_refused_reload_and_a_sink_down_still_fit_the_line(
 _JOURNAL = {
     "calibration": (
         "WARNING calibration suspect: the two views' peaks are 1.46 px apart over the last 3 pairs "
-        "(health.calibration_max_px 0.8): a camera has moved since calibration; recalibrate (ghcal, docs/calibration.md) "
-        "and restart",
+        "(health.calibration_max_px 0.8): a camera has moved since calibration; recalibrate (ghcal, "
+        "docs/calibration.md) and restart",
         "INFO calibration fits again: the views' peaks are 0.20 px apart over the last 3 pairs",
         "INFO calibration check off (health.calibration_max_px null)"),
     "floor": (
         "WARNING calibration suspect: feet 0.18 m below the floor (the lower triangulated foot, median over the last 3 "
         "pairs with feet in view; health.calibration_max_floor_m 0.05): a camera has turned since calibration (a pan "
-        "moves the depth, not the views' agreement); recalibrate (ghcal, docs/calibration.md) and restart. Where people "
-        "stand above the floor (a stage, a bed), set health.calibration_max_floor_m null",
+        "moves the depth, not the views' agreement); recalibrate (ghcal, docs/calibration.md) and restart. Where "
+        "people stand above the floor (a stage, a bed), set health.calibration_max_floor_m null",
         "INFO calibration fits the floor again: feet 0.01 m above the floor over the last 3 pairs",
         "INFO calibration floor check off (health.calibration_max_floor_m null)"),
     "handedness": (
-        "WARNING calibration suspect: the cameras look exchanged: the triangulated person is a mirror image (handedness "
-        "-0.76, median over the last 3 pairs; +1 a person, -1 a mirror image; health.calibration_max_mirror 0.2): the "
-        "left camera's frames come in as the right's; exchange the cameras' plugs or their names in rig.url, no "
-        "recalibration is needed (docs/calibration.md, \"Cameras exchanged\"). On a rig built far from symmetric (a "
-        "camera above the person, one beside the other), set health.calibration_max_mirror null",
+        "WARNING calibration suspect: the cameras look exchanged: the triangulated person is a mirror image "
+        "(handedness -0.76, median over the last 3 pairs; +1 a person, -1 a mirror image; "
+        "health.calibration_max_mirror 0.2): the left camera's frames come in as the right's; exchange the cameras' "
+        "plugs or their names in rig.url, no recalibration is needed (docs/calibration.md, \"Cameras exchanged\"). "
+        "On a rig built far from symmetric (a camera above the person, one beside the other), set "
+        "health.calibration_max_mirror null",
         "INFO the cameras no longer look exchanged: handedness 0.80 over the last 3 pairs",
         "INFO calibration handedness check off (health.calibration_max_mirror null)"),
 }
