@@ -124,7 +124,7 @@ def test_under_systemd_a_rig_file_or_recording_in_a_hidden_place_says_why(tmp_pa
     assert rig_url_hint(f"replay://{tmp_path / 'take'}") == rig_url_hint("sim://?fps=30") == ""
     # the start's check of a rig file names it with the hint (it said only "no such file")
     with pytest.raises(cli.DaemonConfigError, match=r"rig\.json.*\(the path is under .*BindReadOnlyPaths="):
-        cli._check_rig_url(url)
+        cli._check_rig_url(url, warn_of_rig=False)
 
 
 def test_under_systemd_a_status_file_in_a_hidden_place_says_why(tmp_path, monkeypatch, caplog):
