@@ -612,20 +612,26 @@ def test_two_webcams_from_no_rig_file_to_a_calibrated_rig(truth, tmp_path, capsy
     assert source.rig.rig_id == solved.rig_id and pair.images[0].shape == (truth.pair[0].height, truth.pair[0].width, 3)
 
 
-def test_capture_of_the_stand_in_videos_keeps_every_pose_on_a_slow_host(truth, tmp_path, capsys, monkeypatch):
-    # Under CPU load (a benchmark beside it, a 2-core CI host) the workflow above kept 9 of its 10 poses: the
-    # videos played on at 10 fps while the detection lagged, and a pose seen once is not yet held still.
-    # Here each pair's detection takes longer than a pose is held (0.5 s): read at the videos' pace, no pose but
-    # the first (in the queue as the capture began) was seen twice, and it kept 0 or 1 of the 3.
+def _detection_slower_than_a_held_pose(monkeypatch) -> None:
+    """Each image's board detection slowed by 0.25 s: two images a pair, 0.5 s, as long as a pose is held (a slow
+    or loaded host)."""
     import time
 
     detect = BoardDetector.detect
 
     def slow_detect(self, image):
-        time.sleep(0.25)  # two images a pair: 0.5 s
+        time.sleep(0.25)
         return detect(self, image)
 
     monkeypatch.setattr(BoardDetector, "detect", slow_detect)
+
+
+def test_capture_of_the_stand_in_videos_keeps_every_pose_on_a_slow_host(truth, tmp_path, capsys, monkeypatch):
+    # Under CPU load (a benchmark beside it, a 2-core CI host) the workflow above kept 9 of its 10 poses: the
+    # videos played on at 10 fps while the detection lagged, and a pose seen once is not yet held still.
+    # Here each pair's detection takes longer than a pose is held (0.5 s): read at the videos' pace, no pose but
+    # the first (in the queue as the capture began) was seen twice, and it kept 0 or 1 of the 3.
+    _detection_slower_than_a_held_pose(monkeypatch)
     images = calibration_views(truth, BOARD, count=3, edge_count=0, seed=7, floor_view=False)
     names = sorted(images[truth.pair[0].name])
     url = _webcam_videos(truth, tmp_path, images, names, frames_per_pose=5)  # 0.5 s: --still-s 0.3 and more
@@ -636,15 +642,7 @@ def test_capture_of_two_videos_reads_every_frame_without_policy_in_the_url(truth
     # A user's URL of two recorded videos names no policy=: under the driver's default ``latest`` the videos
     # played on at their rate while each pair's detection took longer than a pose is held, and 0 or 1 of the 3
     # poses were kept without a word. ghcal capture reads two videos' every frame unless the URL says otherwise.
-    import time
-
-    detect = BoardDetector.detect
-
-    def slow_detect(self, image):
-        time.sleep(0.25)  # two images a pair: 0.5 s, as long as a pose is held
-        return detect(self, image)
-
-    monkeypatch.setattr(BoardDetector, "detect", slow_detect)
+    _detection_slower_than_a_held_pose(monkeypatch)
     images = calibration_views(truth, BOARD, count=3, edge_count=0, seed=7, floor_view=False)
     names = sorted(images[truth.pair[0].name])
     url = _webcam_videos(truth, tmp_path, images, names, frames_per_pose=5, policy=None)
@@ -680,15 +678,7 @@ def test_two_videos_recorded_as_they_are_captured_get_policy_all_too(monkeypatch
 def test_a_capture_of_two_videos_through_the_recorder_reads_every_frame(truth, tmp_path, capsys, monkeypatch):
     # as test_capture_of_two_videos_reads_every_frame_without_policy_in_the_url, the URL wrapped in record+: on the
     # old code 0 or 1 of the 3 poses were kept
-    import time
-
-    detect = BoardDetector.detect
-
-    def slow_detect(self, image):
-        time.sleep(0.25)  # two images a pair: 0.5 s, as long as a pose is held
-        return detect(self, image)
-
-    monkeypatch.setattr(BoardDetector, "detect", slow_detect)
+    _detection_slower_than_a_held_pose(monkeypatch)
     images = calibration_views(truth, BOARD, count=3, edge_count=0, seed=7, floor_view=False)
     names = sorted(images[truth.pair[0].name])
     take = tmp_path / "take"

@@ -435,18 +435,30 @@ def test_views_whose_cameras_are_exchanged_are_said_to_fit_so(level_rig, level_v
     assert exchanged_fit(level_rig, BOARD, small, limits) is None  # another size than the rig's: not exchanged
 
 
-def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str) -> tuple[int, Path]:
-    """``ghcal check`` of ``rig`` on ``views`` (the detection stood in for): its exit status, and the images' folder."""
-    from ghnerf_runtime.rig_file import save_rig
-
+def _listed_views(views: dict, tmp_path) -> Path:
+    """``views``' images as empty files named as they are (``capture/<camera>/<name>.png``: listed by name, the
+    detection stood in for) beside ``board.json``; returns the images' folder."""
     images = tmp_path / "capture"
     for cam, named in views.items():
         (images / cam).mkdir(parents=True, exist_ok=True)
         for name in named:
-            (images / cam / f"{name}.png").touch()  # listed by name
+            (images / cam / f"{name}.png").touch()
     (tmp_path / "board.json").write_text(json.dumps(BOARD.to_dict()))
-    save_rig(rig, tmp_path / "rig.json")
+    return images
+
+
+def _detection_stood_in_for(views: dict, monkeypatch) -> None:
+    """``ghcal``'s detection answering ``views`` whatever the folder."""
     monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {cam: [] for cam in views}))
+
+
+def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str) -> tuple[int, Path]:
+    """``ghcal check`` of ``rig`` on ``views`` (the detection stood in for): its exit status, and the images' folder."""
+    from ghnerf_runtime.rig_file import save_rig
+
+    images = _listed_views(views, tmp_path)
+    save_rig(rig, tmp_path / "rig.json")
+    _detection_stood_in_for(views, monkeypatch)
     rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
                    "--images", str(images), *options])
     return rc, images
@@ -496,13 +508,8 @@ def test_folders_exchanged_between_cameras_of_two_sizes_are_said_so(sized_rig, t
 def _solve_cli(views: dict, tmp_path, monkeypatch) -> tuple[int, Path]:
     """``ghcal solve`` of ``views`` (the detection stood in for) into ``tmp_path/rig.json``, levelled by a typed
     height: its exit status, and the images' folder."""
-    images = tmp_path / "capture"
-    for cam, named in views.items():
-        (images / cam).mkdir(parents=True, exist_ok=True)
-        for name in named:
-            (images / cam / f"{name}.png").touch()  # listed by name
-    (tmp_path / "board.json").write_text(json.dumps(BOARD.to_dict()))
-    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {cam: [] for cam in views}))
+    images = _listed_views(views, tmp_path)
+    _detection_stood_in_for(views, monkeypatch)
     rc = cli.main(["solve", "--images", str(images), "--board", str(tmp_path / "board.json"), "--out",
                    str(tmp_path / "rig.json"), "--cameras", "left,right", "--camera-height", "1.4", "--pitch", "9"])
     return rc, images

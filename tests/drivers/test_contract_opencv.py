@@ -34,7 +34,7 @@ from ghnerf_runtime.geometry.rig import Rig
 from drivers.backends.opencv import video_size
 from ghnerf_runtime.rig_file import load_rig, save_rig
 from tests.drivers.contract import RigSourceContract
-from tests.drivers.reopens import open_sources_sharing_a_logged_set
+from tests.drivers.reopens import warnings_shared_and_alone
 from tests.rotated_videos import SIZE as PHONE_SIZE
 from tests.rotated_videos import phone_take
 
@@ -151,13 +151,7 @@ def test_the_nominal_rig_warning_is_logged_once_by_sources_sharing_a_logged_set(
     source, given none, still says it at its open."""
     first, second, _, _ = takes[0]
     url = f"opencv://?first={first}&second={second}"
-    with caplog.at_level(logging.WARNING, logger="drivers"):
-        open_sources_sharing_a_logged_set(lambda _: create_rig_source(url), 3)
-        shared = [r for r in caplog.records if "nominal, uncalibrated rig" in r.getMessage()]
-        caplog.clear()
-        with open_rig(url):
-            pass
-        alone = [r for r in caplog.records if "nominal, uncalibrated rig" in r.getMessage()]
+    shared, alone = warnings_shared_and_alone(caplog, url, "nominal, uncalibrated rig")
     assert len(shared) == 1 and len(alone) == 1, caplog.text
 
 def test_a_rig_file_s_warning_is_logged_at_open_once_by_sources_sharing_a_logged_set(takes, tmp_path, caplog):
@@ -171,13 +165,7 @@ def test_a_rig_file_s_warning_is_logged_at_open_once_by_sources_sharing_a_logged
     narrow = tmp_path / "narrow.json"
     save_rig(RigPlacement(width=SIZE[0], height=SIZE[1], baseline_m=0.05).build("narrow"), narrow)
     url = f"opencv://?first={first}&second={second}&rig={narrow}"
-    with caplog.at_level(logging.WARNING):
-        open_sources_sharing_a_logged_set(lambda _: create_rig_source(url), 3)
-        shared = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
-        caplog.clear()
-        with open_rig(url):
-            pass
-        alone = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+    shared, alone = warnings_shared_and_alone(caplog, url)
     assert len(shared) == 1 and len(alone) == 1, caplog.text
     assert shared[0].startswith(f"{narrow}: cameras 'left' and 'right' are 50 mm apart"), shared
 

@@ -35,7 +35,7 @@ from drivers.backends.recording_format import (
 )
 from benchmarks import time_replay_open
 from drivers.url import RigUrl
-from tests.drivers.reopens import open_sources_sharing_a_logged_set
+from tests.drivers.reopens import warnings_shared_and_alone
 from tests.odd_images import (
     bmp_built,
     riff_chunk,
@@ -181,12 +181,7 @@ def test_a_take_s_rig_warning_is_logged_at_open_once_by_sources_sharing_a_logged
     caplog.clear()
     with caplog.at_level(logging.WARNING):
         create_rig_source(url)  # the daemon's check of a reloaded rig.url: opens nothing
-        open_sources_sharing_a_logged_set(lambda _: create_rig_source(url), 3)
-        shared = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
-        caplog.clear()
-        with open_rig(url):
-            pass
-        alone = [r.getMessage() for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
+    shared, alone = warnings_shared_and_alone(caplog, url)
     assert len(shared) == 1 and len(alone) == 1, caplog.text
     assert shared[0].startswith(f"{take / MANIFEST}: cameras 'left' and 'right' are 50 mm apart"), shared
 
