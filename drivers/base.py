@@ -12,17 +12,37 @@ import logging
 import math
 import os
 from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import ClassVar
 
 from drivers.clock import Clock, MonotonicClock
-from drivers.errors import EndOfStream, RigDisconnectedError, RigOperationError, RigTimeoutError
+from drivers.errors import EndOfStream, RigConfigError, RigDisconnectedError, RigOperationError, RigTimeoutError
 from drivers.frames import Frame, FramePair
 from drivers.pairing import DropPolicy, FramePairer, PairingConfig, PairingStats
 from drivers.url import RigUrl
+from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.rig_file import rig_warnings
+from ghnerf_runtime.rig_file import load_rig, rig_warnings
 
 log = logging.getLogger(__name__)
+
+
+def load_rig_option(url: RigUrl, path: str) -> Rig:
+    """The rig file a URL's ``rig=`` option names, read without its warnings: the source logs them at open, once
+    per daemon run (:meth:`RigSource._rig_read_from`). A file that cannot be read is a :class:`RigConfigError`
+    naming the URL and the option (:func:`naming_rig_option`)."""
+    with naming_rig_option(url, path):
+        return load_rig(path, warn=False)
+
+
+@contextmanager
+def naming_rig_option(url: RigUrl, path: str) -> Iterator[None]:
+    """A rig file that cannot be read, or a rig the stream does not fit, raised inside as a :class:`RigConfigError`
+    that names the URL and its ``rig=`` option: the file's own error names only the file."""
+    try:
+        yield
+    except (RigFileError, RigConfigError) as e:
+        raise RigConfigError(f"rig URL {url.url!r}: option rig={path}: {e}") from e
 
 
 class RigSource(abc.ABC):

@@ -99,7 +99,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from drivers.base import RigSource
+from drivers.base import RigSource, load_rig_option
 from drivers.clock import Clock, MonotonicClock
 from drivers.errors import (
     EndOfStream,
@@ -113,9 +113,7 @@ from drivers.frames import Frame
 from drivers.pairing import DropPolicy, PairingConfig, PairingStats
 from drivers.pairing_options import PairingOptions, take_pairing_options
 from drivers.url import RigUrl, redact_url
-from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.video_files import is_still_image, read_as_stored
 
 log = logging.getLogger(__name__)
@@ -541,10 +539,7 @@ class OpenCVRigSource(RigSource):
         options = OpenCVOptions.from_url(url)
         from_file = rig is None and options.rig_path is not None
         if from_file:
-            try:
-                rig = load_rig(options.rig_path, warn=False)  # warned of at open, once per daemon run
-            except RigFileError as e:
-                raise RigConfigError(f"rig URL {url.url!r}: option rig={options.rig_path}: {e}") from e
+            rig = load_rig_option(url, options.rig_path)
         source = cls(options, rig=rig, capture_factory=capture_factory, pairing=pairing, clock=clock)
         if from_file:
             source._rig_read_from(options.rig_path)

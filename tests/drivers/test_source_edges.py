@@ -1,7 +1,7 @@
 """Edges of the sources a reviewer found: a pairing tolerance too large to count in nanoseconds, a close that
-fails, a journal row of a camera outside the pair, a rig file of another size than a depthai stream, a close
-from another thread while a sim read waits, a read timeout too long to count in nanoseconds, a recorder that
-cannot start."""
+fails, a journal row of a camera outside the pair, a rig file of another size than a depthai stream, an
+unreadable rig file (named alike by opencv:// and depthai://), a close from another thread while a sim read
+waits, a read timeout too long to count in nanoseconds, a recorder that cannot start."""
 from __future__ import annotations
 
 import json
@@ -90,6 +90,36 @@ def test_a_rig_file_of_another_size_names_the_url_and_the_file():
     with pytest.raises(RigConfigError, match=r"rig URL 'depthai://\?rig=docs/examples/rig\.json': option "
                                              r"rig=docs/examples/rig\.json: rig .* is \d+x\d+ but the stream is"):
         create_rig_source(url)
+
+
+@pytest.mark.parametrize("scheme_and_cameras", ["opencv://?first=0&second=1&", "depthai://?"])
+def test_an_unreadable_rig_file_names_the_url_and_the_option_alike_in_each_backend(tmp_path, scheme_and_cameras):
+    # both backends read rig= through drivers.base.load_rig_option: one wording, the file's error kept as the cause
+    from ghnerf_runtime.errors import RigFileError
+
+    (tmp_path / "rig.json").write_text("not json")
+    url = f"{scheme_and_cameras}rig={tmp_path / 'rig.json'}"
+    with pytest.raises(RigConfigError) as raised:
+        create_rig_source(url)
+    assert str(raised.value).startswith(f"rig URL {url!r}: option rig={tmp_path / 'rig.json'}: file ")
+    assert isinstance(raised.value.__cause__, RigFileError)
+
+
+def test_naming_the_rig_option_converts_rig_errors_only():
+    from drivers.base import naming_rig_option
+    from drivers.url import RigUrl
+    from ghnerf_runtime.errors import RigFileError
+
+    url = RigUrl.parse("depthai://?rig=r.json")
+    with pytest.raises(RigConfigError, match=r"^rig URL 'depthai://\?rig=r\.json': option rig=r\.json: too small$"):
+        with naming_rig_option(url, "r.json"):
+            raise RigConfigError("too small")
+    with pytest.raises(RigConfigError, match=r"option rig=r\.json: file r\.json: gone"):
+        with naming_rig_option(url, "r.json"):
+            raise RigFileError("gone", path="r.json")
+    with pytest.raises(KeyError):  # not a rig error: left as it is
+        with naming_rig_option(url, "r.json"):
+            raise KeyError("other")
 
 
 def test_a_sim_read_waiting_when_another_thread_closes_says_so(sim_cache):

@@ -10,16 +10,14 @@ from drivers.backends.depthai.calibration import rig_from_calibration
 from drivers.backends.depthai.convert import depthai_errors, frames_from_group
 from drivers.backends.depthai.link import DaiDeviceLink, DeviceLink, StereoRequest
 from drivers.backends.depthai.options import DEFAULT_MOUNT_HEIGHT_M, DepthaiOptions, board_socket
-from drivers.base import RigSource
+from drivers.base import RigSource, load_rig_option, naming_rig_option
 from drivers.clock import Clock
 from drivers.errors import (FrameSizeError, RigConfigError, RigDisconnectedError, RigInitializationError,
                             RigOperationError)
 from drivers.frames import Frame
 from drivers.pairing import DropPolicy, PairingConfig
 from drivers.url import RigUrl
-from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.rig_file import load_rig
 
 if TYPE_CHECKING:
     import depthai as dai
@@ -122,14 +120,9 @@ class DepthaiRigSource(RigSource):
     ) -> "DepthaiRigSource":
         options = DepthaiOptions.from_url(url)
         if rig is None and options.rig_path is not None:
-            try:
-                rig = load_rig(options.rig_path, warn=False)  # warned of at open, once per daemon run
-            except RigFileError as e:
-                raise RigConfigError(f"rig URL {url.url!r}: option rig={options.rig_path}: {e}") from e
-            try:
+            rig = load_rig_option(url, options.rig_path)
+            with naming_rig_option(url, options.rig_path):  # the rig file's size against the stream's
                 source = cls(options, rig=rig, link_factory=link_factory, pairing=pairing, clock=clock)
-            except RigConfigError as e:  # the rig file's size against the stream's: name the URL and the file
-                raise RigConfigError(f"rig URL {url.url!r}: option rig={options.rig_path}: {e}") from e
             source._rig_read_from(options.rig_path)
             return source
         return cls(options, rig=rig, link_factory=link_factory, pairing=pairing, clock=clock)
