@@ -28,8 +28,8 @@ class InterfaceOfBoard(NamedTuple):
     vid_pid: str
     """``"1209:0001"``."""
     board: str
-    """Where the board is: ``port 1-1.4``, or ``bus 1 address 5 (port unknown)`` where the backend reports no
-    port path."""
+    """Where the board is (:func:`~firmware_host.sinks.usb_select.board_place`): ``port 1-1.4``, or ``bus 1
+    address 5 port unknown`` where the backend reports no port path."""
     interface: int
 
 

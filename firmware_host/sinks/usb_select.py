@@ -125,6 +125,14 @@ def describe(dev: Any, note: str = "") -> str:
     return f"{text} {note}" if note else text
 
 
+def board_place(dev: Any) -> str:
+    """Where one board is, for a message about it: its port path (``port 1-1.4``), which stays while the board stays
+    in that socket; where the backend reports none, its bus and address as :func:`describe` lists them (``bus 1
+    address 5 port unknown``): one wording of an unknown port in every message."""
+    port = port_of(dev)
+    return f"port {port}" if port is not None else describe(dev)
+
+
 def _serial_note(dev: Any) -> tuple[Optional[str], str]:
     """The device's serial number (None when it has none or it cannot be read) and how to log it."""
     try:

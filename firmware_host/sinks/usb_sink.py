@@ -44,8 +44,8 @@ from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.url import SinkUrl, int_in, integer, parse_url
 from firmware_host.sinks.usb_claims import Claimant, InterfaceOfBoard, UsbBoardTaken, UsbClaims
-from firmware_host.sinks.usb_select import (BoardName, NoMatch, PortPath, describe, parse_port, parse_serial,
-                                             port_of, select)
+from firmware_host.sinks.usb_select import (BoardName, NoMatch, PortPath, board_place, describe, parse_port,
+                                             parse_serial, port_of, select)
 
 _log = logging.getLogger(__name__)
 
@@ -253,9 +253,7 @@ class UsbSink(ProtocolSink):
         """
         if self._claims is None:
             return
-        port = port_of(dev)
-        where = f"port {port}" if port is not None else f"bus {dev.bus} address {dev.address} (port unknown)"
-        wanted = InterfaceOfBoard(self.vid_pid, where, self.interface)
+        wanted = InterfaceOfBoard(self.vid_pid, board_place(dev), self.interface)
         holder = self._claims.take(wanted, Claimant(self, self.url, self.board_name))
         if holder is not None:
             usb.util.dispose_resources(dev)  # reading its serial may have opened it

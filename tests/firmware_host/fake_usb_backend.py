@@ -73,7 +73,7 @@ class FakeDevice:
     detaches: int = 0
     attaches: int = 0
     bus: int = 1
-    port_numbers: tuple = (1,)
+    port_numbers: tuple = (1,)  # (): a backend that reports no port path (old libusb, some platforms)
     serial: Optional[str] = None  # the serial number string; None: the device declares none
     langids: tuple = (0x0409,)  # string descriptor 0: the languages its strings come in
     string_stall: bool = False  # string descriptor requests stall (EPIPE), as on a buggy firmware
@@ -134,7 +134,7 @@ class FakeBackend(usb.backend.IBackend):
             bLength=18, bDescriptorType=1, bcdUSB=0x0200, bDeviceClass=0xFF, bDeviceSubClass=0,
             bDeviceProtocol=0, bMaxPacketSize0=64, idVendor=dev.vid, idProduct=dev.pid, bcdDevice=0x0100,
             iManufacturer=0, iProduct=0, iSerialNumber=0 if dev.serial is None else _SERIAL_INDEX,
-            bNumConfigurations=1, address=dev.address, bus=dev.bus, port_number=dev.port_numbers[-1],
+            bNumConfigurations=1, address=dev.address, bus=dev.bus, port_number=dev.port_numbers[-1] if dev.port_numbers else None,
             port_numbers=dev.port_numbers, speed=2,
         )
 

@@ -9,7 +9,7 @@ import pytest
 from firmware_host.sinks import open_sink
 from firmware_host.sinks.usb_claims import Claimant, InterfaceOfBoard, UsbClaims
 from firmware_host.sinks.usb_select import BoardName
-from tests.firmware_host.fake_usb_backend import FakeBackend, two_boards
+from tests.firmware_host.fake_usb_backend import FakeBackend, FakeDevice, two_boards
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, joints_seqs, make_frame, messages_of, wait_until
 
 BY_SERIAL = "usb://1209:0001?ep=0x01&serial=ABC123"
@@ -66,6 +66,22 @@ def test_a_board_named_by_serial_and_by_port_is_refused_to_the_second_sink_namin
         holder.close()
     assert joints_seqs(messages_of(board.take())) == [1]
     assert not board.claimed and board.open_handles == 0
+
+
+def test_a_board_of_no_port_path_is_named_by_bus_and_address_as_the_device_listing_names_it() -> None:
+    """The refusal said ``bus 1 address 5 (port unknown)`` where the sink's listing of devices (and docs/protocol.md)
+    says ``bus 1 address 5 port unknown``: one wording now (usb_select.board_place)."""
+    board = FakeDevice(address=5, serial="ABC123", port_numbers=())
+    claims = UsbClaims()
+    holder = open_sink(BY_SERIAL, backend=FakeBackend(board), backoff=FAST_BACKOFF, claims=claims)
+    try:
+        assert holder.wait_connected(5)
+        waiter = open_sink(BY_SERIAL, backend=FakeBackend(board), backoff=FAST_BACKOFF, claims=claims)
+        wait_until(lambda: waiter.stats().connect_failures >= 1, what="a refused connect")
+        assert "interface 0 of the 1209:0001 board at bus 1 address 5 port unknown is held by another sink" in (
+            waiter.close().last_error or "")
+    finally:
+        holder.close()
 
 
 def test_two_boards_named_apart_by_serial_and_by_port_both_stream() -> None:
