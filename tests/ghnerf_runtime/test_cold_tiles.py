@@ -234,3 +234,22 @@ def test_a_person_the_whole_volume_finds_wakes_the_tiles(example_rig):
     for _ in range(2):
         est.estimate(empty)
     assert est.cold_tile_passes == passes + 2  # awake: one tile a pair again
+
+
+def test_reset_keeps_every_counter_and_says_which_it_keeps(example_rig):
+    """The estimator's counters (its public ints but its sizes) are statistics over its life: ``reset()`` keeps them,
+    the cold tiles' with the turn search's, and its docstring names each (it named two and an ellipsis, and
+    docs/runtime.md none of the cold tiles')."""
+    oracle, est = blind_estimator(example_rig)
+    oracle.set_truth(None)
+    est.estimate(empty_room_pair(example_rig, 11, 0.2))
+    counters = sorted(name for name, value in vars(est).items()
+                      if not name.startswith("_") and type(value) is int and name not in ("size", "grid"))
+    assert {"cold_tile_passes", "cold_tiles_found", "turns_refused"} <= set(counters)
+    for k, name in enumerate(counters):
+        setattr(est, name, k + 1)
+    est.reset()
+    assert [getattr(est, name) for name in counters] == list(range(1, len(counters) + 1))
+    assert [name for name in counters if f"``{name}``" not in Estimator.reset.__doc__] == []
+    runtime_doc = (Path(__file__).resolve().parents[2] / "docs" / "runtime.md").read_text(encoding="utf-8")
+    assert [name for name in counters if f"{name}`" not in runtime_doc] == []  # `name` or `Estimator.name`
