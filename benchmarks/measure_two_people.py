@@ -35,6 +35,12 @@ person's, and of them those a flagged pair reported without a pairing of the sub
 read off ``SubjectSelector.keep_tracked_subject`` on the pass reported: :class:`SubjectPairings`): docs/two-people.md,
 "Fewer, right joints" (session 59).
 
+``--off-joints`` adds to each row with the second person the joints :data:`NEAR_M` or more from both people, by
+where each camera's reported 2D joint of them lies (:func:`read_off`: within :data:`NEAR_PX` of the first person's
+joint as that camera sees it, the second's, neither's, or none reported) on pairs flagged ``several_people`` or not,
+and joint by joint: which joints are off and why (one view's peak of each person; both views' peaks the subject's and
+the 3D joint placed off them): docs/two-people.md, "Which joints are off behind the subject" (session 67).
+
 ``--no-refine`` turns ``tracking.refine_cold_start`` off: a cold pass is not run again on the crop of what it found
 (docs/two-people.md, "A track of both people's joints", session 57's review).
 
@@ -94,6 +100,13 @@ from ghnerf_runtime.two_people import MIXED_TORSO_SLACK_M, TORSO_LIMBS_M  # noqa
 
 #: A reported joint this close to a person's is theirs (m).
 NEAR_M = 0.05
+#: ``--off-joints``: a camera's reported 2D joint this near a person's joint as that camera sees it (original image
+#: pixels, the nearer person's) was read off that person's peak.
+NEAR_PX = 8.0
+#: ``--off-joints``: where a camera's 2D joint of an off joint lies (:func:`read_off`).
+READ_OFF = ("first", "second", "neither", "none")
+#: ``--off-joints``: the commonest kinds of off joints named (:func:`off_joints`), the rest summed.
+_OFF_KINDS_SHOWN = 6
 #: ``--occlude``: a body hides what lies within this of its limbs' segments (m, at the body's depth), behind it.
 BODY_HALF_WIDTH_M = 0.15
 #: The torso limbs' rows of ``Estimator._torso_excess`` (``two_people.TORSO_LIMBS_M``' order): the neck to the
@@ -127,6 +140,49 @@ def torso_spread(excess: list) -> str:
 
 #: ``--scan-every-s``: a scan's peak this close to a person's joint (heatmap cells) is theirs.
 OWN_PEAK_CELLS = 1.5
+
+
+def read_off(uv: np.ndarray | None, first_uv: np.ndarray, second_uv: np.ndarray) -> str:
+    """Whose peak a camera's reported 2D joint ``uv`` (None: not reported) was read off, of :data:`READ_OFF`: the
+    person whose joint (``first_uv``, ``second_uv``: projected into that camera) lies within :data:`NEAR_PX`, the
+    nearer where both do."""
+    if uv is None:
+        return "none"
+    apart = [float(np.linalg.norm(uv - p)) if np.all(np.isfinite(p)) else np.inf for p in (first_uv, second_uv)]
+    who = int(np.argmin(apart))
+    return READ_OFF[who] if apart[who] <= NEAR_PX else "neither"
+
+
+def tally_off(counts: dict, result, cameras: list, first: np.ndarray, second: np.ndarray, off: np.ndarray) -> None:
+    """Add a pair's ``off`` joints (``(J,)``: reported, :data:`NEAR_M` or more from both people) to ``counts``: per
+    joint, on pairs not flagged and flagged (``off_joint``, ``(2, J)``); and by where each camera's 2D joint of it lies
+    (:func:`read_off`, ``off_read``: ``(flagged, view 0's, view 1's)`` -> joints)."""
+    flagged = int(bool(result.several_people))
+    for j in np.flatnonzero(off):
+        counts["off_joint"][flagged, j] += 1
+        read = []
+        for cam in cameras:
+            name = cam.name
+            uv = None if result.missing_2d[name][j] else np.asarray(result.joints_2d[name][j], np.float64)
+            read.append(read_off(uv, cam.project(first[j])[0], cam.project(second[j])[0]))
+        counts["off_read"][(flagged, *read)] += 1
+
+
+def off_joints(counts: dict) -> str:
+    """``--off-joints``' lines: the off joints by where the views' 2D joints lie, then joint by joint."""
+    total = max(int(counts["off_joint"].sum()), 1)
+    ranked = sorted(counts["off_read"].items(), key=lambda kv: -kv[1])
+    kinds = ", ".join(f"{'flagged' if f else 'not flagged'} {a} / {b} {n} ({n / total:.0%})"
+                      for (f, a, b), n in ranked[:_OFF_KINDS_SHOWN])
+    rest = sum(n for _, n in ranked[_OFF_KINDS_SHOWN:])
+    kinds += f", the rest {rest} ({rest / total:.0%})" if rest else ""
+    joints = ", ".join(f"{JOINT_NAMES[j]} {counts['off_joint'][0, j]}/{counts['off_joint'][1, j]}"
+                       for j in np.argsort(-counts["off_joint"].sum(axis=0), kind="stable")
+                       if counts["off_joint"][:, j].any())
+    return (f"  off joints ({NEAR_M * 100:.0f} cm or more from both people), {int(counts['off_joint'].sum())}, by "
+            f"where view 0 / view 1's 2D joint lies (within {NEAR_PX:g} px of the first person's, the second's, "
+            f"neither's, none reported): {kinds or 'none'}\n"
+            f"  off joints by joint, pairs not flagged / flagged: {joints or 'none'}")
 
 
 def second_in_scan(P: np.ndarray, box: np.ndarray, stride: int, first: np.ndarray,
@@ -393,7 +449,10 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
               "hidden_view1": 0.0, "turn_searches": 0, "torso_mixed": 0, "torso_excess": [],
               # per joint: pairs reporting it, their mm from the nearer person's, and of them those a flagged pair
               # reported without a pairing of the subject's (the skeleton prior's place, or the pass's answer)
-              "joint_reported": np.zeros(25, int), "joint_mm": np.zeros(25), "joint_unpaired": np.zeros(25, int)}
+              "joint_reported": np.zeros(25, int), "joint_mm": np.zeros(25), "joint_unpaired": np.zeros(25, int),
+              # the off joints (NEAR_M or more from both people): per joint, pairs not flagged / flagged, and by where
+              # each view's 2D joint lies (--off-joints)
+              "off_joint": np.zeros((2, 25), int), "off_read": Counter()}
     ratio = config.joints3d.second_person_ratio
     apart: list[np.ndarray] = []  # the oracle's (view, joint) cells between the people, each pass counted
     counted = 0
@@ -453,6 +512,8 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 counts["first"] += int((found & near_a).sum())
                 counts["second"] += int((found & near_b & ~near_a).sum())
                 counts["neither"] += int((found & ~near_a & ~near_b).sum())
+                if together:
+                    tally_off(counts, r, list(rig.pair), a, b, found & ~near_a & ~near_b)
                 nearer = np.minimum(np.linalg.norm(r.joints_3d - a, axis=-1), np.linalg.norm(r.joints_3d - b, axis=-1))
                 counts["nearer_mm"] += float(nearer[found].sum()) * 1000.0
                 counts["joint_reported"][:len(found)] += found
@@ -742,6 +803,11 @@ def main(argv=None) -> int:
                     help="each row also per joint: the pairs reporting it, their mean mm from the nearer person's, "
                          "and of them those a flagged pair reported without a pairing of the subject's (the skeleton "
                          "prior's place; docs/two-people.md, \"Fewer, right joints\")")
+    ap.add_argument("--off-joints", action="store_true",
+                    help="each row with the second person also the joints 5 cm or more from both people: by where each "
+                         "camera's 2D joint of them lies (the first person's, the second's, neither's, none reported) "
+                         "on pairs flagged several_people or not, and joint by joint (docs/two-people.md, \"Which "
+                         "joints are off behind the subject\")")
     ap.add_argument("--scan-every-s", type=float, default=EstimatorConfig().presence.scan_every_s, metavar="SECONDS",
                     help="presence.scan_every_s: scan the working volume for anyone besides the tracked subject this "
                          "often (0, the default: off; 0.001: every tracked pair); the rows count the pairs that said "
@@ -880,6 +946,8 @@ def main(argv=None) -> int:
                   "pairing): " + ", ".join(
                       f"{JOINT_NAMES[j]} {k} {counts['joint_mm'][j] / k:.0f} ({counts['joint_unpaired'][j]})"
                       if k else f"{JOINT_NAMES[j]} 0" for j, k in enumerate(counts["joint_reported"])))
+        if args.off_joints and second:
+            print(off_joints(counts))
     return 0
 
 

@@ -708,6 +708,46 @@ def test_measure_two_people_behind_and_occluded(capsys, monkeypatch):
     assert "--behind needs a distance above 0 m" in out, out
 
 
+def test_measure_two_people_off_joints_says_where_each_view_read_them(capsys, monkeypatch):
+    # docs/two-people.md, "Which joints are off behind the subject" (session 67): --off-joints adds to each row with the
+    # second person its joints 5 cm or more from both, by where each view's 2D joint of them lies, and joint by joint;
+    # the counts add up to the row's joints at neither person
+    out = run_script("measure_two_people", "--places=0,2.5,0,0", "--behind", "1", "--scenes", "1", "--pairs", "2",
+                     "--alone", "0", "--off-joints", capsys=capsys, monkeypatch=monkeypatch)
+    row = re.search(r"^2 pairs of two people .*: ([\d.]+) joints reported per pair; of them \d+% at the first person's, "
+                    r"\d+% at the second's, (\d+)% at neither", out, re.M)
+    kinds = re.search(r"^  off joints \(5 cm or more from both people\), (\d+), by where view 0 / view 1's 2D joint "
+                      r"lies \(within 8 px of the first person's, the second's, neither's, none reported\): (.*)$",
+                      out, re.M)
+    joints = re.search(r"^  off joints by joint, pairs not flagged / flagged: (.*)$", out, re.M)
+    assert row and kinds and joints, out
+    off = int(kinds.group(1))
+    assert round(100 * off / (2 * float(row.group(1)))) == pytest.approx(int(row.group(2)), abs=1), out
+    each = re.findall(r"(?:^|, )(\w+) (\d+)/(\d+)", joints.group(1))
+    assert all(name in JOINT_NAMES for name, _, _ in each), out
+    assert sum(int(a) + int(b) for _, a, b in each) == off, out
+    if off:
+        kind = r"(?:not flagged|flagged) (?:first|second|neither|none) / (?:first|second|neither|none) (\d+) \(\d+%\)"
+        assert sum(int(n) for n in re.findall(kind, kinds.group(2))) + sum(
+            int(n) for n in re.findall(r"the rest (\d+)", kinds.group(2))) == off, out
+    plain = run_script("measure_two_people", "--scenes", "1", "--pairs", "1", "--alone", "0", capsys=capsys,
+                       monkeypatch=monkeypatch)
+    assert "off joints" not in plain, plain
+
+
+def test_read_off_names_the_person_whose_projected_joint_a_2d_joint_lies_near():
+    from benchmarks.measure_two_people import NEAR_PX, read_off
+
+    first, second = np.array([100.0, 100.0]), np.array([100.0 + 3 * NEAR_PX, 100.0])
+    assert read_off(np.array([100.0 + 0.5 * NEAR_PX, 100.0]), first, second) == "first"
+    assert read_off(np.array([100.0 + 2.5 * NEAR_PX, 100.0]), first, second) == "second"
+    assert read_off(np.array([100.0 + 1.5 * NEAR_PX, 100.0]), first, second) == "neither"  # within NEAR_PX of neither
+    assert read_off(None, first, second) == "none"  # no 2D joint reported (a joint the skeleton prior placed)
+    # a person's joint that camera does not show (projected NaN) is nobody's reading, and both near: the nearer
+    assert read_off(first, np.full(2, np.nan), first + 1.0) == "second"
+    assert read_off(first + 0.6 * NEAR_PX, first, first + NEAR_PX) == "second"
+
+
 # ------------------------------------------------------------------------------- calibration drift
 @pytest.mark.parametrize("option, bad", [("--max-floor-m", b) for b in ("0.05,x", "0", "0.05,-0.1", "nan")]
                          + [("--lift-m", b) for b in ("0.01,x", "-0.01", "0.5", "nan")])
