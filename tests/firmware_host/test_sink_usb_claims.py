@@ -3,18 +3,22 @@ holds the board, once, and takes it when that one lets go (firmware_host/sinks/u
 from __future__ import annotations
 
 import logging
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 import pytest
 
-from firmware_host.sinks import open_sink
+from firmware_host.sinks import open_sink, usb_claims
 from firmware_host.sinks.usb_claims import Claimant, InterfaceOfBoard, UsbClaims
 from firmware_host.sinks.usb_select import BoardName
 from tests.firmware_host.fake_usb_backend import FakeBackend, FakeDevice, two_boards
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, joints_seqs, make_frame, messages_of, wait_until
 
+REPO = Path(__file__).resolve().parents[2]
 BY_SERIAL = "usb://1209:0001?ep=0x01&serial=ABC123"
 BY_PORT = "usb://1209:1?ep=0x01&port=1-1.4"
 NAMES = {BY_SERIAL: "serial='ABC123'", BY_PORT: "port=1-1.4"}
@@ -166,3 +170,13 @@ def test_only_the_holder_lets_its_claim_go() -> None:
     assert claims.take(interface, Claimant(second, BY_PORT, None)) == mine
     claims.let_go(interface, first)
     assert claims.take(interface, Claimant(second, BY_PORT, None)) is None
+
+
+def test_the_claims_module_imports_pyusb_through_usb_select_and_loads_no_libusb_backend_as_its_docstring_says() -> None:
+    """Its docstring said "Nothing here imports pyusb", but ``usb_select`` (BoardName) imports ``usb.core``."""
+    loaded = subprocess.run(
+        [sys.executable, "-c", "import sys, firmware_host.sinks.usb_claims; print(' '.join(sorted(sys.modules)))"],
+        capture_output=True, text=True, check=True, cwd=REPO).stdout.split()
+    assert "usb.core" in loaded and "libusb_package" not in loaded
+    doc = " ".join((usb_claims.__doc__ or "").split())
+    assert "it does import pyusb, through ``usb_select``" in doc and "loads no libusb backend" in doc
