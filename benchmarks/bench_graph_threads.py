@@ -28,7 +28,7 @@ import onnxruntime as ort
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import SessionTap  # noqa: E402
-from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
+from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     EstimatorConfig, HeatmapsConfig, Joints3DConfig, NovelViewConfig, PresenceConfig, SessionConfig,
 )
@@ -95,7 +95,7 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", type=int, default=6, help="pairs per sequence whose inputs are recorded")
     ap.add_argument("--rounds", type=int, default=15)
     ap.add_argument("--graphs", default="human,encoder,volume,render_rgb,render_heat")
-    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     args = ap.parse_args(argv)
     folder = resolve_model_dir(args.model_dir)
     feeds = capture(args.model_dir, load_sequences(args.sequences, 30, cache_dir=args.cache), args.pairs)

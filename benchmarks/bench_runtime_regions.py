@@ -26,7 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.bench import STAGE_GROUPS  # noqa: E402
-from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
+from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     EstimatorConfig,
     HeatmapsConfig,
@@ -150,7 +150,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sequences", type=int, default=4)
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--warmup", type=int, default=5)
-    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     ap.add_argument("--skip-graphs", action="store_true")
     ap.add_argument("--skip-end-to-end", action="store_true")
     args = ap.parse_args(argv)

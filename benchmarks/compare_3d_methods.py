@@ -34,7 +34,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import OracleSession, contract_of, edge128_contract  # noqa: E402
 from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
-from ghnerf_runtime.cli.simdata import load_sequences, percentiles, visibility_summary  # noqa: E402
+from ghnerf_runtime.cli.simdata import (SEQUENCE_CACHE_HELP, load_sequences, percentiles,  # noqa: E402
+                                        visibility_summary)
 from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
 from ghnerf_runtime.metrics import VISIBILITY_CLASSES, mpjpe, strict_json, visibility_class  # noqa: E402
@@ -85,7 +86,7 @@ def main(argv=None) -> int:
     ap.add_argument("--heatmap-sources", default="rendered",
                     help="comma list of rendered,encoder (the 2D heatmaps the methods start from)")
     ap.add_argument("--seen-motions", action="store_true")
-    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     ap.add_argument("--json", help="write the figures here")
     args = ap.parse_args(argv)
     if args.json:  # written after every method has run over every sequence: its place is settled first

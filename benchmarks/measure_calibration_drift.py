@@ -43,7 +43,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.body25 import FEET, FLOOR_JOINTS  # noqa: E402
-from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
+from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences  # noqa: E402
 from ghnerf_runtime.config import FOOT_STANDING_M, EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M  # noqa: E402
@@ -107,7 +107,7 @@ def main(argv=None) -> int:
                          "comma-separated: a column each")
     ap.add_argument("--camera", type=int, choices=(0, 1), default=1,
                     help="the camera whose rig entry is turned (rig order: 0 the first, 1 the second)")
-    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     ap.add_argument("--lift-m", help="comma-separated heights (m, 0 to 0.3) the person is raised above the floor "
                                      "(a sole, a mat), a row each through the true rig; the turns are not run")
     args = ap.parse_args(argv)

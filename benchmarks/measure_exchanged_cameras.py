@@ -51,7 +51,8 @@ from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch,
 from firmware_host.daemon.config import (CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR,  # noqa: E402
                                          CALIBRATION_MAX_PX)
 from ghnerf_runtime.body25 import JOINT_INDEX  # noqa: E402
-from ghnerf_runtime.cli.simdata import Sequence, bench_rig_and_scene, load_sequences, render_frames  # noqa: E402
+from ghnerf_runtime.cli.simdata import (SEQUENCE_CACHE_HELP, Sequence, bench_rig_and_scene,  # noqa: E402
+                                        load_sequences, render_frames)
 from ghnerf_runtime.geometry import Camera, Rig, look_at  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -220,7 +221,7 @@ def main(argv=None) -> int:
     ap.add_argument("--window", type=int, default=30, help="figures per window (health.calibration_window)")
     ap.add_argument("--per-sequence", action="store_true", help="also a line per sequence: its handedness figures' "
                                                                "median as filmed and exchanged")
-    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     ap.add_argument("--heading-deg", type=float, help="render afresh, every person turned so (180: back to the rig)")
     ap.add_argument("--rig", choices=RIGS, default="bench", help="render afresh on this rig (module docstring)")
     ap.add_argument("--face-seen", action="store_true", help="count only pairs with the nose and an eye seen")

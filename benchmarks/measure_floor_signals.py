@@ -34,7 +34,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.measure_calibration_drift import turned  # noqa: E402
-from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE, bench_rig_and_scene, load_sequences  # noqa: E402
+from ghnerf_runtime.cli.simdata import (HELD_OUT_MOTIONS, SEED_BASE, SEQUENCE_CACHE_HELP,  # noqa: E402
+                                        bench_rig_and_scene, load_sequences)
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.geometry import Rig, triangulate_dlt  # noqa: E402
@@ -162,7 +163,7 @@ def main(argv=None) -> int:
     ap.add_argument("--window", type=int, default=30, help="pairs with a foot per window")
     ap.add_argument("--pan-degrees", type=float, default=0.5)
     ap.add_argument("--tilt-degrees", type=float, default=1.0)
-    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir))
     session = load_session(cfg)

@@ -21,7 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.body25 import FLOOR_JOINTS  # noqa: E402
-from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
+from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import _FLOOR_BODY_M, Estimator, load_session  # noqa: E402
 from ghnerf_runtime.joints3d import Joints3D  # noqa: E402
@@ -58,7 +58,7 @@ def main(argv=None) -> int:
     ap.add_argument("--model-dir", default="models")
     ap.add_argument("--sequences", type=int, default=10)
     ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir))
     session = load_session(cfg)

@@ -30,7 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.body25 import FLIP_INDEX, JOINT_NAMES  # noqa: E402
-from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
+from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.flip_test import mirror_images, mirror_projections  # noqa: E402
@@ -164,7 +164,7 @@ def main(argv=None) -> int:
     ap.add_argument("--mirrored", default="off,on", type=_on_off)
     ap.add_argument("--per-sequence", action="store_true",
                     help="also each sequence's heading and right/left shares (truth and the first source)")
-    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     args = ap.parse_args(argv)
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache)
     truth = [np.asarray(s.visible, bool) for s in sequences]

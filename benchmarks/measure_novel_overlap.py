@@ -25,7 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
+from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     EstimatorConfig,
     HeatmapsConfig,
@@ -44,7 +44,7 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--warmup", type=int, default=2, help="pairs of each sequence not counted (cold start)")
     ap.add_argument("--repeats", type=int, default=1)
-    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     args = ap.parse_args(argv)
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache)
     print(f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs; {len(sequences)} sequences x "

@@ -35,7 +35,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import RenderTap, truth_view  # noqa: E402
 from drivers.sim import random_scene  # noqa: E402
-from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEEN_MOTIONS, load_sequences, percentiles  # noqa: E402
+from ghnerf_runtime.cli.simdata import (HELD_OUT_MOTIONS, SEEN_MOTIONS, SEQUENCE_CACHE_HELP,  # noqa: E402
+                                        load_sequences, percentiles)
 from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, load_config  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr, masked_ssim  # noqa: E402
@@ -64,7 +65,7 @@ def main(argv=None) -> int:
     ap.add_argument("--track-from-truth", action="store_true",
                     help="place each pair's crop and sweep box from the previous pair's true joints (as "
                          "ghnerf-bench runtime --track-from-truth): the view without the model's own tracking error")
-    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     args = ap.parse_args(argv)
     alphas = [float(a) for a in args.alphas.split(",")]
     strides = [int(s) for s in args.strides.split(",")]

@@ -27,7 +27,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import RenderTap  # noqa: E402
-from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
+from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     EstimatorConfig,
     HeatmapsConfig,
@@ -54,7 +54,7 @@ def main(argv=None) -> int:
     ap.add_argument("--dilate", type=int, help="silhouette_dilate (default: the config's)")
     ap.add_argument("--interior-stride", type=int, default=0,
                     help="also render with the interior at this stride (0: not; default)")
-    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     ap.add_argument("--config", help="estimator config JSON (ghnerf_runtime.config; the novel view is enabled "
                                      "whatever it says; --model-dir/--precision/--silhouette-stride still apply)")
     args = ap.parse_args(argv)

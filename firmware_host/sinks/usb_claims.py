@@ -7,9 +7,11 @@ to connect claimed the interface and the second met the kernel's EBUSY on every 
 :class:`UsbClaims`; a sink takes its interface there before claiming it from the kernel, so the second is told
 which sink of this daemon holds the board and by which name (:class:`UsbBoardTaken`).
 
-The refused sink keeps retrying, quietly (the base class logs an error once per outage): what holds the board can
-change without a restart (a reload that removes the other sink, the board moved to another socket), and then the
-waiting sink takes it. Nothing here imports pyusb: the daemon builds the registry whatever its sinks are.
+The refused sink keeps retrying, quietly (the base class logs the refusal once per outage, at WARNING; its repeats
+at DEBUG): what holds the board can change without a restart (a reload that removes the other sink, the board moved
+to another socket), and then the waiting sink takes it. The daemon builds the registry whatever its sinks are, so it
+opens no device and loads no libusb backend; it does import pyusb, through ``usb_select``
+(:class:`~firmware_host.sinks.usb_select.BoardName`), a dependency of the package (pyproject.toml).
 """
 from __future__ import annotations
 

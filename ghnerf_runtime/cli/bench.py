@@ -9,7 +9,8 @@ Every row runs the runtime's own defaults (``EstimatorConfig()``, what ``ghnerf-
 without a config file: encoder heatmaps, triangulation, the flip test...) but for what its options name;
 ``--heatmap-sources rendered`` scores the rendered heatmaps (with their best method, ``depth_centroid``).
 
-``runtime`` renders the sequences once (cached in ``~/.cache/ghnerf-bench``), then for every
+``runtime`` renders the sequences once (cached in ``$XDG_CACHE_HOME/ghnerf-bench``, else
+``~/.cache/ghnerf-bench``: ``--cache``), then for every
 precision and for "keypoints" and "keypoints + novel view" runs the estimator over every pair
 and prints each stage's median and p99 (ms), the end-to-end median/p99 and throughput, and the
 accuracy against the simulator's truth (PCK@0.2 in both images, MPJPE in the rig frame, with
@@ -525,6 +526,8 @@ def _best_methods() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP
+
     # every "the config's" default below is read from the runtime's own defaults, never restated
     runtime = EstimatorConfig()
     ap = argparse.ArgumentParser(prog="ghnerf-bench", description=__doc__.split("\n\n")[0])
@@ -614,7 +617,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="place each crop from the previous pair's true joints (times the tracked path with an "
                          "untrained model; accuracy is then not the estimator's own)")
     rt.add_argument("--seen-motions", action="store_true", help="training motions instead of the held-out ones")
-    rt.add_argument("--cache", type=user_path, help="sequence cache folder (default ~/.cache/ghnerf-bench; 'off')")
+    rt.add_argument("--cache", type=user_path, help=SEQUENCE_CACHE_HELP)
     rt.add_argument("--json", type=user_path, help="write the full report here")
     sp = sub.add_parser("sim-pair", help="write a simulated pair (or short clip) and its rig file")
     sp.add_argument("--out", type=user_path, required=True)

@@ -33,8 +33,8 @@ from ghnerf_runtime.rig_file import dumps_rig, loads_rig, save_rig
 log = logging.getLogger(__name__)
 
 __all__ = ["SEED_BASE", "HELD_OUT_MOTIONS", "SEEN_MOTIONS", "Sequence", "load_sequences", "bench_rig_and_scene",
-           "render_frames", "Accuracy", "default_cache_dir", "write_sim_example", "percentiles",
-           "depth_per_disparity_px"]
+           "render_frames", "Accuracy", "default_cache_dir", "SEQUENCE_CACHE_HELP", "write_sim_example",
+           "percentiles", "depth_per_disparity_px"]
 
 #: Scene seeds of the bench sequences: 3 * 2**50 + k, outside every dataset split's range.
 SEED_BASE = 3 * 2 ** 50
@@ -48,6 +48,12 @@ RECIPE_VERSION = 1
 def default_cache_dir() -> Path:
     root = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(root) / "ghnerf-bench"
+
+
+#: The ``--cache`` help of every script that renders the bench's sequences (``load_sequences``): the default is
+#: :func:`default_cache_dir`'s, which follows ``XDG_CACHE_HOME`` (the help said ``~/.cache`` only).
+SEQUENCE_CACHE_HELP = ("sequence cache folder (default $XDG_CACHE_HOME/ghnerf-bench when XDG_CACHE_HOME is set, "
+                       "else ~/.cache/ghnerf-bench; 'off': render into memory, cache nothing)")
 
 
 # ------------------------------------------------------------------ sequences
@@ -144,8 +150,8 @@ def sequence_bytes(frames: int, width: int = 640, height: int = 480) -> int:
 def load_sequences(num_sequences: int = 10, frames: int = 30, *, fps: float = 30.0, width: int = 640,
                    height: int = 480, seen_motions: bool = False, cache_dir: str | os.PathLike | None = None,
                    seed_base: int = SEED_BASE) -> list[Sequence]:
-    """Held-out-like sequences, rendered on first use and cached (``cache_dir``, default
-    ``~/.cache/ghnerf-bench``; ``"off"`` disables). About 0.03-0.04 s a pair to render on session 63's host (``-v`` logs each sequence's time)."""
+    """Held-out-like sequences, rendered on first use and cached (``cache_dir``, default :func:`default_cache_dir`:
+    ``$XDG_CACHE_HOME/ghnerf-bench``, else ``~/.cache/ghnerf-bench``; ``"off"`` disables). About 0.03-0.04 s a pair to render on session 63's host (``-v`` logs each sequence's time)."""
     motions = SEEN_MOTIONS if seen_motions else HELD_OUT_MOTIONS
     folder = sequence_cache_folder(num_sequences, frames, fps=fps, width=width, height=height,
                                    seen_motions=seen_motions, cache_dir=cache_dir, seed_base=seed_base)
