@@ -16,6 +16,20 @@ were, the mean ms per pair over all those pairs, the share of the person's pairs
 person took to be found (0: on their first pair; in brackets the most, the sequence's length where never), the empty
 rooms' median and mean ms per pair (a resting search mixes pairs with a tile pass and pairs without), their pairs that
 reported a joint (a phantom), the ratios to no tiles and the passes through a tile. A tool, not a test.
+
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_cold_tiles.py --walk-in-sweep [--sequences 6] [--frames 20]
+        [--rest-every N] --rigs docs/examples/rig.json,synth_rig.json
+
+The worst case of the rest instead: each of ``--sequences`` people walks into their own room (its empty pairs before
+the person's first instant, through the scene's own sensor: fresh noise and exposure jitter each pair) after every
+count of empty pairs from the first resting pair through one whole cycle of the rest (``--rest-every`` pairs a tile
+pass x the four tiles: 16 counts at 4), so that the walk-in meets every phase of the rest against every next tile,
+under the resting config without the wake-up (``cold_tiles_wake_levels`` None), with it (the runtime's threshold) and
+with no tiles, a fresh estimator each, interleaved placement by placement. It prints the pairs from walk-in to the
+first joint (0: found on the walk-in pair) over the placements found, median, p90 and max, how many placements never
+found the person within ``--frames`` pairs, each person's most (``-``: never), the empty pairs' mean ms after the first
+round of tiles and its ratio to no tiles, the wakes before the walk-in (false: nobody there) out of the empty pairs
+that rested, and the median ms of one pair's scene check (both cameras' copies and the comparison).
 """
 from __future__ import annotations
 
@@ -34,6 +48,8 @@ from ghnerf_runtime.cli.simdata import SEED_BASE  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig, TrackingConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.rig_file import load_rig  # noqa: E402
+from ghnerf_runtime.scene_change import scene_changed, scene_copy  # noqa: E402
+from ghnerf_runtime.tracking import volume_tiles  # noqa: E402
 
 
 def timed(est: Estimator, images) -> tuple[float, bool, bool]:
@@ -77,6 +93,125 @@ def measure(session, configs: dict, rig, streams, empty_first: int = 0) -> dict:
     return out
 
 
+# ------------------------------------------------------------------ --walk-in-sweep
+def sweep_placements(rest_every: int, tiles: int) -> range:
+    """Empty pairs before the walk-in: from the first pair of the rest through one whole cycle of the resting search
+    (``rest_every`` pairs per tile pass, ``tiles`` passes a round), so that the walk-in meets every phase of the rest
+    against every next tile."""
+    return range(tiles, tiles + tiles * rest_every)
+
+
+def room_before(rig, k: int, count: int):
+    """The ``count`` pairs of bench sequence ``k``'s room with nobody in it before its person's first instant, at 30
+    fps, each through the scene's own sensor (its noise and exposure jitter, fresh each pair)."""
+    scene, t0 = bench_scene_in(rig, k)
+    return [scene_without_person(scene, rig.pair, t0 + (i - count) / 30.0) for i in range(count)]
+
+
+def walk_in(session, cfg, rig, empty, person, tiles: int) -> dict:
+    """One fresh estimator through ``empty`` then ``person`` (pair lists): the pairs of the person until the first
+    joint (``len(person)`` when none), the ms of each empty pair, the empty pairs that rested (no tile pass after a
+    whole round of ``tiles``: those a scene change could wake) and the wakes among them (before the walk-in)."""
+    est = Estimator(session, rig, cfg)
+    try:
+        room_ms, rested = [], 0
+        for images in empty:
+            passes = est.cold_tile_passes
+            room_ms.append(timed(est, images)[0])
+            rested += passes >= tiles and est.cold_tile_passes == passes
+        out = {"room_ms": room_ms, "rested": rested, "false_wakes": est.cold_tile_wakes, "until": len(person)}
+        for i, images in enumerate(person):
+            if not timed(est, images)[2]:
+                out["until"] = i
+                break
+        return out
+    finally:
+        est.close()
+
+
+def sweep(session, configs: dict, rig, people: list, rooms: list, placements: range, tiles: int) -> dict:
+    """Per config, over every person (``people[k]``'s pairs after the last ``e`` of ``rooms[k]``) and every ``e`` of
+    ``placements``, the configs interleaved placement by placement: pairs until found (per person), the empty pairs'
+    ms after the first round of tiles, the pairs that rested and the false wakes."""
+    out = {name: {"until": [[] for _ in people], "room_ms": [], "rested": 0, "false_wakes": 0} for name in configs}
+    for k, (person, room) in enumerate(zip(people, rooms)):
+        for e in placements:
+            for name, cfg in configs.items():
+                r = walk_in(session, cfg, rig, room[len(room) - e:], person, tiles)
+                out[name]["until"][k].append(r["until"])
+                out[name]["room_ms"] += r["room_ms"][tiles:]
+                out[name]["rested"] += r["rested"]
+                out[name]["false_wakes"] += r["false_wakes"]
+    return out
+
+
+def scene_check_ms(rooms: list, levels: float) -> float:
+    """Median ms of one pair's scene check (both cameras' copies and the comparison) over ``rooms``' pairs."""
+    times = []
+    for room in rooms:
+        kept = tuple(scene_copy(im) for im in room[0])
+        for images in room[1:]:
+            t = time.perf_counter()
+            scene_changed(tuple(scene_copy(im) for im in images), kept, levels)
+            times.append(1e3 * (time.perf_counter() - t))
+    return float(np.median(times))
+
+
+def until_found_text(until: list, never: int) -> str:
+    """Median, p90 and max of the placements found (``never``: the pairs of a person never found), and how many
+    were never found."""
+    found = [u for u in until if u < never]
+    if not found:
+        return f"| | | {len(until)} of {len(until)}"
+    return (f"{np.median(found):g} | {np.percentile(found, 90):g} | {max(found)} | "
+            f"{len(until) - len(found)} of {len(until)}")
+
+
+def per_person_text(until: list, never: int) -> str:
+    """Each person's most pairs until found over the placements (``-`` where never found), and how many placements
+    never found them where some did."""
+    parts = []
+    for u in until:
+        found = [x for x in u if x < never]
+        missed = len(u) - len(found)
+        parts.append("-" if not found else f"{max(found)}{f' ({missed} never)' if missed else ''}")
+    return ", ".join(parts)
+
+
+def run_sweep(args, session, base: EstimatorConfig) -> int:
+    """``--walk-in-sweep``: the table of pairs from walk-in to the first joint, over every placement."""
+    t = base.tracking
+    rest = t.cold_tiles_rest_every if args.rest_every is None else args.rest_every
+    levels = t.cold_tiles_wake_levels or TrackingConfig().cold_tiles_wake_levels
+    configs = {f"rest every {rest}, no wake-up": EstimatorConfig(session=base.session, tracking=TrackingConfig(
+                   cold_tiles_rest_every=rest, cold_tiles_wake_levels=None)),
+               f"rest every {rest}, wake-up at {levels:g} levels": EstimatorConfig(
+                   session=base.session, tracking=TrackingConfig(cold_tiles_rest_every=rest,
+                                                                 cold_tiles_wake_levels=levels)),
+               "no tiles": EstimatorConfig(session=base.session, tracking=TrackingConfig(cold_tiles_below_share=0.0))}
+    print(f"{args.precision}; {args.sequences} people x {args.frames} pairs, each walking in after every count of "
+          f"empty pairs of its room in a whole cycle of the rest; the configs interleaved placement by placement")
+    print("| rig file | config | placements | pairs until found: median | p90 | max | never found | most per person | "
+          "empty-room mean ms per pair after the first round | ratio to no tiles | false wakes (resting pairs) | "
+          "scene check ms per pair |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for path in rig_paths(args.rigs):
+        rig = load_rig(path, warn=False)
+        tiles = len(volume_tiles(rig, base.roi))
+        placements = sweep_placements(rest, tiles)
+        people = [people_pairs(rig, k, args.frames) for k in range(args.sequences)]
+        rooms = [room_before(rig, k, placements[-1]) for k in range(args.sequences)]
+        out = sweep(session, configs, rig, people, rooms, placements, tiles)
+        check = scene_check_ms(rooms, levels)
+        off = np.mean(out["no tiles"]["room_ms"])
+        for name, r in out.items():
+            until = [u for person in r["until"] for u in person]
+            print(f"| {path} | {name} | {len(until)} | {until_found_text(until, args.frames)} | "
+                  f"{per_person_text(r['until'], args.frames)} | {np.mean(r['room_ms']):.1f} | "
+                  f"{np.mean(r['room_ms']) / off:.2f} | {r['false_wakes']} ({r['rested']}) | {check:.3f} |", flush=True)
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", default="models")
@@ -89,8 +224,12 @@ def main(argv=None) -> int:
     ap.add_argument("--rest-every", type=int, default=None, help="the resting config's cold_tiles_rest_every "
                     "(default: the runtime's)")
     ap.add_argument("--rigs", default="docs/examples/rig.json", help="rig files, comma-separated")
+    ap.add_argument("--walk-in-sweep", action="store_true", help="instead: each person walks in after every count "
+                    "of empty pairs in a whole cycle of the rest; pairs until found, median, p90 and max")
     args = ap.parse_args(argv)
     base = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision))
+    if args.walk_in_sweep:
+        return run_sweep(args, load_session(base), base)
     default_rest = base.tracking.cold_tiles_rest_every
     rest = default_rest if args.rest_every is None else args.rest_every
     resting = EstimatorConfig(session=base.session, tracking=TrackingConfig(cold_tiles_rest_every=rest))

@@ -356,6 +356,12 @@ class TrackingConfig:
             this-many-th cold pair that finds nobody searches a tile (an empty room pays a tile pass on that share of
             its pairs, not on all); every pair searches again once a tile finds someone or a pair sees anyone
             (any joint, or a person in one view). 1 never rests (docs/runtime.md, "Cold tiles").
+        cold_tiles_wake_levels: a resting search wakes (searches a tile on this pair and every cold pair after, as
+            before its rest) when a camera's scene changed since the last tile pass that found nobody: a small grey
+            copy of each frame (``ghnerf_runtime.scene_change``: 18 x 24 cells, each the mean of 64 sampled pixels,
+            scaled to the frame's mean so that a change of exposure or light over the whole frame leaves it) differs
+            from the one kept then in two cells or more by over this many 8-bit levels. Sensor noise moves a cell by
+            a level or two; a person walking in, by tens. 0 or None never wakes (docs/runtime.md, "Cold tiles").
     """
 
     enabled: bool = True
@@ -370,11 +376,14 @@ class TrackingConfig:
     max_gap_s: float = 0.5
     cold_tiles_below_share: float = 0.47
     cold_tiles_rest_every: int = 4
+    cold_tiles_wake_levels: float | None = 6.0
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
         _number(self, "cold_tiles_below_share", 0.0, 1.0)
         _integer(self, "cold_tiles_rest_every", 1, 1000)
+        if self.cold_tiles_wake_levels is not None:  # None: never wakes, as 0
+            _number(self, "cold_tiles_wake_levels", 0.0, 255.0)
         _boolean(self, "retry_cold")
         _number(self, "max_gap_s", 0.0, 3600.0, lo_open=True)
         _boolean(self, "refine_cold_start")

@@ -100,6 +100,7 @@ from ghnerf_runtime.preprocess import (
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import PriorCameras, disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
+from ghnerf_runtime.scene_change import SceneCopy, scene_changed, scene_copy
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners, cold_person_share, volume_tiles
 from ghnerf_runtime.subject import STILL_SEVERAL_MIN_JOINTS, SubjectSelector, guessed_joints, joints_shown_twice, \
@@ -760,8 +761,11 @@ class Estimator:
         self._next_tile = 0
         self._tiles_missed = 0  # tile passes in a row that found nobody (a whole round of them: the search rests)
         self._tile_rest_wait = 0  # cold pairs left that do not search a tile (tracking.cold_tiles_rest_every)
+        # each camera's scene copy at the last tile pass that found nobody (tracking.cold_tiles_wake_levels)
+        self._rest_scene: tuple[SceneCopy, ...] | None = None
         self.cold_tile_passes = 0  # cold pairs that searched a tile, and those whose tile found someone
         self.cold_tiles_found = 0
+        self.cold_tile_wakes = 0  # resting searches a scene change woke (tracking.cold_tiles_wake_levels)
         # roi.turn_search: each camera's crop turn (degrees on top of roi.upright's) and, per turn, the camera
         # state (its own remap tables) and per pair of turns a tracker (volume crops sized for that turn)
         self._turns: tuple[int, int] = (0, 0)
@@ -862,8 +866,8 @@ class Estimator:
         """Forget the tracked subject (the next pair starts from the working volume, through upright crops: a kept
         crop turn goes with the track, ``roi.turn_search``), the smoothing and the cold tiles' rest (the next cold
         pair that finds nobody searches the first tile). The counters are statistics over the estimator's life and
-        stay: ``cold_tile_passes``, ``cold_tiles_found``, ``turn_searches``, ``turns_kept``, ``turns_refused``,
-        ``turn_checks`` and ``turns_left``."""
+        stay: ``cold_tile_passes``, ``cold_tiles_found``, ``cold_tile_wakes``, ``turn_searches``, ``turns_kept``,
+        ``turns_refused``, ``turn_checks`` and ``turns_left``."""
         self.tracker.reset()  # the kept turn's tracker (the upright one is reset as the crops return upright)
         self._use_turns((0, 0))
         self._several_track = False
@@ -1046,7 +1050,7 @@ class Estimator:
             if not self._finds_nobody(p):
                 if self._sees_anyone(p):
                     self._wake_tiles()
-            elif self._tiles_awake():
+            elif self._tiles_awake(images):
                 p = self._tile_search(images, p, sequence, timing, novel_view)
         leave_turn = cold_pass and self._turns != (0, 0) and self._weak_pass(p)
         if cold_pass and self._turns != (0, 0) and not leave_turn and self._turn_misreads(p):
@@ -1289,7 +1293,7 @@ class Estimator:
         q = self._pass(images, self._cold_tiles[k], sequence, timing, novel_view)
         if not self._sees_anyone(q):
             self._next_tile = k + 1
-            self._tile_missed()
+            self._tile_missed(images)
             return p
         self.cold_tiles_found += 1
         self._next_tile = k
@@ -1301,24 +1305,42 @@ class Estimator:
         """Whether ``p`` reported anyone: a joint, or a person's 2D joints in one view."""
         return p.single_view is not None or (p.j3 is not None and p.someone and bool(p.j3.valid.any()))
 
-    def _tiles_awake(self) -> bool:
+    def _tiles_awake(self, images: Sequence[np.ndarray]) -> bool:
         """Whether this cold pair that found nobody searches a tile: always, until a whole round of tiles found
-        nobody; then only every ``tracking.cold_tiles_rest_every``-th such pair (an empty room stays empty)."""
+        nobody; then only every ``tracking.cold_tiles_rest_every``-th such pair (an empty room stays empty), or
+        this one where a camera's scene changed since the last tile pass (``tracking.cold_tiles_wake_levels``: someone
+        may have walked in), which wakes the search."""
+        if self._tiles_missed >= len(self._cold_tiles) and self._scene_changed(images):
+            self.cold_tile_wakes += 1
+            self._wake_tiles()  # also on a resting search's own pair: its tile may not be the walker's
+            return True
         if self._tile_rest_wait > 0:
             self._tile_rest_wait -= 1
             return False
         return True
 
-    def _tile_missed(self) -> None:
-        """A tile pass found nobody: after a whole round of such passes, the next pairs rest."""
+    def _scene_changed(self, images: Sequence[np.ndarray]) -> bool:
+        """Whether ``images`` differ from the scene kept at the last tile pass that found nobody (never with
+        ``tracking.cold_tiles_wake_levels`` 0 or None, or nothing kept)."""
+        levels = self.config.tracking.cold_tiles_wake_levels
+        if not levels or self._rest_scene is None:
+            return False
+        return scene_changed(tuple(scene_copy(im) for im in images[:2]), self._rest_scene, levels)
+
+    def _tile_missed(self, images: Sequence[np.ndarray]) -> None:
+        """A tile pass found nobody in ``images``: after a whole round of such passes, the next pairs rest; the
+        scene is kept for them to wake on (``tracking.cold_tiles_wake_levels``)."""
         self._tiles_missed += 1
         if self._tiles_missed >= len(self._cold_tiles):
             self._tile_rest_wait = self.config.tracking.cold_tiles_rest_every - 1
+        if self.config.tracking.cold_tiles_wake_levels:
+            self._rest_scene = tuple(scene_copy(im) for im in images[:2])
 
     def _wake_tiles(self) -> None:
         """Someone was seen (or the estimator reset): every cold pair that finds nobody searches a tile again."""
         self._tiles_missed = 0
         self._tile_rest_wait = 0
+        self._rest_scene = None
 
     def _weak_pass(self, p: "_Pass") -> bool:
         """Whether ``roi.turn_search`` tries turned crops after ``p``, a cold pair's pass (refined or not) or a

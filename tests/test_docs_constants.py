@@ -69,6 +69,7 @@ from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MAX_
                                      MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG, MIN_PERSON_IN_VIEW_SHARE,
                                      STANDING_PERSON_M, _PERSON_SAMPLES)
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
+from ghnerf_runtime.scene_change import CELL_SAMPLES, THUMB_CELLS, WAKE_MIN_CELLS
 from ghnerf_runtime.proxy_matte import BONE_M
 from ghnerf_runtime.tracking import COLD_TILE_OVERLAP_M, COLD_TILE_SPLITS
 from ghnerf_runtime.two_people import BODY_RADIUS_M, BONE_SLACK_M, MAX_LIMB_M, MIN_APART_M, MIXED_TORSO_SLACK_M, \
@@ -85,6 +86,7 @@ PRIOR_GATE = Joints3DConfig().max_prior_error_m
 TRACK_CONF = TrackingConfig().min_confidence
 COLD_SHARE = TrackingConfig().cold_tiles_below_share
 COLD_REST = TrackingConfig().cold_tiles_rest_every
+COLD_WAKE = TrackingConfig().cold_tiles_wake_levels
 SOLVER_RAY = inspect.signature(triangulate_dlt).parameters["min_ray_angle_deg"].default
 
 
@@ -96,7 +98,7 @@ def _unit_setting(key: str) -> str:
 
 def _words(n: int) -> str:
     """``n`` as the docs write a small count in words."""
-    return {3: "three", 4: "four", 5: "five"}.get(n, str(n))
+    return {2: "two", 3: "three", 4: "four", 5: "five"}.get(n, str(n))
 
 
 def _exp(value: float) -> str:
@@ -333,7 +335,11 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"`COLD_TILE_SPLITS`, each grown `COLD_TILE_OVERLAP_M` = {COLD_TILE_OVERLAP_M:g} m into"),
     ("docs/rig-file.md", f"under {COLD_SHARE * 128:.0f} model pixels ({COLD_SHARE:g} of the crop, the tiles' bound)"),
     ("docs/runtime.md", f"(`tracking.cold_tiles_rest_every`, default {COLD_REST}, session 66)"),
-    ("docs/runtime.md", f'"cold_tiles_rest_every": {COLD_REST}}}'),
+    ("docs/runtime.md", f'"cold_tiles_rest_every": {COLD_REST}, "cold_tiles_wake_levels": {COLD_WAKE!r}}}'),
+    # session 67: the resting search's wake-up (tracking.cold_tiles_wake_levels; scene_change's copy and its cells)
+    ("docs/runtime.md", f"(`tracking.cold_tiles_wake_levels`, default {COLD_WAKE:g}, session 67)"),
+    ("docs/runtime.md", f"{THUMB_CELLS[0]} x {THUMB_CELLS[1]} cells, each the mean of {CELL_SAMPLES ** 2} pixels"),
+    ("docs/runtime.md", f"in {_words(WAKE_MIN_CELLS)} cells or more by over `cold_tiles_wake_levels`"),
     ("docs/runtime.md", f"| docs/examples/rig.json | tiles, rest every {COLD_REST} (default) |"),
     # session 66: why the scan tells nobody behind the subject (the blanked box, the benchmark's own-peak radius)
     ("docs/two-people.md", f"the reported joints' box grown {SUBJECT_MARGIN_M:g} m every way "

@@ -32,3 +32,17 @@ def test_a_person_walking_in_is_counted_from_their_first_pair(tiny_model_dir, sc
     assert all(r.split("|")[3].strip() == "7" for r in rows[:3]), out
     assert all(float(r.split("|")[6]) in (0.0, 0.5, 1.0) for r in rows[:3]), out
     assert all(r.split("|")[7].split()[0] in ("0", "1", "2") for r in rows[:3]), out
+
+
+def test_the_walk_in_sweep_meets_every_phase_of_the_rest(tiny_model_dir, scratch_cache, capsys,  # noqa: F811
+                                                         monkeypatch):
+    out = run_script("measure_cold_tiles", "--model-dir", str(tiny_model_dir), "--precision", "fp32",
+                     "--sequences", "1", "--frames", "2", "--rest-every", "2", "--walk-in-sweep",
+                     "--rigs", "docs/examples/rig.json", capsys=capsys, monkeypatch=monkeypatch)
+    rows = [line.split("|")[1:-1] for line in out.splitlines() if line.startswith("| docs/examples/rig.json |")]
+    assert [r[1].strip() for r in rows] == ["rest every 2, no wake-up", "rest every 2, wake-up at 6 levels",
+                                            "no tiles"], out
+    # a whole cycle of the rest: 2 pairs a tile pass x 4 tiles, the walk-in after 4 to 11 empty pairs
+    assert all(r[2].strip() == "8" for r in rows), out
+    assert all(r[10].split()[0].isdigit() for r in rows), out  # the false wakes (of the resting pairs)
+    assert rows[2][10].strip() == "0 (0)" and rows[2][9].strip() == "1.00", out

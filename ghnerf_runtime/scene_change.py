@@ -1,0 +1,69 @@
+"""Whether a camera's scene changed: the wake-up of resting cold tiles (``tracking.cold_tiles_wake_levels``).
+
+A resting search (docs/runtime.md, "Cold tiles") skips the tile pass on most cold pairs, so a person who walks into an
+empty room may wait for many pairs. Each camera's frame is kept as a small grey copy (:func:`scene_copy`, a grid
+of :data:`THUMB_CELLS` cells, each the mean of :data:`CELL_SAMPLES` x :data:`CELL_SAMPLES` pixels sampled on a
+lattice: no pass over the whole frame) when a tile pass finds nobody; a resting pair whose copy differs from the kept
+one in :data:`WAKE_MIN_CELLS` cells or more by over the threshold wakes the search (:func:`scene_changed`).
+
+Sensor noise averages out over a cell's samples; a change of exposure or light over the whole frame is taken out by
+scaling each copy to its own mean before comparing (a gain, as the simulator's exposure jitter is, moves every cell
+alike); a person moves the few cells they cover.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+#: the grey copy's cells, (rows, columns): a person the tiles are for (about a third of the frame tall) covers several
+THUMB_CELLS = (18, 24)
+#: pixels sampled per cell along each side (64 in all: sensor noise of several levels falls to under one)
+CELL_SAMPLES = 8
+#: cells that must change: one cell alone may be a flicker or a noise extreme, a person covers more
+WAKE_MIN_CELLS = 2
+
+
+def _lattice(image: np.ndarray) -> np.ndarray:
+    """``CELL_SAMPLES`` pixels per cell side of ``image``, evenly over the frame: a nearest-pixel resize (cv2's, a
+    fifth of the time of NumPy's strided copy of a colour frame)."""
+    size = (THUMB_CELLS[1] * CELL_SAMPLES, THUMB_CELLS[0] * CELL_SAMPLES)
+    return cv2.resize(np.ascontiguousarray(image), size, interpolation=cv2.INTER_NEAREST)
+
+
+@dataclass(frozen=True)
+class SceneCopy:
+    """One camera's frame as a small grey copy.
+
+    Attributes:
+        cells: ``THUMB_CELLS`` float32, each cell's mean grey over the frame's mean (a gain on the frame leaves them).
+        mean_levels: the frame's mean grey, 8-bit levels (turns a difference of ``cells`` back into levels).
+    """
+
+    cells: np.ndarray
+    mean_levels: float
+
+
+def scene_copy(image: np.ndarray) -> SceneCopy:
+    """``image`` (``(H, W)`` or ``(H, W, C)`` 8-bit) as a :class:`SceneCopy`: each cell the mean of its lattice
+    samples over the channels."""
+    samples = _lattice(image)
+    if samples.ndim == 3 and samples.shape[2] == 3:
+        samples = cv2.cvtColor(samples, cv2.COLOR_BGR2GRAY)  # the frames are BGR (drivers)
+    elif samples.ndim == 3:
+        samples = samples.mean(axis=2)
+    # a box mean of each cell's samples (cv2: a tenth of NumPy's time on this small copy)
+    cells = cv2.resize(samples.astype(np.float32), THUMB_CELLS[::-1], interpolation=cv2.INTER_AREA)
+    mean = float(cells.mean())
+    return SceneCopy(cells / mean if mean > 0 else cells, mean)
+
+
+def changed_cells(now: SceneCopy, kept: SceneCopy, levels: float) -> int:
+    """How many cells of ``now`` differ from ``kept`` by over ``levels`` 8-bit levels (at ``kept``'s brightness)."""
+    return int(np.count_nonzero(np.abs(now.cells - kept.cells) * kept.mean_levels > levels))
+
+
+def scene_changed(now: tuple[SceneCopy, ...], kept: tuple[SceneCopy, ...], levels: float) -> bool:
+    """Whether any camera's copy ``now`` differs from the one ``kept`` in :data:`WAKE_MIN_CELLS` cells or more."""
+    return any(changed_cells(n, k, levels) >= WAKE_MIN_CELLS for n, k in zip(now, kept))

@@ -1,0 +1,42 @@
+"""``ghnerf_runtime.scene_change``: the small grey copies a resting cold-tile search wakes on
+(``tracking.cold_tiles_wake_levels``, docs/runtime.md, "Cold tiles")."""
+from __future__ import annotations
+
+import numpy as np
+
+from ghnerf_runtime.scene_change import THUMB_CELLS, changed_cells, scene_changed, scene_copy
+
+
+def textured_frame(seed: int = 0) -> np.ndarray:
+    """An 800 x 1280 BGR frame of smooth texture, levels 60-190."""
+    rng = np.random.default_rng(seed)
+    coarse = rng.uniform(60, 190, (10, 16, 3)).astype(np.float32)
+    return np.repeat(np.repeat(coarse, 80, axis=0), 80, axis=1).astype(np.uint8)
+
+
+def test_a_copy_is_the_cells_over_the_frame_mean():
+    copy = scene_copy(textured_frame())
+    assert copy.cells.shape == THUMB_CELLS
+    assert abs(float(copy.cells.mean()) - 1.0) < 1e-5 and 60 < copy.mean_levels < 190
+
+
+def test_a_gain_over_the_whole_frame_changes_no_cell():
+    frame = textured_frame()
+    brighter = np.clip(frame * 1.15, 0, 255).astype(np.uint8)
+    assert changed_cells(scene_copy(brighter), scene_copy(frame), 3.0) == 0
+
+
+def test_a_person_sized_patch_changes_cells_and_the_scene():
+    frame = textured_frame()
+    walked_in = frame.copy()
+    walked_in[300:620, 500:580] = 20  # dark clothes, about 320 x 80 pixels (a person the tiles are for)
+    kept = (scene_copy(frame), scene_copy(frame))
+    assert changed_cells(scene_copy(walked_in), kept[0], 6.0) >= 4
+    assert scene_changed((scene_copy(frame), scene_copy(walked_in)), kept, 6.0)
+    assert not scene_changed((scene_copy(frame), scene_copy(frame)), kept, 6.0)
+
+
+def test_grey_and_small_frames_are_copied_too():
+    grey = textured_frame()[:, :, 1]
+    assert scene_copy(grey).cells.shape == THUMB_CELLS
+    assert scene_copy(grey[:50, :60]).cells.shape == THUMB_CELLS  # smaller than the lattice: resized up
