@@ -22,7 +22,7 @@ from drivers.pairing import DropPolicy, FramePairer, PairingConfig, PairingStats
 from drivers.url import RigUrl
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.rig_file import load_rig, rig_warnings
+from ghnerf_runtime.rig_file import load_rig, rig_notes, rig_warnings
 
 log = logging.getLogger(__name__)
 
@@ -203,23 +203,30 @@ class RigSource(abc.ABC):
     def _rig_warning(self, logger: logging.Logger, fmt: str, *args: object) -> None:
         """``logger.warning(fmt, *args)``, unless a source sharing :meth:`log_rig_warnings_once`'s set logged
         the same text already."""
+        self._log_about_rig_once(logger, logging.WARNING, fmt, *args)
+
+    def _log_about_rig_once(self, logger: logging.Logger, level: int, fmt: str, *args: object) -> None:
+        """``logger.log(level, fmt, *args)``, unless a source sharing :meth:`log_rig_warnings_once`'s set logged
+        the same text already."""
         logged = self._rig_warnings_logged
         if logged is not None:
             text = fmt % args
             if text in logged:
                 return
             logged.add(text)
-        logger.warning(fmt, *args)
+        logger.log(level, fmt, *args)
 
     def _warn_of_rig(self) -> None:
         """What ``load_rig`` would warn of in the rig this backend built (a narrow ``sim://?baseline=``, a
-        camera's height): the one check for every backend's in-memory rig, and for a rig file read without its
-        warnings (:meth:`_rig_read_from`)."""
-        for message in rig_warnings(self._rig):
+        camera's height), and note at INFO (``rig_file.rig_notes``): the one check for every backend's in-memory
+        rig, and for a rig file read without its warnings (:meth:`_rig_read_from`)."""
+        said = [(logging.WARNING, m) for m in rig_warnings(self._rig)]
+        said += [(logging.INFO, m) for m in rig_notes(self._rig)]
+        for level, message in said:
             if self._rig_built:
-                self._rig_warning(log, "%s:// rig %r: %s", self.scheme, self._rig.rig_id, message)
+                self._log_about_rig_once(log, level, "%s:// rig %r: %s", self.scheme, self._rig.rig_id, message)
             else:  # read from a file: worded as load_rig words it
-                self._rig_warning(log, "%s: %s", self._rig_file, message)
+                self._log_about_rig_once(log, level, "%s: %s", self._rig_file, message)
 
     def read(self, timeout_s: float = 1.0) -> FramePair:
         """Block until the next synchronised pair, at most ``timeout_s`` seconds.

@@ -1,0 +1,149 @@
+"""Why ``ghcal synth``'s rig loses pairs: its people framed, found and lost, as it is and pitched otherwise.
+
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_synth_framing.py [--model-dir models] [--sequences 6]
+        [--frames 10] [--pitches 17,10] [--per-sequence] [--save DIR]
+
+``calibration.render.example_rig()`` (960x600, 75 degrees, a 0.6 m pair 1.4 m up, aimed 24 degrees down at a point
+2.5 m ahead so that the floor board is seen near: ``ghcal synth``'s floor view), and per ``--pitches`` the same
+cameras (centres, lenses, the point 2.5 m ahead they converge on horizontally) pitched that many degrees down,
+filming the bench's held-out people drawn in its working volume (``calibration.level.LEVEL_VOLUME``, 0.5-5 m ahead,
+as ``ghcal solve`` gives every rig), as ``benchmarks/measure_baseline.py --rigs`` films them: each sequence cold, the
+runtime's defaults. A row per rig: the pitch, where the floor comes into view (the image's bottom centre, the pair's
+farther camera: ``ghcal synth`` lays the board there), ``measure_baseline.py``'s framing cells (the standing person
+at the volume's centre) and scores. ``--per-sequence``: per rig and sequence, where the person stands, the share of
+their joints inside both images, whether the nose and the ankles are, and the pairs with no joint (session 67: heads
+cut, people too near, or the cold crop's scale?). ``--save DIR`` writes each pitched rig as ``DIR/synth_pitch_P.json``
+(for ``ghcal synth --rig``). A tool, not a test.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.measure_baseline import bench_scene_in, floats, framing_cells, score_cells  # noqa: E402
+from calibration.render import example_rig  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+from ghnerf_runtime.geometry import Camera, Rig, look_at  # noqa: E402
+from ghnerf_runtime.rig_file import save_rig  # noqa: E402
+
+#: How far ahead ``example_rig``'s cameras converge (its look-at point's z), kept when they are pitched otherwise.
+CONVERGE_AHEAD_M = 2.5
+#: BODY_25 joints told apart in ``--per-sequence``: the nose (the head cut or not) and the ankles (the feet).
+NOSE, ANKLES = 0, (11, 14)
+
+
+def pitch_deg(cam: Camera) -> float:
+    """Degrees the camera's optical axis points below the horizontal (the rig frame's y is down)."""
+    return float(np.degrees(np.arcsin(np.clip(cam.R[2, 1], -1.0, 1.0))))
+
+
+def pitched(rig: Rig, pitch: float) -> Rig:
+    """``rig``'s cameras from the same centres, each aimed ``pitch`` degrees down at the point straight below or
+    above where it converged (:data:`CONVERGE_AHEAD_M` ahead, x 0)."""
+    cams = []
+    for cam in rig.pair:
+        eye = cam.center
+        target = np.array([0.0, eye[1] + (CONVERGE_AHEAD_M - eye[2]) * np.tan(np.radians(pitch)), CONVERGE_AHEAD_M])
+        R, t = look_at(eye, target)
+        cams.append(Camera(cam.name, cam.width, cam.height, cam.K, cam.dist, R, t))
+    return Rig(tuple(cams), rig.volume, rig_id=f"{rig.rig_id}-pitch-{pitch:g}")
+
+
+def floor_in_view_from_m(cam: Camera) -> float:
+    """How far ahead (horizontally, metres) the floor (y = 0) comes into ``cam``'s view at its image's bottom
+    centre, lens model included; inf where that pixel looks above the horizon."""
+    origin, ray = cam.rays(np.array([cam.K[0, 2], cam.height - 1.0]))
+    origin, ray = np.asarray(origin, float).reshape(3), np.asarray(ray, float).reshape(3)
+    if ray[1] <= 0.0:
+        return float("inf")
+    hit = origin + (-origin[1] / ray[1]) * ray
+    return float(np.hypot(*(hit - origin)[[0, 2]]))
+
+
+def in_both_images(rig: Rig, points: np.ndarray) -> np.ndarray:
+    """Per point, whether it lies in front of both cameras of the pair and inside both images."""
+    inside = np.ones(len(points), bool)
+    for cam in rig.pair:
+        uv, depth = cam.project(points)
+        with np.errstate(invalid="ignore"):
+            inside &= (depth > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= cam.width - 0.5) \
+                & (uv[:, 1] >= -0.5) & (uv[:, 1] <= cam.height - 0.5)
+    return inside
+
+
+def sequence_row(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0):
+    """Bench sequence ``k`` filmed by ``rig``, one cold estimator: the predictions and truth for
+    :func:`score_cells`, and the sequence's ``--per-sequence`` cells."""
+    scene, t0 = bench_scene_in(rig, k)
+    est = Estimator(session, rig, cfg)
+    pred, found, truth, in_view, lost = [], [], [], [], 0
+    for i in range(frames):
+        t = t0 + i / fps
+        r = est.estimate([scene.render(cam, t, with_truth=False)[0] for cam in rig.pair], sequence=i)
+        joints = scene.joints_3d(t)
+        pred.append(r.joints_3d)
+        found.append(~r.missing)
+        truth.append(joints)
+        in_view.append(in_both_images(rig, joints))
+        lost += int(r.missing.all())
+    est.close()
+    in_view = np.array(in_view)
+    mid = 0.5 * (rig.pair[0].center + rig.pair[1].center)
+    ahead = float(np.hypot(*(truth[0][8] - mid)[[0, 2]]))  # the mid hip at the first instant
+    cells = (f"{k} | {truth[0][8][0]:+.2f} | {ahead:.2f} | {scene.config.motion} | {in_view.mean():.2f} | "
+             f"{in_view[:, NOSE].mean():.1f} | {in_view[:, list(ANKLES)].all(axis=1).mean():.1f} | {lost} of {frames}")
+    return (np.array(pred), np.array(found), np.array(truth)), cells
+
+
+def rigs_to_measure(pitches: list[float]) -> list[Rig]:
+    """``ghcal synth``'s rig as it is, then pitched to each of ``pitches``."""
+    synth = example_rig()
+    return [synth] + [pitched(synth, p) for p in pitches]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--precision", default="int8")
+    ap.add_argument("--sequences", type=int, default=6)
+    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--pitches", default="17,10", help="degrees below the horizontal, comma-separated (\"\": the rig "
+                                                       "as it is only)")
+    ap.add_argument("--per-sequence", action="store_true", help="a row per rig and sequence too")
+    ap.add_argument("--save", type=Path, help="write each pitched rig to this folder as synth_pitch_P.json")
+    args = ap.parse_args(argv)
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision))
+    session = load_session(cfg)
+    rigs = rigs_to_measure(floats(args.pitches))
+    if args.save:
+        args.save.mkdir(parents=True, exist_ok=True)
+        for rig in rigs[1:]:
+            save_rig(rig, args.save / f"synth_pitch_{pitch_deg(rig.pair[0]):.0f}.json")
+    print(f"{args.sequences} held-out-like sequences x {args.frames} frames, {args.precision}, ghcal synth's rig "
+          "(calibration.render.example_rig), each sequence cold")
+    print("| rig | pitch, degrees down | floor in view from, m | standing person in view, share | person tall, image "
+          "px | person tall in the cold crop, model px | MPJPE mm | joints found | pairs with no joint |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    per_sequence = []
+    for rig in rigs:
+        results = [sequence_row(session, cfg, rig, k, args.frames) for k in range(args.sequences)]
+        per_sequence += [f"| {rig.rig_id} | {cells} |" for _, cells in results]
+        floor = max(floor_in_view_from_m(cam) for cam in rig.pair)
+        print(f"| {rig.rig_id} | {pitch_deg(rig.pair[0]):.1f} | {floor:.2f} | "
+              f"{framing_cells(rig, session.contract.width)} | {score_cells([r for r, _ in results])} |", flush=True)
+    if args.per_sequence:
+        print("\n| rig | sequence | person at x, m | ahead of the pair, m | motion | joints in both images | nose in "
+              "both | ankles in both | pairs with no joint |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        print("\n".join(per_sequence))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
