@@ -556,7 +556,7 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
     lost = map_x <= _OUTSIDE / 2  # past the lens model's reach: no frame pixel to repeat (0, or "fade"'s mean)
     fade = None
     if pad_fill == "fade":  # how far past the frame each sample lies, in crop sides (frame pixels, as yet)
-        beyond = np.hypot(map_x - np.clip(map_x, 0, camera.width - 1), map_y - np.clip(map_y, 0, camera.height - 1))
+        beyond = _distance_past_frame(map_x, map_y, camera.size)
         fade = _fade_weights(np.where(lost, np.inf, beyond / roi.size), pad_fade, f)
 
     if not antialias:
@@ -576,7 +576,8 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
         touched = map_x > _OUTSIDE / 2
         if not touched.any():
             touched[...] = True
-        tx, ty = map_x[touched], map_y[touched]
+        # (a crop wholly within the lens model's reach, the usual one, skips the masked copies: the same extremes)
+        tx, ty = (map_x, map_y) if touched.all() else (map_x[touched], map_y[touched])
         x0, x1 = _aligned_span(int(np.floor(tx.min())) - pad, int(np.ceil(tx.max())) + pad + 1, camera.width,
                                factor)
         y0, y1 = _aligned_span(int(np.floor(ty.min())) - pad, int(np.ceil(ty.max())) + pad + 1, camera.height,
@@ -600,14 +601,60 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
                     f, fade=None if inside is None else fade)
 
 
+
+#: Below this block side, numpy sums a block's row from left to right; from 8 on its inner loop is unrolled (another
+#: order), so :func:`_block_means` leaves such blocks to numpy's own reduction.
+_SEQUENTIAL_SUM_BELOW = 8
+
+
+def _block_means(values: np.ndarray, f: int) -> np.ndarray:
+    """The means of the ``f x f`` blocks of the square ``(f n, f n)`` float64 ``values``: the same to the bit as
+    ``values.reshape(n, f, n, f).mean(axis=(1, 3))`` (each block's rows summed left to right, then the row sums
+    top to bottom, then divided by ``f * f``), in whole-plane adds of strided views: numpy's reduction over two
+    small axes at once took ~0.9 ms for a 256-pixel crop's (session 67), the adds ~0.06 ms."""
+    if f == 1 or f >= _SEQUENTIAL_SUM_BELOW:
+        n = values.shape[0] // f
+        return values.reshape(n, f, n, f).mean(axis=(1, 3))
+    total = None
+    for i in range(f):
+        row = values[i::f, 0::f].copy()
+        for j in range(1, f):
+            row += values[i::f, j::f]
+        total = row if total is None else total + row
+    return total / (f * f)
+
+
+def _block_all(mask: np.ndarray, f: int) -> np.ndarray:
+    """Whether every pixel of each ``f x f`` block of the square boolean ``(f n, f n)`` ``mask`` is set:
+    ``mask.reshape(n, f, n, f).all(axis=(1, 3))`` in strided ANDs (~1.1 ms -> ~0.05 ms for a 256-pixel crop's)."""
+    out = mask[0::f, 0::f].copy()
+    for i in range(f):
+        for j in range(f):
+            if i or j:
+                out &= mask[i::f, j::f]
+    return out
+
+
+def _distance_past_frame(map_x: np.ndarray, map_y: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """How far each sample ``(map_x, map_y)`` lies past the ``(width, height)`` frame's pixel centres (0 inside):
+    ``np.hypot`` of the offsets to the nearest frame pixel, taken only where one is not 0 (the same numbers:
+    ``hypot(0, 0)`` is 0; ``np.hypot`` over a whole 256-pixel crop took ~0.7 ms, and most samples lie inside)."""
+    dx = map_x - np.clip(map_x, 0, size[0] - 1)
+    dy = map_y - np.clip(map_y, 0, size[1] - 1)
+    off = (dx != 0) | (dy != 0)
+    beyond = np.zeros(np.broadcast_shapes(dx.shape, dy.shape), np.result_type(dx, dy))
+    if off.any():
+        beyond[off] = np.hypot(dx[off], dy[off])
+    return beyond
+
+
 def _fade_weights(beyond: np.ndarray, reach: float, f: int) -> tuple[slice, slice, np.ndarray, np.ndarray]:
     """The "fade" fill's blend, fixed per crop window (``CropMaps.fade``): the box of ``(S, S)`` model pixels
     that holds every one not wholly frame, and there the float32 weights of the remapped crop (1 inside the frame,
     falling linearly to 0 at ``reach`` crop sides past its edge; 0 past the lens model's reach; box means of the
     ``f x f`` samples, as ``apply_crop_maps`` reduces them) and of the crop's mean (the rest)."""
     w = np.clip(1.0 - beyond / reach, 0.0, 1.0) if reach > 0 else (beyond <= 0).astype(np.float64)
-    n = w.shape[0] // f
-    w = w.reshape(n, f, n, f).mean(axis=(1, 3)).astype(np.float32)
+    w = _block_means(w, f).astype(np.float32)
     rows, cols = np.flatnonzero((w < 1).any(axis=1)), np.flatnonzero((w < 1).any(axis=0))
     if rows.size == 0:
         rows = cols = np.zeros(1, int)
@@ -628,8 +675,7 @@ def _inside(map_x: np.ndarray, map_y: np.ndarray, size: tuple[int, int], supersa
     in the ``(width, height)`` source (``None``: every one)."""
     inside = (map_x >= 0) & (map_x <= size[0] - 1) & (map_y >= 0) & (map_y <= size[1] - 1)
     if supersample > 1:
-        n = inside.shape[0] // supersample
-        inside = inside.reshape(n, supersample, n, supersample).all(axis=(1, 3))
+        inside = _block_all(inside, supersample)
     return None if inside.all() else inside
 
 
