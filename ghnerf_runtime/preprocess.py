@@ -608,7 +608,7 @@ _SEQUENTIAL_SUM_BELOW = 8
 
 
 def _block_means(values: np.ndarray, f: int) -> np.ndarray:
-    """The means of the ``f x f`` blocks of the square ``(f n, f n)`` float64 ``values``: the same to the bit as
+    """The means of the ``f x f`` blocks of the square ``(f n, f n)`` float ``values``: the same to the bit as
     ``values.reshape(n, f, n, f).mean(axis=(1, 3))`` (each block's rows summed left to right, then the row sums
     top to bottom, then divided by ``f * f``), in whole-plane adds of strided views: numpy's reduction over two
     small axes at once took ~0.9 ms for a 256-pixel crop's (session 67), the adds ~0.06 ms."""
