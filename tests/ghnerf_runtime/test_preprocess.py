@@ -752,15 +752,19 @@ def test_block_all_is_numpy_s_block_all(f):
 
 
 def test_distance_past_frame_is_the_hypot_of_the_offsets_to_the_frame():
-    """Taken only where a sample lies off the frame's pixel centres, yet the same numbers as over the whole plane
-    (0 inside, the overflow marker and inf as they were)."""
+    """The hypot taken only past a corner, ``|dx| + |dy|`` elsewhere, yet the same numbers as ``np.hypot`` over the
+    whole plane (0 inside, past one edge, past a corner, the overflow marker, inf and NaN as they were)."""
     rng = np.random.default_rng(3)
     map_x = rng.uniform(-80.0, 720.0, (64, 64)).astype(np.float32)
     map_y = rng.uniform(-60.0, 540.0, (64, 64)).astype(np.float32)
     map_x[0, :4] = [preprocess._OUTSIDE, np.inf, -np.inf, 639.0]
     map_y[1, :2] = [preprocess._OUTSIDE, 479.0]
+    map_x[2, :3], map_y[2, :3] = [np.nan, np.nan, np.inf], [0.0, -5.0, np.nan]  # none reach it, but as hypot
+    map_x[3, :2], map_y[3, :2] = [-3.0, 700.0], [-4.0, 500.0]  # past a corner: the hypot itself
     want = np.hypot(map_x - np.clip(map_x, 0, 639), map_y - np.clip(map_y, 0, 479))
     got = preprocess._distance_past_frame(map_x, map_y, (640, 480))
-    assert got.dtype == want.dtype and got.tobytes() == want.tobytes()
-    inside = preprocess._distance_past_frame(map_x.clip(0, 639), map_y.clip(0, 479), (640, 480))
+    assert got.dtype == want.dtype and np.array_equal(got, want, equal_nan=True)
+    assert got[~np.isnan(got)].tobytes() == want[~np.isnan(want)].tobytes()
+    within = rng.uniform(0.0, 639.0, (64, 64)).astype(np.float32), rng.uniform(0.0, 479.0, (64, 64)).astype(np.float32)
+    inside = preprocess._distance_past_frame(*within, (640, 480))
     assert inside.dtype == np.float32 and not inside.any()
