@@ -640,7 +640,10 @@ def _distance_past_frame(map_x: np.ndarray, map_y: np.ndarray, size: tuple[int, 
     ``np.hypot`` of the offsets to the nearest frame pixel, the same numbers taken cheaper. ``np.hypot`` over a whole
     256-pixel crop took ~0.7 ms, and most samples lie inside the frame or past one edge only, where one offset is 0
     and the C standard's ``hypot(x, 0)`` is ``|x|`` (C99 Annex F), which ``|dx| + |dy|`` gives exactly; the hypot
-    is kept for the samples past a corner (and for non-finite offsets paired with a non-zero one)."""
+    is kept for the samples past a corner (and for non-finite offsets paired with a non-zero one). A window wholly
+    inside the frame, the usual tracked one, is told by the maps' extremes (NaN fails the test) and is all 0."""
+    if (map_x.min() >= 0 and map_x.max() <= size[0] - 1 and map_y.min() >= 0 and map_y.max() <= size[1] - 1):
+        return np.zeros(np.broadcast_shapes(map_x.shape, map_y.shape), np.result_type(map_x, map_y))
     dx = map_x - np.clip(map_x, 0, size[0] - 1)
     dy = map_y - np.clip(map_y, 0, size[1] - 1)
     beyond = np.abs(dx) + np.abs(dy)
