@@ -587,8 +587,8 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
             # The window's edge-repeating padding is not frame: what lies past the frame's edge shows zeros, as
             # everywhere else outside it (a clamping fill below shows the frame's edge there instead).
             past = (map_x > camera.width - 0.5) | (map_y > camera.height - 0.5)
-        map_x = ((map_x - x0 + 0.5) / factor - 0.5).astype(np.float32)
-        map_y = ((map_y - y0 + 0.5) / factor - 0.5).astype(np.float32)
+        map_x = ((map_x - x0 + 0.5) / factor - 0.5).astype(np.float32, copy=False)
+        map_y = ((map_y - y0 + 0.5) / factor - 0.5).astype(np.float32, copy=False)
         window, size = (x0, y0, x1, y1), ((x1 - x0) // factor, (y1 - y0) // factor)
         # `inside` as under black whatever the fill: the window's edge-repeating padding is not frame
         shown = (map_x, map_y) if past is None else (np.where(past, _OUTSIDE, map_x), np.where(past, _OUTSIDE, map_y))
@@ -596,7 +596,7 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
     if inside is not None and pad_fill != "black":  # from the maps before `past`: the window's padding is the edge
         map_x, map_y = _clamped(map_x, map_y, lost, size)
     else:
-        map_x, map_y = (m.astype(np.float32) for m in shown)
+        map_x, map_y = (m.astype(np.float32, copy=False) for m in shown)
     return CropMaps(map_x, map_y, level, window, camera.size, cv2.convertMaps(map_x, map_y, cv2.CV_16SC2), inside,
                     f, fade=None if inside is None else fade)
 
@@ -659,7 +659,7 @@ def _fade_weights(beyond: np.ndarray, reach: float, f: int) -> tuple[slice, slic
     falling linearly to 0 at ``reach`` crop sides past its edge; 0 past the lens model's reach; box means of the
     ``f x f`` samples, as ``apply_crop_maps`` reduces them) and of the crop's mean (the rest)."""
     w = np.clip(1.0 - beyond / reach, 0.0, 1.0) if reach > 0 else (beyond <= 0).astype(np.float64)
-    w = _block_means(w, f).astype(np.float32)
+    w = _block_means(w, f).astype(np.float32, copy=False)
     rows, cols = np.flatnonzero((w < 1).any(axis=1)), np.flatnonzero((w < 1).any(axis=0))
     if rows.size == 0:
         rows = cols = np.zeros(1, int)
@@ -670,8 +670,8 @@ def _fade_weights(beyond: np.ndarray, reach: float, f: int) -> tuple[slice, slic
 def _clamped(map_x: np.ndarray, map_y: np.ndarray, lost: np.ndarray, size: tuple[int, int]):
     """The maps with every sample the lens reaches moved onto the nearest pixel of the ``(width, height)``
     source: past the frame's edge the crop repeats that edge (the "edge" pad fill) instead of showing 0."""
-    cx = np.where(lost, map_x, np.clip(map_x, 0, size[0] - 1)).astype(np.float32)
-    cy = np.where(lost, map_y, np.clip(map_y, 0, size[1] - 1)).astype(np.float32)
+    cx = np.where(lost, map_x, np.clip(map_x, 0, size[0] - 1)).astype(np.float32, copy=False)
+    cy = np.where(lost, map_y, np.clip(map_y, 0, size[1] - 1)).astype(np.float32, copy=False)
     return cx, cy
 
 
