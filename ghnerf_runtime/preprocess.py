@@ -601,7 +601,6 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
                     f, fade=None if inside is None else fade)
 
 
-
 #: Below this block side, numpy sums a block's row from left to right; from 8 on its inner loop is unrolled (another
 #: order), so :func:`_block_means` leaves such blocks to numpy's own reduction.
 _SEQUENTIAL_SUM_BELOW = 8
