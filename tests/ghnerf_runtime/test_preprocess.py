@@ -725,3 +725,46 @@ def test_the_fade_pad_fill_at_zero_shows_the_crop_mean_past_the_edge_in_any_fram
         mean = black[inside].reshape(int(inside.sum()), -1).astype(np.float64).mean(axis=0)
         np.testing.assert_allclose(out[far].reshape(int(far.sum()), -1), np.broadcast_to(mean, (int(far.sum()),
                                    mean.size)), atol=1.0)
+
+
+# ---------------------------------------------------------------- the maps' reductions (session 67: speed)
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])  # the fade's weights are float32, at 0 reach float64
+@pytest.mark.parametrize("f", [1, 2, 3, 4, 5, 7, 8, 9])
+def test_block_means_are_numpy_s_block_means_to_the_bit(f, dtype):
+    """The strided adds give numpy's own block means bit for bit (the crops the model sees do not move), for
+    the block sides the config takes (1-4) and past them (8 on: numpy's unrolled sums, left to numpy)."""
+    rng = np.random.default_rng(f)
+    n = 96 // f
+    values = (rng.standard_normal((n * f, n * f)) * 10.0 ** rng.uniform(-8, 8, (n * f, n * f))).astype(dtype)
+    want = values.reshape(n, f, n, f).mean(axis=(1, 3))
+    got = preprocess._block_means(values, f)
+    assert got.dtype == want.dtype and got.shape == want.shape and got.tobytes() == want.tobytes()
+
+
+@pytest.mark.parametrize("f", [1, 2, 3, 4])
+def test_block_all_is_numpy_s_block_all(f):
+    rng = np.random.default_rng(10 + f)
+    n = 96 // f
+    mask = rng.uniform(size=(n * f, n * f)) < 0.97  # blocks both whole and not
+    want = mask.reshape(n, f, n, f).all(axis=(1, 3))
+    assert want.any() and not want.all()
+    np.testing.assert_array_equal(preprocess._block_all(mask, f), want)
+
+
+def test_distance_past_frame_is_the_hypot_of_the_offsets_to_the_frame():
+    """The hypot taken only past a corner, ``|dx| + |dy|`` elsewhere, yet the same numbers as ``np.hypot`` over the
+    whole plane (0 inside, past one edge, past a corner, the overflow marker, inf and NaN as they were)."""
+    rng = np.random.default_rng(3)
+    map_x = rng.uniform(-80.0, 720.0, (64, 64)).astype(np.float32)
+    map_y = rng.uniform(-60.0, 540.0, (64, 64)).astype(np.float32)
+    map_x[0, :4] = [preprocess._OUTSIDE, np.inf, -np.inf, 639.0]
+    map_y[1, :2] = [preprocess._OUTSIDE, 479.0]
+    map_x[2, :3], map_y[2, :3] = [np.nan, np.nan, np.inf], [0.0, -5.0, np.nan]  # none reach it, but as hypot
+    map_x[3, :2], map_y[3, :2] = [-3.0, 700.0], [-4.0, 500.0]  # past a corner: the hypot itself
+    want = np.hypot(map_x - np.clip(map_x, 0, 639), map_y - np.clip(map_y, 0, 479))
+    got = preprocess._distance_past_frame(map_x, map_y, (640, 480))
+    assert got.dtype == want.dtype and np.array_equal(got, want, equal_nan=True)
+    assert got[~np.isnan(got)].tobytes() == want[~np.isnan(want)].tobytes()
+    within = rng.uniform(0.0, 639.0, (64, 64)).astype(np.float32), rng.uniform(0.0, 479.0, (64, 64)).astype(np.float32)
+    inside = preprocess._distance_past_frame(*within, (640, 480))
+    assert inside.dtype == np.float32 and not inside.any()
