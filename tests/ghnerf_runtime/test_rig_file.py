@@ -14,6 +14,7 @@ from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (
+    MAX_METADATA_DEPTH,
     MIN_PAIR_ANGLE_DEG,
     camera_height_warning,
     volume_floor_warning,
@@ -219,6 +220,33 @@ def test_json_python_cannot_hold_is_a_rig_file_error(tmp_path, text, why):
     with pytest.raises(RigFileError, match=why) as info:
         load_rig(path)
     assert info.value.path == str(path) and "invalid JSON" in str(info.value)
+
+
+def _nested_lists(depth: int) -> list:
+    nested: list = []
+    for _ in range(depth - 1):
+        nested = [nested]
+    return nested
+
+
+@pytest.mark.parametrize("depth", [MAX_METADATA_DEPTH, 900, 5000])
+def test_metadata_nested_too_deep_is_named_not_a_recursion_error(tmp_path, example_dict, depth):
+    """Nesting the JSON parser takes (up to about 1000 levels) but Python's recursion does not: the file loaded as far
+    as the metadata's copy and failed with a bare RecursionError naming no file (a dict 5000 deep given to
+    rig_from_dict failed so in json.dumps). Refused by name past MAX_METADATA_DEPTH."""
+    example_dict["metadata"]["notes"] = _nested_lists(depth)  # levels: metadata 1, the lists 2 .. depth + 1
+    path = tmp_path / "deep.json"
+    if depth < 1000:  # what the parser reads: the file
+        path.write_text(json.dumps(example_dict))
+        with pytest.raises(RigFileError, match=rf"nested more than {MAX_METADATA_DEPTH} levels") as info:
+            load_rig(path)
+        assert info.value.path == str(path)
+    with pytest.raises(RigFileError, match=rf"nested more than {MAX_METADATA_DEPTH} levels") as info:
+        rig_from_dict(example_dict)
+    assert info.value.field == "metadata"
+    example_dict["metadata"]["notes"] = _nested_lists(MAX_METADATA_DEPTH - 1)  # at the bound: loads, saves, reloads
+    save_rig(rig_from_dict(example_dict, warn=False), path)
+    assert load_rig(path, warn=False).metadata["notes"] == example_dict["metadata"]["notes"]
 
 
 def test_a_path_with_a_nul_character_is_a_rig_file_error():
