@@ -41,7 +41,7 @@ from ghnerf_runtime.errors import GeometryError, RigFileError
 from ghnerf_runtime.geometry.camera import (DISTORTION_NAMES, Camera, fold_terms_text, folded_by_tangential,
                                             nearest_rotation)
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.json_keys import JsonTextError, loads_remembering, remember_repeats
+from ghnerf_runtime.json_keys import JsonTextError, loads_remembering, nested_deeper_than, remember_repeats
 from ghnerf_runtime.path_check import is_utf8
 
 log = logging.getLogger(__name__)
@@ -81,7 +81,8 @@ MAX_DISTORTION = 1e3
 MAX_RIG_FILE_BYTES = 1 << 20
 #: Deepest nesting of objects and lists in ``metadata`` (the object itself is level 1): free-form notes are shallow;
 #: between about 500 and 1000 the JSON parser took the file and the copy of the metadata (recursive) failed with a
-#: bare RecursionError naming no file, and a deeper dict given to :func:`rig_from_dict` failed so in ``json.dumps``.
+#: bare RecursionError naming no file (a file is now refused past ``json_keys.MAX_JSON_DEPTH``), and a deeper dict given
+#: to :func:`rig_from_dict` failed so in ``json.dumps``.
 MAX_METADATA_DEPTH = 100
 #: Largest image width or height: the runtime's remap tables (OpenCV's fixed-point maps) address
 #: pixels with 16-bit integers. It also keeps absurd sizes (10**400) from overflowing the float checks.
@@ -385,7 +386,7 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None, warn: boo
     metadata = data.get("metadata", {})
     if not isinstance(metadata, dict):
         chk._raise("metadata", f"must be a JSON object, got {_show(metadata)}")
-    if _deeper_than(metadata, MAX_METADATA_DEPTH):  # before anything below walks it recursively
+    if nested_deeper_than(metadata, MAX_METADATA_DEPTH):  # before anything below walks it recursively
         chk._raise("metadata", f"is nested more than {MAX_METADATA_DEPTH} levels deep (objects and lists; "
                                "MAX_METADATA_DEPTH): free-form notes, not data")
     try:  # what save_rig could not write back (it refuses NaN; a lone surrogate cannot be UTF-8)
@@ -546,21 +547,6 @@ def volume_reach_problem(rig: Rig) -> str | None:
                     f"{MAX_DEPTH_M:g} m (MAX_DEPTH_M) the model's near/far resolve: every pair would fail. A volume "
                     "in millimetres read as metres? The working volume is in metres")
     return None
-
-
-def _deeper_than(value: Any, limit: int) -> bool:
-    """Whether objects and lists nest in ``value`` more than ``limit`` levels deep (``value`` itself is level 1);
-    iterative, so no depth is too deep to measure."""
-    stack = [(value, 1)]
-    while stack:
-        item, level = stack.pop()
-        children = item.values() if isinstance(item, dict) else item if isinstance(item, list) else None
-        if children is None:
-            continue
-        if level > limit:
-            return True
-        stack.extend((child, level + 1) for child in children)
-    return False
 
 
 def _plain(value: Any) -> Any:
