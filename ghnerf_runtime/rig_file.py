@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from ghnerf_runtime.bound_text import past_bound
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, box_reach
 from ghnerf_runtime.errors import GeometryError, RigFileError
 from ghnerf_runtime.geometry.camera import (DISTORTION_NAMES, Camera, fold_terms_text, folded_by_tangential,
@@ -255,7 +256,9 @@ def principal_point_problem(K: Any, width: int, height: int, *, advice: str = _R
     off_x, off_y = abs(cx - (width - 1) / 2) / width, abs(cy - (height - 1) / 2) / height
     if off_x <= PRINCIPAL_POINT_TOLERANCE and off_y <= PRINCIPAL_POINT_TOLERANCE:
         return None
-    return (f"its principal point ({cx:g}, {cy:g}) lies {off_x:.0%} of the width and {off_y:.0%} of the height "
+    tol = PRINCIPAL_POINT_TOLERANCE
+    return (f"its principal point ({cx:g}, {cy:g}) lies {past_bound(off_x, tol, 0, '%')} of the width and "
+            f"{past_bound(off_y, tol, 0, '%')} of the height "
             f"from the centre of the {width}x{height} image (a real lens: within {PRINCIPAL_POINT_TOLERANCE:.0%}): "
             + advice)
 
@@ -269,9 +272,9 @@ def focal_length_problem(K: Any, width: int, height: int) -> str | None:
     for name, f in (("fx", float(K[0, 0])), ("fy", float(K[1, 1]))):
         if not low <= f <= high:
             fov = math.degrees(2.0 * math.atan(side / (2.0 * f))) if f > 0 else float("nan")
-            return (f"its focal length {name} = {f:g} px is outside {low:g}-{high:g} px ({FOCAL_RANGE[0]:g}-"
-                    f"{FOCAL_RANGE[1]:g} times the {width}x{height} image's longer side; a {fov:.3g}-degree view): a "
-                    f"typo, or a focal length in other units?")
+            return (f"its focal length {name} = {past_bound(f, low if f < low else high, 6)} px is outside "
+                    f"{low:g}-{high:g} px ({FOCAL_RANGE[0]:g}-{FOCAL_RANGE[1]:g} times the {width}x{height} image's "
+                    f"longer side; a {fov:.3g}-degree view): a typo, or a focal length in other units?")
     return None
 
 
@@ -283,9 +286,9 @@ def skew_problem(K: Any) -> str | None:
     if abs(skew) <= MAX_SKEW_SHARE * fx:
         return None
     off_square = 90.0 - math.degrees(math.atan2(fx, abs(skew)))  # how far the pixel axes are from square
-    return (f"its skew K[0][1] = {skew:g} px is {abs(skew) / fx:.3g} times fx = {fx:g} px (pixel axes {off_square:.3g} "
-            f"degrees off square; a sensor's: at most {MAX_SKEW_SHARE:g} times fx, 0 from OpenCV): a typo, or a matrix "
-            "in another layout?")
+    return (f"its skew K[0][1] = {skew:g} px is {past_bound(abs(skew) / fx, MAX_SKEW_SHARE, 3)} times fx = {fx:g} px "
+            f"(pixel axes {off_square:.3g} degrees off square; a sensor's: at most {MAX_SKEW_SHARE:g} times fx, 0 from "
+            "OpenCV): a typo, or a matrix in another layout?")
 
 
 def distortion_problem(dist: Any) -> str | None:

@@ -479,6 +479,42 @@ def test_translations_in_millimetres_are_refused_naming_the_pair(example_dict, t
     assert "'left' and 'right' are 75 m apart (at most 10 m" in str(info.value) and "millimetres" in str(info.value)
 
 
+def _pair_apart(example_dict: dict, baseline_m: float) -> None:
+    """Both cameras facing +z, ``baseline_m`` apart along x."""
+    for cam, x in zip(example_dict["cameras"], (0.0, -baseline_m)):
+        cam["R"], cam["t"] = np.eye(3).tolist(), [x, 1.2, 0.0]
+
+
+def _offset_principal_point(example_dict: dict, share: float) -> None:
+    cam = example_dict["cameras"][0]
+    cam["K"][0][2] = (cam["width"] - 1) / 2 + share * cam["width"]
+
+
+def _focal(example_dict: dict, fx: float) -> None:
+    example_dict["cameras"][0]["K"][0][0] = fx
+
+
+def _skew(example_dict: dict, share: float) -> None:
+    cam = example_dict["cameras"][0]
+    cam["K"][0][1] = share * cam["K"][0][0]
+
+
+@pytest.mark.parametrize("change, shown", [
+    (lambda d: _pair_apart(d, 0.00999999), "are 9.99999 mm apart (at least 10 mm needed)"),  # was "10.0 mm apart"
+    (lambda d: _pair_apart(d, 10.00001), "are 10.00001 m apart (at most 10 m accepted)"),  # was "10 m apart"
+    (lambda d: _offset_principal_point(d, 0.10001), "lies 10.001% of the width"),  # was "10% ... (within 10%)"
+    (lambda d: _focal(d, 12.7999999), "fx = 12.7999999 px is outside 12.8-128000 px"),  # was "12.8 px is outside 12.8"
+    (lambda d: _skew(d, 0.1000001), "is 0.1000001 times fx"),  # was "0.1 times fx ... at most 0.1 times fx"
+], ids=["pair too near", "pair too far", "principal point", "focal length", "skew"])
+def test_a_value_just_past_a_bound_is_not_shown_as_the_bound(example_dict, change, shown):
+    """A figure just outside its bound was written on it ("10.0 mm apart (at least 10 mm needed)"), a refusal that
+    read as one of an allowed value. Shown with the digits that tell them apart; far from the bound, as before."""
+    change(example_dict)
+    with pytest.raises(RigFileError) as info:
+        rig_from_dict(example_dict, path="rig.json", warn=False)
+    assert shown in str(info.value), str(info.value)
+
+
 @pytest.mark.filterwarnings("error")
 def test_translations_that_overflow_are_refused_without_numpy_warnings(example_dict):
     example_dict["cameras"][1]["t"] = [1e200, 0.0, 0.0]  # loaded, with a baseline of inf and an overflow warning
