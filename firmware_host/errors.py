@@ -67,6 +67,11 @@ class SinkClosedError(SinkError):
     """A frame was sent to a sink after ``close()``."""
 
 
+class CaptureTimeError(FirmwareHostError, ValueError):
+    """A pair's capture time that the joint stream cannot carry (its header's ``capture_us`` is an unsigned 64-bit
+    count of microseconds): names the camera, the frame and the stamp."""
+
+
 class ProtocolError(FirmwareHostError, ValueError):
     """Base class of joint-protocol encoding and decoding errors."""
 

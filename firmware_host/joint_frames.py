@@ -10,12 +10,13 @@ from __future__ import annotations
 import numpy as np
 
 import drivers
-from firmware_host.protocol.constants import U32_MAX, Flags, hello_scene_flags
+from firmware_host.errors import CaptureTimeError
+from firmware_host.protocol.constants import U32_MAX, U64_MAX, Flags, hello_scene_flags
 from firmware_host.protocol.messages import JointFrame
 from ghnerf_runtime.config import EstimatorConfig
 from ghnerf_runtime.estimator import PairResult
 
-__all__ = ["FrameNumbers", "announced_scene_flags", "estimate_frame", "scene_flags", "truth_frame"]
+__all__ = ["FrameNumbers", "announced_scene_flags", "capture_time_us", "estimate_frame", "scene_flags", "truth_frame"]
 
 
 class FrameNumbers:
@@ -41,6 +42,26 @@ class FrameNumbers:
         return (self._next - 1) & U32_MAX if self._taken else None
 
 
+def capture_time_us(pair: drivers.FramePair) -> int:
+    """The capture time a frame of ``pair`` carries: its first camera's stamp in whole microseconds.
+
+    Raises:
+        CaptureTimeError: a stamp the wire's unsigned 64-bit microseconds cannot hold. A replay with ``keep_time=1``
+            delivers the take's recorded stamps, which the recording format allows to be negative: the first such
+            pair failed in ``JointFrame`` with a bare ``ValueError``, a traceback from ``ghnerf-demo`` and exit 1 (a
+            restart, then the same) from the daemon.
+    """
+    first = pair.frames[0]
+    stamp_us = first.timestamp_ns // 1000
+    if not 0 <= stamp_us <= U64_MAX:
+        raise CaptureTimeError(
+            f"camera {first.camera!r} frame {first.index} was captured at timestamp_ns={first.timestamp_ns}: the joint "
+            f"stream carries capture times as microseconds in 0..{U64_MAX} (docs/protocol.md), so this pair cannot "
+            "be sent. A replay's keep_time=1 delivers the take's recorded stamps: play it without keep_time=1 (its "
+            "frames re-stamped on this host's clock)")
+    return stamp_us
+
+
 def truth_frame(pair: drivers.FramePair, *, sequence: int) -> JointFrame | None:
     """The simulator's ground-truth 3D joints of ``pair`` (confidence 1) as frame ``sequence``, or None when
     it carries none."""
@@ -49,7 +70,7 @@ def truth_frame(pair: drivers.FramePair, *, sequence: int) -> JointFrame | None:
     joints = np.concatenate([pair.joints_3d, np.ones((len(pair.joints_3d), 1))], axis=1)
     return JointFrame(
         sequence=sequence,
-        capture_time_us=pair.frames[0].timestamp_ns // 1000,
+        capture_time_us=capture_time_us(pair),
         joint_set=0,
         joints_3d=joints,
     )
@@ -97,7 +118,7 @@ def estimate_frame(pair: drivers.FramePair, result: PairResult, *, sequence: int
         joints_2d[index] = np.column_stack([uv, np.where(m2, 0.0, result.confidence_2d[frame.camera])])
     return JointFrame(
         sequence=sequence,
-        capture_time_us=pair.frames[0].timestamp_ns // 1000,
+        capture_time_us=capture_time_us(pair),
         joint_set=0,
         joints_3d=np.column_stack([xyz, conf]),
         joints_2d=joints_2d,

@@ -9,7 +9,15 @@ from __future__ import annotations
 import json
 from typing import Any
 
-__all__ = ["JsonTextError", "KeysObject", "first_repeat", "loads_remembering", "remember_repeats"]
+__all__ = ["JsonTextError", "KeysObject", "MAX_JSON_DEPTH", "first_repeat", "loads_remembering", "nested_deeper_than",
+           "remember_repeats"]
+
+#: Deepest nesting of objects and arrays :func:`loads_remembering` takes (the outermost is level 1). The files read
+#: with it (rig, configs, a take's manifest) are a few levels deep, a rig's free-form ``metadata`` at most 100 more
+#: (``rig_file.MAX_METADATA_DEPTH``). Python's parser takes up to about 1000, but the readers walk what it returns
+#: recursively (:func:`first_repeat`, the copies into plain dicts): from about 500 levels a bare RecursionError,
+#: naming no file, came out of them.
+MAX_JSON_DEPTH = 128
 
 
 class JsonTextError(ValueError):
@@ -66,15 +74,34 @@ def loads_remembering(text: str) -> Any:
     """``text`` parsed with :func:`remember_repeats` (every object a :class:`KeysObject`).
 
     Raises:
-        JsonTextError: invalid JSON (with its line and column), JSON nested too deeply (a RecursionError from
-            the parser) or an integer of more digits than Python converts (4300): each was a traceback from a
-            reader that caught only the first.
+        JsonTextError: invalid JSON (with its line and column), JSON nested too deeply (past
+            :data:`MAX_JSON_DEPTH`, or a RecursionError from the parser) or an integer of more digits than Python
+            converts (4300): each was a traceback from a reader that caught only the first.
     """
     try:
-        return json.loads(text, object_pairs_hook=remember_repeats)
+        value = json.loads(text, object_pairs_hook=remember_repeats)
     except json.JSONDecodeError as e:
         raise JsonTextError(e.msg, e.lineno, e.colno) from e
     except RecursionError as e:
         raise JsonTextError("nested too deeply") from e
     except ValueError as e:  # Python's 4300-digit limit on integers
         raise JsonTextError(str(e)) from e
+    if nested_deeper_than(value, MAX_JSON_DEPTH):
+        raise JsonTextError(f"nested too deeply (objects and arrays more than {MAX_JSON_DEPTH} levels deep, "
+                            "MAX_JSON_DEPTH)")
+    return value
+
+
+def nested_deeper_than(value: Any, limit: int) -> bool:
+    """Whether objects (dicts) and arrays (lists) nest in ``value`` more than ``limit`` levels deep (``value`` itself
+    is level 1); iterative, so no depth is too deep to measure."""
+    pending = [(value, 1)]
+    while pending:
+        item, level = pending.pop()
+        children = item.values() if isinstance(item, dict) else item if isinstance(item, list) else None
+        if children is None:
+            continue
+        if level > limit:
+            return True
+        pending.extend((child, level + 1) for child in children)
+    return False

@@ -36,12 +36,13 @@ from typing import Any
 
 import numpy as np
 
+from ghnerf_runtime.bound_text import past_bound
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, box_reach
 from ghnerf_runtime.errors import GeometryError, RigFileError
 from ghnerf_runtime.geometry.camera import (DISTORTION_NAMES, Camera, fold_terms_text, folded_by_tangential,
                                             nearest_rotation)
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.json_keys import JsonTextError, loads_remembering, remember_repeats
+from ghnerf_runtime.json_keys import JsonTextError, loads_remembering, nested_deeper_than, remember_repeats
 from ghnerf_runtime.path_check import is_utf8
 
 log = logging.getLogger(__name__)
@@ -79,6 +80,11 @@ MAX_DISTORTION = 1e3
 #: Largest rig file read, bytes: the example rig (docs/examples/rig.json) is 1.5 KB, so this holds hundreds of cameras
 #: with their metadata; anything larger (a log, an image, /dev/zero named by mistake) is refused before it is read.
 MAX_RIG_FILE_BYTES = 1 << 20
+#: Deepest nesting of objects and lists in ``metadata`` (the object itself is level 1): free-form notes are shallow;
+#: between about 500 and 1000 the JSON parser took the file and the copy of the metadata (recursive) failed with a
+#: bare RecursionError naming no file (a file is now refused past ``json_keys.MAX_JSON_DEPTH``), and a deeper dict given
+#: to :func:`rig_from_dict` failed so in ``json.dumps``.
+MAX_METADATA_DEPTH = 100
 #: Largest image width or height: the runtime's remap tables (OpenCV's fixed-point maps) address
 #: pixels with 16-bit integers. It also keeps absurd sizes (10**400) from overflowing the float checks.
 MAX_IMAGE_SIDE = 32767
@@ -174,6 +180,7 @@ __all__ = [
     "MAX_DISTORTION",
     "MAX_SKEW_SHARE",
     "MAX_RIG_FILE_BYTES",
+    "MAX_METADATA_DEPTH",
 ]
 
 
@@ -259,7 +266,9 @@ def principal_point_problem(K: Any, width: int, height: int, *, advice: str = _R
     off_x, off_y = abs(cx - (width - 1) / 2) / width, abs(cy - (height - 1) / 2) / height
     if off_x <= PRINCIPAL_POINT_TOLERANCE and off_y <= PRINCIPAL_POINT_TOLERANCE:
         return None
-    return (f"its principal point ({cx:g}, {cy:g}) lies {off_x:.0%} of the width and {off_y:.0%} of the height "
+    tol = PRINCIPAL_POINT_TOLERANCE
+    return (f"its principal point ({cx:g}, {cy:g}) lies {past_bound(off_x, tol, 0, '%')} of the width and "
+            f"{past_bound(off_y, tol, 0, '%')} of the height "
             f"from the centre of the {width}x{height} image (a real lens: within {PRINCIPAL_POINT_TOLERANCE:.0%}): "
             + advice)
 
@@ -273,9 +282,9 @@ def focal_length_problem(K: Any, width: int, height: int) -> str | None:
     for name, f in (("fx", float(K[0, 0])), ("fy", float(K[1, 1]))):
         if not low <= f <= high:
             fov = math.degrees(2.0 * math.atan(side / (2.0 * f))) if f > 0 else float("nan")
-            return (f"its focal length {name} = {f:g} px is outside {low:g}-{high:g} px ({FOCAL_RANGE[0]:g}-"
-                    f"{FOCAL_RANGE[1]:g} times the {width}x{height} image's longer side; a {fov:.3g}-degree view): a "
-                    f"typo, or a focal length in other units?")
+            return (f"its focal length {name} = {past_bound(f, low if f < low else high, 6)} px is outside "
+                    f"{low:g}-{high:g} px ({FOCAL_RANGE[0]:g}-{FOCAL_RANGE[1]:g} times the {width}x{height} image's "
+                    f"longer side; a {fov:.3g}-degree view): a typo, or a focal length in other units?")
     return None
 
 
@@ -287,9 +296,9 @@ def skew_problem(K: Any) -> str | None:
     if abs(skew) <= MAX_SKEW_SHARE * fx:
         return None
     off_square = 90.0 - math.degrees(math.atan2(fx, abs(skew)))  # how far the pixel axes are from square
-    return (f"its skew K[0][1] = {skew:g} px is {abs(skew) / fx:.3g} times fx = {fx:g} px (pixel axes {off_square:.3g} "
-            f"degrees off square; a sensor's: at most {MAX_SKEW_SHARE:g} times fx, 0 from OpenCV): a typo, or a matrix "
-            "in another layout?")
+    return (f"its skew K[0][1] = {skew:g} px is {past_bound(abs(skew) / fx, MAX_SKEW_SHARE, 3)} times fx = {fx:g} px "
+            f"(pixel axes {off_square:.3g} degrees off square; a sensor's: at most {MAX_SKEW_SHARE:g} times fx, 0 from "
+            "OpenCV): a typo, or a matrix in another layout?")
 
 
 def distortion_problem(dist: Any) -> str | None:
@@ -390,6 +399,9 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None, warn: boo
     metadata = data.get("metadata", {})
     if not isinstance(metadata, dict):
         chk._raise("metadata", f"must be a JSON object, got {_show(metadata)}")
+    if nested_deeper_than(metadata, MAX_METADATA_DEPTH):  # before anything below walks it recursively
+        chk._raise("metadata", f"is nested more than {MAX_METADATA_DEPTH} levels deep (objects and lists; "
+                               "MAX_METADATA_DEPTH): free-form notes, not data")
     try:  # what save_rig could not write back (it refuses NaN; a lone surrogate cannot be UTF-8)
         metadata_text = json.dumps(metadata, allow_nan=False, ensure_ascii=False)
     except ValueError:

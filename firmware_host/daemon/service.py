@@ -83,8 +83,8 @@ from firmware_host.daemon.memory import pin_mmap_threshold, return_freed_memory
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
 from firmware_host.daemon.sandbox import rig_url_hint, service_hint
 from firmware_host.daemon.status_claim import StatusFileClaim, StatusFileTaken, names_one_file
-from firmware_host.errors import FirmwareHostError
-from firmware_host.joint_frames import FrameNumbers, announced_scene_flags, estimate_frame
+from firmware_host.errors import CaptureTimeError, FirmwareHostError
+from firmware_host.joint_frames import FrameNumbers, announced_scene_flags, capture_time_us, estimate_frame
 from firmware_host.protocol.constants import Fault, Flags
 from firmware_host.service_unit import read_only_hint
 from firmware_host.sinks.base import Sink
@@ -616,15 +616,17 @@ class Daemon:
             # reload's trim (return_freed_memory), which then could not hand their pages back
             assert self._estimator is not None
             try:
+                capture_time_us(pair)  # one the stream cannot carry is refused before the model runs on it
                 result = self._estimator.estimate(pair.images, sequence=pair.sequence,
                                                   timestamp_s=pair.timestamps_ns[0] * 1e-9)
-            except (FrameError, ModelRunError) as e:
+            except (FrameError, CaptureTimeError, ModelRunError) as e:
                 # One pair onnxruntime fails on is skipped like a rejected one; it took the daemon down (exit 1,
                 # a restart: the model loaded again, the seqs from 0), with nothing in the status file to say why.
+                # So did a capture time before the clock's zero (a replay's keep_time=1 of such a take).
                 failed_runs = failed_runs + 1 if isinstance(e, ModelRunError) else 0
                 self.health.estimate_errors += 1
-                self.health.last_error = f"pair {pair.sequence} rejected: {e}" if isinstance(e, FrameError) else \
-                    f"pair {pair.sequence}: the model failed: {e}"
+                self.health.last_error = f"pair {pair.sequence}: the model failed: {e}" \
+                    if isinstance(e, ModelRunError) else f"pair {pair.sequence} rejected: {e}"
                 if failed_runs >= MAX_FAILED_RUNS:
                     _log.error("the model failed on %d pairs in a row: stopping, for a restart", failed_runs)
                     raise

@@ -231,7 +231,8 @@ class _Joints:
     """Unity-frame joint lookup that knows which joints are missing."""
 
     def __init__(self, joints_3d: np.ndarray) -> None:
-        j = np.asarray(joints_3d, np.float64)
+        with np.errstate(over="ignore"):  # a long double past float64's range is inf, missing below: nothing to warn
+            j = np.asarray(joints_3d, np.float64)
         if j.ndim != 2 or j.shape[1] != 4 or j.shape[0] < len(J):
             raise ValueError(f"joints_3d must have shape (25, 4) for BODY_25, got {j.shape}")
         self.p = rig_to_unity(j[:, :3])

@@ -5,6 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ghnerf_runtime.bound_text import past_bound
 from ghnerf_runtime.errors import GeometryError
 from ghnerf_runtime.geometry.camera import Camera, check_last_dim
 
@@ -118,7 +119,8 @@ class Rig:
             with np.errstate(over="ignore", invalid="ignore"):  # translations of 1e200: inf
                 distance = float(np.linalg.norm(cam.center - first.center))
             if not distance <= MAX_BASELINE_M:  # NaN too
-                return k, (f"camera {cam.name!r} is {distance:.4g} m from camera {first.name!r} (at most "
+                shown = past_bound(distance, MAX_BASELINE_M, 4)  # never "10 m" for 10.00001 m
+                return k, (f"camera {cam.name!r} is {shown} m from camera {first.name!r} (at most "
                            f"{MAX_BASELINE_M:g} m accepted, as between the pair's): translations in millimetres read "
                            "as metres? The rig's translations are in metres")
         return None
@@ -131,10 +133,12 @@ class Rig:
             return None
         a, b = self.pair
         if baseline > MAX_BASELINE_M:
-            return (f"cameras {a.name!r} and {b.name!r} are {baseline:.4g} m apart (at most {MAX_BASELINE_M:g} m "
-                    "accepted): translations in millimetres read as metres? The rig's translations are in metres "
-                    "(a foreign file's are converted with units_to_metres, 0.001 for millimetres)")
-        return (f"cameras {a.name!r} and {b.name!r} are {baseline * 1e3:.1f} mm apart (at least "
+            return (f"cameras {a.name!r} and {b.name!r} are {past_bound(baseline, MAX_BASELINE_M, 4)} m apart "
+                    f"(at most {MAX_BASELINE_M:g} m accepted): translations in millimetres read as metres? The rig's "
+                    "translations are in metres (a foreign file's are converted with units_to_metres, 0.001 for "
+                    "millimetres)")
+        shown_mm = past_bound(baseline * 1e3, MIN_BASELINE_M * 1e3, 1, "f")  # never "10.0 mm" for 9.99999 mm
+        return (f"cameras {a.name!r} and {b.name!r} are {shown_mm} mm apart (at least "
                 f"{MIN_BASELINE_M * 1e3:.0f} mm needed): two views from one point give no depth, so every joint would "
                 "be missing. Were only the intrinsics calibrated, or one camera's pose copied to both? Solve the "
                 "pair's extrinsics (ghcal solve)")

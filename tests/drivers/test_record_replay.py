@@ -473,6 +473,7 @@ def test_a_file_for_the_take_is_named_as_a_file(tmp_path):
 @pytest.mark.parametrize("text, says", [
     # each was a RecursionError or ValueError traceback from the replay's open (and the daemon's config check)
     ("[" * 100_000 + "]" * 100_000, "invalid JSON: nested too deeply"),
+    ('{"rig": ' + "[" * 500 + "]" * 500 + "}", "invalid JSON: nested too deeply"),  # parsed: a RecursionError
     ('{"version": 1' + "0" * 5000 + "}", "invalid JSON: Exceeds the limit (4300 digits)"),
     # JSON keeps the last: a hand-edited manifest's first value was lost without a word
     ('{"format": "ghnerf-rig-recording", "version": 1, "version": 1}', "duplicate key 'version'"),

@@ -68,3 +68,21 @@ def test_keep_time_streams_the_recorded_capture_times(take, tmp_path):
     joints = _stream_through_the_demo(tmp_path, f"replay://{out}?keep_time=1")
     assert [m.header.capture_us for m in joints] == [t // 1000 for t in recorded]
 
+
+
+def test_a_take_before_the_clock_s_zero_kept_is_refused_naming_the_stamp(tmp_path, capsys):
+    """A take whose recorded stamps are negative (the recording format's signed 64-bit allows them) played with
+    ``keep_time=1``: the joint stream carries capture times as unsigned microseconds, and the demo's first frame
+    failed in ``JointFrame`` with a traceback. Now one line naming the camera, the stamp and the way out (exit 2);
+    re-stamped (the default) the same take streams."""
+    out = tmp_path / "take"
+    url = f"record+sim://?fps=30&width=64&height=48&seed=1&policy=all&cache={tmp_path / 'cache'}&out={out}&lossless=1"
+    with drivers.open_rig(url, clock=drivers.ManualClock(-10**9)) as rig:
+        stamps = [rig.read(timeout_s=5.0).frames[0].timestamp_ns for _ in range(PAIRS)]
+    assert max(stamps) < 0
+    rc = demo.main(["--truth-only", "--url", f"replay://{out}?keep_time=1", "--seconds", "10",
+                    "--out", str(tmp_path / "kept"), "--sink", "memory://"])
+    error = capsys.readouterr().err
+    assert rc == 2
+    assert "camera 'left' frame 0 was captured at timestamp_ns=-1000000000" in error and "keep_time=1" in error, error
+    assert len(_stream_through_the_demo(tmp_path, f"replay://{out}")) == PAIRS

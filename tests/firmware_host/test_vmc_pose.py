@@ -1,6 +1,8 @@
 """BODY_25 -> Unity humanoid rotations (pure maths, known poses)."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -102,6 +104,19 @@ def test_a_coordinate_beyond_the_wire_s_reach_is_missing(value: float) -> None:
         assert np.abs(bone.local_position).max() < 33 and np.isfinite(bone.local_rotation).all()
     j[J["RKnee"], 2] = 32.0  # inside the reach: still a joint
     assert "RightLowerLeg" in solve_pose(j).bones
+
+
+@pytest.mark.skipif(np.finfo(np.longdouble).max <= np.finfo(np.float64).max, reason="long double is float64 here")
+def test_a_long_double_beyond_float64_is_missing_without_a_warning() -> None:
+    """JointFrame takes any real dtype, as the same float64 array would go out (docs/protocol.md, "NumPy values"):
+    the binary wire's quantiser made such a joint missing in silence, the VMC solver's cast warned "overflow
+    encountered in cast" (and raised under -W error) before making it missing."""
+    j = t_pose_rig().astype(np.longdouble)
+    j[J["RKnee"], 2] = np.longdouble(np.finfo(np.float64).max) * 16
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pose = solve_pose(j)
+    assert pose is not None and "RightLowerLeg" not in pose.bones and "LeftFoot" in pose.bones
 
 
 def test_shape_is_checked() -> None:

@@ -3,18 +3,27 @@ from __future__ import annotations
 
 import pytest
 
-from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
+from ghnerf_runtime.json_keys import MAX_JSON_DEPTH, JsonTextError, first_repeat, loads_remembering
 
 
 @pytest.mark.parametrize("text, said, placed", [
     ('{"a": 1,\n "b": }', "invalid JSON at line 2, column 7: Expecting value", True),
     ("[" * 100_000 + "]" * 100_000, "invalid JSON: nested too deeply", False),  # a RecursionError
+    # parsed, then a RecursionError from the readers' recursive walks (first_repeat, the plain copies)
+    ('{"a": ' + "[" * 900 + "]" * 900 + "}", "invalid JSON: nested too deeply (objects and arrays more than", False),
     ("1" * 5000, "invalid JSON: Exceeds the limit (4300 digits)", False),  # Python's integer limit
 ])
 def test_every_unreadable_text_is_one_error(text, said, placed):
     with pytest.raises(JsonTextError) as e:
         loads_remembering(text)
     assert str(e.value).startswith(said) and (e.value.line is not None) == placed
+
+
+def test_nesting_is_taken_up_to_max_json_depth():
+    at_the_bound = "[" * (MAX_JSON_DEPTH - 1) + "{}" + "]" * (MAX_JSON_DEPTH - 1)
+    assert first_repeat(loads_remembering(at_the_bound)) is None
+    with pytest.raises(JsonTextError, match="more than 128 levels"):
+        loads_remembering("[" + at_the_bound + "]")
 
 
 def test_repeated_keys_are_remembered_at_any_depth():

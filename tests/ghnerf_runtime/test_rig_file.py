@@ -14,6 +14,7 @@ from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (
+    MAX_METADATA_DEPTH,
     MIN_PAIR_ANGLE_DEG,
     camera_height_warning,
     volume_floor_warning,
@@ -219,6 +220,33 @@ def test_json_python_cannot_hold_is_a_rig_file_error(tmp_path, text, why):
     with pytest.raises(RigFileError, match=why) as info:
         load_rig(path)
     assert info.value.path == str(path) and "invalid JSON" in str(info.value)
+
+
+def _nested_lists(depth: int) -> list:
+    nested: list = []
+    for _ in range(depth - 1):
+        nested = [nested]
+    return nested
+
+
+@pytest.mark.parametrize("depth", [MAX_METADATA_DEPTH, 900, 5000])
+def test_metadata_nested_too_deep_is_named_not_a_recursion_error(tmp_path, example_dict, depth):
+    """Nesting the JSON parser takes (up to about 1000 levels) but Python's recursion does not: the file loaded as far
+    as the metadata's copy and failed with a bare RecursionError naming no file (a dict 5000 deep given to
+    rig_from_dict failed so in json.dumps). Refused by name past MAX_METADATA_DEPTH."""
+    example_dict["metadata"]["notes"] = _nested_lists(depth)  # levels: metadata 1, the lists 2 .. depth + 1
+    path = tmp_path / "deep.json"
+    if depth < 1000:  # what the parser reads: the file (past MAX_JSON_DEPTH refused as JSON nested too deeply)
+        path.write_text(json.dumps(example_dict))
+        with pytest.raises(RigFileError, match=r"nested more than 100 levels|nested too deeply") as info:
+            load_rig(path)
+        assert info.value.path == str(path)
+    with pytest.raises(RigFileError, match=rf"nested more than {MAX_METADATA_DEPTH} levels") as info:
+        rig_from_dict(example_dict)
+    assert info.value.field == "metadata"
+    example_dict["metadata"]["notes"] = _nested_lists(MAX_METADATA_DEPTH - 1)  # at the bound: loads, saves, reloads
+    save_rig(rig_from_dict(example_dict, warn=False), path)
+    assert load_rig(path, warn=False).metadata["notes"] == example_dict["metadata"]["notes"]
 
 
 def test_a_path_with_a_nul_character_is_a_rig_file_error():
@@ -449,6 +477,42 @@ def test_translations_in_millimetres_are_refused_naming_the_pair(example_dict, t
         load_rig(path)
     assert info.value.field == "cameras[1].t" and str(path) in str(info.value)
     assert "'left' and 'right' are 75 m apart (at most 10 m" in str(info.value) and "millimetres" in str(info.value)
+
+
+def _pair_apart(example_dict: dict, baseline_m: float) -> None:
+    """Both cameras facing +z, ``baseline_m`` apart along x."""
+    for cam, x in zip(example_dict["cameras"], (0.0, -baseline_m)):
+        cam["R"], cam["t"] = np.eye(3).tolist(), [x, 1.2, 0.0]
+
+
+def _offset_principal_point(example_dict: dict, share: float) -> None:
+    cam = example_dict["cameras"][0]
+    cam["K"][0][2] = (cam["width"] - 1) / 2 + share * cam["width"]
+
+
+def _focal(example_dict: dict, fx: float) -> None:
+    example_dict["cameras"][0]["K"][0][0] = fx
+
+
+def _skew(example_dict: dict, share: float) -> None:
+    cam = example_dict["cameras"][0]
+    cam["K"][0][1] = share * cam["K"][0][0]
+
+
+@pytest.mark.parametrize("change, shown", [
+    (lambda d: _pair_apart(d, 0.00999999), "are 9.99999 mm apart (at least 10 mm needed)"),  # was "10.0 mm apart"
+    (lambda d: _pair_apart(d, 10.00001), "are 10.00001 m apart (at most 10 m accepted)"),  # was "10 m apart"
+    (lambda d: _offset_principal_point(d, 0.10001), "lies 10.001% of the width"),  # was "10% ... (within 10%)"
+    (lambda d: _focal(d, 12.7999999), "fx = 12.7999999 px is outside 12.8-128000 px"),  # was "12.8 px is outside 12.8"
+    (lambda d: _skew(d, 0.1000001), "is 0.1000001 times fx"),  # was "0.1 times fx ... at most 0.1 times fx"
+], ids=["pair too near", "pair too far", "principal point", "focal length", "skew"])
+def test_a_value_just_past_a_bound_is_not_shown_as_the_bound(example_dict, change, shown):
+    """A figure just outside its bound was written on it ("10.0 mm apart (at least 10 mm needed)"), a refusal that
+    read as one of an allowed value. Shown with the digits that tell them apart; far from the bound, as before."""
+    change(example_dict)
+    with pytest.raises(RigFileError) as info:
+        rig_from_dict(example_dict, path="rig.json", warn=False)
+    assert shown in str(info.value), str(info.value)
 
 
 @pytest.mark.filterwarnings("error")

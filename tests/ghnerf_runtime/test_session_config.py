@@ -137,6 +137,7 @@ def test_a_config_file_with_a_byte_order_mark_loads(tmp_path):
 @pytest.mark.parametrize("text, why", [
     ('{"session": {"threads": ' + "1" * 5000 + "}}", "4300 digits"),  # was a bare ValueError
     ("[" * 100_000 + "]" * 100_000, "nested too deeply"),  # was a RecursionError
+    ('{"smoothing": {"enabled": ' + "[" * 500 + "]" * 500 + "}}", "nested too deeply"),  # parsed: a RecursionError
 ])
 def test_json_python_cannot_hold_is_a_config_error(tmp_path, text, why):
     path = tmp_path / "odd.json"

@@ -486,6 +486,32 @@ def test_the_model_failing_on_every_pair_stops_the_daemon_saying_why(sim_url, tm
     assert report["last_error"].startswith("stopped by ModelRunError: human.onnx: graph 'human' failed")
 
 
+def test_a_take_s_negative_capture_times_kept_are_rejected_pairs_not_a_crash(sim_url, tmp_path, monkeypatch, caplog):
+    """The recording format allows negative stamps (signed 64-bit), and ``keep_time=1`` delivers them, but the
+    stream's capture times are unsigned microseconds: the first such pair failed in ``JointFrame`` with a bare
+    ``ValueError`` and stopped the daemon (exit 1: a restart, then the same). Each is a rejected pair now, counted
+    and logged before the model runs on it; the take plays to its end."""
+    import firmware_host.daemon.service as service
+
+    take = tmp_path / "take"
+    with drivers.open_rig(f"record+{sim_url}&policy=all&out={take}", clock=drivers.ManualClock(-10**9)) as rig:
+        for _ in range(6):  # stamps from -1 s, 1/30 s apart: every one negative
+            rig.read(timeout_s=5)
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _CountingEstimator)
+    with caplog.at_level(logging.WARNING, logger="ghnerf.daemon"):
+        with _Running(_config({"url": f"replay://{take}?keep_time=1&speed=free"}, tmp_path), tmp_path) as run:
+            run.thread.join(timeout=60)  # rig.exit_at_end: the daemon stops by itself
+            assert not run.thread.is_alive()
+    assert run.rc == [0]
+    health = run.daemon.health
+    assert health.estimate_errors == health.pairs_read == 6 and health.pairs_estimated == 0
+    rejected = [r.getMessage() for r in caplog.records if "rejected" in r.getMessage()]
+    assert len(rejected) == 1 and "frame 0 was captured at timestamp_ns=-1000000000" in rejected[0], rejected
+    assert "keep_time=1" in rejected[0]
+    assert run.daemon._estimator.calls == 0
+
+
 def test_an_absent_rig_is_waited_for_then_a_recording_plays_to_its_end(sim_url, tmp_path):
     take = tmp_path / "take"
     with drivers.open_rig(f"record+{sim_url}&policy=all&out={tmp_path / 'made'}") as rig:
