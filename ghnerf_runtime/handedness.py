@@ -11,8 +11,8 @@ left-to-right axis and its up axis, points to its back, where the nose and the t
 people and answers a person's handedness whatever the triangulation: measured, it hid the mirror entirely). The
 figure is in the body's own frame, so turning round, bending or a handstand leave it as it is; a mirror image turns
 its sign. A body lying (:data:`LYING_BAND_DEG`), or whose found joints span too little of its width to give its left
-(:data:`MIN_LEFT_SPAN_M`: side-on) gives none: there the model's left and right are not to be trusted. A
-few dot products a pair.
+(:data:`MIN_LEFT_SPAN_M`: side-on) gives none: there the model's left and right are not to be trusted; nor does a
+torso wider than one body's (:data:`MAX_TORSO_SPAN_M`: another person's joints mixed in). A few dot products a pair.
 """
 from __future__ import annotations
 
@@ -23,7 +23,8 @@ import numpy as np
 
 from ghnerf_runtime.body25 import JOINT_INDEX
 
-__all__ = ["handedness", "LEFTWARD_PAIRS", "FORWARD_CUES", "BACK_JOINTS", "LYING_BAND_DEG", "MIN_LEFT_SPAN_M"]
+__all__ = ["handedness", "LEFTWARD_PAIRS", "TORSO_SPANS", "FORWARD_CUES", "BACK_JOINTS", "LYING_BAND_DEG",
+           "MIN_LEFT_SPAN_M", "MAX_TORSO_SPAN_M"]
 
 _J = JOINT_INDEX
 #: (a, b) pairs whose ``a - b`` points to the person's left: the shoulders and hips, through the neck and the mid-hip
@@ -37,6 +38,10 @@ LEFTWARD_PAIRS: tuple[tuple[int, int], ...] = (
     (_J["LShoulder"], _J["Neck"]), (_J["Neck"], _J["RShoulder"]), (_J["LShoulder"], _J["RShoulder"]),
     (_J["LHip"], _J["MidHip"]), (_J["MidHip"], _J["RHip"]), (_J["LHip"], _J["RHip"]),
     (_J["LKnee"], _J["RKnee"]), (_J["LAnkle"], _J["RAnkle"]))
+#: The :data:`LEFTWARD_PAIRS` across the torso (the shoulders and hips, through the neck and the mid-hip): one body's
+#: width bounds them, where the knees and ankles spread as far as a stride (one person's up to 0.8 m on the bench's
+#: takes as filmed).
+TORSO_SPANS: tuple[tuple[int, int], ...] = LEFTWARD_PAIRS[:6]
 _TOP = _J["Neck"]
 _SHOULDERS = (_J["LShoulder"], _J["RShoulder"])
 _HIPS = (_J["MidHip"], _J["LHip"], _J["RHip"])
@@ -77,6 +82,17 @@ _LEVEL_MAX_UP_Y = math.sin(math.radians(LYING_BAND_DEG))  # |up . gravity| of an
 #: 270`` and ``--sequences 30 --frames 30``, session 66 (docs/calibration.md, "Cameras exchanged").
 MIN_LEFT_SPAN_M = 0.1
 _MIN_LEFT_SPAN_SQ = MIN_LEFT_SPAN_M ** 2  # (squared once: the summed span is compared squared on every pair)
+#: Longest of the found :data:`TORSO_SPANS` (metres) that gives a figure: a torso wider than this is not one body's
+#: (shoulders about 0.4 m apart, plus the triangulation's depth error at the working volume's far end, up to 0.43 m
+#: on a hip: ``two_people.SLACK_DEPTH_BASELINES``). With a second person beside the subject the runtime does not
+#: always call the pair ``several_people``, and a shoulder or hip paired with the other person's peak in one view
+#: lies about a metre off along the line of sight: such pairs read -0.41 to +0.47 on the true rig (20 of 22 under
+#: +0.3), and a short take's window -0.19 against the -0.2 limit (``benchmarks/measure_exchanged_cameras.py
+#: --sequences 20 --frames 30 --second 1.0,0.4``, session 67). One person's torso spans stayed under it in 540 of 547
+#: figures of the bench's takes as filmed, and 5 of the 7 over it read below 0 (docs/calibration.md, "Cameras
+#: exchanged").
+MAX_TORSO_SPAN_M = 0.8
+_MAX_TORSO_SPAN_SQ = MAX_TORSO_SPAN_M ** 2
 #: Shortest span (metres) given a direction: joints closer than a micrometre are one point (a repeated peak).
 _TINY_M = 1e-6
 
@@ -96,9 +112,19 @@ def _mean_of(points: np.ndarray, found: np.ndarray, joints: Sequence[int]) -> np
     return points[idx].mean(axis=0) if idx else None
 
 
+def _wider_than_a_body(points: np.ndarray, found: np.ndarray) -> bool:
+    """Whether a found :data:`TORSO_SPANS` span is longer than :data:`MAX_TORSO_SPAN_M`: joints of two people."""
+    for a, b in TORSO_SPANS:
+        if found[a] and found[b]:
+            span = points[a] - points[b]
+            if float(span @ span) > _MAX_TORSO_SPAN_SQ:
+                return True
+    return False
+
+
 def _body_axes(points: np.ndarray, found: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """The person's leftward and upward unit axes from the found torso joints (None: too few of them, or the leftward
-    spans summing under :data:`MIN_LEFT_SPAN_M`)."""
+    """The person's leftward and upward unit axes from the found torso joints (None: too few of them, the leftward
+    spans summing under :data:`MIN_LEFT_SPAN_M`, or a torso span over :data:`MAX_TORSO_SPAN_M`)."""
     leftward = [points[a] - points[b] for a, b in LEFTWARD_PAIRS if found[a] and found[b]]
     top = points[_TOP] if found[_TOP] else _mean_of(points, found, _SHOULDERS)
     bottom = _mean_of(points, found, _HIPS)
@@ -108,6 +134,8 @@ def _body_axes(points: np.ndarray, found: np.ndarray) -> tuple[np.ndarray, np.nd
         return None
     summed = sum(leftward)
     if float(summed @ summed) < _MIN_LEFT_SPAN_SQ:  # too little of the body's width to tell its left by
+        return None
+    if _wider_than_a_body(points, found):  # another person's shoulder or hip mixed in
         return None
     left, up = _unit(summed), _unit(top - bottom)
     return None if left is None or up is None else (left, up)
@@ -127,8 +155,9 @@ def handedness(points: np.ndarray, found: np.ndarray) -> float | None:
     times the sine of the angle between the unit left and up axes (a skewed torso reads weaker). Within [-1, 1]
     (clipped: a cue straight ahead read 1 + 2e-16 by rounding, which ``PairResult`` refused). ``None`` when the
     torso gives no axes (its found spans summing under :data:`MIN_LEFT_SPAN_M` of width among them: side-on, one
-    side seen) or no cue is found, when a heel is (:data:`BACK_JOINTS`: the person's back to the rig, where
-    the model's left and right and its nose are not to be trusted), or when the body lies (:data:`LYING_BAND_DEG`).
+    side seen; or one torso span over :data:`MAX_TORSO_SPAN_M`: two people's joints) or no cue is found, when a heel
+    is (:data:`BACK_JOINTS`: the person's back to the rig, where the model's left and right and its nose are not to be
+    trusted), or when the body lies (:data:`LYING_BAND_DEG`).
 
     Args:
         points: ``(25, 3)`` BODY_25 joints, metres.

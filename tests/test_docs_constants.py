@@ -49,7 +49,7 @@ from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import FOOT_STANDING_M, MAX_FOOT_STANDING_M, MIN_CUTOFF_HZ, Joints3DConfig, RoiConfig, \
     TrackingConfig
-from ghnerf_runtime.handedness import LYING_BAND_DEG, MIN_LEFT_SPAN_M
+from ghnerf_runtime.handedness import LYING_BAND_DEG, MAX_TORSO_SPAN_M, MIN_LEFT_SPAN_M
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
 from ghnerf_runtime.body_lie import KEPT_TURN_SECTOR_DEG, KEPT_TURN_STEP_DEG, TURN_LIE_TOLERANCE_DEG, \
     TURN_MIN_FROM_SIGHT_DEG, TURN_NEAR_LIE_DEG
@@ -159,6 +159,8 @@ def _doc(name: str) -> str:
     ("docs/calibration.md", f"within {LYING_BAND_DEG:g} degrees of level; the rig frame's y is along"),
     # and a left axis from too little of the body's width (side-on) gives none
     ("docs/calibration.md", f"summing under {MIN_LEFT_SPAN_M * 100:g} cm (`handedness.MIN_LEFT_SPAN_M`"),
+    # session 67's: a torso wider than one body's (another person's joints mixed in) gives none
+    ("docs/calibration.md", f"wider than {MAX_TORSO_SPAN_M * 100:g} cm (`handedness.MAX_TORSO_SPAN_M`"),
     ("docs/runtime.md", f"coarser than {MAX_TIME_STEP_S * 1e3:g} ms at its value (`estimator.MAX_TIME_STEP_S`)"),
     ("docs/rig-file.md", f"outside {CAMERA_HEIGHT_RANGE_M[0]:g}-{CAMERA_HEIGHT_RANGE_M[1]:g} m "
                          "(`CAMERA_HEIGHT_RANGE_M`:"),
