@@ -14,8 +14,10 @@ near edge at that lens distance (never under 0.5 m); at the distance where that 
 centre is whole in both images, aim and lens model included (where it is within the far edge); and the lens near
 edge with the far edge at ``--far``. Every row films the same people: the bench's held-out sequences
 (``measure_baseline.bench_scene_in``'s seeds) drawn in the lens-near volume up to ``--far`` (so inside every row's
-volume; ``--people written``: in the volume as written), each sequence cold, the runtime's defaults. Cells: the volume's depth range,
-the cold crop's side and the same standing person's height in it (for the rig as told) and scores. A tool, not a test.
+volume; ``--people written``: in the volume as written), each sequence cold, the runtime's defaults. Cells: the
+volume's depth range, the cold crop's side and the same standing person's height in it (for the rig as told) and
+scores. Session 67 measured it (docs/rig-file.md, "The volume's near edge"): the crop does not move, the 3 m wide
+volume filling the image's width from either near edge. A tool, not a test.
 """
 from __future__ import annotations
 
@@ -67,6 +69,7 @@ def whole_fit_m(rig: Rig) -> float | None:
 
 
 def told(rig: Rig, volume: WorkingVolume, label: str) -> Rig:
+    """``rig``'s cameras told ``volume``, ``label`` after its id (the row's name)."""
     return Rig(rig.cameras, volume, rig_id=f"{rig.rig_id} {label}", metadata=rig.metadata)
 
 
@@ -119,6 +122,7 @@ def run_sequence(session, cfg, rig: Rig, people: WorkingVolume, k: int, frames: 
 
 
 def rig_named(name: str) -> Rig:
+    """``--rigs``' entry: ``synth`` is ``ghcal synth``'s rig, anything else a rig file."""
     return example_rig() if name == "synth" else load_rig(name)
 
 
@@ -148,8 +152,8 @@ def main(argv=None) -> int:
         for row in variants(rig, args.far):
             runs = [run_sequence(session, cfg, row, people, k, args.frames) for k in range(args.sequences)]
             depth = f"{row.volume.min_corner[2]:.2f}-{row.volume.max_corner[2]:.2f}"
-            print(f"| {name}: {row.rig_id.split(' ', 1)[1]} | {depth} | {crop_cells(row, people, session.contract.width)} "
-                  f"| {score_cells(runs)} |", flush=True)
+            crop = crop_cells(row, people, session.contract.width)
+            print(f"| {name}: {row.rig_id.split(' ', 1)[1]} | {depth} | {crop} | {score_cells(runs)} |", flush=True)
     return 0
 
 
