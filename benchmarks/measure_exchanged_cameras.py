@@ -5,7 +5,7 @@
                                                                    [--heading-deg 180] [--rig higher|toed-in|wide]
                                                                    [--only 25 ...]
                                                                    [--pose lying_x|lying_z|upside_down]
-                                                                   [--second DX,DZ]
+                                                                   [--second DX,DZ] [--per-sequence]
 
 The simulator films the bench's held-out-like scenes (``ghnerf-bench runtime``'s recipe and cache: held-out motions,
 random rig placements, every rig symmetric about its centre plane, both cameras aimed at one point). Each sequence is
@@ -15,9 +15,10 @@ handedness (``PairResult.handedness``: +1 a person, -1 a mirror image; the pairs
 ``--window`` consecutive figures of one sequence, and per sequence the daemon's three calibration checks run over its
 pairs (:mod:`firmware_host.daemon.calibration_watch`, the daemon's limits, a ``--window`` window each): the
 sequences each flagged, and for the handedness check the pairs read until it did. Only sequences with a full window
-of handedness figures are judged (the daemon waits for a full window). Last, the pairs' heel peaks as filmed, by the
-way the true person faces (a heel at the presence threshold in both views gives no figure since session 66:
-``ghnerf_runtime.handedness.BACK_JOINTS``). A tool, not a test.
+of handedness figures are judged (the daemon waits for a full window); ``--per-sequence`` adds a line a sequence:
+its figures, their median, its windows' range and the pair the handedness check flagged at, either way. Last, the
+pairs' heel peaks as filmed, by the way the true person faces (a heel at the presence threshold in both views gives no
+figure since session 66: ``ghnerf_runtime.handedness.BACK_JOINTS``). A tool, not a test.
 
 ``--heading-deg`` and ``--rig`` render the same scenes afresh (no cache), each person turned to that heading (180: their
 back to the rig for the whole take; the motion's own turns stay) or filmed by another rig than the bench's: ``higher``
@@ -213,6 +214,15 @@ def judge(results: list, window: int) -> dict:
             "ever": {k: c.suspect or (k == "hand" and flagged_at is not None) for k, c in checks.items()}}
 
 
+def sequence_windows_text(verdict: dict, window: int) -> str:
+    """One sequence's windows for its ``--per-sequence`` line: their medians' range (a short take: one window of all
+    its figures, as the summary counts it) and the pair the handedness check flagged at."""
+    rolled = rolling_medians(verdict["hands"], window)
+    text = f", windows {min(rolled):5.2f} to {max(rolled):5.2f}" if rolled else ", windows     - to     -"
+    at = verdict["flagged_at"]
+    return text + (f", flagged after {at} pairs" if at is not None else ", not flagged")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", default="models")
@@ -220,7 +230,7 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--window", type=int, default=30, help="figures per window (health.calibration_window)")
     ap.add_argument("--per-sequence", action="store_true", help="also a line per sequence: its handedness figures' "
-                                                               "median as filmed and exchanged")
+                                                               "median, windows and flag as filmed and exchanged")
     ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     ap.add_argument("--heading-deg", type=float, help="render afresh, every person turned so (180: back to the rig)")
     ap.add_argument("--rig", choices=RIGS, default="bench", help="render afresh on this rig (module docstring)")
@@ -267,7 +277,8 @@ def main(argv=None) -> int:
                 results = [r if face_seen(r, threshold) else _without_figure(r) for r in results]
             verdict = judge(results, args.window)
             h = verdict["hands"]
-            line += f" {setting} {len(h):3d} figures, median " + (f"{np.median(h):5.2f}" if h else "    -") + ";"
+            line += f" {setting} {len(h):3d} figures, median " + (f"{np.median(h):5.2f}" if h else "    -")
+            line += sequence_windows_text(verdict, args.window) + ";"
             acc["hands"] += verdict["hands"]
             acc["rolled"] += rolling_medians(verdict["hands"], args.window)
             if len(verdict["hands"]) >= args.window:  # the daemon judges full windows only

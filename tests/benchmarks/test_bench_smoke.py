@@ -215,6 +215,25 @@ def test_measure_exchanged_cameras(model, capsys, monkeypatch):
     assert re.search(r"^  +as filmed \| .*\n  +exchanged \| ", out, re.M), out
 
 
+def test_measure_exchanged_cameras_per_sequence_windows_and_flag(model, capsys, monkeypatch):
+    """--per-sequence gives each sequence's windows and the pair its handedness flag came at (the figures docs/
+    calibration.md quotes of single takes, two people beside each other)."""
+    out = run_script("measure_exchanged_cameras", "--model-dir", model, *SIZES, "--window", "2", "--per-sequence",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    setting = r" +\d+ figures, median +(-|-?\d\.\d\d), windows +(- to +-|-?\d\.\d\d to +-?\d\.\d\d), " \
+              r"(not flagged|flagged after \d+ pairs);"
+    assert re.search(rf"^  sequence +0 \(.*\): as filmed{setting} exchanged{setting}$", out, re.M), out
+
+
+def test_measure_exchanged_cameras_sequence_windows_text():
+    """A sequence's windows are read as the summary's (a short take: one window of all its figures)."""
+    text = runpy.run_path(str(BENCH / "measure_exchanged_cameras.py"))["sequence_windows_text"]
+    assert text({"hands": [0.5, -0.5, -0.7, -0.9], "flagged_at": 4}, 3) == \
+        ", windows -0.70 to -0.50, flagged after 4 pairs"
+    assert text({"hands": [0.25], "flagged_at": None}, 30) == ", windows  0.25 to  0.25, not flagged"
+    assert text({"hands": [], "flagged_at": None}, 30) == ", windows     - to     -, not flagged"
+
+
 def test_measure_exchanged_cameras_renders_the_bench_sequence_as_load_sequences_does():
     """Its own rendering (for --heading-deg and --rig) is simdata.render_frames, the bench's: as drawn, on the bench's
     rig, its frames and truth are the bench sequence's (a copy of the render loop kept no 2D truth)."""
