@@ -86,11 +86,11 @@ _MIN_LEFT_SPAN_SQ = MIN_LEFT_SPAN_M ** 2  # (squared once: the summed span is co
 #: (shoulders about 0.4 m apart, plus the triangulation's depth error at the working volume's far end, up to 0.43 m
 #: on a hip: ``two_people.SLACK_DEPTH_BASELINES``). With a second person beside the subject the runtime does not
 #: always call the pair ``several_people``, and a shoulder or hip paired with the other person's peak in one view
-#: lies about a metre off along the line of sight: such pairs read -0.41 to +0.47 on the true rig (20 of 22 under
-#: +0.3), and a short take's window -0.19 against the -0.2 limit (``benchmarks/measure_exchanged_cameras.py
-#: --sequences 20 --frames 30 --second 1.0,0.4``, session 67). One person's torso spans stayed under it in 540 of 547
-#: figures of the bench's takes as filmed, and 5 of the 7 over it read below 0 (docs/calibration.md, "Cameras
-#: exchanged").
+#: lies far off along the line of sight: a short take's window read -0.19 against the -0.2 limit before this bound,
+#: +0.22 after; it drops 16 of 154 figures as filmed and 28 of 176 exchanged there
+#: (``benchmarks/measure_exchanged_cameras.py --sequences 20 --frames 30 --second 1.0,0.4``, session 67). One
+#: person's torso spans stayed under it in 540 of 547 figures of the bench's takes as filmed (``--sequences 30
+#: --frames 30``; docs/calibration.md, "Cameras exchanged").
 MAX_TORSO_SPAN_M = 0.8
 _MAX_TORSO_SPAN_SQ = MAX_TORSO_SPAN_M ** 2
 #: Shortest span (metres) given a direction: joints closer than a micrometre are one point (a repeated peak).
