@@ -88,6 +88,10 @@ MAX_METADATA_DEPTH = 100
 #: Largest image width or height: the runtime's remap tables (OpenCV's fixed-point maps) address
 #: pixels with 16-bit integers. It also keeps absurd sizes (10**400) from overflowing the float checks.
 MAX_IMAGE_SIDE = 32767
+#: Farthest 2D joint coordinate, pixels, the joint stream carries: JOINTS_2D sends u and v as 16-bit quarter pixels
+#: (docs/protocol.md; ``firmware_host.protocol.quantize``), 32767 / 4; one past it goes out as missing. Loading warns
+#: of a pair camera whose image reaches past it (wider or taller than 8192 pixels).
+WIRE_2D_MAX_PX = 32767 / 4
 #: Smallest angle (degrees) between the pair's lines of sight to the working volume's centre before loading warns that
 #: the pair is too narrow for its distance (baseline over distance, in radians, for a pair facing the volume). Twice the
 #: default ``joints3d.min_ray_angle_deg`` (0.5), which drops a joint whose rays meet at less: the angle shrinks further
@@ -181,6 +185,8 @@ __all__ = [
     "MAX_SKEW_SHARE",
     "MAX_RIG_FILE_BYTES",
     "MAX_METADATA_DEPTH",
+    "WIRE_2D_MAX_PX",
+    "wire_2d_range_warning",
 ]
 
 
@@ -429,7 +435,8 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None, warn: boo
 def rig_warnings(rig: Rig) -> list[str]:
     """What loading warns of in a rig it accepts: a lens model folding inside its image, a pair too narrow for its
     working distance, a camera at an implausible height above the floor, a working volume off the floor, a person
-    standing at the volume's centre who does not fit the pair's views."""
+    standing at the volume's centre who does not fit the pair's views, a pair camera whose 2D joints the joint stream
+    cannot carry in part."""
     out = [lens_fold_warning(cam) for cam in rig.cameras if cam.fold_inside_image()]
     if narrow := narrow_pair_warning(rig):
         out.append(narrow)
@@ -438,6 +445,7 @@ def rig_warnings(rig: Rig) -> list[str]:
         out.append(floor)
     elif outside := person_outside_view_warning(rig):  # (a volume off the floor holds no one standing: said above)
         out.append(outside)
+    out.extend(filter(None, (wire_2d_range_warning(cam) for cam in rig.pair)))
     return out
 
 
@@ -548,6 +556,17 @@ def _cameras_showing_under(rig: Rig, share_bound: float) -> list[str]:
     height of the person standing at the working volume's centre (:func:`person_in_view_share`)."""
     shares = [(cam.name, person_in_view_share(cam, rig.volume)) for cam in rig.pair]
     return [f"camera {name!r} shows {share:.0%} of their height" for name, share in shares if share < share_bound]
+
+
+def wire_2d_range_warning(cam: Camera) -> str | None:
+    """Why some of ``cam``'s 2D joints cannot go out on the joint stream (its image reaches past
+    :data:`WIRE_2D_MAX_PX`: pixel centres at integers, the last pixel's far edge at ``side - 0.5``), or None. They
+    went out missing with no word."""
+    if max(cam.width, cam.height) - 0.5 <= WIRE_2D_MAX_PX:
+        return None
+    return (f"camera {cam.name!r} is {cam.width}x{cam.height} pixels, but the joint stream sends 2D joints as 16-bit "
+            f"quarter pixels (docs/protocol.md, JOINTS_2D): its 2D joints past {WIRE_2D_MAX_PX:g} px (WIRE_2D_MAX_PX) "
+            "are sent as missing; its 3D joints are unaffected")
 
 
 def camera_height_warning(cam: Camera) -> str | None:
