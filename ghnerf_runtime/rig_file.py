@@ -480,7 +480,8 @@ def narrow_pair_warning(rig: Rig) -> str | None:
         return None
     distance = float(np.linalg.norm(centre - 0.5 * (a.center + b.center)))
     return (f"cameras {a.name!r} and {b.name!r} are {rig.baseline * 1e3:.0f} mm apart and {distance:.2f} m from the "
-            f"working volume's centre: their rays meet there at {angle:.2f} degrees (under {MIN_PAIR_ANGLE_DEG:g}, "
+            f"working volume's centre: their rays meet there at {past_bound(angle, MIN_PAIR_ANGLE_DEG, 2, 'f')} "
+            f"degrees (under {MIN_PAIR_ANGLE_DEG:g}, "
             "MIN_PAIR_ANGLE_DEG), so the 3D joints will be far off in depth, or missing where their rays meet under "
             "joints3d.min_ray_angle_deg (docs/rig-file.md, \"Baseline and camera height\"). Mount the cameras "
             "farther apart")
@@ -494,7 +495,8 @@ def volume_floor_warning(rig: Rig) -> str | None:
     if gap <= MAX_VOLUME_FLOOR_GAP_M:
         return None
     where = "above" if bottom < 0.0 else "below"
-    return (f"working volume: y from {top:g} to {bottom:g} lies {gap:.2f} m {where} the floor (y = 0, y down; over "
+    shown = past_bound(gap, MAX_VOLUME_FLOOR_GAP_M, 2, "f")  # never "0.50 m" for 0.5001 m
+    return (f"working volume: y from {top:g} to {bottom:g} lies {shown} m {where} the floor (y = 0, y down; over "
             f"{MAX_VOLUME_FLOOR_GAP_M:g} m, MAX_VOLUME_FLOOR_GAP_M): a person standing on the floor is outside it, "
             "their joints missing, and the skeleton prior reads heights from y = 0. Is the origin on the floor, y "
             "pointing down? A standing person's volume reaches y = 0 (docs/examples/rig.json: -2.2 to 0.05)")
@@ -576,8 +578,9 @@ def camera_height_warning(cam: Camera) -> str | None:
     height = -float(cam.center[1])
     if lo <= height <= hi:
         return None
-    shown = round(height, 2) + 0.0  # + 0.0: a camera on the floor to rounding shows 0.00, not -0.00
-    return (f"camera {cam.name!r} stands {shown:.2f} m above the floor (y = 0, y down), outside the {lo:g}-{hi:g} m "
+    shown = past_bound(height, lo if height < lo else hi, 2, "f")  # never "10.00 m" for 10.001 m
+    shown = "0.00" if shown == "-0.00" else shown  # a camera on the floor to rounding
+    return (f"camera {cam.name!r} stands {shown} m above the floor (y = 0, y down), outside the {lo:g}-{hi:g} m "
             "(CAMERA_HEIGHT_RANGE_M) of a camera on the floor to a hall's ceiling: the runtime reads heights from the "
             "floor (the skeleton prior) and every joint may come out missing. Is the origin on the floor below the "
             "cameras' midpoint, y pointing down? Level the rig (calibration.level.level_rig, "

@@ -1066,3 +1066,30 @@ def test_the_2d_range_warned_of_is_the_one_the_wire_s_quantiser_keeps():
     uv, _, missing = quantise_joints_2d(joints)
     assert missing.tolist() == [False, False, True, True]
     assert uv[0, 0] == uv[1, 1] == np.iinfo(np.int16).max
+
+
+def _pair_meeting_at(example_dict: dict, angle_deg: float) -> Rig:
+    """The example rig's pair moved apart along x until their rays meet at the volume's centre at ``angle_deg``."""
+    lo, hi = 0.01, 0.2
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        _pair_apart(example_dict, mid)
+        rig = rig_from_dict(example_dict, warn=False)
+        lo, hi = (mid, hi) if pair_angle_deg(rig, rig.volume.center) < angle_deg else (lo, mid)
+    return rig
+
+
+def test_the_rig_warnings_never_write_a_figure_just_past_its_bound_as_the_bound(example_dict):
+    """As the refusals (bound_text.past_bound): rays meeting at 0.999 degrees were said to meet "at 1.00 degrees
+    (under 1", a volume 0.5001 m off the floor "0.50 m above the floor (... over 0.5 m", a camera 10.001 m up "stands
+    10.00 m above the floor ... outside the 0.05-10 m", one 0.0499 m up "0.05 m"."""
+    narrow = narrow_pair_warning(_pair_meeting_at(copy.deepcopy(example_dict), 0.9999))
+    assert narrow is not None and "rays meet there at 0.9999 degrees (under 1," in narrow, narrow
+    example_dict["working_volume"]["max"][1] = -0.5001
+    floor = volume_floor_warning(rig_from_dict(example_dict, warn=False))
+    assert floor is not None and "lies 0.5001 m above the floor" in floor, floor
+    for height, shown in ((10.001, "10.001"), (0.0499, "0.0499"), (-0.001, "0.00"), (-0.02, "-0.02")):
+        cam = Camera("up", 640, 480, [[500.0, 0.0, 319.5], [0.0, 500.0, 239.5], [0.0, 0.0, 1.0]], [], np.eye(3),
+                     [0.0, height, 0.0])
+        message = camera_height_warning(cam)
+        assert message is not None and f"stands {shown} m above the floor" in message, (height, message)
