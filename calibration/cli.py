@@ -858,7 +858,7 @@ def _declared_units(path: Path) -> float | None:
 
     try:
         meta = tomllib.loads(path.read_text(encoding="utf-8-sig")).get("metadata")  # as the reader: a BOM is skipped
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):  # RecursionError: nested thousands deep
         return None  # the reader names what is wrong with it
     if meta is not None and not isinstance(meta, dict):  # metadata = 5 was passed over as no unit recorded
         raise RigFileError(f"must be a table ([metadata]), got {meta!r}", path=str(path), field="metadata")

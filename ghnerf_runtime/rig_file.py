@@ -88,6 +88,10 @@ MAX_METADATA_DEPTH = 100
 #: Largest image width or height: the runtime's remap tables (OpenCV's fixed-point maps) address
 #: pixels with 16-bit integers. It also keeps absurd sizes (10**400) from overflowing the float checks.
 MAX_IMAGE_SIDE = 32767
+#: Farthest 2D joint coordinate, pixels, the joint stream carries: JOINTS_2D sends u and v as 16-bit quarter pixels
+#: (docs/protocol.md; ``firmware_host.protocol.quantize``), 32767 / 4; one past it goes out as missing. Loading warns
+#: of a pair camera whose image reaches past it (wider or taller than 8192 pixels).
+WIRE_2D_MAX_PX = 32767 / 4
 #: Smallest angle (degrees) between the pair's lines of sight to the working volume's centre before loading warns that
 #: the pair is too narrow for its distance (baseline over distance, in radians, for a pair facing the volume). Twice the
 #: default ``joints3d.min_ray_angle_deg`` (0.5), which drops a joint whose rays meet at less: the angle shrinks further
@@ -181,6 +185,8 @@ __all__ = [
     "MAX_SKEW_SHARE",
     "MAX_RIG_FILE_BYTES",
     "MAX_METADATA_DEPTH",
+    "WIRE_2D_MAX_PX",
+    "wire_2d_range_warning",
 ]
 
 
@@ -429,7 +435,8 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None, warn: boo
 def rig_warnings(rig: Rig) -> list[str]:
     """What loading warns of in a rig it accepts: a lens model folding inside its image, a pair too narrow for its
     working distance, a camera at an implausible height above the floor, a working volume off the floor, a person
-    standing at the volume's centre who does not fit the pair's views."""
+    standing at the volume's centre who does not fit the pair's views, a pair camera whose 2D joints the joint stream
+    cannot carry in part."""
     out = [lens_fold_warning(cam) for cam in rig.cameras if cam.fold_inside_image()]
     if narrow := narrow_pair_warning(rig):
         out.append(narrow)
@@ -438,6 +445,7 @@ def rig_warnings(rig: Rig) -> list[str]:
         out.append(floor)
     elif outside := person_outside_view_warning(rig):  # (a volume off the floor holds no one standing: said above)
         out.append(outside)
+    out.extend(filter(None, (wire_2d_range_warning(cam) for cam in rig.pair)))
     return out
 
 
@@ -472,7 +480,8 @@ def narrow_pair_warning(rig: Rig) -> str | None:
         return None
     distance = float(np.linalg.norm(centre - 0.5 * (a.center + b.center)))
     return (f"cameras {a.name!r} and {b.name!r} are {rig.baseline * 1e3:.0f} mm apart and {distance:.2f} m from the "
-            f"working volume's centre: their rays meet there at {angle:.2f} degrees (under {MIN_PAIR_ANGLE_DEG:g}, "
+            f"working volume's centre: their rays meet there at {past_bound(angle, MIN_PAIR_ANGLE_DEG, 2, 'f')} "
+            f"degrees (under {MIN_PAIR_ANGLE_DEG:g}, "
             "MIN_PAIR_ANGLE_DEG), so the 3D joints will be far off in depth, or missing where their rays meet under "
             "joints3d.min_ray_angle_deg (docs/rig-file.md, \"Baseline and camera height\"). Mount the cameras "
             "farther apart")
@@ -486,7 +495,8 @@ def volume_floor_warning(rig: Rig) -> str | None:
     if gap <= MAX_VOLUME_FLOOR_GAP_M:
         return None
     where = "above" if bottom < 0.0 else "below"
-    return (f"working volume: y from {top:g} to {bottom:g} lies {gap:.2f} m {where} the floor (y = 0, y down; over "
+    shown = past_bound(gap, MAX_VOLUME_FLOOR_GAP_M, 2, "f")  # never "0.50 m" for 0.5001 m
+    return (f"working volume: y from {top:g} to {bottom:g} lies {shown} m {where} the floor (y = 0, y down; over "
             f"{MAX_VOLUME_FLOOR_GAP_M:g} m, MAX_VOLUME_FLOOR_GAP_M): a person standing on the floor is outside it, "
             "their joints missing, and the skeleton prior reads heights from y = 0. Is the origin on the floor, y "
             "pointing down? A standing person's volume reaches y = 0 (docs/examples/rig.json: -2.2 to 0.05)")
@@ -550,6 +560,17 @@ def _cameras_showing_under(rig: Rig, share_bound: float) -> list[str]:
     return [f"camera {name!r} shows {share:.0%} of their height" for name, share in shares if share < share_bound]
 
 
+def wire_2d_range_warning(cam: Camera) -> str | None:
+    """Why some of ``cam``'s 2D joints cannot go out on the joint stream (its image reaches past
+    :data:`WIRE_2D_MAX_PX`: pixel centres at integers, the last pixel's far edge at ``side - 0.5``), or None. They
+    went out missing with no word."""
+    if max(cam.width, cam.height) - 0.5 <= WIRE_2D_MAX_PX:
+        return None
+    return (f"camera {cam.name!r} is {cam.width}x{cam.height} pixels, but the joint stream sends 2D joints as 16-bit "
+            f"quarter pixels (docs/protocol.md, JOINTS_2D): its 2D joints past {WIRE_2D_MAX_PX:g} px (WIRE_2D_MAX_PX) "
+            "are sent as missing; its 3D joints are unaffected")
+
+
 def camera_height_warning(cam: Camera) -> str | None:
     """Why ``cam`` stands where no rig's camera does (its height above the floor, ``-y``, outside
     :data:`CAMERA_HEIGHT_RANGE_M`), or None."""
@@ -557,8 +578,9 @@ def camera_height_warning(cam: Camera) -> str | None:
     height = -float(cam.center[1])
     if lo <= height <= hi:
         return None
-    shown = round(height, 2) + 0.0  # + 0.0: a camera on the floor to rounding shows 0.00, not -0.00
-    return (f"camera {cam.name!r} stands {shown:.2f} m above the floor (y = 0, y down), outside the {lo:g}-{hi:g} m "
+    shown = past_bound(height, lo if height < lo else hi, 2, "f")  # never "10.00 m" for 10.001 m
+    shown = "0.00" if shown == "-0.00" else shown  # a camera on the floor to rounding
+    return (f"camera {cam.name!r} stands {shown} m above the floor (y = 0, y down), outside the {lo:g}-{hi:g} m "
             "(CAMERA_HEIGHT_RANGE_M) of a camera on the floor to a hall's ceiling: the runtime reads heights from the "
             "floor (the skeleton prior) and every joint may come out missing. Is the origin on the floor below the "
             "cameras' midpoint, y pointing down? Level the rig (calibration.level.level_rig, "

@@ -60,8 +60,10 @@ def scene_copy(image: np.ndarray) -> SceneCopy:
 
 
 def changed_cells(now: SceneCopy, kept: SceneCopy, levels: float) -> int:
-    """How many cells of ``now`` differ from ``kept`` by over ``levels`` 8-bit levels (at ``kept``'s brightness)."""
-    return int(np.count_nonzero(np.abs(now.cells - kept.cells) * kept.mean_levels > levels))
+    """How many cells of ``now`` differ from ``kept`` by over ``levels`` 8-bit levels (at ``kept``'s brightness; at
+    ``now``'s where ``kept`` is black, whose cells are 0 with no mean to scale by: scaled by its 0, nothing woke)."""
+    scale = kept.mean_levels if kept.mean_levels > 0 else now.mean_levels
+    return int(np.count_nonzero(np.abs(now.cells - kept.cells) * scale > levels))
 
 
 def scene_changed(now: tuple[SceneCopy, ...], kept: tuple[SceneCopy, ...], levels: float) -> bool:

@@ -67,7 +67,7 @@ from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_D
 from ghnerf_runtime.others_scan import SUBJECT_MARGIN_M
 from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MAX_RIG_FILE_BYTES, MAX_SKEW_SHARE,
                                      MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG, MIN_PERSON_IN_VIEW_SHARE,
-                                     PERSON_IN_VIEW_NOTE_SHARE, STANDING_PERSON_M, _PERSON_SAMPLES)
+                                     PERSON_IN_VIEW_NOTE_SHARE, STANDING_PERSON_M, WIRE_2D_MAX_PX, _PERSON_SAMPLES)
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
 from ghnerf_runtime.scene_change import CELL_SAMPLES, THUMB_CELLS, WAKE_MIN_CELLS
 from ghnerf_runtime.proxy_matte import BONE_M
@@ -355,6 +355,9 @@ def _doc(name: str) -> str:
     ("docs/rig-file.md", f"`rig_file.person_in_view_share`: {_PERSON_SAMPLES} points from the feet"),
     # session 67: the framing note (INFO) for the band the warning spares
     ("docs/rig-file.md", f"under {PERSON_IN_VIEW_NOTE_SHARE * 100:g} % of their height (`PERSON_IN_VIEW_NOTE_SHARE`"),
+    # session 67: the joint stream's 2D range (i16 quarter pixels) warned of at load
+    ("docs/rig-file.md", f"a coordinate past {WIRE_2D_MAX_PX:g} px (`WIRE_2D_MAX_PX`, 32767 / 4)"),
+    ("docs/protocol.md", f"a coordinate past {WIRE_2D_MAX_PX:g} px does not fit in i16"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"

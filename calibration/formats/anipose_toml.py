@@ -103,6 +103,8 @@ def read_anipose_toml(
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise fail(path, None, f"invalid TOML: {e}") from e
+    except RecursionError as e:  # tomllib parses arrays and inline tables recursively: a traceback before
+        raise fail(path, None, "invalid TOML: nested too deeply") from e
 
     declared = doc.get("metadata", {}).get("units_to_metres") if isinstance(doc.get("metadata"), dict) else None
     if declared is not None:  # ours: the unit the writer was given; aniposelib files say nothing

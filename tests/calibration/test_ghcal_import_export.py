@@ -357,3 +357,19 @@ def test_the_real_rigs_pass_the_common_view_check():
     shares = {name: common_view_share(rig) for name, rig in rigs.items()}
     assert all(common_view_warning(rig) is None for rig in rigs.values())
     assert min(shares.values()) >= 2 * MIN_COMMON_SHARE  # a margin: half the volume, not a quarter
+
+
+def test_an_anipose_file_nested_thousands_deep_is_refused_naming_it_not_a_traceback(tmp_path, capsys):
+    """tomllib parses arrays recursively: ``a = [[[...]]]`` 2000 deep was a bare RecursionError from ``ghcal
+    import`` (its units check, then the reader), as JSON nested so deep was from the JSON readers (session 67's
+    MAX_JSON_DEPTH)."""
+    from calibration.formats import read_anipose_toml
+    from ghnerf_runtime.errors import RigFileError
+
+    deep = tmp_path / "calibration.toml"
+    deep.write_text("a = " + "[" * 2000 + "1" + "]" * 2000 + "\n")
+    with pytest.raises(RigFileError, match=r"calibration\.toml.*invalid TOML: nested too deeply"):
+        read_anipose_toml(deep, units_to_metres=1.0)
+    assert cli.main(["import", str(deep), "--units-to-metres", "1", "--out", str(tmp_path / "rig.json")]) == 2
+    err = capsys.readouterr().err
+    assert "invalid TOML: nested too deeply" in err and "Traceback" not in err, err

@@ -23,11 +23,12 @@ def open_sources_sharing_a_logged_set(make_source: Callable[[int], RigSource], o
     return logged
 
 
-def warnings_shared_and_alone(caplog, url: str, words: str = PAIR_ANGLE_WORDS,
-                               opens: int = 3) -> tuple[list[str], list[str]]:
+def warnings_shared_and_alone(caplog, url: str, words: str = PAIR_ANGLE_WORDS, opens: int = 3,
+                               level: int = logging.WARNING) -> tuple[list[str], list[str]]:
     """The warnings saying ``words`` logged (with any already in ``caplog``) over ``opens`` sources of ``url``
-    sharing one logged set, as a daemon's reopens, then by one :func:`open_rig` of it alone, as a one-shot tool's."""
-    with caplog.at_level(logging.WARNING):
+    sharing one logged set, as a daemon's reopens, then by one :func:`open_rig` of it alone, as a one-shot tool's;
+    ``level`` ``logging.INFO`` counts the rig's notes too (``rig_file.rig_notes``)."""
+    with caplog.at_level(level):
         open_sources_sharing_a_logged_set(lambda _: create_rig_source(url), opens)
         shared = [r.getMessage() for r in caplog.records if words in r.getMessage()]
         caplog.clear()

@@ -170,6 +170,22 @@ def test_a_rig_file_s_warning_is_logged_at_open_once_by_sources_sharing_a_logged
     assert shared[0].startswith(f"{narrow}: cameras 'left' and 'right' are 50 mm apart"), shared
 
 
+def test_a_rig_file_s_note_is_logged_at_open_once_by_sources_sharing_a_logged_set(takes, tmp_path, caplog):
+    """The note at INFO of a rig whose pair cuts a standing person (``rig_file.rig_notes``, session 67) goes the way
+    of the warnings through ``rig=`` (``drivers.base.load_rig_option``, then the open): once over the sources sharing
+    a logged set, worded as ``load_rig`` words it, at INFO."""
+    from drivers.sim import RigPlacement
+
+    first, second, _, _ = takes[0]
+    near = tmp_path / "near.json"
+    save_rig(RigPlacement(width=SIZE[0], height=SIZE[1], distance_m=1.0, volume_depth_m=1.0).build("near"), near)
+    url = f"opencv://?first={first}&second={second}&rig={near}"
+    shared, alone = warnings_shared_and_alone(caplog, url, "PERSON_IN_VIEW_NOTE_SHARE", level=logging.INFO)
+    assert len(shared) == 1 and len(alone) == 1, caplog.text
+    assert shared[0].startswith(f"{near}: a 1.8 m person standing at the working volume's centre"), shared
+    assert {r.levelname for r in caplog.records if "PERSON_IN_VIEW_NOTE_SHARE" in r.getMessage()} == {"INFO"}
+
+
 @pytest.mark.parametrize("query, message", [
     ("", "option first="),
     ("first=0", "option second="),

@@ -1033,3 +1033,63 @@ def test_a_volume_centred_on_a_camera_has_no_one_in_its_view_and_loads(example_d
     example_dict["working_volume"] = {"min": [-1.0, -1.0, -1.0], "max": [1.0, 1.0, 1.0]}
     rig = rig_from_dict(example_dict)
     assert person_in_view_share(rig.cameras[0], rig.volume) == 0.0
+
+
+def _scaled_image(cam: dict, scale: float) -> None:
+    """``cam``'s image ``scale`` times wider and taller, its intrinsics scaled with it: the same view, more pixels."""
+    cam["width"], cam["height"] = round(cam["width"] * scale), round(cam["height"] * scale)
+    cam["K"] = [[v * scale for v in row] for row in cam["K"][:2]] + [cam["K"][2]]
+
+
+def test_a_camera_wider_than_the_joint_stream_s_2d_range_is_warned_of_naming_the_file_the_camera_and_its_size(
+        example_dict, caplog):
+    """The joint stream sends 2D joints as i16 quarter pixels (docs/protocol.md, JOINTS_2D): a joint past 8191.75 px
+    went out missing with no word. The example rig's left camera eight times finer (10240x6400) is warned of, once;
+    its right camera at 8192x5120 (every pixel within the range) is not."""
+    _scaled_image(example_dict["cameras"][0], 8.0)
+    _scaled_image(example_dict["cameras"][1], 6.4)
+    with caplog.at_level("WARNING"):
+        rig_from_dict(example_dict, path="fine.json")
+    messages = [r.getMessage() for r in caplog.records]
+    assert messages == ["fine.json: camera 'left' is 10240x6400 pixels, but the joint stream sends 2D joints as 16-bit "
+                        "quarter pixels (docs/protocol.md, JOINTS_2D): its 2D joints past 8191.75 px "
+                        "(WIRE_2D_MAX_PX) are sent as missing; its 3D joints are unaffected"], messages
+
+
+def test_the_2d_range_warned_of_is_the_one_the_wire_s_quantiser_keeps():
+    """``WIRE_2D_MAX_PX`` is the farthest coordinate ``quantise_joints_2d`` sends; a quarter pixel past it is missing."""
+    from firmware_host.protocol.quantize import quantise_joints_2d
+    from ghnerf_runtime.rig_file import WIRE_2D_MAX_PX
+
+    joints = np.array([[WIRE_2D_MAX_PX, 0.0, 1.0], [0.0, WIRE_2D_MAX_PX, 1.0], [WIRE_2D_MAX_PX + 0.25, 0.0, 1.0],
+                       [0.0, WIRE_2D_MAX_PX + 0.25, 1.0]])
+    uv, _, missing = quantise_joints_2d(joints)
+    assert missing.tolist() == [False, False, True, True]
+    assert uv[0, 0] == uv[1, 1] == np.iinfo(np.int16).max
+
+
+def _pair_meeting_at(example_dict: dict, angle_deg: float) -> Rig:
+    """The example rig's pair moved apart along x until their rays meet at the volume's centre at ``angle_deg``."""
+    lo, hi = 0.01, 0.2
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        _pair_apart(example_dict, mid)
+        rig = rig_from_dict(example_dict, warn=False)
+        lo, hi = (mid, hi) if pair_angle_deg(rig, rig.volume.center) < angle_deg else (lo, mid)
+    return rig
+
+
+def test_the_rig_warnings_never_write_a_figure_just_past_its_bound_as_the_bound(example_dict):
+    """As the refusals (bound_text.past_bound): rays meeting at 0.999 degrees were said to meet "at 1.00 degrees
+    (under 1", a volume 0.5001 m off the floor "0.50 m above the floor (... over 0.5 m", a camera 10.001 m up "stands
+    10.00 m above the floor ... outside the 0.05-10 m", one 0.0499 m up "0.05 m"."""
+    narrow = narrow_pair_warning(_pair_meeting_at(copy.deepcopy(example_dict), 0.9999))
+    assert narrow is not None and "rays meet there at 0.9999 degrees (under 1," in narrow, narrow
+    example_dict["working_volume"]["max"][1] = -0.5001
+    floor = volume_floor_warning(rig_from_dict(example_dict, warn=False))
+    assert floor is not None and "lies 0.5001 m above the floor" in floor, floor
+    for height, shown in ((10.001, "10.001"), (0.0499, "0.0499"), (-0.001, "0.00"), (-0.02, "-0.02")):
+        cam = Camera("up", 640, 480, [[500.0, 0.0, 319.5], [0.0, 500.0, 239.5], [0.0, 0.0, 1.0]], [], np.eye(3),
+                     [0.0, height, 0.0])
+        message = camera_height_warning(cam)
+        assert message is not None and f"stands {shown} m above the floor" in message, (height, message)

@@ -40,3 +40,14 @@ def test_grey_and_small_frames_are_copied_too():
     grey = textured_frame()[:, :, 1]
     assert scene_copy(grey).cells.shape == THUMB_CELLS
     assert scene_copy(grey[:50, :60]).cells.shape == THUMB_CELLS  # smaller than the lattice: resized up
+
+
+def test_a_person_lit_in_front_of_a_camera_kept_black_changes_its_cells():
+    """A copy kept from a black frame (lights off, a covered lens) has no mean to scale by: the difference was scaled
+    by its 0 and no change, however large, woke the search through that camera. The frame now seen gives the scale."""
+    black = np.zeros((480, 640, 3), np.uint8)
+    lit = black.copy()
+    lit[100:400, 200:300] = 200  # a person-sized patch
+    assert changed_cells(scene_copy(lit), scene_copy(black), 6.0) >= 2
+    assert scene_changed((scene_copy(lit),), (scene_copy(black),), 6.0)
+    assert changed_cells(scene_copy(black), scene_copy(black), 6.0) == 0

@@ -354,6 +354,23 @@ def test_the_start_runs_the_checks_a_reload_runs(tmp_path, capsys):
     assert f"ghnerf-daemon: error: {path}: rig.url: " in capsys.readouterr().err
 
 
+def test_validate_config_prints_the_rig_file_s_note_as_it_prints_its_warnings(tmp_path, capsys):
+    """Loading notes at INFO a rig whose pair shows a person at the volume's centre under 97 % of their height
+    (``rig_file.rig_notes``, session 67); ``--validate-config``, which opens no rig and prints the rig's warnings,
+    set up no logging, so Python showed WARNING and over only and the note was dropped."""
+    from calibration.render import example_rig  # ghcal synth's rig: 84 % in view, noted, not warned of
+    from ghnerf_runtime.rig_file import save_rig
+
+    rig = tmp_path / "synth_rig.json"
+    save_rig(example_rig(), rig)
+    path = _write(tmp_path, {"rig": {"url": f"opencv://?first=/dev/video0&second=/dev/video2&rig={rig}"},
+                             "sinks": ["udp://127.0.0.1:9870"]})
+    assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == 0
+    err = capsys.readouterr().err
+    assert err.count(f"{rig}: a 1.8 m person standing at the working volume's centre") == 1, err
+    assert "(under 97%, PERSON_IN_VIEW_NOTE_SHARE)" in err
+
+
 @pytest.mark.parametrize("scheme", ["depthai", "opencv"])
 def test_validate_config_refuses_a_rig_file_whose_volume_the_model_cannot_sweep(tmp_path, capsys, scheme):
     """A working volume reaching 20 km passed --validate-config and the start, then every pair failed on the
