@@ -134,7 +134,8 @@ class FakeBackend(usb.backend.IBackend):
             bLength=18, bDescriptorType=1, bcdUSB=0x0200, bDeviceClass=0xFF, bDeviceSubClass=0,
             bDeviceProtocol=0, bMaxPacketSize0=64, idVendor=dev.vid, idProduct=dev.pid, bcdDevice=0x0100,
             iManufacturer=0, iProduct=0, iSerialNumber=0 if dev.serial is None else _SERIAL_INDEX,
-            bNumConfigurations=1, address=dev.address, bus=dev.bus, port_number=dev.port_numbers[-1] if dev.port_numbers else None,
+            bNumConfigurations=1, address=dev.address, bus=dev.bus,
+            port_number=dev.port_numbers[-1] if dev.port_numbers else None,
             port_numbers=dev.port_numbers, speed=2,
         )
 

@@ -1,4 +1,4 @@
-"""Shared helpers for the joint-stream tests (frames, poses, waiting, decoding)."""
+"""Shared helpers for the joint-stream tests (frames, poses, waiting, decoding, a take recorded on a given clock)."""
 from __future__ import annotations
 
 import socket
@@ -7,6 +7,8 @@ from typing import Callable
 
 import numpy as np
 
+import drivers
+from drivers.clock import Clock
 from firmware_host.protocol import JointFrame, decode_stream
 from firmware_host.protocol.messages import Message
 from firmware_host.sinks.backoff import BackoffPolicy
@@ -50,6 +52,13 @@ def make_frame(seq: int, t0_us: int = 10_000_000, period_us: int = FRAME_US, joi
                joints_2d: dict | None = None) -> JointFrame:
     j = t_pose_rig() if joints is None else joints
     return JointFrame(seq, t0_us + seq * period_us, 0, j, joints_2d or {})
+
+
+def record_take(url: str, clock: Clock, pairs: int) -> list[int]:
+    """Read ``pairs`` pairs from ``url`` (a ``record+`` URL: the take is written as they pass) on ``clock``; the
+    first camera's stamps, as the take holds them."""
+    with drivers.open_rig(url, clock=clock) as rig:
+        return [rig.read(timeout_s=5.0).frames[0].timestamp_ns for _ in range(pairs)]
 
 
 def wait_until(predicate: Callable[[], bool], timeout: float = 5.0, what: str = "condition") -> None:

@@ -16,6 +16,7 @@ import drivers
 from firmware_host import demo, listen
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Joints
+from tests.firmware_host.joint_stream_helpers import record_take
 
 DAYS_AHEAD_NS = 3 * 86_400 * 10**9
 PAIRS = 12
@@ -28,9 +29,7 @@ def take(tmp_path_factory):
     out = root / "take"
     clock = drivers.ManualClock(time.monotonic_ns() + DAYS_AHEAD_NS)
     url = f"record+sim://?fps=30&width=64&height=48&seed=1&policy=all&cache={root / 'cache'}&out={out}&lossless=1"
-    with drivers.open_rig(url, clock=clock) as rig:  # the pairs pass through with the stamps recorded
-        recorded = [rig.read(timeout_s=5.0).frames[0].timestamp_ns for _ in range(PAIRS)]
-    return out, recorded
+    return out, record_take(url, clock, PAIRS)  # the pairs pass through with the stamps recorded
 
 
 def _stream_through_the_demo(tmp_path, url: str) -> list[Joints]:
@@ -69,7 +68,6 @@ def test_keep_time_streams_the_recorded_capture_times(take, tmp_path):
     assert [m.header.capture_us for m in joints] == [t // 1000 for t in recorded]
 
 
-
 def test_a_take_before_the_clock_s_zero_kept_is_refused_naming_the_stamp(tmp_path, capsys):
     """A take whose recorded stamps are negative (the recording format's signed 64-bit allows them) played with
     ``keep_time=1``: the joint stream carries capture times as unsigned microseconds, and the demo's first frame
@@ -77,9 +75,7 @@ def test_a_take_before_the_clock_s_zero_kept_is_refused_naming_the_stamp(tmp_pat
     re-stamped (the default) the same take streams."""
     out = tmp_path / "take"
     url = f"record+sim://?fps=30&width=64&height=48&seed=1&policy=all&cache={tmp_path / 'cache'}&out={out}&lossless=1"
-    with drivers.open_rig(url, clock=drivers.ManualClock(-10**9)) as rig:
-        stamps = [rig.read(timeout_s=5.0).frames[0].timestamp_ns for _ in range(PAIRS)]
-    assert max(stamps) < 0
+    assert max(record_take(url, drivers.ManualClock(-10**9), PAIRS)) < 0
     rc = demo.main(["--truth-only", "--url", f"replay://{out}?keep_time=1", "--seconds", "10",
                     "--out", str(tmp_path / "kept"), "--sink", "memory://"])
     error = capsys.readouterr().err

@@ -34,7 +34,8 @@ from firmware_host.listen import Tally
 from firmware_host.protocol.constants import Fault, Flags
 from firmware_host.protocol.messages import Hello, Joints, Status
 from tests.firmware_host.daemon.test_daemon_memory import glibc_only_reason, probe_big_block
-from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, messages_of, queued_datagrams, wait_until
+from tests.firmware_host.joint_stream_helpers import (FAST_BACKOFF, messages_of, queued_datagrams, record_take,
+                                                    wait_until)
 
 REPO = Path(__file__).resolve().parents[3]
 MODELS = REPO / "models"
@@ -494,9 +495,8 @@ def test_a_take_s_negative_capture_times_kept_are_rejected_pairs_not_a_crash(sim
     import firmware_host.daemon.service as service
 
     take = tmp_path / "take"
-    with drivers.open_rig(f"record+{sim_url}&policy=all&out={take}", clock=drivers.ManualClock(-10**9)) as rig:
-        for _ in range(6):  # stamps from -1 s, 1/30 s apart: every one negative
-            rig.read(timeout_s=5)
+    # stamps from -1 s, 1/30 s apart: every one negative
+    record_take(f"record+{sim_url}&policy=all&out={take}", drivers.ManualClock(-10**9), 6)
     monkeypatch.setattr(service, "load_session", lambda config: object())
     monkeypatch.setattr(service, "Estimator", _CountingEstimator)
     with caplog.at_level(logging.WARNING, logger="ghnerf.daemon"):
