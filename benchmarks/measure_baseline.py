@@ -75,21 +75,23 @@ def lifted(rig: Rig, lift_m: float) -> Rig:
     return Rig(cams, volume, f"{rig.rig_id}-lifted-{lift_m:g}")
 
 
-def bench_scene_in(rig: Rig, k: int):
-    """Bench sequence ``k``'s scene seed (its person, clothes, motion and room) drawn in ``rig``'s volume, and its
-    first instant (seconds, from that seed alone, not the bench sequence's): what ``--rigs`` films, and
-    ``benchmarks/measure_cold_tiles.py`` too."""
+def bench_scene_in(rig: Rig, k: int, people: WorkingVolume | None = None):
+    """Bench sequence ``k``'s scene seed (its person, clothes, motion and room) drawn in ``people`` (default
+    ``rig``'s volume), and its first instant (seconds, from that seed alone, not the bench sequence's): what
+    ``--rigs`` films, and ``benchmarks/measure_cold_tiles.py`` and ``measure_volume_near_edge.py`` too."""
     import drivers.sim as sim  # a tool: the runtime library never imports drivers
 
     seed = SEED_BASE + k
-    scene = sim.random_scene(seed, volume=rig.volume, motions=HELD_OUT_MOTIONS)
+    scene = sim.random_scene(seed, volume=rig.volume if people is None else people, motions=HELD_OUT_MOTIONS)
     return scene, float(np.random.default_rng([seed, 7]).uniform(0.0, scene.period_s))
 
 
-def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0, lift_m: float = 0.0):
-    """Predicted joints, found mask and truth of bench sequence ``k``'s scene (:func:`bench_scene_in`) filmed by
-    ``rig``, one cold estimator given ``rig`` :func:`lifted` by ``lift_m`` (truth in ``rig``'s frame)."""
-    scene, t0 = bench_scene_in(rig, k)
+def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0, lift_m: float = 0.0,
+                 people: WorkingVolume | None = None):
+    """Predicted joints, found mask and truth of bench sequence ``k``'s scene (:func:`bench_scene_in`, its person
+    drawn in ``people``, default ``rig``'s volume) filmed by ``rig``, one cold estimator given ``rig`` :func:`lifted`
+    by ``lift_m`` (truth in ``rig``'s frame)."""
+    scene, t0 = bench_scene_in(rig, k, people)
     est = Estimator(session, lifted(rig, lift_m) if lift_m else rig, cfg)
     pred, found, truth = [], [], []
     for i in range(frames):
