@@ -956,15 +956,22 @@ def test_the_framing_warning_sorts_the_measured_rigs(distance_m, hfov_deg, warne
     assert (person_outside_view_warning(rig) is not None) == warned
 
 
-def test_ghcal_synth_s_rig_is_noted_at_info_once_naming_the_file_the_cameras_and_their_share(tmp_path, caplog):
-    """``ghcal synth``'s rig, aimed down for its floor view, shows 84 % of a standing person's height (heads cut
-    nearer than 8 m): over the 75 % warning, and it loaded without a word; on 12 of the bench's people it gave 99 mm
-    MPJPE where the same pair pitched 17 degrees down gave 50 mm (session 67, docs/rig-file.md). Since
-    then an INFO note names the file, each camera and its share, and no warning."""
+@pytest.fixture
+def synth_rig_file(tmp_path) -> Path:
+    """``ghcal synth``'s rig (``calibration.render.example_rig``) saved as a rig file."""
     from calibration.render import example_rig
 
     path = tmp_path / "synth_rig.json"
     save_rig(example_rig(), path)
+    return path
+
+
+def test_ghcal_synth_s_rig_is_noted_at_info_once_naming_the_file_the_cameras_and_their_share(synth_rig_file, caplog):
+    """``ghcal synth``'s rig, aimed down for its floor view, shows 84 % of a standing person's height (heads cut
+    nearer than 8 m): over the 75 % warning, and it loaded without a word; on 12 of the bench's people it gave 99 mm
+    MPJPE where the same pair pitched 17 degrees down gave 50 mm (session 67, docs/rig-file.md). Since
+    then an INFO note names the file, each camera and its share, and no warning."""
+    path = synth_rig_file
     with caplog.at_level("INFO", logger="ghnerf_runtime.rig_file"):
         load_rig(path)
     assert [r.levelname for r in caplog.records] == ["INFO"], caplog.text
@@ -975,12 +982,9 @@ def test_ghcal_synth_s_rig_is_noted_at_info_once_naming_the_file_the_cameras_and
     assert "78% of the height in view lost 38% of the pairs" in message, message
 
 
-def test_a_rig_read_without_its_warnings_is_not_noted_of_either(tmp_path, caplog):
+def test_a_rig_read_without_its_warnings_is_not_noted_of_either(synth_rig_file, caplog):
     """``warn=False``: the caller (a rig source, once per daemon run) logs the notes with the warnings."""
-    from calibration.render import example_rig
-
-    path = tmp_path / "synth_rig.json"
-    save_rig(example_rig(), path)
+    path = synth_rig_file
     with caplog.at_level("INFO", logger="ghnerf_runtime.rig_file"):
         load_rig(path, warn=False)
     assert not caplog.records, caplog.text
