@@ -119,16 +119,20 @@ def score_cells(runs) -> str:
     return f"{value} | {found.mean():.3f} | {float((~found.any(axis=1)).mean()):.3f}"
 
 
+def standing_person_px(cam: Camera, volume: WorkingVolume) -> float:
+    """How tall (image pixels, pinhole) ``cam`` shows a person standing at ``volume``'s centre
+    (``rig_file.standing_person``)."""
+    feet_head = cam.project(standing_person(volume, samples=2), distort=False)[0]
+    return float(np.linalg.norm(feet_head[1] - feet_head[0]))
+
+
 def framing_cells(rig: Rig, model_px: int) -> str:
     """The framing cells of a row, each the pair's worse camera: the share of a standing person's height at the working
     volume's centre inside the image (``rig_file.person_in_view_share``: what ``load_rig``'s warning reads), that
     person's height in image pixels (pinhole) and in the model's input pixels through the cold-start crop (the volume
     projected, ``roi_from_volume``, resized to the model's ``model_px``: what a pair with no track sees)."""
     share = min(person_in_view_share(cam, rig.volume) for cam in rig.pair)
-    heights = []
-    for cam in rig.pair:
-        feet_head = cam.project(standing_person(rig.volume, samples=2), distort=False)[0]
-        heights.append(float(np.linalg.norm(feet_head[1] - feet_head[0])))
+    heights = [standing_person_px(cam, rig.volume) for cam in rig.pair]
     crops = [roi_from_volume(cam, rig.volume).size for cam in rig.pair]
     in_model = min(h * model_px / size for h, size in zip(heights, crops))
     return f"{share:.2f} | {min(heights):.0f} | {in_model:.0f}"

@@ -29,13 +29,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.measure_baseline import run_sequence, score_cells  # noqa: E402
+from benchmarks.measure_baseline import run_sequence, score_cells, standing_person_px  # noqa: E402
 from calibration.render import example_rig  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import load_session  # noqa: E402
 from ghnerf_runtime.geometry import Rig, WorkingVolume  # noqa: E402
 from ghnerf_runtime.preprocess import roi_from_volume  # noqa: E402
-from ghnerf_runtime.rig_file import STANDING_PERSON_M, load_rig, person_in_view_share, standing_person  # noqa: E402
+from ghnerf_runtime.rig_file import STANDING_PERSON_M, load_rig, person_in_view_share  # noqa: E402
 
 #: The nearest near edge any row gets (``LEVEL_VOLUME``'s own).
 MIN_NEAR_M = 0.5
@@ -93,10 +93,9 @@ def crop_cells(rig: Rig, people: WorkingVolume, model_px: int) -> str:
     volume's centre, which moves with the near edge, and would shrink for that alone."""
     crops, in_model = [], []
     for cam in rig.pair:
-        feet_head = cam.project(standing_person(people, samples=2), distort=False)[0]
         size = roi_from_volume(cam, rig.volume).size
         crops.append(size)
-        in_model.append(float(np.linalg.norm(feet_head[1] - feet_head[0])) * model_px / size)
+        in_model.append(standing_person_px(cam, people) * model_px / size)
     return f"{max(crops):.0f} | {min(in_model):.0f}"
 
 
