@@ -16,6 +16,7 @@ from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (
     MAX_METADATA_DEPTH,
     MIN_PAIR_ANGLE_DEG,
+    PRINCIPAL_POINT_TOLERANCE,
     camera_height_warning,
     volume_floor_warning,
     dumps_rig,
@@ -513,6 +514,17 @@ def test_a_value_just_past_a_bound_is_not_shown_as_the_bound(example_dict, chang
     with pytest.raises(RigFileError) as info:
         rig_from_dict(example_dict, path="rig.json", warn=False)
     assert shown in str(info.value), str(info.value)
+
+
+def test_a_principal_point_off_by_the_tolerance_along_one_axis_shows_it_as_a_percentage(example_dict):
+    """The axis that did not break the bound lies exactly on it (48 of 480 pixels): past_bound found no digits that
+    told 10% from 10% and wrote repr(0.1), "lies 20% of the width and 0.1 of the height"."""
+    cam = example_dict["cameras"][0]
+    cam["K"][0][2] = (cam["width"] - 1) / 2 + 0.2 * cam["width"]
+    cam["K"][1][2] = (cam["height"] - 1) / 2 + PRINCIPAL_POINT_TOLERANCE * cam["height"]
+    with pytest.raises(RigFileError) as info:
+        rig_from_dict(example_dict, path="rig.json", warn=False)
+    assert "lies 20% of the width and 10% of the height" in str(info.value), str(info.value)
 
 
 @pytest.mark.filterwarnings("error")
