@@ -75,21 +75,23 @@ def lifted(rig: Rig, lift_m: float) -> Rig:
     return Rig(cams, volume, f"{rig.rig_id}-lifted-{lift_m:g}")
 
 
-def bench_scene_in(rig: Rig, k: int):
-    """Bench sequence ``k``'s scene seed (its person, clothes, motion and room) drawn in ``rig``'s volume, and its
-    first instant (seconds, from that seed alone, not the bench sequence's): what ``--rigs`` films, and
-    ``benchmarks/measure_cold_tiles.py`` too."""
+def bench_scene_in(rig: Rig, k: int, people: WorkingVolume | None = None):
+    """Bench sequence ``k``'s scene seed (its person, clothes, motion and room) drawn in ``people`` (default
+    ``rig``'s volume), and its first instant (seconds, from that seed alone, not the bench sequence's): what
+    ``--rigs`` films, and ``benchmarks/measure_cold_tiles.py`` and ``measure_volume_near_edge.py`` too."""
     import drivers.sim as sim  # a tool: the runtime library never imports drivers
 
     seed = SEED_BASE + k
-    scene = sim.random_scene(seed, volume=rig.volume, motions=HELD_OUT_MOTIONS)
+    scene = sim.random_scene(seed, volume=rig.volume if people is None else people, motions=HELD_OUT_MOTIONS)
     return scene, float(np.random.default_rng([seed, 7]).uniform(0.0, scene.period_s))
 
 
-def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0, lift_m: float = 0.0):
-    """Predicted joints, found mask and truth of bench sequence ``k``'s scene (:func:`bench_scene_in`) filmed by
-    ``rig``, one cold estimator given ``rig`` :func:`lifted` by ``lift_m`` (truth in ``rig``'s frame)."""
-    scene, t0 = bench_scene_in(rig, k)
+def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0, lift_m: float = 0.0,
+                 people: WorkingVolume | None = None):
+    """Predicted joints, found mask and truth of bench sequence ``k``'s scene (:func:`bench_scene_in`, its person
+    drawn in ``people``, default ``rig``'s volume) filmed by ``rig``, one cold estimator given ``rig`` :func:`lifted`
+    by ``lift_m`` (truth in ``rig``'s frame)."""
+    scene, t0 = bench_scene_in(rig, k, people)
     est = Estimator(session, lifted(rig, lift_m) if lift_m else rig, cfg)
     pred, found, truth = [], [], []
     for i in range(frames):
@@ -117,16 +119,20 @@ def score_cells(runs) -> str:
     return f"{value} | {found.mean():.3f} | {float((~found.any(axis=1)).mean()):.3f}"
 
 
+def standing_person_px(cam: Camera, volume: WorkingVolume) -> float:
+    """How tall (image pixels, pinhole) ``cam`` shows a person standing at ``volume``'s centre
+    (``rig_file.standing_person``)."""
+    feet_head = cam.project(standing_person(volume, samples=2), distort=False)[0]
+    return float(np.linalg.norm(feet_head[1] - feet_head[0]))
+
+
 def framing_cells(rig: Rig, model_px: int) -> str:
     """The framing cells of a row, each the pair's worse camera: the share of a standing person's height at the working
     volume's centre inside the image (``rig_file.person_in_view_share``: what ``load_rig``'s warning reads), that
     person's height in image pixels (pinhole) and in the model's input pixels through the cold-start crop (the volume
     projected, ``roi_from_volume``, resized to the model's ``model_px``: what a pair with no track sees)."""
     share = min(person_in_view_share(cam, rig.volume) for cam in rig.pair)
-    heights = []
-    for cam in rig.pair:
-        feet_head = cam.project(standing_person(rig.volume, samples=2), distort=False)[0]
-        heights.append(float(np.linalg.norm(feet_head[1] - feet_head[0])))
+    heights = [standing_person_px(cam, rig.volume) for cam in rig.pair]
     crops = [roi_from_volume(cam, rig.volume).size for cam in rig.pair]
     in_model = min(h * model_px / size for h, size in zip(heights, crops))
     return f"{share:.2f} | {min(heights):.0f} | {in_model:.0f}"

@@ -48,7 +48,7 @@ from ghnerf_runtime.cli.simdata import SEED_BASE  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig, TrackingConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.rig_file import load_rig  # noqa: E402
-from ghnerf_runtime.scene_change import scene_changed, scene_copy  # noqa: E402
+from ghnerf_runtime.scene_change import pair_copies, scene_changed  # noqa: E402
 from ghnerf_runtime.tracking import volume_tiles  # noqa: E402
 
 
@@ -149,10 +149,10 @@ def scene_check_ms(rooms: list, levels: float) -> float:
     """Median ms of one pair's scene check (both cameras' copies and the comparison) over ``rooms``' pairs."""
     times = []
     for room in rooms:
-        kept = tuple(scene_copy(im) for im in room[0])
+        kept = pair_copies(room[0])
         for images in room[1:]:
             t = time.perf_counter()
-            scene_changed(tuple(scene_copy(im) for im in images), kept, levels)
+            scene_changed(pair_copies(images), kept, levels)
             times.append(1e3 * (time.perf_counter() - t))
     return float(np.median(times))
 

@@ -13,11 +13,11 @@ view, pinhole, the pair's larger) is never seen whole, whatever the aim. Per rig
 near edge at that lens distance (never under 0.5 m); at the distance where that person standing at the volume's x
 centre is whole in both images, aim and lens model included (where it is within the far edge); and the lens near
 edge with the far edge at ``--far``. Every row films the same people: the bench's held-out sequences
-(``measure_baseline.bench_scene_in``'s seeds) drawn in the lens-near volume up to ``--far`` (so inside every row's
-volume; ``--people written``: in the volume as written), each sequence cold, the runtime's defaults. Cells: the
-volume's depth range, the cold crop's side and the same standing person's height in it (for the rig as told) and
-scores. Session 67 measured it (docs/rig-file.md, "The volume's near edge"): the crop does not move, the 3 m wide
-volume filling the image's width from either near edge. A tool, not a test.
+(``measure_baseline.run_sequence``, ``bench_scene_in``'s seeds) drawn in the lens-near volume up to ``--far`` (so
+inside every row's volume; ``--people written``: in the volume as written), each sequence cold, the runtime's
+defaults. Cells: the volume's depth range, the cold crop's side and the same standing person's height in it (for the
+rig as told) and scores. Session 67 measured it (docs/rig-file.md, "The volume's near edge"): the crop does not
+move, the 3 m wide volume filling the image's width from either near edge. A tool, not a test.
 """
 from __future__ import annotations
 
@@ -29,14 +29,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.measure_baseline import score_cells  # noqa: E402
+from benchmarks.measure_baseline import run_sequence, score_cells, standing_person_px  # noqa: E402
 from calibration.render import example_rig  # noqa: E402
-from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
-from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+from ghnerf_runtime.estimator import load_session  # noqa: E402
 from ghnerf_runtime.geometry import Rig, WorkingVolume  # noqa: E402
 from ghnerf_runtime.preprocess import roi_from_volume  # noqa: E402
-from ghnerf_runtime.rig_file import STANDING_PERSON_M, load_rig, person_in_view_share, standing_person  # noqa: E402
+from ghnerf_runtime.rig_file import STANDING_PERSON_M, load_rig, person_in_view_share  # noqa: E402
 
 #: The nearest near edge any row gets (``LEVEL_VOLUME``'s own).
 MIN_NEAR_M = 0.5
@@ -94,31 +93,10 @@ def crop_cells(rig: Rig, people: WorkingVolume, model_px: int) -> str:
     volume's centre, which moves with the near edge, and would shrink for that alone."""
     crops, in_model = [], []
     for cam in rig.pair:
-        feet_head = cam.project(standing_person(people, samples=2), distort=False)[0]
         size = roi_from_volume(cam, rig.volume).size
         crops.append(size)
-        in_model.append(float(np.linalg.norm(feet_head[1] - feet_head[0])) * model_px / size)
+        in_model.append(standing_person_px(cam, people) * model_px / size)
     return f"{max(crops):.0f} | {min(in_model):.0f}"
-
-
-def run_sequence(session, cfg, rig: Rig, people: WorkingVolume, k: int, frames: int, fps: float = 30.0):
-    """Bench sequence ``k``'s person drawn in ``people`` (its seed, motion and first instant as
-    ``measure_baseline.bench_scene_in``), filmed by ``rig``, one cold estimator: predictions, found, truth."""
-    import drivers.sim as sim  # a tool: the runtime library never imports drivers
-
-    seed = SEED_BASE + k
-    scene = sim.random_scene(seed, volume=people, motions=HELD_OUT_MOTIONS)
-    t0 = float(np.random.default_rng([seed, 7]).uniform(0.0, scene.period_s))
-    est = Estimator(session, rig, cfg)
-    pred, found, truth = [], [], []
-    for i in range(frames):
-        t = t0 + i / fps
-        r = est.estimate([scene.render(cam, t, with_truth=False)[0] for cam in rig.pair], sequence=i)
-        pred.append(r.joints_3d)
-        found.append(~r.missing)
-        truth.append(scene.joints_3d(t))
-    est.close()
-    return np.array(pred), np.array(found), np.array(truth)
 
 
 def rig_named(name: str) -> Rig:
@@ -150,7 +128,7 @@ def main(argv=None) -> int:
         people = rig.volume if args.people == "written" else with_depth(
             rig.volume, lens_fit_m(rig), min(args.far, float(rig.volume.max_corner[2])))
         for row in variants(rig, args.far):
-            runs = [run_sequence(session, cfg, row, people, k, args.frames) for k in range(args.sequences)]
+            runs = [run_sequence(session, cfg, row, k, args.frames, people=people) for k in range(args.sequences)]
             depth = f"{row.volume.min_corner[2]:.2f}-{row.volume.max_corner[2]:.2f}"
             crop = crop_cells(row, people, session.contract.width)
             print(f"| {name}: {row.rig_id.split(' ', 1)[1]} | {depth} | {crop} | {score_cells(runs)} |", flush=True)

@@ -100,7 +100,7 @@ from ghnerf_runtime.preprocess import (
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import PriorCameras, disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
-from ghnerf_runtime.scene_change import SceneCopy, scene_changed, scene_copy
+from ghnerf_runtime.scene_change import SceneCopy, pair_copies, scene_changed
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners, cold_person_share, volume_tiles
 from ghnerf_runtime.subject import STILL_SEVERAL_MIN_JOINTS, SubjectSelector, guessed_joints, joints_shown_twice, \
@@ -1325,7 +1325,7 @@ class Estimator:
         levels = self.config.tracking.cold_tiles_wake_levels
         if not levels or self._rest_scene is None:
             return False
-        return scene_changed(tuple(scene_copy(im) for im in images[:2]), self._rest_scene, levels)
+        return scene_changed(pair_copies(images), self._rest_scene, levels)
 
     def _tile_missed(self, images: Sequence[np.ndarray]) -> None:
         """A tile pass found nobody in ``images``: after a whole round of such passes, the next pairs rest; the
@@ -1334,7 +1334,7 @@ class Estimator:
         if self._tiles_missed >= len(self._cold_tiles):
             self._tile_rest_wait = self.config.tracking.cold_tiles_rest_every - 1
         if self.config.tracking.cold_tiles_wake_levels:
-            self._rest_scene = tuple(scene_copy(im) for im in images[:2])
+            self._rest_scene = pair_copies(images)
 
     def _wake_tiles(self) -> None:
         """Someone was seen (or the estimator reset): every cold pair that finds nobody searches a tile again."""

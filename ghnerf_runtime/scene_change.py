@@ -12,6 +12,7 @@ alike); a person moves the few cells they cover.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -57,6 +58,12 @@ def scene_copy(image: np.ndarray) -> SceneCopy:
     cells = cv2.resize(samples.astype(np.float32), THUMB_CELLS[::-1], interpolation=cv2.INTER_AREA)
     mean = float(cells.mean())
     return SceneCopy(cells / mean if mean > 0 else cells, mean)
+
+
+def pair_copies(images: Sequence[np.ndarray]) -> tuple[SceneCopy, ...]:
+    """The pair's two frames (the first two of ``images``) as :class:`SceneCopy` s, the cameras' order kept: what
+    :func:`scene_changed` compares."""
+    return tuple(scene_copy(im) for im in images[:2])
 
 
 def changed_cells(now: SceneCopy, kept: SceneCopy, levels: float) -> int:

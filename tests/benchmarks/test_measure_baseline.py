@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.measure_baseline import baseline_for_angle, lifted, rig_with_baseline
-from ghnerf_runtime.rig_file import pair_angle_deg
+from benchmarks.measure_baseline import baseline_for_angle, framing_cells, lifted, rig_with_baseline, standing_person_px
+from ghnerf_runtime.rig_file import STANDING_PERSON_M, load_rig, pair_angle_deg
 from tests.benchmarks.test_bench_smoke import run_script, scratch_cache  # noqa: F401
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
@@ -65,3 +65,15 @@ def test_the_command_line_prints_the_framing_and_takes_rig_files(tiny_model_dir,
                      capsys=capsys, monkeypatch=monkeypatch)
     assert "| 1.5 | 50 | 686 | 0.107 | 4.00 | 0.031 | 0.62 | 783 | " in out, out
     assert f"| {example} | 1.00 | 517 | " in out, out
+
+
+def test_the_standing_person_s_image_height_is_the_pinhole_s_and_the_framing_cell_s():
+    """``standing_person_px`` (shared with ``measure_volume_near_edge.crop_cells``): 1.8 m at the volume's centre over
+    its depth, times the focal length, for a camera looking straight at it; the framing cell is the pair's smaller."""
+    rig = rig_with_baseline(0.02, 3.0)
+    cam = rig.pair[0]
+    depth = float((cam.R @ rig.volume.center + cam.t)[2])
+    assert standing_person_px(cam, rig.volume) == pytest.approx(STANDING_PERSON_M * cam.K[1, 1] / depth, rel=0.02)
+    example = load_rig("docs/examples/rig.json", warn=False)
+    shorter_shown = min(standing_person_px(c, example.volume) for c in example.pair)
+    assert framing_cells(example, 128).split(" | ")[1] == f"{shorter_shown:.0f}"

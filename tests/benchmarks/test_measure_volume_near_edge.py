@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import pytest
 
+from benchmarks.measure_baseline import bench_scene_in
 from benchmarks.measure_volume_near_edge import lens_fit_m, variants, whole_fit_m, with_depth
 from calibration.render import example_rig
 from ghnerf_runtime.preprocess import roi_from_volume
@@ -37,6 +38,18 @@ def test_the_cold_crop_is_the_same_from_the_written_near_edge_to_the_lens_fit(ri
     near = with_depth(rig.volume, lens_fit_m(rig), float(rig.volume.max_corner[2]))
     for cam in rig.pair:
         assert roi_from_volume(cam, near).size == roi_from_volume(cam, rig.volume).size
+
+
+def test_the_people_drawn_in_another_volume_keep_the_bench_sequence_s_seed_and_first_instant():
+    """The rows film the same people wherever the rig's volume is told: ``measure_baseline.bench_scene_in`` draws the
+    sequence's person in the volume given, its motion and first instant the bench sequence's as in the rig's own."""
+    rig = load_rig(EXAMPLE_RIG)
+    people = with_depth(rig.volume, 2.5, 3.0)
+    own, own_t0 = bench_scene_in(rig, 1)
+    drawn, t0 = bench_scene_in(rig, 1, people)
+    assert t0 == own_t0 and drawn.config.motion == own.config.motion
+    hip = drawn.joints_3d(t0)[8]
+    assert 2.5 - 0.3 <= hip[2] <= 3.0 + 0.3, hip  # the person's place is drawn in ``people``, not the rig's 1-4.5 m
 
 
 def test_the_command_line_runs(tiny_model_dir, scratch_cache, capsys, monkeypatch):  # noqa: F811

@@ -16,6 +16,7 @@ from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (
     MAX_METADATA_DEPTH,
     MIN_PAIR_ANGLE_DEG,
+    PRINCIPAL_POINT_TOLERANCE,
     camera_height_warning,
     volume_floor_warning,
     dumps_rig,
@@ -515,6 +516,17 @@ def test_a_value_just_past_a_bound_is_not_shown_as_the_bound(example_dict, chang
     assert shown in str(info.value), str(info.value)
 
 
+def test_a_principal_point_off_by_the_tolerance_along_one_axis_shows_it_as_a_percentage(example_dict):
+    """The axis that did not break the bound lies exactly on it (48 of 480 pixels): past_bound found no digits that
+    told 10% from 10% and wrote repr(0.1), "lies 20% of the width and 0.1 of the height"."""
+    cam = example_dict["cameras"][0]
+    cam["K"][0][2] = (cam["width"] - 1) / 2 + 0.2 * cam["width"]
+    cam["K"][1][2] = (cam["height"] - 1) / 2 + PRINCIPAL_POINT_TOLERANCE * cam["height"]
+    with pytest.raises(RigFileError) as info:
+        rig_from_dict(example_dict, path="rig.json", warn=False)
+    assert "lies 20% of the width and 10% of the height" in str(info.value), str(info.value)
+
+
 @pytest.mark.filterwarnings("error")
 def test_translations_that_overflow_are_refused_without_numpy_warnings(example_dict):
     example_dict["cameras"][1]["t"] = [1e200, 0.0, 0.0]  # loaded, with a baseline of inf and an overflow warning
@@ -956,15 +968,22 @@ def test_the_framing_warning_sorts_the_measured_rigs(distance_m, hfov_deg, warne
     assert (person_outside_view_warning(rig) is not None) == warned
 
 
-def test_ghcal_synth_s_rig_is_noted_at_info_once_naming_the_file_the_cameras_and_their_share(tmp_path, caplog):
-    """``ghcal synth``'s rig, aimed down for its floor view, shows 84 % of a standing person's height (heads cut
-    nearer than 8 m): over the 75 % warning, and it loaded without a word; on 12 of the bench's people it gave 99 mm
-    MPJPE where the same pair pitched 17 degrees down gave 50 mm (session 67, docs/rig-file.md). Since
-    then an INFO note names the file, each camera and its share, and no warning."""
+@pytest.fixture
+def synth_rig_file(tmp_path) -> Path:
+    """``ghcal synth``'s rig (``calibration.render.example_rig``) saved as a rig file."""
     from calibration.render import example_rig
 
     path = tmp_path / "synth_rig.json"
     save_rig(example_rig(), path)
+    return path
+
+
+def test_ghcal_synth_s_rig_is_noted_at_info_once_naming_the_file_the_cameras_and_their_share(synth_rig_file, caplog):
+    """``ghcal synth``'s rig, aimed down for its floor view, shows 84 % of a standing person's height (heads cut
+    nearer than 8 m): over the 75 % warning, and it loaded without a word; on 12 of the bench's people it gave 99 mm
+    MPJPE where the same pair pitched 17 degrees down gave 50 mm (session 67, docs/rig-file.md). Since
+    then an INFO note names the file, each camera and its share, and no warning."""
+    path = synth_rig_file
     with caplog.at_level("INFO", logger="ghnerf_runtime.rig_file"):
         load_rig(path)
     assert [r.levelname for r in caplog.records] == ["INFO"], caplog.text
@@ -975,12 +994,9 @@ def test_ghcal_synth_s_rig_is_noted_at_info_once_naming_the_file_the_cameras_and
     assert "78% of the height in view lost 38% of the pairs" in message, message
 
 
-def test_a_rig_read_without_its_warnings_is_not_noted_of_either(tmp_path, caplog):
+def test_a_rig_read_without_its_warnings_is_not_noted_of_either(synth_rig_file, caplog):
     """``warn=False``: the caller (a rig source, once per daemon run) logs the notes with the warnings."""
-    from calibration.render import example_rig
-
-    path = tmp_path / "synth_rig.json"
-    save_rig(example_rig(), path)
+    path = synth_rig_file
     with caplog.at_level("INFO", logger="ghnerf_runtime.rig_file"):
         load_rig(path, warn=False)
     assert not caplog.records, caplog.text

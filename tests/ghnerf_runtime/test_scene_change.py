@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ghnerf_runtime.scene_change import THUMB_CELLS, changed_cells, scene_changed, scene_copy
+from ghnerf_runtime.scene_change import THUMB_CELLS, changed_cells, pair_copies, scene_changed, scene_copy
 
 
 def textured_frame(seed: int = 0) -> np.ndarray:
@@ -51,3 +51,14 @@ def test_a_person_lit_in_front_of_a_camera_kept_black_changes_its_cells():
     assert changed_cells(scene_copy(lit), scene_copy(black), 6.0) >= 2
     assert scene_changed((scene_copy(lit),), (scene_copy(black),), 6.0)
     assert changed_cells(scene_copy(black), scene_copy(black), 6.0) == 0
+
+
+def test_pair_copies_are_the_first_two_frames_copies_in_the_cameras_order():
+    """What the estimator keeps and compares (a third frame, a novel view's or a spare camera's, is not the pair's)."""
+    frames = [textured_frame(seed) for seed in range(3)]
+    copies = pair_copies(frames)
+    assert len(copies) == 2
+    for copy, frame in zip(copies, frames):
+        expected = scene_copy(frame)
+        np.testing.assert_array_equal(copy.cells, expected.cells)
+        assert copy.mean_levels == expected.mean_levels
