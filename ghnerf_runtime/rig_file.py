@@ -529,9 +529,7 @@ def person_outside_view_warning(rig: Rig) -> str | None:
     cut = _cameras_showing_under(rig, MIN_PERSON_IN_VIEW_SHARE)
     if not cut:
         return None
-    centre = rig.volume.center
-    return (f"a {STANDING_PERSON_M:g} m person standing at the working volume's centre (x {centre[0]:.2f}, z "
-            f"{centre[2]:.2f} m) does not fit the view: {'; '.join(cut)} (under {MIN_PERSON_IN_VIEW_SHARE:.0%}, "
+    return (f"{_person_at_centre(rig)} does not fit the view: {'; '.join(cut)} (under {MIN_PERSON_IN_VIEW_SHARE:.0%}, "
             "MIN_PERSON_IN_VIEW_SHARE), so their cut joints are missing and whole pairs may have none "
             "(docs/rig-file.md, \"A person who does not fit the view\"). Move the cameras farther from the volume, "
             "fit wider lenses or aim the cameras at the volume's centre")
@@ -544,13 +542,18 @@ def person_partly_in_view_note(rig: Rig) -> str | None:
     cut = _cameras_showing_under(rig, PERSON_IN_VIEW_NOTE_SHARE)
     if not cut:
         return None
-    centre = rig.volume.center
-    return (f"a {STANDING_PERSON_M:g} m person standing at the working volume's centre (x {centre[0]:.2f}, z "
-            f"{centre[2]:.2f} m) is partly out of view: {'; '.join(cut)} (under {PERSON_IN_VIEW_NOTE_SHARE:.0%}, "
+    return (f"{_person_at_centre(rig)} is partly out of view: {'; '.join(cut)} (under {PERSON_IN_VIEW_NOTE_SHARE:.0%}, "
             "PERSON_IN_VIEW_NOTE_SHARE). Their cut joints are missing, and pairs may have none: on the simulated scene "
             "through a 50-degree lens 78% of the height in view lost 38% of the pairs, 97% lost 5% "
             "(docs/rig-file.md, \"A person who does not fit the view\"). If people stand there, aim the cameras at "
             "the volume's centre or move them farther from it")
+
+
+def _person_at_centre(rig: Rig) -> str:
+    """The person the framing warning and note speak of, and where they stand (the working volume's centre)."""
+    centre = rig.volume.center
+    return (f"a {STANDING_PERSON_M:g} m person standing at the working volume's centre (x {centre[0]:.2f}, z "
+            f"{centre[2]:.2f} m)")
 
 
 def _cameras_showing_under(rig: Rig, share_bound: float) -> list[str]:
