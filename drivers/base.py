@@ -200,11 +200,6 @@ class RigSource(abc.ABC):
         warnings in the journal; a source given no set (a one-shot tool's) warns at each open, once."""
         self._rig_warnings_logged = logged
 
-    def _rig_warning(self, logger: logging.Logger, fmt: str, *args: object) -> None:
-        """``logger.warning(fmt, *args)``, unless a source sharing :meth:`log_rig_warnings_once`'s set logged
-        the same text already."""
-        self._log_about_rig_once(logger, logging.WARNING, fmt, *args)
-
     def _log_about_rig_once(self, logger: logging.Logger, level: int, fmt: str, *args: object) -> None:
         """``logger.log(level, fmt, *args)``, unless a source sharing :meth:`log_rig_warnings_once`'s set logged
         the same text already."""

@@ -593,8 +593,9 @@ class OpenCVRigSource(RigSource):
             self._close()
             raise
         if self._fixed_rig is None:
-            self._rig_warning(log, "opencv://: no rig= given: a nominal, uncalibrated rig (%g deg field of view) "
-                              "names the cameras; calibrate with ghcal before trusting 3D joints", o.hfov_deg)
+            self._log_about_rig_once(log, logging.WARNING, "opencv://: no rig= given: a nominal, uncalibrated rig "
+                                     "(%g deg field of view) names the cameras; calibrate with ghcal before trusting "
+                                     "3D joints", o.hfov_deg)
         self._set_rig(rig, built=self._fixed_rig is None)
 
     def _first_frames(self) -> list[tuple[int, int]]:
