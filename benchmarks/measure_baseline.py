@@ -38,7 +38,7 @@ from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, look_at  # noqa: E402
 from ghnerf_runtime.metrics import mpjpe  # noqa: E402
 from ghnerf_runtime.preprocess import roi_from_volume  # noqa: E402
-from ghnerf_runtime.rig_file import load_rig, pair_angle_deg, person_in_view_share, standing_person  # noqa: E402
+from ghnerf_runtime.rig_file import load_rig, pair_angle_deg, person_in_view_share, standing_person_px  # noqa: E402
 
 
 def rig_with_baseline(baseline_m: float, distance_m: float, hfov_deg: float = 80.0) -> Rig:
@@ -117,13 +117,6 @@ def score_cells(runs) -> str:
     pred, found, truth = (np.concatenate(a) for a in zip(*runs))
     value = f"{mpjpe(pred, truth, np.ones(found.shape, bool), pred_valid=found).value:.0f}" if found.any() else "-"
     return f"{value} | {found.mean():.3f} | {float((~found.any(axis=1)).mean()):.3f}"
-
-
-def standing_person_px(cam: Camera, volume: WorkingVolume) -> float:
-    """How tall (image pixels, pinhole) ``cam`` shows a person standing at ``volume``'s centre
-    (``rig_file.standing_person``)."""
-    feet_head = cam.project(standing_person(volume, samples=2), distort=False)[0]
-    return float(np.linalg.norm(feet_head[1] - feet_head[0]))
 
 
 def framing_cells(rig: Rig, model_px: int) -> str:

@@ -173,6 +173,7 @@ __all__ = [
     "volume_floor_warning",
     "MAX_VOLUME_FLOOR_GAP_M",
     "standing_person",
+    "standing_person_px",
     "person_in_view_share",
     "person_outside_view_warning",
     "STANDING_PERSON_M",
@@ -510,6 +511,13 @@ def standing_person(volume: WorkingVolume, samples: int = _PERSON_SAMPLES) -> np
     feet = min(max(0.0, float(volume.min_corner[1])), float(volume.max_corner[1]))
     heights = np.linspace(0.0, STANDING_PERSON_M, samples)
     return np.stack([np.full(samples, centre[0]), feet - heights, np.full(samples, centre[2])], axis=-1)
+
+
+def standing_person_px(cam: Camera, volume: WorkingVolume) -> float:
+    """How tall (image pixels, pinhole) ``cam`` shows the person of :func:`standing_person` standing at ``volume``'s
+    centre: what the cold tiles' bound and the framing benchmarks read."""
+    feet_head = cam.project(standing_person(volume, samples=2), distort=False)[0]
+    return float(np.linalg.norm(feet_head[1] - feet_head[0]))
 
 
 def person_in_view_share(cam: Camera, volume: WorkingVolume) -> float:

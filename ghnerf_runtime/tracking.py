@@ -35,7 +35,7 @@ from ghnerf_runtime.config import RoiConfig, TrackingConfig
 from ghnerf_runtime.errors import GeometryError, ShapeError
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.preprocess import Roi, crop_camera, roi_from_joints, roi_from_volume
-from ghnerf_runtime.rig_file import standing_person
+from ghnerf_runtime.rig_file import standing_person_px
 
 __all__ = ["Track", "Regions", "SubjectTracker", "keep_roi", "plan_regions", "snap_roi", "track_from_joints",
            "volume_regions", "box_corners", "cold_person_share", "volume_tiles", "COLD_TILE_SPLITS",
@@ -211,11 +211,7 @@ def cold_person_share(rig: Rig, regions: Regions) -> float:
     """The height of a person standing at the working volume's centre (``rig_file.standing_person``) as a share of
     the side of ``regions``' crops, the pair's worse camera: what a cold pass sees of them (the model learnt people of
     about 0.49 of its input and more, 63 of 128 pixels, at 2.2-4 m)."""
-    heights = []
-    for cam, roi in zip(rig.pair, regions.rois):
-        feet_head = cam.project(standing_person(rig.volume, samples=2), distort=False)[0]
-        heights.append(float(np.linalg.norm(feet_head[1] - feet_head[0])) / roi.size)
-    return min(heights)
+    return min(standing_person_px(cam, rig.volume) / roi.size for cam, roi in zip(rig.pair, regions.rois))
 
 
 def volume_tiles(rig: Rig, roi_config: RoiConfig, rolls: tuple[float, float] = (0.0, 0.0)) -> tuple[Regions, ...]:

@@ -68,8 +68,9 @@ def test_the_command_line_prints_the_framing_and_takes_rig_files(tiny_model_dir,
 
 
 def test_the_standing_person_s_image_height_is_the_pinhole_s_and_the_framing_cell_s():
-    """``standing_person_px`` (shared with ``measure_volume_near_edge.crop_cells``): 1.8 m at the volume's centre over
-    its depth, times the focal length, for a camera looking straight at it; the framing cell is the pair's smaller."""
+    """``standing_person_px`` (rig_file's, shared by the cold tiles and the framing benchmarks): 1.8 m at the
+    volume's centre over its depth, times the focal length, for a camera looking straight at it; the framing cell is
+    the pair's smaller."""
     rig = rig_with_baseline(0.02, 3.0)
     cam = rig.pair[0]
     depth = float((cam.R @ rig.volume.center + cam.t)[2])
