@@ -182,7 +182,7 @@ def run_sweep(args, session, base: EstimatorConfig) -> int:
     """``--walk-in-sweep``: the table of pairs from walk-in to the first joint, over every placement."""
     t = base.tracking
     rest = t.cold_tiles_rest_every if args.rest_every is None else args.rest_every
-    levels = t.cold_tiles_wake_levels or TrackingConfig().cold_tiles_wake_levels
+    levels = t.cold_tiles_wake_levels  # the default config's (``base``): never 0 or None
     configs = {f"rest every {rest}, no wake-up": EstimatorConfig(session=base.session, tracking=TrackingConfig(
                    cold_tiles_rest_every=rest, cold_tiles_wake_levels=None)),
                f"rest every {rest}, wake-up at {levels:g} levels": EstimatorConfig(
