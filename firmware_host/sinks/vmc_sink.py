@@ -2,7 +2,8 @@
 
 Per frame, OSC bundles of at most 1232 bytes (two for all bones, so no path
 fragments them): /VMC/Ext/OK, /VMC/Ext/T, Root/Pos (hip position) and
-Bone/Pos (local rotations) solved by ``vmc_pose``. VMC has no sequence
+Bone/Pos (local rotations) solved by ``vmc_pose``. T is seconds since the first frame and never goes back, even
+when the capture stamps do (``vmc_time``). VMC has no sequence
 numbers, so receivers cannot count gaps; the sink's own counters (``stats()``)
 report what it decimated or dropped. ``max_fps`` caps the rate (receivers
 render at display rate; 60 is plenty). Host names are resolved like udp://
@@ -33,6 +34,7 @@ from firmware_host.sinks.udp_sink import RESOLVE_S, DatagramLink, take_resolve_s
 from firmware_host.sinks.url import SinkUrl, boolean, host_port, one_of, parse_url
 from firmware_host.sinks.vmc_osc import build_datagrams
 from firmware_host.sinks.vmc_pose import keep_hemisphere, solve_pose
+from firmware_host.sinks.vmc_time import VmcClock
 from firmware_host.sinks.vmc_view import FACINGS, AvatarView
 
 VMC_DEFAULT_PORT = 39539  # the Marionette (receiver) port
@@ -58,7 +60,7 @@ class VmcSink(Sink):
         self.view = view
         self.calibration_flag = calibration_flag  # send /ghnerf/calibration_suspect with a suspect frame
         self._link = DatagramLink(url, host, port, resolve_s)
-        self._t0_us: Optional[int] = None
+        self._clock = VmcClock(self.shown)  # /VMC/Ext/T: never goes back, whatever the capture stamps do
         self._last_rotations: dict[str, np.ndarray] = {}  # by bone name: the sign sent last (keep_hemisphere)
 
     @classmethod
@@ -85,11 +87,7 @@ class VmcSink(Sink):
         return self._link.refusing()
 
     def _deliver(self, frame: JointFrame, flags: int) -> None:
-        if self._t0_us is None:
-            self._t0_us = frame.capture_time_us
-        # Seconds since the first frame, not since boot: OSC floats are float32
-        # (about 1 ms resolution after an hour, 2 ms after four).
-        t = (frame.capture_time_us - self._t0_us) / 1e6
+        t = self._clock.seconds(frame.capture_time_us)
         pose = keep_hemisphere(solve_pose(self.view.apply(frame.joints_3d)), self._last_rotations)
         suspect = self.calibration_flag and bool(frame.scene_flags & Flags.CALIBRATION_SUSPECT)
         for datagram in build_datagrams(pose, t, calibration_suspect=suspect):  # two bundles: one would fragment

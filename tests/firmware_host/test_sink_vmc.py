@@ -301,3 +301,29 @@ def test_calibration_flag_0_sends_a_suspect_frame_as_one_that_fits() -> None:
     # For a receiver that refuses addresses it does not know (EVMC4U in StrictMode stops receiving at the first).
     _, dgrams = _receive(_three_frames(int(Flags.CALIBRATION_SUSPECT)), "&calibration_flag=0")
     assert hashlib.sha256(b"".join(dgrams)).hexdigest() == _FITTING_DIGEST
+
+
+# ---- /VMC/Ext/T never goes back (vmc_time) ----------------------------------------------------------
+
+def test_ext_t_never_goes_back_when_the_capture_stamps_do() -> None:
+    # A camera clock reset (or a replay looping) took the stamps back 10 s: /VMC/Ext/T went from 0.067 s to
+    # -9.9 s, which a receiver takes for stale frames. T counts on from the last value, one frame step later.
+    stamps = [0, 1, 2, -300, -299, -600]  # in frame periods: back 10 s, on one frame, back 10 s again
+    frames = [replace(make_frame(i), capture_time_us=20_000_000 + s * 33_333) for i, s in enumerate(stamps)]
+    per_frame, _ = _receive(frames)
+    times = [next(p[0] for a, p in f if a == "/VMC/Ext/T") for f in per_frame]
+    assert all(b > a for a, b in zip(times, times[1:])), times
+    step = 0.033333
+    assert np.allclose(times, [0, step, 2 * step, 3 * step, 4 * step, 5 * step], atol=1e-5), times
+
+
+def test_the_first_jump_back_is_logged_once(caplog: pytest.LogCaptureFixture) -> None:
+    from firmware_host.sinks.vmc_time import VmcClock
+    clock = VmcClock("vmc://host")
+    with caplog.at_level("WARNING", logger="firmware_host.sinks.vmc_time"):
+        times = [clock.seconds(us) for us in (5_000_000, 5_100_000, 1_000_000, 6_000_000, 2_000_000, 2_000_000)]
+    # back: one frame step (0.1 s, the smallest seen; not the 5 s gap) on; a repeated stamp repeats T
+    assert times == pytest.approx([0.0, 0.1, 0.2, 5.2, 5.3, 5.3])
+    assert clock.jumps_back == 2
+    (record,) = caplog.records
+    assert "vmc://host" in record.getMessage() and "went back 4.100 s" in record.getMessage()
