@@ -70,7 +70,7 @@ from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch,
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
     CALIBRATION_WINDOW
 from firmware_host.errors import FirmwareHostError
-from firmware_host.joint_frames import FrameNumbers, announced_scene_flags, estimate_frame, truth_frame
+from firmware_host.joint_frames import FrameNumbers, announced_scene_flags, capture_time_us, estimate_frame, truth_frame
 from firmware_host.protocol.constants import MAX_RIG_ID_LEN
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks import Sink, open_sink
@@ -508,6 +508,10 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                         print(f"skipped a frame: {e}")
                         continue
                     read_failed = False
+                    # a capture time the stream cannot carry (a take's negative stamps kept) is refused before the
+                    # model runs on it, as the daemon refuses it: it was refused only as its frame was made, the
+                    # model and tracking run on it for nothing
+                    capture_time_us(pair)
                     delivered += 1
                     stats_at_pair = source.stats
                     result = None

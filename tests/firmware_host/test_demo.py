@@ -20,6 +20,7 @@ import drivers
 from firmware_host import demo
 from ghnerf_runtime.cli.sigterm import Terminated
 from ghnerf_runtime.estimator import Estimator
+from tests.firmware_host.joint_stream_helpers import record_take
 
 REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"
@@ -430,6 +431,20 @@ def test_a_rig_that_gives_no_pair_says_why_as_the_daemon_does(tmp_path, capsys, 
     err = capsys.readouterr().err
     assert rc == 2 and "the rig failed after 0 pairs" in err, err
     assert "frames came from both cameras" in err and "raise the rig URL's max_pending" in err, err
+
+
+@needs_model
+def test_a_capture_time_the_stream_cannot_carry_is_refused_before_the_model_runs(tmp_path, capsys, recorded):
+    """A take's negative stamps kept (``keep_time=1``): the demo ran the model on the first pair, then refused it
+    as its frame was made. Now refused before the estimate, as the daemon refuses it."""
+    take = tmp_path / "take"
+    url = f"record+sim://?fps=30&width=64&height=48&seed=1&policy=all&cache={tmp_path / 'cache'}&out={take}"
+    record_take(url, drivers.ManualClock(-10**9), 3)
+    rc = demo.main(["--url", f"replay://{take}?keep_time=1", "--seconds", "10", "--out", str(tmp_path / "out"),
+                    "--sink", "memory://", "--model-dir", str(MODELS)])
+    error = capsys.readouterr().err
+    assert rc == 2 and "timestamp_ns=-1000000000" in error, error
+    assert recorded == []  # the model never ran
 
 
 def test_a_stream_that_ends_is_no_failure(tmp_path, capsys, small_take):
