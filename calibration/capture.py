@@ -29,7 +29,8 @@ from ghnerf_runtime.image_files import read_image_or_none, unread_because
 from ghnerf_runtime.rig_file import write_text_atomic
 
 __all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
-           "earlier_views", "earlier_size", "next_view_number", "read_camera_order", "write_camera_order"]
+           "earlier_views", "earlier_size", "next_view_number", "read_camera_order", "stored_size",
+           "write_camera_order"]
 
 CAMERAS_FILE = "cameras.json"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -77,13 +78,13 @@ def earlier_size(folder: Path, *, skip: Iterable[str] = ()) -> tuple[Path, tuple
     for name, path in images.items():
         if name in skip:
             continue
-        size = _stored_size(path)
+        size = stored_size(path)
         if size is not None:  # an unreadable one is the solve's to name
             return path, size
     return None
 
 
-def _stored_size(path: Path) -> tuple[int, int] | None:
+def stored_size(path: Path) -> tuple[int, int] | None:
     """An image's ``(width, height)`` as stored: from its header where it gives one (a camera's 8000x6000 still
     was decoded whole, about 400 MB, for its size alone), else decoded; None for one that does not decode."""
     from drivers.backends.recording_format import header_size  # replay's header reader: one reader of sizes

@@ -44,6 +44,7 @@ from calibration.check import (FLOOR_VIEW, CheckLimits, check_failures, check_ri
 from calibration.detect import (PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view,
                                mirrored_corners, mirrored_words)
 from calibration.errors import BoardError, CalibrationError, CaptureError
+from calibration.image_sizes import camera_image_sizes, mixed_sizes_problem
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, unwritable_reason
@@ -636,6 +637,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     for cam in names:
         extra = f"; no board in {', '.join(missed[cam])}" if missed[cam] else ""
         print(f"{cam}: the board found in {len(views[cam])} of {len(views[cam]) + len(missed[cam])} images{extra}")
+    _refuse_mixed_sizes(Path(args.images), names, views)
     _refuse_exchanged_sizes(out, views, Path(args.images))
     blind = [cam for cam in names if not views[cam]]
     if blind:  # said as such: it was blamed on the floor view, or on too few views ("15-30 is usual")
@@ -693,6 +695,17 @@ def _replaced_rig(out: Path):
         return load_rig(out, warn=False)
     except RigFileError:
         return None
+
+
+def _refuse_mixed_sizes(images: Path, cameras: Sequence[str], views: dict) -> None:
+    """Refuse a camera whose images are not all one size, the board found in them or not
+    (:mod:`calibration.image_sizes`): checked from the images alone, so also where ``--out`` holds no rig file.
+
+    :raises UsageError: naming each odd image's file, its size and its camera's usual one.
+    """
+    problem = mixed_sizes_problem(camera_image_sizes(images, cameras, views))
+    if problem is not None:
+        raise UsageError(f"{problem}. Solved as they are, a camera's views at two sizes cannot share one lens")
 
 
 def _refuse_exchanged_sizes(out: Path, views: dict, images: Path) -> None:

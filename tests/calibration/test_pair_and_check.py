@@ -555,6 +555,37 @@ def test_solve_checks_the_sizes_only_against_a_rig_file_it_replaces(sized_rig, t
         assert "look exchanged" not in said.err and "warning: sides: camera 'left' came out" in said.out
 
 
+def test_solve_without_a_rig_file_refuses_a_pair_exchanged_between_the_folders(sized_rig, tmp_path, capsys,
+                                                                               monkeypatch):
+    # no rig at --out to compare with: the one pair exchanged was "camera 'left': its images differ in size"
+    views = _views(sized_rig, _facing_poses(sized_rig, 10, seed=7), noise_px=0.1)
+    name = sorted(views["left"])[3]
+    views["left"][name], views["right"][name] = views["right"][name], views["left"][name]
+    rc, images = _solve_cli(views, tmp_path, monkeypatch)
+    err = capsys.readouterr().err
+    assert rc == 2 and (
+        f"{images / 'left' / name}.png is 640x400, the other 9 image(s) of camera 'left' 960x600, and its namesake "
+        f"{images / 'right' / name}.png has camera 'left''s size, camera 'right''s images 640x400: the two look "
+        "exchanged") in err, err
+    assert not (tmp_path / "rig.json").exists() and not (tmp_path / "rig.report.json").exists()
+
+
+def test_solve_without_a_rig_file_refuses_an_image_of_another_size_the_board_was_not_found_in(
+        sized_rig, tmp_path, capsys, monkeypatch):
+    # the solve compared only the images the board was found in: a stray image at another size went unsaid
+    views = _views(sized_rig, _facing_poses(sized_rig, 10, seed=7), noise_px=0.1)
+    images = _listed_views(views, tmp_path)
+    stray = images / "left" / "stray.png"
+    assert cv2.imwrite(str(stray), np.zeros((16, 32), np.uint8))
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {"left": ["stray"], "right": []}))
+    rc = cli.main(["solve", "--images", str(images), "--board", str(tmp_path / "board.json"), "--out",
+                   str(tmp_path / "rig.json"), "--cameras", "left,right", "--camera-height", "1.4", "--pitch", "9"])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"{stray} is 32x16, the other 10 image(s) of camera 'left' 960x600: remove or retake it" in err
+    stray.unlink()
+    assert _solve_cli(views, tmp_path, monkeypatch)[0] == 0  # without it: solved
+
+
 @pytest.mark.parametrize("exchanged", [False, True])
 def test_a_left_camera_solved_on_the_right_is_warned_about(level_rig, exchanged):
     # each folder holding the other camera's images solves as well as the right ones (the rig file then gives each

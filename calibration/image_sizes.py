@@ -1,0 +1,72 @@
+"""The calibration images' sizes checked against each other, needing no rig file.
+
+``ghcal solve`` compares the image sizes with the rig file it replaces at ``--out`` (folders exchanged whole,
+:func:`~calibration.check.sized_as_exchanged`); with none there it had nothing to compare them with, and each
+camera's images were compared only among those the board was found in (``solve_intrinsics``): an image of another
+size in which the board was not found went unnoticed, and a pair exchanged between the folders was told only as
+"its images differ in size". Every image of a camera is one size here, the board found in it or not: the size
+of its board detections where it has them, read from the file's header where it has none. An image of another
+size is named with both sizes; one whose namesake in the other camera's folder has this camera's size is said to
+be exchanged with it.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from calibration.capture import camera_folders, list_images, stored_size
+from calibration.detect import BoardView
+
+__all__ = ["camera_image_sizes", "mixed_sizes_problem"]
+
+Size = tuple[int, int]
+
+
+def camera_image_sizes(root: str | Path, cameras: Sequence[str], views: Mapping[str, Mapping[str, BoardView]]) \
+        -> dict[str, dict[str, tuple[Path, Size]]]:
+    """Camera -> image name -> (its file, its ``(width, height)``): a board view's size where the board was found
+    (what the solve uses), else the file's stored size. An image that does not decode is left out (the detection
+    names it)."""
+    sizes: dict[str, dict[str, tuple[Path, Size]]] = {}
+    for camera, folder in camera_folders(root, cameras).items():
+        sizes[camera] = {}
+        for name, path in list_images(folder).items():
+            view = views.get(camera, {}).get(name)
+            size = view.image_size if view is not None else stored_size(path)
+            if size is not None:
+                sizes[camera][name] = (path, (int(size[0]), int(size[1])))
+    return sizes
+
+
+def _usual_size(images: Mapping[str, tuple[Path, Size]]) -> Size | None:
+    """The size most of a camera's images have (the first of equals in name order); None without images."""
+    counts = Counter(size for _, size in sorted(images.values()))
+    return counts.most_common(1)[0][0] if counts else None
+
+
+def _odd_image_words(camera: str, name: str, sizes: Mapping[str, Mapping[str, tuple[Path, Size]]],
+                     usual: Mapping[str, Size | None]) -> str:
+    """What is wrong with ``camera``'s image ``name``, whose size is not its camera's usual one."""
+    path, (w, h) = sizes[camera][name]
+    count = sum(1 for _, size in sizes[camera].values() if size == usual[camera])
+    own = usual[camera]
+    assert own is not None
+    words = f"{path} is {w}x{h}, the other {count} image(s) of camera {camera!r} {own[0]}x{own[1]}"
+    for other, images in sizes.items():
+        namesake = images.get(name)
+        if other != camera and namesake is not None and namesake[1] == own and usual[other] == (w, h):
+            return (f"{words}, and its namesake {namesake[0]} has camera {camera!r}'s size, camera {other!r}'s "
+                    f"images {w}x{h}: the two look exchanged; exchange them (or remove both)")
+    return f"{words}: remove or retake it (a camera's views are solved at one size)"
+
+
+def mixed_sizes_problem(sizes: Mapping[str, Mapping[str, tuple[Path, Size]]]) -> str | None:
+    """The first camera whose images are not all one size, said per odd image (up to three), or None."""
+    usual = {camera: _usual_size(images) for camera, images in sizes.items()}
+    for camera, images in sizes.items():
+        odd = sorted(name for name, (_, size) in images.items() if size != usual[camera])
+        if odd:
+            more = f"; {len(odd) - 3} more" if len(odd) > 3 else ""
+            return "; ".join(_odd_image_words(camera, name, sizes, usual) for name in odd[:3]) + more
+    return None
