@@ -152,7 +152,8 @@ def select(found: Sequence[Any], serial: Optional[str], port: Optional[PortPath]
     Serial numbers are read from every device (the log then lists them all); the devices not taken
     have their handles closed. Exactly one of ``serial`` and ``port`` is given.
 
-    :raises NoMatch: none matches, or several share that serial number (say ``port=`` instead).
+    :raises NoMatch: none matches, or several share that serial number (the message gives each one's ``port=``,
+        or says that the backend reports no port path to choose by).
     """
     looked_for = f"serial {serial!r}" if serial is not None else f"port {port}"
     seen: list[str] = []
@@ -178,6 +179,18 @@ def select(found: Sequence[Any], serial: Optional[str], port: Optional[PortPath]
     if not hits:
         raise NoMatch(f"no device {ids} with {looked_for}; found {len(found)} of {ids}: {listed}")
     if len(hits) > 1:
-        raise NoMatch(f"{len(hits)} devices {ids} have {looked_for} (boards flashed alike?); "
-                      f"choose one by port= instead: {listed}")
+        raise NoMatch(f"{len(hits)} devices {ids} have {looked_for} (boards flashed alike?); {_tell_apart(hits)} "
+                      f"(found: {listed})")
     return hits[0]
+
+
+def _tell_apart(alike: Sequence[Any]) -> str:
+    """How to name one of boards that share a serial number: ``port=`` with each one's port path, ready to put in
+    the URL in place of ``serial=``; where the backend reports no port path for one of them, that ``port=`` cannot
+    tell them apart either, and what can."""
+    ports = [port_of(dev) for dev in alike]
+    if all(port is not None for port in ports):
+        return "choose one by port= in place of serial=: " + " or ".join(f"port={port}" for port in ports)
+    unknown = "; ".join(describe(dev) for dev, port in zip(alike, ports) if port is None)
+    return (f"port= cannot choose between them either: this libusb reports no port path for {unknown}; give the "
+            "boards serial numbers of their own (or use a libusb that reports port numbers)")

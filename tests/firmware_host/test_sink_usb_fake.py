@@ -388,11 +388,32 @@ def test_two_boards_with_one_serial_are_not_guessed_between() -> None:
     sink = open_sink(f"{URL}&serial=ABC123", backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
     wait_until(lambda: sink.stats().connect_failures >= 2, what="retries")
     stats = sink.close()
-    assert "2 devices 1209:0001 have serial 'ABC123'" in (stats.last_error or "")
-    assert "choose one by port=" in (stats.last_error or "")
-    # the ports to choose from are named
-    assert "port 1-1.4 serial 'ABC123'; bus 1 address 9 port 1-2 serial 'ABC123'" in (stats.last_error or "")
+    error = stats.last_error or ""
+    assert "2 devices 1209:0001 have serial 'ABC123'" in error
+    # each board's port path, as the option that takes it (the list of all boards found left the reader to build it)
+    assert "choose one by port= in place of serial=: port=1-1.4 or port=1-2 (found: " in error, error
+    assert "port 1-1.4 serial 'ABC123'; bus 1 address 9 port 1-2 serial 'ABC123'" in error
     assert not first.claimed and not second.claimed and first.open_handles == second.open_handles == 0
+    # and the option named takes its board
+    sink = open_sink(f"{URL}&port=1-2", backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
+    assert sink.wait_connected(5)
+    sink.send(make_frame(0))
+    assert sink.wait_drained(5)
+    sink.close()
+    assert joints_seqs(messages_of(second.take())) == [0] and first.take() == b""
+
+
+def test_boards_with_one_serial_and_no_port_path_are_refused_saying_port_cannot_choose() -> None:
+    # port= was offered where the backend reports no port path, so it could never match either board
+    first, second = two_boards()
+    second.serial = first.serial
+    second.port_numbers = ()  # this libusb reports none for it
+    sink = open_sink(f"{URL}&serial=ABC123", backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
+    wait_until(lambda: sink.stats().connect_failures >= 2, what="retries")
+    error = sink.close().last_error or ""
+    assert "port= cannot choose between them either: this libusb reports no port path for bus 1 address 9 port " \
+           "unknown; give the boards serial numbers of their own" in error, error
+    assert "choose one by port=" not in error
 
 
 def test_without_a_selector_no_string_descriptor_is_read() -> None:
