@@ -815,6 +815,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-refine", action="store_true",
                     help="tracking.refine_cold_start off: a cold pass (the working volume's crop) is not run again "
                          "on the crop of what it found (docs/two-people.md, \"A track of both people's joints\")")
+    ap.add_argument("--no-turn-search", action="store_true",
+                    help="roi.turn_search off (on by default for a model with encoder heatmaps): the rows' counts "
+                         "without the crop turn search (docs/two-people.md, \"People close together\")")
     args = ap.parse_args(argv)
     # --calibration and --one-person-model run their own sessions (the oracle filmed through a turned rig; the
     # bench sequences at the runtime's defaults): a model or prior asked for there would be silently left out
@@ -842,7 +845,11 @@ def main(argv=None) -> int:
         if not (np.isfinite(args.behind) and args.behind > 0):
             ap.error(f"--behind needs a distance above 0 m, got {args.behind!r}")
         args.places = (args.places[0], behind_place(args.places[0], args.behind))
+    if args.no_turn_search and (args.one_person_model or args.calibration):
+        ap.error("--no-turn-search sets the two-people rows' estimators; --calibration and --one-person-model run "
+                 "their own (the oracle session; that folder at the defaults): leave it out")
     tracking = replace(EstimatorConfig().tracking, refine_cold_start=not args.no_refine)
+    roi = replace(EstimatorConfig().roi, turn_search=False) if args.no_turn_search else EstimatorConfig().roi
     if args.calibration:
         config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject,
                                                   behind_min_joints=args.behind_min_joints), tracking=tracking)
@@ -904,7 +911,7 @@ def main(argv=None) -> int:
     config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject,
                                               skeleton_prior=args.skeleton_prior,
                                               behind_min_joints=args.behind_min_joints), tracking=tracking,
-                             presence=replace(EstimatorConfig().presence, scan_every_s=args.scan_every_s))
+                             presence=replace(EstimatorConfig().presence, scan_every_s=args.scan_every_s), roi=roi)
     for alone, second, what in runs:
         counts, pairs = measure(args.scenes, args.pairs, alone, config, args.swap, args.places, args.model_dir,
                                 second, args.occlude)
@@ -919,6 +926,8 @@ def main(argv=None) -> int:
             maps += f", behind_min_joints {args.behind_min_joints}"
         if args.no_refine:
             maps += ", refine_cold_start off"
+        if args.no_turn_search:
+            maps += ", roi.turn_search off"
         flagged_mm = (f"the flagged pairs' {counts['flagged_mm'] / counts['flagged_joints']:.1f}"
                       if counts["flagged_joints"] else "no flagged pair's joints")
         print(f"{what}{where}{', swapped' if args.swap else ''}, {maps}, the defaults, pick_subject "

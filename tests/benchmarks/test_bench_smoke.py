@@ -574,6 +574,23 @@ def test_measure_two_people_counts_the_scan_s_answers(capsys, monkeypatch):
     assert "someone_else" not in plain, plain
 
 
+def test_measure_two_people_turn_search_off_names_itself_in_each_row(capsys, monkeypatch):
+    # docs/two-people.md, "People close together" (session 57's review L): the counts with the crop turn search off
+    # come from this option (a script outside the repository gave them before); every row says the search is off
+    out = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", "--no-turn-search", capsys=capsys,
+                     monkeypatch=monkeypatch)
+    rows = re.findall(r"^(2 pairs of two people|the second person joining after 3 pairs) .*, roi\.turn_search off, "
+                      r"the defaults, pick_subject \w+: [\d.]+ joints reported per pair", out, re.M)
+    assert len(rows) == 2, out
+    assert len(re.findall(r"; roi\.turn_search searches 0$", out, re.M)) == 2, out
+
+
+def test_measure_two_people_turn_search_off_is_refused_where_the_rows_are_not_run(capsys, monkeypatch):
+    err = run_script_failing("measure_two_people", "--one-person-model", "models", "--no-turn-search", capsys=capsys,
+                             monkeypatch=monkeypatch)
+    assert "--no-turn-search sets the two-people rows' estimators" in err, err
+
+
 def test_measure_two_people_by_joint(capsys, monkeypatch):
     # the joint-by-joint figures of docs/two-people.md ("Fewer, right joints", session 59) come from this option: each
     # row's 25 joints, the pairs reporting each and of them those without a subject's pairing (at most as many)
