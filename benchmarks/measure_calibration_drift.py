@@ -30,12 +30,16 @@ room and its floor as they were, the sensor noise the same: 0 is the cached sequ
 a row each, the turns not run. Its floor rows add the windows past each limit once ``joints3d.foot_standing_m`` is
 set to the default plus the lift (what ``ghnerf-daemon --measure-floor`` has a user set; the figure less the lift).
 Rendering costs about 0.25 s a pair on a 2-core machine (docs/calibration.md, "Shoes, mats: the standing foot").
+
+A last line counts the crop turn searches (``Estimator.turn_searches``) over every row's pairs; ``--no-turn-search``
+sets ``roi.turn_search`` off, to see whether the search moves the tables.
 A tool, not a test.
 """
 from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -110,6 +114,9 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     ap.add_argument("--lift-m", help="comma-separated heights (m, 0 to 0.3) the person is raised above the floor "
                                      "(a sole, a mat), a row each through the true rig; the turns are not run")
+    ap.add_argument("--no-turn-search", action="store_true",
+                    help="roi.turn_search off (on by default for a model with encoder heatmaps); either way the "
+                         "searches run are counted (docs/calibration.md, \"The crop turn search and these figures\")")
     args = ap.parse_args(argv)
     lifts = []
     if args.lift_m is not None:
@@ -129,7 +136,11 @@ def main(argv=None) -> int:
     if unknown := [a for a in axes if a not in AXES]:
         ap.error(f"--axes: {unknown} not of {list(AXES)}")
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir))
+    if args.no_turn_search:
+        cfg = replace(cfg, roi=replace(cfg.roi, turn_search=False))
     session = load_session(cfg)
+    searching = cfg.roi.search_for(getattr(session.contract, "encoder_heatmaps", False)).turn_search
+    searches = 0  # Estimator.turn_searches summed over every setting's estimators
     if lifts:
         settings = [("lifted", h) for h in lifts]
     else:
@@ -162,6 +173,7 @@ def main(argv=None) -> int:
                         seq_px.append(r.reprojection_px_median)
                     if r.lowest_foot_m is not None:
                         seq_foot.append(r.lowest_foot_m)
+                searches += est.turn_searches
             acc["px"] += seq_px
             acc["roll"] += rolling_medians(seq_px, args.window)  # within a sequence: the daemon's window
             acc["foot"] += seq_foot
@@ -206,6 +218,8 @@ def main(argv=None) -> int:
                   + " | ".join(f"{'-':>9}" for _ in limits) + "".join(f" | {'-':>23}" for _ in limits if lifts))
         print(f"  {setting_name(axis, deg):>14} | {foot.size:5d}/{acc['pairs']:<5d} | {' ' * 9}{stats} | "
               f"{' ' * 4}{rolled}")
+    pairs = sum(acc["pairs"] for acc in tally.values())
+    print(f"roi.turn_search {'on' if searching else 'off'}: {searches} crop turn searches in the {pairs} pairs")
     return 0
 
 

@@ -807,6 +807,20 @@ def test_measure_calibration_drift_turns_the_camera_asked_and_counts_each_limit(
 
 
 @pytest.mark.skipif(not (BENCH.parent / "models" / "model_card.json").is_file(), reason="no trained model")
+def test_measure_calibration_drift_counts_the_turn_searches_and_sets_the_search_off(scratch_cache, capsys,
+                                                                                    monkeypatch):
+    # docs/calibration.md, "The crop turn search and these figures": the tables with the search on (the shipped
+    # model's default) and off, and the searches each ran, come from this script (a script outside it gave them before)
+    common = ("--model-dir", str(BENCH.parent / "models"), "--sequences", "1", "--frames", "2", "--axes", "pan",
+              "--degrees", "1", "--window", "2")
+    on = run_script("measure_calibration_drift", *common, capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^roi\.turn_search on: \d+ crop turn searches in the 4 pairs$", on, re.M), on
+    off = run_script("measure_calibration_drift", *common, "--no-turn-search", capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^roi\.turn_search off: 0 crop turn searches in the 4 pairs$", off, re.M), off
+    assert [r for r in re.findall(r"^ +(true rig|pan 1 deg) \|", off, re.M)] == ["true rig", "pan 1 deg"] * 2, off
+
+
+@pytest.mark.skipif(not (BENCH.parent / "models" / "model_card.json").is_file(), reason="no trained model")
 def test_measure_calibration_drift_raises_the_person_through_the_true_rig(scratch_cache, capsys, monkeypatch):
     # docs/calibration.md, "Shoes, mats: the standing foot": a row per lift, the turns not run, and the windows
     # counted again with the standing foot set to the default plus the lift
