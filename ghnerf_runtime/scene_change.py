@@ -24,6 +24,9 @@ THUMB_CELLS = (18, 24)
 CELL_SAMPLES = 8
 #: cells that must change: one cell alone may be a flicker or a noise extreme, a person covers more
 WAKE_MIN_CELLS = 2
+#: a cell that woke this many resting searches whose whole round of tiles then found nobody wakes no more (until the
+#: estimator is reset): a screen, a curtain in a draught; one vain wake may be a person the tiles missed
+RESTLESS_AFTER_WAKES = 2
 
 
 def _lattice(image: np.ndarray) -> np.ndarray:
@@ -98,3 +101,9 @@ def scene_changed(now: tuple[SceneCopy, ...], kept: tuple[SceneCopy, ...], level
     if ignored is not None:
         masks = [m & ~i for m, i in zip(masks, ignored)]
     return any(np.count_nonzero(m) >= WAKE_MIN_CELLS for m in masks)
+
+
+def restless_with_neighbours(restless: np.ndarray) -> np.ndarray:
+    """``restless`` (``THUMB_CELLS`` bool) grown by one cell each way, diagonals too: a moving thing's edge cells,
+    which it covers in part, change by less and not every time, so they wake on their own long after its core."""
+    return cv2.dilate(restless.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
