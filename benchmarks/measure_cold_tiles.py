@@ -30,6 +30,25 @@ first joint (0: found on the walk-in pair) over the placements found, median, p9
 found the person within ``--frames`` pairs, each person's most (``-``: never), the empty pairs' mean ms after the first
 round of tiles and its ratio to no tiles, the wakes before the walk-in (false: nobody there) out of the empty pairs
 that rested, and the median ms of one pair's scene check (both cameras' copies and the comparison).
+
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_cold_tiles.py --wake-margin [--sequences 6] [--pairs 30]
+        --rigs docs/examples/rig.json,synth_rig.json
+
+The wake-up's margin instead (no model run): the statistic ``tracking.cold_tiles_wake_levels`` thresholds
+(``ghnerf_runtime.scene_change.wake_statistic``: each camera's 2nd largest cell difference, the larger camera's) of
+each of ``--pairs`` pairs of ``--sequences`` bench rooms with nobody in them, through the scene's own sensor (fresh
+noise and exposure jitter each pair), against the room's first pair, and of each person's first pair (where
+``--walk-in-sweep`` puts the walk-in) against the same: count, min, median, p90, p99, max, how many are over the
+runtime's threshold, and each person's value.
+
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_cold_tiles.py --moving-room [--sequences 6] [--pairs 40]
+        [--rest-every N] --rigs docs/examples/rig.json,synth_rig.json
+
+A scene that keeps moving instead: ``--sequences`` bench rooms with nobody in them and a screen playing
+(``benchmarks/empty_rooms.py``'s ``scene_with_screen``, a new picture every pair), ``--pairs`` pairs each, through
+tiles that never rest, the resting config without the wake-up, with it and no tiles, a fresh estimator each,
+interleaved pair by pair. After the first round of tiles it prints the tile passes and the wakes per 100 pairs, the
+mean ms per pair and its ratio to no tiles, and the pairs that reported a joint (nobody is there).
 """
 from __future__ import annotations
 
@@ -290,8 +309,9 @@ def run_moving_room(args, session, base: EstimatorConfig) -> int:
     t = base.tracking
     rest = t.cold_tiles_rest_every if args.rest_every is None else args.rest_every
     levels = t.cold_tiles_wake_levels
-    configs = {"tiles, no rest": EstimatorConfig(session=base.session,
-                                                 tracking=TrackingConfig(cold_tiles_rest_every=1)),
+    # (tiles that never rest have nothing to wake: no scene check, no wakes counted)
+    configs = {"tiles, no rest": EstimatorConfig(session=base.session, tracking=TrackingConfig(
+                   cold_tiles_rest_every=1, cold_tiles_wake_levels=None)),
                f"rest every {rest}, no wake-up": EstimatorConfig(session=base.session, tracking=TrackingConfig(
                    cold_tiles_rest_every=rest, cold_tiles_wake_levels=None)),
                f"rest every {rest}, wake-up at {levels:g} levels": EstimatorConfig(

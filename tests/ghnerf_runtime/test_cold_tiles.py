@@ -341,7 +341,7 @@ def run_screen_room(est, example_rig, pairs: int) -> tuple[list[int], list[int]]
 
 def test_a_screen_playing_in_an_empty_room_stops_waking_the_rest(example_rig):
     """A screen changes its cells every pair: each rest woke the search, whose round found nobody, and the tiles
-    searched almost every pair (a wake every 5 pairs, 11 in 60). Its cells wake :data:`RESTLESS_AFTER_WAKES`
+    searched almost every pair (14 wakes in 60 pairs). Its cells wake :data:`RESTLESS_AFTER_WAKES`
     searches in vain, with their neighbours (the screen's edges) they wake no more: the rest holds."""
     oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=4)))
     oracle.set_truth(None)
