@@ -341,7 +341,8 @@ def run_moving_room(args, session, base: EstimatorConfig) -> int:
         for name, r in out.items():
             n = max(r["pairs"], 1)
             print(f"| {path} | {name} | {r['pairs']} | {100 * r['passes'] / n:.0f} | {100 * r['wakes'] / n:.0f} | "
-                  f"{100 * r['one_view'] / n:.0f} / {100 * r['rejected'] / n:.0f} | {np.mean(r['ms']):.1f} | {np.mean(r['ms']) / off:.2f} | {r['phantoms']} |", flush=True)
+                  f"{100 * r['one_view'] / n:.0f} / {100 * r['rejected'] / n:.0f} | {np.mean(r['ms']):.1f} | "
+                  f"{np.mean(r['ms']) / off:.2f} | {r['phantoms']} |", flush=True)
     return 0
 
 
