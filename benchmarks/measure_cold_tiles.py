@@ -30,6 +30,27 @@ first joint (0: found on the walk-in pair) over the placements found, median, p9
 found the person within ``--frames`` pairs, each person's most (``-``: never), the empty pairs' mean ms after the first
 round of tiles and its ratio to no tiles, the wakes before the walk-in (false: nobody there) out of the empty pairs
 that rested, and the median ms of one pair's scene check (both cameras' copies and the comparison).
+
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_cold_tiles.py --wake-margin [--sequences 6] [--pairs 30]
+        --rigs docs/examples/rig.json,synth_rig.json
+
+The wake-up's margin instead (no model run): the statistic ``tracking.cold_tiles_wake_levels`` thresholds
+(``ghnerf_runtime.scene_change.wake_statistic``: each camera's 2nd largest cell difference, the larger camera's) of
+each of ``--pairs`` pairs of ``--sequences`` bench rooms with nobody in them, through the scene's own sensor (fresh
+noise and exposure jitter each pair), against the room's first pair, and of each person's first pair (where
+``--walk-in-sweep`` puts the walk-in) against the same: count, min, median, p90, p99, max, how many are over the
+runtime's threshold, and each person's value.
+
+    PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_cold_tiles.py --moving-room [--sequences 6] [--pairs 40]
+        [--rest-every N] --rigs docs/examples/rig.json,synth_rig.json
+
+A scene that keeps moving instead: ``--sequences`` bench rooms with nobody in them and a screen playing
+(``benchmarks/empty_rooms.py``'s ``scene_with_screen``, a new picture every pair), ``--pairs`` pairs each, through
+tiles that never rest, the resting config without the wake-up, with it and no tiles, a fresh estimator each,
+interleaved pair by pair. After the first round of tiles it prints the tile passes and the wakes per 100 pairs, the
+pairs seen in one view (a 2D person in one camera: it wakes the tiles as anyone seen does) and those with a frame
+rejected (no tile pass), the mean ms per pair and its ratio to no tiles, and the pairs that reported a joint (nobody
+is there).
 """
 from __future__ import annotations
 
@@ -42,13 +63,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.empty_rooms import empty_room_pair, scene_without_person  # noqa: E402
+from benchmarks.empty_rooms import empty_room_pair, scene_with_screen, scene_without_person  # noqa: E402
 from benchmarks.measure_baseline import bench_scene_in, rig_paths  # noqa: E402
 from ghnerf_runtime.cli.simdata import SEED_BASE  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig, TrackingConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.rig_file import load_rig  # noqa: E402
-from ghnerf_runtime.scene_change import pair_copies, scene_changed  # noqa: E402
+from ghnerf_runtime.scene_change import pair_copies, scene_changed, wake_statistic  # noqa: E402
 from ghnerf_runtime.tracking import volume_tiles  # noqa: E402
 
 
@@ -212,6 +233,119 @@ def run_sweep(args, session, base: EstimatorConfig) -> int:
     return 0
 
 
+# ------------------------------------------------------------------ --wake-margin
+def room_statistics(room: list) -> list[float]:
+    """The wake statistic (:func:`wake_statistic`) of each pair of ``room`` after its first, against the first's
+    copies (kept as a tile pass that found nobody keeps them): what sensor noise and exposure jitter alone give."""
+    kept = pair_copies(room[0])
+    return [wake_statistic(pair_copies(images), kept) for images in room[1:]]
+
+
+def walk_in_statistic(rig, k: int, room: list) -> float:
+    """The wake statistic of bench sequence ``k``'s first pair with its person (where ``--walk-in-sweep`` puts the
+    walk-in) against the copies of ``room``'s first pair (its room before them)."""
+    scene, t0 = bench_scene_in(rig, k)
+    person = [scene.render(cam, t0, with_truth=False)[0] for cam in rig.pair]
+    return wake_statistic(pair_copies(person), pair_copies(room[0]))
+
+
+def spread_text(values: list) -> str:
+    """Count, min, median, p90, p99 and max of ``values`` (8-bit levels)."""
+    v = np.asarray(values, dtype=np.float64)
+    return (f"{len(v)} | {v.min():.1f} | {np.median(v):.1f} | {np.percentile(v, 90):.1f} | "
+            f"{np.percentile(v, 99):.1f} | {v.max():.1f}")
+
+
+def run_wake_margin(args, base: EstimatorConfig) -> int:
+    """``--wake-margin``: the distribution of the statistic the wake-up thresholds, over empty rooms and walk-ins."""
+    levels = base.tracking.cold_tiles_wake_levels
+    print(f"the wake statistic (each camera's 2nd largest cell difference, the larger camera's; 8-bit levels; "
+          f"wakes over {levels:g}): {args.sequences} bench rooms x {args.pairs} pairs each through its scene's own "
+          f"sensor, against the room's first pair; the walk-ins: each person's first pair against the same")
+    print("| rig file | pairs compared | count | min | median | p90 | p99 | max | over the threshold | per person |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for path in rig_paths(args.rigs):
+        rig = load_rig(path, warn=False)
+        rooms = [room_before(rig, k, args.pairs) for k in range(args.sequences)]
+        empty = [s for room in rooms for s in room_statistics(room)]
+        walk = [walk_in_statistic(rig, k, room) for k, room in enumerate(rooms)]
+        for name, values, each in (("empty rooms", empty, ""), ("walk-ins", walk, ", ".join(f"{v:.1f}" for v in walk))):
+            over = sum(v > levels for v in values)
+            print(f"| {path} | {name} | {spread_text(values)} | {over} of {len(values)} | {each} |", flush=True)
+    return 0
+
+
+# ------------------------------------------------------------------ --moving-room
+def moving_stream(rig, k: int, pairs: int) -> list:
+    """``pairs`` pairs at 30 fps of bench sequence ``k``'s room with nobody in it and a screen playing
+    (``benchmarks/empty_rooms.py``'s ``scene_with_screen``), through the scene's own sensor."""
+    scene, t0 = bench_scene_in(rig, k)
+    return [scene_with_screen(scene, rig.pair, t0 + i / 30.0) for i in range(pairs)]
+
+
+def run_moving(session, configs: dict, rig, streams: list, tiles: int) -> dict:
+    """Per config, over ``streams`` (pair lists, a fresh estimator each, the configs interleaved pair by pair): the
+    ms of each pair after the first round of ``tiles``, the tile passes and wakes there, the pairs there that saw
+    someone in one view (which wakes the tiles as anyone seen does) or had a frame rejected (no tile pass), and the
+    pairs that reported a joint (nobody is there)."""
+    out = {name: {"ms": [], "passes": 0, "wakes": 0, "one_view": 0, "rejected": 0, "phantoms": 0, "pairs": 0}
+           for name in configs}
+    for pairs in streams:
+        ests = {name: Estimator(session, rig, cfg) for name, cfg in configs.items()}
+        for i, images in enumerate(pairs):
+            for name, est in ests.items():
+                before = (est.cold_tile_passes, est.cold_tile_wakes)
+                t = time.perf_counter()
+                result = est.estimate(images)
+                ms = 1e3 * (time.perf_counter() - t)
+                out[name]["phantoms"] += not result.missing.all()
+                if i >= tiles:  # after the first round: what resting (or not) does
+                    r = out[name]
+                    r["ms"].append(ms)
+                    r["pairs"] += 1
+                    r["passes"] += est.cold_tile_passes - before[0]
+                    r["wakes"] += est.cold_tile_wakes - before[1]
+                    r["one_view"] += result.single_view is not None
+                    r["rejected"] += not all(result.frame_ok.values())
+        for est in ests.values():
+            est.close()
+    return out
+
+
+def run_moving_room(args, session, base: EstimatorConfig) -> int:
+    """``--moving-room``: wakes and cost in an empty room whose screen changes every pair."""
+    t = base.tracking
+    rest = t.cold_tiles_rest_every if args.rest_every is None else args.rest_every
+    levels = t.cold_tiles_wake_levels
+    # (tiles that never rest have nothing to wake: no scene check, no wakes counted)
+    configs = {"tiles, no rest": EstimatorConfig(session=base.session, tracking=TrackingConfig(
+                   cold_tiles_rest_every=1, cold_tiles_wake_levels=None)),
+               f"rest every {rest}, no wake-up": EstimatorConfig(session=base.session, tracking=TrackingConfig(
+                   cold_tiles_rest_every=rest, cold_tiles_wake_levels=None)),
+               f"rest every {rest}, wake-up at {levels:g} levels": EstimatorConfig(
+                   session=base.session, tracking=TrackingConfig(cold_tiles_rest_every=rest,
+                                                                 cold_tiles_wake_levels=levels)),
+               "no tiles": EstimatorConfig(session=base.session, tracking=TrackingConfig(cold_tiles_below_share=0.0))}
+    print(f"{args.precision}; {args.sequences} empty rooms with a screen playing x {args.pairs} pairs; after the "
+          f"first round of tiles: per 100 pairs, mean ms per pair; the configs interleaved pair by pair")
+    print("| rig file | config | pairs after the first round | tile passes per 100 pairs | wakes per 100 pairs | "
+          "seen in one view / a frame rejected, per 100 pairs | mean ms per pair | ratio to no tiles | "
+          "pairs with a joint |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for path in rig_paths(args.rigs):
+        rig = load_rig(path, warn=False)
+        tiles = len(volume_tiles(rig, base.roi))
+        streams = [moving_stream(rig, k, args.pairs) for k in range(args.sequences)]
+        out = run_moving(session, configs, rig, streams, tiles)
+        off = np.mean(out["no tiles"]["ms"])
+        for name, r in out.items():
+            n = max(r["pairs"], 1)
+            print(f"| {path} | {name} | {r['pairs']} | {100 * r['passes'] / n:.0f} | {100 * r['wakes'] / n:.0f} | "
+                  f"{100 * r['one_view'] / n:.0f} / {100 * r['rejected'] / n:.0f} | {np.mean(r['ms']):.1f} | "
+                  f"{np.mean(r['ms']) / off:.2f} | {r['phantoms']} |", flush=True)
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", default="models")
@@ -226,10 +360,18 @@ def main(argv=None) -> int:
     ap.add_argument("--rigs", default="docs/examples/rig.json", help="rig files, comma-separated")
     ap.add_argument("--walk-in-sweep", action="store_true", help="instead: each person walks in after every count "
                     "of empty pairs in a whole cycle of the rest; pairs until found, median, p90 and max")
+    ap.add_argument("--wake-margin", action="store_true", help="instead: the distribution of the statistic the "
+                    "wake-up thresholds, over --sequences bench rooms x --pairs pairs and their people's walk-ins")
+    ap.add_argument("--moving-room", action="store_true", help="instead: wakes and ms per pair in --sequences "
+                    "bench rooms with a screen playing, --pairs pairs each, nobody there")
     args = ap.parse_args(argv)
     base = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision))
+    if args.wake_margin:
+        return run_wake_margin(args, base)
     if args.walk_in_sweep:
         return run_sweep(args, load_session(base), base)
+    if args.moving_room:
+        return run_moving_room(args, load_session(base), base)
     default_rest = base.tracking.cold_tiles_rest_every
     rest = default_rest if args.rest_every is None else args.rest_every
     resting = EstimatorConfig(session=base.session, tracking=TrackingConfig(cold_tiles_rest_every=rest))

@@ -100,7 +100,8 @@ from ghnerf_runtime.preprocess import (
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import PriorCameras, disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
-from ghnerf_runtime.scene_change import SceneCopy, pair_copies, scene_changed
+from ghnerf_runtime.scene_change import (RESTLESS_AFTER_WAKES, SceneCopy, changed_mask, pair_copies,
+                                         restless_with_neighbours, scene_changed)
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners, cold_person_share, volume_tiles
 from ghnerf_runtime.subject import STILL_SEVERAL_MIN_JOINTS, SubjectSelector, guessed_joints, joints_shown_twice, \
@@ -763,6 +764,9 @@ class Estimator:
         self._tile_rest_wait = 0  # cold pairs left that do not search a tile (tracking.cold_tiles_rest_every)
         # each camera's scene copy at the last tile pass that found nobody (tracking.cold_tiles_wake_levels)
         self._rest_scene: tuple[SceneCopy, ...] | None = None
+        self._woke_on: tuple[np.ndarray, ...] | None = None  # the cells that woke the search now awake, per camera
+        # per camera, each cell's wakes whose round of tiles then found nobody (a screen, a curtain: a restless cell)
+        self._vain_wakes: tuple[np.ndarray, ...] | None = None
         self.cold_tile_passes = 0  # cold pairs that searched a tile, and those whose tile found someone
         self.cold_tiles_found = 0
         self.cold_tile_wakes = 0  # resting searches a scene change woke (tracking.cold_tiles_wake_levels)
@@ -881,6 +885,7 @@ class Estimator:
         self._crop_terms = None
         self._next_tile = 0
         self._wake_tiles()
+        self._vain_wakes = None  # the scene may be another now (a camera moved): its restless cells with it
         self._forget_scan()
         if self._smoother is not None:
             self._smoother.reset()
@@ -1310,22 +1315,44 @@ class Estimator:
         nobody; then only every ``tracking.cold_tiles_rest_every``-th such pair (an empty room stays empty), or
         this one where a camera's scene changed since the last tile pass (``tracking.cold_tiles_wake_levels``: someone
         may have walked in), which wakes the search."""
-        if self._tiles_missed >= len(self._cold_tiles) and self._scene_changed(images):
+        woke_on = self._cells_that_wake(images) if self._tiles_missed >= len(self._cold_tiles) else None
+        if woke_on is not None:
             self.cold_tile_wakes += 1
             self._wake_tiles()  # also on a resting search's own pair: its tile may not be the walker's
+            self._woke_on = woke_on
             return True
         if self._tile_rest_wait > 0:
             self._tile_rest_wait -= 1
             return False
         return True
 
-    def _scene_changed(self, images: Sequence[np.ndarray]) -> bool:
-        """Whether ``images`` differ from the scene kept at the last tile pass that found nobody (never with
-        ``tracking.cold_tiles_wake_levels`` 0 or None, or nothing kept)."""
+    def _cells_that_wake(self, images: Sequence[np.ndarray]) -> tuple[np.ndarray, ...] | None:
+        """Each camera's changed cells where ``images`` differ from the scene kept at the last tile pass that found
+        nobody, leaving out the restless cells (:meth:`_restless_cells`); None where that is no change (never a
+        change with ``tracking.cold_tiles_wake_levels`` 0 or None, or nothing kept)."""
         levels = self.config.tracking.cold_tiles_wake_levels
         if not levels or self._rest_scene is None:
-            return False
-        return scene_changed(pair_copies(images), self._rest_scene, levels)
+            return None
+        now = pair_copies(images)
+        if not scene_changed(now, self._rest_scene, levels, self._restless_cells()):
+            return None
+        return tuple(changed_mask(n, k, levels) for n, k in zip(now, self._rest_scene))
+
+    def _restless_cells(self) -> tuple[np.ndarray, ...] | None:
+        """Each camera's cells that woke :data:`RESTLESS_AFTER_WAKES` searches whose round then found nobody, and
+        their neighbours: they no longer wake one (a scene that keeps moving would wake every rest, and the rest would
+        save nothing; the edge cells of a screen, partly covered, change less and not every time)."""
+        if self._vain_wakes is None:
+            return None
+        return tuple(restless_with_neighbours(counts >= RESTLESS_AFTER_WAKES) for counts in self._vain_wakes)
+
+    def _count_vain_wake(self) -> None:
+        """A woken search's whole round found nobody: the cells that woke it count one vain wake each."""
+        if self._vain_wakes is None:
+            self._vain_wakes = tuple(np.zeros(m.shape, np.int32) for m in self._woke_on)
+        for counts, woke in zip(self._vain_wakes, self._woke_on):
+            counts += woke
+        self._woke_on = None
 
     def _tile_missed(self, images: Sequence[np.ndarray]) -> None:
         """A tile pass found nobody in ``images``: after a whole round of such passes, the next pairs rest; the
@@ -1333,6 +1360,8 @@ class Estimator:
         self._tiles_missed += 1
         if self._tiles_missed >= len(self._cold_tiles):
             self._tile_rest_wait = self.config.tracking.cold_tiles_rest_every - 1
+            if self._woke_on is not None:
+                self._count_vain_wake()
         if self.config.tracking.cold_tiles_wake_levels:
             self._rest_scene = pair_copies(images)
 
@@ -1341,6 +1370,7 @@ class Estimator:
         self._tiles_missed = 0
         self._tile_rest_wait = 0
         self._rest_scene = None
+        self._woke_on = None  # someone seen: the wake, if any, was not in vain
 
     def _weak_pass(self, p: "_Pass") -> bool:
         """Whether ``roi.turn_search`` tries turned crops after ``p``, a cold pair's pass (refined or not) or a

@@ -24,6 +24,9 @@ THUMB_CELLS = (18, 24)
 CELL_SAMPLES = 8
 #: cells that must change: one cell alone may be a flicker or a noise extreme, a person covers more
 WAKE_MIN_CELLS = 2
+#: a cell that woke this many resting searches whose whole round of tiles then found nobody wakes no more (until the
+#: estimator is reset): a screen, a curtain in a draught; one vain wake may be a person the tiles missed
+RESTLESS_AFTER_WAKES = 2
 
 
 def _lattice(image: np.ndarray) -> np.ndarray:
@@ -66,13 +69,41 @@ def pair_copies(images: Sequence[np.ndarray]) -> tuple[SceneCopy, ...]:
     return tuple(scene_copy(im) for im in images[:2])
 
 
-def changed_cells(now: SceneCopy, kept: SceneCopy, levels: float) -> int:
-    """How many cells of ``now`` differ from ``kept`` by over ``levels`` 8-bit levels (at ``kept``'s brightness; at
-    ``now``'s where ``kept`` is black, whose cells are 0 with no mean to scale by: scaled by its 0, nothing woke)."""
+def cell_differences(now: SceneCopy, kept: SceneCopy) -> np.ndarray:
+    """Each cell's difference of ``now`` from ``kept``, 8-bit levels (at ``kept``'s brightness; at ``now``'s where
+    ``kept`` is black, whose cells are 0 with no mean to scale by: scaled by its 0, nothing woke)."""
     scale = kept.mean_levels if kept.mean_levels > 0 else now.mean_levels
-    return int(np.count_nonzero(np.abs(now.cells - kept.cells) * scale > levels))
+    return np.abs(now.cells - kept.cells) * scale
 
 
-def scene_changed(now: tuple[SceneCopy, ...], kept: tuple[SceneCopy, ...], levels: float) -> bool:
-    """Whether any camera's copy ``now`` differs from the one ``kept`` in :data:`WAKE_MIN_CELLS` cells or more."""
-    return any(changed_cells(n, k, levels) >= WAKE_MIN_CELLS for n, k in zip(now, kept))
+def changed_mask(now: SceneCopy, kept: SceneCopy, levels: float) -> np.ndarray:
+    """The cells of ``now`` that differ from ``kept`` by over ``levels`` 8-bit levels (``THUMB_CELLS`` bool)."""
+    return cell_differences(now, kept) > levels
+
+
+def changed_cells(now: SceneCopy, kept: SceneCopy, levels: float) -> int:
+    """How many cells of ``now`` differ from ``kept`` by over ``levels`` 8-bit levels (:func:`cell_differences`)."""
+    return int(np.count_nonzero(changed_mask(now, kept, levels)))
+
+
+def wake_statistic(now: tuple[SceneCopy, ...], kept: tuple[SceneCopy, ...]) -> float:
+    """The difference the wake-up thresholds, 8-bit levels: each camera's :data:`WAKE_MIN_CELLS`-th largest cell
+    difference, the largest over the cameras. :func:`scene_changed` is true exactly where this is over ``levels``
+    (nothing ignored): what ``benchmarks/measure_cold_tiles.py --wake-margin`` reports."""
+    return max(float(np.sort(cell_differences(n, k), axis=None)[-WAKE_MIN_CELLS]) for n, k in zip(now, kept))
+
+
+def scene_changed(now: tuple[SceneCopy, ...], kept: tuple[SceneCopy, ...], levels: float,
+                  ignored: tuple[np.ndarray, ...] | None = None) -> bool:
+    """Whether any camera's copy ``now`` differs from the one ``kept`` in :data:`WAKE_MIN_CELLS` cells or more,
+    leaving out each camera's ``ignored`` cells (``THUMB_CELLS`` bool masks, the cameras' order) where given."""
+    masks = [changed_mask(n, k, levels) for n, k in zip(now, kept)]
+    if ignored is not None:
+        masks = [m & ~i for m, i in zip(masks, ignored)]
+    return any(np.count_nonzero(m) >= WAKE_MIN_CELLS for m in masks)
+
+
+def restless_with_neighbours(restless: np.ndarray) -> np.ndarray:
+    """``restless`` (``THUMB_CELLS`` bool) grown by one cell each way, diagonals too: a moving thing's edge cells,
+    which it covers in part, change by less and not every time, so they wake on their own long after its core."""
+    return cv2.dilate(restless.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)

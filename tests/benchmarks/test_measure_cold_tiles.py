@@ -46,3 +46,27 @@ def test_the_walk_in_sweep_meets_every_phase_of_the_rest(tiny_model_dir, scratch
     assert all(r[2].strip() == "8" for r in rows), out
     assert all(r[10].split()[0].isdigit() for r in rows), out  # the false wakes (of the resting pairs)
     assert rows[2][10].strip() == "0 (0)" and rows[2][9].strip() == "1.00", out
+
+
+def test_the_wake_margin_prints_empty_rooms_and_walk_ins(capsys, monkeypatch):
+    """No model run: the statistic of the bench rooms' pairs and of their people's first pairs."""
+    out = run_script("measure_cold_tiles", "--wake-margin", "--sequences", "2", "--pairs", "3",
+                     "--rigs", "docs/examples/rig.json", capsys=capsys, monkeypatch=monkeypatch)
+    rows = [line.split("|")[1:-1] for line in out.splitlines() if line.startswith("| docs/examples/rig.json |")]
+    assert [r[1].strip() for r in rows] == ["empty rooms", "walk-ins"], out
+    assert rows[0][2].strip() == "4" and rows[1][2].strip() == "2", out  # 2 rooms x 2 pairs after the first; 2 people
+    assert rows[0][8].strip() == "0 of 4" and len(rows[1][9].split(",")) == 2, out  # noise wakes nothing
+
+
+def test_the_moving_room_counts_wakes_after_the_first_round(tiny_model_dir, scratch_cache, capsys,  # noqa: F811
+                                                          monkeypatch):
+    out = run_script("measure_cold_tiles", "--model-dir", str(tiny_model_dir), "--precision", "fp32",
+                     "--moving-room", "--sequences", "1", "--pairs", "6",
+                     "--rigs", "docs/examples/rig.json", capsys=capsys, monkeypatch=monkeypatch)
+    rows = [line.split("|")[1:-1] for line in out.splitlines() if line.startswith("| docs/examples/rig.json |")]
+    assert [r[1].strip() for r in rows] == ["tiles, no rest", "rest every 4, no wake-up",
+                                            "rest every 4, wake-up at 6 levels", "no tiles"], out
+    assert all(r[2].strip() == "2" for r in rows), out  # 6 pairs, the first round of four tiles left out
+    assert rows[0][4].strip() == "0" and rows[1][4].strip() == "0" and rows[3][4].strip() == "0", out
+    assert rows[3][3].strip() == "0" and rows[3][7].strip() == "1.00", out
+    assert all(len(r[5].split("/")) == 2 for r in rows), out  # seen in one view / a frame rejected

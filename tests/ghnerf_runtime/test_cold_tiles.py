@@ -13,10 +13,11 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract
-from benchmarks.empty_rooms import empty_room_pair, scene_without_person
+from benchmarks.empty_rooms import empty_room_pair, scene_with_screen, scene_without_person, with_screen
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, RoiConfig, TrackingConfig
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.rig_file import load_rig
+from ghnerf_runtime.scene_change import RESTLESS_AFTER_WAKES
 from ghnerf_runtime.tracking import COLD_TILE_SPLITS, cold_person_share, volume_regions, volume_tiles
 from tests.ghnerf_runtime.sim_takes import pair_images
 
@@ -316,6 +317,66 @@ def test_sensor_noise_and_lighting_drift_do_not_wake_resting_tiles(example_rig):
         passes.append(est.cold_tile_passes)
     assert est.cold_tile_wakes == 0
     assert passes == [1, 2, 3, 4] + [4 + (i + 1) // 3 for i in range(26)]
+
+
+FAR_ROOM = sim.SceneConfig(seed=11, motion="wave", position_xz=(-0.8, 4.0))
+
+
+def screen_room(example_rig, times) -> list[tuple[np.ndarray, ...]]:
+    """:func:`far_person`'s room with nobody in it and a screen playing (a new picture each pair), at ``times``."""
+    scene = sim.SimScene(FAR_ROOM)
+    return [scene_with_screen(scene, example_rig.pair, t) for t in times]
+
+
+def run_screen_room(est, example_rig, pairs: int) -> tuple[list[int], list[int]]:
+    """The tile passes and the wakes so far after each of ``pairs`` pairs of :func:`screen_room` through ``est``
+    (nobody found)."""
+    passes, wakes = [], []
+    for images in screen_room(example_rig, [1.0 + i / 30.0 for i in range(pairs)]):
+        assert est.estimate(images).missing.all()
+        passes.append(est.cold_tile_passes)
+        wakes.append(est.cold_tile_wakes)
+    return passes, wakes
+
+
+def test_a_screen_playing_in_an_empty_room_stops_waking_the_rest(example_rig):
+    """A screen changes its cells every pair: each rest woke the search, whose round found nobody, and the tiles
+    searched almost every pair (14 wakes in 60 pairs). Its cells wake :data:`RESTLESS_AFTER_WAKES`
+    searches in vain, with their neighbours (the screen's edges) they wake no more: the rest holds."""
+    oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=4)))
+    oracle.set_truth(None)
+    passes, wakes = run_screen_room(est, example_rig, 60)
+    assert RESTLESS_AFTER_WAKES <= wakes[-1] <= 5
+    assert wakes[-24] == wakes[-1]  # no wake in the last 24 pairs
+    assert passes[-1] - passes[-25] == 6  # every 4th pair searches
+
+
+def test_a_walk_in_wakes_a_rest_the_screen_no_longer_wakes(example_rig, far_person):
+    """The screen's cells are ignored for waking, the rest of the picture is not: the far person walking into the
+    room (left of the frame, the screen on the right) wakes the search and is found on the next pair, as without
+    the screen."""
+    oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=8)))
+    oracle.set_truth(None)
+    _, wakes = run_screen_room(est, example_rig, 60)
+    assert wakes[-24] == wakes[-1] and est._tile_rest_wait > 0  # resting, the screen ignored
+    _, joints = far_person
+    scene = sim.SimScene(FAR_ROOM)
+    t = 1.0 + 60 / 30.0
+    walked_in = [scene.capture(with_screen(scene.renderer.render(scene.posed(0.0), cam, with_truth=False)[0],
+                                           cam.name, t), cam, t) for cam in example_rig.pair]
+    oracle.set_truth(joints)
+    assert est.estimate(walked_in).missing.all()  # the near left tile draws them too small: not yet
+    assert est.cold_tile_wakes == wakes[-1] + 1
+    assert not est.estimate(walked_in).missing.all()  # the far left tile, on the next pair
+
+
+def test_a_reset_forgets_the_restless_cells(example_rig):
+    oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=4)))
+    oracle.set_truth(None)
+    run_screen_room(est, example_rig, 24)
+    assert est._restless_cells() is not None and any(m.any() for m in est._restless_cells())
+    est.reset()
+    assert est._restless_cells() is None
 
 
 @pytest.mark.parametrize("value", [-1.0, float("nan"), 300.0, "6", True])

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ghnerf_runtime.scene_change import THUMB_CELLS, changed_cells, pair_copies, scene_changed, scene_copy
+from ghnerf_runtime.scene_change import (THUMB_CELLS, WAKE_MIN_CELLS, changed_cells, pair_copies,
+                                         restless_with_neighbours, scene_changed, scene_copy, wake_statistic)
 
 
 def textured_frame(seed: int = 0) -> np.ndarray:
@@ -62,3 +63,41 @@ def test_pair_copies_are_the_first_two_frames_copies_in_the_cameras_order():
         expected = scene_copy(frame)
         np.testing.assert_array_equal(copy.cells, expected.cells)
         assert copy.mean_levels == expected.mean_levels
+
+
+def test_the_wake_statistic_is_over_the_levels_exactly_where_the_scene_changed():
+    """The 2nd largest cell difference of either camera: what ``measure_cold_tiles.py --wake-margin`` reports."""
+    frame = textured_frame()
+    kept = (scene_copy(frame), scene_copy(frame))
+    for patch_levels in (3, 8, 20, 60):
+        walked_in = frame.copy()
+        walked_in[300:620, 500:580] = np.clip(walked_in[300:620, 500:580].astype(int) - patch_levels, 0, 255)
+        now = (scene_copy(frame), scene_copy(walked_in))
+        stat = wake_statistic(now, kept)
+        for levels in (2.0, 6.0, 15.0, 40.0):
+            assert (stat > levels) == scene_changed(now, kept, levels), (patch_levels, levels, stat)
+    assert wake_statistic(kept, kept) == 0.0
+
+
+def test_ignored_cells_do_not_change_the_scene():
+    frame = textured_frame()
+    walked_in = frame.copy()
+    walked_in[300:620, 500:580] = 20
+    kept, now = (scene_copy(frame),), (scene_copy(walked_in),)
+    changed = np.abs(now[0].cells - kept[0].cells) * kept[0].mean_levels > 6.0
+    assert np.count_nonzero(changed) >= WAKE_MIN_CELLS
+    assert not scene_changed(now, kept, 6.0, (changed,))
+    all_but_two = changed.copy()
+    for row, col in np.argwhere(changed)[:WAKE_MIN_CELLS]:
+        all_but_two[row, col] = False  # two changed cells not ignored: a change again
+    assert scene_changed(now, kept, 6.0, (all_but_two,))
+
+
+def test_restless_cells_grow_by_their_neighbours():
+    restless = np.zeros(THUMB_CELLS, bool)
+    restless[5, 10] = True
+    grown = restless_with_neighbours(restless)
+    assert grown.sum() == 9 and grown[4:7, 9:12].all()
+    corner = np.zeros(THUMB_CELLS, bool)
+    corner[0, 0] = True
+    assert restless_with_neighbours(corner).sum() == 4
