@@ -1362,8 +1362,21 @@ class Estimator:
             self._tile_rest_wait = self.config.tracking.cold_tiles_rest_every - 1
             if self._woke_on is not None:
                 self._count_vain_wake()
-        if self.config.tracking.cold_tiles_wake_levels:
-            self._rest_scene = pair_copies(images)
+        levels = self.config.tracking.cold_tiles_wake_levels
+        if levels:
+            now = pair_copies(images)
+            self._calm_restless_cells(now, levels)
+            self._rest_scene = now
+
+    def _calm_restless_cells(self, now: tuple[SceneCopy, ...], levels: float) -> None:
+        """Each cell that stayed still since the last tile pass that found nobody loses one vain wake: a screen
+        switched off, a curtain now still, wakes the rest again after :data:`RESTLESS_AFTER_WAKES` quiet passes
+        rather than never (a long-running device would otherwise stay blind there until a reset)."""
+        if self._vain_wakes is None or self._rest_scene is None:
+            return
+        for counts, n, k in zip(self._vain_wakes, now, self._rest_scene):
+            calm = ~changed_mask(n, k, levels) & (counts > 0)
+            counts[calm] -= 1
 
     def _wake_tiles(self) -> None:
         """Someone was seen (or the estimator reset): every cold pair that finds nobody searches a tile again."""

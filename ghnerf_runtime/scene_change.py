@@ -24,8 +24,8 @@ THUMB_CELLS = (18, 24)
 CELL_SAMPLES = 8
 #: cells that must change: one cell alone may be a flicker or a noise extreme, a person covers more
 WAKE_MIN_CELLS = 2
-#: a cell that woke this many resting searches whose whole round of tiles then found nobody wakes no more (until the
-#: estimator is reset): a screen, a curtain in a draught; one vain wake may be a person the tiles missed
+#: a cell that woke this many resting searches whose whole round of tiles then found nobody wakes no more (until it
+#: stays still over as many tile passes that find nobody, or the estimator is reset): a screen, a curtain in a draught; one vain wake may be a person the tiles missed
 RESTLESS_AFTER_WAKES = 2
 
 

@@ -383,3 +383,21 @@ def test_a_reset_forgets_the_restless_cells(example_rig):
 def test_cold_tiles_wake_levels_out_of_range_is_refused(value):
     with pytest.raises(ConfigError, match="cold_tiles_wake_levels"):
         TrackingConfig(cold_tiles_wake_levels=value)
+
+
+def test_a_screen_switched_off_wakes_the_rest_again_when_it_plays(example_rig):
+    """Restless cells calm down: once the screen is off (its cells still over :data:`RESTLESS_AFTER_WAKES` tile
+    passes), nothing is ignored any more, and the screen playing again wakes the rest, as anyone walking in there
+    would (without the calming, a long-running device stayed blind in those cells until a reset)."""
+    oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=4)))
+    oracle.set_truth(None)
+    run_screen_room(est, example_rig, 60)
+    assert any(m.any() for m in est._restless_cells())
+    off = far_scene_room(example_rig, [3.0 + i / 30.0 for i in range(16)])  # the same room, the screen dark
+    for images in off:
+        assert est.estimate(images).missing.all()
+    assert not any(m.any() for m in est._restless_cells())
+    woken = est.cold_tile_wakes
+    for images in screen_room(example_rig, [4.0 + i / 30.0 for i in range(4)]):
+        est.estimate(images)
+    assert est.cold_tile_wakes > woken
