@@ -12,7 +12,6 @@ scales by 2 % scales the whole rig by 2 %.
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import struct
 import zlib
@@ -23,6 +22,7 @@ import cv2
 import numpy as np
 
 from calibration.errors import BoardError
+from ghnerf_runtime.json_keys import JsonTextError, loads_remembering
 from ghnerf_runtime.plain_values import is_finite_number, is_true_false, whole_number_or_none
 
 __all__ = ["BoardSpec", "load_board", "png_with_dpi", "DICTIONARIES", "MIN_CORNERS", "REQUIRED_KEYS"]
@@ -180,17 +180,17 @@ def load_board(path: str | os.PathLike) -> BoardSpec:
         raise BoardError(f"not a JSON file: not UTF-8 text (byte {e.start}): {e.reason}", path=str(path)) from e
     if not text.strip():
         raise BoardError("the file is empty", path=str(path))
-    try:
-        data = json.loads(text, object_pairs_hook=_refuse_repeats(str(path)))
-    except BoardError:  # a key given twice (the hook's): a ValueError too, said as it is
-        raise
-    except json.JSONDecodeError as e:
-        raise BoardError(f"not a JSON file: {e}", path=str(path)) from e
-    except RecursionError as e:  # arrays nested thousands deep: a traceback from ghcal before
-        raise BoardError("not a JSON file: nested too deeply", path=str(path)) from e
-    except ValueError as e:  # an integer of more digits than Python converts (4300): a traceback too
-        raise BoardError(f"not a JSON file: {e}", path=str(path)) from e
+    try:  # a key given twice raises the hook's BoardError, which goes through
+        data = loads_remembering(text, object_pairs_hook=_refuse_repeats(str(path)))
+    except JsonTextError as e:  # invalid, nested past MAX_JSON_DEPTH (129 levels read as a field error before), or
+        # an integer past 4300 digits
+        raise BoardError(f"not a JSON file: {_json_words(e)}", path=str(path)) from e
     return BoardSpec.from_dict(data, path=str(path))
+
+
+def _json_words(e: JsonTextError) -> str:
+    """Why the text is not JSON, with its place where it has one: ``Expecting value at line 1, column 1``."""
+    return e.reason if e.line is None else f"{e.reason} at line {e.line}, column {e.column}"
 
 
 def _refuse_repeats(path: str):

@@ -26,6 +26,7 @@ from calibration.board import BoardSpec
 from calibration.detect import BoardDetector, BoardView, board_mismatch, mirrored_corners, mirrored_words
 from calibration.errors import BoardError, CaptureError
 from ghnerf_runtime.image_files import read_image_or_none, unread_because
+from ghnerf_runtime.json_keys import loads_remembering
 from ghnerf_runtime.rig_file import write_text_atomic
 
 __all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
@@ -122,11 +123,11 @@ def read_camera_order(root: str | os.PathLike, *, check_folders: bool = True) ->
     if not path.is_file():
         return None
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as e:  # ValueError: not UTF-8, not JSON, an integer past 4300 digits
+        # JsonTextError (a ValueError): not JSON, nested past MAX_JSON_DEPTH (129 levels read as a wrong layout
+        # before) or an integer past 4300 digits; the other ValueError: not UTF-8
+        data = loads_remembering(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as e:
         raise CaptureError(f"{path}: cannot read the camera order ({e})") from e
-    except RecursionError as e:  # both were a traceback from ghcal solve and check
-        raise CaptureError(f"{path}: cannot read the camera order (JSON nested too deeply)") from e
     names = data.get("cameras") if isinstance(data, dict) else None
     if (not isinstance(names, list) or len(names) != 2 or not all(isinstance(n, str) for n in names)
             or len(set(names)) != 2):  # strings first: a list entry is unhashable

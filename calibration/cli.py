@@ -48,10 +48,12 @@ from calibration.image_sizes import camera_image_sizes, mixed_sizes_problem
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, unwritable_reason
+from ghnerf_runtime.cli.rig_messages import rig_messages_on_stderr
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
-from ghnerf_runtime.geometry.rig import WorkingVolume
-from ghnerf_runtime.rig_file import CAMERA_HEIGHT_RANGE_M, load_rig, save_rig, write_bytes_atomic, write_text_atomic
+from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, load_rig, rig_notes, save_rig, write_bytes_atomic,
+                                     write_text_atomic)
 from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser"]
@@ -305,6 +307,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
             if not cv2.imwrite(str(out / camera / f"{name}.png"), image):
                 raise UsageError(f"{out / camera / name}.png: cannot write the image")
     save_rig(rig, out / "truth_rig.json")
+    if not args.rig:  # (a --rig file's notes were said as it loaded)
+        _say_rig_notes(rig, out / "truth_rig.json")
     write_text_atomic(out / BOARD_FILE, json.dumps(board.to_dict(), indent=2) + "\n")
     write_camera_order(out, [cam.name for cam in rig.pair], replace=True)
     total = len(next(iter(views.values())))
@@ -680,6 +684,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
           f"pitch {lv['pitch_deg']:.2f} deg, roll {lv['roll_deg']:.2f} deg")
     for warning in r["warnings"]:
         print(f"warning: {warning}")
+    _say_rig_notes(solution.rig, out)
     _say_kept(kept)
     print(f"wrote {out} and {report_path}")
     return 0
@@ -723,6 +728,14 @@ def _refuse_exchanged_sizes(out: Path, views: dict, images: Path) -> None:
                      "round), then solve again: solved from them as they are, the rig would give each camera the "
                      "other's lens, image size and pose. If the cameras were exchanged on purpose (first= and second= "
                      f"swapped in the rig URL), give --out another path, or move {out} away first")
+
+
+def _say_rig_notes(rig: Rig, path: Path) -> None:
+    """The notes ``load_rig`` will log of the rig written to ``path`` (``rig_file.rig_notes``: a standing person
+    partly out of the pair's views), said on stderr as :func:`main` shows a loaded rig's: where the rig is made,
+    not first at the daemon's start."""
+    for note in rig_notes(rig):
+        print(f"{path}: {note}", file=sys.stderr)
 
 
 def _say_kept(kept: dict[Path, Path | None]) -> None:
@@ -951,6 +964,7 @@ def cmd_import(args: argparse.Namespace) -> int:
               + (f" ({mismatch})" if mismatch else "")
               + ", and the runtime reads y as down with the floor at y = 0 (the skeleton prior, upright crops, the "
               "working volume): import again with --camera-height M (and --pitch, --roll) of the first camera")
+    _say_rig_notes(rig, out)
     _say_kept(kept)
     print(f"wrote {out}")
     return 0
@@ -1278,7 +1292,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # its cameras and says what it kept, the others say they did not finish; by default it killed them without
     # a word (exit 143 from the shell, the cameras never closed)
     try:
-        with sigterm_as_interrupt():
+        # a rig loaded (check, export, synth --rig) shows its notes beside its warnings, each a bare line on stderr:
+        # with no logging set up, Python showed the warnings only
+        with sigterm_as_interrupt(), rig_messages_on_stderr():
             return int(args.run(args))
     except (CalibrationError, RuntimeErrorBase, OSError) as e:
         # RuntimeErrorBase: a bad rig file (RigFileError) or geometry; OSError: a folder we cannot write

@@ -22,7 +22,7 @@ from drivers.pairing import DropPolicy, FramePairer, PairingConfig, PairingStats
 from drivers.url import RigUrl
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.rig_file import load_rig, rig_notes, rig_warnings
+from ghnerf_runtime.rig_file import load_rig, rig_warnings_and_notes
 
 log = logging.getLogger(__name__)
 
@@ -215,8 +215,8 @@ class RigSource(abc.ABC):
         """What ``load_rig`` would warn of in the rig this backend built (a narrow ``sim://?baseline=``, a
         camera's height), and note at INFO (``rig_file.rig_notes``): the one check for every backend's in-memory
         rig, and for a rig file read without its warnings (:meth:`_rig_read_from`)."""
-        said = [(logging.WARNING, m) for m in rig_warnings(self._rig)]
-        said += [(logging.INFO, m) for m in rig_notes(self._rig)]
+        warnings, notes = rig_warnings_and_notes(self._rig)
+        said = [(logging.WARNING, m) for m in warnings] + [(logging.INFO, m) for m in notes]
         for level, message in said:
             if self._rig_built:
                 self._log_about_rig_once(log, level, "%s:// rig %r: %s", self.scheme, self._rig.rig_id, message)

@@ -7,6 +7,7 @@ with, and :func:`loads_remembering` the one parse they share (each says its erro
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from typing import Any
 
 __all__ = ["JsonTextError", "KeysObject", "MAX_JSON_DEPTH", "first_repeat", "loads_remembering", "nested_deeper_than",
@@ -70,8 +71,11 @@ def first_repeat(value: Any, where: str = "") -> str | None:
     return next((found for path, v in items if (found := first_repeat(v, path)) is not None), None)
 
 
-def loads_remembering(text: str) -> Any:
-    """``text`` parsed with :func:`remember_repeats` (every object a :class:`KeysObject`).
+def loads_remembering(text: str, *, object_pairs_hook: Callable[[list[tuple[str, Any]]], Any] = remember_repeats
+                      ) -> Any:
+    """``text`` parsed with :func:`remember_repeats` (every object a :class:`KeysObject`), or with
+    ``object_pairs_hook`` in its place: one that refuses a repeated key itself (the board file names both values).
+    What the hook raises goes through as it is.
 
     Raises:
         JsonTextError: invalid JSON (with its line and column), JSON nested too deeply (past
@@ -79,17 +83,24 @@ def loads_remembering(text: str) -> Any:
             converts (4300): each was a traceback from a reader that caught only the first.
     """
     try:
-        value = json.loads(text, object_pairs_hook=remember_repeats)
+        value = json.loads(text, object_pairs_hook=object_pairs_hook, parse_int=_int_or_refuse)
     except json.JSONDecodeError as e:
         raise JsonTextError(e.msg, e.lineno, e.colno) from e
     except RecursionError as e:
         raise JsonTextError("nested too deeply") from e
-    except ValueError as e:  # Python's 4300-digit limit on integers
-        raise JsonTextError(str(e)) from e
     if nested_deeper_than(value, MAX_JSON_DEPTH):
         raise JsonTextError(f"nested too deeply (objects and arrays more than {MAX_JSON_DEPTH} levels deep, "
                             "MAX_JSON_DEPTH)")
     return value
+
+
+def _int_or_refuse(digits: str) -> int:
+    """A JSON integer; past Python's digit limit (4300) a :class:`JsonTextError`, told from the ValueError a hook
+    may raise (the board file's, a repeated key)."""
+    try:
+        return int(digits)
+    except ValueError as e:
+        raise JsonTextError(str(e)) from e
 
 
 def nested_deeper_than(value: Any, limit: int) -> bool:

@@ -181,6 +181,7 @@ __all__ = [
     "PERSON_IN_VIEW_NOTE_SHARE",
     "person_partly_in_view_note",
     "rig_notes",
+    "rig_warnings_and_notes",
     "PRINCIPAL_POINT_TOLERANCE",
     "MAX_DISTORTION",
     "MAX_SKEW_SHARE",
@@ -426,11 +427,19 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None, warn: boo
         chk._raise(f"cameras[{far[0]}].t", far[1])
     if too_far := volume_reach_problem(rig):
         chk._raise("working_volume", too_far)
-    for message in rig_warnings(rig) if warn else ():
-        log.warning("%s%s", f"{path}: " if path else "", message)
-    for message in rig_notes(rig) if warn else ():
-        log.info("%s%s", f"{path}: " if path else "", message)
+    if warn:
+        _log_warnings_and_notes(rig, path)
     return rig
+
+
+def _log_warnings_and_notes(rig: Rig, path: str | os.PathLike | None) -> None:
+    """Log what loading warns of (WARNING) and notes (INFO), each message led by the file's name."""
+    warnings, notes = rig_warnings_and_notes(rig)
+    where = f"{path}: " if path else ""
+    for message in warnings:
+        log.warning("%s%s", where, message)
+    for message in notes:
+        log.info("%s%s", where, message)
 
 
 def rig_warnings(rig: Rig) -> list[str]:
@@ -438,26 +447,35 @@ def rig_warnings(rig: Rig) -> list[str]:
     working distance, a camera at an implausible height above the floor, a working volume off the floor, a person
     standing at the volume's centre who does not fit the pair's views, a pair camera whose 2D joints the joint stream
     cannot carry in part."""
-    out = [lens_fold_warning(cam) for cam in rig.cameras if cam.fold_inside_image()]
-    if narrow := narrow_pair_warning(rig):
-        out.append(narrow)
-    out.extend(filter(None, (camera_height_warning(cam) for cam in rig.cameras)))
-    if floor := volume_floor_warning(rig):
-        out.append(floor)
-    elif outside := person_outside_view_warning(rig):  # (a volume off the floor holds no one standing: said above)
-        out.append(outside)
-    out.extend(filter(None, (wire_2d_range_warning(cam) for cam in rig.pair)))
-    return out
+    return rig_warnings_and_notes(rig)[0]
 
 
 def rig_notes(rig: Rig) -> list[str]:
     """What loading notes (logs at INFO) of a rig it does not warn of: a person standing at the volume's centre
     partly out of the pair's views, under :data:`PERSON_IN_VIEW_NOTE_SHARE` of their height (not where
     :func:`rig_warnings` speaks of the volume or the framing already)."""
-    if volume_floor_warning(rig) is not None or person_outside_view_warning(rig) is not None:
-        return []
-    note = person_partly_in_view_note(rig)
-    return [note] if note else []
+    return rig_warnings_and_notes(rig)[1]
+
+
+def rig_warnings_and_notes(rig: Rig) -> tuple[list[str], list[str]]:
+    """:func:`rig_warnings` and :func:`rig_notes` together, each check run once: the notes hang on the warnings
+    (none where the volume or the framing is warned of), and loading called both, so it ran the volume's check twice
+    and projected the standing person three times."""
+    warnings = [lens_fold_warning(cam) for cam in rig.cameras if cam.fold_inside_image()]
+    if narrow := narrow_pair_warning(rig):
+        warnings.append(narrow)
+    warnings.extend(filter(None, (camera_height_warning(cam) for cam in rig.cameras)))
+    notes: list[str] = []
+    if floor := volume_floor_warning(rig):
+        warnings.append(floor)  # (a volume off the floor holds no one standing: the framing is not judged)
+    else:
+        outside, partly = _framing_warning_and_note(rig)
+        if outside:
+            warnings.append(outside)
+        if partly:
+            notes.append(partly)
+    warnings.extend(filter(None, (wire_2d_range_warning(cam) for cam in rig.pair)))
+    return warnings, notes
 
 
 def pair_angle_deg(rig: Rig, point: np.ndarray) -> float:
@@ -534,7 +552,27 @@ def person_in_view_share(cam: Camera, volume: WorkingVolume) -> float:
 def person_outside_view_warning(rig: Rig) -> str | None:
     """Why a person standing at the working volume's centre does not fit the pair's views (under
     :data:`MIN_PERSON_IN_VIEW_SHARE` of their height inside a camera's image), naming each such camera, or None."""
-    cut = _cameras_showing_under(rig, MIN_PERSON_IN_VIEW_SHARE)
+    return _outside_view_words(rig, _pair_shares(rig))
+
+
+def person_partly_in_view_note(rig: Rig) -> str | None:
+    """What a person standing at the working volume's centre costs where a camera of the pair shows under
+    :data:`PERSON_IN_VIEW_NOTE_SHARE` of their height (and, in :func:`rig_notes`, not under the warned
+    :data:`MIN_PERSON_IN_VIEW_SHARE`), naming each such camera, or None."""
+    return _partly_in_view_words(rig, _pair_shares(rig))
+
+
+def _framing_warning_and_note(rig: Rig) -> tuple[str | None, str | None]:
+    """:func:`person_outside_view_warning` and, where it is None, :func:`person_partly_in_view_note`: the person
+    projected once for both."""
+    shares = _pair_shares(rig)
+    warning = _outside_view_words(rig, shares)
+    return warning, None if warning else _partly_in_view_words(rig, shares)
+
+
+def _outside_view_words(rig: Rig, shares: list[tuple[str, float]]) -> str | None:
+    """:func:`person_outside_view_warning`'s words, from the pair's :func:`_pair_shares`."""
+    cut = _cameras_showing_under(shares, MIN_PERSON_IN_VIEW_SHARE)
     if not cut:
         return None
     return (f"{_person_at_centre(rig)} does not fit the view: {'; '.join(cut)} (under {MIN_PERSON_IN_VIEW_SHARE:.0%}, "
@@ -543,11 +581,9 @@ def person_outside_view_warning(rig: Rig) -> str | None:
             "fit wider lenses or aim the cameras at the volume's centre")
 
 
-def person_partly_in_view_note(rig: Rig) -> str | None:
-    """What a person standing at the working volume's centre costs where a camera of the pair shows under
-    :data:`PERSON_IN_VIEW_NOTE_SHARE` of their height (and, in :func:`rig_notes`, not under the warned
-    :data:`MIN_PERSON_IN_VIEW_SHARE`), naming each such camera, or None."""
-    cut = _cameras_showing_under(rig, PERSON_IN_VIEW_NOTE_SHARE)
+def _partly_in_view_words(rig: Rig, shares: list[tuple[str, float]]) -> str | None:
+    """:func:`person_partly_in_view_note`'s words, from the pair's :func:`_pair_shares`."""
+    cut = _cameras_showing_under(shares, PERSON_IN_VIEW_NOTE_SHARE)
     if not cut:
         return None
     return (f"{_person_at_centre(rig)} is partly out of view: {'; '.join(cut)} (under {PERSON_IN_VIEW_NOTE_SHARE:.0%}, "
@@ -564,10 +600,14 @@ def _person_at_centre(rig: Rig) -> str:
             f"{centre[2]:.2f} m)")
 
 
-def _cameras_showing_under(rig: Rig, share_bound: float) -> list[str]:
-    """``camera 'name' shows N% of their height`` for each camera of the pair showing under ``share_bound`` of the
-    height of the person standing at the working volume's centre (:func:`person_in_view_share`)."""
-    shares = [(cam.name, person_in_view_share(cam, rig.volume)) for cam in rig.pair]
+def _pair_shares(rig: Rig) -> list[tuple[str, float]]:
+    """Each pair camera's name and the share of the height of the person standing at the working volume's centre
+    it shows (:func:`person_in_view_share`)."""
+    return [(cam.name, person_in_view_share(cam, rig.volume)) for cam in rig.pair]
+
+
+def _cameras_showing_under(shares: list[tuple[str, float]], share_bound: float) -> list[str]:
+    """``camera 'name' shows N% of their height`` for each of :func:`_pair_shares` under ``share_bound``."""
     return [f"camera {name!r} shows {share:.0%} of their height" for name, share in shares if share < share_bound]
 
 

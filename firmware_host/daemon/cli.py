@@ -70,6 +70,7 @@ from firmware_host.daemon.measure_floor import (DEFAULT_PAIRS, FloorMeasureError
 from firmware_host.daemon.sandbox import rig_url_hint, sandbox_warnings, service_hint
 from firmware_host.daemon.service import Daemon, DaemonStartError, check_estimator, check_sink_urls, load_model
 from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
+from ghnerf_runtime.cli.rig_messages import rig_messages_on_stderr
 from ghnerf_runtime.config import config_to_dict
 from ghnerf_runtime.config_paths import config_folder
 from ghnerf_runtime.errors import ModelLoadError, RuntimeErrorBase
@@ -77,7 +78,6 @@ from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.novel_painter import FILE_NAME as PAINTER_FILE
 from ghnerf_runtime.novel_painter import NovelPainter
 from ghnerf_runtime.rig_file import load_rig
-from ghnerf_runtime.rig_file import log as rig_file_log
 from ghnerf_runtime.session import resolve_model_dir
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.video_files import is_still_image
@@ -411,30 +411,14 @@ def _stdout_for_the_json_alone() -> Iterator[None]:
             os.close(saved)
 
 
-@contextlib.contextmanager
-def _rig_notes_on_stderr() -> Iterator[None]:
-    """The rig file's notes (INFO, ``rig_file.rig_notes``) on stderr beside its warnings, each as its bare message:
-    with no logging set up, Python shows WARNING and over only, so ``--validate-config`` printed the rig's warnings
-    and dropped its notes."""
-    logger = rig_file_log  # load_rig's and read_manifest's (a take's rig) alike
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(message)s"))  # as Python's last-resort handler prints the warnings
-    level = logger.level
-    logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
-    try:
-        yield
-    finally:
-        logger.removeHandler(handler)
-        logger.setLevel(level)
-
-
 def _validate(path: str, *, with_model: bool) -> int:
     """``--validate-config``: the config in full on stdout (JSON), then on stderr one line saying what was checked.
 
     :raises DaemonConfigError: naming the file and the key.
     """
-    with _stdout_for_the_json_alone(), _rig_notes_on_stderr():  # depthai may log to stdout
+    # the rig's notes on stderr beside its warnings, bare (no logging is set up here: Python showed the warnings
+    # only); depthai may log to stdout
+    with _stdout_for_the_json_alone(), rig_messages_on_stderr():
         config = read_checked_config(path, warn_of_rig=True)  # no rig opens to warn of it
         checked = "model: not loaded (--no-model), its folder holds graph files"
         if with_model:

@@ -36,6 +36,7 @@ import numpy as np
 
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
 from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output, same_file
+from ghnerf_runtime.cli.rig_messages import rig_notes_let_through
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
     load_config
@@ -705,7 +706,9 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     # SIGTERM (timeout, systemd, docker) stops a run as Ctrl-C does: the outputs are closed whole
     try:
-        with sigterm_as_interrupt():
+        # the rig file's notes (INFO) shown without --verbose too, beside its warnings: a rig that cuts a standing
+        # person loaded without a word otherwise
+        with sigterm_as_interrupt(), rig_notes_let_through():
             return _run(args)
     except KeyboardInterrupt as e:
         print(f"ghnerf-run: stopped ({stop_signal(e).name}); the outputs hold the pairs finished", file=sys.stderr)

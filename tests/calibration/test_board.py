@@ -199,6 +199,10 @@ def test_a_fraction_in_millimetres_is_refused_by_name_not_a_format_error():
 @pytest.mark.parametrize("text, says", [
     ("[" * 100_000 + "]" * 100_000, "not a JSON file: nested too deeply"),  # was a RecursionError traceback
     ('{"squares_x": 1' + "0" * 5000 + "}", "not a JSON file: Exceeds the limit (4300 digits)"),  # a ValueError one
+    # parsed, and read as a field error ("squares_x: must be a whole number, got [[[...") until session 68
+    ('{"squares_x": ' + "[" * 199 + "]" * 199 + "}", "not a JSON file: nested too deeply (objects and arrays more "
+                                                     "than 128 levels deep, MAX_JSON_DEPTH)"),
+    ("{not json", "not a JSON file: Expecting property name enclosed in double quotes at line 1, column 2"),
 ])
 def test_board_json_past_the_parser_names_the_file(tmp_path, text, says):
     path = tmp_path / "board.json"

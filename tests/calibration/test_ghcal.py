@@ -29,6 +29,8 @@ from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import load_rig, save_rig
 
 BOARD = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
+#: the words of the rig file's note (rig_file.person_partly_in_view_note), which example_rig is noted of (84 %)
+NOTE_WORDS = "is partly out of view: camera 'left' shows"
 
 
 def _rotation_deg(R: np.ndarray) -> float:
@@ -142,19 +144,26 @@ def test_check_accepts_the_truth_and_flags_a_bumped_camera(truth, views):
 
 
 def test_cli_solve_then_check(capture, truth, tmp_path, capsys):
+    """``solve`` writes a rig that ``check`` passes (a bumped one it fails), and each says the rig's note once, a
+    bare line on stderr: the rig solved from views of ``truth`` (example_rig's poses) shows a standing person under
+    97 % of their height, which loading notes at INFO (session 67) and ghcal, setting no logging up, dropped until
+    session 68 (``solve`` says it of the rig it writes, ``check`` of the rig it reads)."""
     rig_path = tmp_path / "rig.json"
     board = str(capture / "board.json")
     rc = cli.main(["solve", "--board", board, "--images", str(capture), "--floor-view", "floor",
                    "--out", str(rig_path), "--rig-id", "bench-rig"])
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
     assert rc == 0, out
     assert "levelled by floor view, both cameras" in out and "baseline" in out
+    assert err.count(NOTE_WORDS) == 1 and f"{rig_path}: a 1.8 m person standing" in err, err
     rig = load_rig(rig_path)
     assert rig.rig_id == "bench-rig" and rig.names == ("left", "right")
     report = json.loads((tmp_path / "rig.report.json").read_text())
     assert report["cameras"]["right"]["views"] >= 10
     assert cli.main(["check", "--rig", str(rig_path), "--board", board, "--images", str(capture)]) == 0
-    assert "pairs: reprojection" in capsys.readouterr().out
+    out, err = capsys.readouterr()
+    assert "pairs: reprojection" in out
+    assert err.count(NOTE_WORDS) == 1 and f"{rig_path}: a 1.8 m person standing" in err, err
     right = truth.camera("right")
     nudge = cv2.Rodrigues(np.array([math.radians(1.0), 0.0, 0.0]))[0]
     save_rig(Rig((truth.camera("left"), right.with_pose(nudge @ right.R, nudge @ right.t)), truth.volume),
@@ -1275,3 +1284,20 @@ def test_a_stop_between_the_two_renames_of_a_view_leaves_the_pair_whole_and_coun
     assert pngs == [f"{cam}/000.png" for cam in cams] and len(cams) == 2  # both images of the view, no half pair
     assert not list(out.rglob(".*.tmp"))
     assert rc == 0 and f"stopped{how}: kept 1 view(s)" in capsys.readouterr().out
+
+
+def test_cli_synth_says_its_rig_s_note_once(tmp_path, capsys, monkeypatch):
+    """``ghcal synth``'s rig (example_rig, 84 % of a standing person in view) is noted of where it is written, naming
+    truth_rig.json; a ``--rig`` file's note is said as it loads, naming it, and not a second time for its copy."""
+    def one_blank_view(rig, board, **_):  # the rendering (half a minute) is not what is tested
+        return {cam.name: {"000": np.zeros((cam.height, cam.width, 3), np.uint8)} for cam in rig.pair}
+
+    monkeypatch.setattr(cli, "calibration_views", one_blank_view)
+    assert cli.main(["synth", "--out", str(tmp_path / "synth")]) == 0
+    err = capsys.readouterr().err
+    assert err.count(NOTE_WORDS) == 1 and f"{tmp_path / 'synth' / 'truth_rig.json'}: a 1.8 m person" in err, err
+    given = tmp_path / "given.json"
+    save_rig(example_rig(), given)
+    assert cli.main(["synth", "--out", str(tmp_path / "again"), "--rig", str(given)]) == 0
+    err = capsys.readouterr().err
+    assert err.count(NOTE_WORDS) == 1 and f"{given}: a 1.8 m person" in err, err

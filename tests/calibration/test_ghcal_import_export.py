@@ -17,6 +17,8 @@ from ghnerf_runtime.rig_file import load_rig, save_rig
 
 #: example_rig's first camera: 1.4 m up at x = -0.3 m, looking at a point 2.5 m ahead and 0.3 m up (x = 0), no roll
 PITCH_DEG = math.degrees(math.atan2(1.4 - 0.3, math.hypot(2.5, 0.3)))
+#: the words of the rig file's note (rig_file.person_partly_in_view_note), which example_rig is noted of (84 %)
+NOTE_WORDS = "is partly out of view: camera 'left' shows 84% of their height"
 
 
 @pytest.fixture()
@@ -156,7 +158,8 @@ def test_what_the_user_must_give_is_named(rig_file, tmp_path, capsys, args, word
     argv = [a.format(toml=toml, foreign=foreign, out=tmp_path / "out.json", rig=rig_file, dir=tmp_path)
             for a in args]
     assert cli.main(argv) == 2
-    err = capsys.readouterr().err
+    # one line, bar the note of the rig file an export reads (example_rig's: 84 % of a standing person in view)
+    err = "".join(line for line in capsys.readouterr().err.splitlines(keepends=True) if NOTE_WORDS not in line)
     assert err.count("\n") == 1 and all(w in err for w in words), err
     assert not (tmp_path / "out.json").exists()
 
@@ -373,3 +376,19 @@ def test_an_anipose_file_nested_thousands_deep_is_refused_naming_it_not_a_traceb
     assert cli.main(["import", str(deep), "--units-to-metres", "1", "--out", str(tmp_path / "rig.json")]) == 2
     err = capsys.readouterr().err
     assert "invalid TOML: nested too deeply" in err and "Traceback" not in err, err
+
+
+def test_export_and_import_say_the_rig_s_note_once_on_stderr_naming_the_file(rig_file, tmp_path, capsys):
+    """``ghcal synth``'s rig shows a standing person 84 % of their height: loading notes it at INFO (session 67), and
+    ghcal, which sets no logging up, showed WARNING and over only: neither the export of it (which reads it) nor the
+    import (which writes it) said it. Since session 68 each says it once on stderr, a bare line beside the warnings,
+    naming the rig file read or written."""
+    foreign = tmp_path / "calibration.yml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)]) == 0
+    err = capsys.readouterr().err
+    assert err.count(NOTE_WORDS) == 1 and f"{rig_file}: a 1.8 m person standing" in err, err
+    back = tmp_path / "back.json"
+    assert cli.main(["import", str(foreign), "--out", str(back)]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.count(NOTE_WORDS) == 1 and f"{back}: a 1.8 m person standing" in captured.err, captured.err
+    assert NOTE_WORDS not in captured.out

@@ -222,8 +222,11 @@ def test_a_camera_whose_images_are_mirrored_is_said_so(camera, image, tmp_path, 
 
 
 @pytest.mark.parametrize("text, says", [
-    ("[" * 100_000 + "]" * 100_000, "(JSON nested too deeply)"),  # was a RecursionError traceback from ghcal solve
-    ('{"cameras": 1' + "0" * 5000 + "}", "(Exceeds the limit (4300 digits)"),  # a ValueError traceback
+    ("[" * 100_000 + "]" * 100_000, "(invalid JSON: nested too deeply)"),  # a RecursionError traceback from ghcal solve
+    ('{"cameras": 1' + "0" * 5000 + "}", "(invalid JSON: Exceeds the limit (4300 digits)"),  # a ValueError traceback
+    # parsed, and said to be of the wrong layout (its 200 levels shown) until session 68
+    ('{"cameras": ' + "[" * 199 + "]" * 199 + "}", "(invalid JSON: nested too deeply (objects and arrays more than "
+                                                   "128 levels deep, MAX_JSON_DEPTH))"),
 ])
 def test_a_camera_order_file_past_the_parser_is_named(tmp_path, text, says):
     from calibration.capture import read_camera_order

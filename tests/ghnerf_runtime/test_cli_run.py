@@ -4,6 +4,8 @@ from __future__ import annotations
 import json
 import math
 import re
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -1294,3 +1296,23 @@ def test_the_tiny_model_without_a_prior_warns_of_max_prior_error(sim_pair, tiny_
     assert rc == 0
     assert [r.levelname for r in caplog.records if "--max-prior-error 0.2 has no effect" in r.getMessage()] == \
         ["WARNING"]
+
+
+@pytest.mark.parametrize("verbose", [[], ["--verbose"]])
+def test_the_rig_file_s_note_is_shown_without_verbose_once(tmp_path, verbose):
+    """Loading notes at INFO a rig that cuts a standing person (``rig_file.rig_notes``; ``ghcal synth``'s rig shows
+    84 % of their height), and ``ghnerf-run`` shows WARNING and over unless ``--verbose``: the note was dropped
+    (session 68). Shown now beside the warnings, in the same format, once with ``--verbose`` as without. The run
+    stops at the images (none there), after the rig loaded."""
+    from calibration.render import example_rig
+    from ghnerf_runtime.rig_file import save_rig
+
+    rig = tmp_path / "synth_rig.json"
+    save_rig(example_rig(), rig)
+    proc = subprocess.run([sys.executable, "-m", "ghnerf_runtime.cli.run", "--rig", str(rig), "--images",
+                           str(tmp_path / "a.png"), str(tmp_path / "b.png"), "--out", str(tmp_path / "j.json"),
+                           *verbose], capture_output=True, text=True, timeout=120,
+                           cwd=Path(__file__).resolve().parents[2])
+    assert proc.returncode == 2 and "a.png: no such file" in proc.stderr, proc.stderr
+    noted = [line for line in proc.stderr.splitlines() if "PERSON_IN_VIEW_NOTE_SHARE" in line]
+    assert len(noted) == 1 and noted[0].startswith(f"INFO ghnerf_runtime.rig_file: {rig}: a 1.8 m person"), noted

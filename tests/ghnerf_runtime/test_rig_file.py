@@ -1109,3 +1109,44 @@ def test_the_rig_warnings_never_write_a_figure_just_past_its_bound_as_the_bound(
                      [0.0, height, 0.0])
         message = camera_height_warning(cam)
         assert message is not None and f"stands {shown} m above the floor" in message, (height, message)
+
+
+def _framing_rigs(example_dict: dict, synth_rig_file: Path) -> dict[str, Rig]:
+    """A rig for each way the framing is said: noted (``ghcal synth``'s), warned of (a 2.5-times lens), neither
+    (the example), and a volume off the floor (warned of as such, the framing not judged)."""
+    tele, off_floor = copy.deepcopy(example_dict), copy.deepcopy(example_dict)
+    _scaled_focal(tele, 2.5)
+    off_floor["working_volume"]["min"][1] -= 2.0
+    off_floor["working_volume"]["max"][1] -= 2.0
+    return {"noted": load_rig(synth_rig_file, warn=False), "warned": rig_from_dict(tele, warn=False),
+            "example": rig_from_dict(example_dict, warn=False), "off the floor": rig_from_dict(off_floor, warn=False)}
+
+
+def test_warnings_and_notes_together_are_the_warnings_and_the_notes_apart(example_dict, synth_rig_file):
+    """``rig_warnings_and_notes`` (one pass, session 68) splits as ``rig_warnings`` and ``rig_notes`` do: the note
+    only where neither the framing nor the volume is warned of."""
+    from ghnerf_runtime.rig_file import rig_notes, rig_warnings, rig_warnings_and_notes
+
+    said = {}
+    for name, rig in _framing_rigs(example_dict, synth_rig_file).items():
+        said[name] = rig_warnings_and_notes(rig)
+        assert said[name] == (rig_warnings(rig), rig_notes(rig)), name
+    assert said["example"] == ([], []) and said["noted"][0] == [] and len(said["noted"][1]) == 1, said
+    (warned,), notes = said["warned"]
+    assert "does not fit the view" in warned and notes == [], said["warned"]
+    (off_floor,), notes = said["off the floor"]
+    assert off_floor.startswith("working volume: y from") and notes == [], said["off the floor"]
+
+
+def test_loading_projects_the_standing_person_once_per_camera(synth_rig_file, monkeypatch):
+    """``load_rig`` ran ``rig_warnings`` and then ``rig_notes``, which ran the volume's and the framing's warnings
+    again to know whether to note: the standing person projected three times through each pair camera (session 68,
+    a leftover of session 67's review). Once now, and the note the same."""
+    from ghnerf_runtime import rig_file
+
+    projected = []
+    share = rig_file.person_in_view_share
+    monkeypatch.setattr(rig_file, "person_in_view_share", lambda cam, volume: projected.append(cam.name)
+                        or share(cam, volume))
+    load_rig(synth_rig_file)
+    assert sorted(projected) == ["left", "right"], projected

@@ -371,6 +371,46 @@ def test_validate_config_prints_the_rig_file_s_note_as_it_prints_its_warnings(tm
     assert "(under 97%, PERSON_IN_VIEW_NOTE_SHARE)" in err
 
 
+def test_validate_config_prints_the_rig_s_note_once_where_the_root_logger_has_a_handler(tmp_path, capsys):
+    """``--validate-config``'s handler printed the rig file's lines on stderr, and passed them on too: where the root
+    logger has a handler (a caller's ``logging.basicConfig``, pytest's), each line came out a second time in that
+    handler's format (session 68)."""
+    import logging
+
+    from calibration.render import example_rig
+    from ghnerf_runtime.rig_file import save_rig
+
+    rig = tmp_path / "synth_rig.json"
+    save_rig(example_rig(), rig)
+    path = _write(tmp_path, {"rig": {"url": f"opencv://?first=/dev/video0&second=/dev/video2&rig={rig}"},
+                             "sinks": ["udp://127.0.0.1:9870"]})
+    root = logging.getLogger()
+    handler = logging.StreamHandler()  # sys.stderr as capsys holds it
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    root.addHandler(handler)
+    try:
+        assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == 0
+    finally:
+        root.removeHandler(handler)
+    err = capsys.readouterr().err
+    assert err.count("a 1.8 m person standing at the working volume's centre") == 1, err
+    assert f"\n{rig}: a 1.8 m person" in "\n" + err, err  # bare, as the warnings are
+
+
+@needs_model
+def test_the_start_logs_the_rig_s_note_once_at_the_default_log_level(tmp_path):
+    """The daemon's rig source notes a rig that cuts a standing person at INFO, once over its reopens; the default
+    ``log_level`` (info) shows it in the journal at the start, with no setting (session 68 checked: no change
+    needed there, unlike ``ghcal`` and ``ghnerf-run``). ``sim://?distance=1`` shows 89 % of the person."""
+    path = _write(tmp_path, {"rig": {"url": "sim://?width=48&height=36&cache=off&distance=1"}, "sinks": ["memory://"],
+                             "estimator": {"session": {"model_dir": str(MODELS), "warmup": False}}})
+    proc = subprocess.run([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path),
+                           "--max-seconds", "2"], capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    noted = [line for line in proc.stderr.splitlines() if "PERSON_IN_VIEW_NOTE_SHARE" in line]
+    assert len(noted) == 1 and "INFO drivers.base: sim:// rig 'sim': a 1.8 m person standing" in noted[0], noted
+
+
 @pytest.mark.parametrize("scheme", ["depthai", "opencv"])
 def test_validate_config_refuses_a_rig_file_whose_volume_the_model_cannot_sweep(tmp_path, capsys, scheme):
     """A working volume reaching 20 km passed --validate-config and the start, then every pair failed on the
