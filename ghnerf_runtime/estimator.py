@@ -759,6 +759,10 @@ class Estimator:
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
                                       (self._cams[0].roll_deg, self._cams[1].roll_deg))
         self._build_cold_crops()
+        # and their crop cameras' terms, which every cold pass solves in (_crop_terms_for)
+        self._volume_terms = _CropTerms.of(np.stack([np.asarray(st.cold[roi, st.turn_deg][1].P, np.float64)
+                                                     for st, roi in zip(self._cams, self.tracker.volume_regions.rois)]),
+                                           self.skeleton_prior is not None)
         # tracking.cold_tiles_below_share: the working volume's tiles (none where its whole crop frames a person well
         # enough), one searched per cold pair that finds nobody, in turn
         self._cold_tiles = self._tiles_for_small_people(rig)
@@ -946,9 +950,12 @@ class Estimator:
         return rays
 
     def _crop_terms_for(self, crops: Sequence[Camera]) -> _CropTerms:
-        """The two crop cameras' terms: the last ones while the crops' matrices are the same (compared by value:
-        a crop window's camera is rebuilt when the window returns after leaving the map cache), else new ones."""
+        """The two crop cameras' terms: the working volume's, built with the estimator, or the last ones while the
+        crops' matrices are the same (compared by value: a crop window's camera is rebuilt when the window returns
+        after leaving the map cache), else new ones."""
         P = np.stack([np.asarray(c.P, np.float64) for c in crops])
+        if self._volume_terms.two_view.is_for(P):
+            return self._volume_terms
         if self._crop_terms is None or not self._crop_terms.two_view.is_for(P):
             self._crop_terms = _CropTerms.of(P, self.skeleton_prior is not None)
         return self._crop_terms

@@ -65,6 +65,25 @@ def test_the_volume_window_is_built_with_the_estimator_not_by_the_first_pair(ses
     assert not set(by_first_pair) & set(at_start), by_first_pair
 
 
+def test_the_volume_crops_terms_are_built_with_the_estimator_not_by_the_first_pair(session, rig_and_frames,
+                                                                                   monkeypatch):
+    """The two-view solver's (and the prior's) terms of the volume's crop cameras: every cold pass solves in them."""
+    rig, frames = rig_and_frames
+    built = []
+    real = estimator_module._CropTerms.of
+    monkeypatch.setattr(estimator_module._CropTerms, "of", lambda P, prior: built.append(P) or real(P, prior))
+    asked = []
+    real_for = Estimator._crop_terms_for
+    monkeypatch.setattr(Estimator, "_crop_terms_for", lambda self, crops: asked.append(crops) or real_for(self, crops))
+    with Estimator(session, rig, EstimatorConfig(roi=NO_TURN_SEARCH)) as est:
+        (volume_P,) = built
+        est.estimate(frames, sequence=0)
+        est.reset()
+        est.estimate(frames, sequence=1)  # cold again: after a track, its crops' terms the last ones
+    assert asked, "the passes solved in no crop terms: the test shows nothing"
+    assert all(not np.array_equal(P, volume_P) for P in built[1:]), len(built)
+
+
 def test_a_cold_pair_after_a_long_track_finds_the_volume_window_built(session, rig_and_frames, built_rois):
     """Kept outside the LRU: the tracked windows that fill the map cache do not push it out."""
     rig, frames = rig_and_frames
@@ -97,6 +116,9 @@ def test_the_built_volume_window_is_this_rig_s_and_this_config_s(session, roi_co
                 assert _same(getattr(maps, field.name), getattr(fresh, field.name)), field.name
             assert est._crop(st, roi)[0] is maps
             np.testing.assert_array_equal(crop.P, est._build_crop(st, roi)[1].P)
+        volume_P = np.stack([est._build_crop(st, roi)[1].P
+                             for st, roi in zip(est._cams, est.tracker.volume_regions.rois)])
+        assert est._volume_terms.two_view.is_for(volume_P)
 
 
 def _same(a, b) -> bool:
