@@ -933,9 +933,9 @@ class Estimator:
         return maps, crop_camera(state.camera, roi, self.size, state.crop_roll_deg)
 
     def _build_cold_crops(self) -> None:
-        """The working volume's window in each camera, built now rather than by the first pair: a cold pair
-        builds it otherwise (about 2 ms of its time on the reference bench's host), and a device builds its
-        estimator before its first frame."""
+        """The working volume's window in each camera, built now rather than by the first pair (a device builds its
+        estimator before its first frame): the same tables for every cold pair of this rig and configuration, about
+        2 ms of the estimator's build on session 68's host (``ghnerf-bench runtime``'s startup line)."""
         for state, roi in zip(self._cams, self.tracker.volume_regions.rois):
             state.cold[roi, state.turn_deg] = self._build_crop(state, roi)
 

@@ -443,7 +443,7 @@ class SkeletonPrior:
     def warm_up(self) -> float:
         """Run the network once at each batch the estimator runs, one pair with its mirror
         (``joints3d.prior_flip_test``) and without, so that the first pair does not pay onnxruntime's first run of
-        a shape (0.8-6 ms against 0.5 after, session 68's host); returns the milliseconds it took."""
+        a shape (0.8-6 ms against 0.5 after in a one-off timing on session 68's host); returns its milliseconds."""
         t0 = time.perf_counter()
         for batch in WARMUP_BATCHES:
             feeds = (np.zeros((batch, NUM_JOINTS, JOINT_FEATURES), np.float32),

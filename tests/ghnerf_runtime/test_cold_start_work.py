@@ -146,7 +146,7 @@ class _CountingRuns:
 
 def test_the_skeleton_prior_is_run_at_each_batch_the_estimator_runs_before_the_first_pair():
     """One pair with its mirror (joints3d.prior_flip_test) and without: onnxruntime's first run of a shape is the slow
-    one (0.8-6 ms against 0.5 after, session 68's host)."""
+    one (0.8-6 ms against 0.5 after in a one-off timing on session 68's host)."""
     runs = _CountingRuns()
     prior = SkeletonPrior(runs, None, {})
     assert prior.warm_up() >= 0.0
