@@ -187,7 +187,8 @@ class RoiConfig:
             in view, not much smaller), so crops are stable and remap tables are reused; 0
             disables.
         map_cache_size: remap tables kept per camera (least recently used are dropped), its crop turns
-            (``turn_search``) together.
+            (``turn_search``) together; the working volume's (a cold pair's) are kept besides them, built with
+            the estimator.
         upright: rotate each camera's crop so that the rig's down (gravity) is the picture's down, as
             in training: a camera mounted upside down (a ceiling mount), on its side or crooked. The
             angle comes from the rig file's R; free at run time (it is in the remap tables). False:

@@ -583,6 +583,9 @@ class _CameraState:
     turn_deg: float = 0.0  # and the turn search's on top of it (RoiConfig.turn_search: a person lying, upside down)
     # one camera's turns share it (Estimator._use_turns), so roi.map_cache_size bounds the tables per camera
     cache: "OrderedDict[tuple[Roi, float], tuple[CropMaps, Camera]]" = field(default_factory=OrderedDict)
+    # the working volume's window (a cold pass's), built with the estimator and kept outside the LRU: the first pair
+    # and a cold pair after a long track (whose windows pushed it out of the cache) find it built
+    cold: "dict[tuple[Roi, float], tuple[CropMaps, Camera]]" = field(default_factory=dict)
 
     @property
     def crop_roll_deg(self) -> float:
@@ -756,6 +759,11 @@ class Estimator:
         self._centres = np.stack([c.center for c in rig.pair]).astype(np.float64)
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
                                       (self._cams[0].roll_deg, self._cams[1].roll_deg))
+        self._build_cold_crops()
+        # and their crop cameras' terms, which every cold pass solves in (_crop_terms_for)
+        self._volume_terms = _CropTerms.of(np.stack([np.asarray(st.cold[roi, st.turn_deg][1].P, np.float64)
+                                                     for st, roi in zip(self._cams, self.tracker.volume_regions.rois)]),
+                                           self.skeleton_prior is not None)
         # tracking.cold_tiles_below_share: the working volume's tiles (none where its whole crop frames a person well
         # enough), one searched per cold pair that finds nobody, in turn
         self._cold_tiles = self._tiles_for_small_people(rig)
@@ -905,22 +913,36 @@ class Estimator:
 
     # -------------------------------------------------------------- helpers
     def _crop(self, state: _CameraState, roi: Roi) -> tuple[CropMaps, Camera]:
-        """Remap tables and the pinhole crop camera of one window (building both costs ~0.7 ms for a lens without
-        distortion, ~3 ms for the example rig's: session 62, 128 px crops)."""
+        """Remap tables and the pinhole crop camera of one window: the working volume's built with the estimator
+        (:meth:`_build_cold_crops`), the others on their first use and kept in the camera's LRU."""
         key = (roi, state.turn_deg)
+        entry = state.cold.get(key)
+        if entry is not None:
+            return entry
         entry = state.cache.get(key)
         if entry is None:
-            entry = (build_undistort_crop_maps(state.camera, roi, self.size, roll_deg=state.crop_roll_deg,
-                                               supersample=self.config.roi.supersample,
-                                               pad_fill=self.config.roi.pad_fill,
-                                               pad_fade=self.config.roi.pad_fade).compact(),
-                     crop_camera(state.camera, roi, self.size, state.crop_roll_deg))
+            entry = self._build_crop(state, roi)
             state.cache[key] = entry
             while len(state.cache) > self.config.roi.map_cache_size:
                 state.cache.popitem(last=False)
         else:
             state.cache.move_to_end(key)
         return entry
+
+    def _build_crop(self, state: _CameraState, roi: Roi) -> tuple[CropMaps, Camera]:
+        """Build one window's remap tables and pinhole crop camera (both cost ~0.7 ms for a lens without
+        distortion, ~3 ms for the example rig's: session 62, 128 px crops)."""
+        maps = build_undistort_crop_maps(state.camera, roi, self.size, roll_deg=state.crop_roll_deg,
+                                         supersample=self.config.roi.supersample, pad_fill=self.config.roi.pad_fill,
+                                         pad_fade=self.config.roi.pad_fade).compact()
+        return maps, crop_camera(state.camera, roi, self.size, state.crop_roll_deg)
+
+    def _build_cold_crops(self) -> None:
+        """The working volume's window in each camera, built now rather than by the first pair (a device builds its
+        estimator before its first frame): the same tables for every cold pair of this rig and configuration, about
+        2 ms of the estimator's build on session 68's host (``ghnerf-bench runtime``'s startup line)."""
+        for state, roi in zip(self._cams, self.tracker.volume_regions.rois):
+            state.cold[roi, state.turn_deg] = self._build_crop(state, roi)
 
     def _ray_uv(self, blocks: tuple, stride: int) -> np.ndarray:
         """``(2, R, 2)`` rays of the two views' blocks (cached: blocks recur while tracking)."""
@@ -933,9 +955,12 @@ class Estimator:
         return rays
 
     def _crop_terms_for(self, crops: Sequence[Camera]) -> _CropTerms:
-        """The two crop cameras' terms: the last ones while the crops' matrices are the same (compared by value:
-        a crop window's camera is rebuilt when the window returns after leaving the map cache), else new ones."""
+        """The two crop cameras' terms: the working volume's, built with the estimator, or the last ones while the
+        crops' matrices are the same (compared by value: a crop window's camera is rebuilt when the window returns
+        after leaving the map cache), else new ones."""
         P = np.stack([np.asarray(c.P, np.float64) for c in crops])
+        if self._volume_terms.two_view.is_for(P):
+            return self._volume_terms
         if self._crop_terms is None or not self._crop_terms.two_view.is_for(P):
             self._crop_terms = _CropTerms.of(P, self.skeleton_prior is not None)
         return self._crop_terms

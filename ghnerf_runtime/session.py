@@ -308,7 +308,8 @@ class ModelSession:
         skeleton_prior: the folder's :class:`~ghnerf_runtime.skeleton_prior.SkeletonPrior` when
             :meth:`load` was asked for it and the folder has one, else None.
         run_counts: graph -> number of :meth:`run` calls (instrumentation).
-        warmup_ms: graph -> duration of the warm-up run (empty when warm-up is off).
+        warmup_ms: graph -> duration of the warm-up run (empty when warm-up is off); ``"skeleton_prior"`` the
+            prior's (:meth:`~ghnerf_runtime.skeleton_prior.SkeletonPrior.warm_up`).
     """
 
     def __init__(self, sessions: Mapping[str, ort.InferenceSession], contract: ModelContract,
@@ -698,6 +699,8 @@ class ModelSession:
                 t0 = time.perf_counter()
                 self.run(graph, one)
                 self.warmup_ms[graph] = 1e3 * (time.perf_counter() - t0)
+        if self.skeleton_prior is not None:
+            self.warmup_ms["skeleton_prior"] = self.skeleton_prior.warm_up()
         for graph in self.run_counts:  # warm-up runs are not counted as work
             self.run_counts[graph] = 0
         return dict(self.warmup_ms)

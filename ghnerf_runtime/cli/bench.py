@@ -15,7 +15,8 @@ precision and for "keypoints" and "keypoints + novel view" runs the estimator ov
 and prints each stage's median and p99 (ms), the end-to-end median/p99 and throughput, and the
 accuracy against the simulator's truth (PCK@0.2 in both images, MPJPE in the rig frame, with
 the counts of missing joints, and the jitter of the 3D joints: ``metrics.acceleration_error``), and
-each sequence's first pair alone (its cold start, which ``tracking.refine_cold_start`` runs twice).
+each sequence's first pair alone (its cold start, which ``tracking.refine_cold_start`` runs twice): its
+accuracy and its stages' times, and the startup it does not count (the model's load, each estimator's build).
 The pairs carry their capture times (frame number / fps), as ``smoothing`` needs. The rows take
 turns sequence by sequence, so drifts in the machine's speed hit them alike. The first pairs of
 each row are warm-up and not counted. Not a timed test: the figures depend on the machine and its
@@ -68,6 +69,12 @@ STAGE_GROUPS = {
 }
 #: The totals of the pairs after each sequence's first (a stream's steady state), beside ``total``.
 STEADY = "total after the first pair"
+#: Each sequence's first pair alone (its cold start): its stages, as ``f"{COLD} {key}"`` in :func:`run_pairs`'
+#: lists, and grouped as ``STAGE_GROUPS`` under ``COLD`` in a row.
+COLD = "first pair"
+#: The ms to build each sequence's estimator (before its first pair, not counted in its time): the startup a
+#: device pays once, with the model's load (``model_load_ms``), before its first frame.
+ESTIMATOR_START = "estimator start"
 
 
 def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, oracle=None,
@@ -87,12 +94,14 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
     warm-up is a matter of timing, and a row's first sequence would otherwise lose its first pair.
 
     Returns per-stage lists of ms (warm-up pairs excluded) and the wall time of the counted pairs;
-    ``STEADY`` holds the totals of the pairs after each sequence's first (a stream's steady state: the first
-    pair starts cold, and with ``tracking.refine_cold_start`` runs twice).
+    ``ESTIMATOR_START`` holds each sequence's estimator's build time, ``STEADY`` the totals of the pairs after
+    each sequence's first (a stream's steady state: the first pair starts cold, and with
+    ``tracking.refine_cold_start`` runs twice), ``f"{COLD} {key}"`` each counted first pair's stage ``key``.
     """
     stages: dict[str, list[float]] = {k: [] for k in (*KEYPOINT_STAGES, *NOVEL_STAGES, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
                                                       NOVEL_MATTE_STAGE, "total")}
     steady: list[float] = []
+    cold: dict[str, list[float]] = {k: [] for k in stages}
     request = NovelViewRequest(alpha=0.5) if novel else None
     wall = 0.0
     n = 0
@@ -108,11 +117,18 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
             stages[k].append(result.timing_ms.get(k, 0.0))
         if i > 0:
             steady.append(result.timing_ms.get("total", 0.0))
+        else:
+            for k in cold:
+                cold[k].append(result.timing_ms.get(k, 0.0))
         if accuracy is not None:
             accuracy.add(result, seq, i)
 
+    starts: list[float] = []
     for k_seq, seq in enumerate(sequences):
-        with Estimator(estimator.session, seq.rig, estimator.config) as est, NovelViewPipeline(est) as pipe:
+        t = time.perf_counter()
+        est = Estimator(estimator.session, seq.rig, estimator.config)
+        starts.append(1e3 * (time.perf_counter() - t))
+        with est, NovelViewPipeline(est) as pipe:
             for i in range(len(seq)):
                 images = (np.array(seq.images[i, 0]), np.array(seq.images[i, 1]))  # in RAM, as a driver delivers
                 if oracle is not None:
@@ -133,21 +149,31 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
                 for result in results:
                     add(k_seq, seq, result)
     stages[STEADY] = steady
+    stages[ESTIMATOR_START] = starts
+    stages.update({f"{COLD} {k}": v for k, v in cold.items()})
     return stages, wall
 
 
 def _row(stages: dict[str, list[float]], wall: float) -> dict:
     from ghnerf_runtime.cli.simdata import percentiles
 
-    out = {}
-    for name, keys in STAGE_GROUPS.items():
-        vals = np.sum([stages[k] for k in keys], axis=0) if stages["total"] else []
-        out[name] = percentiles(vals)
+    out = _grouped(stages)
     out[STEADY] = percentiles(stages.get(STEADY, []))
+    out[COLD] = _grouped(stages, f"{COLD} ")
+    out[ESTIMATOR_START] = percentiles(stages.get(ESTIMATOR_START, []))
     count = len(stages["total"])
     out["pairs"] = count
     out["pairs_per_s"] = count / wall if wall > 0 else float("nan")
     return out
+
+
+def _grouped(stages: dict[str, list[float]], prefix: str = "") -> dict:
+    """Median and p99 of each ``STAGE_GROUPS`` column over the pairs of ``stages``' lists named ``prefix + key``."""
+    from ghnerf_runtime.cli.simdata import percentiles
+
+    have = bool(stages.get(prefix + "total"))
+    return {name: percentiles(np.sum([stages.get(prefix + k, []) for k in keys], axis=0) if have else [])
+            for name, keys in STAGE_GROUPS.items()}
 
 
 def row_base_config(args, precision: str, source: str) -> EstimatorConfig:
@@ -244,7 +270,9 @@ def run_runtime_bench(args) -> dict:
     rows = []
     for precision, source in itertools.product(args.precisions, args.heatmap_sources):
         cfg = row_base_config(args, precision, source)
+        t_load = time.perf_counter()
         session = _load_row_session(args, cfg)
+        model_load_ms = 1e3 * (time.perf_counter() - t_load)
         model_desc = session.describe()
         flips = (args.flip_tests or [None]) if source == "encoder" else [None]
         follows = (args.follow_encoder or [None]) if source == "rendered" else [None]
@@ -300,6 +328,7 @@ def run_runtime_bench(args) -> dict:
                     row_cfg = replace(row_cfg, novel_view=replace(row_cfg.novel_view, lanes=lanes))
                 rows.append({"precision": precision, "source": source, "mode": mode, "cfg": row_cfg,
                              "session": session, "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0,
+                             "model_load_ms": model_load_ms,
                              "first_pair_accuracy": Accuracy(),
                              "flip_label": flip is not None, "follow_label": follow is not None,
                              "prior_label": prior is not None, "prior_flip_label": prior_flip is not None,
@@ -362,6 +391,7 @@ def run_runtime_bench(args) -> dict:
                    "novel_lanes": cfg.novel_view.lanes, "lanes_label": row["lanes_label"]}
                   if row["mode"] == "novel" else {}),
                "files": {g: f.precision for g, f in session.files.items()}, **_row(row["stages"], row["wall"]),
+               "model_load_ms": row["model_load_ms"],
                "accuracy": row["accuracy"].summary(),
                "accuracy_first_pair": _first_pair_summary(row["first_pair_accuracy"]),
                "load_average": float(np.mean(loads))}
@@ -379,8 +409,7 @@ def _first_pair_summary(accuracy) -> dict:
 
 
 def _print_row(row: dict) -> None:
-    cols = " ".join(f"{name.split(' ')[0]} {row[name]['median']:.2f}/{row[name]['p99']:.2f}"
-                    for name in STAGE_GROUPS)
+    cols = _columns(row)
     if STEADY in row:
         cols += f" (after the first {row[STEADY]['median']:.2f}/{row[STEADY]['p99']:.2f})"
     tracked = " (tracked from truth)" if row.get("track_from_truth") else ""
@@ -430,6 +459,12 @@ def _print_row(row: dict) -> None:
         print(f"      each sequence's first pair ({first['pairs']} pairs): PCK@0.2 "
               f"{first.get('pck@0.2', float('nan')):.3f} MPJPE {first['mpjpe_mm']:.1f} mm "
               f"(3D found {first['found_3d_frac']:.2f})", flush=True)
+    if (cold := row.get(COLD)) and not math.isnan(cold["total"]["median"]):
+        print(f"      each sequence's first pair past the warm-up, ms median/p99: {_columns(cold)}", flush=True)
+    if start := row.get(ESTIMATOR_START):
+        print(f"      startup, not counted in the pairs: the model loaded in {row['model_load_ms']:.0f} ms (warm-up "
+              f"runs included), each sequence's estimator built in {start['median']:.1f} ms median (p99 "
+              f"{start['p99']:.1f})", flush=True)
     if e2 := acc.get("error_2d_px"):
         print(f"      2D error of the visible joints decoded: median {e2['median']:.1f} px, p90 {e2['p90']:.1f} px "
               f"(original image pixels)", flush=True)
@@ -439,6 +474,12 @@ def _print_row(row: dict) -> None:
             f"view {c} {_percent(f, 1)} ({n} pairs)" for c, (f, n) in views)
             + f" of the pairs decoded there; in every view alike {_percent(sw['all_views_frac'], 2)} "
               f"({sw['all_views_evaluated']} pairs)", flush=True)
+
+
+def _columns(groups: dict) -> str:
+    """``"preprocess 1.20/3.40 encoders ..."``: each ``STAGE_GROUPS`` column's median/p99 ms."""
+    return " ".join(f"{name.split(' ')[0]} {groups[name]['median']:.2f}/{groups[name]['p99']:.2f}"
+                    for name in STAGE_GROUPS)
 
 
 def _percent(share: float, digits: int) -> str:

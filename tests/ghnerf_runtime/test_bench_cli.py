@@ -233,3 +233,62 @@ def test_scan_every_s_takes_a_comma_list_of_seconds_and_labels_its_rows(capsys):
             bench.build_parser().parse_args(["runtime", "--scan-every-s", bad])
         assert "--scan-every-s" in capsys.readouterr().err
     assert "scan" in bench.STAGE_GROUPS["encoders"]
+
+
+class _TimedEstimator:
+    """Stands in for the estimator in :func:`bench.run_pairs`: each sequence's first pair (cold) 30 ms of
+    ``preprocess`` and ``encoder``, the others 1 and 9."""
+
+    def __init__(self, session, rig, config) -> None:
+        self.session, self.config = session, config
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+    def estimate(self, images, *, sequence, novel_view, timestamp_s):
+        pre, enc = (10.0, 20.0) if sequence == 0 else (1.0, 9.0)
+        return SimpleNamespace(sequence=sequence, timing_ms={"preprocess": pre, "encoder": enc, "total": pre + enc})
+
+
+class _NoPipeline:
+    def __init__(self, est) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+
+def test_the_bench_prints_each_sequence_s_first_pair_by_stage_and_the_startup(capsys, monkeypatch):
+    """The cold first pair's own stages (session 68: it sets the p99 over every pair) and what the device pays
+    before its first pair: the model's load and each estimator's build."""
+    monkeypatch.setattr(bench, "Estimator", _TimedEstimator)
+    monkeypatch.setattr(bench, "NovelViewPipeline", _NoPipeline)
+    sequences = [_Sequence(np.zeros((3, 2, 2, 2, 3), np.uint8)) for _ in range(3)]
+    stages, _ = bench.run_pairs(_TimedEstimator(None, None, None), sequences, novel=False, warmup=1)
+    assert stages[f"{bench.COLD} total"] == [30.0, 30.0]  # the first sequence's first pair is the warm-up
+    assert stages[f"{bench.COLD} preprocess"] == [10.0, 10.0] and stages[bench.STEADY] == [10.0] * 6
+    assert len(stages[bench.ESTIMATOR_START]) == 3
+    row = {**bench._row(stages, 1.0), "model_load_ms": 123.0, "precision": "int8", "heatmaps": "encoder",
+           "method": "triangulate", "mode": "keypoints", "accuracy": {}, "load_average": 1.0}
+    assert row[bench.COLD]["total"]["median"] == 30.0 and row[bench.COLD]["preprocess"]["median"] == 10.0
+    bench._print_row(row)
+    out = capsys.readouterr().out
+    assert ("each sequence's first pair past the warm-up, ms median/p99: preprocess 10.00/10.00 encoders "
+            "20.00/20.00") in out
+    assert "the model loaded in 123 ms" in out and "each sequence's estimator built in" in out
+
+
+class _Sequence:
+    """A bench sequence of blank pairs."""
+
+    def __init__(self, images: np.ndarray) -> None:
+        self.images, self.rig, self.info = images, None, {"fps": 30.0}
+
+    def __len__(self) -> int:
+        return len(self.images)
