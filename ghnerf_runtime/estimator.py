@@ -1388,7 +1388,7 @@ class Estimator:
             if self._woke_on is not None:
                 self._count_vain_wake()
         levels = self.config.tracking.cold_tiles_wake_levels
-        if levels:
+        if levels and self.config.tracking.cold_tiles_rest_every > 1:  # with no rest there is nothing to wake
             now = pair_copies(images)
             self._calm_restless_cells(now, levels)
             self._rest_scene = now

@@ -401,3 +401,14 @@ def test_a_screen_switched_off_wakes_the_rest_again_when_it_plays(example_rig):
     for images in screen_room(example_rig, [4.0 + i / 30.0 for i in range(4)]):
         est.estimate(images)
     assert est.cold_tile_wakes > woken
+
+
+def test_tiles_that_never_rest_keep_no_scene_and_count_no_wakes(example_rig):
+    """``cold_tiles_rest_every`` 1: every cold pair searches a tile, so the scene check would only cost time (about a
+    quarter of a millisecond a pair) and count wakes of a rest that never happens."""
+    config = EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=1, cold_tiles_wake_levels=6.0))
+    oracle, est = blind_estimator(example_rig, config)
+    oracle.set_truth(None)
+    passes, wakes = run_screen_room(est, example_rig, 12)
+    assert passes[-1] == 12 and wakes[-1] == 0
+    assert est._rest_scene is None
