@@ -234,10 +234,10 @@ def example_rig() -> Rig:
 
 #: ``ghcal synth``'s rig (:func:`synth_rig`, session 68): its cameras' height above the floor (metres) and pitch
 #: (degrees below the horizon). At head height a standing person spans the least angle of the view, and pitched 23
-#: degrees the 1.8 m person is whole in both images from 1.55 m ahead to past 5 m (at least 38 px to spare from 1.75
-#: m on), where :func:`example_rig` (1.4 m up, 24 degrees down) cut the head of anyone nearer than 8 m and lost 38 %
-#: of its pairs, and pitched 13 degrees at 1.4 m framed people from 1.75 m with 4 px to spare and lost 34 %
-#: (``benchmarks/measure_synth_framing.py``, docs/rig-file.md).
+#: degrees the 1.8 m person is whole in both images from 1.55 m ahead to past 5 m, where :func:`example_rig` (1.4 m
+#: up, 24 degrees down) cut the head of anyone nearer than 8 m and lost 38 % of its pairs on 12 of the bench's
+#: people, and the same cameras at 1.4 m lost 34-42 % pitched to frame the person (13 and 17 degrees):
+#: ``benchmarks/measure_synth_framing.py``, docs/rig-file.md "`ghcal synth`'s rig since session 68".
 SYNTH_CAMERA_HEIGHT_M = 1.8
 SYNTH_PITCH_DEG = 23.0
 #: How far ahead (metres) :func:`synth_rig`'s working volume starts: where its lens shows a standing person whole

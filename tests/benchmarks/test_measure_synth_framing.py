@@ -52,11 +52,12 @@ def test_the_old_rig_raised_to_1_8_m_and_pitched_23_degrees_is_the_new_one():
 
 def test_the_command_line_runs(tiny_model_dir, scratch_cache, capsys, monkeypatch, tmp_path):  # noqa: F811
     out = run_script("measure_synth_framing", "--model-dir", str(tiny_model_dir), "--sequences", "1", "--frames",
-                     "1", "--pitches", "17", "--per-sequence", "--save", str(tmp_path), capsys=capsys,
-                     monkeypatch=monkeypatch)
+                     "1", "--pitches", "17", "--per-sequence", "--floor-seeds", "1", "--save", str(tmp_path),
+                     capsys=capsys, monkeypatch=monkeypatch)
     assert "| ghcal-synth | 1.80 | 22.9 | 1.58 | 2.0-5.0 | 1.00 | 311 | " in out, out
     assert "| ghcal-example | 1.40 | 23.6 | 1.19 | 0.5-5.0 | 0.84 | 424 | " in out, out
     assert "| ghcal-synth-pitch-17 | 1.80 | 16.9 | 1.94 | 2.0-5.0 | 1.00 | " in out, out
     assert "| ghcal-synth | 0 | -0.69 | 4.50 | jumping_jacks | 1.00 | 1.0 | 1.0 | " in out, out
     assert "| ghcal-example | 0 | -0.69 | 4.35 | jumping_jacks | 0.64 | 0.0 | 1.0 | " in out, out
+    assert "| ghcal-synth | 1.58 | " in out and "| ghcal-example | 1.19 | " in out, out  # the floor-view rows
     assert (tmp_path / "synth_pitch_17.json").is_file()
