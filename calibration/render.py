@@ -246,8 +246,8 @@ SYNTH_PITCH_DEG = 23.0
 SYNTH_VOLUME_NEAR_M = 2.0
 #: The board ``ghcal synth`` renders by default: 9x6 squares of 120 mm (markers of 90 mm). The floor comes into
 #: :func:`synth_rig`'s view 1.6 m ahead, 2.4 m from its cameras, where the 80-mm default board lying there was read
-#: in both cameras in none of six seeds (docs/calibration.md: a rig that sees the floor only farther away needs a
-#: larger board).
+#: by both cameras in 1 of 6 seeds, this one in all 6 (``benchmarks/measure_synth_framing.py --floor-seeds``;
+#: docs/calibration.md: a rig that sees the floor only farther away needs a larger board).
 SYNTH_BOARD = BoardSpec(square_m=0.12, marker_m=0.09)
 #: Where the pair's optical axes cross, metres ahead of the cameras (x 0).
 CONVERGE_AHEAD_M = 2.5
