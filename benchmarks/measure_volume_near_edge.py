@@ -4,20 +4,21 @@ it with the near edge moved back to where a standing person fits the lens (and t
     PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_volume_near_edge.py [--model-dir models] [--sequences 6]
         [--frames 10] [--rigs synth,docs/examples/rig.json] [--far 4]
 
-``ghcal solve`` and ``ghcal synth`` give every rig ``calibration.level.LEVEL_VOLUME`` (0.5-5 m ahead) unless
-``--volume`` is given. The runtime's cold start crops the whole volume projected into each image (docs/runtime.md,
-"Cold tiles"): a volume starting 0.5 m from the cameras fills the image and a person shrinks in the model's crop. A
-1.8 m person (``rig_file.STANDING_PERSON_M``) nearer than ``STANDING_PERSON_M * fy / height`` (the lens's vertical
-view, pinhole, the pair's larger) is never seen whole, whatever the aim. Per rig (``synth``: ``ghcal synth``'s rig,
-``calibration.render.example_rig()``; else a rig file), the rows tell the rig's volume otherwise: as written; its
-near edge at that lens distance (never under 0.5 m); at the distance where that person standing at the volume's x
-centre is whole in both images, aim and lens model included (where it is within the far edge); and the lens near
-edge with the far edge at ``--far``. Every row films the same people: the bench's held-out sequences
-(``measure_baseline.run_sequence``, ``bench_scene_in``'s seeds) drawn in the lens-near volume up to ``--far`` (so
-inside every row's volume; ``--people written``: in the volume as written), each sequence cold, the runtime's
-defaults. Cells: the volume's depth range, the cold crop's side and the same standing person's height in it (for the
-rig as told) and scores. Session 67 measured it (docs/rig-file.md, "The volume's near edge"): the crop does not
-move, the 3 m wide volume filling the image's width from either near edge. A tool, not a test.
+``ghcal solve`` gives every rig ``calibration.level.LEVEL_VOLUME`` (0.5-5 m ahead) unless ``--volume`` is given, and
+so did ``ghcal synth`` until session 68 (since, its rig's volume starts 2 m ahead). The runtime's cold start crops
+the whole volume projected into each image (docs/runtime.md, "Cold tiles"): a volume starting 0.5 m from the cameras
+fills the image and a person shrinks in the model's crop. A 1.8 m person (``rig_file.STANDING_PERSON_M``) nearer
+than ``STANDING_PERSON_M * fy / height`` (the lens's vertical view, pinhole, the pair's larger) is never seen whole,
+whatever the aim. Per rig (``synth``: ``ghcal synth``'s rig, ``calibration.render.synth_rig()``; ``synth-67``: its
+rig until session 68, ``example_rig()``; else a rig file), the rows tell the rig's volume
+otherwise: as written; its near edge at that lens distance (never under 0.5 m); at the distance where that person
+standing at the volume's x centre is whole in both images, aim and lens model included (where it is within the far
+edge); and the lens near edge with the far edge at ``--far``. Every row films the same people: the bench's held-out
+sequences (``measure_baseline.run_sequence``, ``bench_scene_in``'s seeds) drawn in the lens-near volume up to
+``--far`` (so inside every row's volume; ``--people written``: in the volume as written), each sequence cold, the
+runtime's defaults. Cells: the volume's depth range, the cold crop's side and the same standing person's height in
+it (for the rig as told) and scores. Session 67 measured it (docs/rig-file.md, "The volume's near edge"): the crop
+does not move, the 3 m wide volume filling the image's width from either near edge. A tool, not a test.
 """
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.measure_baseline import run_sequence, score_cells, standing_person_px  # noqa: E402
-from calibration.render import example_rig  # noqa: E402
+from calibration.render import example_rig, synth_rig  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import load_session  # noqa: E402
 from ghnerf_runtime.geometry import Rig, WorkingVolume  # noqa: E402
@@ -100,8 +101,13 @@ def crop_cells(rig: Rig, people: WorkingVolume, model_px: int) -> str:
 
 
 def rig_named(name: str) -> Rig:
-    """``--rigs``' entry: ``synth`` is ``ghcal synth``'s rig, anything else a rig file."""
-    return example_rig() if name == "synth" else load_rig(name)
+    """``--rigs``' entry: ``synth`` is ``ghcal synth``'s rig, ``synth-67`` the one it was until session 68 (1.4 m up,
+    24 degrees down, 0.5-5 m: what session 67 measured), anything else a rig file."""
+    if name == "synth":
+        return synth_rig()
+    if name == "synth-67":
+        return example_rig()
+    return load_rig(name)
 
 
 def main(argv=None) -> int:
@@ -111,7 +117,8 @@ def main(argv=None) -> int:
     ap.add_argument("--sequences", type=int, default=6)
     ap.add_argument("--frames", type=int, default=10)
     ap.add_argument("--rigs", default="synth,docs/examples/rig.json", help="comma-separated: synth (ghcal synth's "
-                                                                           "rig) or rig files")
+                                                                           "rig), synth-67 (its session-67 one) or "
+                                                                           "rig files")
     ap.add_argument("--far", type=float, default=4.0, help="the far edge of the last row, metres ahead")
     ap.add_argument("--people", choices=("lens", "written"), default="lens",
                     help="the volume the people are drawn in: the lens-near one or the one as written")

@@ -45,7 +45,7 @@ from calibration.detect import (PATTERN_CHECK_MARKERS, BoardDetector, BoardView,
                                mirrored_corners, mirrored_words)
 from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.image_sizes import camera_image_sizes, mixed_sizes_problem
-from calibration.render import calibration_views, example_rig
+from calibration.render import SYNTH_BOARD, calibration_views, synth_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, unwritable_reason
 from ghnerf_runtime.cli.rig_messages import rig_messages_on_stderr
@@ -98,7 +98,8 @@ def _stream_name(text: str, limit: int, what: str) -> str:
 
 
 def _board(path: str | None) -> BoardSpec:
-    """``board``, ``synth``, ``capture``: the given board, else the default (they print, render or detect it)."""
+    """``board``, ``capture``: the given board, else the default (they print or detect it; ``synth`` renders a larger
+    one by default, ``calibration.render.SYNTH_BOARD``)."""
     return load_board(path) if path else BoardSpec()
 
 
@@ -286,8 +287,8 @@ def cmd_board(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------ synth
 def cmd_synth(args: argparse.Namespace) -> int:
-    board = _board(args.board)
-    rig = load_rig(args.rig) if args.rig else example_rig()
+    board = load_board(args.board) if args.board else SYNTH_BOARD  # large enough to be read lying on the floor
+    rig = load_rig(args.rig) if args.rig else synth_rig()
     for cam in rig.pair:
         check_camera_name(cam.name)
     out = Path(args.out)
@@ -1186,8 +1187,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("synth", help="render the calibration views of a known rig (no cameras needed)")
     p.add_argument("--out", type=user_path, required=True)
-    p.add_argument("--rig", type=user_path, help="the rig to film (default: a 0.6 m pair at 1.4 m, calibration.render.example_rig)")
-    p.add_argument("--board", type=user_path, help="the board to render (default: 9x6 squares of 80 mm); written to OUT/board.json")
+    p.add_argument("--rig", type=user_path, help="the rig to film (default: a 0.6 m pair at 1.8 m pitched 23 degrees "
+                                                        "down, calibration.render.synth_rig)")
+    p.add_argument("--board", type=user_path, help="the board to render (default: 9x6 squares of 120 mm, "
+                                                   "calibration.render.SYNTH_BOARD); written to OUT/board.json")
     p.add_argument("--force", action="store_true",
                    help="write into a folder that already holds views, board.json or cameras.json")
     p.add_argument("--count", type=_view_count(1), default=15,

@@ -20,7 +20,7 @@ from calibration.errors import CalibrationError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 
-__all__ = ["render_board", "board_pose_facing", "calibration_views", "example_rig"]
+__all__ = ["render_board", "board_pose_facing", "calibration_views", "example_rig", "synth_rig", "SYNTH_BOARD"]
 
 #: Grey level around the board (the room) and of the quiet white margin printed around it.
 BACKGROUND = 90
@@ -225,9 +225,51 @@ def calibration_views(rig: Rig, board: BoardSpec, *, count: int = 20, edge_count
 
 
 def example_rig() -> Rig:
-    """The rig ``ghcal synth`` films by default: two 960x600 cameras (75 degrees, a mild barrel lens,
-    principal points off centre) 0.6 m apart at 1.4 m, converging on a point 2.5 m ahead and 0.3 m up (pitched 24 degrees down: the floor in view from about 1.2 m)."""
+    """The known rig the calibration tests and benchmarks film (``ghcal synth``'s default until session 68, now
+    :func:`synth_rig`): two 960x600 cameras (75 degrees, a mild barrel lens, principal points off centre) 0.6 m apart
+    at 1.4 m, converging on a point 2.5 m ahead and 0.3 m up (pitched 24 degrees down: the floor in view from about
+    1.2 m, a standing person's head cut nearer than 8 m)."""
+    return _pair_of_960x600(1.4, -0.3, LEVEL_VOLUME_NEAR_M, "ghcal-example")
+
+
+#: ``ghcal synth``'s rig (:func:`synth_rig`, session 68): its cameras' height above the floor (metres) and pitch
+#: (degrees below the horizon). At head height a standing person spans the least angle of the view, and pitched 23
+#: degrees the 1.8 m person is whole in both images from 1.55 m ahead to past 5 m, where :func:`example_rig` (1.4 m
+#: up, 24 degrees down) cut the head of anyone nearer than 8 m and lost 38 % of its pairs on 12 of the bench's
+#: people, and the same cameras at 1.4 m lost 34-42 % pitched to frame the person (13 and 17 degrees):
+#: ``benchmarks/measure_synth_framing.py``, docs/rig-file.md "`ghcal synth`'s rig since session 68".
+SYNTH_CAMERA_HEIGHT_M = 1.8
+SYNTH_PITCH_DEG = 23.0
+#: How far ahead (metres) :func:`synth_rig`'s working volume starts: where its lens shows a standing person whole
+#: with room to spare (``calibration.level.LEVEL_VOLUME``'s 0.5 m no aim of this lens frames: 1.88 m, pinhole).
+#: Otherwise ``LEVEL_VOLUME``: 3 m wide, to 5 m ahead.
+SYNTH_VOLUME_NEAR_M = 2.0
+#: The board ``ghcal synth`` renders by default: 9x6 squares of 120 mm (markers of 90 mm). The floor comes into
+#: :func:`synth_rig`'s view 1.6 m ahead, 2.4 m from its cameras, where the 80-mm default board lying there was read
+#: by both cameras in 1 of 6 seeds, this one in all 6 (``benchmarks/measure_synth_framing.py --floor-seeds``;
+#: docs/calibration.md: a rig that sees the floor only farther away needs a larger board).
+SYNTH_BOARD = BoardSpec(square_m=0.12, marker_m=0.09)
+#: Where the pair's optical axes cross, metres ahead of the cameras (x 0).
+CONVERGE_AHEAD_M = 2.5
+#: ``calibration.level.LEVEL_VOLUME``'s near edge, metres ahead.
+LEVEL_VOLUME_NEAR_M = 0.5
+
+
+def synth_rig() -> Rig:
+    """The rig ``ghcal synth`` films by default (session 68): :func:`example_rig`'s cameras raised to 1.8 m and
+    pitched 23 degrees down, converging 2.5 m ahead (the floor in view from about 1.6 m), its working volume
+    ``calibration.level.LEVEL_VOLUME`` from 2 m ahead: a 1.8 m person standing anywhere along its middle is whole in
+    both images, and loading neither warns nor notes of it."""
+    drop = CONVERGE_AHEAD_M * math.tan(math.radians(SYNTH_PITCH_DEG))
+    return _pair_of_960x600(SYNTH_CAMERA_HEIGHT_M, drop - SYNTH_CAMERA_HEIGHT_M, SYNTH_VOLUME_NEAR_M, "ghcal-synth")
+
+
+def _pair_of_960x600(height_m: float, target_y: float, near_m: float, rig_id: str) -> Rig:
+    """Two 960x600 cameras (75 degrees, a mild barrel lens, principal points off centre) 0.6 m apart, ``height_m``
+    above the floor, aimed at the point ``CONVERGE_AHEAD_M`` ahead at ``y = target_y``; their working volume
+    ``LEVEL_VOLUME`` from ``near_m`` ahead."""
     from ghnerf_runtime.geometry.camera import intrinsics_from_fov, look_at
+    from ghnerf_runtime.geometry.rig import WorkingVolume
     from calibration.level import LEVEL_VOLUME
 
     width, height = 960, 600
@@ -236,6 +278,10 @@ def example_rig() -> Rig:
         K = intrinsics_from_fov(width, height, 75.0)
         K[0, 2] += shift[0]
         K[1, 2] += shift[1]
-        R, t = look_at([x, -1.4, 0.0], [0.0, -0.3, 2.5])
+        R, t = look_at([x, -height_m, 0.0], [0.0, target_y, CONVERGE_AHEAD_M])
         cams.append(Camera(name, width, height, K, [-0.12, 0.03, 0.001, -0.0005, 0.0], R, t))
-    return Rig(tuple(cams), LEVEL_VOLUME, rig_id="ghcal-example")
+    if near_m == LEVEL_VOLUME_NEAR_M:
+        return Rig(tuple(cams), LEVEL_VOLUME, rig_id=rig_id)
+    near = LEVEL_VOLUME.min_corner.copy()
+    near[2] = near_m
+    return Rig(tuple(cams), WorkingVolume(near, LEVEL_VOLUME.max_corner.copy()), rig_id=rig_id)

@@ -78,14 +78,14 @@ BOARD_DISTANCE_SLACK = 2.0
 #: warned about (each folder holding the other camera's images); a pair stacked one above the other has no side.
 SIDE_NAMES = ("left", "right")
 SIDES_SHARE = 0.5
-#: Two images of one camera show the same board pose (counted once) where every corner both found lies within this
-#: many pixels of the other's, and they share at least half of each one's corners. On ghcal synth's rendered views
-#: (benchmarks/measure_repeated_views.py, 3 seeds) one pose's two images lay at most 1.84 px apart (re-saved as JPEG
-#: of quality 75; 1.11 px at quality 95, 0.75 px rendered twice with other sensor noise: a still board exposed
-#: twice), a board moved 5 mm at most 2.99 px (median 2.3), and each view at least 33 px from the capture's nearest
-#: other view (median 91 px): a re-saved image and a frame grabbed twice are caught, and so is a board nudged by a
-#: few millimetres (no pose the fit lacks: a 1 mm nudge is within a re-saved copy's spread, so no threshold could
-#: tell them apart); the poses a capture's views take are not.
+#: Two images of one camera show the same board pose (counted once) where every corner both found lies within this many
+#: pixels of the other's, and they share at least half of each one's corners. On ghcal synth's rendered views (its rig
+#: until session 68, calibration.render.example_rig; benchmarks/measure_repeated_views.py, 3 seeds) one pose's two
+#: images lay at most 1.84 px apart (re-saved as JPEG of quality 75; 1.11 px at quality 95, 0.75 px rendered twice with
+#: other sensor noise: a still board exposed twice), a board moved 5 mm at most 2.99 px (median 2.3), and each view at
+#: least 33 px from the capture's nearest other view (median 91 px): a re-saved image and a frame grabbed twice are
+#: caught, and so is a board nudged by a few millimetres (no pose the fit lacks: a 1 mm nudge is within a re-saved
+#: copy's spread, so no threshold could tell them apart); the poses a capture's views take are not.
 #: 0.5 px would have missed over a tenth of the still board's second exposures (90th percentile 0.53 px) and of the
 #: quality-85 copies (0.61 px).
 REPEAT_PX = 3.0

@@ -345,7 +345,8 @@ class TrackingConfig:
             anywhere by now.
         cold_tiles_below_share: where the cold-start crop (the whole working volume projected) shows a 1.8 m
             person standing at the volume's centre under this share of the crop's side tall (a volume wide and
-            near the cameras: the example rig's and ``ghcal synth``'s, 0.40, 51 of the model's 128 input pixels;
+            near the cameras: the example rig's and ``ghcal synth``'s until session 68, 0.40, 51 of the model's 128
+            input pixels; ``ghcal synth``'s since, 38;
             0.47 is 60 of them), a cold pair that finds
             nobody runs one more pass through one of the volume's tiles (``tracking.volume_tiles``: left/right
             halves by near/far halves, each grown 0.3 m into its neighbours), the next tile each such pair, and

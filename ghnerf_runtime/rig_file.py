@@ -124,17 +124,17 @@ STANDING_PERSON_M = 1.8
 #: with the simulator's rig through a 50-degree lens, the pair 4 degrees apart (``benchmarks/measure_baseline.py``,
 #: docs/rig-file.md "A person who does not fit the view"): 0.62 of the height in view (the subject 1.5 m ahead) lost
 #: 67 % of the pairs (no joint at all), 0.78 (2 m) 38 %, 0.97 (2.5 m) 5 %, the whole height (3 m) none; through
-#: 80-130-degree lenses the whole height was in view from 1.5 m on. Not higher: ``ghcal synth``'s rig
-#: (calibration.render.example_rig) shows 0.84 (its head cut), and a shipped rig is not warned of; the bench's
-#: simulated placements (2000 of ``RigPlacement.random``) show 0.97 at least, the example rig and the simulator's
-#: default the whole height.
+#: 80-130-degree lenses the whole height was in view from 1.5 m on. Not higher: ``ghcal synth``'s rig until session 68
+#: (calibration.render.example_rig) shows 0.84 (its head cut), and a shipped rig is not warned of (its rig since,
+#: ``synth_rig``, the whole height); the bench's simulated placements (2000 of ``RigPlacement.random``) show 0.97 at
+#: least, the example rig and the simulator's default the whole height.
 MIN_PERSON_IN_VIEW_SHARE = 0.75
 #: Share of that height under which loading notes (INFO, not a warning) a rig the warning spares: the 0.75-0.97 band
-#: still costs pairs (through the 50-degree lens 0.78 in view lost 38 % of them, 0.97 5 %), and ``ghcal synth``'s rig,
-#: aimed down at the floor for its floor view, shows 0.84 (heads cut nearer than 8 m: on 12 of the bench's people it
-#: gave 99 mm MPJPE, pitched 17 degrees instead 50 mm; session 67, docs/rig-file.md). A note, not a warning: that
-#: shipped rig must load without one, and the cost depends on where people stand. 36 of the 37 points (0.973) are
-#: spared: the bench's placements show 0.97 at least.
+#: still costs pairs (through the 50-degree lens 0.78 in view lost 38 % of them, 0.97 5 %), and ``ghcal synth``'s rig
+#: until session 68, aimed down at the floor for its floor view, shows 0.84 (heads cut nearer than 8 m: on 12 of the
+#: bench's people it gave 99 mm MPJPE, pitched 17 degrees instead 50 mm; session 67, docs/rig-file.md). A note, not a
+#: warning: that shipped rig must load without one, and the cost depends on where people stand. 36 of the 37 points
+#: (0.973) are spared: the bench's placements show 0.97 at least.
 PERSON_IN_VIEW_NOTE_SHARE = 0.97
 #: Spacing (metres) of the points along the standing person's height that :func:`person_in_view_share` projects,
 #: and so their number (37 for 1.8 m): the share's step.

@@ -22,7 +22,7 @@ from calibration.capture import detect_folder
 from calibration.detect import BoardDetector, BoardView
 from calibration.check import check_rig
 from calibration.errors import CaptureError, SolveError
-from calibration.render import calibration_views, example_rig
+from calibration.render import SYNTH_BOARD, calibration_views, example_rig
 from calibration.solve import calibrate_intrinsics, calibrate_pair, floor_from_pair, solve_rig
 from drivers.backends.recording_format import FRAMES, FrameRow, Manifest, write_manifest
 from ghnerf_runtime.geometry.rig import Rig
@@ -772,7 +772,7 @@ def test_synth_does_not_write_over_captures(tmp_path, capsys):
     assert cli.main(["synth", "--out", str(measured), *args]) == 2  # its board.json, measured on the print, kept
     assert load_board_json(measured) == BOARD
     assert cli.main(["synth", "--out", str(measured), "--force", *args]) == 0
-    assert load_board_json(measured) == BoardSpec()
+    assert load_board_json(measured) == SYNTH_BOARD  # synth's own default, larger than BoardSpec()'s 80 mm
     assert json.loads((measured / "cameras.json").read_text()) == {"cameras": ["left", "right"]}
     assert sorted(p.name for p in (measured / "left").iterdir()) == ["000.png", "floor.png"]
 
