@@ -1287,12 +1287,16 @@ def test_a_stop_between_the_two_renames_of_a_view_leaves_the_pair_whole_and_coun
 
 
 def test_cli_synth_says_its_rig_s_note_once(tmp_path, capsys, monkeypatch):
-    """``ghcal synth``'s rig (example_rig, 84 % of a standing person in view) is noted of where it is written, naming
-    truth_rig.json; a ``--rig`` file's note is said as it loads, naming it, and not a second time for its copy."""
+    """A noted rig (example_rig, ``ghcal synth``'s until session 68: 84 % of a standing person in view) is noted of
+    where ``ghcal synth`` writes it, naming truth_rig.json; a ``--rig`` file's note is said as it loads, naming it,
+    and not a second time for its copy; the default synth rig frames its person and says nothing."""
     def one_blank_view(rig, board, **_):  # the rendering (half a minute) is not what is tested
         return {cam.name: {"000": np.zeros((cam.height, cam.width, 3), np.uint8)} for cam in rig.pair}
 
     monkeypatch.setattr(cli, "calibration_views", one_blank_view)
+    assert cli.main(["synth", "--out", str(tmp_path / "framed")]) == 0
+    assert NOTE_WORDS not in capsys.readouterr().err
+    monkeypatch.setattr(cli, "synth_rig", example_rig)
     assert cli.main(["synth", "--out", str(tmp_path / "synth")]) == 0
     err = capsys.readouterr().err
     assert err.count(NOTE_WORDS) == 1 and f"{tmp_path / 'synth' / 'truth_rig.json'}: a 1.8 m person" in err, err
