@@ -115,6 +115,8 @@ def round_order(variants: dict[str, list[Variant]], turn: int) -> list[Variant]:
     """The sessions of one round: each graph's files and thread counts one after another (their ratios compare
     runs made close in time), turned every two rounds; the graphs' order turned more slowly, so that the two
     turns do not move in step and each session meets every place within its graph."""
+    if not variants:  # no graph the estimator ran
+        return []
     every = max(len(vs) for vs in variants.values())
     return [v for graph in _rotated(list(variants), turn, every) for v in _rotated(variants[graph], turn)]
 

@@ -117,3 +117,9 @@ def test_round_order_turns_and_reverses():
     assert orders[2] == [("a", "a.onnx", 2), ("a", "a.onnx", 1), ("b", "b.onnx", 2), ("b", "b.onnx", 1)]
     # the graphs turn every two variant turns (two variants a graph), so the two turns do not move in step
     assert orders[4] == [("b", "b.onnx", 1), ("b", "b.onnx", 2), ("a", "a.onnx", 1), ("a", "a.onnx", 2)]
+
+
+def test_no_graph_the_estimator_ran_is_named_not_timed(fake_bench, capsys):
+    assert bench.main(["--graphs", "render_rgb"]) == 0  # the fake capture has no render_rgb calls
+    assert "render_rgb               (not run by the estimator with this model)" in capsys.readouterr().out
+    assert fake_bench == []
