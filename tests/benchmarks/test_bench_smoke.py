@@ -338,7 +338,7 @@ def test_bench_graph_threads(model, capsys, monkeypatch):
     out = run_script("bench_graph_threads", "--model-dir", model, "--sequences", "1", "--pairs", "2", "--rounds", "1",
                      "--graphs", "encoder,render_rgb", capsys=capsys, monkeypatch=monkeypatch)
     for graph, calls in (("encoder", r"\d+"), ("render_rgb", "2")):  # one novel view: its coarse and fine passes
-        assert re.search(rf"^{graph}\.onnx +{calls} +[\d.]+ +[\d.]+ +[\d.]+$", out, re.M), out
+        assert re.search(rf"^{graph}\.onnx +{calls} +[\d.]+ +[\d.]+ +[\d.]+ +[\d.]+-[\d.]+$", out, re.M), out
 
 
 def test_a_tracked_pairs_view_on_the_lanes_reaches_the_render_tap(model):
