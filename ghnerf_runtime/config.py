@@ -364,8 +364,8 @@ class TrackingConfig:
             scaled to the frame's mean so that a change of exposure or light over the whole frame leaves it) differs
             from the one kept then in two cells or more by over this many 8-bit levels. Sensor noise moves a cell by
             a level or two; a person walking in, by tens. A cell that woke two searches whose round then found
-            nobody (a screen, a curtain) wakes none after, nor do its neighbours, until it stays still over two tile
-            passes (or a reset). 0 or None never
+            nobody (a screen, a curtain) wakes none after, nor do its neighbours, until it stays still over eight tile
+            passes in a row (or a reset). 0 or None never
             wakes (docs/runtime.md, "Cold tiles").
     """
 

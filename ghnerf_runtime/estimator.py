@@ -100,8 +100,8 @@ from ghnerf_runtime.preprocess import (
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import PriorCameras, disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
-from ghnerf_runtime.scene_change import (RESTLESS_AFTER_WAKES, SceneCopy, changed_mask, pair_copies,
-                                         restless_with_neighbours, scene_changed)
+from ghnerf_runtime.scene_change import (CALM_AFTER_PASSES, RESTLESS_AFTER_WAKES, SceneCopy, changed_mask,
+                                         pair_copies, restless_with_neighbours, scene_changed)
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners, cold_person_share, volume_tiles
 from ghnerf_runtime.subject import STILL_SEVERAL_MIN_JOINTS, SubjectSelector, guessed_joints, joints_shown_twice, \
@@ -775,6 +775,7 @@ class Estimator:
         self._woke_on: tuple[np.ndarray, ...] | None = None  # the cells that woke the search now awake, per camera
         # per camera, each cell's wakes whose round of tiles then found nobody (a screen, a curtain: a restless cell)
         self._vain_wakes: tuple[np.ndarray, ...] | None = None
+        self._still_passes: tuple[np.ndarray, ...] | None = None  # per camera, each cell's tile passes unchanged in a row
         self.cold_tile_passes = 0  # cold pairs that searched a tile, and those whose tile found someone
         self.cold_tiles_found = 0
         self.cold_tile_wakes = 0  # resting searches a scene change woke (tracking.cold_tiles_wake_levels)
@@ -894,6 +895,7 @@ class Estimator:
         self._next_tile = 0
         self._wake_tiles()
         self._vain_wakes = None  # the scene may be another now (a camera moved): its restless cells with it
+        self._still_passes = None
         self._forget_scan()
         if self._smoother is not None:
             self._smoother.reset()
@@ -1375,6 +1377,7 @@ class Estimator:
         """A woken search's whole round found nobody: the cells that woke it count one vain wake each."""
         if self._vain_wakes is None:
             self._vain_wakes = tuple(np.zeros(m.shape, np.int32) for m in self._woke_on)
+            self._still_passes = tuple(np.zeros(m.shape, np.int32) for m in self._woke_on)
         for counts, woke in zip(self._vain_wakes, self._woke_on):
             counts += woke
         self._woke_on = None
@@ -1394,14 +1397,17 @@ class Estimator:
             self._rest_scene = now
 
     def _calm_restless_cells(self, now: tuple[SceneCopy, ...], levels: float) -> None:
-        """Each cell that stayed still since the last tile pass that found nobody loses one vain wake: a screen
-        switched off, a curtain now still, wakes the rest again after :data:`RESTLESS_AFTER_WAKES` quiet passes
-        rather than never (a long-running device would otherwise stay blind there until a reset)."""
+        """A cell unchanged over :data:`CALM_AFTER_PASSES` tile passes in a row that found nobody forgets its vain
+        wakes: a screen switched off, a curtain now still, wakes the rest again rather than never (a long-running
+        device would otherwise stay blind there until a reset). One still pass is not enough: a screen's next picture
+        may match its last in a cell by chance, and the cell would wake the rest again at once."""
         if self._vain_wakes is None or self._rest_scene is None:
             return
-        for counts, n, k in zip(self._vain_wakes, now, self._rest_scene):
-            calm = ~changed_mask(n, k, levels) & (counts > 0)
-            counts[calm] -= 1
+        for counts, still, n, k in zip(self._vain_wakes, self._still_passes, now, self._rest_scene):
+            changed = changed_mask(n, k, levels)
+            still[changed] = 0
+            still[~changed] += 1
+            counts[still >= CALM_AFTER_PASSES] = 0
 
     def _wake_tiles(self) -> None:
         """Someone was seen (or the estimator reset): every cold pair that finds nobody searches a tile again."""

@@ -25,8 +25,13 @@ CELL_SAMPLES = 8
 #: cells that must change: one cell alone may be a flicker or a noise extreme, a person covers more
 WAKE_MIN_CELLS = 2
 #: a cell that woke this many resting searches whose whole round of tiles then found nobody wakes no more (until it
-#: stays still over as many tile passes that find nobody, or the estimator is reset): a screen, a curtain in a draught; one vain wake may be a person the tiles missed
+#: stays still over CALM_AFTER_PASSES tile passes in a row, or the estimator is reset): a screen, a curtain in a draught; one vain wake may be a person the tiles missed
 RESTLESS_AFTER_WAKES = 2
+#: a restless cell unchanged over this many tile passes in a row that found nobody wakes again (about 32 resting
+#: pairs at a tile pass every 4th): a screen's next picture can match its last in a cell by chance, so one still
+#: pass is not enough (with one, a screen woke the rest 10 times per 100 pairs, against 4 with none:
+#: benchmarks/measure_cold_tiles.py --moving-room)
+CALM_AFTER_PASSES = 8
 
 
 def _lattice(image: np.ndarray) -> np.ndarray:

@@ -69,7 +69,8 @@ from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MAX_
                                      MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG, MIN_PERSON_IN_VIEW_SHARE,
                                      PERSON_IN_VIEW_NOTE_SHARE, STANDING_PERSON_M, WIRE_2D_MAX_PX, _PERSON_SAMPLES)
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
-from ghnerf_runtime.scene_change import CELL_SAMPLES, RESTLESS_AFTER_WAKES, THUMB_CELLS, WAKE_MIN_CELLS
+from ghnerf_runtime.scene_change import (CALM_AFTER_PASSES, CELL_SAMPLES, RESTLESS_AFTER_WAKES, THUMB_CELLS,
+                                         WAKE_MIN_CELLS)
 from ghnerf_runtime.proxy_matte import BONE_M
 from ghnerf_runtime.tracking import COLD_TILE_OVERLAP_M, COLD_TILE_SPLITS
 from ghnerf_runtime.two_people import BODY_RADIUS_M, BONE_SLACK_M, MAX_LIMB_M, MIN_APART_M, MIXED_TORSO_SLACK_M, \
@@ -98,7 +99,7 @@ def _unit_setting(key: str) -> str:
 
 def _words(n: int) -> str:
     """``n`` as the docs write a small count in words."""
-    return {2: "two", 3: "three", 4: "four", 5: "five"}.get(n, str(n))
+    return {2: "two", 3: "three", 4: "four", 5: "five", 8: "eight"}.get(n, str(n))
 
 
 def _exp(value: float) -> str:
@@ -344,6 +345,7 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"in {_words(WAKE_MIN_CELLS)} cells or more by over `cold_tiles_wake_levels`"),
     # session 68: a cell that keeps waking the rest in vain wakes it no more (a screen playing)
     ("docs/runtime.md", f"`scene_change.RESTLESS_AFTER_WAKES` ({_words(RESTLESS_AFTER_WAKES)}) such searches in vain"),
+    ("docs/runtime.md", f"`scene_change.CALM_AFTER_PASSES` ({_words(CALM_AFTER_PASSES)}) tile passes in a row"),
     ("docs/runtime.md", f"| docs/examples/rig.json | tiles, rest every {COLD_REST} (default) |"),
     # session 66: why the scan tells nobody behind the subject (the blanked box, the benchmark's own-peak radius)
     ("docs/two-people.md", f"the reported joints' box grown {SUBJECT_MARGIN_M:g} m every way "
