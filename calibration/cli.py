@@ -29,7 +29,7 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 
 import cv2
@@ -48,12 +48,12 @@ from calibration.image_sizes import camera_image_sizes, mixed_sizes_problem
 from calibration.render import SYNTH_BOARD, calibration_views, synth_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, unwritable_reason
-from ghnerf_runtime.cli.rig_messages import rig_messages_on_stderr
+from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stderr
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, load_rig, rig_notes, save_rig, write_bytes_atomic,
-                                     write_text_atomic)
+from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, lens_fold_warning, load_rig,
+                                     rig_warnings_and_notes, save_rig, write_bytes_atomic, write_text_atomic)
 from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser"]
@@ -308,8 +308,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
             if not cv2.imwrite(str(out / camera / f"{name}.png"), image):
                 raise UsageError(f"{out / camera / name}.png: cannot write the image")
     save_rig(rig, out / "truth_rig.json")
-    if not args.rig:  # (a --rig file's notes were said as it loaded)
-        _say_rig_notes(rig, out / "truth_rig.json")
+    if not args.rig:  # (a --rig file's warnings and notes were said as it loaded)
+        _say_rig_messages(rig, out / "truth_rig.json")
     write_text_atomic(out / BOARD_FILE, json.dumps(board.to_dict(), indent=2) + "\n")
     write_camera_order(out, [cam.name for cam in rig.pair], replace=True)
     total = len(next(iter(views.values())))
@@ -411,6 +411,7 @@ def every_frame_of_two_videos(url: str) -> str:
 
 def cmd_capture(args: argparse.Namespace) -> int:
     import drivers
+    from drivers.base import log as rig_source_log
     from drivers.url import redact_url
 
     board = _board(args.board)
@@ -446,7 +447,10 @@ def cmd_capture(args: argparse.Namespace) -> int:
     shown_url = redact_url(args.url)  # a camera URL may carry a password (rtsp://user:pass@..., token=)
     read_to_its_end = False  # the capture ended without a stop (caught below) or an error on its way out
     try:
-        source.open()
+        # what the open warns and notes of the rig (a take's, a device's calibration, sim://'s) is logged by the
+        # source, not the rig file: shown as main shows a loaded rig's, its notes too (Python showed the warnings)
+        with log_on_stderr(rig_source_log):
+            source.open()
         cams = [check_camera_name(c.name) for c in source.rig.pair]
         folders = [out / cam for cam in cams]
         if args.floor and not args.force and any((f / f"{FLOOR_VIEW}{suffix}").exists()
@@ -685,7 +689,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
           f"pitch {lv['pitch_deg']:.2f} deg, roll {lv['roll_deg']:.2f} deg")
     for warning in r["warnings"]:
         print(f"warning: {warning}")
-    _say_rig_notes(solution.rig, out)
+    _say_rig_messages(solution.rig, out, said=_fold_warnings_said(solution.rig))
     _say_kept(kept)
     print(f"wrote {out} and {report_path}")
     return 0
@@ -731,12 +735,28 @@ def _refuse_exchanged_sizes(out: Path, views: dict, images: Path) -> None:
                      f"swapped in the rig URL), give --out another path, or move {out} away first")
 
 
-def _say_rig_notes(rig: Rig, path: Path) -> None:
-    """The notes ``load_rig`` will log of the rig written to ``path`` (``rig_file.rig_notes``: a standing person
-    partly out of the pair's views), said on stderr as :func:`main` shows a loaded rig's: where the rig is made,
-    not first at the daemon's start."""
-    for note in rig_notes(rig):
-        print(f"{path}: {note}", file=sys.stderr)
+def _say_rig_messages(rig: Rig, path: Path, *, said: Collection[str] = ()) -> None:
+    """What ``load_rig`` will warn and note of the rig written to ``path`` (``rig_file.rig_warnings_and_notes``: a
+    narrow pair, a camera's height, a volume off the floor, a standing person out of view...), said on stderr as
+    :func:`main` shows a loaded rig's, each once: where the rig is made, not first when it is next loaded. Those in
+    ``said`` are left out: the command said them in its own words already."""
+    warnings, notes = rig_warnings_and_notes(rig)
+    for message in warnings + notes:
+        if message not in said:
+            print(f"{path}: {message}", file=sys.stderr)
+
+
+def _fold_warnings_said(rig: Rig) -> set[str]:
+    """The rig file's words for the lens folds ``solve`` warned of (``solution.report``'s ``fold_warning``, one for
+    each camera of the pair whose lens folds inside its image)."""
+    return {lens_fold_warning(cam) for cam in rig.pair if cam.fold_inside_image()}
+
+
+def _height_warnings_said(rig: Rig) -> set[str]:
+    """The rig file's words for a camera's height, which ``import``'s "not levelled" warning says already: in the
+    calibration tool's frame the first camera stands at its origin, "0.00 m above the floor", and the fix each
+    names is the same (import again with --camera-height)."""
+    return {warning for cam in rig.cameras if (warning := camera_height_warning(cam))}
 
 
 def _say_kept(kept: dict[Path, Path | None]) -> None:
@@ -949,6 +969,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     if warning := common_view_warning(rig):
         print(f"warning: {warning}")
     recorded = rig.metadata.get("levelled")
+    said: set[str] = set()  # the rig file's warnings said above in other words
     if args.camera_height is not None:
         print(f"levelled: {a.name} {args.camera_height:g} m above the floor, pitch {args.pitch or 0.0:g} deg, "
               f"roll {args.roll or 0.0:g} deg")
@@ -965,7 +986,8 @@ def cmd_import(args: argparse.Namespace) -> int:
               + (f" ({mismatch})" if mismatch else "")
               + ", and the runtime reads y as down with the floor at y = 0 (the skeleton prior, upright crops, the "
               "working volume): import again with --camera-height M (and --pitch, --roll) of the first camera")
-    _say_rig_notes(rig, out)
+        said = _height_warnings_said(rig)
+    _say_rig_messages(rig, out, said=said)
     _say_kept(kept)
     print(f"wrote {out}")
     return 0

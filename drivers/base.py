@@ -211,6 +211,14 @@ class RigSource(abc.ABC):
             logged.add(text)
         logger.log(level, fmt, *args)
 
+    def warn_of_built_rig(self) -> None:
+        """Log now what :meth:`open` will warn and note of the rig this source built in memory before any open
+        (``sim://``'s placement), for a check that opens nothing (``ghnerf-daemon --validate-config``). Nothing for a
+        rig read from a file (its loader warns of it) or known only at the open (a device's calibration,
+        ``opencv://``'s nominal rig, sized by the cameras' first frames)."""
+        if self._rig_built and self._rig is not None:
+            self._warn_of_rig()
+
     def _warn_of_rig(self) -> None:
         """What ``load_rig`` would warn of in the rig this backend built (a narrow ``sim://?baseline=``, a
         camera's height), and note at INFO (``rig_file.rig_notes``): the one check for every backend's in-memory

@@ -388,6 +388,9 @@ class RecordingRigSource(RigSource):
         super().log_rig_warnings_once(logged)
         self.inner.log_rig_warnings_once(logged)  # the inner source builds the rig and warns of it
 
+    def warn_of_built_rig(self) -> None:
+        self.inner.warn_of_built_rig()  # the inner source builds the rig
+
     def _open(self) -> None:
         self.inner.open()
         try:

@@ -62,6 +62,7 @@ from drivers.backends.opencv import (is_nominal_rig, is_video_file, rig_size_mes
                                      video_size)
 from drivers.backends.recording_format import MANIFEST, read_manifest
 from drivers.backends.replay import ReplayRigSource
+from drivers.base import log as rig_source_log
 from drivers.url import RigUrl, redact_url
 from firmware_host.daemon import early_sighup
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config_noting_paths
@@ -70,7 +71,7 @@ from firmware_host.daemon.measure_floor import (DEFAULT_PAIRS, FloorMeasureError
 from firmware_host.daemon.sandbox import rig_url_hint, sandbox_warnings, service_hint
 from firmware_host.daemon.service import Daemon, DaemonStartError, check_estimator, check_sink_urls, load_model
 from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
-from ghnerf_runtime.cli.rig_messages import rig_messages_on_stderr
+from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stderr
 from ghnerf_runtime.config import config_to_dict
 from ghnerf_runtime.config_paths import config_folder
 from ghnerf_runtime.errors import ModelLoadError, RuntimeErrorBase
@@ -128,8 +129,8 @@ def check_config(config: DaemonConfig, source: str | os.PathLike | None = None,
     (:func:`~firmware_host.daemon.config.load_daemon_config_noting_paths`), for the hint on where they were read
     from: given only where the value that fails is one of them.
 
-    ``warn_of_rig``: log the warnings of the rig file or take ``rig.url`` names (``--validate-config``, which opens
-    no rig). The start and the reloads leave them to the rig's open, which logs each once per ``rig.url``: the
+    ``warn_of_rig``: log the warnings and notes of the rig file or take ``rig.url`` names, or of the rig its source
+    builds in memory (``sim://``) (``--validate-config``, which opens no rig). The start and the reloads leave them to the rig's open, which logs each once per ``rig.url``: the
     check logged them again at the start and at every reload.
 
     :raises DaemonConfigError: naming the key.
@@ -210,6 +211,10 @@ def _check_rig_url(text: str, *, warn_of_rig: bool) -> None:
         size_error = source.size_error()
         if size_error is not None:
             raise DaemonConfigError(str(size_error), key="rig.url")
+    if warn_of_rig and source is not None:
+        # a sim:// rig is built in memory, read from no file: its source says what its open will (cheap: the rig
+        # is built already, nothing rendered). A device's rig is known only once it opens: not said here
+        source.warn_of_built_rig()
     if rig_file:  # a calibration of our own (ghcal): the stream announces its id and camera names
         try:
             rig = load_rig(rig_file, warn=warn_of_rig)
@@ -417,8 +422,9 @@ def _validate(path: str, *, with_model: bool) -> int:
     :raises DaemonConfigError: naming the file and the key.
     """
     # the rig's notes on stderr beside its warnings, bare (no logging is set up here: Python showed the warnings
-    # only); depthai may log to stdout
-    with _stdout_for_the_json_alone(), rig_messages_on_stderr():
+    # only), a rig file's and a rig built in memory's (sim://, said by its source as its open says it); depthai may
+    # log to stdout
+    with _stdout_for_the_json_alone(), rig_messages_on_stderr(), log_on_stderr(rig_source_log):
         config = read_checked_config(path, warn_of_rig=True)  # no rig opens to warn of it
         checked = "model: not loaded (--no-model), its folder holds graph files"
         if with_model:

@@ -6,10 +6,12 @@ WARNING and over where no logging is set up, and ``ghnerf-run`` sets it up so: t
 by ``ghnerf-run`` without ``--verbose`` and by ``ghnerf-daemon --validate-config``, the places a user mounting a rig
 looks. The daemon itself logs at INFO by default (``log_level``), so its rig source's note is shown at its start.
 
-Two helpers, one per way a tool shows its log:
+The helpers, by the way a tool shows its log:
 
 - :func:`rig_messages_on_stderr`: a tool that sets no logging up (``ghcal``, ``ghnerf-daemon --validate-config``):
   each warning and note on stderr as its bare message, as Python's last-resort handler prints the warnings.
+  :func:`log_on_stderr` does the same for another logger: a rig source's (``drivers.base``), which logs at its open
+  what it warns and notes of its rig (``ghcal capture``; ``--validate-config`` of a ``sim://`` rig, built in memory).
 - :func:`rig_notes_let_through`: a tool whose logging is set up to show WARNING and over (``ghnerf-run``): the notes
   go out through that set-up's handler, in its format, beside the warnings.
 """
@@ -22,14 +24,14 @@ from collections.abc import Iterator
 
 from ghnerf_runtime.rig_file import log as rig_file_log
 
-__all__ = ["rig_messages_on_stderr", "rig_notes_let_through"]
+__all__ = ["log_on_stderr", "rig_messages_on_stderr", "rig_notes_let_through"]
 
 
 @contextlib.contextmanager
-def rig_notes_let_through() -> Iterator[None]:
-    """The rig file's logger passes INFO (its notes) while inside, its own level put back after: the notes then
-    reach the handlers the tool set up, however high the root logger's level."""
-    logger = rig_file_log  # load_rig's and read_manifest's (a take's rig) alike
+def rig_notes_let_through(logger: logging.Logger = rig_file_log) -> Iterator[None]:
+    """``logger`` (the rig file's: load_rig's and read_manifest's, a take's rig) passes INFO (its notes) while
+    inside, its own level put back after: the notes then reach the handlers the tool set up, however high the root
+    logger's level."""
     level = logger.level
     logger.setLevel(logging.INFO)
     try:
@@ -39,9 +41,8 @@ def rig_notes_let_through() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def rig_messages_on_stderr() -> Iterator[None]:
-    """The rig file's warnings and notes on stderr while inside, each once as its bare message."""
-    logger = rig_file_log
+def log_on_stderr(logger: logging.Logger) -> Iterator[None]:
+    """``logger``'s records of INFO and over on stderr while inside, each once as its bare message."""
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(message)s"))  # as Python's last-resort handler prints the warnings
     propagate = logger.propagate
@@ -50,8 +51,13 @@ def rig_messages_on_stderr() -> Iterator[None]:
     # printed each line a second time, in its own format
     logger.propagate = False
     try:
-        with rig_notes_let_through():
+        with rig_notes_let_through(logger):
             yield
     finally:
         logger.propagate = propagate
         logger.removeHandler(handler)
+
+
+def rig_messages_on_stderr() -> contextlib.AbstractContextManager[None]:
+    """The rig file's warnings and notes on stderr while inside, each once as its bare message."""
+    return log_on_stderr(rig_file_log)

@@ -25,7 +25,7 @@ from calibration.errors import CaptureError, SolveError
 from calibration.render import SYNTH_BOARD, calibration_views, example_rig
 from calibration.solve import calibrate_intrinsics, calibrate_pair, floor_from_pair, solve_rig
 from drivers.backends.recording_format import FRAMES, FrameRow, Manifest, write_manifest
-from ghnerf_runtime.geometry.rig import Rig
+from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import load_rig, save_rig
 
 BOARD = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
@@ -1305,3 +1305,24 @@ def test_cli_synth_says_its_rig_s_note_once(tmp_path, capsys, monkeypatch):
     assert cli.main(["synth", "--out", str(tmp_path / "again"), "--rig", str(given)]) == 0
     err = capsys.readouterr().err
     assert err.count(NOTE_WORDS) == 1 and f"{given}: a 1.8 m person" in err, err
+
+
+def test_capture_says_the_rig_s_note_and_warnings_once_as_its_source_opens(truth, tmp_path, capsys):
+    """A rig source logs at its open what it warns and notes of its rig (``drivers.base``): ``ghcal capture``, with no
+    logging set up, showed the warnings (Python's last resort) and dropped the note (INFO), here of the take's rig
+    (``truth``: 84 % of a standing person in view). Since session 68 each is said once, a bare line on stderr naming
+    the take's manifest as ghcal names a loaded rig file; a rig off the floor's warning once, not twice."""
+    take, board = _one_view_take(tmp_path, truth)
+    out = tmp_path / "capture"
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
+                     "--count", "1"]) == 0
+    err = capsys.readouterr().err
+    assert err.count(NOTE_WORDS) == 1 and f"\n{take / 'manifest.json'}: a 1.8 m person" in "\n" + err, err
+    raised = Rig(truth.cameras, WorkingVolume(truth.volume.min_corner - [0, 2, 0], truth.volume.max_corner - [0, 2, 0]),
+                 rig_id="raised")
+    (tmp_path / "raised").mkdir()
+    take, board = _one_view_take(tmp_path / "raised", raised)
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out",
+                     str(tmp_path / "raised" / "capture"), "--count", "1"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("working volume: y from") == 1 and f"\n{take / 'manifest.json'}: working volume" in "\n" + err, err

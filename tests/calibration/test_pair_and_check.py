@@ -505,13 +505,14 @@ def test_folders_exchanged_between_cameras_of_two_sizes_are_said_so(sized_rig, t
     assert "exchanged, the rig does not fit them either (reprojection" in err and "over 0.1 px" in err
 
 
-def _solve_cli(views: dict, tmp_path, monkeypatch) -> tuple[int, Path]:
+def _solve_cli(views: dict, tmp_path, monkeypatch, *more: str) -> tuple[int, Path]:
     """``ghcal solve`` of ``views`` (the detection stood in for) into ``tmp_path/rig.json``, levelled by a typed
-    height: its exit status, and the images' folder."""
+    height, ``more`` arguments after: its exit status, and the images' folder."""
     images = _listed_views(views, tmp_path)
     _detection_stood_in_for(views, monkeypatch)
     rc = cli.main(["solve", "--images", str(images), "--board", str(tmp_path / "board.json"), "--out",
-                   str(tmp_path / "rig.json"), "--cameras", "left,right", "--camera-height", "1.4", "--pitch", "9"])
+                   str(tmp_path / "rig.json"), "--cameras", "left,right", "--camera-height", "1.4", "--pitch", "9",
+                   *more])
     return rc, images
 
 
@@ -747,3 +748,45 @@ def test_solve_reads_the_rig_it_replaces_without_its_warnings(sized_rig, tmp_pat
     assert rc == 2 and "look exchanged" in err
     assert not [r for r in caplog.records if r.name == "ghnerf_runtime.rig_file"], caplog.text
     assert "working volume: y from" not in err, err  # ghcal shows the rig file's log on stderr (session 68)
+
+
+def test_solve_says_the_written_rig_s_warnings_once_on_stderr_naming_it(level_rig, tmp_path, capsys, monkeypatch):
+    """A working volume given off the floor (``--volume``, 2.5 m above it) is what loading the rig warns of: ``solve``
+    printed its own warnings only, and the rig file's came first when the rig was next loaded (the daemon's start).
+    Since session 68 ``solve`` says them of the rig it writes, bare on stderr as ghcal shows a loaded rig's."""
+    views = _views(level_rig, _facing_poses(level_rig, 10, seed=7), noise_px=0.1)
+    rc, _ = _solve_cli(views, tmp_path, monkeypatch, "--volume=-1.5,-3.5,0.5,1.5,-2.5,5")
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    assert err.count("working volume: y from -3.5 to -2.5 lies 2.50 m above the floor") == 1, err
+    assert f"\n{tmp_path / 'rig.json'}: working volume: y from" in "\n" + err, err
+    assert "working volume: y from" not in out
+
+
+def test_solve_does_not_say_a_lens_fold_twice(level_rig, tmp_path, capsys, monkeypatch):
+    """``solve`` warns of a solved lens that folds inside its image in its own words (``fold_warning``); the rig
+    file's words for it (``lens_fold_warning``) are left out of the rig's warnings it says after, the others said
+    (a volume off the floor; session 68)."""
+    from ghnerf_runtime.rig_file import lens_fold_warning, load_rig
+
+    solve_rig = cli.solve_rig
+
+    def folding(*args, **kwargs):  # the solution with its left lens folding, warned of as solve_rig warns of it
+        solution = solve_rig(*args, **kwargs)
+        left, right = solution.rig.pair
+        bent = dataclasses.replace(left, dist=np.array([-0.6, 0.0, 0.0, 0.0, 0.0]))
+        assert bent.fold_inside_image()
+        solution.report["warnings"].append(solve.fold_warning(bent))
+        return dataclasses.replace(solution, rig=Rig((bent, right), solution.rig.volume, solution.rig.rig_id,
+                                                     solution.rig.metadata))
+
+    monkeypatch.setattr(cli, "solve_rig", folding)
+    views = _views(level_rig, _facing_poses(level_rig, 10, seed=7), noise_px=0.1)
+    rc, _ = _solve_cli(views, tmp_path, monkeypatch, "--volume=-1.5,-3.5,0.5,1.5,-2.5,5")
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    assert "warning: left: the solved lens model folds over inside the image" in out
+    assert err.count("working volume: y from -3.5 to -2.5 lies 2.50 m above the floor") == 1, err
+    saved = load_rig(tmp_path / "rig.json", warn=False)
+    assert lens_fold_warning(saved.camera("left")) not in err and "its lens model folds over" not in err, err
+

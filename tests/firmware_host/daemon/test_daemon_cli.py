@@ -397,6 +397,31 @@ def test_validate_config_prints_the_rig_s_note_once_where_the_root_logger_has_a_
     assert f"\n{rig}: a 1.8 m person" in "\n" + err, err  # bare, as the warnings are
 
 
+@pytest.mark.parametrize("options, words", [
+    ("distance=1", "sim:// rig 'sim': a 1.8 m person standing at the working volume's centre"),  # 89 %: a note
+    ("baseline=0.05", "sim:// rig 'sim': cameras 'left' and 'right' are 50 mm apart"),  # a warning
+])
+def test_validate_config_prints_a_sim_rig_s_note_and_warnings_once(tmp_path, capsys, options, words):
+    """A ``sim://`` rig is built in memory: no rig file is loaded and ``--validate-config`` opens no source, so it
+    printed neither the note nor the warnings the start logs of it (session 68). Now each once, bare on stderr, in
+    the start's words (``INFO drivers.base: sim:// rig 'sim': ...`` there), also where the root logger has a handler."""
+    import logging
+
+    path = _write(tmp_path, {"rig": {"url": f"sim://?width=48&height=36&cache=off&{options}"},
+                             "sinks": ["udp://127.0.0.1:9870"]})
+    root = logging.getLogger()
+    handler = logging.StreamHandler()  # sys.stderr as capsys holds it
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    root.addHandler(handler)
+    try:
+        assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == 0
+    finally:
+        root.removeHandler(handler)
+    out, err = capsys.readouterr()
+    assert err.count(words.split(": ", 1)[1]) == 1 and f"\n{words}" in "\n" + err, err
+    assert words not in out
+
+
 @needs_model
 def test_the_start_logs_the_rig_s_note_once_at_the_default_log_level(tmp_path):
     """The daemon's rig source notes a rig that cuts a standing person at INFO, once over its reopens; the default
