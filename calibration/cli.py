@@ -1260,7 +1260,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera-height", type=_finite(*CAMERA_HEIGHT_RANGE_M),
                    help="instead of a floor view: the first camera above the floor, m")
     _add_tilt(p)
-    p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, rig frame)")
+    p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, rig frame); a value that starts with '-' needs '=': --volume=-1.5,0,2,1.5,2,5")
     p.add_argument("--rig-id", default="rig")
     p.set_defaults(run=cmd_solve)
 
@@ -1296,7 +1296,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "the file's frame: levelled where the file records a levelling its poses show, as ghcal "
                         "export writes for a levelled rig; else the tool's own, and a warning says so)")
     _add_tilt(p)
-    p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, in the written rig's frame)")
+    p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, in the written rig's frame); a value that starts with '-' needs '=': --volume=-1.5,0,2,1.5,2,5")
     p.add_argument("--rig-id", help="default: the file's, else its name")
     p.set_defaults(run=cmd_import)
 
