@@ -4,7 +4,8 @@
 
 ``ghcal import`` warns when the stereo pair sees less than ``calibration.common_view.MIN_COMMON_SHARE`` of the
 working volume in common. This prints that share for the repo's rigs (``docs/examples/rig.json``, the rig
-``ghcal synth`` films, the simulator's default) as they are and as ``ghcal import`` makes them from a
+``ghcal synth`` films, ``calibration.render.synth_rig``, and the one it filmed until session 68,
+``calibration.render.example_rig``, the simulator's default) as they are and as ``ghcal import`` makes them from a
 stereo_calib file in the right unit (in the tool's frame with the default volume, and levelled with
 ``--camera-height`` and ``--pitch``), the least over random training placements, and then each rig's pair
 written in board squares and read with ``--units-to-metres 1`` (pairs over 10 m apart are refused anyway).
@@ -24,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from calibration.common_view import MIN_COMMON_SHARE, common_view_share  # noqa: E402
 from calibration.formats import default_working_volume  # noqa: E402
 from calibration.level import level_rig  # noqa: E402
-from calibration.render import example_rig  # noqa: E402
+from calibration.render import example_rig, synth_rig  # noqa: E402
 from drivers.sim.placement import RigPlacement  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig  # noqa: E402
 from ghnerf_runtime.geometry.rig import MAX_BASELINE_M  # noqa: E402
@@ -65,7 +66,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     root = Path(__file__).resolve().parents[1]
     rigs = {"docs/examples/rig.json": load_rig(root / "docs" / "examples" / "rig.json"),
-            "ghcal synth's rig": example_rig(), "simulator default": RigPlacement().build()}
+            "ghcal synth's rig": synth_rig(), "ghcal synth's rig until session 68": example_rig(),
+            "simulator default": RigPlacement().build()}
     print(f"warned below {MIN_COMMON_SHARE:g}\n")
     print("| rig | baseline m | share as is | imported, tool's frame | imported, levelled |\n|---|---|---|---|---|")
     for name, rig in rigs.items():
