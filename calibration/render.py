@@ -229,7 +229,7 @@ def example_rig() -> Rig:
     :func:`synth_rig`): two 960x600 cameras (75 degrees, a mild barrel lens, principal points off centre) 0.6 m apart
     at 1.4 m, converging on a point 2.5 m ahead and 0.3 m up (pitched 24 degrees down: the floor in view from about
     1.2 m, a standing person's head cut nearer than 8 m)."""
-    return _pair_of_960x600(1.4, -0.3, LEVEL_VOLUME_NEAR_M, "ghcal-example")
+    return _pair_of_960x600(1.4, -0.3, None, "ghcal-example")
 
 
 #: ``ghcal synth``'s rig (:func:`synth_rig`, session 68): its cameras' height above the floor (metres) and pitch
@@ -251,8 +251,6 @@ SYNTH_VOLUME_NEAR_M = 2.0
 SYNTH_BOARD = BoardSpec(square_m=0.12, marker_m=0.09)
 #: Where the pair's optical axes cross, metres ahead of the cameras (x 0).
 CONVERGE_AHEAD_M = 2.5
-#: ``calibration.level.LEVEL_VOLUME``'s near edge, metres ahead.
-LEVEL_VOLUME_NEAR_M = 0.5
 
 
 def synth_rig() -> Rig:
@@ -264,10 +262,10 @@ def synth_rig() -> Rig:
     return _pair_of_960x600(SYNTH_CAMERA_HEIGHT_M, drop - SYNTH_CAMERA_HEIGHT_M, SYNTH_VOLUME_NEAR_M, "ghcal-synth")
 
 
-def _pair_of_960x600(height_m: float, target_y: float, near_m: float, rig_id: str) -> Rig:
+def _pair_of_960x600(height_m: float, target_y: float, near_m: float | None, rig_id: str) -> Rig:
     """Two 960x600 cameras (75 degrees, a mild barrel lens, principal points off centre) 0.6 m apart, ``height_m``
     above the floor, aimed at the point ``CONVERGE_AHEAD_M`` ahead at ``y = target_y``; their working volume
-    ``LEVEL_VOLUME`` from ``near_m`` ahead."""
+    ``LEVEL_VOLUME``, from ``near_m`` ahead where given (None: its own near edge, read from it rather than copied)."""
     from ghnerf_runtime.geometry.camera import intrinsics_from_fov, look_at
     from ghnerf_runtime.geometry.rig import WorkingVolume
     from calibration.level import LEVEL_VOLUME
@@ -280,7 +278,7 @@ def _pair_of_960x600(height_m: float, target_y: float, near_m: float, rig_id: st
         K[1, 2] += shift[1]
         R, t = look_at([x, -height_m, 0.0], [0.0, target_y, CONVERGE_AHEAD_M])
         cams.append(Camera(name, width, height, K, [-0.12, 0.03, 0.001, -0.0005, 0.0], R, t))
-    if near_m == LEVEL_VOLUME_NEAR_M:
+    if near_m is None:
         return Rig(tuple(cams), LEVEL_VOLUME, rig_id=rig_id)
     near = LEVEL_VOLUME.min_corner.copy()
     near[2] = near_m
