@@ -24,6 +24,7 @@ from calibration.capture import MISMATCH_TRIES
 from calibration.consensus import CONSENSUS_DEG, CONSENSUS_MM
 from calibration.solve import COVERAGE_GRID, MIN_VIEWS, REPEAT_PX, USUAL_PITCH_DEG
 from calibration.detect import PATTERN_CHECK_MARKERS
+from calibration.render import SYNTH_BOARD, SYNTH_CAMERA_HEIGHT_M, SYNTH_PITCH_DEG, SYNTH_VOLUME_NEAR_M
 from drivers.backends.depthai.options import DEFAULT_MOUNT_HEIGHT_M, DepthaiOptions
 from drivers.backends.depthai.source import SLOW_SHARE
 from drivers.backends.replay import MIN_SPEED
@@ -303,6 +304,14 @@ def _doc(name: str) -> str:
     ("docs/calibration.md", f"The default board is {BoardSpec().squares_x}x{BoardSpec().squares_y} squares of "
                             f"{1000 * BoardSpec().square_m:g} mm"),
     ("docs/calibration.md", f"at least {MIN_CORNERS}, and not all but one on one line"),
+    # session 68: ghcal synth's rig and board, quoted beside the default board's
+    ("docs/calibration.md", f"0.6 m apart at {SYNTH_CAMERA_HEIGHT_M:g} m, pitched {SYNTH_PITCH_DEG:g} degrees down and "
+                            "converging"),
+    ("docs/calibration.md", f"whole in both views from {SYNTH_VOLUME_NEAR_M:g} m ahead, where its working volume starts"),
+    ("docs/calibration.md", f"a board of {SYNTH_BOARD.squares_x}x{SYNTH_BOARD.squares_y} squares of "
+                            f"{1000 * SYNTH_BOARD.square_m:g} mm (`calibration.render.SYNTH_BOARD`"),
+    ("docs/rig-file.md", f"the rig's volume starts {SYNTH_VOLUME_NEAR_M:g} m ahead (`SYNTH_VOLUME_NEAR_M`;"),
+    ("docs/rig-file.md", f"raised to {SYNTH_CAMERA_HEIGHT_M:g} m and pitched {SYNTH_PITCH_DEG:g} degrees down"),
     ("docs/calibration.md", f"agree within {CONSENSUS_MM:g} mm and {CONSENSUS_DEG:g} degrees "
                             "(`CONSENSUS_MM`, `CONSENSUS_DEG`)"),
     ("docs/calibration.md", f"`--max-px` (default {CheckLimits.max_px:g} px rms)"),
