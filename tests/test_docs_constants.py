@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks.empty_rooms import SCREEN_BLOCKS
 from benchmarks.measure_two_people import OWN_PEAK_CELLS
 from calibration.board import MIN_CORNERS, BoardSpec
 from calibration.check import CheckLimits
@@ -355,6 +356,7 @@ def _doc(name: str) -> str:
     # session 68: a cell that keeps waking the rest in vain wakes it no more (a screen playing)
     ("docs/runtime.md", f"`scene_change.RESTLESS_AFTER_WAKES` ({_words(RESTLESS_AFTER_WAKES)}) such searches in vain"),
     ("docs/runtime.md", f"`scene_change.CALM_AFTER_PASSES` ({_words(CALM_AFTER_PASSES)}) tile passes in a row"),
+    ("docs/runtime.md", f"a new picture of {SCREEN_BLOCKS[0]} x {SCREEN_BLOCKS[1]} coloured blocks every pair"),
     ("docs/runtime.md", f"| docs/examples/rig.json | tiles, rest every {COLD_REST} (default) |"),
     # session 66: why the scan tells nobody behind the subject (the blanked box, the benchmark's own-peak radius)
     ("docs/two-people.md", f"the reported joints' box grown {SUBJECT_MARGIN_M:g} m every way "
