@@ -412,3 +412,24 @@ def test_tiles_that_never_rest_keep_no_scene_and_count_no_wakes(example_rig):
     passes, wakes = run_screen_room(est, example_rig, 12)
     assert passes[-1] == 12 and wakes[-1] == 0
     assert est._rest_scene is None
+
+
+def test_one_quiet_pass_does_not_calm_a_playing_screen(example_rig):
+    """A restless cell wakes the rest again only after :data:`CALM_AFTER_PASSES` tile passes in a row that find it
+    still: a screen playing random pictures leaves a cell still at one pass now and then, and when one such pass
+    calmed it, the screen woke the rest again and again (the moving-room bench: 10 wakes per 100 pairs against 4).
+    Here the screen is dark over one quiet pass (the pass where it went dark compares a dark frame with a lit one:
+    moved), then plays again: it wakes nothing."""
+    oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=4)))
+    oracle.set_truth(None)
+    run_screen_room(est, example_rig, 60)
+    assert any(m.any() for m in est._restless_cells())
+    woken, passes = est.cold_tile_wakes, est.cold_tile_passes
+    for images in far_scene_room(example_rig, [3.0 + i / 30.0 for i in range(16)]):  # the screen dark
+        assert est.estimate(images).missing.all()
+        if est.cold_tile_passes == passes + 2:  # the pass it went dark, then one quiet pass
+            break
+    assert est.cold_tile_passes == passes + 2
+    for images in screen_room(example_rig, [4.0 + i / 30.0 for i in range(8)]):  # playing again
+        assert est.estimate(images).missing.all()
+    assert est.cold_tile_wakes == woken
