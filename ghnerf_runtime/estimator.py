@@ -100,8 +100,8 @@ from ghnerf_runtime.preprocess import (
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import PriorCameras, disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
-from ghnerf_runtime.scene_change import (CALM_AFTER_PASSES, RESTLESS_AFTER_WAKES, SceneCopy, changed_mask,
-                                         pair_copies, restless_with_neighbours, scene_changed)
+from ghnerf_runtime.scene_change import (CALM_AFTER_PASSES, RESTLESS_AFTER_WAKES, SceneCopy, changed_masks,
+                                         masks_wake, pair_copies, restless_with_neighbours)
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners, cold_person_share, volume_tiles
 from ghnerf_runtime.subject import STILL_SEVERAL_MIN_JOINTS, SubjectSelector, guessed_joints, joints_shown_twice, \
@@ -775,7 +775,8 @@ class Estimator:
         self._woke_on: tuple[np.ndarray, ...] | None = None  # the cells that woke the search now awake, per camera
         # per camera, each cell's wakes whose round of tiles then found nobody (a screen, a curtain: a restless cell)
         self._vain_wakes: tuple[np.ndarray, ...] | None = None
-        self._still_passes: tuple[np.ndarray, ...] | None = None  # per camera, each cell's tile passes unchanged in a row
+        # per camera, each cell's tile passes unchanged in a row
+        self._still_passes: tuple[np.ndarray, ...] | None = None
         self.cold_tile_passes = 0  # cold pairs that searched a tile, and those whose tile found someone
         self.cold_tiles_found = 0
         self.cold_tile_wakes = 0  # resting searches a scene change woke (tracking.cold_tiles_wake_levels)
@@ -1360,10 +1361,8 @@ class Estimator:
         levels = self.config.tracking.cold_tiles_wake_levels
         if not levels or self._rest_scene is None:
             return None
-        now = pair_copies(images)
-        if not scene_changed(now, self._rest_scene, levels, self._restless_cells()):
-            return None
-        return tuple(changed_mask(n, k, levels) for n, k in zip(now, self._rest_scene))
+        changed = changed_masks(pair_copies(images), self._rest_scene, levels)
+        return changed if masks_wake(changed, self._restless_cells()) else None
 
     def _restless_cells(self) -> tuple[np.ndarray, ...] | None:
         """Each camera's cells that woke :data:`RESTLESS_AFTER_WAKES` searches whose round then found nobody, and
@@ -1403,8 +1402,8 @@ class Estimator:
         may match its last in a cell by chance, and the cell would wake the rest again at once."""
         if self._vain_wakes is None or self._rest_scene is None:
             return
-        for counts, still, n, k in zip(self._vain_wakes, self._still_passes, now, self._rest_scene):
-            changed = changed_mask(n, k, levels)
+        for counts, still, changed in zip(self._vain_wakes, self._still_passes,
+                                          changed_masks(now, self._rest_scene, levels)):
             still[changed] = 0
             still[~changed] += 1
             counts[still >= CALM_AFTER_PASSES] = 0

@@ -25,7 +25,8 @@ CELL_SAMPLES = 8
 #: cells that must change: one cell alone may be a flicker or a noise extreme, a person covers more
 WAKE_MIN_CELLS = 2
 #: a cell that woke this many resting searches whose whole round of tiles then found nobody wakes no more (until it
-#: stays still over CALM_AFTER_PASSES tile passes in a row, or the estimator is reset): a screen, a curtain in a draught; one vain wake may be a person the tiles missed
+#: stays still over CALM_AFTER_PASSES tile passes in a row, or the estimator is reset): a screen, a curtain in a
+#: draught; one vain wake may be a person the tiles missed
 RESTLESS_AFTER_WAKES = 2
 #: a restless cell unchanged over this many tile passes in a row that found nobody wakes again (about 32 resting
 #: pairs at a tile pass every 4th): a screen's next picture can match its last in a cell by chance, so one still
@@ -98,14 +99,24 @@ def wake_statistic(now: tuple[SceneCopy, ...], kept: tuple[SceneCopy, ...]) -> f
     return max(float(np.sort(cell_differences(n, k), axis=None)[-WAKE_MIN_CELLS]) for n, k in zip(now, kept))
 
 
-def scene_changed(now: tuple[SceneCopy, ...], kept: tuple[SceneCopy, ...], levels: float,
-                  ignored: tuple[np.ndarray, ...] | None = None) -> bool:
-    """Whether any camera's copy ``now`` differs from the one ``kept`` in :data:`WAKE_MIN_CELLS` cells or more,
-    leaving out each camera's ``ignored`` cells (``THUMB_CELLS`` bool masks, the cameras' order) where given."""
-    masks = [changed_mask(n, k, levels) for n, k in zip(now, kept)]
+def changed_masks(now: tuple[SceneCopy, ...], kept: tuple[SceneCopy, ...], levels: float) -> tuple[np.ndarray, ...]:
+    """Each camera's :func:`changed_mask` of ``now`` against ``kept``, the cameras' order."""
+    return tuple(changed_mask(n, k, levels) for n, k in zip(now, kept))
+
+
+def masks_wake(masks: Sequence[np.ndarray], ignored: tuple[np.ndarray, ...] | None = None) -> bool:
+    """Whether any camera's changed cells (:func:`changed_masks`) number :data:`WAKE_MIN_CELLS` or more, leaving out
+    each camera's ``ignored`` cells (``THUMB_CELLS`` bool masks, the cameras' order) where given."""
     if ignored is not None:
         masks = [m & ~i for m, i in zip(masks, ignored)]
     return any(np.count_nonzero(m) >= WAKE_MIN_CELLS for m in masks)
+
+
+def scene_changed(now: tuple[SceneCopy, ...], kept: tuple[SceneCopy, ...], levels: float,
+                  ignored: tuple[np.ndarray, ...] | None = None) -> bool:
+    """Whether any camera's copy ``now`` differs from the one ``kept`` in :data:`WAKE_MIN_CELLS` cells or more,
+    leaving out each camera's ``ignored`` cells where given (:func:`masks_wake`)."""
+    return masks_wake(changed_masks(now, kept, levels), ignored)
 
 
 def restless_with_neighbours(restless: np.ndarray) -> np.ndarray:
