@@ -1365,8 +1365,8 @@ class Estimator:
         return changed if masks_wake(changed, self._restless_cells()) else None
 
     def _restless_cells(self) -> tuple[np.ndarray, ...] | None:
-        """Each camera's cells that woke :data:`RESTLESS_AFTER_WAKES` searches whose round then found nobody, and
-        their neighbours: they no longer wake one (a scene that keeps moving would wake every rest, and the rest would
+        """Each camera's cells that woke :data:`RESTLESS_AFTER_WAKES` searches whose round then found nobody (since
+        they last calmed, :meth:`_calm_restless_cells`), and their neighbours: they no longer wake one (a scene that keeps moving would wake every rest, and the rest would
         save nothing; the edge cells of a screen, partly covered, change less and not every time)."""
         if self._vain_wakes is None:
             return None
@@ -1382,8 +1382,10 @@ class Estimator:
         self._woke_on = None
 
     def _tile_missed(self, images: Sequence[np.ndarray]) -> None:
-        """A tile pass found nobody in ``images``: after a whole round of such passes, the next pairs rest; the
-        scene is kept for them to wake on (``tracking.cold_tiles_wake_levels``)."""
+        """A tile pass found nobody in ``images``: after a whole round of such passes, the next pairs rest, and the
+        cells that woke that round's search count a vain wake (:meth:`_count_vain_wake`); the scene is kept for the
+        resting pairs to wake on (``tracking.cold_tiles_wake_levels``; not with ``cold_tiles_rest_every`` 1), its
+        still cells counted towards calming (:meth:`_calm_restless_cells`)."""
         self._tiles_missed += 1
         if self._tiles_missed >= len(self._cold_tiles):
             self._tile_rest_wait = self.config.tracking.cold_tiles_rest_every - 1

@@ -683,7 +683,9 @@ class ModelSession:
         return answers
 
     def warm_up(self) -> dict[str, float]:
-        """Run every loaded graph once at the estimator's shapes (so the first frame is not slow)."""
+        """Run every loaded graph once at the estimator's shapes, and the skeleton prior where loaded
+        (:meth:`~ghnerf_runtime.skeleton_prior.SkeletonPrior.warm_up`), so the first frame is not slow; returns
+        :attr:`warmup_ms`'s copy."""
         feeds = warmup_feeds(self.contract)
         order = [g for g in ("human", "encoder", "volume", "render_heat", "query") if g in self._sessions]
         for graph in order:

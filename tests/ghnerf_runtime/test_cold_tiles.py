@@ -387,13 +387,14 @@ def test_cold_tiles_wake_levels_out_of_range_is_refused(value):
 
 def test_a_screen_switched_off_wakes_the_rest_again_when_it_plays(example_rig):
     """Restless cells calm down: once the screen is off (its cells still over :data:`CALM_AFTER_PASSES` tile passes
-    in a row, a pass every 4th pair), nothing is ignored any more, and the screen playing again wakes the rest, as anyone walking in there
-    would (without the calming, a long-running device stayed blind in those cells until a reset)."""
+    in a row, a pass every 4th pair), nothing is ignored any more, and the screen playing again wakes the rest, as
+    anyone walking in there would (without the calming, a long-running device stayed blind in those cells until a reset)."""
     oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=4)))
     oracle.set_truth(None)
     run_screen_room(est, example_rig, 60)
     assert any(m.any() for m in est._restless_cells())
-    off = far_scene_room(example_rig, [3.0 + i / 30.0 for i in range(4 * CALM_AFTER_PASSES + 8)])  # the same room, the screen dark
+    # the same room, the screen dark
+    off = far_scene_room(example_rig, [3.0 + i / 30.0 for i in range(4 * CALM_AFTER_PASSES + 8)])
     for images in off:
         assert est.estimate(images).missing.all()
     assert not any(m.any() for m in est._restless_cells())
