@@ -9,23 +9,16 @@ import numpy as np
 import pytest
 
 from ghnerf_runtime import estimator as estimator_module
-from ghnerf_runtime.config import EstimatorConfig, RoiConfig, SessionConfig
-from ghnerf_runtime.contract import GRAPH_NAMES
+from ghnerf_runtime.config import EstimatorConfig, RoiConfig
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.preprocess import Roi, build_undistort_crop_maps
-from ghnerf_runtime.session import ModelSession
 from ghnerf_runtime.skeleton_prior import CONTEXT_FEATURES, INPUTS, JOINT_FEATURES, SkeletonPrior
-from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
+from tests.ghnerf_runtime.test_session import tiny_model_dir, tiny_session  # noqa: F401  (fixtures)
 
 sim = pytest.importorskip("drivers.sim")
 
 #: the tiny model's random weights find nobody weakly: no turn search, whose turned crops would build tables too
 NO_TURN_SEARCH = RoiConfig(turn_search=False)
-
-
-@pytest.fixture(scope="module")
-def session(tiny_model_dir):  # noqa: F811
-    return ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir)), GRAPH_NAMES)
 
 
 @pytest.fixture(scope="module")
@@ -53,9 +46,10 @@ def _volume_windows(est: Estimator) -> list[tuple[str, Roi]]:
     return [(st.camera.name, roi) for st, roi in zip(est._cams, est.tracker.volume_regions.rois)]
 
 
-def test_the_volume_window_is_built_with_the_estimator_not_by_the_first_pair(session, rig_and_frames, built_rois):
+def test_the_volume_window_is_built_with_the_estimator_not_by_the_first_pair(tiny_session, rig_and_frames,
+                                                                              built_rois):
     rig, frames = rig_and_frames
-    with Estimator(session, rig, EstimatorConfig(roi=NO_TURN_SEARCH)) as est:
+    with Estimator(tiny_session, rig, EstimatorConfig(roi=NO_TURN_SEARCH)) as est:
         at_start = list(built_rois)
         result = est.estimate(frames, sequence=0)
         by_first_pair = built_rois[len(at_start):]
@@ -65,8 +59,8 @@ def test_the_volume_window_is_built_with_the_estimator_not_by_the_first_pair(ses
     assert not set(by_first_pair) & set(at_start), by_first_pair
 
 
-def test_the_volume_crops_terms_are_built_with_the_estimator_not_by_the_first_pair(session, rig_and_frames,
-                                                                                   monkeypatch):
+def test_the_volume_crops_terms_are_built_with_the_estimator_not_by_the_first_pair(tiny_session, rig_and_frames,
+                                                                                        monkeypatch):
     """The two-view solver's (and the prior's) terms of the volume's crop cameras: every cold pass solves in them."""
     rig, frames = rig_and_frames
     built = []
@@ -75,7 +69,7 @@ def test_the_volume_crops_terms_are_built_with_the_estimator_not_by_the_first_pa
     asked = []
     real_for = Estimator._crop_terms_for
     monkeypatch.setattr(Estimator, "_crop_terms_for", lambda self, crops: asked.append(crops) or real_for(self, crops))
-    with Estimator(session, rig, EstimatorConfig(roi=NO_TURN_SEARCH)) as est:
+    with Estimator(tiny_session, rig, EstimatorConfig(roi=NO_TURN_SEARCH)) as est:
         (volume_P,) = built
         est.estimate(frames, sequence=0)
         est.reset()
@@ -84,10 +78,10 @@ def test_the_volume_crops_terms_are_built_with_the_estimator_not_by_the_first_pa
     assert all(not np.array_equal(P, volume_P) for P in built[1:]), len(built)
 
 
-def test_a_cold_pair_after_a_long_track_finds_the_volume_window_built(session, rig_and_frames, built_rois):
+def test_a_cold_pair_after_a_long_track_finds_the_volume_window_built(tiny_session, rig_and_frames, built_rois):
     """Kept outside the LRU: the tracked windows that fill the map cache do not push it out."""
     rig, frames = rig_and_frames
-    with Estimator(session, rig, EstimatorConfig(roi=replace(NO_TURN_SEARCH, map_cache_size=1))) as est:
+    with Estimator(tiny_session, rig, EstimatorConfig(roi=replace(NO_TURN_SEARCH, map_cache_size=1))) as est:
         for k in range(3):  # tracked windows, each pushing the last out of a one-window cache
             for st in est._cams:
                 est._crop(st, Roi(40 + 8 * k, 30, 160))
@@ -100,11 +94,11 @@ def test_a_cold_pair_after_a_long_track_finds_the_volume_window_built(session, r
                                         replace(NO_TURN_SEARCH, pad_fill="black"),
                                         replace(NO_TURN_SEARCH, volume_margin_m=0.4)])
 @pytest.mark.parametrize("placement", [sim.RigPlacement(), sim.RigPlacement(distance_m=3.5)])
-def test_the_built_volume_window_is_this_rig_s_and_this_config_s(session, roi_config, placement):
+def test_the_built_volume_window_is_this_rig_s_and_this_config_s(tiny_session, roi_config, placement):
     """Each estimator builds its own rig's volume window with its own crop settings: the tables are the ones a
     first pair would have built (a rig, volume margin, supersampling or fill of another estimator's would differ)."""
     rig = placement.build()
-    with Estimator(session, rig, EstimatorConfig(roi=roi_config)) as est:
+    with Estimator(tiny_session, rig, EstimatorConfig(roi=roi_config)) as est:
         roi_cfg = est.config.roi  # (the pad fill resolved against the model)
         for st, roi in zip(est._cams, est.tracker.volume_regions.rois):
             assert list(st.cold) == [(roi, 0.0)]
@@ -153,9 +147,9 @@ def test_the_skeleton_prior_is_run_at_each_batch_the_estimator_runs_before_the_f
     assert sorted(runs.batches) == [1, 2]
 
 
-def test_a_warmed_session_has_run_its_skeleton_prior(monkeypatch, session):
+def test_a_warmed_session_has_run_its_skeleton_prior(monkeypatch, tiny_session):
     warmed = []
     monkeypatch.setattr(SkeletonPrior, "warm_up", lambda self: warmed.append(self) or 1.0)
-    monkeypatch.setattr(session, "skeleton_prior", SkeletonPrior(_CountingRuns(), None, {}))
-    session.warm_up()
-    assert warmed == [session.skeleton_prior] and session.warmup_ms["skeleton_prior"] == 1.0
+    monkeypatch.setattr(tiny_session, "skeleton_prior", SkeletonPrior(_CountingRuns(), None, {}))
+    tiny_session.warm_up()
+    assert warmed == [tiny_session.skeleton_prior] and tiny_session.warmup_ms["skeleton_prior"] == 1.0
