@@ -80,6 +80,11 @@ def floor_in_view_from_m(cam: Camera) -> float:
     return float(np.hypot(*(hit - origin)[[0, 2]]))
 
 
+def pair_floor_in_view_from_m(rig: Rig) -> float:
+    """:func:`floor_in_view_from_m` of the pair's farther camera (where ``ghcal synth`` lays the floor board)."""
+    return max(floor_in_view_from_m(cam) for cam in rig.pair)
+
+
 def in_both_images(rig: Rig, points: np.ndarray) -> np.ndarray:
     """Per point, whether it lies in front of both cameras of the pair and inside both images."""
     inside = np.ones(len(points), bool)
@@ -177,7 +182,7 @@ def main(argv=None) -> int:
               "board: floor views read by both | fewest markers |")
         print("|---|---|---|---|---|---|")
         for rig in rigs:
-            floor = max(floor_in_view_from_m(cam) for cam in rig.pair)
+            floor = pair_floor_in_view_from_m(rig)
             print(f"| {rig.rig_id} | {floor:.2f} | {floor_cells(rig, [BoardSpec(), SYNTH_BOARD], args.floor_seeds)} |",
                   flush=True)
     return 0
@@ -193,7 +198,7 @@ def scores_table(session, cfg, rigs: list[Rig], args: argparse.Namespace) -> Non
     for rig in rigs:
         results = [sequence_row(session, cfg, rig, k, args.frames) for k in range(args.sequences)]
         per_sequence += [f"| {rig.rig_id} | {cells} |" for _, cells in results]
-        floor = max(floor_in_view_from_m(cam) for cam in rig.pair)
+        floor = pair_floor_in_view_from_m(rig)
         height = -float(np.mean([cam.center[1] for cam in rig.pair]))
         ahead = f"{rig.volume.min_corner[2]:.1f}-{rig.volume.max_corner[2]:.1f}"
         print(f"| {rig.rig_id} | {height:.2f} | {pitch_deg(rig.pair[0]):.1f} | {floor:.2f} | {ahead} | "
