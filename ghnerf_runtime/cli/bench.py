@@ -113,13 +113,11 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
             first_pair_accuracy.add(result, seq, i)
         if (k_seq, i) not in counted:
             return
-        for k in stages:
-            stages[k].append(result.timing_ms.get(k, 0.0))
+        _append_timings(stages, result.timing_ms)
         if i > 0:
             steady.append(result.timing_ms.get("total", 0.0))
         else:
-            for k in cold:
-                cold[k].append(result.timing_ms.get(k, 0.0))
+            _append_timings(cold, result.timing_ms)
         if accuracy is not None:
             accuracy.add(result, seq, i)
 
@@ -152,6 +150,12 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
     stages[ESTIMATOR_START] = starts
     stages.update({f"{COLD} {k}": v for k, v in cold.items()})
     return stages, wall
+
+
+def _append_timings(lists: dict[str, list[float]], timing_ms: dict[str, float]) -> None:
+    """One pair's ms appended to each stage's list (0 for a stage the pair did not run)."""
+    for k, values in lists.items():
+        values.append(timing_ms.get(k, 0.0))
 
 
 def _row(stages: dict[str, list[float]], wall: float) -> dict:
