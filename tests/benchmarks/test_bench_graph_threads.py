@@ -87,7 +87,7 @@ def test_identical_graph_files_time_alike_under_drifting_load(fake_bench, capsys
 
 
 def test_every_round_runs_every_session_in_a_turned_order(fake_bench, capsys):
-    bench.main(["--graphs", "volume,human", "--rounds", "8", "--warmup", "2"])
+    assert bench.main(["--graphs", "volume,human", "--rounds", "8", "--warmup", "2"]) == 0
     passes = [key for key, _ in fake_bench]
     sessions = set(passes)
     assert len(sessions) == 8 and len(passes) == 8 * 10  # 2 warm-up rounds + 8 timed, every session in each
@@ -103,7 +103,7 @@ def test_every_round_runs_every_session_in_a_turned_order(fake_bench, capsys):
 
 
 def test_every_session_warms_up_on_every_call_alike(fake_bench, capsys):
-    bench.main(["--graphs", "volume,human", "--rounds", "3", "--warmup", "2"])
+    assert bench.main(["--graphs", "volume,human", "--rounds", "3", "--warmup", "2"]) == 0
     warm = {}
     for key, n in fake_bench[:8 * 2]:  # the passes before the first timed round
         warm[key] = warm.get(key, 0) + n
