@@ -1416,6 +1416,9 @@ class Estimator:
         self._tile_rest_wait = 0
         self._rest_scene = None
         self._woke_on = None  # someone seen: the wake, if any, was not in vain
+        if self._still_passes is not None:  # nothing kept to compare with now: a cell's still passes start again
+            for still in self._still_passes:
+                still[:] = 0
 
     def _weak_pass(self, p: "_Pass") -> bool:
         """Whether ``roi.turn_search`` tries turned crops after ``p``, a cold pair's pass (refined or not) or a

@@ -434,3 +434,16 @@ def test_one_quiet_pass_does_not_calm_a_playing_screen(example_rig):
     for images in screen_room(example_rig, [4.0 + i / 30.0 for i in range(8)]):  # playing again
         assert est.estimate(images).missing.all()
     assert est.cold_tile_wakes == woken
+
+
+def test_a_wake_starts_the_restless_cells_still_passes_again(example_rig):
+    """A wake (or someone seen) drops the kept scene, so the passes before it and after it are not one still run: a
+    restless cell a pass short of calming is a whole :data:`CALM_AFTER_PASSES` short again after it."""
+    oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=4)))
+    oracle.set_truth(None)
+    run_screen_room(est, example_rig, 60)
+    for still in est._still_passes:
+        still[:] = CALM_AFTER_PASSES - 1
+    est._wake_tiles()
+    assert all(not still.any() for still in est._still_passes)
+    assert any(m.any() for m in est._restless_cells())
