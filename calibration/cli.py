@@ -1195,6 +1195,13 @@ def _add_tilt(p: argparse.ArgumentParser) -> None:
                    help="with --camera-height: degrees about the optical axis (default 0)")
 
 
+def _add_volume(p: argparse.ArgumentParser, frame: str) -> None:
+    """``--volume``: the working volume given in ``frame`` (solve, import), one help for both commands."""
+    # argparse reads a value starting with '-' ("-1.5,...") as an option: the help shows the '=' form
+    p.add_argument("--volume", help=f"working volume xmin,ymin,zmin,xmax,ymax,zmax (m, {frame}); a value that starts "
+                                    "with '-' needs '=': --volume=-1.5,0,2,1.5,2,5")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
                                  epilog="Guide: docs/calibration.md")
@@ -1260,7 +1267,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera-height", type=_finite(*CAMERA_HEIGHT_RANGE_M),
                    help="instead of a floor view: the first camera above the floor, m")
     _add_tilt(p)
-    p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, rig frame); a value that starts with '-' needs '=': --volume=-1.5,0,2,1.5,2,5")
+    _add_volume(p, "rig frame")
     p.add_argument("--rig-id", default="rig")
     p.set_defaults(run=cmd_solve)
 
@@ -1296,7 +1303,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "the file's frame: levelled where the file records a levelling its poses show, as ghcal "
                         "export writes for a levelled rig; else the tool's own, and a warning says so)")
     _add_tilt(p)
-    p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, in the written rig's frame); a value that starts with '-' needs '=': --volume=-1.5,0,2,1.5,2,5")
+    _add_volume(p, "in the written rig's frame")
     p.add_argument("--rig-id", help="default: the file's, else its name")
     p.set_defaults(run=cmd_import)
 
