@@ -358,7 +358,7 @@ def test_validate_config_prints_the_rig_file_s_note_as_it_prints_its_warnings(tm
     """Loading notes at INFO a rig whose pair shows a person at the volume's centre under 97 % of their height
     (``rig_file.rig_notes``, session 67); ``--validate-config``, which opens no rig and prints the rig's warnings,
     set up no logging, so Python showed WARNING and over only and the note was dropped."""
-    from calibration.render import example_rig  # ghcal synth's rig: 84 % in view, noted, not warned of
+    from calibration.render import example_rig  # ghcal synth's rig until session 68: 84 % in view, noted
     from ghnerf_runtime.rig_file import save_rig
 
     rig = tmp_path / "synth_rig.json"
