@@ -53,7 +53,7 @@ from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_s
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, lens_fold_warning, load_rig,
-                                     rig_warnings_and_notes, save_rig, write_bytes_atomic, write_text_atomic)
+                                     log_warnings_and_notes, save_rig, write_bytes_atomic, write_text_atomic)
 from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser"]
@@ -736,14 +736,11 @@ def _refuse_exchanged_sizes(out: Path, views: dict, images: Path) -> None:
 
 
 def _say_rig_messages(rig: Rig, path: Path, *, said: Collection[str] = ()) -> None:
-    """What ``load_rig`` will warn and note of the rig written to ``path`` (``rig_file.rig_warnings_and_notes``: a
-    narrow pair, a camera's height, a volume off the floor, a standing person out of view...), said on stderr as
-    :func:`main` shows a loaded rig's, each once: where the rig is made, not first when it is next loaded. Those in
-    ``said`` are left out: the command said them in its own words already."""
-    warnings, notes = rig_warnings_and_notes(rig)
-    for message in warnings + notes:
-        if message not in said:
-            print(f"{path}: {message}", file=sys.stderr)
+    """What ``load_rig`` will warn and note of the rig written to ``path`` (a narrow pair, a camera's height, a
+    volume off the floor, a standing person out of view...), logged as loading logs them and so shown on stderr as
+    :func:`main` shows a loaded rig's (``rig_messages_on_stderr``), each once: where the rig is made, not first when
+    it is next loaded. Those in ``said`` are left out: the command said them in its own words already."""
+    log_warnings_and_notes(rig, path, leave_out=said)
 
 
 def _fold_warnings_said(rig: Rig) -> set[str]:
