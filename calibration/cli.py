@@ -53,7 +53,7 @@ from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_s
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, lens_fold_warning, load_rig,
-                                     rig_warnings_and_notes, save_rig, write_bytes_atomic, write_text_atomic)
+                                     log_warnings_and_notes, save_rig, write_bytes_atomic, write_text_atomic)
 from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser"]
@@ -736,14 +736,11 @@ def _refuse_exchanged_sizes(out: Path, views: dict, images: Path) -> None:
 
 
 def _say_rig_messages(rig: Rig, path: Path, *, said: Collection[str] = ()) -> None:
-    """What ``load_rig`` will warn and note of the rig written to ``path`` (``rig_file.rig_warnings_and_notes``: a
-    narrow pair, a camera's height, a volume off the floor, a standing person out of view...), said on stderr as
-    :func:`main` shows a loaded rig's, each once: where the rig is made, not first when it is next loaded. Those in
-    ``said`` are left out: the command said them in its own words already."""
-    warnings, notes = rig_warnings_and_notes(rig)
-    for message in warnings + notes:
-        if message not in said:
-            print(f"{path}: {message}", file=sys.stderr)
+    """What ``load_rig`` will warn and note of the rig written to ``path`` (a narrow pair, a camera's height, a
+    volume off the floor, a standing person out of view...), logged as loading logs them and so shown on stderr as
+    :func:`main` shows a loaded rig's (``rig_messages_on_stderr``), each once: where the rig is made, not first when
+    it is next loaded. Those in ``said`` are left out: the command said them in its own words already."""
+    log_warnings_and_notes(rig, path, leave_out=said)
 
 
 def _fold_warnings_said(rig: Rig) -> set[str]:
@@ -1195,6 +1192,13 @@ def _add_tilt(p: argparse.ArgumentParser) -> None:
                    help="with --camera-height: degrees about the optical axis (default 0)")
 
 
+def _add_volume(p: argparse.ArgumentParser, frame: str) -> None:
+    """``--volume``: the working volume given in ``frame`` (solve, import), one help for both commands."""
+    # argparse reads a value starting with '-' ("-1.5,...") as an option: the help shows the '=' form
+    p.add_argument("--volume", help=f"working volume xmin,ymin,zmin,xmax,ymax,zmax (m, {frame}); a value that starts "
+                                    "with '-' needs '=': --volume=-1.5,0,2,1.5,2,5")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
                                  epilog="Guide: docs/calibration.md")
@@ -1260,7 +1264,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera-height", type=_finite(*CAMERA_HEIGHT_RANGE_M),
                    help="instead of a floor view: the first camera above the floor, m")
     _add_tilt(p)
-    p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, rig frame); a value that starts with '-' needs '=': --volume=-1.5,0,2,1.5,2,5")
+    _add_volume(p, "rig frame")
     p.add_argument("--rig-id", default="rig")
     p.set_defaults(run=cmd_solve)
 
@@ -1296,7 +1300,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "the file's frame: levelled where the file records a levelling its poses show, as ghcal "
                         "export writes for a levelled rig; else the tool's own, and a warning says so)")
     _add_tilt(p)
-    p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, in the written rig's frame); a value that starts with '-' needs '=': --volume=-1.5,0,2,1.5,2,5")
+    _add_volume(p, "in the written rig's frame")
     p.add_argument("--rig-id", help="default: the file's, else its name")
     p.set_defaults(run=cmd_import)
 

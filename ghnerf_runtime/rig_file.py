@@ -31,6 +31,7 @@ import logging
 import math
 import os
 import uuid
+from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
@@ -165,6 +166,7 @@ __all__ = [
     "volume_reach_problem",
     "lens_fold_warning",
     "rig_warnings",
+    "log_warnings_and_notes",
     "pair_angle_deg",
     "narrow_pair_warning",
     "camera_height_warning",
@@ -428,18 +430,22 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None, warn: boo
     if too_far := volume_reach_problem(rig):
         chk._raise("working_volume", too_far)
     if warn:
-        _log_warnings_and_notes(rig, path)
+        log_warnings_and_notes(rig, path)
     return rig
 
 
-def _log_warnings_and_notes(rig: Rig, path: str | os.PathLike | None) -> None:
-    """Log what loading warns of (WARNING) and notes (INFO), each message led by the file's name."""
+def log_warnings_and_notes(rig: Rig, path: str | os.PathLike | None, *, leave_out: Collection[str] = ()) -> None:
+    """Log what loading warns of (WARNING) and notes (INFO), each message led by the file's name: as the rig loads,
+    and where a tool writes it (``ghcal solve``, ``import``, ``synth``), in the same words. Those in ``leave_out``
+    are not logged: the tool said them in its own words already."""
     warnings, notes = rig_warnings_and_notes(rig)
     where = f"{path}: " if path else ""
     for message in warnings:
-        log.warning("%s%s", where, message)
+        if message not in leave_out:
+            log.warning("%s%s", where, message)
     for message in notes:
-        log.info("%s%s", where, message)
+        if message not in leave_out:
+            log.info("%s%s", where, message)
 
 
 def rig_warnings(rig: Rig) -> list[str]:

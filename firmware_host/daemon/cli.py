@@ -130,8 +130,9 @@ def check_config(config: DaemonConfig, source: str | os.PathLike | None = None,
     from: given only where the value that fails is one of them.
 
     ``warn_of_rig``: log the warnings and notes of the rig file or take ``rig.url`` names, or of the rig its source
-    builds in memory (``sim://``) (``--validate-config``, which opens no rig). The start and the reloads leave them to the rig's open, which logs each once per ``rig.url``: the
-    check logged them again at the start and at every reload.
+    builds in memory (``sim://``) (``--validate-config``, which opens no rig). The start and the reloads leave them
+    to the rig's open, which logs each once per ``rig.url``: the check logged them again at the start and at every
+    reload.
 
     :raises DaemonConfigError: naming the key.
     """

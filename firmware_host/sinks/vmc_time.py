@@ -4,8 +4,8 @@ Capture stamps can go back: a camera clock reset, a replay that loops, a daemon 
 VMC receivers (VSeeFace, EVMC4U, VirtualMotionCapture) take T as a time that only moves forward; a jump back
 can make one drop frames as stale or interpolate backwards. So a stamp earlier than the one before it starts a
 new stretch: its frame reads the last T sent plus the smallest forward step seen so far (about one frame
-interval, whatever gaps came before; nothing before the first step), and the frames after it count on from there. The first jump back is logged once
-per sink; later ones only counted (``jumps_back``).
+interval, whatever gaps came before; nothing before the first step), and the frames after it count on from
+there. The first jump back is logged once per sink; later ones only counted (``jumps_back``).
 
 Seconds since the first frame, not since boot: OSC floats are float32 (about 1 ms resolution after an hour,
 2 ms after four).

@@ -5,6 +5,7 @@ lens model), so the solved rig is compared with the truth it was rendered from.
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import re
@@ -1326,3 +1327,17 @@ def test_capture_says_the_rig_s_note_and_warnings_once_as_its_source_opens(truth
                      str(tmp_path / "raised" / "capture"), "--count", "1"]) == 0
     err = capsys.readouterr().err
     assert err.count("working volume: y from") == 1 and f"\n{take / 'manifest.json'}: working volume" in "\n" + err, err
+
+
+@pytest.mark.parametrize("command", ["solve", "import"])
+def test_volume_help_example_is_accepted(command):
+    """The '=' example both --volume helps show parses as given (argparse reads '-1.5,...' without '=' as an
+    option) and is a valid working volume."""
+    parser = cli.build_parser()
+    commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    help_text = commands.choices[command].format_help()
+    example = re.search(r"--volume=\S+", " ".join(help_text.split())).group(0)
+    required = {"solve": ["--images", "imgs", "--out", "r.json"], "import": ["r.toml", "--out", "r.json"]}[command]
+    args = parser.parse_args([command, *required, example])
+    volume = cli._volume(args.volume)
+    assert np.allclose(volume.min_corner, [-1.5, 0, 2]) and np.allclose(volume.max_corner, [1.5, 2, 5])

@@ -379,10 +379,10 @@ def test_an_anipose_file_nested_thousands_deep_is_refused_naming_it_not_a_traceb
 
 
 def test_export_and_import_say_the_rig_s_note_once_on_stderr_naming_the_file(rig_file, tmp_path, capsys):
-    """``ghcal synth``'s rig shows a standing person 84 % of their height: loading notes it at INFO (session 67), and
-    ghcal, which sets no logging up, showed WARNING and over only: neither the export of it (which reads it) nor the
-    import (which writes it) said it. Since session 68 each says it once on stderr, a bare line beside the warnings,
-    naming the rig file read or written."""
+    """``example_rig`` (``ghcal synth``'s rig until session 68) shows a standing person 84 % of their height: loading
+    notes it at INFO (session 67), and ghcal, which sets no logging up, showed WARNING and over only: neither the
+    export of it (which reads it) nor the import (which writes it) said it. Since session 68 each says it once on
+    stderr, a bare line beside the warnings, naming the rig file read or written."""
     foreign = tmp_path / "calibration.yml"
     assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)]) == 0
     err = capsys.readouterr().err

@@ -1,7 +1,9 @@
 """``ghnerf-daemon`` as systemd runs it: a separate process, a notify socket, SIGTERM, exit statuses."""
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import os
 import shutil
 import signal
@@ -10,6 +12,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -358,7 +361,7 @@ def test_validate_config_prints_the_rig_file_s_note_as_it_prints_its_warnings(tm
     """Loading notes at INFO a rig whose pair shows a person at the volume's centre under 97 % of their height
     (``rig_file.rig_notes``, session 67); ``--validate-config``, which opens no rig and prints the rig's warnings,
     set up no logging, so Python showed WARNING and over only and the note was dropped."""
-    from calibration.render import example_rig  # ghcal synth's rig: 84 % in view, noted, not warned of
+    from calibration.render import example_rig  # ghcal synth's rig until session 68: 84 % in view, noted
     from ghnerf_runtime.rig_file import save_rig
 
     rig = tmp_path / "synth_rig.json"
@@ -371,12 +374,24 @@ def test_validate_config_prints_the_rig_file_s_note_as_it_prints_its_warnings(tm
     assert "(under 97%, PERSON_IN_VIEW_NOTE_SHARE)" in err
 
 
+@contextlib.contextmanager
+def _a_root_handler_as_a_caller_sets_up() -> Iterator[None]:
+    """A handler on the root logger while inside, as a caller's ``logging.basicConfig`` adds one, printing on
+    sys.stderr as capsys holds it, in a format of its own: a line passed on to it shows twice."""
+    root = logging.getLogger()
+    handler = logging.StreamHandler()
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    root.addHandler(handler)
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
+
+
 def test_validate_config_prints_the_rig_s_note_once_where_the_root_logger_has_a_handler(tmp_path, capsys):
     """``--validate-config``'s handler printed the rig file's lines on stderr, and passed them on too: where the root
     logger has a handler (a caller's ``logging.basicConfig``, pytest's), each line came out a second time in that
     handler's format (session 68)."""
-    import logging
-
     from calibration.render import example_rig
     from ghnerf_runtime.rig_file import save_rig
 
@@ -384,14 +399,8 @@ def test_validate_config_prints_the_rig_s_note_once_where_the_root_logger_has_a_
     save_rig(example_rig(), rig)
     path = _write(tmp_path, {"rig": {"url": f"opencv://?first=/dev/video0&second=/dev/video2&rig={rig}"},
                              "sinks": ["udp://127.0.0.1:9870"]})
-    root = logging.getLogger()
-    handler = logging.StreamHandler()  # sys.stderr as capsys holds it
-    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
-    root.addHandler(handler)
-    try:
+    with _a_root_handler_as_a_caller_sets_up():
         assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == 0
-    finally:
-        root.removeHandler(handler)
     err = capsys.readouterr().err
     assert err.count("a 1.8 m person standing at the working volume's centre") == 1, err
     assert f"\n{rig}: a 1.8 m person" in "\n" + err, err  # bare, as the warnings are
@@ -405,18 +414,10 @@ def test_validate_config_prints_a_sim_rig_s_note_and_warnings_once(tmp_path, cap
     """A ``sim://`` rig is built in memory: no rig file is loaded and ``--validate-config`` opens no source, so it
     printed neither the note nor the warnings the start logs of it (session 68). Now each once, bare on stderr, in
     the start's words (``INFO drivers.base: sim:// rig 'sim': ...`` there), also where the root logger has a handler."""
-    import logging
-
     path = _write(tmp_path, {"rig": {"url": f"sim://?width=48&height=36&cache=off&{options}"},
                              "sinks": ["udp://127.0.0.1:9870"]})
-    root = logging.getLogger()
-    handler = logging.StreamHandler()  # sys.stderr as capsys holds it
-    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
-    root.addHandler(handler)
-    try:
+    with _a_root_handler_as_a_caller_sets_up():
         assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == 0
-    finally:
-        root.removeHandler(handler)
     out, err = capsys.readouterr()
     assert err.count(words.split(": ", 1)[1]) == 1 and f"\n{words}" in "\n" + err, err
     assert words not in out
