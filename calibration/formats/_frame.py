@@ -47,7 +47,9 @@ def levelling_of(rig: Rig) -> dict[str, Any] | None:
         return None
     camera = rig.cameras[0]
     height, down = _first_camera_levelling(camera)
-    if not height > 0:
+    # within HEIGHT_TOLERANCE_M of the floor: a tool's own frame (its first camera at the origin, up to float noise
+    # that read "levelled already ... 0.000 m above the floor" on import), not a levelled one
+    if not height > HEIGHT_TOLERANCE_M:
         return None
     # (+ 0.0: no "-0" roll printed for a level camera)
     return {"reference": camera.name, "camera_height_m": height,

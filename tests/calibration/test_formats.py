@@ -830,3 +830,24 @@ def test_a_units_key_in_a_toml_file_that_is_not_a_unit_is_named(rig, tmp_path, d
     with pytest.raises(RigFileError, match="must be a positive finite number") as info:
         read_anipose_toml(path, units_to_metres=0.001)
     assert info.value.field == "metadata.units_to_metres"
+
+
+@pytest.mark.parametrize("noise_m", [0.0, 1e-12, -1e-12, 5e-4])
+def test_a_rig_in_its_first_camera_s_frame_records_no_levelling(noise_m):
+    """A rig in a calibration tool's own frame (the first camera at the origin, up to float noise) is not levelled:
+    the writers record no levelling for it, so ``ghcal import`` says "not levelled", not "levelled already ... 0.000 m
+    above the floor" (a height of 1e-12 m passed the old ``height > 0``)."""
+    from calibration.formats._frame import levelling_of
+    from calibration.render import example_rig
+
+    rig = example_rig()
+    first = rig.cameras[0]
+
+    def in_first_frame(cam: Camera) -> Camera:
+        R = cam.R @ first.R.T
+        return dataclasses.replace(cam, R=R, t=cam.t - R @ first.t)
+
+    cameras = [in_first_frame(c) for c in rig.cameras]
+    cameras[0] = dataclasses.replace(cameras[0], t=cameras[0].t + np.array([0.0, noise_m, 0.0]))
+    assert levelling_of(dataclasses.replace(rig, cameras=tuple(cameras))) is None
+    assert levelling_of(rig) is not None  # the levelled rig itself records its levelling
