@@ -199,17 +199,30 @@ def per_person_text(until: list, never: int) -> str:
     return ", ".join(parts)
 
 
+def resting_every(args, base: EstimatorConfig) -> int:
+    """``--rest-every``, else the default config's ``tracking.cold_tiles_rest_every``."""
+    return base.tracking.cold_tiles_rest_every if args.rest_every is None else args.rest_every
+
+
+def resting_configs(base: EstimatorConfig, rest: int) -> dict[str, EstimatorConfig]:
+    """The configs a resting search is measured against, by table name: resting every ``rest`` pairs without and with
+    the wake-up (at the default config's ``cold_tiles_wake_levels``: never 0 or None), and no tiles at all."""
+    levels = base.tracking.cold_tiles_wake_levels
+
+    def tracking(**kw) -> EstimatorConfig:
+        return EstimatorConfig(session=base.session, tracking=TrackingConfig(**kw))
+
+    return {f"rest every {rest}, no wake-up": tracking(cold_tiles_rest_every=rest, cold_tiles_wake_levels=None),
+            f"rest every {rest}, wake-up at {levels:g} levels": tracking(cold_tiles_rest_every=rest,
+                                                                          cold_tiles_wake_levels=levels),
+            "no tiles": tracking(cold_tiles_below_share=0.0)}
+
+
 def run_sweep(args, session, base: EstimatorConfig) -> int:
     """``--walk-in-sweep``: the table of pairs from walk-in to the first joint, over every placement."""
-    t = base.tracking
-    rest = t.cold_tiles_rest_every if args.rest_every is None else args.rest_every
-    levels = t.cold_tiles_wake_levels  # the default config's (``base``): never 0 or None
-    configs = {f"rest every {rest}, no wake-up": EstimatorConfig(session=base.session, tracking=TrackingConfig(
-                   cold_tiles_rest_every=rest, cold_tiles_wake_levels=None)),
-               f"rest every {rest}, wake-up at {levels:g} levels": EstimatorConfig(
-                   session=base.session, tracking=TrackingConfig(cold_tiles_rest_every=rest,
-                                                                 cold_tiles_wake_levels=levels)),
-               "no tiles": EstimatorConfig(session=base.session, tracking=TrackingConfig(cold_tiles_below_share=0.0))}
+    rest = resting_every(args, base)
+    levels = base.tracking.cold_tiles_wake_levels
+    configs = resting_configs(base, rest)
     print(f"{args.precision}; {args.sequences} people x {args.frames} pairs, each walking in after every count of "
           f"empty pairs of its room in a whole cycle of the rest; the configs interleaved placement by placement")
     print("| rig file | config | placements | pairs until found: median | p90 | max | never found | most per person | "
@@ -314,18 +327,10 @@ def run_moving(session, configs: dict, rig, streams: list, tiles: int) -> dict:
 
 def run_moving_room(args, session, base: EstimatorConfig) -> int:
     """``--moving-room``: wakes and cost in an empty room whose screen changes every pair."""
-    t = base.tracking
-    rest = t.cold_tiles_rest_every if args.rest_every is None else args.rest_every
-    levels = t.cold_tiles_wake_levels
     # (tiles that never rest have nothing to wake: no scene check, no wakes counted)
     configs = {"tiles, no rest": EstimatorConfig(session=base.session, tracking=TrackingConfig(
                    cold_tiles_rest_every=1, cold_tiles_wake_levels=None)),
-               f"rest every {rest}, no wake-up": EstimatorConfig(session=base.session, tracking=TrackingConfig(
-                   cold_tiles_rest_every=rest, cold_tiles_wake_levels=None)),
-               f"rest every {rest}, wake-up at {levels:g} levels": EstimatorConfig(
-                   session=base.session, tracking=TrackingConfig(cold_tiles_rest_every=rest,
-                                                                 cold_tiles_wake_levels=levels)),
-               "no tiles": EstimatorConfig(session=base.session, tracking=TrackingConfig(cold_tiles_below_share=0.0))}
+               **resting_configs(base, resting_every(args, base))}
     print(f"{args.precision}; {args.sequences} empty rooms with a screen playing x {args.pairs} pairs; after the "
           f"first round of tiles: per 100 pairs, mean ms per pair; the configs interleaved pair by pair")
     print("| rig file | config | pairs after the first round | tile passes per 100 pairs | wakes per 100 pairs | "
