@@ -283,16 +283,21 @@ def test_a_board_that_stops_taking_transfers_reads_stalled_then_up() -> None:
 
 # ---- choosing one of two boards of one VID:PID: ?serial= and ?port= ----
 
+def send_frame_0(url: str, backend: FakeBackend) -> None:
+    """Frame 0 through a sink opened on ``url`` over ``backend``, once connected, drained, then the sink closed."""
+    sink = open_sink(url, backend=backend, backoff=FAST_BACKOFF)
+    assert sink.wait_connected(5)
+    sink.send(make_frame(0))
+    assert sink.wait_drained(5)
+    sink.close()
+
+
 @pytest.mark.parametrize(("query", "chosen"), [
     ("serial=ABC123", 0), ("serial=XYZ789", 1), ("port=1-1.4", 0), ("port=1-2", 1),
 ])
 def test_a_selector_sends_to_the_board_it_names(query: str, chosen: int) -> None:
     boards = two_boards()
-    sink = open_sink(f"{URL}&{query}", backend=FakeBackend(*boards), backoff=FAST_BACKOFF)
-    assert sink.wait_connected(5)
-    sink.send(make_frame(0))
-    assert sink.wait_drained(5)
-    sink.close()
+    send_frame_0(f"{URL}&{query}", FakeBackend(*boards))
     assert joints_seqs(messages_of(boards[chosen].take())) == [0]
     other = boards[1 - chosen]
     assert other.take() == b"" and not other.claimed
@@ -369,11 +374,7 @@ def test_a_serial_that_cannot_be_read_for_permission_names_the_udev_rule() -> No
 def test_a_board_whose_serial_read_fails_is_listed_and_the_other_still_chosen() -> None:
     first, second = two_boards()
     first.string_stall = True  # a firmware that stalls string requests
-    sink = open_sink(f"{URL}&serial=XYZ789", backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
-    assert sink.wait_connected(5)
-    sink.send(make_frame(0))
-    assert sink.wait_drained(5)
-    sink.close()
+    send_frame_0(f"{URL}&serial=XYZ789", FakeBackend(first, second))
     assert joints_seqs(messages_of(second.take())) == [0] and first.take() == b""
     # and when it is the only one, the log says why its serial is not known
     sink = open_sink(f"{URL}&serial=ABC123", backend=FakeBackend(first), backoff=FAST_BACKOFF)
@@ -395,11 +396,7 @@ def test_two_boards_with_one_serial_are_not_guessed_between() -> None:
     assert "port 1-1.4 serial 'ABC123'; bus 1 address 9 port 1-2 serial 'ABC123'" in error
     assert not first.claimed and not second.claimed and first.open_handles == second.open_handles == 0
     # and the option named takes its board
-    sink = open_sink(f"{URL}&port=1-2", backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
-    assert sink.wait_connected(5)
-    sink.send(make_frame(0))
-    assert sink.wait_drained(5)
-    sink.close()
+    send_frame_0(f"{URL}&port=1-2", FakeBackend(first, second))
     assert joints_seqs(messages_of(second.take())) == [0] and first.take() == b""
 
 
@@ -419,11 +416,7 @@ def test_boards_with_one_serial_and_no_port_path_are_refused_saying_port_cannot_
 def test_without_a_selector_no_string_descriptor_is_read() -> None:
     # the default is unchanged: no serial read (which could fail on permissions), the first board taken
     first, second = two_boards()
-    sink = open_sink(URL, backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
-    assert sink.wait_connected(5)
-    sink.send(make_frame(0))
-    assert sink.wait_drained(5)
-    sink.close()
+    send_frame_0(URL, FakeBackend(first, second))
     assert first.string_reads == second.string_reads == 0
     assert joints_seqs(messages_of(first.take())) == [0] and second.take() == b""
 
