@@ -1366,8 +1366,9 @@ class Estimator:
 
     def _restless_cells(self) -> tuple[np.ndarray, ...] | None:
         """Each camera's cells that woke :data:`RESTLESS_AFTER_WAKES` searches whose round then found nobody (since
-        they last calmed, :meth:`_calm_restless_cells`), and their neighbours: they no longer wake one (a scene that keeps moving would wake every rest, and the rest would
-        save nothing; the edge cells of a screen, partly covered, change less and not every time)."""
+        they last calmed, :meth:`_calm_restless_cells`), and their neighbours: they no longer wake one (a scene that
+        keeps moving would wake every rest, and the rest would save nothing; the edge cells of a screen, partly
+        covered, change less and not every time)."""
         if self._vain_wakes is None:
             return None
         return tuple(restless_with_neighbours(counts >= RESTLESS_AFTER_WAKES) for counts in self._vain_wakes)
@@ -1411,7 +1412,8 @@ class Estimator:
             counts[still >= CALM_AFTER_PASSES] = 0
 
     def _wake_tiles(self) -> None:
-        """Someone was seen (or the estimator reset): every cold pair that finds nobody searches a tile again."""
+        """Someone was seen, the scene changed (a wake) or the estimator reset: every cold pair that finds nobody
+        searches a tile again."""
         self._tiles_missed = 0
         self._tile_rest_wait = 0
         self._rest_scene = None
