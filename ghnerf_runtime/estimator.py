@@ -45,6 +45,7 @@ The :class:`~ghnerf_runtime.session.ModelSession` is injected (or built by
 """
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import numbers
@@ -1083,8 +1084,11 @@ class Estimator:
             if not self._finds_nobody(p):
                 if self._sees_anyone(p):
                     self._wake_tiles()
-            elif self._tiles_awake(images):
-                p = self._tile_search(images, p, sequence, timing, novel_view)
+            else:
+                # the pair's scene copies, built once where both the wake check and a missed tile pass read them
+                copies = functools.cache(lambda: pair_copies(images))
+                if self._tiles_awake(images, copies):
+                    p = self._tile_search(images, p, sequence, timing, novel_view, copies)
         leave_turn = cold_pass and self._turns != (0, 0) and self._weak_pass(p)
         if cold_pass and self._turns != (0, 0) and not leave_turn and self._turn_misreads(p):
             self.turns_refused += 1
@@ -1316,7 +1320,7 @@ class Estimator:
         return p.j3 is not None and all(p.frame_ok.values()) and not self._sees_anyone(p)
 
     def _tile_search(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
-                     novel_view: NovelViewRequest | None) -> "_Pass":
+                     novel_view: NovelViewRequest | None, copies: Callable[[], tuple[SceneCopy, ...]]) -> "_Pass":
         """After ``p``, a cold pass that found nobody: the pass through the next working-volume tile (one a pair, in
         turn), refined on its subject when it finds someone (and then that tile is searched first when the track is
         lost again); a person the tile shows one camera only is that pass's answer too (the tracker follows that
@@ -1326,7 +1330,7 @@ class Estimator:
         q = self._pass(images, self._cold_tiles[k], sequence, timing, novel_view)
         if not self._sees_anyone(q):
             self._next_tile = k + 1
-            self._tile_missed(images)
+            self._tile_missed(copies)
             return p
         self.cold_tiles_found += 1
         self._next_tile = k
@@ -1338,12 +1342,15 @@ class Estimator:
         """Whether ``p`` reported anyone: a joint, or a person's 2D joints in one view."""
         return p.single_view is not None or (p.j3 is not None and p.someone and bool(p.j3.valid.any()))
 
-    def _tiles_awake(self, images: Sequence[np.ndarray]) -> bool:
+    def _tiles_awake(self, images: Sequence[np.ndarray],
+                     copies: Callable[[], tuple[SceneCopy, ...]] | None = None) -> bool:
         """Whether this cold pair that found nobody searches a tile: always, until a whole round of tiles found
         nobody; then only every ``tracking.cold_tiles_rest_every``-th such pair (an empty room stays empty), or
         this one where a camera's scene changed since the last tile pass (``tracking.cold_tiles_wake_levels``: someone
-        may have walked in), which wakes the search."""
-        woke_on = self._cells_that_wake(images) if self._tiles_missed >= len(self._cold_tiles) else None
+        may have walked in), which wakes the search. ``copies``: the pair's scene copies, built at most once (the
+        wake check and a tile pass that then finds nobody both read them), made here where not given."""
+        copies = copies or functools.cache(lambda: pair_copies(images))
+        woke_on = self._cells_that_wake(copies) if self._tiles_missed >= len(self._cold_tiles) else None
         if woke_on is not None:
             self.cold_tile_wakes += 1
             self._wake_tiles()  # also on a resting search's own pair: its tile may not be the walker's
@@ -1354,14 +1361,14 @@ class Estimator:
             return False
         return True
 
-    def _cells_that_wake(self, images: Sequence[np.ndarray]) -> tuple[np.ndarray, ...] | None:
-        """Each camera's changed cells where ``images`` differ from the scene kept at the last tile pass that found
-        nobody, leaving out the restless cells (:meth:`_restless_cells`); None where that is no change (never a
-        change with ``tracking.cold_tiles_wake_levels`` 0 or None, or nothing kept)."""
+    def _cells_that_wake(self, copies: Callable[[], tuple[SceneCopy, ...]]) -> tuple[np.ndarray, ...] | None:
+        """Each camera's changed cells where the pair (``copies()``, its scene copies) differs from the scene kept at
+        the last tile pass that found nobody, leaving out the restless cells (:meth:`_restless_cells`); None where that
+        is no change (never a change with ``tracking.cold_tiles_wake_levels`` 0 or None, or nothing kept)."""
         levels = self.config.tracking.cold_tiles_wake_levels
         if not levels or self._rest_scene is None:
             return None
-        changed = changed_masks(pair_copies(images), self._rest_scene, levels)
+        changed = changed_masks(copies(), self._rest_scene, levels)
         return changed if masks_wake(changed, self._restless_cells()) else None
 
     def _restless_cells(self) -> tuple[np.ndarray, ...] | None:
@@ -1382,11 +1389,11 @@ class Estimator:
             counts += woke
         self._woke_on = None
 
-    def _tile_missed(self, images: Sequence[np.ndarray]) -> None:
-        """A tile pass found nobody in ``images``: after a whole round of such passes, the next pairs rest, and the
-        cells that woke that round's search count a vain wake (:meth:`_count_vain_wake`); the scene is kept for the
-        resting pairs to wake on (``tracking.cold_tiles_wake_levels``; not with ``cold_tiles_rest_every`` 1), its
-        still cells counted towards calming (:meth:`_calm_restless_cells`)."""
+    def _tile_missed(self, copies: Callable[[], tuple[SceneCopy, ...]]) -> None:
+        """A tile pass found nobody in the pair (``copies()``, its scene copies): after a whole round of such passes,
+        the next pairs rest, and the cells that woke that round's search count a vain wake (:meth:`_count_vain_wake`);
+        the scene is kept for the resting pairs to wake on (``tracking.cold_tiles_wake_levels``; not with
+        ``cold_tiles_rest_every`` 1), its still cells counted towards calming (:meth:`_calm_restless_cells`)."""
         self._tiles_missed += 1
         if self._tiles_missed >= len(self._cold_tiles):
             self._tile_rest_wait = self.config.tracking.cold_tiles_rest_every - 1
@@ -1394,7 +1401,7 @@ class Estimator:
                 self._count_vain_wake()
         levels = self.config.tracking.cold_tiles_wake_levels
         if levels and self.config.tracking.cold_tiles_rest_every > 1:  # with no rest there is nothing to wake
-            now = pair_copies(images)
+            now = copies()
             self._calm_restless_cells(now, levels)
             self._rest_scene = now
 

@@ -17,7 +17,7 @@ from benchmarks.empty_rooms import empty_room_pair, scene_with_screen, scene_wit
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, RoiConfig, TrackingConfig
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.rig_file import load_rig
-from ghnerf_runtime.scene_change import CALM_AFTER_PASSES, RESTLESS_AFTER_WAKES
+from ghnerf_runtime.scene_change import CALM_AFTER_PASSES, RESTLESS_AFTER_WAKES, pair_copies
 from ghnerf_runtime.tracking import COLD_TILE_SPLITS, cold_person_share, volume_regions, volume_tiles
 from tests.ghnerf_runtime.sim_takes import pair_images
 
@@ -447,3 +447,23 @@ def test_a_wake_starts_the_restless_cells_still_passes_again(example_rig):
     est._wake_tiles()
     assert all(not still.any() for still in est._still_passes)
     assert any(m.any() for m in est._restless_cells())
+
+
+def test_a_resting_pair_builds_its_scene_copies_once(example_rig, monkeypatch):
+    """The wake check and a tile pass that then finds nobody read the same pair's scene copies: built once a pair
+    (every 3rd resting pair searches, so those pairs read them twice)."""
+    import ghnerf_runtime.estimator as estimator_module
+
+    built = []
+
+    def counting_pair_copies(images):
+        built.append(1)
+        return pair_copies(images)
+
+    monkeypatch.setattr(estimator_module, "pair_copies", counting_pair_copies)
+    images = empty_room_pair(example_rig, 11, 0.2)
+    oracle, est = blind_estimator(example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_rest_every=3)))
+    oracle.set_truth(None)
+    for _ in range(13):
+        est.estimate(images)
+    assert est.cold_tile_passes == 7 and len(built) == 13  # one a pair, not 13 + the 3 resting passes
