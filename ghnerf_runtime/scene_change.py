@@ -87,11 +87,6 @@ def changed_mask(now: SceneCopy, kept: SceneCopy, levels: float) -> np.ndarray:
     return cell_differences(now, kept) > levels
 
 
-def changed_cells(now: SceneCopy, kept: SceneCopy, levels: float) -> int:
-    """How many cells of ``now`` differ from ``kept`` by over ``levels`` 8-bit levels (:func:`cell_differences`)."""
-    return int(np.count_nonzero(changed_mask(now, kept, levels)))
-
-
 def wake_statistic(now: tuple[SceneCopy, ...], kept: tuple[SceneCopy, ...]) -> float:
     """The difference the wake-up thresholds, 8-bit levels: each camera's :data:`WAKE_MIN_CELLS`-th largest cell
     difference, the largest over the cameras. :func:`scene_changed` is true exactly where this is over ``levels``

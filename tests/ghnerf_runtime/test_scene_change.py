@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ghnerf_runtime.scene_change import (THUMB_CELLS, WAKE_MIN_CELLS, changed_cells, pair_copies,
+from ghnerf_runtime.scene_change import (THUMB_CELLS, WAKE_MIN_CELLS, changed_masks, masks_wake, pair_copies,
                                          restless_with_neighbours, scene_changed, scene_copy, wake_statistic)
 
 
@@ -13,6 +13,13 @@ def textured_frame(seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     coarse = rng.uniform(60, 190, (10, 16, 3)).astype(np.float32)
     return np.repeat(np.repeat(coarse, 80, axis=0), 80, axis=1).astype(np.uint8)
+
+
+def _cells_changed(now: np.ndarray, kept: np.ndarray, levels: float) -> int:
+    """How many cells of frame ``now``'s copy differ from frame ``kept``'s by over ``levels``, through
+    ``changed_masks``, which the estimator's wake check counts (``masks_wake``)."""
+    (mask,) = changed_masks((scene_copy(now),), (scene_copy(kept),), levels)
+    return int(np.count_nonzero(mask))
 
 
 def test_a_copy_is_the_cells_over_the_frame_mean():
@@ -24,7 +31,7 @@ def test_a_copy_is_the_cells_over_the_frame_mean():
 def test_a_gain_over_the_whole_frame_changes_no_cell():
     frame = textured_frame()
     brighter = np.clip(frame * 1.15, 0, 255).astype(np.uint8)
-    assert changed_cells(scene_copy(brighter), scene_copy(frame), 3.0) == 0
+    assert _cells_changed(brighter, frame, 3.0) == 0
 
 
 def test_a_person_sized_patch_changes_cells_and_the_scene():
@@ -32,7 +39,7 @@ def test_a_person_sized_patch_changes_cells_and_the_scene():
     walked_in = frame.copy()
     walked_in[300:620, 500:580] = 20  # dark clothes, about 320 x 80 pixels (a person the tiles are for)
     kept = (scene_copy(frame), scene_copy(frame))
-    assert changed_cells(scene_copy(walked_in), kept[0], 6.0) >= 4
+    assert _cells_changed(walked_in, frame, 6.0) >= 4
     assert scene_changed((scene_copy(frame), scene_copy(walked_in)), kept, 6.0)
     assert not scene_changed((scene_copy(frame), scene_copy(frame)), kept, 6.0)
 
@@ -49,9 +56,9 @@ def test_a_person_lit_in_front_of_a_camera_kept_black_changes_its_cells():
     black = np.zeros((480, 640, 3), np.uint8)
     lit = black.copy()
     lit[100:400, 200:300] = 200  # a person-sized patch
-    assert changed_cells(scene_copy(lit), scene_copy(black), 6.0) >= 2
+    assert _cells_changed(lit, black, 6.0) >= 2
     assert scene_changed((scene_copy(lit),), (scene_copy(black),), 6.0)
-    assert changed_cells(scene_copy(black), scene_copy(black), 6.0) == 0
+    assert _cells_changed(black, black, 6.0) == 0
 
 
 def test_pair_copies_are_the_first_two_frames_copies_in_the_cameras_order():
@@ -101,3 +108,14 @@ def test_restless_cells_grow_by_their_neighbours():
     corner = np.zeros(THUMB_CELLS, bool)
     corner[0, 0] = True
     assert restless_with_neighbours(corner).sum() == 4
+
+
+def test_the_wake_counts_each_camera_s_changed_cells_apart():
+    """``masks_wake`` (the estimator's check): ``WAKE_MIN_CELLS`` changed cells in one camera wake, one fewer in each
+    camera do not (a cell of a flicker in each view is no person), and a camera's ignored cells are left out."""
+    one_short, enough, none = (np.zeros(THUMB_CELLS, bool) for _ in range(3))
+    one_short.flat[:WAKE_MIN_CELLS - 1] = True
+    enough.flat[:WAKE_MIN_CELLS] = True
+    assert not masks_wake((one_short, one_short))
+    assert masks_wake((one_short, enough)) and masks_wake((enough, one_short))
+    assert not masks_wake((enough, one_short), (enough, none)) and masks_wake((enough, one_short), (none, enough))
