@@ -15,13 +15,12 @@ import pytest
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, HeatmapsConfig, Joints3DConfig, NovelViewConfig, \
     PresenceConfig, RoiConfig, SessionConfig, TrackingConfig
-from ghnerf_runtime.contract import GRAPH_NAMES
 from ghnerf_runtime.errors import ConfigError, FrameError, ModelError
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images
 from ghnerf_runtime.estimator import KEYPOINT_STAGES, NOVEL_STAGES, Estimator
 from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.session import ModelSession
-from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
+from tests.ghnerf_runtime.test_session import tiny_model_dir, tiny_session  # noqa: F401  (fixtures)
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -57,11 +56,6 @@ def scene_rig():
     return rig, frames
 
 
-@pytest.fixture(scope="module")
-def full_session(tiny_model_dir):  # noqa: F811
-    return ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir)), GRAPH_NAMES)
-
-
 #: Random weights find nobody, or someone weakly, and such a pass tries the crop turns (roi.turn_search, on by
 #: default since session 57: three encoder runs more); the tests that count one pass's graph runs set it off.
 NO_TURN_SEARCH = RoiConfig(turn_search=False)
@@ -80,9 +74,9 @@ def _assert_all_missing(result):
     assert _all_finite(result)
 
 
-def test_output_schema_and_finite(full_session, scene_rig):
+def test_output_schema_and_finite(tiny_session, scene_rig):
     rig, frames = scene_rig
-    est = Estimator(full_session, rig)
+    est = Estimator(tiny_session, rig)
     r = est.estimate(frames[0], sequence=7)
     assert r.sequence == 7 and r.joint_names == JOINT_NAMES
     assert r.joints_3d.shape == (25, 3) and r.confidence.shape == (25,) and r.missing.shape == (25,)
@@ -102,9 +96,9 @@ def test_output_schema_and_finite(full_session, scene_rig):
 
 
 @pytest.mark.parametrize("family", ["black", "saturated", "uniform_noise", "gaussian_noise", "nan_free_dark"])
-def test_bad_frames_give_finite_missing_joints_without_running_the_model(full_session, scene_rig, family):
+def test_bad_frames_give_finite_missing_joints_without_running_the_model(tiny_session, scene_rig, family):
     rig, frames = scene_rig
-    rec = Recorder(full_session)
+    rec = Recorder(tiny_session)
     est = Estimator(rec, rig)
     h, w = frames[0][0].shape[:2]
     rng = np.random.default_rng(1)
@@ -128,7 +122,7 @@ def test_bad_frames_give_finite_missing_joints_without_running_the_model(full_se
 
 
 @pytest.mark.parametrize("family", ["black", "saturated", "uniform_noise"])
-def test_one_bad_camera_gives_the_other_cameras_2d_joints_only(full_session, scene_rig, family):
+def test_one_bad_camera_gives_the_other_cameras_2d_joints_only(tiny_session, scene_rig, family):
     """single_view_2d (the default): the good camera's encoder heatmaps are decoded; no 3D, no novel view,
     nothing in the bad camera; the human graph alone runs (random weights: which 2D joints survive the
     presence gate is the shipped model's test, test_estimator_accuracy.py)."""
@@ -136,11 +130,11 @@ def test_one_bad_camera_gives_the_other_cameras_2d_joints_only(full_session, sce
     h, w = frames[0][0].shape[:2]
     bad = {"black": np.zeros((h, w, 3), np.uint8), "saturated": np.full((h, w, 3), 255, np.uint8),
            "uniform_noise": np.random.default_rng(1).integers(0, 256, (h, w, 3), dtype=np.uint8)}[family]
-    rec = Recorder(full_session)
+    rec = Recorder(tiny_session)
     cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True), presence=PresenceConfig(enabled=False))
     est = Estimator(rec, rig, cfg)
     names = est.camera_names
-    both = Estimator(full_session, rig, cfg).estimate(frames[0])  # cold: the crops the single views get
+    both = Estimator(tiny_session, rig, cfg).estimate(frames[0])  # cold: the crops the single views get
     for good in (0, 1):
         pair = [frames[0][0], frames[0][1]]
         pair[1 - good] = bad
@@ -174,9 +168,9 @@ def test_novel_view_off_never_runs_or_loads_a_colour_graph(tiny_model_dir, scene
         est.estimate(frames[0], novel_view=NovelViewRequest())
 
 
-def test_novel_view_off_with_colour_graph_loaded_still_never_runs_it(full_session, scene_rig):
+def test_novel_view_off_with_colour_graph_loaded_still_never_runs_it(tiny_session, scene_rig):
     rig, frames = scene_rig
-    rec = Recorder(full_session)
+    rec = Recorder(tiny_session)
     est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True)))
     for pair in frames:
         est.estimate(pair)  # no request: no novel view
@@ -190,14 +184,14 @@ NOBODY_UNDECIDED = PresenceConfig(enabled=False)
 
 
 @pytest.mark.parametrize("stride, overlay", [(1, "skeleton"), (2, "none")])
-def test_novel_view_on_request(full_session, scene_rig, stride, overlay):
+def test_novel_view_on_request(tiny_session, scene_rig, stride, overlay):
     rig, frames = scene_rig
-    rec = Recorder(full_session)
+    rec = Recorder(tiny_session)
     cfg = NovelViewConfig(enabled=True, stride=stride, silhouette_stride=0)  # every ray of the box
     # random weights: the presence gate would say nobody, and a pair with nobody has no novel view
     est = Estimator(rec, rig, EstimatorConfig(novel_view=cfg, presence=NOBODY_UNDECIDED))
     r = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.3, overlay=overlay))
-    S = full_session.contract.height
+    S = tiny_session.contract.height
     assert r.novel_view is not None and r.novel_view.image.shape == (S, S, 3) and r.novel_view.image.dtype == np.uint8
     assert rec.ran("render_rgb") == 1 and rec.ran("render") == 0 and rec.ran("volume") == 1  # the novel camera's
     rays = [shapes["ray_uv"] for g, shapes in rec.calls if g == "render_rgb"][0]
@@ -214,7 +208,7 @@ def test_novel_view_on_request(full_session, scene_rig, stride, overlay):
 
 
 @pytest.mark.parametrize("height", [-1.3, -0.95])  # tilted down (axes 167 degrees apart), level (collinear)
-def test_a_view_between_facing_cameras_takes_the_configured_path(full_session, height):
+def test_a_view_between_facing_cameras_takes_the_configured_path(tiny_session, height):
     """``novel_view.path``: the line puts the halfway camera in the subject; the orbit (and auto, the axes 167-180
     degrees apart) keeps it 3 m out, round the axes' pivot or, collinear, the subject box's centre."""
     from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, intrinsics_from_fov, look_at
@@ -228,7 +222,7 @@ def test_a_view_between_facing_cameras_takes_the_configured_path(full_session, h
     centre = {}
     for path in ("line", "orbit", "auto"):
         # (the random weights find nobody, and a pair with nobody gets no view: the presence gate is off here)
-        est = Estimator(full_session, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, path=path),
+        est = Estimator(tiny_session, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, path=path),
                                                            presence=NOBODY_UNDECIDED))
         r = est.estimate(frames, novel_view=NovelViewRequest(alpha=0.5))
         centre[path] = r.novel_view.camera.center
@@ -239,9 +233,9 @@ def test_a_view_between_facing_cameras_takes_the_configured_path(full_session, h
     np.testing.assert_allclose(centre["auto"], centre["orbit"])
 
 
-def test_novel_view_with_heatmaps_uses_the_render_graph(full_session, scene_rig):
+def test_novel_view_with_heatmaps_uses_the_render_graph(tiny_session, scene_rig):
     rig, frames = scene_rig
-    rec = Recorder(full_session)
+    rec = Recorder(tiny_session)
     est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, heatmaps=True),
                                               presence=NOBODY_UNDECIDED))
     from ghnerf_runtime.geometry import look_at
@@ -258,7 +252,7 @@ METHOD_GRAPHS = {"triangulate": (), "volumetric": ("volume", "query"), "depth_ce
 
 
 @pytest.mark.parametrize("method", ["triangulate", "volumetric", "depth_centroid"])
-def test_every_3d_method_runs_and_is_finite(full_session, scene_rig, method, monkeypatch):
+def test_every_3d_method_runs_and_is_finite(tiny_session, scene_rig, method, monkeypatch):
     # The random weights give flat heatmaps and query responses (peaks ~0.6 over most of the map): the
     # default decoder and the volumetric flood check call every joint missing, and all-zero outputs are
     # finite trivially. Here the flood checks are off, and the presence gate too, so each method's own
@@ -276,7 +270,7 @@ def test_every_3d_method_runs_and_is_finite(full_session, scene_rig, method, mon
                                   presence=PresenceConfig(enabled=False),
                               decoder=KeypointDecoderConfig(max_region_frac=1.0),
                               tracking=TrackingConfig(refine_cold_start=False))  # graph runs counted per pair
-        est = Estimator(full_session, rig, cfg)
+        est = Estimator(tiny_session, rig, cfg)
         est.session = Recorder(est.session)
         return est
 
@@ -299,9 +293,9 @@ def test_every_3d_method_runs_and_is_finite(full_session, scene_rig, method, mon
         assert est.session.ran(graph) == expected, (method, graph, [g for g, _ in est.session.calls])
 
 
-def test_wrong_frames_and_missing_graphs_are_errors(full_session, tiny_model_dir, scene_rig):  # noqa: F811
+def test_wrong_frames_and_missing_graphs_are_errors(tiny_session, tiny_model_dir, scene_rig):  # noqa: F811
     rig, frames = scene_rig
-    est = Estimator(full_session, rig)
+    est = Estimator(tiny_session, rig)
     with pytest.raises(FrameError, match=rig.names[1]):
         est.estimate((frames[0][0], frames[0][1][:100]))
     with pytest.raises(FrameError, match="uint8"):
@@ -320,11 +314,11 @@ def test_wrong_frames_and_missing_graphs_are_errors(full_session, tiny_model_dir
         Estimator(small, rig, EstimatorConfig(joints3d=Joints3DConfig(method="volumetric")))
 
 
-def test_a_pair_that_is_no_list_or_a_ragged_image_is_a_frame_error_naming_what_came(full_session, scene_rig):
+def test_a_pair_that_is_no_list_or_a_ragged_image_is_a_frame_error_naming_what_came(tiny_session, scene_rig):
     """A dict of the cameras' images was read by its keys ("got <U4 ()"), None or a generator of images raised
     len()'s TypeError, and an image of ragged nested lists numpy's ValueError naming no camera."""
     rig, frames = scene_rig
-    est = Estimator(full_session, rig)
+    est = Estimator(tiny_session, rig)
     left, right = frames[0]
     not_lists = ((dict(zip(rig.names, frames[0])), "dict"), (None, "NoneType"),
                  (iter(list(frames[0])), "list_iterator"), ("ab", "str"))
@@ -336,12 +330,12 @@ def test_a_pair_that_is_no_list_or_a_ragged_image_is_a_frame_error_naming_what_c
     assert est.estimate(np.stack([left, right])).sequence == 0  # an array of the two images is still a pair
 
 
-def test_a_0d_array_is_no_pair_and_a_deque_or_object_array_of_two_images_is_one(full_session, scene_rig):
+def test_a_0d_array_is_no_pair_and_a_deque_or_object_array_of_two_images_is_one(tiny_session, scene_rig):
     """A 0-d array passed the sequence check and then len() raised a bare TypeError; a deque and a NumPy object
     array of the two images are pairs in the rig's camera order."""
     import collections
     rig, frames = scene_rig
-    est = Estimator(full_session, rig)
+    est = Estimator(tiny_session, rig)
     with pytest.raises(FrameError, match=r"expected 2 images in the rig's camera order.*got ndarray$"):
         est.estimate(np.array(None, dtype=object))
     as_objects = np.empty(2, dtype=object)
@@ -350,11 +344,11 @@ def test_a_0d_array_is_no_pair_and_a_deque_or_object_array_of_two_images_is_one(
     assert est.estimate(as_objects).sequence == 1
 
 
-def test_a_refused_call_leaves_the_running_count_as_it_was(full_session, scene_rig):
+def test_a_refused_call_leaves_the_running_count_as_it_was(tiny_session, scene_rig):
     """A bad image, time or novel-view request is refused before the pair is read: the next pair keeps the number
     it would have had (the count was advanced before the checks, so a refused call left a gap in the sequence)."""
     rig, frames = scene_rig
-    est = Estimator(full_session, rig)
+    est = Estimator(tiny_session, rig)
     assert est.estimate(frames[0]).sequence == 0
     with pytest.raises(FrameError, match="expected 2 images"):
         est.estimate((frames[1][0],))
@@ -408,7 +402,7 @@ class _FlipAveragingSession:
         return out
 
 
-def test_the_flip_test_averages_a_second_pass_over_the_mirrored_crops(full_session, scene_rig):
+def test_the_flip_test_averages_a_second_pass_over_the_mirrored_crops(tiny_session, scene_rig):
     rig, frames = scene_rig
     flip = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=True),
                            joints3d=Joints3DConfig(method="triangulate"), roi=NO_TURN_SEARCH)
@@ -416,8 +410,8 @@ def test_the_flip_test_averages_a_second_pass_over_the_mirrored_crops(full_sessi
                             roi=NO_TURN_SEARCH)
     assert flip.heatmaps.flip_test and flip.flips_encoder_heatmaps and not plain.flips_encoder_heatmaps
     assert not EstimatorConfig(heatmaps=HeatmapsConfig("rendered")).flips_encoder_heatmaps  # rendered: no effect
-    seen = _FlipAveragingSession(full_session)
-    rec = Recorder(full_session)
+    seen = _FlipAveragingSession(tiny_session)
+    rec = Recorder(tiny_session)
     with_flip, reference = Estimator(rec, rig, flip), Estimator(seen, rig, plain)
     for pair in frames:
         a, b = with_flip.estimate(pair), reference.estimate(pair)
@@ -430,13 +424,13 @@ def test_the_flip_test_averages_a_second_pass_over_the_mirrored_crops(full_sessi
         HeatmapsConfig(flip_test="yes")
 
 
-def test_human_graph_gives_the_encoder_graphs_keypoints(full_session, scene_rig):
+def test_human_graph_gives_the_encoder_graphs_keypoints(tiny_session, scene_rig):
     """The human graph is the encoder graph's heatmap branch: same joints either way."""
     rig, frames = scene_rig
     cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method="triangulate"))
     calls = []
     results = {}
-    for name, session in (("human", full_session), ("encoder", _Without(full_session, "human"))):
+    for name, session in (("human", tiny_session), ("encoder", _Without(tiny_session, "human"))):
         rec = Recorder(session)
         est = Estimator(rec, rig, cfg)
         results[name] = [est.estimate(pair) for pair in frames]
@@ -463,14 +457,14 @@ def test_older_model_without_human_graph_runs_the_encoder(tiny_model_dir, scene_
     assert _all_finite(est.estimate(frames[0]))
 
 
-def test_novel_view_pairs_run_the_encoder_other_pairs_the_human_graph(full_session, scene_rig):
+def test_novel_view_pairs_run_the_encoder_other_pairs_the_human_graph(tiny_session, scene_rig):
     rig, frames = scene_rig
     # the cold start not refined: the pass itself reads the image features (the default: below)
     cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method="triangulate"),
                           novel_view=NovelViewConfig(enabled=True), presence=NOBODY_UNDECIDED,
                           tracking=TrackingConfig(refine_cold_start=False), roi=NO_TURN_SEARCH)
     assert cfg.required_graphs(human_graph=True) == ("encoder", "human", "volume", "render_rgb")
-    rec = Recorder(full_session)
+    rec = Recorder(tiny_session)
     est = Estimator(rec, rig, cfg)
     est.estimate(frames[0])
     plain = [g for g, _ in rec.calls]
@@ -498,12 +492,12 @@ def test_novel_view_pairs_run_the_encoder_other_pairs_the_human_graph(full_sessi
         np.testing.assert_allclose(later.joints_2d[cam], reference.joints_2d[cam], atol=1e-3)
 
 
-def test_an_empty_room_with_a_novel_view_asked_runs_the_keypoint_graph_alone(full_session, scene_rig):
+def test_an_empty_room_with_a_novel_view_asked_runs_the_keypoint_graph_alone(tiny_session, scene_rig):
     """Random weights: the presence gate says nobody (frames the frame check passes, as a textured empty room).
     Such a pair has no novel view, and its cold pass runs the human graph, not the encoder's image features:
     before, every such pair ran the encoder, the novel camera's volume and the colour graph."""
     rig, frames = scene_rig
-    rec = Recorder(full_session)
+    rec = Recorder(tiny_session)
     est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True)))
     for pair in frames * 2:
         r = est.estimate(pair, novel_view=NovelViewRequest(alpha=0.5))
@@ -530,7 +524,7 @@ class _Without:
 
 @pytest.mark.parametrize("method, graphs", [("depth_centroid", ("encoder", "volume", "render_heat")),
                                             ("volumetric", ("encoder", "volume", "query"))])
-def test_encoder_heatmaps_run_what_the_3d_method_reads(full_session, scene_rig, method, graphs):
+def test_encoder_heatmaps_run_what_the_3d_method_reads(tiny_session, scene_rig, method, graphs):
     rig, frames = scene_rig
     cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method=method),
                           roi=NO_TURN_SEARCH)
@@ -540,27 +534,27 @@ def test_encoder_heatmaps_run_what_the_3d_method_reads(full_session, scene_rig, 
     assert flip.required_graphs() == graphs
     assert flip.required_graphs(human_graph=True) == (graphs[0], "human", *graphs[1:])
     for c, ran in ((cfg, set(graphs)), (flip, {*graphs, "human"})):
-        rec = Recorder(full_session)
+        rec = Recorder(tiny_session)
         r = Estimator(rec, rig, c).estimate(frames[0])
         assert _all_finite(r)
         assert {g for g, _ in rec.calls} == ran
 
 
-def test_encoder_heatmaps_need_a_model_that_has_them(full_session, scene_rig):
+def test_encoder_heatmaps_need_a_model_that_has_them(tiny_session, scene_rig):
     from dataclasses import replace
 
     from ghnerf_runtime.config import ConfigError, config_from_dict
 
     rig, _ = scene_rig
-    rec = Recorder(full_session)
-    rec.contract = replace(full_session.contract, encoder_heatmaps=False)  # as a 1.0.0 export reads
+    rec = Recorder(tiny_session)
+    rec.contract = replace(tiny_session.contract, encoder_heatmaps=False)  # as a 1.0.0 export reads
     with pytest.raises(ModelError, match="encoder heatmaps"):
         Estimator(rec, rig, EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False)))
     with pytest.raises(ConfigError, match="heatmaps.source"):
         config_from_dict({"heatmaps": {"source": "volumetric"}})
 
 
-def test_an_empty_room_with_rendered_heatmaps_renders_them_to_ask_whether_someone_is_there(full_session, scene_rig):
+def test_an_empty_room_with_rendered_heatmaps_renders_them_to_ask_whether_someone_is_there(tiny_session, scene_rig):
     """The rendered source cannot skip its render graphs where nobody is (the encoder source runs the human graph
     alone there): the presence gate reads the rendered heatmaps' own peaks against their own threshold
     (presence.min_confidence, 0.4 rendered), so nothing is known of presence before render_heat has run
@@ -568,7 +562,7 @@ def test_an_empty_room_with_rendered_heatmaps_renders_them_to_ask_whether_someon
     rig, frames = scene_rig
     ran = {}
     for source in ("rendered", "encoder"):
-        rec = Recorder(full_session)
+        rec = Recorder(tiny_session)
         est = Estimator(rec, rig, EstimatorConfig(heatmaps=HeatmapsConfig(source, flip_test=False), roi=NO_TURN_SEARCH))
         for pair in frames:
             r = est.estimate(pair)
