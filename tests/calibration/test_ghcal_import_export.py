@@ -14,11 +14,10 @@ from calibration import cli
 from calibration.render import example_rig
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import load_rig, save_rig
+from tests.framing_note import but_the_framing_note, framing_notes
 
 #: example_rig's first camera: 1.4 m up at x = -0.3 m, looking at a point 2.5 m ahead and 0.3 m up (x = 0), no roll
 PITCH_DEG = math.degrees(math.atan2(1.4 - 0.3, math.hypot(2.5, 0.3)))
-#: the words of the rig file's note (rig_file.person_partly_in_view_note), which example_rig is noted of (84 %)
-NOTE_WORDS = "is partly out of view: camera 'left' shows 84% of their height"
 
 
 @pytest.fixture()
@@ -159,7 +158,7 @@ def test_what_the_user_must_give_is_named(rig_file, tmp_path, capsys, args, word
             for a in args]
     assert cli.main(argv) == 2
     # one line, bar the note of the rig file an export reads (example_rig's: 84 % of a standing person in view)
-    err = "".join(line for line in capsys.readouterr().err.splitlines(keepends=True) if NOTE_WORDS not in line)
+    err = but_the_framing_note(capsys.readouterr().err)
     assert err.count("\n") == 1 and all(w in err for w in words), err
     assert not (tmp_path / "out.json").exists()
 
@@ -385,13 +384,14 @@ def test_export_and_import_say_the_rig_s_note_once_on_stderr_naming_the_file(rig
     stderr, a bare line beside the warnings, naming the rig file read or written."""
     foreign = tmp_path / "calibration.yml"
     assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)]) == 0
-    err = capsys.readouterr().err
-    assert err.count(NOTE_WORDS) == 1 and f"{rig_file}: a 1.8 m person standing" in err, err
+    notes = framing_notes(capsys.readouterr().err)
+    assert len(notes) == 1 and notes[0].startswith(f"{rig_file}: a 1.8 m person standing") and "84%" in notes[0], notes
     back = tmp_path / "back.json"
     assert cli.main(["import", str(foreign), "--out", str(back)]) == 0
     captured = capsys.readouterr()
-    assert captured.err.count(NOTE_WORDS) == 1 and f"{back}: a 1.8 m person standing" in captured.err, captured.err
-    assert NOTE_WORDS not in captured.out
+    notes = framing_notes(captured.err)
+    assert len(notes) == 1 and notes[0].startswith(f"{back}: a 1.8 m person standing") and "84%" in notes[0], notes
+    assert framing_notes(captured.out) == []
 
 
 #: the words of the rig file's warning for a camera's height (rig_file.camera_height_warning) of example_rig's first

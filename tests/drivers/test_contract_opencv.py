@@ -35,6 +35,7 @@ from drivers.backends.opencv import video_size
 from ghnerf_runtime.rig_file import load_rig, save_rig
 from tests.drivers.contract import RigSourceContract
 from tests.drivers.reopens import warnings_shared_and_alone
+from tests.framing_note import FRAMING_NOTE_WORDS, logged_framing_notes
 from tests.rotated_videos import SIZE as PHONE_SIZE
 from tests.rotated_videos import phone_take
 
@@ -180,10 +181,10 @@ def test_a_rig_file_s_note_is_logged_at_open_once_by_sources_sharing_a_logged_se
     near = tmp_path / "near.json"
     save_rig(RigPlacement(width=SIZE[0], height=SIZE[1], distance_m=1.0, volume_depth_m=1.0).build("near"), near)
     url = f"opencv://?first={first}&second={second}&rig={near}"
-    shared, alone = warnings_shared_and_alone(caplog, url, "PERSON_IN_VIEW_NOTE_SHARE", level=logging.INFO)
+    shared, alone = warnings_shared_and_alone(caplog, url, FRAMING_NOTE_WORDS, level=logging.INFO)
     assert len(shared) == 1 and len(alone) == 1, caplog.text
     assert shared[0].startswith(f"{near}: a 1.8 m person standing at the working volume's centre"), shared
-    assert {r.levelname for r in caplog.records if "PERSON_IN_VIEW_NOTE_SHARE" in r.getMessage()} == {"INFO"}
+    assert {r.levelname for r in logged_framing_notes(caplog.records)} == {"INFO"}
 
 
 @pytest.mark.parametrize("query, message", [

@@ -8,6 +8,7 @@ from drivers import ManualClock, RigConfigError, create_rig_source, open_rig
 from drivers.backends.sim_loop import default_cache_root
 from drivers.sim import SAMPLE_BVH, SceneConfig, SensorModel, SimScene
 from tests.drivers.reopens import open_sources_sharing_a_logged_set
+from tests.framing_note import logged_framing_notes
 
 SMALL = "width=48&height=36"
 
@@ -318,7 +319,7 @@ def test_a_rig_built_from_the_url_that_cuts_the_person_is_noted_at_info_once_ove
     url = f"sim://?{SMALL}&cache=off&distance=1"
     with caplog.at_level(logging.INFO, logger="drivers"):
         logged = open_sources_sharing_a_logged_set(lambda _: create_rig_source(url, clock=ManualClock()), 3)
-    noted = [r for r in caplog.records if "PERSON_IN_VIEW_NOTE_SHARE" in r.getMessage()]
+    noted = logged_framing_notes(caplog.records)
     assert [r.levelname for r in noted] == ["INFO"] and len(logged) == 1, caplog.text
     assert noted[0].getMessage().startswith("sim:// rig 'sim': a 1.8 m person standing at the working volume's "
                                             "centre (x 0.00, z 1.00 m) is partly out of view: camera 'left' shows 89%")

@@ -20,6 +20,7 @@ from ghnerf_runtime.contract import GRAPH_NAMES
 from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.rig_file import load_rig
 from tests.exif_images import jpeg_turned
+from tests.framing_note import framing_notes
 from tests.rotated_videos import phone_take
 from tests.odd_images import bmp_beyond_opencv_s_limits, tiff_laid_out
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
@@ -1314,5 +1315,5 @@ def test_the_rig_file_s_note_is_shown_without_verbose_once(tmp_path, verbose):
                            *verbose], capture_output=True, text=True, timeout=120,
                            cwd=Path(__file__).resolve().parents[2])
     assert proc.returncode == 2 and "a.png: no such file" in proc.stderr, proc.stderr
-    noted = [line for line in proc.stderr.splitlines() if "PERSON_IN_VIEW_NOTE_SHARE" in line]
+    noted = framing_notes(proc.stderr)
     assert len(noted) == 1 and noted[0].startswith(f"INFO ghnerf_runtime.rig_file: {rig}: a 1.8 m person"), noted
