@@ -1,7 +1,7 @@
 """Confidence of phantom joints in empty rooms vs joints of real people (sets the presence gate).
 
     .venv/bin/python benchmarks/measure_presence.py [--model-dir models] [--rooms 8] [--flip-test] [--time]
-                                                    [--novel-view] [--turn-search]
+                                                    [--novel-view] [--time-turn-search-off]
 
 The trained model has only ever seen views with a person in them, so for an empty room it still
 answers "someone", with weaker peaks. For each heatmap source (with its best 3D method) this
@@ -19,7 +19,8 @@ default and at 0 (both run the flip test), the pairs interleaved: median ms per 
 also the defaults with a novel view requested on every pair (none is rendered for a pair that shows nobody);
 and how many of the defaults' pairs searched the crop turns (``roi.turn_search``, on by default since session 57:
 an empty-room pair is a cold pair that finds nobody, so it searches unless its peaks say nobody may be there) and
-reported someone; with ``--turn-search`` also the defaults with ``roi.turn_search`` off (what the search costs).
+reported someone; with ``--time-turn-search-off`` also the defaults with ``roi.turn_search`` off (what the search
+costs; ``--turn-search`` until session 69, a name other benchmarks give rows with the search on).
 A tool, not a test.
 """
 from __future__ import annotations
@@ -78,7 +79,7 @@ def main(argv=None) -> int:
                     help="also time the empty rooms with the defaults, heatmaps.flip_test_skip_below default vs 0")
     ap.add_argument("--novel-view", action="store_true",
                     help="with --time: also time the defaults with a novel view requested on every pair")
-    ap.add_argument("--turn-search", action="store_true",
+    ap.add_argument("--time-turn-search-off", action="store_true",
                     help="with --time: also time the defaults with roi.turn_search off (the default is on)")
     args = ap.parse_args(argv)
     import drivers.sim as sim
@@ -113,16 +114,16 @@ def main(argv=None) -> int:
             print(f"{'':>8} before the mirrored run (heatmaps.flip_test_skip_below): empty rooms max "
                   f"{max(empty_peaks):.3f} | with a person min {min(_PeakRecorder.peaks):.3f}")
     if args.time:
-        time_empty_rooms(args.model_dir, args.rooms, novel=args.novel_view, turn_search=args.turn_search)
+        time_empty_rooms(args.model_dir, args.rooms, novel=args.novel_view, search_off=args.time_turn_search_off)
     return 0
 
 
 def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10, novel: bool = False,
-                     turn_search: bool = False) -> None:
+                     search_off: bool = False) -> None:
     """Median ms per empty-room pair with the defaults (frame check off), skipping the flip test's mirrored
     run where nobody may be (the default) against running it always (``flip_test_skip_below`` 0); ``novel``:
     also the defaults with a novel view (alpha 0.5) requested on every pair; and how many of the defaults' pairs
-    searched the crop turns (``roi.turn_search``) and reported someone; ``turn_search``: also the defaults with
+    searched the crop turns (``roi.turn_search``) and reported someone; ``search_off``: also the defaults with
     ``roi.turn_search`` off."""
     import time
     from dataclasses import replace
@@ -140,7 +141,7 @@ def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10, novel: bool 
     order = [("skipped", skip, None), ("always", always, None)]
     if novel:
         order.append(("novel", Estimator(skip.session, rig, base), NovelViewRequest(alpha=0.5)))
-    if turn_search:
+    if search_off:
         unsearched = Estimator(skip.session, rig, replace(base, roi=replace(base.roi, turn_search=False)))
         order.append(("no turn search", unsearched, None))
     times: dict[str, list[float]] = {name: [] for name, _, _ in order}
@@ -165,7 +166,7 @@ def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10, novel: bool 
     search = "on" if skip.config.roi.turn_search else "off"  # as the estimator resolved the default for the model
     print(f"empty rooms, the defaults (roi.turn_search {search}): {skip.turn_searches} of {n + rooms} pairs searched "
           f"the crop turns, {phantoms} of {n} reported someone")
-    if turn_search:
+    if search_off:
         off = float(np.median(times["no turn search"]))
         print(f"empty rooms, the defaults with roi.turn_search off: {off:.2f} ms median per pair (the defaults "
               f"{a / off:.2f}x that)")

@@ -517,15 +517,15 @@ def test_measure_presence(model, capsys, monkeypatch):
 def test_measure_presence_with_the_flip_test_and_its_timing(model, capsys, monkeypatch):
     """The documented ``--flip-test`` run (its recorder's ``_flip_test`` lacked the estimator's ``beside``
     argument: a TypeError on the first pair) and ``--time --novel-view`` (docs/runtime.md, "Compute only what
-    the scene requires"), and ``--turn-search`` (docs/turn-search.md, "Lying and upside down, rendered")."""
+    the scene requires"), and ``--time-turn-search-off`` (docs/turn-search.md, "Lying and upside down, rendered")."""
     out = run_script("measure_presence", "--model-dir", model, "--rooms", "1", "--flip-test", "--time",
-                     "--novel-view", "--turn-search", capsys=capsys, monkeypatch=monkeypatch)
+                     "--novel-view", "--time-turn-search-off", capsys=capsys, monkeypatch=monkeypatch)
     assert re.search(r"^ *encoder heatmaps \(triangulate, flip test\): empty rooms", out, re.M), out
     assert re.search(r"^ *before the mirrored run \(heatmaps.flip_test_skip_below\): empty rooms max [\d.]+", out,
                      re.M), out
     assert re.search(r"^empty rooms, the defaults with a novel view requested on every pair: [\d.]+ ms median per "
                      r"pair, 0 of 10 pairs with a novel view$", out, re.M), out
-    # the search is on by default (session 57): the defaults' searches always, --turn-search times it off
+    # the search is on by default (session 57): the defaults' searches always, --time-turn-search-off times it off
     assert re.search(r"^empty rooms, the defaults \(roi.turn_search on\): \d+ of 11 pairs searched the crop turns, "
                      r"\d+ of 10 reported someone$", out, re.M), out
     assert re.search(r"^empty rooms, the defaults with roi.turn_search off: [\d.]+ ms median per pair \(the defaults "
