@@ -7,7 +7,8 @@ size in which the board was not found went unnoticed, and a pair exchanged betwe
 "its images differ in size". Every image of a camera is one size here, the board found in it or not: the size
 of its board detections where it has them, read from the file's header where it has none. An image of another
 size is named with both sizes; one whose namesake in the other camera's folder has this camera's size is said to
-be exchanged with it.
+be exchanged with it. ``ghcal check`` compares them the same way before comparing them with its rig file's sizes
+(since session 69: it compared only the images the board was found in).
 """
 from __future__ import annotations
 
@@ -58,7 +59,7 @@ def _odd_image_words(camera: str, name: str, sizes: Mapping[str, Mapping[str, tu
         if other != camera and namesake is not None and namesake[1] == own and usual[other] == (w, h):
             return (f"{words}, and its namesake {namesake[0]} has camera {camera!r}'s size, camera {other!r}'s "
                     f"images {w}x{h}: the two look exchanged; exchange them (or remove both)")
-    return f"{words}: remove or retake it (a camera's views are solved at one size)"
+    return f"{words}: remove or retake it"  # why is the caller's to say: solve's lens, check's rig
 
 
 def mixed_sizes_problem(sizes: Mapping[str, Mapping[str, tuple[Path, Size]]]) -> str | None:
