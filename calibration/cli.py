@@ -1094,7 +1094,7 @@ def _refuse_sizes_unlike_the_rig(rig: Rig, rig_path: str, images: Path, views: d
     """Refuse an image of another size than its camera's in ``rig_path``, the board found in it or not
     (:mod:`calibration.image_sizes`, as ``solve`` checks them): a camera's images not all one size, each odd one
     named (a pair exchanged between the folders said so), else a camera's images all of another size than the
-    rig's. Only the images the board was found in were compared: a stray image of another size went unsaid.
+    rig's. Before session 69 only the images the board was found in were compared: a stray image went unsaid.
 
     :raises UsageError: naming an image's file, its size and the size it should have.
     """
