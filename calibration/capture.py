@@ -86,15 +86,15 @@ def earlier_size(folder: Path, *, skip: Iterable[str] = ()) -> tuple[Path, tuple
 
 
 def stored_size(path: Path) -> tuple[int, int] | None:
-    """An image's ``(width, height)`` as stored: from its header where it gives one (a camera's 8000x6000 still
-    was decoded whole, about 400 MB, for its size alone), else decoded; None for one that does not decode."""
-    from drivers.backends.recording_format import header_size  # replay's header reader: one reader of sizes
+    """An image's ``(width, height)`` as stored, by replay's reader of sizes (``drivers.backends.recording_format.
+    image_size``: from its header where it gives one, else decoded; a camera's 8000x6000 still was decoded whole,
+    about 400 MB, for its size alone); None for one replay does not decode, which the detection refuses too, naming
+    it (a TIFF of 32-bit samples, float or integer: "the board is found in 8- or 16-bit images only"). Until session
+    69 this decoded such a TIFF itself, unchanged, and ``earlier_size`` took its size as the folder's."""
+    from drivers.backends.recording_format import image_size  # a backend's module: imported when a size is asked
 
-    size = header_size(path)
-    if size is not None:
-        return int(size[0]), int(size[1])
-    image = read_image_or_none(path, cv2.IMREAD_UNCHANGED)
-    return None if image is None else (int(image.shape[1]), int(image.shape[0]))
+    size = image_size(path)
+    return (int(size[0]), int(size[1])) if isinstance(size, tuple) else None
 
 
 def write_camera_order(root: str | os.PathLike, names: Iterable[str], *, replace: bool = False) -> None:

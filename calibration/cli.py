@@ -1042,12 +1042,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     if sized_as_exchanged(rig, views):
         raise UsageError(_exchanged_sizes_words(rig, args.rig, board, views, Path(args.images), limits, thickness,
                                                 floor_view))
-    for cam in rig.pair:
-        for name, view in views[cam.name].items():
-            if view.image_size != cam.size:
-                path = list_images(Path(args.images) / cam.name)[name]  # the file as named, suffix and all
-                raise UsageError(f"{path}: the image is {view.image_size[0]}x"
-                                 f"{view.image_size[1]}, camera {cam.name!r} of {args.rig} {cam.width}x{cam.height}")
+    _refuse_sizes_unlike_the_rig(rig, args.rig, Path(args.images), views)
 
     def taken(name: str) -> bool:
         return any(name in views[c] or name in missed[c] for c in views)
@@ -1093,6 +1088,26 @@ def cmd_check(args: argparse.Namespace) -> int:
               "of another rig: calibrate again", file=sys.stderr)
         return 1
     return 0
+
+
+def _refuse_sizes_unlike_the_rig(rig: Rig, rig_path: str, images: Path, views: dict) -> None:
+    """Refuse an image of another size than its camera's in ``rig_path``, the board found in it or not
+    (:mod:`calibration.image_sizes`, as ``solve`` checks them): a camera's images not all one size, each odd one
+    named (a pair exchanged between the folders said so), else a camera's images all of another size than the
+    rig's. Before session 69 only the images the board was found in were compared: a stray image went unsaid.
+
+    :raises UsageError: naming an image's file, its size and the size it should have.
+    """
+    sizes = camera_image_sizes(images, [cam.name for cam in rig.pair], views)
+    problem = mixed_sizes_problem(sizes)
+    if problem is not None:
+        rig_sizes = ", ".join(f"{cam.name!r} {cam.width}x{cam.height}" for cam in rig.pair)
+        raise UsageError(f"{problem}. A camera's images are checked at its size in {rig_path}: {rig_sizes}")
+    for cam in rig.pair:
+        for path, size in sizes[cam.name].values():
+            if size != cam.size:
+                raise UsageError(f"{path}: the image is {size[0]}x{size[1]}, camera {cam.name!r} of {rig_path} "
+                                 f"{cam.width}x{cam.height}")
 
 
 def _exchanged_words(report: dict, images: Path, names: Sequence[str]) -> str:

@@ -7,18 +7,19 @@ size in which the board was not found went unnoticed, and a pair exchanged betwe
 "its images differ in size". Every image of a camera is one size here, the board found in it or not: the size
 of its board detections where it has them, read from the file's header where it has none. An image of another
 size is named with both sizes; one whose namesake in the other camera's folder has this camera's size is said to
-be exchanged with it.
+be exchanged with it. ``ghcal check`` compares them the same way before comparing them with its rig file's sizes
+(since session 69: it compared only the images the board was found in).
 """
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 from calibration.capture import camera_folders, list_images, stored_size
 from calibration.detect import BoardView
 
-__all__ = ["camera_image_sizes", "mixed_sizes_problem"]
+__all__ = ["camera_image_sizes", "mixed_sizes_problem", "mixed_views_problem"]
 
 Size = tuple[int, int]
 
@@ -39,10 +40,16 @@ def camera_image_sizes(root: str | Path, cameras: Sequence[str], views: Mapping[
     return sizes
 
 
-def _usual_size(images: Mapping[str, tuple[Path, Size]]) -> Size | None:
-    """The size most of a camera's images have (the first of equals in name order); None without images."""
-    counts = Counter(size for _, size in sorted(images.values()))
+def _usual_size(sizes: Iterable[Size]) -> Size | None:
+    """The size most of ``sizes`` have (the first of equals in their order); None without any."""
+    counts = Counter(sizes)
     return counts.most_common(1)[0][0] if counts else None
+
+
+def _odd_size_words(what: str, size: Size, camera: str, usual: Size, count: int, kind: str) -> str:
+    """One odd image's words, ``what`` its file (``ghcal``) or its view's name (:func:`mixed_views_problem`):
+    "capture/left/stray.png is 32x16, the other 10 image(s) of camera 'left' 960x600"."""
+    return f"{what} is {size[0]}x{size[1]}, the other {count} {kind}(s) of camera {camera!r} {usual[0]}x{usual[1]}"
 
 
 def _odd_image_words(camera: str, name: str, sizes: Mapping[str, Mapping[str, tuple[Path, Size]]],
@@ -52,21 +59,38 @@ def _odd_image_words(camera: str, name: str, sizes: Mapping[str, Mapping[str, tu
     count = sum(1 for _, size in sizes[camera].values() if size == usual[camera])
     own = usual[camera]
     assert own is not None
-    words = f"{path} is {w}x{h}, the other {count} image(s) of camera {camera!r} {own[0]}x{own[1]}"
+    words = _odd_size_words(str(path), (w, h), camera, own, count, "image")
     for other, images in sizes.items():
         namesake = images.get(name)
         if other != camera and namesake is not None and namesake[1] == own and usual[other] == (w, h):
             return (f"{words}, and its namesake {namesake[0]} has camera {camera!r}'s size, camera {other!r}'s "
                     f"images {w}x{h}: the two look exchanged; exchange them (or remove both)")
-    return f"{words}: remove or retake it (a camera's views are solved at one size)"
+    return f"{words}: remove or retake it"  # why is the caller's to say: solve's lens, check's rig
 
 
 def mixed_sizes_problem(sizes: Mapping[str, Mapping[str, tuple[Path, Size]]]) -> str | None:
     """The first camera whose images are not all one size, said per odd image (up to three), or None."""
-    usual = {camera: _usual_size(images) for camera, images in sizes.items()}
+    usual = {camera: _usual_size(size for _, size in sorted(images.values())) for camera, images in sizes.items()}
     for camera, images in sizes.items():
         odd = sorted(name for name, (_, size) in images.items() if size != usual[camera])
         if odd:
-            more = f"; {len(odd) - 3} more" if len(odd) > 3 else ""
-            return "; ".join(_odd_image_words(camera, name, sizes, usual) for name in odd[:3]) + more
+            return "; ".join(_odd_image_words(camera, name, sizes, usual) for name in odd[:3]) + _more(odd)
     return None
+
+
+def mixed_views_problem(camera: str, views: Mapping[str, BoardView]) -> str | None:
+    """One camera's board views not all one size, said per odd view (up to three) as :func:`mixed_sizes_problem`
+    says files, or None: the guard of a caller that hands views without their files (``calibrate_intrinsics``)."""
+    usual = _usual_size(views[name].image_size for name in sorted(views))
+    odd = sorted(name for name, view in views.items() if view.image_size != usual)
+    if not odd:
+        return None
+    assert usual is not None
+    count = len(views) - len(odd)
+    return "; ".join(_odd_size_words(f"view {name!r}", views[name].image_size, camera, usual, count, "view")
+                     + ": remove or retake it" for name in odd[:3]) + _more(odd)
+
+
+def _more(odd: Sequence[str]) -> str:
+    """How many odd images were not said (beyond the first three)."""
+    return f"; {len(odd) - 3} more" if len(odd) > 3 else ""

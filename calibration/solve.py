@@ -28,6 +28,7 @@ from calibration.board import BoardSpec
 from calibration.consensus import agreeing_pairs, pair_relative_pose
 from calibration.detect import MIN_CORNERS, BoardView, fixes_a_pose
 from calibration.errors import SolveError
+from calibration.image_sizes import mixed_views_problem
 from calibration.level import LEVEL_VOLUME, level_rig
 from ghnerf_runtime.geometry.camera import Camera, fold_terms_text, folded_by_tangential
 from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M, Rig, WorkingVolume
@@ -192,18 +193,13 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
     if lens not in LENS_MODELS:
         raise SolveError(f"lens model {lens!r} is not one of {sorted(LENS_MODELS)}")
     views = dict(views)
-    sizes = {v.image_size for v in views.values()}
-    if len(sizes) > 1:
-        by_size = {size: sorted(n for n, v in views.items() if v.image_size == size) for size in sizes}
-        odd = min(by_size.values(), key=len)  # the fewer: most likely the mistake
-        raise SolveError(f"camera {camera!r}: its images differ in size: "
-                         + "; ".join(f"{w}x{h}: {len(names)} ({', '.join(names[:5])}{', ...' if len(names) > 5 else ''})"
-                                     for (w, h), names in sorted(by_size.items()))
-                         + f"; take every view at one size (remove or retake {', '.join(odd[:5])})")
+    mixed = mixed_views_problem(camera, views)  # ghcal said so of the files first: a library caller's guard
+    if mixed is not None:
+        raise SolveError(f"{mixed}. Solved as they are, a camera's views at two sizes cannot share one lens")
     if len(views) < MIN_VIEWS:
         raise SolveError(f"camera {camera!r}: the board was found in {len(views)} image(s); at least {MIN_VIEWS} "
                          "are needed (15-30 is usual: near and far, tilted, reaching the image corners)")
-    size = sizes.pop()
+    size = next(iter(views.values())).image_size  # all one size (above)
     dropped: list[str] = []
     for attempt in range(2):
         names = sorted(views)

@@ -15,8 +15,10 @@ from calibration.capture import detect_folder, earlier_size
 from calibration.detect import BoardDetector, fixes_a_pose, grey8
 from calibration.errors import BoardError, CaptureError
 from calibration.render import board_pose_facing, example_rig, render_board
+from drivers.backends import recording_format
+from ghnerf_runtime.image_files import read_image_or_none
 from tests.exif_images import jpeg_turned
-from tests.odd_images import bmp_beyond_opencv_s_limits, tiff_laid_out
+from tests.odd_images import bmp_beyond_opencv_s_limits, tiff_laid_out, tiff_tiled
 
 BOARD = BoardSpec(squares_x=7, squares_y=6, square_m=0.12, marker_m=0.09)  # an even number of rows
 
@@ -228,8 +230,37 @@ def test_an_earlier_view_s_size_is_read_from_its_header_without_decoding_it(tmp_
     (tmp_path / "left").mkdir()
     assert cv2.imwrite(str(tmp_path / "left" / "000.png"), np.zeros((60, 80), np.uint8))
 
-    def no_decode(path, flags):
-        raise AssertionError(f"{path} decoded")
+    def no_decode(*args):
+        raise AssertionError(f"decoded: {args[0]!r:.60}")
 
-    monkeypatch.setattr(capture, "read_image_or_none", no_decode)
+    for decoder in ("imread", "imdecode"):  # whichever reader stored_size decodes with
+        monkeypatch.setattr(cv2, decoder, no_decode)
     assert earlier_size(tmp_path / "left") == (tmp_path / "left" / "000.png", (80, 60))
+
+
+@pytest.mark.parametrize(("shape", "separate"), [((5, 7, 3), False), ((5, 7), False), ((5, 7, 3), True)])
+def test_an_image_decoded_for_its_size_is_the_size_ghcal_decodes(tmp_path, shape, separate):
+    # capture's stored_size reads sizes with replay's reader (recording_format.image_size) since session 69; where
+    # the header gives none (a tiled TIFF OpenCV refuses from memory, read from the file), its decode gives the
+    # size capture's own decode (unchanged) gave
+    path = tmp_path / "000.tiff"
+    path.write_bytes(tiff_tiled(np.zeros(shape, np.uint8), (16, 16), separate_planes=separate))
+    assert recording_format.header_size(path) is None
+    image = read_image_or_none(path, cv2.IMREAD_UNCHANGED)
+    assert image is not None and capture.stored_size(path) == (image.shape[1], image.shape[0]) == (7, 5)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.int32])
+def test_an_earlier_view_of_32_bit_samples_does_not_stand_for_the_folder(tmp_path, dtype):
+    # decoded unchanged, such a TIFF gave earlier_size its size, though the detection refuses it (and replay does
+    # not decode it): ghcal capture --append compared the new views with an image the solve cannot use
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+        assert cv2.imwrite(str(tmp_path / cam / "000.tiff"), np.zeros((16, 32), dtype))
+        assert cv2.imwrite(str(tmp_path / cam / "001.png"), np.zeros((60, 80), np.uint8))
+    folder = tmp_path / "left"
+    assert capture.stored_size(folder / "000.tiff") is None
+    assert earlier_size(folder) == (folder / "001.png", (80, 60))
+    with pytest.raises(CaptureError, match=rf"000.tiff: an image of {np.dtype(dtype).name} pixels: the board is "
+                                           r"found in 8- or 16-bit images only"):
+        detect_folder(BOARD, tmp_path)

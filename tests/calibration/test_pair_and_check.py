@@ -587,6 +587,62 @@ def test_solve_without_a_rig_file_refuses_an_image_of_another_size_the_board_was
     assert _solve_cli(views, tmp_path, monkeypatch)[0] == 0  # without it: solved
 
 
+def test_check_refuses_an_image_of_another_size_the_board_was_not_found_in(sized_rig, tmp_path, capsys,
+                                                                          monkeypatch):
+    # check compared only the images the board was found in with the rig: a stray image at another size went unsaid
+    from ghnerf_runtime.rig_file import save_rig
+
+    views = _views(sized_rig, _facing_poses(sized_rig, 6, seed=5))
+    images = _listed_views(views, tmp_path)
+    save_rig(sized_rig, tmp_path / "rig.json")
+    stray = images / "left" / "stray.png"
+    assert cv2.imwrite(str(stray), np.zeros((16, 32), np.uint8))
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {"left": ["stray"], "right": []}))
+    check = ["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"), "--images",
+             str(images)]
+    rc = cli.main(check)
+    err = capsys.readouterr().err
+    assert rc == 2 and (
+        f"{stray} is 32x16, the other 6 image(s) of camera 'left' 960x600: remove or retake it. A camera's images "
+        f"are checked at its size in {tmp_path / 'rig.json'}: 'left' 960x600, 'right' 640x400") in err, err
+    stray.unlink()
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {"left": [], "right": []}))
+    assert cli.main(check) == 0  # without it: checked
+
+
+def test_check_says_a_pair_exchanged_between_the_folders(sized_rig, tmp_path, capsys, monkeypatch):
+    # the one pair exchanged read "the image is 640x400, camera 'left' ... 960x600", its namesake not said
+    views = _views(sized_rig, _facing_poses(sized_rig, 6, seed=5))
+    name = sorted(views["left"])[2]
+    views["left"][name], views["right"][name] = views["right"][name], views["left"][name]
+    rc, images = _check_cli(sized_rig, views, tmp_path, monkeypatch)
+    err = capsys.readouterr().err
+    assert rc == 2 and (
+        f"{images / 'left' / name}.png is 640x400, the other 5 image(s) of camera 'left' 960x600, and its namesake "
+        f"{images / 'right' / name}.png has camera 'left''s size, camera 'right''s images 640x400: the two look "
+        "exchanged") in err, err
+
+
+def test_check_names_a_folder_all_of_another_size_than_the_rig(sized_rig, tmp_path, capsys, monkeypatch):
+    # each camera's images one size, the board found in none of the left's: "no image pair in which both cameras
+    # found the board", the size unsaid
+    from ghnerf_runtime.rig_file import save_rig
+
+    views = _views(sized_rig, _facing_poses(sized_rig, 6, seed=5))
+    images = _listed_views(views, tmp_path)
+    save_rig(sized_rig, tmp_path / "rig.json")
+    for name in views["left"]:
+        assert cv2.imwrite(str(images / "left" / f"{name}.png"), np.zeros((400, 640), np.uint8))
+    missed = {"left": sorted(views["left"]), "right": []}
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: ({"left": {}, "right": views["right"]}, missed))
+    rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
+                   "--images", str(images)])
+    err = capsys.readouterr().err
+    first = sorted(views["left"])[0]
+    assert rc == 2 and (f"{images / 'left' / first}.png: the image is 640x400, camera 'left' of "
+                        f"{tmp_path / 'rig.json'} 960x600") in err, err
+
+
 @pytest.mark.parametrize("exchanged", [False, True])
 def test_a_left_camera_solved_on_the_right_is_warned_about(level_rig, exchanged):
     # each folder holding the other camera's images solves as well as the right ones (the rig file then gives each
