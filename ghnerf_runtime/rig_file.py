@@ -535,16 +535,14 @@ def volume_floor_warning(rig: Rig) -> str | None:
             "pointing down? A standing person's volume reaches y = 0 (docs/examples/rig.json: -2.2 to 0.05)")
 
 
-def standing_person(volume: WorkingVolume, samples: int = _PERSON_SAMPLES, depth: float | None = None) -> np.ndarray:
+def standing_person(volume: WorkingVolume, samples: int = _PERSON_SAMPLES) -> np.ndarray:
     """``(samples, 3)`` points from the feet to the head of a :data:`STANDING_PERSON_M` person standing at ``volume``'s
-    centre's x and z (``depth`` instead of that z where given) on the floor (y = 0, y down), or on the volume's nearest
-    y to it where the volume does not reach the floor (then within :data:`MAX_VOLUME_FLOOR_GAP_M` of it, or
-    :func:`volume_floor_warning` speaks)."""
+    centre's x and z on the floor (y = 0, y down), or on the volume's nearest y to it where the volume does not reach
+    the floor (then within :data:`MAX_VOLUME_FLOOR_GAP_M` of it, or :func:`volume_floor_warning` speaks)."""
     centre = volume.center
     feet = min(max(0.0, float(volume.min_corner[1])), float(volume.max_corner[1]))
     heights = np.linspace(0.0, STANDING_PERSON_M, samples)
-    z = float(centre[2]) if depth is None else depth
-    return np.stack([np.full(samples, centre[0]), feet - heights, np.full(samples, z)], axis=-1)
+    return np.stack([np.full(samples, centre[0]), feet - heights, np.full(samples, centre[2])], axis=-1)
 
 
 def standing_person_px(cam: Camera, volume: WorkingVolume) -> float:
@@ -637,20 +635,26 @@ def volume_edge_notes(rig: Rig) -> list[str]:
     floor) whom a pair camera shows under :data:`MIN_PERSON_IN_VIEW_SHARE` of their height: the centre's check passed
     a volume that starts nearer than the lenses frame anyone (``ghcal solve``'s default 0.5 m; session 69). Each note
     names the cameras, what they cut and the nearest (farthest) depth at which both show the person whole."""
-    return [note for edge in ("near", "far") if (note := _edge_note(rig, edge))]
+    edges = (("near", float(rig.volume.min_corner[2])), ("far", float(rig.volume.max_corner[2])))
+    people = _people_at(rig.volume, np.array([depth for _, depth in edges]))  # both edges in one projection a camera
+    shown = [(cam.name, _inside_image(cam, people).reshape(len(edges), _PERSON_SAMPLES)) for cam in rig.pair]
+    notes: list[str] = []
+    grid = None  # the depths both cameras show the person whole at: searched once, and only for a cut edge
+    for k, (edge, depth) in enumerate(edges):
+        cut = [_cut_words(name, inside[k]) for name, inside in shown if inside[k].mean() < MIN_PERSON_IN_VIEW_SHARE]
+        if cut:
+            grid = grid if grid is not None else _whole_grid(rig)
+            notes.append(f"a {STANDING_PERSON_M:g} m person standing at the working volume's {edge} edge (x "
+                         f"{rig.volume.center[0]:.2f}, z {depth:.2f} m) is cut: {'; '.join(cut)} (under "
+                         f"{MIN_PERSON_IN_VIEW_SHARE:.0%}, MIN_PERSON_IN_VIEW_SHARE). {_edge_advice(rig, edge, *grid)}")
+    return notes
 
 
-def _edge_note(rig: Rig, edge: str) -> str | None:
-    """:func:`volume_edge_notes`' note of the ``edge`` ("near" or "far") of the working volume, or None."""
-    depth = float(rig.volume.min_corner[2] if edge == "near" else rig.volume.max_corner[2])
-    person = standing_person(rig.volume, depth=depth)
-    shown = [(cam.name, _inside_image(cam, person)) for cam in rig.pair]
-    cut = [_cut_words(name, inside) for name, inside in shown if inside.mean() < MIN_PERSON_IN_VIEW_SHARE]
-    if not cut:
-        return None
-    return (f"a {STANDING_PERSON_M:g} m person standing at the working volume's {edge} edge (x "
-            f"{rig.volume.center[0]:.2f}, z {depth:.2f} m) is cut: {'; '.join(cut)} (under "
-            f"{MIN_PERSON_IN_VIEW_SHARE:.0%}, MIN_PERSON_IN_VIEW_SHARE). {_edge_advice(rig, edge)}")
+def _people_at(volume: WorkingVolume, depths: np.ndarray) -> np.ndarray:
+    """:func:`standing_person` standing at each of ``depths`` (z) in turn, ``(len(depths) * samples, 3)``."""
+    people = np.repeat(standing_person(volume)[None], len(depths), axis=0)
+    people[..., 2] = depths[:, None]
+    return people.reshape(-1, 3)
 
 
 def _cut_words(name: str, inside: np.ndarray) -> str:
@@ -660,31 +664,31 @@ def _cut_words(name: str, inside: np.ndarray) -> str:
     return f"camera {name!r} shows {float(inside.mean()):.0%} of their height, {cut} out of view"
 
 
-def _edge_advice(rig: Rig, edge: str) -> str:
-    """Where both pair cameras show the person whole, nearest the ``edge`` (depths on :data:`EDGE_FIT_STEP_M`'s grid
-    within the volume), and what to do of it."""
+def _whole_grid(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+    """The depths on :data:`EDGE_FIT_STEP_M`'s grid within the working volume, nearest first, and whether both pair
+    cameras show the whole person standing at each: one projection per camera for all of them (loading's cost)."""
     near, far = float(rig.volume.min_corner[2]), float(rig.volume.max_corner[2])
     steps = np.arange(math.ceil(near / EDGE_FIT_STEP_M - 1e-6), math.floor(far / EDGE_FIT_STEP_M + 1e-6) + 1)
-    depths = np.round(steps * EDGE_FIT_STEP_M, 6)[:: 1 if edge == "near" else -1]
-    whole = _whole_at(rig, depths)
+    depths = np.round(steps * EDGE_FIT_STEP_M, 6)
+    people = _people_at(rig.volume, depths)
+    whole = np.ones(len(depths), dtype=bool)
+    for cam in rig.pair:
+        whole &= _inside_image(cam, people).reshape(len(depths), _PERSON_SAMPLES).all(axis=1)
+    return depths, whole
+
+
+def _edge_advice(rig: Rig, edge: str, depths: np.ndarray, whole: np.ndarray) -> str:
+    """Where both pair cameras show the person whole nearest the ``edge`` (of :func:`_whole_grid`'s ``depths``), and
+    what to do of it."""
+    near, far = float(rig.volume.min_corner[2]), float(rig.volume.max_corner[2])
     if not whole.any():
         return (f"No depth within the volume (z {near:.2f}-{far:.2f} m, every {EDGE_FIT_STEP_M:g} m) shows them whole "
                 f"in both cameras: move the cameras back, fit wider lenses or aim them at the volume {_EDGES_DOC}")
-    fit = float(depths[int(np.argmax(whole))])
+    fit = float(depths[whole][0 if edge == "near" else -1])
     key, where, beyond = ("min", "nearest", "nearer") if edge == "near" else ("max", "farthest", "farther")
     return (f"Both cameras show them whole at z {fit:.1f} m, the {where} (every {EDGE_FIT_STEP_M:g} m): if no one "
             f"stands {beyond}, set the volume's {edge} edge there (working_volume.{key}[2] = {fit:.1f}; ghcal "
             f"solve/import: --volume); if people do, move or aim the cameras {_EDGES_DOC}")
-
-
-def _whole_at(rig: Rig, depths: np.ndarray) -> np.ndarray:
-    """For each of ``depths``, whether both pair cameras show the whole person standing there: one projection per
-    camera for all of them (loading's cost)."""
-    people = np.concatenate([standing_person(rig.volume, depth=float(z)) for z in depths] or [np.zeros((0, 3))])
-    whole = np.ones(len(depths), dtype=bool)
-    for cam in rig.pair:
-        whole &= _inside_image(cam, people).reshape(len(depths), _PERSON_SAMPLES).all(axis=1)
-    return whole
 
 
 def wire_2d_range_warning(cam: Camera) -> str | None:
