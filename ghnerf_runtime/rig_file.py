@@ -145,7 +145,7 @@ _PERSON_SAMPLES = round(STANDING_PERSON_M / _PERSON_STEP_M) + 1
 #: cameras show the standing person whole: the depth it gives is one to type into the rig file's ``working_volume``.
 EDGE_FIT_STEP_M = 0.1
 # where the edge notes send the reader (the doc's section checked by tests/test_docs_sections.py)
-_EDGES_DOC = '(docs/rig-file.md, "A person at the volume\'s edges")'
+_EDGES_DOC = "(docs/rig-file.md, \"A person at the volume's edges\")"
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
 _TOP_OPTIONAL = ("metadata",)

@@ -52,9 +52,11 @@ def _take(root: Path, truth: Rig, one_view, frames: int = 3) -> Path:
 
 
 def _but_the_rig_s_note(err: str) -> str:
-    """What a capture printed on stderr, bar the note it says of ``truth`` (84 % of a standing person in view) as
-    the take opens, since session 68: what these tests count is the rest."""
-    return "".join(line for line in err.splitlines(keepends=True) if "PERSON_IN_VIEW_NOTE_SHARE" not in line)
+    """What a capture printed on stderr, bar the notes it says of ``truth`` as the take opens: 84 % of a standing
+    person in view at its volume's centre (since session 68) and 35 % at its near edge (since session 69). What these
+    tests count is the rest."""
+    notes = ("PERSON_IN_VIEW_NOTE_SHARE", "the working volume's near edge")
+    return "".join(line for line in err.splitlines(keepends=True) if not any(words in line for words in notes))
 
 
 def _board_file(tmp_path: Path) -> Path:

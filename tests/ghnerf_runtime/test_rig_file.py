@@ -1104,8 +1104,8 @@ def test_a_volume_no_depth_of_which_frames_anyone_says_so(synth_rig_file):
     (note,) = volume_edge_notes(load_rig(synth_rig_file, warn=False))
     assert "near edge (x 0.00, z 0.50 m) is cut" in note, note
     assert note.endswith("No depth within the volume (z 0.50-5.00 m, every 0.1 m) shows them whole in both cameras: "
-                         "move the cameras back, fit wider lenses or aim them at the volume (docs/rig-file.md, "
-                         "\"A person at the volume's edges\")"), note
+                         "move the cameras back, fit wider lenses or aim them at the volume "
+                         "(docs/rig-file.md, \"A person at the volume's edges\")"), note
 
 
 def test_a_volume_thinner_than_the_grid_step_is_judged_without_failing(example_dict):
