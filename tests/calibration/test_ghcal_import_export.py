@@ -19,6 +19,8 @@ from ghnerf_runtime.rig_file import load_rig, save_rig
 PITCH_DEG = math.degrees(math.atan2(1.4 - 0.3, math.hypot(2.5, 0.3)))
 #: the words of the rig file's note (rig_file.person_partly_in_view_note), which example_rig is noted of (84 %)
 NOTE_WORDS = "is partly out of view: camera 'left' shows 84% of their height"
+#: the words of its note of its volume's near edge, 0.5 m ahead (since session 69; rig_file.volume_edge_notes)
+NEAR_EDGE_WORDS = "a 1.8 m person standing at the working volume's near edge (x 0.00, z 0.50 m) is cut"
 
 
 @pytest.fixture()
@@ -158,8 +160,10 @@ def test_what_the_user_must_give_is_named(rig_file, tmp_path, capsys, args, word
     argv = [a.format(toml=toml, foreign=foreign, out=tmp_path / "out.json", rig=rig_file, dir=tmp_path)
             for a in args]
     assert cli.main(argv) == 2
-    # one line, bar the note of the rig file an export reads (example_rig's: 84 % of a standing person in view)
-    err = "".join(line for line in capsys.readouterr().err.splitlines(keepends=True) if NOTE_WORDS not in line)
+    # one line, bar the notes of the rig file an export reads (example_rig's: 84 % of a standing person in view, 35 %
+    # at the volume's near edge)
+    err = "".join(line for line in capsys.readouterr().err.splitlines(keepends=True)
+                  if NOTE_WORDS not in line and NEAR_EDGE_WORDS not in line)
     assert err.count("\n") == 1 and all(w in err for w in words), err
     assert not (tmp_path / "out.json").exists()
 
