@@ -141,6 +141,11 @@ PERSON_IN_VIEW_NOTE_SHARE = 0.97
 #: and so their number (37 for 1.8 m): the share's step.
 _PERSON_STEP_M = 0.05
 _PERSON_SAMPLES = round(STANDING_PERSON_M / _PERSON_STEP_M) + 1
+#: Step (metres) of the depths :func:`volume_edge_notes` tries for the nearest (farthest) one at which both pair
+#: cameras show the standing person whole: the depth it gives is one to type into the rig file's ``working_volume``.
+EDGE_FIT_STEP_M = 0.1
+# where the edge notes send the reader (the doc's section checked by tests/test_docs_sections.py)
+_EDGES_DOC = "(docs/rig-file.md, \"A person at the volume's edges\")"
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
 _TOP_OPTIONAL = ("metadata",)
@@ -182,6 +187,8 @@ __all__ = [
     "MIN_PERSON_IN_VIEW_SHARE",
     "PERSON_IN_VIEW_NOTE_SHARE",
     "person_partly_in_view_note",
+    "volume_edge_notes",
+    "EDGE_FIT_STEP_M",
     "rig_notes",
     "rig_warnings_and_notes",
     "PRINCIPAL_POINT_TOLERANCE",
@@ -458,8 +465,9 @@ def rig_warnings(rig: Rig) -> list[str]:
 
 def rig_notes(rig: Rig) -> list[str]:
     """What loading notes (logs at INFO) of a rig it does not warn of: a person standing at the volume's centre
-    partly out of the pair's views, under :data:`PERSON_IN_VIEW_NOTE_SHARE` of their height (not where
-    :func:`rig_warnings` speaks of the volume or the framing already)."""
+    partly out of the pair's views, under :data:`PERSON_IN_VIEW_NOTE_SHARE` of their height, and one at the volume's
+    near or far edge cut by a pair camera (:func:`volume_edge_notes`); not where :func:`rig_warnings` speaks of the
+    volume or the framing already."""
     return rig_warnings_and_notes(rig)[1]
 
 
@@ -477,9 +485,9 @@ def rig_warnings_and_notes(rig: Rig) -> tuple[list[str], list[str]]:
     else:
         outside, partly = _framing_warning_and_note(rig)
         if outside:
-            warnings.append(outside)
-        if partly:
-            notes.append(partly)
+            warnings.append(outside)  # (its advice, to move or aim the cameras, holds for the edges too)
+        else:
+            notes.extend(filter(None, [partly, *volume_edge_notes(rig)]))
     warnings.extend(filter(None, (wire_2d_range_warning(cam) for cam in rig.pair)))
     return warnings, notes
 
@@ -547,12 +555,17 @@ def standing_person_px(cam: Camera, volume: WorkingVolume) -> float:
 def person_in_view_share(cam: Camera, volume: WorkingVolume) -> float:
     """The share of the height of a person standing at ``volume``'s centre (:func:`standing_person`) that lies inside
     ``cam``'s image, lens model included (a point behind the camera or past the lens's fold counts as outside)."""
-    uv, _ = cam.project(standing_person(volume))
+    return float(_inside_image(cam, standing_person(volume)).mean())
+
+
+def _inside_image(cam: Camera, points: np.ndarray) -> np.ndarray:
+    """Which of ``points`` (rig frame, ``(N, 3)``) lie inside ``cam``'s image, lens model included (behind the camera
+    or past the lens's fold: outside)."""
+    uv, _ = cam.project(points)
     # the image's edges: pixel centres at whole numbers, so from -0.5 to the side less 0.5
     with np.errstate(invalid="ignore"):  # NaN pixels: outside
-        inside = ((uv[:, 0] >= -0.5) & (uv[:, 0] <= cam.width - 0.5)
-                  & (uv[:, 1] >= -0.5) & (uv[:, 1] <= cam.height - 0.5))
-    return float(inside.mean())
+        return ((uv[:, 0] >= -0.5) & (uv[:, 0] <= cam.width - 0.5)
+                & (uv[:, 1] >= -0.5) & (uv[:, 1] <= cam.height - 0.5))
 
 
 def person_outside_view_warning(rig: Rig) -> str | None:
@@ -615,6 +628,67 @@ def _pair_shares(rig: Rig) -> list[tuple[str, float]]:
 def _cameras_showing_under(shares: list[tuple[str, float]], share_bound: float) -> list[str]:
     """``camera 'name' shows N% of their height`` for each of :func:`_pair_shares` under ``share_bound``."""
     return [f"camera {name!r} shows {share:.0%} of their height" for name, share in shares if share < share_bound]
+
+
+def volume_edge_notes(rig: Rig) -> list[str]:
+    """What loading notes of a person standing at the working volume's near and at its far edge (its centre's x, on the
+    floor) whom a pair camera shows under :data:`MIN_PERSON_IN_VIEW_SHARE` of their height: the centre's check passed
+    a volume that starts nearer than the lenses frame anyone (``ghcal solve``'s default 0.5 m; session 69). Each note
+    names the cameras, what they cut and the nearest (farthest) depth at which both show the person whole."""
+    edges = (("near", float(rig.volume.min_corner[2])), ("far", float(rig.volume.max_corner[2])))
+    people = _people_at(rig.volume, np.array([depth for _, depth in edges]))  # both edges in one projection a camera
+    shown = [(cam.name, _inside_image(cam, people).reshape(len(edges), _PERSON_SAMPLES)) for cam in rig.pair]
+    notes: list[str] = []
+    grid = None  # the depths both cameras show the person whole at: searched once, and only for a cut edge
+    for k, (edge, depth) in enumerate(edges):
+        cut = [_cut_words(name, inside[k]) for name, inside in shown if inside[k].mean() < MIN_PERSON_IN_VIEW_SHARE]
+        if cut:
+            grid = grid if grid is not None else _whole_grid(rig)
+            notes.append(f"a {STANDING_PERSON_M:g} m person standing at the working volume's {edge} edge (x "
+                         f"{rig.volume.center[0]:.2f}, z {depth:.2f} m) is cut: {'; '.join(cut)} (under "
+                         f"{MIN_PERSON_IN_VIEW_SHARE:.0%}, MIN_PERSON_IN_VIEW_SHARE). {_edge_advice(rig, edge, *grid)}")
+    return notes
+
+
+def _people_at(volume: WorkingVolume, depths: np.ndarray) -> np.ndarray:
+    """:func:`standing_person` standing at each of ``depths`` (z) in turn, ``(len(depths) * samples, 3)``."""
+    people = np.repeat(standing_person(volume)[None], len(depths), axis=0)
+    people[..., 2] = depths[:, None]
+    return people.reshape(-1, 3)
+
+
+def _cut_words(name: str, inside: np.ndarray) -> str:
+    """``camera 'name' shows N% of their height, their head out of view`` from ``inside``, feet to head."""
+    ends = [part for part, seen in (("head", inside[-1]), ("feet", inside[0])) if not seen]
+    cut = f"their {' and '.join(ends)}" if ends else "part of their body"
+    return f"camera {name!r} shows {float(inside.mean()):.0%} of their height, {cut} out of view"
+
+
+def _whole_grid(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+    """The depths on :data:`EDGE_FIT_STEP_M`'s grid within the working volume, nearest first, and whether both pair
+    cameras show the whole person standing at each: one projection per camera for all of them (loading's cost)."""
+    near, far = float(rig.volume.min_corner[2]), float(rig.volume.max_corner[2])
+    steps = np.arange(math.ceil(near / EDGE_FIT_STEP_M - 1e-6), math.floor(far / EDGE_FIT_STEP_M + 1e-6) + 1)
+    depths = np.round(steps * EDGE_FIT_STEP_M, 6)
+    people = _people_at(rig.volume, depths)
+    whole = np.ones(len(depths), dtype=bool)
+    for cam in rig.pair:
+        whole &= _inside_image(cam, people).reshape(len(depths), _PERSON_SAMPLES).all(axis=1)
+    return depths, whole
+
+
+def _edge_advice(rig: Rig, edge: str, depths: np.ndarray, whole: np.ndarray) -> str:
+    """Where both pair cameras show the person whole nearest the ``edge`` (of :func:`_whole_grid`'s ``depths``), and
+    what to do of it."""
+    near, far = float(rig.volume.min_corner[2]), float(rig.volume.max_corner[2])
+    if not whole.any():
+        return (f"No depth within the volume (z {near:.2f}-{far:.2f} m, every {EDGE_FIT_STEP_M:g} m) shows them whole "
+                f"in both cameras: move the cameras back, fit wider lenses or aim them at the volume {_EDGES_DOC}")
+    fit = float(depths[whole][0 if edge == "near" else -1])
+    key, where, beyond = ("min", "nearest", "nearer") if edge == "near" else ("max", "farthest", "farther")
+    return (f"Both cameras show them whole at z {fit:.1f} m, the {where} (every {EDGE_FIT_STEP_M:g} m): if no one "
+            f"stands {beyond}, set the volume's {edge} edge there (working_volume.{key}[2] = {fit:.1f}; ghcal "
+            f"solve/import: --volume); if people do, move or aim the cameras {_EDGES_DOC}")
 
 
 def wire_2d_range_warning(cam: Camera) -> str | None:

@@ -1,7 +1,8 @@
 """The rig file's notes shown where a tool reads or writes a rig, as its warnings are.
 
 Loading a rig logs its warnings at WARNING and its notes at INFO (``rig_file.rig_notes``: a standing person partly
-out of the pair's views, which the shipped ``ghcal synth`` rig must load without a warning for). Python shows
+out of the pair's views, which the shipped ``ghcal synth`` rig must load without a warning for; since session 69 one
+cut at the working volume's near or far edge, ``rig_file.volume_edge_notes``). Python shows
 WARNING and over where no logging is set up, and ``ghnerf-run`` sets it up so: the notes were dropped by ``ghcal``,
 by ``ghnerf-run`` without ``--verbose`` and by ``ghnerf-daemon --validate-config``, the places a user mounting a rig
 looks. The daemon itself logs at INFO by default (``log_level``), so its rig source's note is shown at its start.

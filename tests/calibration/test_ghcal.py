@@ -28,9 +28,12 @@ from calibration.solve import calibrate_intrinsics, calibrate_pair, floor_from_p
 from drivers.backends.recording_format import FRAMES, FrameRow, Manifest, write_manifest
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import load_rig, save_rig
-from tests.framing_note import framing_notes
+from tests.framing_note import edge_notes, framing_notes
 
 BOARD = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
+#: the start of the rig file's note of its volume's near edge (rig_file.volume_edge_notes), ghcal solve's
+#: LEVEL_VOLUME from 0.5 m
+NEAR_EDGE_WORDS = "a 1.8 m person standing at the working volume's near edge (x 0.00, z 0.50 m) is cut"
 
 
 def _rotation_deg(R: np.ndarray) -> float:
@@ -147,7 +150,8 @@ def test_cli_solve_then_check(capture, truth, tmp_path, capsys):
     """``solve`` writes a rig that ``check`` passes (a bumped one it fails), and each says the rig's note once, a
     bare line on stderr: the rig solved from views of ``truth`` (example_rig's poses) shows a standing person under
     97 % of their height, which loading notes at INFO (session 67) and ghcal, setting no logging up, dropped until
-    session 68 (``solve`` says it of the rig it writes, ``check`` of the rig it reads)."""
+    session 68 (``solve`` says it of the rig it writes, ``check`` of the rig it reads). Since session 69 each also says
+    once that the solved rig's volume, ``LEVEL_VOLUME`` from 0.5 m ahead, starts where the cameras cut that person."""
     rig_path = tmp_path / "rig.json"
     board = str(capture / "board.json")
     rc = cli.main(["solve", "--board", board, "--images", str(capture), "--floor-view", "floor",
@@ -156,6 +160,7 @@ def test_cli_solve_then_check(capture, truth, tmp_path, capsys):
     assert rc == 0, out
     assert "levelled by floor view, both cameras" in out and "baseline" in out
     assert len(framing_notes(err)) == 1 and f"{rig_path}: a 1.8 m person standing" in err, err
+    assert len(edge_notes(err)) == 1 and f"{rig_path}: {NEAR_EDGE_WORDS}" in err, err
     rig = load_rig(rig_path)
     assert rig.rig_id == "bench-rig" and rig.names == ("left", "right")
     report = json.loads((tmp_path / "rig.report.json").read_text())
@@ -164,6 +169,7 @@ def test_cli_solve_then_check(capture, truth, tmp_path, capsys):
     out, err = capsys.readouterr()
     assert "pairs: reprojection" in out
     assert len(framing_notes(err)) == 1 and f"{rig_path}: a 1.8 m person standing" in err, err
+    assert len(edge_notes(err)) == 1 and f"{rig_path}: {NEAR_EDGE_WORDS}" in err, err
     right = truth.camera("right")
     nudge = cv2.Rodrigues(np.array([math.radians(1.0), 0.0, 0.0]))[0]
     save_rig(Rig((truth.camera("left"), right.with_pose(nudge @ right.R, nudge @ right.t)), truth.volume),

@@ -8,7 +8,7 @@ from drivers import ManualClock, RigConfigError, create_rig_source, open_rig
 from drivers.backends.sim_loop import default_cache_root
 from drivers.sim import SAMPLE_BVH, SceneConfig, SensorModel, SimScene
 from tests.drivers.reopens import open_sources_sharing_a_logged_set
-from tests.framing_note import logged_framing_notes
+from tests.framing_note import logged_edge_notes, logged_framing_notes
 
 SMALL = "width=48&height=36"
 
@@ -315,12 +315,14 @@ def test_a_rig_built_from_the_url_is_warned_of_at_open_as_a_rig_file_would_be(ca
 def test_a_rig_built_from_the_url_that_cuts_the_person_is_noted_at_info_once_over_shared_opens(caplog):
     """``sim://?distance=1`` shows 89 % of a standing person's height (``rig_file.rig_notes``): the rig a backend
     builds gets the note ``load_rig`` gives a rig file, at INFO and not as a warning, once over a daemon's reopens
-    sharing a logged set (session 67)."""
+    sharing a logged set (session 67); its volume's near edge, 0.5 m ahead (57 %), has a note of its own since
+    session 69, once too."""
     url = f"sim://?{SMALL}&cache=off&distance=1"
     with caplog.at_level(logging.INFO, logger="drivers"):
         logged = open_sources_sharing_a_logged_set(lambda _: create_rig_source(url, clock=ManualClock()), 3)
     noted = logged_framing_notes(caplog.records)
-    assert [r.levelname for r in noted] == ["INFO"] and len(logged) == 1, caplog.text
+    edge = logged_edge_notes(caplog.records)
+    assert [r.levelname for r in noted + edge] == ["INFO", "INFO"] and len(logged) == 2, caplog.text
     assert noted[0].getMessage().startswith("sim:// rig 'sim': a 1.8 m person standing at the working volume's "
                                             "centre (x 0.00, z 1.00 m) is partly out of view: camera 'left' shows 89%")
     assert not [r for r in caplog.records if r.levelno >= logging.WARNING], caplog.text
