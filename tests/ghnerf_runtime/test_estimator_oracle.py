@@ -471,7 +471,8 @@ def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, sour
         crop = est.tracker.regions().rois[1 - k]
         assert crop.size < est.tracker.volume_regions.rois[1 - k].size, crop
         uv = rig.pair[1 - k].project(truth[0][found], distort=False)[0]
-        assert (uv.min(0) >= [crop.x0, crop.y0]).all() and (uv.max(0) <= np.add([crop.x0, crop.y0], crop.size)).all(), uv
+        corner = np.array([crop.x0, crop.y0])
+        assert (uv.min(0) >= corner).all() and (uv.max(0) <= corner + crop.size).all(), (uv, crop)
         obj = r.to_json()
         assert obj["single_view"] == names[k] and obj["frame_ok"] == {n: True for n in names}
         assert all(row == [0.0, 0.0, 0.0, 0.0] for row in obj["joints_3d"]) and all(obj["missing"])
