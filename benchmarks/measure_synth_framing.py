@@ -15,7 +15,10 @@ A row per rig: the cameras' height and pitch, where the floor comes into view (t
 farther camera: ``ghcal synth`` lays the board there), the volume's depth range, ``measure_baseline.py``'s framing
 cells (the standing person at the volume's centre) and scores. ``--per-sequence``: per rig and sequence, where the
 person stands, the share of their joints inside both images, whether the nose and the ankles are, and the pairs with
-no joint (session 67: heads cut, people too near, or the cold crop's scale?). ``--floor-seeds N``: per rig, in how
+no joint (session 67: heads cut, people too near, or the cold crop's scale?), the pairs answered by one camera's 2D
+joints alone (``PairResult.single_view``) and how tall the person is in the cold crop (the working volume projected,
+in the model's input pixels, the worse camera; session 69: a person 4.47 m ahead, 27 pixels, was seen by one camera
+through a tile and lost by the other's whole-volume crop). ``--floor-seeds N``: per rig, in how
 many of N seeds both cameras read the floor view ``calibration_views`` renders (the board lying on the floor, as
 ``ghcal synth`` lays it), of the default 80 mm board and of ``ghcal synth``'s 120 mm one
 (``calibration.render.SYNTH_BOARD``); ``--sequences 0``: that table only. ``--save DIR`` writes each aimed rig as
@@ -39,6 +42,7 @@ from calibration.render import CONVERGE_AHEAD_M, SYNTH_BOARD, calibration_views,
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, look_at  # noqa: E402
+from ghnerf_runtime.preprocess import roi_from_volume  # noqa: E402
 from ghnerf_runtime.rig_file import save_rig  # noqa: E402
 
 #: BODY_25 joints told apart in ``--per-sequence``: the nose (the head cut or not) and the ankles (the feet).
@@ -96,12 +100,23 @@ def in_both_images(rig: Rig, points: np.ndarray) -> np.ndarray:
     return inside
 
 
+def cold_crop_px(rig: Rig, joints: np.ndarray, model_px: int) -> float:
+    """How tall ``joints`` ``(J, 3)`` (rig frame) are in the model's input through the cold-start crop (the working
+    volume projected, ``roi_from_volume``, resized to ``model_px``), the pair's worse camera, pinhole: as
+    ``framing_cells`` measures the standing person at the volume's centre, for this person where they stand."""
+    tall = []
+    for cam in rig.pair:
+        uv = cam.project(joints, distort=False)[0]
+        tall.append(float(np.ptp(uv[:, 1])) * model_px / roi_from_volume(cam, rig.volume).size)
+    return min(tall)
+
+
 def sequence_row(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0):
     """Bench sequence ``k`` filmed by ``rig``, one cold estimator: the predictions and truth for
     :func:`score_cells`, and the sequence's ``--per-sequence`` cells."""
     scene, t0 = bench_scene_in(rig, k)
     est = Estimator(session, rig, cfg)
-    pred, found, truth, in_view, lost = [], [], [], [], 0
+    pred, found, truth, in_view, lost, one_view = [], [], [], [], 0, 0
     for i in range(frames):
         t = t0 + i / fps
         r = est.estimate([scene.render(cam, t, with_truth=False)[0] for cam in rig.pair], sequence=i)
@@ -111,12 +126,14 @@ def sequence_row(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0)
         truth.append(joints)
         in_view.append(in_both_images(rig, joints))
         lost += int(r.missing.all())
+        one_view += r.single_view is not None
     est.close()
     in_view = np.array(in_view)
     mid = 0.5 * (rig.pair[0].center + rig.pair[1].center)
     ahead = float(np.hypot(*(truth[0][8] - mid)[[0, 2]]))  # the mid hip at the first instant
     cells = (f"{k} | {truth[0][8][0]:+.2f} | {ahead:.2f} | {scene.config.motion} | {in_view.mean():.2f} | "
-             f"{in_view[:, NOSE].mean():.1f} | {in_view[:, list(ANKLES)].all(axis=1).mean():.1f} | {lost} of {frames}")
+             f"{in_view[:, NOSE].mean():.1f} | {in_view[:, list(ANKLES)].all(axis=1).mean():.1f} | {lost} of {frames}"
+             f" | {one_view} of {frames} | {cold_crop_px(rig, truth[0], session.contract.width):.0f}")
     return (np.array(pred), np.array(found), np.array(truth)), cells
 
 
@@ -205,8 +222,9 @@ def scores_table(session, cfg, rigs: list[Rig], args: argparse.Namespace) -> Non
               f"{framing_cells(rig, session.contract.width)} | {score_cells([r for r, _ in results])} |", flush=True)
     if args.per_sequence:
         print("\n| rig | sequence | person at x, m | ahead of the pair, m | motion | joints in both images | nose in "
-              "both | ankles in both | pairs with no joint |")
-        print("|---|---|---|---|---|---|---|---|---|")
+              "both | ankles in both | pairs with no joint | pairs with one camera's 2D joints only | person tall in "
+              "the cold crop, model px |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         print("\n".join(per_sequence))
 
 

@@ -1952,9 +1952,11 @@ class Estimator:
         self._track_unsorted = (not regions.tracked and not several and self.tracker.track is not None and
                                 (torso or joints_shown_twice(kp, cfg.joints3d.second_person_ratio)
                                  >= STILL_SEVERAL_MIN_JOINTS))
-        if seen_by is not None:  # its next crop follows the person; the other camera's stays on the volume
+        if seen_by is not None:  # its next crop follows the person
+            # both frames passed: the other camera looks along the seen joints' rays, where its whole-volume crop
+            # may draw a far person too small to find (docs/rig-file.md, session 69)
             self.tracker.update_view(seen_by, joints_2d[self.camera_names[seen_by]],
-                                     conf_2d[self.camera_names[seen_by]])
+                                     conf_2d[self.camera_names[seen_by]], other_on_rays=True)
         if several:
             # each view's decoded peak may be either person's, so the pair's own figures say nothing of the rig:
             # the subject's own pairings do (SubjectSelector.subject_figures)

@@ -21,7 +21,9 @@ still inside the crop is not carried: the crop stays what the joints found make 
 
 A pair with one unusable camera (``frame_check.single_view_2d``) gives 2D joints in the other
 camera only: there is no 3D track then, but that camera's next crop follows its 2D joints (a
-*view track*), while the other camera and the sweep stay on the working volume.
+*view track*), while the other camera and the sweep stay on the working volume. Where both frames passed (the
+person seen by one camera only), the other camera's next crop frames where the seen joints' rays cross the working
+volume instead (:func:`rays_in_box`): its whole-volume crop may draw a far person too small for the model to find.
 
 Pure numpy; the :class:`SubjectTracker` is a small state holder around pure functions.
 """
@@ -33,12 +35,13 @@ import numpy as np
 
 from ghnerf_runtime.config import RoiConfig, TrackingConfig
 from ghnerf_runtime.errors import GeometryError, ShapeError
+from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.preprocess import Roi, crop_camera, roi_from_joints, roi_from_volume
 from ghnerf_runtime.rig_file import standing_person_px
 
 __all__ = ["Track", "Regions", "SubjectTracker", "keep_roi", "plan_regions", "snap_roi", "track_from_joints",
-           "volume_regions", "box_corners", "cold_person_share", "volume_tiles", "COLD_TILE_SPLITS",
+           "volume_regions", "box_corners", "cold_person_share", "volume_tiles", "rays_in_box", "COLD_TILE_SPLITS",
            "COLD_TILE_OVERLAP_M"]
 
 #: ``tracking.cold_tiles_below_share``: the working volume's tiles, this many along x (left/right) and along z
@@ -235,6 +238,23 @@ def volume_tiles(rig: Rig, roi_config: RoiConfig, rolls: tuple[float, float] = (
     return tuple(tiles)
 
 
+def rays_in_box(camera: Camera, pixels: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """``(2M, 3)``: where the rays of ``camera`` through ``pixels`` ``(N, 2)`` (distorted image pixels) enter and
+    leave ``box`` ``(2, 3)`` (min and max corners, rig frame), for the ``M`` of them that cross it in front of the
+    camera (a pixel the lens model cannot reach has no ray). The other camera of the pair sees each such ray's
+    stretch as the segment between its two points' projections: all that a person seen in ``camera`` can be."""
+    origins, dirs = camera.rays(np.asarray(pixels, dtype=np.float64).reshape(-1, 2))
+    lo, hi = np.asarray(box, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a ray along a face: +-inf, or NaN (dropped) on it
+        t_lo, t_hi = (lo - origins) / dirs, (hi - origins) / dirs
+        enter = np.maximum(np.minimum(t_lo, t_hi).max(axis=1), 0.0)
+        leave = np.maximum(t_lo, t_hi).min(axis=1)
+        crosses = np.isfinite(enter) & np.isfinite(leave) & (leave > enter)
+    near = origins[crosses] + enter[crosses, None] * dirs[crosses]
+    far = origins[crosses] + leave[crosses, None] * dirs[crosses]
+    return np.concatenate([near, far])
+
+
 class SubjectTracker:
     """Holds the current :class:`Track` (or none) and turns it into :class:`Regions`.
 
@@ -254,6 +274,8 @@ class SubjectTracker:
         self.track: Track | None = None
         #: ``(camera index, crop)`` of the one camera a single-view pair saw the subject in
         self.view_track: tuple[int, Roi] | None = None
+        #: with a view track, the other camera's crop on the seen joints' rays (``update_view(other_on_rays=)``)
+        self.view_other: Roi | None = None
         self._volume = volume_regions(rig, roi_config, self.rolls)
         self._last_rois: tuple[Roi, ...] | None = None
         self._used: Regions | None = None  # the regions of the pair being estimated (carried joints)
@@ -272,6 +294,8 @@ class SubjectTracker:
                 k, roi = self.view_track
                 rois = list(self._volume.rois)
                 rois[k] = roi
+                if self.view_other is not None:
+                    rois[1 - k] = self.view_other
                 return Regions(tuple(rois), self._volume.box, False)
             return self._volume
         regions = plan_regions(self.rig, self.track, self.roi_config, self._last_rois, self.rolls)
@@ -287,6 +311,7 @@ class SubjectTracker:
             self.drops += 1
         self.track = new
         self.view_track = None
+        self.view_other = None
         self._used = None  # the next pair's crop is known once regions() gives it
         return new is not None
 
@@ -312,10 +337,13 @@ class SubjectTracker:
             out[ask] |= ~((depth > 0) & np.all((uv >= -0.5) & (uv <= roi.size - 0.5), axis=1))
         return out
 
-    def update_view(self, camera: int, joints_2d: np.ndarray, confidence: np.ndarray) -> bool:
+    def update_view(self, camera: int, joints_2d: np.ndarray, confidence: np.ndarray,
+                    other_on_rays: bool = False) -> bool:
         """A single-view pair: camera ``camera`` (rig order) saw ``(J, 2)`` joints (distorted image
         pixels; confidence 0 where missing). Its next crop follows them (as many confident joints as
-        a 3D track needs); the 3D track is dropped. Returns whether a view track is held afterwards."""
+        a 3D track needs); the 3D track is dropped. ``other_on_rays`` (both frames passed: the person is seen by
+        that camera only): the other camera's next crop frames where those joints' rays cross the working volume
+        (:meth:`_crop_on_rays`), not the whole volume. Returns whether a view track is held afterwards."""
         cfg, rc = self.config, self.roi_config
         self.track = None
         self._last_rois = None
@@ -329,7 +357,23 @@ class SubjectTracker:
                               roll_deg=self.rolls[camera], edge_crop=rc.edge_crop) if cfg.enabled else None
         self.view_track = None if roi is None else (camera, keep_roi(previous, snap_roi(roi, rc.snap_px),
                                                                      rc.keep_frac))
+        self.view_other = (self._crop_on_rays(camera, np.asarray(joints_2d, dtype=np.float64)[counted > 0])
+                           if other_on_rays and self.view_track is not None else None)
         return self.view_track is not None
+
+    def _crop_on_rays(self, camera: int, seen: np.ndarray) -> Roi | None:
+        """The other camera's crop showing where the rays of ``camera`` through ``seen`` ``(N, 2)`` (the counted
+        joints, distorted pixels) cross the working volume (grown as the cold crop's): the person is somewhere
+        along them, and a far one is drawn larger than in the whole volume's crop, which may draw them too small for
+        the model to find (docs/rig-file.md, session 69). None (the whole volume's crop) where fewer than
+        ``tracking.min_joints`` rays cross it or their stretch is outside that camera's image."""
+        rc, other = self.roi_config, 1 - camera
+        points = rays_in_box(self.rig.pair[camera], seen, self._volume.box)
+        if len(points) < 2 * self.config.min_joints:
+            return None
+        roi = roi_from_joints(self.rig.pair[other], points, np.ones(len(points)), rc.joint_margin_frac,
+                              rc.min_size_px, roll_deg=self.rolls[other], edge_crop=rc.edge_crop)
+        return None if roi is None else snap_roi(roi, rc.snap_px)
 
     def follow(self, track: Track) -> None:
         """Take ``track``, another tracker's (the same subject seen through crops turned otherwise: the estimator's
@@ -337,6 +381,7 @@ class SubjectTracker:
         other's windows were sized for its own rolls)."""
         self.track = track
         self.view_track = None
+        self.view_other = None
         self._last_rois = None
         self._used = None
 
@@ -344,5 +389,6 @@ class SubjectTracker:
         """Forget the subject (next pair starts from the working volume)."""
         self.track = None
         self.view_track = None
+        self.view_other = None
         self._last_rois = None
         self._used = None

@@ -7,9 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.measure_synth_framing import floor_in_view_from_m, pitch_deg, pitched
+from benchmarks.measure_baseline import framing_cells
+from benchmarks.measure_synth_framing import cold_crop_px, floor_in_view_from_m, pitch_deg, pitched
 from calibration.render import example_rig, synth_rig
-from ghnerf_runtime.rig_file import person_in_view_share
+from ghnerf_runtime.rig_file import person_in_view_share, standing_person
 from tests.benchmarks.test_bench_smoke import run_script, scratch_cache  # noqa: F401
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
@@ -50,6 +51,15 @@ def test_the_old_rig_raised_to_1_8_m_and_pitched_23_degrees_is_the_new_one():
         np.testing.assert_allclose(cam.R, ref.R, atol=1e-12)  # the new default: the old pair raised, 23 degrees down
 
 
+def test_cold_crop_px_is_framing_cells_model_px_for_the_person_at_the_volume_s_centre_and_less_farther_back():
+    """The per-sequence column ``cold_crop_px``: the standing person at the volume's centre is as tall as
+    ``framing_cells``' model pixels say (38 through ``ghcal synth``'s rig); moved 1 m back, shorter."""
+    synth = synth_rig()
+    person = standing_person(synth.volume)
+    assert round(cold_crop_px(synth, person, 128)) == int(framing_cells(synth, 128).split(" | ")[2]) == 38
+    assert cold_crop_px(synth, person + [0.0, 0.0, 1.0], 128) < 0.85 * cold_crop_px(synth, person, 128)
+
+
 def test_the_command_line_runs(tiny_model_dir, scratch_cache, capsys, monkeypatch, tmp_path):  # noqa: F811
     out = run_script("measure_synth_framing", "--model-dir", str(tiny_model_dir), "--sequences", "1", "--frames",
                      "1", "--pitches", "17", "--per-sequence", "--floor-seeds", "1", "--save", str(tmp_path),
@@ -58,6 +68,10 @@ def test_the_command_line_runs(tiny_model_dir, scratch_cache, capsys, monkeypatc
     assert "| ghcal-example | 1.40 | 23.6 | 1.19 | 0.5-5.0 | 0.84 | 424 | " in out, out
     assert "| ghcal-synth-pitch-17 | 1.80 | 16.9 | 1.94 | 2.0-5.0 | 1.00 | " in out, out
     assert "| ghcal-synth | 0 | -0.69 | 4.50 | jumping_jacks | 1.00 | 1.0 | 1.0 | " in out, out
+    row = next(line for line in out.splitlines() if line.startswith("| ghcal-synth | 0 | "))
+    one_view, tall = row.split(" | ")[-2:]
+    # 4.50 m ahead, arms up: 37 of 128 model px, 18 of the tiny export's 64
+    assert one_view in ("0 of 1", "1 of 1") and tall == "18 |", row
     assert "| ghcal-example | 0 | -0.69 | 4.35 | jumping_jacks | 0.64 | 0.0 | 1.0 | " in out, out
     assert "| ghcal-synth | 1.58 | " in out and "| ghcal-example | 1.19 | " in out, out  # the floor-view rows
     assert (tmp_path / "synth_pitch_17.json").is_file()

@@ -466,6 +466,13 @@ def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, sour
         assert err.max() < 1.5, err  # the oracle's heatmaps: exact up to the grid's decoding
         assert ("encoder_flip" in r.timing_ms) == (source == "encoder" and flip), r.timing_ms
         assert est.tracker.track is None and est.tracker.view_track is not None and est.tracker.view_track[0] == k
+        # both frames passed: the other camera's next crop looks along the seen joints' rays (session 69), not at
+        # the whole volume, and holds the joints seen
+        crop = est.tracker.regions().rois[1 - k]
+        assert crop.size < est.tracker.volume_regions.rois[1 - k].size, crop
+        uv = rig.pair[1 - k].project(truth[0][found], distort=False)[0]
+        corner = np.array([crop.x0, crop.y0])
+        assert (uv.min(0) >= corner).all() and (uv.max(0) <= corner + crop.size).all(), (uv, crop)
         obj = r.to_json()
         assert obj["single_view"] == names[k] and obj["frame_ok"] == {n: True for n in names}
         assert all(row == [0.0, 0.0, 0.0, 0.0] for row in obj["joints_3d"]) and all(obj["missing"])

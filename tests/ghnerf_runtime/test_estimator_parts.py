@@ -17,7 +17,7 @@ from ghnerf_runtime.keypoints import model_to_heatmap_pixels
 from ghnerf_runtime.novel_view import interpolate_camera, slerp_rotation
 from ghnerf_runtime.preprocess import Roi
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, scatter_block
-from ghnerf_runtime.tracking import SubjectTracker, snap_roi, track_from_joints
+from ghnerf_runtime.tracking import SubjectTracker, rays_in_box, snap_roi, track_from_joints
 
 K128 = [[150.0, 0.0, 63.5], [0.0, 150.0, 63.5], [0.0, 0.0, 1.0]]
 REPO = Path(__file__).resolve().parents[2]
@@ -188,6 +188,60 @@ def test_a_2d_joint_at_exactly_min_confidence_counts_for_the_view_track():
     assert tracker.update_view(1, uv, conf)
     conf[5] = np.nextafter(0.5, 0.0)  # one below: too few
     assert not tracker.update_view(1, uv, conf)
+
+
+def test_rays_in_box_gives_where_each_crossing_ray_enters_and_leaves_the_box():
+    """Each ray through a pixel that crosses the box in front of the camera: its entry and exit, on the ray and on
+    the box's faces; a ray that misses the box gives nothing; from a camera inside the box a ray enters at its
+    centre."""
+    cam = _cams()[0]
+    box = np.array([[-1.0, -2.0, 2.0], [1.0, 0.0, 4.0]])
+    pixels = np.array([[63.5, 63.5], [20.0, 100.0], [127.0, 0.0]])
+    points = rays_in_box(cam, pixels, box)
+    assert points.shape == (6, 3)
+    near, far = points[:3], points[3:]
+    _, dirs = cam.rays(pixels)
+    for p in (near, far):
+        np.testing.assert_allclose(np.cross(p - cam.center, dirs), 0.0, atol=1e-9)  # on its ray
+        assert (p >= box[0] - 1e-9).all() and (p <= box[1] + 1e-9).all()
+        assert (np.isclose(p, box[0]) | np.isclose(p, box[1])).any(axis=1).all()  # on a face
+    assert (np.einsum("ij,ij->i", far - near, dirs) > 0).all()  # entry before exit
+    assert len(rays_in_box(cam, pixels, box - [0.0, 0.0, 10.0])) == 0  # the box behind the camera
+    inside = rays_in_box(cam, pixels[:1], np.array([[-2.0, -3.0, -1.0], [2.0, 1.0, 4.0]]))
+    np.testing.assert_allclose(inside[0], cam.center)
+
+
+def test_a_person_seen_by_one_camera_only_crops_the_other_along_their_rays():
+    """``update_view(other_on_rays=True)`` (both frames passed, one camera alone found the person): the other
+    camera's next crop frames where the seen joints' rays cross the working volume, wherever along them the person
+    stands, and not the whole volume, whose crop drew a person 4.47 m ahead on ``ghcal synth``'s rig too small to
+    find (docs/rig-file.md, session 69). A rejected frame's camera (the default) stays on the volume; a 3D track, a
+    reset or too few joints end it."""
+    render = pytest.importorskip("calibration.render")
+    rig = render.synth_rig()
+    tracker = SubjectTracker(rig, TrackingConfig(min_joints=6), RoiConfig())
+    cold = tracker.regions()
+    far = _joints() + [-0.2, 0.0, 1.3]  # 4.1-4.5 m ahead
+    uv, _ = rig.pair[0].project(far)
+    assert tracker.update_view(0, uv, np.full(25, 0.9))
+    assert tracker.regions().rois[1] == cold.rois[1]
+    assert tracker.update_view(0, uv, np.full(25, 0.9), other_on_rays=True)
+    r = tracker.regions()
+    assert not r.tracked and np.array_equal(r.box, cold.box) and r.rois[0] == tracker.view_track[1]
+    crop = r.rois[1]
+    assert crop.size < 0.4 * cold.rois[1].size, (crop, cold.rois[1])
+    eye = rig.pair[0].center
+    for scale in (1.0, 0.6, 1.1):  # the same rays' points nearer or farther, inside the volume
+        seen, _ = rig.pair[1].project(eye + scale * (far - eye), distort=False)
+        assert (seen >= [crop.x0, crop.y0]).all() and (seen <= np.add([crop.x0, crop.y0], crop.size)).all(), scale
+    assert not tracker.update_view(0, uv, np.full(25, 0.05), other_on_rays=True)
+    assert tracker.view_other is None and tracker.regions() is tracker._volume
+    tracker.update_view(0, uv, np.full(25, 0.9), other_on_rays=True)
+    tracker.update(far, np.full(25, 0.9), np.ones(25, bool))
+    assert tracker.view_other is None and tracker.regions().tracked
+    tracker.update_view(0, uv, np.full(25, 0.9), other_on_rays=True)
+    tracker.reset()
+    assert tracker.view_other is None and tracker.regions() is tracker._volume
 
 
 def test_a_tracker_follows_another_trackers_track_with_its_own_crops():
