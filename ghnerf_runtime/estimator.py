@@ -773,7 +773,8 @@ class Estimator:
         self._tile_rest_wait = 0  # cold pairs left that do not search a tile (tracking.cold_tiles_rest_every)
         # each camera's scene copy at the last tile pass that found nobody (tracking.cold_tiles_wake_levels)
         self._rest_scene: tuple[SceneCopy, ...] | None = None
-        self._woke_on: tuple[np.ndarray, ...] | None = None  # the cells that woke the search now awake, per camera
+        # the cells that woke the search now awake, per camera, until a pair reports a joint or its round ends
+        self._woke_on: tuple[np.ndarray, ...] | None = None
         # per camera, each cell's wakes whose round of tiles then found nobody (a screen, a curtain: a restless cell)
         self._vain_wakes: tuple[np.ndarray, ...] | None = None
         # per camera, each cell's tile passes unchanged in a row
@@ -896,6 +897,7 @@ class Estimator:
         self._crop_terms = None
         self._next_tile = 0
         self._wake_tiles()
+        self._woke_on = None  # (a wake outlives _wake_tiles: a reset judges none)
         self._vain_wakes = None  # the scene may be another now (a camera moved): its restless cells with it
         self._still_passes = None
         self._forget_scan()
@@ -1135,6 +1137,8 @@ class Estimator:
                 p = turned
         elif p.someone:
             self._end_wait()  # someone found well: the next weak pair searches at once
+        if self._sees_in_3d(p):
+            self._woke_on = None  # someone found: the wake awake, if any, was not in vain
         self._kept_axis = self._kept_turn_axis(p)
         if p.j3 is None:
             self._forget_scan()
@@ -1340,7 +1344,12 @@ class Estimator:
     @staticmethod
     def _sees_anyone(p: "_Pass") -> bool:
         """Whether ``p`` reported anyone: a joint, or a person's 2D joints in one view."""
-        return p.single_view is not None or (p.j3 is not None and p.someone and bool(p.j3.valid.any()))
+        return p.single_view is not None or Estimator._sees_in_3d(p)
+
+    @staticmethod
+    def _sees_in_3d(p: "_Pass") -> bool:
+        """Whether ``p`` reported a joint: someone both views saw, not a person's 2D joints in one view alone."""
+        return p.j3 is not None and p.someone and bool(p.j3.valid.any())
 
     def _tiles_awake(self, images: Sequence[np.ndarray],
                      copies: Callable[[], tuple[SceneCopy, ...]] | None = None) -> bool:
@@ -1381,7 +1390,8 @@ class Estimator:
         return tuple(restless_with_neighbours(counts >= RESTLESS_AFTER_WAKES) for counts in self._vain_wakes)
 
     def _count_vain_wake(self) -> None:
-        """A woken search's whole round found nobody: the cells that woke it count one vain wake each."""
+        """A woken search's whole round found nobody (a person in one view alone restarted it, no more): the cells
+        that woke it count one vain wake each."""
         if self._vain_wakes is None:
             self._vain_wakes = tuple(np.zeros(m.shape, np.int32) for m in self._woke_on)
             self._still_passes = tuple(np.zeros(m.shape, np.int32) for m in self._woke_on)
@@ -1420,11 +1430,13 @@ class Estimator:
 
     def _wake_tiles(self) -> None:
         """Someone was seen, the scene changed (a wake) or the estimator reset: every cold pair that finds nobody
-        searches a tile again."""
+        searches a tile again. The wake awake, if any, stays to be judged: a person seen in one view only may be a
+        screen the model reads as one (a moving picture woke the rest again and again, docs/runtime.md), so only a
+        pair that reports a joint (:meth:`_sees_in_3d`) makes it not vain; else the round that ends in nobody
+        counts it (:meth:`_tile_missed`)."""
         self._tiles_missed = 0
         self._tile_rest_wait = 0
         self._rest_scene = None
-        self._woke_on = None  # someone seen: the wake, if any, was not in vain
         if self._still_passes is not None:  # nothing kept to compare with now: a cell's still passes start again
             for still in self._still_passes:
                 still[:] = 0

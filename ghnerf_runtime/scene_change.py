@@ -24,9 +24,9 @@ THUMB_CELLS = (18, 24)
 CELL_SAMPLES = 8
 #: cells that must change: one cell alone may be a flicker or a noise extreme, a person covers more
 WAKE_MIN_CELLS = 2
-#: a cell that woke this many resting searches whose whole round of tiles then found nobody wakes no more (until it
-#: stays still over CALM_AFTER_PASSES tile passes in a row, or the estimator is reset): a screen, a curtain in a
-#: draught; one vain wake may be a person the tiles missed
+#: a cell that woke this many resting searches whose whole round of tiles then found nobody (no joint: a person in one
+#: view alone may be a screen's picture) wakes no more (until it stays still over CALM_AFTER_PASSES tile passes in a
+#: row, or the estimator is reset): a screen, a curtain in a draught; one vain wake may be a person the tiles missed
 RESTLESS_AFTER_WAKES = 2
 #: a restless cell unchanged over this many tile passes in a row that found nobody wakes again (about 32 resting
 #: pairs at a tile pass every 4th): a screen's next picture can match its last in a cell by chance, so one still
