@@ -1728,8 +1728,9 @@ class Estimator:
         dropped the track and reported nobody. That includes a crop the frame check rejected: a subject who
         left shows the crop a flat wall, and the working volume's crop may show them (a view whose 2D joints
         were reported, the single-view pass, is no loss: its next crop follows them). A person seen by one
-        camera only is retried (the other camera's tracked crop may have lost them where its working volume's
-        crop shows them), from that camera's view track."""
+        camera only is retried (the other camera's tracked crop may have lost them), from that camera's view track
+        and, both frames having passed, the other camera's crop on the seen joints' rays (session 69; before, its
+        working volume's crop)."""
         if not (self.config.tracking.retry_cold and p.regions.tracked and self.tracker.track is None):
             return False
         if all(p.frame_ok.values()):
