@@ -515,3 +515,19 @@ def test_a_walk_in_seen_in_one_view_then_in_both_is_no_vain_wake(example_rig, fa
         assert est.estimate(room).missing.all()
     assert est._tile_rest_wait > 0  # resting again
     assert est._vain_wakes is None
+
+
+def test_a_reset_leaves_no_wake_to_judge(example_rig, far_person):
+    """A wake still to be judged (the walk-in seen by one camera alone so far) is forgotten by ``reset()`` with the
+    restless cells: the round after it that finds nobody counts no vain wake against the cells that woke it."""
+    images, joints = far_person
+    oracle, est = resting_estimator(example_rig, rest_every=8)
+    oracle.set_truth(joints, first_camera_only(joints))
+    est.estimate(images)  # the walk-in wakes the rest
+    assert est.estimate(images).single_view == example_rig.pair[0].name and est._woke_on is not None
+    est.reset()
+    oracle.set_truth(None)
+    for room in far_scene_room(example_rig, [2.0 + i / 30.0 for i in range(5)]):  # a whole round finds nobody
+        assert est.estimate(room).missing.all()
+    assert est._tile_rest_wait > 0  # resting again
+    assert est._vain_wakes is None
