@@ -635,9 +635,9 @@ def volume_edge_notes(rig: Rig) -> list[str]:
     floor) whom a pair camera shows under :data:`MIN_PERSON_IN_VIEW_SHARE` of their height: the centre's check passed
     a volume that starts nearer than the lenses frame anyone (``ghcal solve``'s default 0.5 m; session 69). Each note
     names the cameras, what they cut and the nearest (farthest) depth at which both show the person whole."""
-    edges = (("near", float(rig.volume.min_corner[2])), ("far", float(rig.volume.max_corner[2])))
+    edges = tuple(zip(("near", "far"), _depth_range(rig.volume)))
     people = _people_at(rig.volume, np.array([depth for _, depth in edges]))  # both edges in one projection a camera
-    shown = [(cam.name, _inside_image(cam, people).reshape(len(edges), _PERSON_SAMPLES)) for cam in rig.pair]
+    shown = [(cam.name, _inside_per_person(cam, people)) for cam in rig.pair]
     notes: list[str] = []
     grid = None  # the depths both cameras show the person whole at: searched once, and only for a cut edge
     for k, (edge, depth) in enumerate(edges):
@@ -657,6 +657,16 @@ def _people_at(volume: WorkingVolume, depths: np.ndarray) -> np.ndarray:
     return people.reshape(-1, 3)
 
 
+def _depth_range(volume: WorkingVolume) -> tuple[float, float]:
+    """The working volume's near and far edges along ``z`` (rig frame, metres)."""
+    return float(volume.min_corner[2]), float(volume.max_corner[2])
+
+
+def _inside_per_person(cam: Camera, people: np.ndarray) -> np.ndarray:
+    """:func:`_inside_image` of :func:`_people_at`'s ``people``, one row per person (feet to head)."""
+    return _inside_image(cam, people).reshape(-1, _PERSON_SAMPLES)
+
+
 def _cut_words(name: str, inside: np.ndarray) -> str:
     """``camera 'name' shows N% of their height, their head out of view`` from ``inside``, feet to head."""
     ends = [part for part, seen in (("head", inside[-1]), ("feet", inside[0])) if not seen]
@@ -667,20 +677,20 @@ def _cut_words(name: str, inside: np.ndarray) -> str:
 def _whole_grid(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
     """The depths on :data:`EDGE_FIT_STEP_M`'s grid within the working volume, nearest first, and whether both pair
     cameras show the whole person standing at each: one projection per camera for all of them (loading's cost)."""
-    near, far = float(rig.volume.min_corner[2]), float(rig.volume.max_corner[2])
+    near, far = _depth_range(rig.volume)
     steps = np.arange(math.ceil(near / EDGE_FIT_STEP_M - 1e-6), math.floor(far / EDGE_FIT_STEP_M + 1e-6) + 1)
     depths = np.round(steps * EDGE_FIT_STEP_M, 6)
     people = _people_at(rig.volume, depths)
     whole = np.ones(len(depths), dtype=bool)
     for cam in rig.pair:
-        whole &= _inside_image(cam, people).reshape(len(depths), _PERSON_SAMPLES).all(axis=1)
+        whole &= _inside_per_person(cam, people).all(axis=1)
     return depths, whole
 
 
 def _edge_advice(rig: Rig, edge: str, depths: np.ndarray, whole: np.ndarray) -> str:
     """Where both pair cameras show the person whole nearest the ``edge`` (of :func:`_whole_grid`'s ``depths``), and
     what to do of it."""
-    near, far = float(rig.volume.min_corner[2]), float(rig.volume.max_corner[2])
+    near, far = _depth_range(rig.volume)
     if not whole.any():
         return (f"No depth within the volume (z {near:.2f}-{far:.2f} m, every {EDGE_FIT_STEP_M:g} m) shows them whole "
                 f"in both cameras: move the cameras back, fit wider lenses or aim them at the volume {_EDGES_DOC}")
