@@ -486,8 +486,9 @@ def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, sour
 
 def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_in_the_other(clip):
     """A 3D track, then the person seen by camera 0 only: the tracked pass finds nobody in 3D, the pair is run
-    again from the working volume in camera 1 (``tracking.retry_cold``) and camera 0's view track, and answers
-    camera 0's 2D joints; the next such pair starts from there, one pass."""
+    again (``tracking.retry_cold``) from camera 0's view track and, since session 69, camera 1's crop on the seen
+    joints' rays (the working volume's before), and answers camera 0's 2D joints; the next such pair starts from
+    there, one pass."""
     rig, frames, truth, visible, *_ = clip
     oracle = OracleSession(edge128_contract())
     # roi.turn_search at its default, on: the view reads them well, so no pair searches the crop turns (counted
@@ -502,6 +503,8 @@ def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_
         assert r.single_view == est.camera_names[0] and r.missing.all() and not r.tracked
         assert oracle.run_counts["encoder"] - runs == (2 if k == 1 else 1)  # the tracked pass, then the retry
         assert est.tracker.track is None and est.tracker.view_track[0] == 0
+        volume = est.tracker.volume_regions.rois[1]
+        assert r.rois[est.camera_names[1]].size < volume.size  # the retry's camera 1 crop: on the rays, not the volume
 
 
 @pytest.mark.parametrize("k", [0, 1])
