@@ -447,9 +447,11 @@ def _listed_views(views: dict, tmp_path) -> Path:
     return images
 
 
-def _detection_stood_in_for(views: dict, monkeypatch) -> None:
-    """``ghcal``'s detection answering ``views`` whatever the folder."""
-    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {cam: [] for cam in views}))
+def _detection_stood_in_for(views: dict, monkeypatch, missed: dict | None = None) -> None:
+    """``ghcal``'s detection answering ``views`` whatever the folder, and ``missed`` (camera -> the images it did
+    not find the board in; none by default)."""
+    missed = {cam: [] for cam in views} if missed is None else missed
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, missed))
 
 
 def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str,
@@ -460,11 +462,9 @@ def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str,
 
     images = _listed_views(views, tmp_path)
     save_rig(rig, tmp_path / "rig.json")
-    _detection_stood_in_for(views, monkeypatch)
     if stray is not None:
         assert cv2.imwrite(str(images / "left" / "stray.png"), np.zeros(stray[::-1], np.uint8))
-        missed = {cam: ["stray"] if cam == "left" else [] for cam in views}
-        monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, missed))
+    _detection_stood_in_for(views, monkeypatch, None if stray is None else {"left": ["stray"], "right": []})
     rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
                    "--images", str(images), *options])
     return rc, images
