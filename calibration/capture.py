@@ -71,8 +71,8 @@ def earlier_size(folder: Path, *, skip: Iterable[str] = ()) -> tuple[Path, tuple
     """An image already in a camera's ``folder`` and its ``(width, height)``; None when it holds none.
 
     A session appended (or a floor view added) at another size than the views there was kept without a word, and
-    the solve then refused the mix ("its images differ in size"): the cameras of another rig, or opened at
-    another resolution. One image stands for the folder: the solve names every size found. Views named in
+    the solve then refused the mix: the cameras of another rig, or opened at another resolution. One image stands
+    for the folder: the solve names each image of another size (:mod:`calibration.image_sizes`). Views named in
     ``skip`` do not count (a floor view being replaced).
     """
     images = list_images(folder) if folder.is_dir() else {}

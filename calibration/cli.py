@@ -29,7 +29,7 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 
 import cv2
@@ -646,7 +646,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     for cam in names:
         extra = f"; no board in {', '.join(missed[cam])}" if missed[cam] else ""
         print(f"{cam}: the board found in {len(views[cam])} of {len(views[cam]) + len(missed[cam])} images{extra}")
-    _refuse_mixed_sizes(Path(args.images), names, views)
+    _refuse_mixed_sizes(camera_image_sizes(Path(args.images), names, views),
+                        "Solved as they are, a camera's views at two sizes cannot share one lens")
     _refuse_exchanged_sizes(out, views, Path(args.images))
     blind = [cam for cam in names if not views[cam]]
     if blind:  # said as such: it was blamed on the floor view, or on too few views ("15-30 is usual")
@@ -707,15 +708,16 @@ def _replaced_rig(out: Path):
         return None
 
 
-def _refuse_mixed_sizes(images: Path, cameras: Sequence[str], views: dict) -> None:
-    """Refuse a camera whose images are not all one size, the board found in them or not
-    (:mod:`calibration.image_sizes`): checked from the images alone, so also where ``--out`` holds no rig file.
+def _refuse_mixed_sizes(sizes: Mapping[str, Mapping[str, tuple[Path, tuple[int, int]]]], why: str) -> None:
+    """Refuse a camera whose images are not all one size, the board found in them or not (``sizes`` from
+    :func:`~calibration.image_sizes.camera_image_sizes`): checked from the images alone, so also where ``solve``'s
+    ``--out`` holds no rig file; ``why`` is the command's reason (``solve``'s lens, ``check``'s rig file).
 
     :raises UsageError: naming each odd image's file, its size and its camera's usual one.
     """
-    problem = mixed_sizes_problem(camera_image_sizes(images, cameras, views))
+    problem = mixed_sizes_problem(sizes)
     if problem is not None:
-        raise UsageError(f"{problem}. Solved as they are, a camera's views at two sizes cannot share one lens")
+        raise UsageError(f"{problem}. {why}")
 
 
 def _refuse_exchanged_sizes(out: Path, views: dict, images: Path) -> None:
@@ -1039,10 +1041,14 @@ def cmd_check(args: argparse.Namespace) -> int:
                          f"{names} (no folder {missing[0]!r}): views of another rig? check them with its rig file")
     views, missed = detect_folder(board, args.images, names)
     limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
+    sizes = camera_image_sizes(Path(args.images), names, views)
+    rig_sizes = ", ".join(f"{cam.name!r} {cam.width}x{cam.height}" for cam in rig.pair)
+    # first, as solve: each camera's images one size, the exchange below (told by its board views) holds of them all
+    _refuse_mixed_sizes(sizes, f"A camera's images are checked at its size in {args.rig}: {rig_sizes}")
     if sized_as_exchanged(rig, views):
         raise UsageError(_exchanged_sizes_words(rig, args.rig, board, views, Path(args.images), limits, thickness,
                                                 floor_view))
-    _refuse_sizes_unlike_the_rig(rig, args.rig, Path(args.images), views)
+    _refuse_sizes_unlike_the_rig(rig, args.rig, sizes)
 
     def taken(name: str) -> bool:
         return any(name in views[c] or name in missed[c] for c in views)
@@ -1090,19 +1096,15 @@ def cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
-def _refuse_sizes_unlike_the_rig(rig: Rig, rig_path: str, images: Path, views: dict) -> None:
-    """Refuse an image of another size than its camera's in ``rig_path``, the board found in it or not
-    (:mod:`calibration.image_sizes`, as ``solve`` checks them): a camera's images not all one size, each odd one
-    named (a pair exchanged between the folders said so), else a camera's images all of another size than the
-    rig's. Before session 69 only the images the board was found in were compared: a stray image went unsaid.
+def _refuse_sizes_unlike_the_rig(rig: Rig, rig_path: str,
+                                 sizes: Mapping[str, Mapping[str, tuple[Path, tuple[int, int]]]]) -> None:
+    """Refuse an image of another size than its camera's in ``rig_path``, the board found in it or not (``sizes``
+    from :func:`~calibration.image_sizes.camera_image_sizes`, each camera's images found one size first, as
+    ``solve`` finds them). Before session 69 only the images the board was found in were compared: a stray image
+    went unsaid.
 
     :raises UsageError: naming an image's file, its size and the size it should have.
     """
-    sizes = camera_image_sizes(images, [cam.name for cam in rig.pair], views)
-    problem = mixed_sizes_problem(sizes)
-    if problem is not None:
-        rig_sizes = ", ".join(f"{cam.name!r} {cam.width}x{cam.height}" for cam in rig.pair)
-        raise UsageError(f"{problem}. A camera's images are checked at its size in {rig_path}: {rig_sizes}")
     for cam in rig.pair:
         for path, size in sizes[cam.name].values():
             if size != cam.size:

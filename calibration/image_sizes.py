@@ -2,13 +2,14 @@
 
 ``ghcal solve`` compares the image sizes with the rig file it replaces at ``--out`` (folders exchanged whole,
 :func:`~calibration.check.sized_as_exchanged`); with none there it had nothing to compare them with, and each
-camera's images were compared only among those the board was found in (``solve_intrinsics``): an image of another
-size in which the board was not found went unnoticed, and a pair exchanged between the folders was told only as
-"its images differ in size". Every image of a camera is one size here, the board found in it or not: the size
-of its board detections where it has them, read from the file's header where it has none. An image of another
-size is named with both sizes; one whose namesake in the other camera's folder has this camera's size is said to
-be exchanged with it. ``ghcal check`` compares them the same way before comparing them with its rig file's sizes
-(since session 69: it compared only the images the board was found in).
+camera's images were compared only among those the board was found in (``calibration.solve.calibrate_intrinsics``,
+which keeps that guard for library callers): an image of another size in which the board was not found went
+unnoticed, and a pair exchanged between the folders was told only as "its images differ in size". Every image of a
+camera is one size here, the board found in it or not: the size of its board detections where it has them, read
+from the file's header where it has none. An image of another size is named with both sizes; one whose namesake in
+the other camera's folder has this camera's size is said to be exchanged with it. ``ghcal check`` compares them the
+same way, before it says the folders exchanged or compares them with its rig file's sizes (since session 69: it
+compared only the images the board was found in).
 """
 from __future__ import annotations
 

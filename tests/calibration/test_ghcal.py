@@ -1295,35 +1295,42 @@ def test_a_stop_between_the_two_renames_of_a_view_leaves_the_pair_whole_and_coun
 def test_cli_synth_says_its_rig_s_note_once(tmp_path, capsys, monkeypatch):
     """A noted rig (example_rig, ``ghcal synth``'s until session 68: 84 % of a standing person in view) is noted of
     where ``ghcal synth`` writes it, naming truth_rig.json; a ``--rig`` file's note is said as it loads, naming it,
-    and not a second time for its copy; the default synth rig frames its person and says nothing."""
+    and not a second time for its copy; the default synth rig frames its person and says nothing. The near edge's
+    note (session 69: example_rig's volume from 0.5 m) is said once beside it, where it is."""
     def one_blank_view(rig, board, **_):  # the rendering (half a minute) is not what is tested
         return {cam.name: {"000": np.zeros((cam.height, cam.width, 3), np.uint8)} for cam in rig.pair}
 
     monkeypatch.setattr(cli, "calibration_views", one_blank_view)
     assert cli.main(["synth", "--out", str(tmp_path / "framed")]) == 0
-    assert framing_notes(capsys.readouterr().err) == []
+    err = capsys.readouterr().err
+    assert framing_notes(err) == [] and edge_notes(err) == [], err
     monkeypatch.setattr(cli, "synth_rig", example_rig)
     assert cli.main(["synth", "--out", str(tmp_path / "synth")]) == 0
     err = capsys.readouterr().err
     assert len(framing_notes(err)) == 1 and f"{tmp_path / 'synth' / 'truth_rig.json'}: a 1.8 m person" in err, err
+    edges = edge_notes(err)
+    assert len(edges) == 1 and edges[0].startswith(f"{tmp_path / 'synth' / 'truth_rig.json'}: {NEAR_EDGE_WORDS}"), err
     given = tmp_path / "given.json"
     save_rig(example_rig(), given)
     assert cli.main(["synth", "--out", str(tmp_path / "again"), "--rig", str(given)]) == 0
     err = capsys.readouterr().err
     assert len(framing_notes(err)) == 1 and f"{given}: a 1.8 m person" in err, err
+    assert len(edge_notes(err)) == 1 and edge_notes(err)[0].startswith(f"{given}: {NEAR_EDGE_WORDS}"), err
 
 
 def test_capture_says_the_rig_s_note_and_warnings_once_as_its_source_opens(truth, tmp_path, capsys):
     """A rig source logs at its open what it warns and notes of its rig (``drivers.base``): ``ghcal capture``, with no
     logging set up, showed the warnings (Python's last resort) and dropped the note (INFO), here of the take's rig
     (``truth``: 84 % of a standing person in view). Since session 68 each is said once, a bare line on stderr naming
-    the take's manifest as ghcal names a loaded rig file; a rig off the floor's warning once, not twice."""
+    the take's manifest as ghcal names a loaded rig file; a rig off the floor's warning once, not twice; the near
+    edge's note (session 69) once, after the centre's."""
     take, board = _one_view_take(tmp_path, truth)
     out = tmp_path / "capture"
     assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
                      "--count", "1"]) == 0
     err = capsys.readouterr().err
     assert len(framing_notes(err)) == 1 and f"\n{take / 'manifest.json'}: a 1.8 m person" in "\n" + err, err
+    assert len(edge_notes(err)) == 1 and err.splitlines() == framing_notes(err) + edge_notes(err), err  # nothing else
     raised = Rig(truth.cameras, WorkingVolume(truth.volume.min_corner - [0, 2, 0], truth.volume.max_corner - [0, 2, 0]),
                  rig_id="raised")
     (tmp_path / "raised").mkdir()

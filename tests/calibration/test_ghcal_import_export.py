@@ -14,7 +14,7 @@ from calibration import cli
 from calibration.render import example_rig
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import load_rig, save_rig
-from tests.framing_note import but_the_framing_note, framing_notes
+from tests.framing_note import but_the_framing_note, edge_notes, framing_notes
 
 #: example_rig's first camera: 1.4 m up at x = -0.3 m, looking at a point 2.5 m ahead and 0.3 m up (x = 0), no roll
 PITCH_DEG = math.degrees(math.atan2(1.4 - 0.3, math.hypot(2.5, 0.3)))
@@ -381,17 +381,25 @@ def test_export_and_import_say_the_rig_s_note_once_on_stderr_naming_the_file(rig
     """``example_rig`` (``ghcal synth``'s rig until session 68) shows a standing person 84 % of their height: loading
     notes it at INFO (session 67), and ghcal, which sets no logging up, showed WARNING and over only: neither the
     export of it (which reads it) nor the import (which writes it) said it. Since session 68 each says it once on
-    stderr, a bare line beside the warnings, naming the rig file read or written."""
+    stderr, a bare line beside the warnings, naming the rig file read or written; since session 69 the note of its
+    volume's near edge (0.5 m ahead) after it, once too."""
     foreign = tmp_path / "calibration.yml"
     assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)]) == 0
-    notes = framing_notes(capsys.readouterr().err)
-    assert len(notes) == 1 and notes[0].startswith(f"{rig_file}: a 1.8 m person standing") and "84%" in notes[0], notes
+    _assert_noted_once(capsys.readouterr().err, rig_file)
     back = tmp_path / "back.json"
     assert cli.main(["import", str(foreign), "--out", str(back)]) == 0
     captured = capsys.readouterr()
-    notes = framing_notes(captured.err)
-    assert len(notes) == 1 and notes[0].startswith(f"{back}: a 1.8 m person standing") and "84%" in notes[0], notes
-    assert framing_notes(captured.out) == []
+    _assert_noted_once(captured.err, back)
+    assert framing_notes(captured.out) == [] and edge_notes(captured.out) == []
+
+
+def _assert_noted_once(err: str, path: Path) -> None:
+    """``err`` holds example_rig's centre note (84 %) then its near edge's, each once, naming ``path``."""
+    notes = framing_notes(err) + edge_notes(err)
+    assert [note.split("(")[0] for note in notes] == [
+        f"{path}: a 1.8 m person standing at the working volume's centre ",
+        f"{path}: a 1.8 m person standing at the working volume's near edge "], err
+    assert "84%" in notes[0] and [line for line in err.splitlines() if line in notes] == notes, err
 
 
 #: the words of the rig file's warning for a camera's height (rig_file.camera_height_warning) of example_rig's first

@@ -447,18 +447,24 @@ def _listed_views(views: dict, tmp_path) -> Path:
     return images
 
 
-def _detection_stood_in_for(views: dict, monkeypatch) -> None:
-    """``ghcal``'s detection answering ``views`` whatever the folder."""
-    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {cam: [] for cam in views}))
+def _detection_stood_in_for(views: dict, monkeypatch, missed: dict | None = None) -> None:
+    """``ghcal``'s detection answering ``views`` whatever the folder, and ``missed`` (camera -> the images it did
+    not find the board in; none by default)."""
+    missed = {cam: [] for cam in views} if missed is None else missed
+    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, missed))
 
 
-def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str) -> tuple[int, Path]:
-    """``ghcal check`` of ``rig`` on ``views`` (the detection stood in for): its exit status, and the images' folder."""
+def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str,
+               stray: tuple[int, int] | None = None) -> tuple[int, Path]:
+    """``ghcal check`` of ``rig`` on ``views`` (the detection stood in for): its exit status, and the images' folder.
+    ``stray``: a ``(width, height)`` image ``left/stray.png`` beside them too, the board not found in it."""
     from ghnerf_runtime.rig_file import save_rig
 
     images = _listed_views(views, tmp_path)
     save_rig(rig, tmp_path / "rig.json")
-    _detection_stood_in_for(views, monkeypatch)
+    if stray is not None:
+        assert cv2.imwrite(str(images / "left" / "stray.png"), np.zeros(stray[::-1], np.uint8))
+    _detection_stood_in_for(views, monkeypatch, None if stray is None else {"left": ["stray"], "right": []})
     rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
                    "--images", str(images), *options])
     return rc, images
@@ -590,24 +596,29 @@ def test_solve_without_a_rig_file_refuses_an_image_of_another_size_the_board_was
 def test_check_refuses_an_image_of_another_size_the_board_was_not_found_in(sized_rig, tmp_path, capsys,
                                                                           monkeypatch):
     # check compared only the images the board was found in with the rig: a stray image at another size went unsaid
-    from ghnerf_runtime.rig_file import save_rig
-
     views = _views(sized_rig, _facing_poses(sized_rig, 6, seed=5))
-    images = _listed_views(views, tmp_path)
-    save_rig(sized_rig, tmp_path / "rig.json")
-    stray = images / "left" / "stray.png"
-    assert cv2.imwrite(str(stray), np.zeros((16, 32), np.uint8))
-    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {"left": ["stray"], "right": []}))
-    check = ["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"), "--images",
-             str(images)]
-    rc = cli.main(check)
+    rc, images = _check_cli(sized_rig, views, tmp_path, monkeypatch, stray=(32, 16))
     err = capsys.readouterr().err
     assert rc == 2 and (
-        f"{stray} is 32x16, the other 6 image(s) of camera 'left' 960x600: remove or retake it. A camera's images "
-        f"are checked at its size in {tmp_path / 'rig.json'}: 'left' 960x600, 'right' 640x400") in err, err
-    stray.unlink()
-    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {"left": [], "right": []}))
-    assert cli.main(check) == 0  # without it: checked
+        f"{images / 'left' / 'stray.png'} is 32x16, the other 6 image(s) of camera 'left' 960x600: remove or retake "
+        f"it. A camera's images are checked at its size in {tmp_path / 'rig.json'}: 'left' 960x600, 'right' "
+        "640x400") in err, err
+    (images / "left" / "stray.png").unlink()
+    assert _check_cli(sized_rig, views, tmp_path, monkeypatch)[0] == 0  # without it: checked
+
+
+def test_check_names_a_stray_image_before_saying_the_folders_exchanged(sized_rig, tmp_path, capsys, monkeypatch):
+    # the exchange is told by the board views: "every image in capture/left is 640x400" was said beside a stray of
+    # a third size, named only by the next check; solve names it first too (the images one size, then the exchange)
+    views = _exchanged(_views(sized_rig, _facing_poses(sized_rig, 6, seed=5)))
+    rc, images = _check_cli(sized_rig, views, tmp_path, monkeypatch, stray=(32, 16))
+    err = capsys.readouterr().err
+    assert rc == 2 and "look exchanged" not in err and (
+        f"{images / 'left' / 'stray.png'} is 32x16, the other 6 image(s) of camera 'left' 640x400: remove or retake "
+        "it. A camera's images are checked at its size in") in err, err
+    (images / "left" / "stray.png").unlink()
+    assert _check_cli(sized_rig, views, tmp_path, monkeypatch)[0] == 2
+    assert "the folders look exchanged: every image in" in capsys.readouterr().err
 
 
 def test_check_says_a_pair_exchanged_between_the_folders(sized_rig, tmp_path, capsys, monkeypatch):
