@@ -32,7 +32,7 @@ def edge_notes(text: str) -> list[str]:
     return [line for line in text.splitlines() if _is_edge_note(line)]
 
 
-def but_the_framing_note(text: str) -> str:
+def but_the_framing_notes(text: str) -> str:
     """``text`` without its framing notes' lines (the centre's and the edges'): what a test of a tool's other messages
     reads."""
     return "".join(line for line in text.splitlines(keepends=True)

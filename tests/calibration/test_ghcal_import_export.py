@@ -14,7 +14,7 @@ from calibration import cli
 from calibration.render import example_rig
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import load_rig, save_rig
-from tests.framing_note import but_the_framing_note, edge_notes, framing_notes
+from tests.framing_note import but_the_framing_notes, edge_notes, framing_notes
 
 #: example_rig's first camera: 1.4 m up at x = -0.3 m, looking at a point 2.5 m ahead and 0.3 m up (x = 0), no roll
 PITCH_DEG = math.degrees(math.atan2(1.4 - 0.3, math.hypot(2.5, 0.3)))
@@ -158,7 +158,7 @@ def test_what_the_user_must_give_is_named(rig_file, tmp_path, capsys, args, word
             for a in args]
     assert cli.main(argv) == 2
     # one line, bar the note of the rig file an export reads (example_rig's: 84 % of a standing person in view)
-    err = but_the_framing_note(capsys.readouterr().err)
+    err = but_the_framing_notes(capsys.readouterr().err)
     assert err.count("\n") == 1 and all(w in err for w in words), err
     assert not (tmp_path / "out.json").exists()
 

@@ -18,7 +18,7 @@ from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import save_rig
 from tests.calibration.test_ghcal import _write_recording
-from tests.framing_note import but_the_framing_note
+from tests.framing_note import but_the_framing_notes
 
 BOARD = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
 
@@ -202,7 +202,7 @@ def test_a_camera_unplugged_mid_capture_says_what_was_kept(truth, one_view, tmp_
         drivers.create_rig_source, 2, drivers.RigDisconnectedError("camera 'right' vanished (USB reset)")))
     assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
                      "--count", "5", "--interval-s", "0", "--still-s", "0"]) == 2
-    err = but_the_framing_note(capsys.readouterr().err)
+    err = but_the_framing_notes(capsys.readouterr().err)
     assert "camera 'right' vanished (USB reset); the 1 view(s) kept before it are whole pairs in" in err, err
     assert "--append" in err and err.count("\n") == 1
     for cam in truth.pair:  # and they are
@@ -236,7 +236,7 @@ def test_a_corrupt_image_mid_take_is_skipped_and_the_views_after_it_kept(truth, 
                    "--out", str(out), "--count", "3", "--interval-s", "0", "--still-s", "0"])
     captured = capsys.readouterr()
     assert rc == 0, captured.err
-    assert but_the_framing_note(captured.err) == (f"ghcal: skipped a frame the rig could not deliver: recording image "
+    assert but_the_framing_notes(captured.err) == (f"ghcal: skipped a frame the rig could not deliver: recording image "
                                                  f"{corrupt} is corrupt (OpenCV cannot decode it)\n")
     assert captured.out.splitlines()[-1] == f"kept 3 view(s) in {out}; skipped 1 frame(s) the rig could not deliver"
     for cam in truth.pair:  # the poses before and after it, each a whole pair
@@ -254,7 +254,7 @@ def test_two_frames_the_rig_could_not_deliver_in_a_row_end_the_capture(truth, th
     out = tmp_path / "capture"
     assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(_board_file(tmp_path)),
                      "--out", str(out), "--count", "3", "--interval-s", "0", "--still-s", "0"]) == 2
-    lines = but_the_framing_note(capsys.readouterr().err).splitlines()
+    lines = but_the_framing_notes(capsys.readouterr().err).splitlines()
     assert len(lines) == 2 and lines[0].startswith("ghcal: skipped a frame the rig could not deliver: "), lines
     assert f"{take / 'images' / 'right' / '00000003.png'} is corrupt (OpenCV cannot decode it) (the second frame " \
         "in a row the rig could not deliver); the 1 view(s) kept before it are whole pairs in" in lines[1], lines
@@ -276,7 +276,7 @@ def test_a_rig_of_another_size_or_a_take_not_written_ends_the_capture_at_once(tr
     monkeypatch.setattr(drivers, "create_rig_source", _failing_after(drivers.create_rig_source, 2, error))
     assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(_board_file(tmp_path)),
                      "--out", str(tmp_path / "c"), "--count", "5", "--interval-s", "0", "--still-s", "0"]) == 2
-    err = but_the_framing_note(capsys.readouterr().err)
+    err = but_the_framing_notes(capsys.readouterr().err)
     assert f"{error}; the 1 view(s) kept before it are whole pairs in" in err and err.count("\n") == 1, err
     assert "skipped" not in err
 
