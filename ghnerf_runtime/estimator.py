@@ -504,6 +504,20 @@ def _add_ms(timing: dict[str, float], stage: str, t0: float) -> None:
     timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
 
 
+def _nearest_meeting(o1: np.ndarray, o2: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> np.ndarray | None:
+    """The midpoint of where two rays (origins ``o1``, ``o2``, unit directions ``d1``, ``d2``) pass nearest each
+    other; None where they are parallel, not finite, or meet behind either origin."""
+    w = o1 - o2
+    b, d, e = float(d1 @ d2), float(d1 @ w), float(d2 @ w)
+    det = 1.0 - b * b
+    if not np.isfinite(det) or det < 1e-9:
+        return None
+    t1, t2 = (b * e - d) / det, (e - b * d) / det
+    if t1 <= 0 or t2 <= 0:
+        return None
+    return 0.5 * (o1 + t1 * d1 + o2 + t2 * d2)
+
+
 @dataclass
 class _Pass:
     """What one pass over a pair produced (``j3`` is ``None`` when the frame check stopped it)."""
@@ -622,6 +636,10 @@ _NEAR_LIE_STEP_DEG = 2.0
 #: (both views together, 100 rooms: benchmarks/measure_presence.py --rooms 100 --flip-test; with --time
 #: --turn-search it counts the empty-room pairs that still search: none of 88).
 _TURN_SEARCH_FLOOR = 0.1
+#: tracking.cold_tiles_below_share: a cold pass that found nobody searches first the tile where the joints whose
+#: encoder-heatmap peaks reach this in both views meet (under the presence threshold: a person too small for the whole
+#: volume's crop may still leave weak peaks where they stand; Estimator._tile_by_evidence)
+_TILE_EVIDENCE_FLOOR = 0.05
 
 
 def _view_score(heat: np.ndarray) -> np.ndarray:
@@ -769,6 +787,7 @@ class Estimator:
         # enough), one searched per cold pair that finds nobody, in turn
         self._cold_tiles = self._tiles_for_small_people(rig)
         self._next_tile = 0
+        self._tiles_tried: frozenset[int] = frozenset()  # the tiles the current round searched and found nobody in
         self._tiles_missed = 0  # tile passes in a row that found nobody (a whole round of them: the search rests)
         self._tile_rest_wait = 0  # cold pairs left that do not search a tile (tracking.cold_tiles_rest_every)
         # each camera's scene copy at the last tile pass that found nobody (tracking.cold_tiles_wake_levels)
@@ -1321,21 +1340,64 @@ class Estimator:
 
     def _tile_search(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
                      novel_view: NovelViewRequest | None, copies: Callable[[], tuple[SceneCopy, ...]]) -> "_Pass":
-        """After ``p``, a cold pass that found nobody: the pass through the next working-volume tile (one a pair, in
-        turn), refined on its subject when it finds someone (and then that tile is searched first when the track is
+        """After ``p``, a cold pass that found nobody: the pass through one working-volume tile (one a pair), the one
+        where ``p``'s faint peaks meet (:meth:`_tile_by_evidence`), else the next in turn that this round has not
+        searched; refined on its subject when it finds someone (and then that tile is next in turn when the track is
         lost again); a person the tile shows one camera only is that pass's answer too (the tracker follows that
         view from it); else ``p``."""
-        k = self._next_tile % len(self._cold_tiles)
+        k = self._tile_by_evidence(p)
+        if k is None:
+            k = self._next_untried_tile()
         self.cold_tile_passes += 1
         q = self._pass(images, self._cold_tiles[k], sequence, timing, novel_view)
         if not self._sees_anyone(q):
             self._next_tile = k + 1
+            self._tiles_tried = self._tiles_tried | {k}
+            if len(self._tiles_tried) >= len(self._cold_tiles):
+                self._tiles_tried = frozenset()  # a whole round: the next one may search any tile again
             self._tile_missed(copies)
             return p
         self.cold_tiles_found += 1
         self._next_tile = k
         self._wake_tiles()
         return self._refined(images, q, sequence, timing, novel_view)
+
+    def _next_untried_tile(self) -> int:
+        """The fixed order: the next tile from ``_next_tile`` on that this round has not searched."""
+        n = len(self._cold_tiles)
+        return next((k % n for k in range(self._next_tile, self._next_tile + n) if k % n not in self._tiles_tried),
+                    self._next_tile % n)
+
+    def _tile_by_evidence(self, p: "_Pass") -> int | None:
+        """The tile this round has not searched that holds the weak evidence of ``p``, a cold pass that found nobody
+        (:meth:`_weak_evidence_point`), the one whose centre is nearest it where tiles overlap: where a person too
+        small to find in the whole volume's crop may stand. None where there is no such point or no untried tile
+        holds it (the fixed order then)."""
+        point = self._weak_evidence_point(p)
+        if point is None:
+            return None
+        held = [k for k, tile in enumerate(self._cold_tiles) if k not in self._tiles_tried
+                and np.all(point >= tile.box[0]) and np.all(point <= tile.box[1])]
+        if not held:
+            return None
+        return min(held, key=lambda k: float(np.linalg.norm(self._cold_tiles[k].box.mean(axis=0) - point)))
+
+    def _weak_evidence_point(self, p: "_Pass") -> np.ndarray | None:
+        """``(3,)``: the median, over the joints whose decoded encoder-heatmap peak reaches
+        :data:`_TILE_EVIDENCE_FLOOR` in both views, of where the two views' rays through those peaks pass nearest each
+        other (sub-cell peaks: the views' disparity, a pixel or two of the model's input at 4 m through a 12 cm
+        baseline, is under a heatmap cell); None without such a joint or the encoder heatmaps."""
+        heat = None if p.env is None else p.env.get("encoder_heatmaps")
+        if heat is None or p.crops is None:
+            return None
+        kp = decode_keypoints(np.ascontiguousarray(heat, dtype=np.float32), self.config.decoder)
+        both = np.flatnonzero(np.all(kp.valid & (kp.confidence >= _TILE_EVIDENCE_FLOOR), axis=0))
+        if not len(both):
+            return None
+        uv = heatmap_to_model_pixels(kp.uv[:, both], self.grid, self.size)  # (2, M, 2)
+        (o1, d1), (o2, d2) = (crop.rays(uv[i]) for i, crop in enumerate(p.crops))
+        points = [m for m in (_nearest_meeting(o1[j], o2[j], d1[j], d2[j]) for j in range(len(both))) if m is not None]
+        return np.median(points, axis=0) if points else None
 
     @staticmethod
     def _sees_anyone(p: "_Pass") -> bool:
@@ -1422,6 +1484,7 @@ class Estimator:
         """Someone was seen, the scene changed (a wake) or the estimator reset: every cold pair that finds nobody
         searches a tile again."""
         self._tiles_missed = 0
+        self._tiles_tried = frozenset()
         self._tile_rest_wait = 0
         self._rest_scene = None
         self._woke_on = None  # someone seen: the wake, if any, was not in vain
