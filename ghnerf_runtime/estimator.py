@@ -636,10 +636,6 @@ _NEAR_LIE_STEP_DEG = 2.0
 #: (both views together, 100 rooms: benchmarks/measure_presence.py --rooms 100 --flip-test; with --time
 #: --turn-search it counts the empty-room pairs that still search: none of 88).
 _TURN_SEARCH_FLOOR = 0.1
-#: tracking.cold_tiles_below_share: a cold pass that found nobody searches first the tile where the joints whose
-#: encoder-heatmap peaks reach this in both views meet (under the presence threshold: a person too small for the whole
-#: volume's crop may still leave weak peaks where they stand; Estimator._tile_by_evidence)
-_TILE_EVIDENCE_FLOOR = 0.05
 
 
 def _view_score(heat: np.ndarray) -> np.ndarray:
@@ -1383,15 +1379,16 @@ class Estimator:
         return min(held, key=lambda k: float(np.linalg.norm(self._cold_tiles[k].box.mean(axis=0) - point)))
 
     def _weak_evidence_point(self, p: "_Pass") -> np.ndarray | None:
-        """``(3,)``: the median, over the joints whose decoded encoder-heatmap peak reaches
-        :data:`_TILE_EVIDENCE_FLOOR` in both views, of where the two views' rays through those peaks pass nearest each
-        other (sub-cell peaks: the views' disparity, a pixel or two of the model's input at 4 m through a 12 cm
-        baseline, is under a heatmap cell); None without such a joint or the encoder heatmaps."""
+        """``(3,)``: the median, over the joints decoded in both views (a peak over ``decoder.threshold``, 0.1, under
+        the presence threshold in a pass that found nobody: a person too small to find may leave such peaks where they
+        stand), of where the two views' rays through those peaks pass nearest each other (sub-cell peaks: the views'
+        disparity at 4 m, a pixel or two of the model's input, is under a heatmap cell); None without such a joint or
+        the encoder heatmaps."""
         heat = None if p.env is None else p.env.get("encoder_heatmaps")
         if heat is None or p.crops is None:
             return None
         kp = decode_keypoints(np.ascontiguousarray(heat, dtype=np.float32), self.config.decoder)
-        both = np.flatnonzero(np.all(kp.valid & (kp.confidence >= _TILE_EVIDENCE_FLOOR), axis=0))
+        both = np.flatnonzero(np.all(kp.valid, axis=0))
         if not len(both):
             return None
         uv = heatmap_to_model_pixels(kp.uv[:, both], self.grid, self.size)  # (2, M, 2)
