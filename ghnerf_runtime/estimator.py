@@ -504,18 +504,17 @@ def _add_ms(timing: dict[str, float], stage: str, t0: float) -> None:
     timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
 
 
-def _nearest_meeting(o1: np.ndarray, o2: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> np.ndarray | None:
-    """The midpoint of where two rays (origins ``o1``, ``o2``, unit directions ``d1``, ``d2``) pass nearest each
-    other; None where they are parallel, not finite, or meet behind either origin."""
+def _nearest_meetings(o1: np.ndarray, o2: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> np.ndarray:
+    """``(M, 3)``: the midpoints of where pairs of rays (origins ``o1``, ``o2``, unit directions ``d1``, ``d2``, each
+    ``(N, 3)``) pass nearest each other, leaving out the pairs that are parallel, not finite, or meet behind either
+    origin."""
     w = o1 - o2
-    b, d, e = float(d1 @ d2), float(d1 @ w), float(d2 @ w)
+    b, d, e = (np.einsum("ij,ij->i", x, y) for x, y in ((d1, d2), (d1, w), (d2, w)))
     det = 1.0 - b * b
-    if not np.isfinite(det) or det < 1e-9:
-        return None
-    t1, t2 = (b * e - d) / det, (e - b * d) / det
-    if t1 <= 0 or t2 <= 0:
-        return None
-    return 0.5 * (o1 + t1 * d1 + o2 + t2 * d2)
+    with np.errstate(divide="ignore", invalid="ignore"):  # parallel rays: dropped below
+        t1, t2 = (b * e - d) / det, (e - b * d) / det
+        ok = np.isfinite(t1) & np.isfinite(t2) & (det > 1e-9) & (t1 > 0) & (t2 > 0)
+    return 0.5 * (o1[ok] + t1[ok, None] * d1[ok] + o2[ok] + t2[ok, None] * d2[ok])
 
 
 @dataclass
@@ -539,6 +538,7 @@ class _Pass:
     reprojection_px_median: float | None = None  # the views' agreement before the gate (PairResult's)
     lowest_foot_m: float | None = None  # the lower triangulated foot's height (PairResult's)
     handedness: float | None = None  # a person (+1) or a mirror image (-1) by the triangulation (PairResult's)
+    peaks: Keypoints2D | None = None  # both views' decoded peaks (a cold pass's faint ones pick its tile)
 
     @property
     def frame_ok(self) -> dict:
@@ -1379,22 +1379,21 @@ class Estimator:
         return min(held, key=lambda k: float(np.linalg.norm(self._cold_tiles[k].box.mean(axis=0) - point)))
 
     def _weak_evidence_point(self, p: "_Pass") -> np.ndarray | None:
-        """``(3,)``: the median, over the joints decoded in both views (a peak over ``decoder.threshold``, 0.1, under
-        the presence threshold in a pass that found nobody: a person too small to find may leave such peaks where they
-        stand), of where the two views' rays through those peaks pass nearest each other (sub-cell peaks: the views'
-        disparity at 4 m, a pixel or two of the model's input, is under a heatmap cell); None without such a joint or
-        the encoder heatmaps."""
-        heat = None if p.env is None else p.env.get("encoder_heatmaps")
-        if heat is None or p.crops is None:
+        """``(3,)``: the median, over the joints ``p`` decoded in both views (a peak over ``decoder.threshold``, 0.1,
+        under the presence threshold in a pass that found nobody: a person too small to find may leave such peaks where
+        they stand), of where the two views' rays through those peaks pass nearest each other (sub-cell peaks: the
+        views' disparity at 4 m, a pixel or two of the model's input, is under a heatmap cell); None without such a
+        joint or decoded peaks."""
+        kp = p.peaks
+        if kp is None or p.crops is None:
             return None
-        kp = decode_keypoints(np.ascontiguousarray(heat, dtype=np.float32), self.config.decoder)
         both = np.flatnonzero(np.all(kp.valid, axis=0))
         if not len(both):
             return None
         uv = heatmap_to_model_pixels(kp.uv[:, both], self.grid, self.size)  # (2, M, 2)
         (o1, d1), (o2, d2) = (crop.rays(uv[i]) for i, crop in enumerate(p.crops))
-        points = [m for m in (_nearest_meeting(o1[j], o2[j], d1[j], d2[j]) for j in range(len(both))) if m is not None]
-        return np.median(points, axis=0) if points else None
+        points = _nearest_meetings(o1, o2, d1, d2)
+        return np.median(points, axis=0) if len(points) else None
 
     @staticmethod
     def _sees_anyone(p: "_Pass") -> bool:
@@ -2039,7 +2038,7 @@ class Estimator:
         _add_ms(timing, "joints_3d", t)  # (the figures too: both_people checks every pairing again)
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
-                     None if seen_by is None else self.camera_names[seen_by], agreement, foot, hand)
+                     None if seen_by is None else self.camera_names[seen_by], agreement, foot, hand, kp)
 
     def _subject_prior(self, reported: Joints3D, subject: Joints3D, chosen: tuple[Keypoints2D, np.ndarray],
                        crops: list[Camera], regions: Regions) -> Joints3D:
