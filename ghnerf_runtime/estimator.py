@@ -1328,7 +1328,8 @@ class Estimator:
         """After ``p``, a cold pass that found nobody: the pass through the next working-volume tile (one a pair, in
         turn), refined on its subject when it finds someone (and then that tile is searched first when the track is
         lost again); a person the tile shows one camera only is that pass's answer too (the tracker follows that
-        view from it); else ``p``."""
+        view from it, and the other camera's next crop lies on the seen joints' rays: ``update_view(other_on_rays=)``);
+        else ``p``."""
         k = self._next_tile % len(self._cold_tiles)
         self.cold_tile_passes += 1
         q = self._pass(images, self._cold_tiles[k], sequence, timing, novel_view)
