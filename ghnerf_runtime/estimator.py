@@ -2133,11 +2133,13 @@ class Estimator:
         good = next(i for i, st in enumerate(self._cams) if frame_reason[st.camera.name] is None)
         name = self.camera_names[good]
         t = time.perf_counter()
-        heat = self.session.run("human" if self.session.has("human") else "encoder", {"images": batch})
+        # src_P as in _pass: a keypoint graph that reads the cameras (the benchmarks' oracle session) is fed them
+        feeds = {"images": batch, "src_P": source_projections(crops, self.size, self.size)}
+        heat = self.session.run("human" if self.session.has("human") else "encoder", feeds)
         _add_ms(timing, "encoder", t)
         heat = heat["encoder_heatmaps"]
         if cfg.heatmaps.flip_test and self._may_be_someone(heat, (good,)):
-            heat = self._flip_test(batch, heat, timing)
+            heat = self._flip_test(batch, heat, timing, feeds["src_P"])
         t = time.perf_counter()
         kp = decode_keypoints(np.ascontiguousarray(heat, dtype=np.float32), cfg.decoder)
         uv_model = heatmap_to_model_pixels(kp.uv, self.grid, self.size)

@@ -484,6 +484,25 @@ def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, sour
     assert est.tracker.track is not None and est.tracker.view_track is None
 
 
+@pytest.mark.parametrize("flip", [True, False])
+def test_a_covered_cameras_other_view_gets_its_2d_joints_from_the_oracle(clip, flip):
+    """One camera covered (a black frame the frame check rejects): the other view's 2D joints through the oracle,
+    whose keypoint graph reads the crops' cameras. The single-view pass fed it the images alone (KeyError: 'src_P'),
+    so no oracle test reached that pass before session 70."""
+    rig, frames, truth, visible, _, twod = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=flip)))
+    names = est.camera_names
+    oracle.set_truth(truth[0], visible[0])
+    r = est.estimate((frames[0][0], np.zeros_like(frames[0][1])))
+    assert r.frame_reason == {names[0]: None, names[1]: "flat"} and r.single_view == names[0]
+    assert ("encoder_flip" in r.timing_ms) == flip, r.timing_ms
+    found = ~r.missing_2d[names[0]]
+    assert found.sum() >= 0.9 * visible[0][0].sum()
+    err = np.linalg.norm(r.joints_2d[names[0]][found] - twod[0][0][found], axis=-1)
+    assert err.max() < 1.5, err  # exact up to the grid's decoding: the mirrored run's cameras are mirrored too
+
+
 def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_in_the_other(clip):
     """A 3D track, then the person seen by camera 0 only: the tracked pass finds nobody in 3D, the pair is run
     again (``tracking.retry_cold``) from camera 0's view track and, since session 69, camera 1's crop on the seen
