@@ -361,6 +361,14 @@ class SubjectTracker:
                            if other_on_rays and self.view_track is not None else None)
         return self.view_track is not None
 
+    def rays_camera(self, regions: Regions) -> int | None:
+        """The camera whose crop in ``regions`` is :attr:`view_other` (on the rays of the joints the other camera
+        saw alone), or None."""
+        if self.view_track is None or self.view_other is None or regions.tracked:
+            return None
+        other = 1 - self.view_track[0]
+        return other if regions.rois[other] == self.view_other else None
+
     def _crop_on_rays(self, camera: int, seen: np.ndarray) -> Roi | None:
         """The other camera's crop showing where the rays of ``camera`` through ``seen`` ``(N, 2)`` (the counted
         joints, distorted pixels) cross the working volume (grown as the cold crop's): the person is somewhere

@@ -18,9 +18,10 @@ from benchmarks.empty_rooms import empty_room_pair
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, FrameCheckConfig, HeatmapsConfig, Joints3DConfig, \
     NovelViewConfig, PresenceConfig, TrackingConfig, config_from_dict
 from ghnerf_runtime.errors import ModelRunError
-from ghnerf_runtime.estimator import NOVEL_STAGES, Estimator
+from ghnerf_runtime.estimator import NOVEL_STAGES, Estimator, check_crop
 from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.metrics import mpjpe, pck
+from ghnerf_runtime.preprocess import preprocess_image
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -482,6 +483,66 @@ def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, sour
     r = est.estimate(frames[1])
     assert r.num_found > 10 and r.single_view is None and r.to_json()["single_view"] is None
     assert est.tracker.track is not None and est.tracker.view_track is None
+
+
+@pytest.mark.parametrize("flip", [True, False])
+def test_a_covered_cameras_other_view_gets_its_2d_joints_from_the_oracle(clip, flip):
+    """One camera covered (a black frame the frame check rejects): the other view's 2D joints through the oracle,
+    whose keypoint graph reads the crops' cameras. The single-view pass fed it the images alone (KeyError: 'src_P'),
+    so no oracle test reached that pass before session 70."""
+    rig, frames, truth, visible, _, twod = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=flip)))
+    names = est.camera_names
+    oracle.set_truth(truth[0], visible[0])
+    r = est.estimate((frames[0][0], np.zeros_like(frames[0][1])))
+    assert r.frame_reason == {names[0]: None, names[1]: "flat"} and r.single_view == names[0]
+    assert ("encoder_flip" in r.timing_ms) == flip, r.timing_ms
+    found = ~r.missing_2d[names[0]]
+    assert found.sum() >= 0.9 * visible[0][0].sum()
+    err = np.linalg.norm(r.joints_2d[names[0]][found] - twod[0][0][found], axis=-1)
+    assert err.max() < 1.5, err  # exact up to the grid's decoding: the mirrored run's cameras are mirrored too
+
+
+def _with_panel(image: np.ndarray, roi, margin: int) -> np.ndarray:
+    """``image`` with a plain grey panel over ``roi`` grown by ``margin`` pixels each side (clipped to the frame)."""
+    out = image.copy()
+    x0, y0 = max(0, int(roi.x0) - margin), max(0, int(roi.y0) - margin)
+    out[y0:max(0, int(roi.y0 + roi.size) + margin), x0:max(0, int(roi.x0 + roi.size) + margin)] = 128
+    return out
+
+
+def test_a_plain_crop_on_the_rays_of_a_working_camera_is_kept_pair_after_pair(clip):
+    """A person seen by camera 0 only, a plain panel hiding them from camera 1 (the rest of its frame the room):
+    camera 1's crop on the seen joints' rays shows the panel alone, which the frame check rejects as flat. Until
+    session 70 that sent camera 1 back to the whole volume on the next pair and to the rays on the one after,
+    pair after pair, and reported camera 1 rejected every other pair (the same 2D joints of camera 0 and two
+    keypoint runs a pair either way); now camera 1's whole-volume crop of the same frame, which passes, says the
+    camera works: the rays crop is run and kept. A camera covered meanwhile is still rejected, back on the volume."""
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig())
+    names = est.camera_names
+    oracle.set_truth(truth[0], _seen_by(visible[0], 0))
+    first = est.estimate(frames[0])
+    panel = est.tracker.view_other  # where camera 1 looks next: the panel covers it, and the person, from now on
+    assert first.single_view == names[0] and first.rois[names[1]] == est.tracker.volume_regions.rois[1]
+    assert panel is not None
+    for k in range(1, len(frames)):
+        oracle.set_truth(truth[k], _seen_by(visible[k], 0))
+        on_rays, runs = est.tracker.view_other, oracle.run_counts["encoder"]
+        hidden = _with_panel(frames[k][1], panel, 16)
+        maps, _ = est._crop(est._cams[1], on_rays)
+        plane = preprocess_image(hidden, maps, est.contract.normalisation)[1]
+        assert check_crop(plane, est._levels, est.config.frame_check, maps.inside) == (False, "flat"), k
+        r = est.estimate((frames[k][0], hidden))
+        assert r.rois[names[1]] == on_rays and on_rays.size < est.tracker.volume_regions.rois[1].size, k
+        assert r.frame_reason == {n: None for n in names}, (k, r.frame_reason)
+        assert r.single_view == names[0] and (~r.missing_2d[names[0]]).sum() >= 0.9 * visible[k][0].sum()
+        assert oracle.run_counts["encoder"] - runs == 2  # the crops and the flip test's mirrored run
+    covered = est.estimate((frames[-1][0], np.zeros_like(frames[-1][1])))
+    assert covered.frame_reason == {names[0]: None, names[1]: "flat"} and covered.single_view == names[0]
+    assert est.tracker.view_other is None  # camera 1's next crop: the whole volume
 
 
 def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_in_the_other(clip):

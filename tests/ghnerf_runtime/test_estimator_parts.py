@@ -1,6 +1,7 @@
 """The estimator's pure pieces: ray blocks, ROI snapping, tracks, 3D methods, novel cameras, frame check."""
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from pathlib import Path
 
@@ -242,6 +243,24 @@ def test_a_person_seen_by_one_camera_only_crops_the_other_along_their_rays():
     tracker.update_view(0, uv, np.full(25, 0.9), other_on_rays=True)
     tracker.reset()
     assert tracker.view_other is None and tracker.regions() is tracker._volume
+
+
+def test_rays_camera_names_the_camera_whose_crop_is_on_the_rays():
+    """``SubjectTracker.rays_camera``: the camera whose crop in the regions given is ``view_other`` (the estimator
+    judges that crop's frame by the camera's whole-volume crop when the frame check rejects it, session 70); None
+    without a crop on the rays, for regions that do not hold it, and for a tracked pair's."""
+    render = pytest.importorskip("calibration.render")
+    rig = render.synth_rig()
+    tracker = SubjectTracker(rig, TrackingConfig(min_joints=6), RoiConfig())
+    uv, _ = rig.pair[1].project(_joints() + [0.0, 0.0, 1.0])
+    assert tracker.rays_camera(tracker.regions()) is None
+    tracker.update_view(1, uv, np.full(25, 0.9))  # a rejected frame's camera stays on the volume
+    assert tracker.rays_camera(tracker.regions()) is None
+    tracker.update_view(1, uv, np.full(25, 0.9), other_on_rays=True)
+    regions = tracker.regions()
+    assert tracker.rays_camera(regions) == 0 and regions.rois[0] == tracker.view_other
+    assert tracker.rays_camera(tracker.volume_regions) is None
+    assert tracker.rays_camera(dataclasses.replace(regions, tracked=True)) is None
 
 
 def test_a_tracker_follows_another_trackers_track_with_its_own_crops():
