@@ -145,6 +145,13 @@ _FLOOR_MIN_FOOT_JOINTS = 2
 #: lunge costs one joint, not the pair's figure; stray ones kept would pull their foot's median down (two of its four
 #: joints, or one of a foot with two seen: tests/ghnerf_runtime/test_floor_big_pan.py).
 _FLOOR_BODY_M = 1.0
+#: A cold tile's find (refined on its subject) whose lower foot (PairResult.lowest_foot_m) stands over this (m) above
+#: the floor is refused: a person the frame's bottom edge cuts near the cameras, whom the tile's crop reads whole and
+#: shrunk, the same in both views, so that the skeleton triangulates too far and too high (0.2-0.5 m off, its feet
+#: 0.7 m up, then tracked for frames), where the whole volume's crop found them on the next pair (the example rig,
+#: sequence 1: benchmarks/measure_baseline.py --tile-finds). The finds kept there and on ghcal synth's rig read
+#: -0.3 to 0.2 m.
+_TILE_FIND_MAX_FOOT_M = 0.4
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "turn_search", "volume", "render_heat", "decode_2d",
@@ -796,6 +803,7 @@ class Estimator:
         self._still_passes: tuple[np.ndarray, ...] | None = None
         self.cold_tile_passes = 0  # cold pairs that searched a tile, and those whose tile found someone
         self.cold_tiles_found = 0
+        self.tile_finds_floating = 0  # tile finds refused for feet far above the floor (_TILE_FIND_MAX_FOOT_M)
         self.cold_tile_wakes = 0  # resting searches a scene change woke (tracking.cold_tiles_wake_levels)
         # roi.turn_search: each camera's crop turn (degrees on top of roi.upright's) and, per turn, the camera
         # state (its own remap tables) and per pair of turns a tracker (volume crops sized for that turn)
@@ -1345,13 +1353,20 @@ class Estimator:
         searched; refined on its subject when it finds someone (and then that tile is next in turn when the track is
         lost again); a person the tile shows one camera only is that pass's answer too (the tracker follows that
         view from it, and the other camera's next crop lies on the seen joints' rays: ``update_view(other_on_rays=)``);
-        else ``p``."""
+        else ``p``, so too where the refined find's feet float (:meth:`_feet_float`: the track is dropped)."""
         k = self._tile_by_evidence(p)
         if k is None:
             k = self._next_untried_tile()
         self.cold_tile_passes += 1
         q = self._pass(images, self._cold_tiles[k], sequence, timing, novel_view)
-        if not self._sees_anyone(q):
+        found = self._sees_anyone(q)
+        if found:
+            q = self._refined(images, q, sequence, timing, novel_view)
+            if self._feet_float(q):
+                self.tile_finds_floating += 1
+                self.tracker.reset()  # the next pair starts cold, as after a tile that found nobody
+                found = False
+        if not found:
             self._next_tile = k + 1
             self._tiles_tried = self._tiles_tried | {k}
             if len(self._tiles_tried) >= len(self._cold_tiles):
@@ -1361,7 +1376,13 @@ class Estimator:
         self.cold_tiles_found += 1
         self._next_tile = k
         self._wake_tiles()
-        return self._refined(images, q, sequence, timing, novel_view)
+        return q
+
+    @staticmethod
+    def _feet_float(p: "_Pass") -> bool:
+        """Whether ``p``'s lower foot stands over ``_TILE_FIND_MAX_FOOT_M`` above the floor (``lowest_foot_m``; no
+        figure: no)."""
+        return p.lowest_foot_m is not None and p.lowest_foot_m > _TILE_FIND_MAX_FOOT_M
 
     def _next_untried_tile(self) -> int:
         """The fixed order: the next tile from ``_next_tile`` on that this round has not searched."""

@@ -572,3 +572,21 @@ def test_a_faint_peak_in_a_tile_already_searched_leaves_the_fixed_order(example_
     assert picked is not None
     est._tiles_tried = frozenset({picked})
     assert est._tile_by_evidence(cold) is None
+
+
+@pytest.mark.parametrize("lift_m, kept", [(0.6, False), (0.2, True)])
+def test_a_tile_find_whose_feet_float_is_refused(example_rig, far_person, lift_m, kept):
+    """A tile's find whose lower foot stands over 0.4 m above the floor (the person drawn lifted 0.6 m: as the model
+    reads a person whom the frame's near edge cuts, whole and shrunk, too far and too high) is not kept: nobody on
+    that pair, and the next pair starts cold; a foot 0.2 m up (a step) is kept."""
+    images, joints = far_person
+    oracle = FaintSmallPeopleOracle(edge128_contract())
+    est = Estimator(oracle, example_rig, EstimatorConfig())
+    oracle.set_truth(joints - [0.0, lift_m, 0.0])
+    first = est.estimate(images)
+    assert first.missing.all() != kept
+    assert est.cold_tile_passes == 1 and est.cold_tiles_found == int(kept)
+    assert est.tile_finds_floating == int(not kept)
+    assert (est.tracker.track is not None) == kept
+    if kept:
+        assert first.lowest_foot_m == pytest.approx(lift_m, abs=0.1)
