@@ -93,7 +93,7 @@ def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0,
     """Predicted joints, found mask and truth of bench sequence ``k``'s scene (:func:`bench_scene_in`, its person
     drawn in ``people``, default ``rig``'s volume) filmed by ``rig``, one cold estimator given ``rig`` :func:`lifted`
     by ``lift_m`` (truth in ``rig``'s frame). ``tile_finds``: gets ``(pair, kept)`` for each pair whose cold tile
-    search found someone, kept or refused for floating feet (``--tile-finds``)."""
+    search found someone, kept or refused for floating feet, and the pair's ``lowest_foot_m`` (``--tile-finds``)."""
     scene, t0 = bench_scene_in(rig, k, people)
     est = Estimator(session, lifted(rig, lift_m) if lift_m else rig, cfg)
     pred, found, truth = [], [], []
@@ -102,7 +102,7 @@ def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0,
         before = (est.cold_tiles_found, est.tile_finds_floating)
         r = est.estimate([scene.render(cam, t, with_truth=False)[0] for cam in rig.pair], sequence=i)
         if tile_finds is not None and (est.cold_tiles_found, est.tile_finds_floating) != before:
-            tile_finds.append((i, est.cold_tiles_found > before[0]))
+            tile_finds.append((i, est.cold_tiles_found > before[0], r.lowest_foot_m))
         pred.append(r.joints_3d + [0.0, lift_m, 0.0])
         found.append(~r.missing)
         truth.append(scene.joints_3d(t))
@@ -164,13 +164,15 @@ def baseline_rows(args) -> list[tuple[float, float, float]]:
 def tile_find_rows(path: str, k: int, run, finds: list) -> list[str]:
     """``--tile-finds``' rows of sequence ``k``'s ``run`` (:func:`run_sequence`'s) in rig file ``path``: per pair
     whose tile search found someone (``finds``), whether the find was kept, where the person stood (their true
-    joints' mean, m, and the nearest joint's depth: the example rig's volume starts 1 m ahead), that pair's MPJPE and
+    joints' mean, m, and the nearest joint's depth: the example rig's volume starts 1 m ahead), that pair's lower foot
+    above the floor (``PairResult.lowest_foot_m``, what the estimator refuses a tile find on; "-": no figure), MPJPE and
     joints found, and the MPJPE of the sequence's pairs from it on (what the track then followed)."""
     pred, found, truth = run
     rows = []
-    for i, kept in finds:
+    for i, kept, foot in finds:
         mean = ", ".join(f"{v:.2f}" for v in truth[i].mean(axis=0))
         rows.append(f"| {path} | {k} | {i} | {'kept' if kept else 'refused'} | {mean} | {truth[i][:, 2].min():.2f} | "
+                    f"{'-' if foot is None else f'{foot:.2f}'} | "
                     f"{score_cells([(pred[i:i + 1], found[i:i + 1], truth[i:i + 1])]).rsplit(' | ', 1)[0]} | "
                     f"{score_cells([(pred[i:], found[i:], truth[i:])]).split(' | ')[0]} |")
     return rows
@@ -179,8 +181,8 @@ def tile_find_rows(path: str, k: int, run, finds: list) -> list[str]:
 def print_tile_finds(rows: list[str]) -> None:
     """``--tile-finds``' table (:func:`tile_find_rows`)."""
     print("\n| rig file | sequence | pair | tile find | person's joints' mean x, y, z, m | nearest joint ahead, m | "
-          "MPJPE mm | joints found | MPJPE mm from this pair on |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "lower foot above the floor, m | MPJPE mm | joints found | MPJPE mm from this pair on |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     print("\n".join(rows) if rows else "| (none) |", flush=True)
 
 

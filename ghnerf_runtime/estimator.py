@@ -147,10 +147,10 @@ _FLOOR_MIN_FOOT_JOINTS = 2
 _FLOOR_BODY_M = 1.0
 #: A cold tile's find (refined on its subject) whose lower foot (PairResult.lowest_foot_m) stands over this (m) above
 #: the floor is refused: a person the frame's bottom edge cuts near the cameras, whom the tile's crop reads whole and
-#: shrunk, the same in both views, so that the skeleton triangulates too far and too high (0.2-0.5 m off, its feet
-#: 0.7 m up, then tracked for frames), where the whole volume's crop found them on the next pair (the example rig,
-#: sequence 1: benchmarks/measure_baseline.py --tile-finds). The finds kept there and on ghcal synth's rig read
-#: -0.3 to 0.2 m.
+#: shrunk, the same in both views, so that the skeleton triangulates too far and too high (394 mm MPJPE, its foot
+#: 0.69 m up, then tracked for frames), where the whole volume's crop found them on the next pair (the example rig's
+#: sequence 1, 1.2 m ahead; the other tile finds there and on ghcal synth's rig read -0.16 to -0.01 m:
+#: benchmarks/measure_baseline.py --tile-finds, docs/runtime.md, "The first tile").
 _TILE_FIND_MAX_FOOT_M = 0.4
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
