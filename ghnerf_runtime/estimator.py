@@ -905,8 +905,8 @@ class Estimator:
         """Forget the tracked subject (the next pair starts from the working volume, through upright crops: a kept
         crop turn goes with the track, ``roi.turn_search``), the smoothing and the cold tiles' rest (the next cold
         pair that finds nobody searches the first tile). The counters are statistics over the estimator's life and
-        stay: ``cold_tile_passes``, ``cold_tiles_found``, ``cold_tile_wakes``, ``turn_searches``, ``turns_kept``,
-        ``turns_refused``, ``turn_checks`` and ``turns_left``."""
+        stay: ``cold_tile_passes``, ``cold_tiles_found``, ``tile_finds_floating``, ``cold_tile_wakes``,
+        ``turn_searches``, ``turns_kept``, ``turns_refused``, ``turn_checks`` and ``turns_left``."""
         self.tracker.reset()  # the kept turn's tracker (the upright one is reset as the crops return upright)
         self._use_turns((0, 0))
         self._several_track = False
