@@ -2,7 +2,7 @@
 
     PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_baseline.py [--model-dir models] [--sequences 4]
         [--frames 8] [--baselines 0.02,0.03,0.04,0.06,0.1,0.2,0.6 | --angles 0.5,1,2] [--distances 3]
-        [--hfovs 80] [--rigs docs/examples/rig.json] [--lifts 0,1,3,50]
+        [--hfovs 80] [--rigs docs/examples/rig.json] [--tile-finds] [--lifts 0,1,3,50]
 
 The simulator's default rig (``drivers.sim.RigPlacement()``: 640x480, 80 degrees, 1.3 m high, both cameras aimed
 at the subject ``--distances`` ahead) with the pair's centres moved to each baseline, filming the bench's held-out
@@ -16,7 +16,9 @@ warning reads, docs/rig-file.md), the depth one pixel of disparity moves a point
 (``depth_per_disparity_px``), how a person standing at the volume's centre is framed (``framing_cells``: the share
 of their height in view, what ``load_rig``'s framing warning reads, and their height in image and model pixels), the
 MPJPE of the joints found, the share of joints found and the share of pairs with no 3D joint at all; ``--rigs``
-adds a row per rig file, its own pair filming the same people drawn in its own working volume. ``RigPlacement``
+adds a row per rig file, its own pair filming the same people drawn in its own working volume; ``--tile-finds``
+then a row per pair of theirs whose cold tile search found someone: where the person stood and the error then and
+after (session 70). ``RigPlacement``
 refuses baselines under 5 cm, so the cameras are placed here as it places them. Then, per ``--lifts`` (``""``:
 none), the default rig (its own baseline, 1.2 m; the first distance, 80 degrees) with its frame moved that many
 metres up (cameras and working volume alike, the same images): the floor no longer at y = 0, where the runtime
@@ -87,16 +89,20 @@ def bench_scene_in(rig: Rig, k: int, people: WorkingVolume | None = None):
 
 
 def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0, lift_m: float = 0.0,
-                 people: WorkingVolume | None = None):
+                 people: WorkingVolume | None = None, tile_finds: list | None = None):
     """Predicted joints, found mask and truth of bench sequence ``k``'s scene (:func:`bench_scene_in`, its person
     drawn in ``people``, default ``rig``'s volume) filmed by ``rig``, one cold estimator given ``rig`` :func:`lifted`
-    by ``lift_m`` (truth in ``rig``'s frame)."""
+    by ``lift_m`` (truth in ``rig``'s frame). ``tile_finds``: gets ``(pair, kept)`` for each pair whose cold tile
+    search found someone, kept or refused for floating feet, and the pair's ``lowest_foot_m`` (``--tile-finds``)."""
     scene, t0 = bench_scene_in(rig, k, people)
     est = Estimator(session, lifted(rig, lift_m) if lift_m else rig, cfg)
     pred, found, truth = [], [], []
     for i in range(frames):
         t = t0 + i / fps
+        before = (est.cold_tiles_found, est.tile_finds_floating)
         r = est.estimate([scene.render(cam, t, with_truth=False)[0] for cam in rig.pair], sequence=i)
+        if tile_finds is not None and (est.cold_tiles_found, est.tile_finds_floating) != before:
+            tile_finds.append((i, est.cold_tiles_found > before[0], r.lowest_foot_m))
         pred.append(r.joints_3d + [0.0, lift_m, 0.0])
         found.append(~r.missing)
         truth.append(scene.joints_3d(t))
@@ -155,18 +161,51 @@ def baseline_rows(args) -> list[tuple[float, float, float]]:
     return rows
 
 
+def tile_find_rows(path: str, k: int, run, finds: list) -> list[str]:
+    """``--tile-finds``' rows of sequence ``k``'s ``run`` (:func:`run_sequence`'s) in rig file ``path``: per pair
+    whose tile search found someone (``finds``), whether the find was kept, where the person stood (their true
+    joints' mean, m, and the nearest joint's depth: the example rig's volume starts 1 m ahead), that pair's lower foot
+    above the floor (``PairResult.lowest_foot_m``, what the estimator refuses a tile find on; "-": no figure), MPJPE and
+    joints found, and the MPJPE of the sequence's pairs from it on (what the track then followed)."""
+    pred, found, truth = run
+    rows = []
+    for i, kept, foot in finds:
+        mean = ", ".join(f"{v:.2f}" for v in truth[i].mean(axis=0))
+        rows.append(f"| {path} | {k} | {i} | {'kept' if kept else 'refused'} | {mean} | {truth[i][:, 2].min():.2f} | "
+                    f"{'-' if foot is None else f'{foot:.2f}'} | "
+                    f"{score_cells([(pred[i:i + 1], found[i:i + 1], truth[i:i + 1])]).rsplit(' | ', 1)[0]} | "
+                    f"{score_cells([(pred[i:], found[i:], truth[i:])]).split(' | ')[0]} |")
+    return rows
+
+
+def print_tile_finds(rows: list[str]) -> None:
+    """``--tile-finds``' table (:func:`tile_find_rows`)."""
+    print("\n| rig file | sequence | pair | tile find | person's joints' mean x, y, z, m | nearest joint ahead, m | "
+          "lower foot above the floor, m | MPJPE mm | joints found | MPJPE mm from this pair on |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("\n".join(rows) if rows else "| (none) |", flush=True)
+
+
 def print_rig_files(args, session, cfg) -> None:
-    """The table of ``--rigs``: each rig file's own pair, framing and scores on the same people."""
+    """The table of ``--rigs``: each rig file's own pair, framing and scores on the same people; with
+    ``--tile-finds``, then each pair whose cold tile search found someone (:func:`tile_find_rows`)."""
     paths = rig_paths(args.rigs)
     if not paths:
         return
     print("\n| rig file | standing person in view, share | person tall, image px | person tall in the cold crop, "
           "model px | MPJPE mm | joints found | pairs with no joint |")
     print("|---|---|---|---|---|---|---|")
+    rows = []
     for path in paths:
         rig = load_rig(path)
-        runs = [run_sequence(session, cfg, rig, k, args.frames) for k in range(args.sequences)]
+        runs = []
+        for k in range(args.sequences):
+            finds: list = []
+            runs.append(run_sequence(session, cfg, rig, k, args.frames, tile_finds=finds))
+            rows += tile_find_rows(path, k, runs[-1], finds)
         print(f"| {path} | {framing_cells(rig, session.contract.width)} | {score_cells(runs)} |", flush=True)
+    if args.tile_finds:
+        print_tile_finds(rows)
 
 
 def main(argv=None) -> int:
@@ -187,6 +226,8 @@ def main(argv=None) -> int:
                                                "working volume), comma-separated: one row each (\"\": none)")
     ap.add_argument("--lifts", default="0,1,3,50", help="metres the default rig's frame is moved up, comma-separated "
                                                         "(\"\": no such table)")
+    ap.add_argument("--tile-finds", action="store_true", help="after the --rigs table, a row per pair whose cold "
+                                                               "tile search found someone (kept or refused)")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision))
     session = load_session(cfg)

@@ -145,6 +145,13 @@ _FLOOR_MIN_FOOT_JOINTS = 2
 #: lunge costs one joint, not the pair's figure; stray ones kept would pull their foot's median down (two of its four
 #: joints, or one of a foot with two seen: tests/ghnerf_runtime/test_floor_big_pan.py).
 _FLOOR_BODY_M = 1.0
+#: A cold tile's find (refined on its subject) whose lower foot (PairResult.lowest_foot_m) stands over this (m) above
+#: the floor is refused: a person the frame's bottom edge cuts near the cameras, whom the tile's crop reads whole and
+#: shrunk, the same in both views, so that the skeleton triangulates too far and too high (394 mm MPJPE, its foot
+#: 0.69 m up, then tracked for frames), where the whole volume's crop found them on the next pair (the example rig's
+#: sequence 1, 1.2 m ahead; the other tile finds there and on ghcal synth's rig read -0.16 to -0.01 m:
+#: benchmarks/measure_baseline.py --tile-finds, docs/runtime.md, "The first tile").
+_TILE_FIND_MAX_FOOT_M = 0.4
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "turn_search", "volume", "render_heat", "decode_2d",
@@ -504,6 +511,19 @@ def _add_ms(timing: dict[str, float], stage: str, t0: float) -> None:
     timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
 
 
+def _nearest_meetings(o1: np.ndarray, o2: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> np.ndarray:
+    """``(M, 3)``: the midpoints of where pairs of rays (origins ``o1``, ``o2``, unit directions ``d1``, ``d2``, each
+    ``(N, 3)``) pass nearest each other, leaving out the pairs that are parallel, not finite, or meet behind either
+    origin."""
+    w = o1 - o2
+    b, d, e = (np.einsum("ij,ij->i", x, y) for x, y in ((d1, d2), (d1, w), (d2, w)))
+    det = 1.0 - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):  # parallel rays: dropped below
+        t1, t2 = (b * e - d) / det, (e - b * d) / det
+        ok = np.isfinite(t1) & np.isfinite(t2) & (det > 1e-9) & (t1 > 0) & (t2 > 0)
+    return 0.5 * (o1[ok] + t1[ok, None] * d1[ok] + o2[ok] + t2[ok, None] * d2[ok])
+
+
 @dataclass
 class _Pass:
     """What one pass over a pair produced (``j3`` is ``None`` when the frame check stopped it)."""
@@ -525,6 +545,7 @@ class _Pass:
     reprojection_px_median: float | None = None  # the views' agreement before the gate (PairResult's)
     lowest_foot_m: float | None = None  # the lower triangulated foot's height (PairResult's)
     handedness: float | None = None  # a person (+1) or a mirror image (-1) by the triangulation (PairResult's)
+    peaks: Keypoints2D | None = None  # both views' decoded peaks (a cold pass's faint ones pick its tile)
 
     @property
     def frame_ok(self) -> dict:
@@ -769,6 +790,7 @@ class Estimator:
         # enough), one searched per cold pair that finds nobody, in turn
         self._cold_tiles = self._tiles_for_small_people(rig)
         self._next_tile = 0
+        self._tiles_tried: frozenset[int] = frozenset()  # the tiles the current round searched and found nobody in
         self._tiles_missed = 0  # tile passes in a row that found nobody (a whole round of them: the search rests)
         self._tile_rest_wait = 0  # cold pairs left that do not search a tile (tracking.cold_tiles_rest_every)
         # each camera's scene copy at the last tile pass that found nobody (tracking.cold_tiles_wake_levels)
@@ -781,6 +803,7 @@ class Estimator:
         self._still_passes: tuple[np.ndarray, ...] | None = None
         self.cold_tile_passes = 0  # cold pairs that searched a tile, and those whose tile found someone
         self.cold_tiles_found = 0
+        self.tile_finds_floating = 0  # tile finds refused for feet far above the floor (_TILE_FIND_MAX_FOOT_M)
         self.cold_tile_wakes = 0  # resting searches a scene change woke (tracking.cold_tiles_wake_levels)
         # roi.turn_search: each camera's crop turn (degrees on top of roi.upright's) and, per turn, the camera
         # state (its own remap tables) and per pair of turns a tracker (volume crops sized for that turn)
@@ -882,8 +905,8 @@ class Estimator:
         """Forget the tracked subject (the next pair starts from the working volume, through upright crops: a kept
         crop turn goes with the track, ``roi.turn_search``), the smoothing and the cold tiles' rest (the next cold
         pair that finds nobody searches the first tile). The counters are statistics over the estimator's life and
-        stay: ``cold_tile_passes``, ``cold_tiles_found``, ``cold_tile_wakes``, ``turn_searches``, ``turns_kept``,
-        ``turns_refused``, ``turn_checks`` and ``turns_left``."""
+        stay: ``cold_tile_passes``, ``cold_tiles_found``, ``tile_finds_floating``, ``cold_tile_wakes``,
+        ``turn_searches``, ``turns_kept``, ``turns_refused``, ``turn_checks`` and ``turns_left``."""
         self.tracker.reset()  # the kept turn's tracker (the upright one is reset as the crops return upright)
         self._use_turns((0, 0))
         self._several_track = False
@@ -1325,22 +1348,78 @@ class Estimator:
 
     def _tile_search(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
                      novel_view: NovelViewRequest | None, copies: Callable[[], tuple[SceneCopy, ...]]) -> "_Pass":
-        """After ``p``, a cold pass that found nobody: the pass through the next working-volume tile (one a pair, in
-        turn), refined on its subject when it finds someone (and then that tile is searched first when the track is
+        """After ``p``, a cold pass that found nobody: the pass through one working-volume tile (one a pair), the one
+        where ``p``'s faint peaks meet (:meth:`_tile_by_evidence`), else the next in turn that this round has not
+        searched; refined on its subject when it finds someone (and then that tile is next in turn when the track is
         lost again); a person the tile shows one camera only is that pass's answer too (the tracker follows that
         view from it, and the other camera's next crop lies on the seen joints' rays: ``update_view(other_on_rays=)``);
-        else ``p``."""
-        k = self._next_tile % len(self._cold_tiles)
+        else ``p``, so too where the refined find's feet float (:meth:`_feet_float`: the track is dropped)."""
+        k = self._tile_by_evidence(p)
+        if k is None:
+            k = self._next_untried_tile()
         self.cold_tile_passes += 1
         q = self._pass(images, self._cold_tiles[k], sequence, timing, novel_view)
-        if not self._sees_anyone(q):
+        found = self._sees_anyone(q)
+        if found:
+            q = self._refined(images, q, sequence, timing, novel_view)
+            if self._feet_float(q):
+                self.tile_finds_floating += 1
+                self.tracker.reset()  # the next pair starts cold, as after a tile that found nobody
+                found = False
+        if not found:
             self._next_tile = k + 1
+            self._tiles_tried = self._tiles_tried | {k}
+            if len(self._tiles_tried) >= len(self._cold_tiles):
+                self._tiles_tried = frozenset()  # a whole round: the next one may search any tile again
             self._tile_missed(copies)
             return p
         self.cold_tiles_found += 1
         self._next_tile = k
         self._wake_tiles()
-        return self._refined(images, q, sequence, timing, novel_view)
+        return q
+
+    @staticmethod
+    def _feet_float(p: "_Pass") -> bool:
+        """Whether ``p``'s lower foot stands over ``_TILE_FIND_MAX_FOOT_M`` above the floor (``lowest_foot_m``; no
+        figure: no)."""
+        return p.lowest_foot_m is not None and p.lowest_foot_m > _TILE_FIND_MAX_FOOT_M
+
+    def _next_untried_tile(self) -> int:
+        """The fixed order: the next tile from ``_next_tile`` on that this round has not searched."""
+        n = len(self._cold_tiles)
+        return next((k % n for k in range(self._next_tile, self._next_tile + n) if k % n not in self._tiles_tried),
+                    self._next_tile % n)
+
+    def _tile_by_evidence(self, p: "_Pass") -> int | None:
+        """The tile this round has not searched that holds the weak evidence of ``p``, a cold pass that found nobody
+        (:meth:`_weak_evidence_point`), the one whose centre is nearest it where tiles overlap: where a person too
+        small to find in the whole volume's crop may stand. None where there is no such point or no untried tile
+        holds it (the fixed order then)."""
+        point = self._weak_evidence_point(p)
+        if point is None:
+            return None
+        held = [k for k, tile in enumerate(self._cold_tiles) if k not in self._tiles_tried
+                and np.all(point >= tile.box[0]) and np.all(point <= tile.box[1])]
+        if not held:
+            return None
+        return min(held, key=lambda k: float(np.linalg.norm(self._cold_tiles[k].box.mean(axis=0) - point)))
+
+    def _weak_evidence_point(self, p: "_Pass") -> np.ndarray | None:
+        """``(3,)``: the median, over the joints ``p`` decoded in both views (a peak over ``decoder.threshold``, 0.1,
+        under the presence threshold in a pass that found nobody: a person too small to find may leave such peaks where
+        they stand), of where the two views' rays through those peaks pass nearest each other (sub-cell peaks: the
+        views' disparity at 4 m, a pixel or two of the model's input, is under a heatmap cell); None without such a
+        joint or decoded peaks."""
+        kp = p.peaks
+        if kp is None or p.crops is None:
+            return None
+        both = np.flatnonzero(np.all(kp.valid, axis=0))
+        if not len(both):
+            return None
+        uv = heatmap_to_model_pixels(kp.uv[:, both], self.grid, self.size)  # (2, M, 2)
+        (o1, d1), (o2, d2) = (crop.rays(uv[i]) for i, crop in enumerate(p.crops))
+        points = _nearest_meetings(o1, o2, d1, d2)
+        return np.median(points, axis=0) if len(points) else None
 
     @staticmethod
     def _sees_anyone(p: "_Pass") -> bool:
@@ -1436,6 +1515,7 @@ class Estimator:
         pair that reports a joint (:meth:`_sees_in_3d`) makes it not vain; else the round that ends in nobody
         counts it (:meth:`_tile_missed`)."""
         self._tiles_missed = 0
+        self._tiles_tried = frozenset()
         self._tile_rest_wait = 0
         self._rest_scene = None
         if self._still_passes is not None:  # nothing kept to compare with now: a cell's still passes start again
@@ -2006,7 +2086,7 @@ class Estimator:
         _add_ms(timing, "joints_3d", t)  # (the figures too: both_people checks every pairing again)
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
-                     None if seen_by is None else self.camera_names[seen_by], agreement, foot, hand)
+                     None if seen_by is None else self.camera_names[seen_by], agreement, foot, hand, kp)
 
     def _subject_prior(self, reported: Joints3D, subject: Joints3D, chosen: tuple[Keypoints2D, np.ndarray],
                        crops: list[Camera], regions: Regions) -> Joints3D:

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.measure_baseline import baseline_for_angle, framing_cells, lifted, rig_with_baseline, standing_person_px
+from benchmarks.measure_baseline import (baseline_for_angle, framing_cells, lifted, rig_with_baseline,
+                                         standing_person_px, tile_find_rows)
 from ghnerf_runtime.rig_file import STANDING_PERSON_M, load_rig, pair_angle_deg
 from tests.benchmarks.test_bench_smoke import run_script, scratch_cache  # noqa: F401
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
@@ -78,3 +79,29 @@ def test_the_standing_person_s_image_height_is_the_pinhole_s_and_the_framing_cel
     example = load_rig("docs/examples/rig.json", warn=False)
     shorter_shown = min(standing_person_px(c, example.volume) for c in example.pair)
     assert framing_cells(example, 128).split(" | ")[1] == f"{shorter_shown:.0f}"
+
+
+def test_the_tile_find_rows_say_where_the_person_stood_and_the_error_then_and_after():
+    """``--tile-finds`` (session 70): per pair whose cold tile search found someone, kept or refused, the person's
+    true joints' mean and nearest depth, that pair's lower foot, MPJPE and joints found, and the MPJPE from that pair
+    on."""
+    truth = np.zeros((3, 25, 3))
+    truth[..., 2] = 2.0
+    truth[:, 0, 2] = 1.2
+    pred = truth + np.array([0.0, 0.0, 0.1])
+    pred[2] += [0.0, 0.0, 0.2]
+    found = np.ones((3, 25), bool)
+    found[0] = False
+    rows = tile_find_rows("rig.json", 4, (pred, found, truth), [(1, True, 0.73), (0, False, None)])
+    assert rows == ["| rig.json | 4 | 1 | kept | 0.00, 0.00, 1.97 | 1.20 | 0.73 | 100 | 1.000 | 200 |",
+                    "| rig.json | 4 | 0 | refused | 0.00, 0.00, 1.97 | 1.20 | - | - | 0.000 | 200 |"]
+
+
+def test_the_command_line_prints_the_tile_finds(tiny_model_dir, scratch_cache, capsys, monkeypatch):  # noqa: F811
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[2] / "docs" / "examples" / "rig.json"
+    out = run_script("measure_baseline", "--model-dir", str(tiny_model_dir), "--sequences", "1", "--frames", "1",
+                     "--baselines", "", "--rigs", str(example), "--lifts", "", "--tile-finds", capsys=capsys,
+                     monkeypatch=monkeypatch)
+    assert "| rig file | sequence | pair | tile find | person's joints' mean x, y, z, m |" in out, out
