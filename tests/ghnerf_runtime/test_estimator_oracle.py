@@ -21,6 +21,7 @@ from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.estimator import NOVEL_STAGES, Estimator
 from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.metrics import mpjpe, pck
+from tests.one_camera import seen_by
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -425,13 +426,6 @@ def test_an_empty_room_takes_the_heatmap_maxima_once_for_the_flip_test_and_once_
     assert oracle.run_counts["encoder"] == 3  # nobody: no mirrored run, no turn searched
 
 
-def _seen_by(visible: np.ndarray, k: int) -> np.ndarray:
-    """``(2, 25)`` visibility of a person camera ``k`` sees (as in the truth) and the other camera does not."""
-    one = visible.copy()
-    one[1 - k] = False
-    return one
-
-
 @pytest.mark.parametrize("source, flip", [("encoder", True), ("encoder", False), ("rendered", False)])
 def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, source, flip):
     """Someone entering at the edge of one camera's view, outside the other's: both frames pass the check and
@@ -448,7 +442,7 @@ def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, sour
     est = Estimator(oracle, rig, cfg)
     names = est.camera_names
     for k in (0, 1):
-        oracle.set_truth(truth[0], _seen_by(visible[0], k))
+        oracle.set_truth(truth[0], seen_by(visible[0], k))
         runs = oracle.run_counts["encoder"]
         est.reset()
         r = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.5))
@@ -497,7 +491,7 @@ def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_
     oracle.set_truth(truth[0], visible[0])
     assert est.estimate(frames[0]).num_found > 10 and est.tracker.track is not None
     for k in (1, 2):
-        oracle.set_truth(truth[k], _seen_by(visible[k], 0))
+        oracle.set_truth(truth[k], seen_by(visible[k], 0))
         runs = oracle.run_counts["encoder"]
         r = est.estimate(frames[k])
         assert r.single_view == est.camera_names[0] and r.missing.all() and not r.tracked
@@ -525,7 +519,7 @@ def test_a_person_seen_well_by_one_camera_only_does_not_search_the_turns(clip, k
             est.reset()
         for i in range(7):
             f = 1 + i % 4
-            oracle.set_truth(truth[f], _seen_by(visible[f], k))
+            oracle.set_truth(truth[f], seen_by(visible[f], k))
             runs = oracle.run_counts["encoder"]
             r = est.estimate(frames[f])
             assert r.single_view == est.camera_names[k] and r.missing.all()
@@ -579,7 +573,7 @@ def test_a_person_seen_by_one_camera_only_is_nobody_with_single_view_2d_off(clip
     oracle = OracleSession(edge128_contract())
     est = Estimator(oracle, rig, EstimatorConfig(frame_check=FrameCheckConfig(single_view_2d=False)))
     for k in (0, 1):
-        oracle.set_truth(truth[0], _seen_by(visible[0], k))
+        oracle.set_truth(truth[0], seen_by(visible[0], k))
         r = est.estimate(frames[0])
         assert all(r.frame_ok.values()) and r.single_view is None
         assert r.missing.all() and all(r.missing_2d[n].all() and not r.joints_2d[n].any() for n in rig.names[:2])
