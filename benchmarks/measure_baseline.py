@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -132,9 +133,16 @@ def framing_cells(rig: Rig, model_px: int) -> str:
     projected, ``roi_from_volume``, resized to the model's ``model_px``: what a pair with no track sees)."""
     share = min(person_in_view_share(cam, rig.volume) for cam in rig.pair)
     heights = [standing_person_px(cam, rig.volume) for cam in rig.pair]
-    crops = [roi_from_volume(cam, rig.volume).size for cam in rig.pair]
-    in_model = min(h * model_px / size for h, size in zip(heights, crops))
-    return f"{share:.2f} | {min(heights):.0f} | {in_model:.0f}"
+    return f"{share:.2f} | {min(heights):.0f} | {in_cold_crop_px(rig, heights, model_px):.0f}"
+
+
+def in_cold_crop_px(rig: Rig, image_px: Sequence[float], model_px: int) -> float:
+    """``image_px`` (a height per camera of the pair, image pixels) in the model's input through the cold-start crop
+    (the working volume projected, ``roi_from_volume``, resized to ``model_px``), the pair's worse camera: what a pair
+    with no track sees of a person that tall (:func:`framing_cells`, ``measure_synth_framing.cold_crop_px``)."""
+    if len(image_px) != len(rig.pair):
+        raise ValueError(f"image_px: one height per camera of the pair ({len(rig.pair)}), got {len(image_px)}")
+    return min(h * model_px / roi_from_volume(cam, rig.volume).size for cam, h in zip(rig.pair, image_px))
 
 
 def floats(text: str) -> list[float]:

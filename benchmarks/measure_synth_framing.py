@@ -36,13 +36,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.measure_baseline import bench_scene_in, floats, framing_cells, score_cells  # noqa: E402
+from benchmarks.measure_baseline import in_cold_crop_px  # noqa: E402
 from calibration.board import BoardSpec  # noqa: E402
 from calibration.detect import BoardDetector  # noqa: E402
 from calibration.render import CONVERGE_AHEAD_M, SYNTH_BOARD, calibration_views, example_rig, synth_rig  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, look_at  # noqa: E402
-from ghnerf_runtime.preprocess import roi_from_volume  # noqa: E402
 from ghnerf_runtime.rig_file import save_rig  # noqa: E402
 
 #: BODY_25 joints told apart in ``--per-sequence``: the nose (the head cut or not) and the ankles (the feet).
@@ -103,12 +103,10 @@ def in_both_images(rig: Rig, points: np.ndarray) -> np.ndarray:
 def cold_crop_px(rig: Rig, joints: np.ndarray, model_px: int) -> float:
     """How tall ``joints`` ``(J, 3)`` (rig frame) are in the model's input through the cold-start crop (the working
     volume projected, ``roi_from_volume``, resized to ``model_px``), the pair's worse camera, pinhole: as
-    ``framing_cells`` measures the standing person at the volume's centre, for this person where they stand."""
-    tall = []
-    for cam in rig.pair:
-        uv = cam.project(joints, distort=False)[0]
-        tall.append(float(np.ptp(uv[:, 1])) * model_px / roi_from_volume(cam, rig.volume).size)
-    return min(tall)
+    ``framing_cells`` measures the standing person at the volume's centre, for this person where they stand (their
+    vertical extent in the image, where ``framing_cells`` reads the feet-to-head length)."""
+    tall = [float(np.ptp(cam.project(joints, distort=False)[0][:, 1])) for cam in rig.pair]
+    return in_cold_crop_px(rig, tall, model_px)
 
 
 def sequence_row(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0):

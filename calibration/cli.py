@@ -29,7 +29,7 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import cv2
@@ -309,7 +309,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
                 raise UsageError(f"{out / camera / name}.png: cannot write the image")
     save_rig(rig, out / "truth_rig.json")
     if not args.rig:  # (a --rig file's warnings and notes were said as it loaded)
-        _say_rig_messages(rig, out / "truth_rig.json")
+        log_warnings_and_notes(rig, out / "truth_rig.json")
     write_text_atomic(out / BOARD_FILE, json.dumps(board.to_dict(), indent=2) + "\n")
     write_camera_order(out, [cam.name for cam in rig.pair], replace=True)
     total = len(next(iter(views.values())))
@@ -690,7 +690,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
           f"pitch {lv['pitch_deg']:.2f} deg, roll {lv['roll_deg']:.2f} deg")
     for warning in r["warnings"]:
         print(f"warning: {warning}")
-    _say_rig_messages(solution.rig, out, said=_fold_warnings_said(solution.rig))
+    log_warnings_and_notes(solution.rig, out, leave_out=_fold_warnings_said(solution.rig))
     _say_kept(kept)
     print(f"wrote {out} and {report_path}")
     return 0
@@ -735,14 +735,6 @@ def _refuse_exchanged_sizes(out: Path, views: dict, images: Path) -> None:
                      "round), then solve again: solved from them as they are, the rig would give each camera the "
                      "other's lens, image size and pose. If the cameras were exchanged on purpose (first= and second= "
                      f"swapped in the rig URL), give --out another path, or move {out} away first")
-
-
-def _say_rig_messages(rig: Rig, path: Path, *, said: Collection[str] = ()) -> None:
-    """What ``load_rig`` will warn and note of the rig written to ``path`` (a narrow pair, a camera's height, a
-    volume off the floor, a standing person out of view...), logged as loading logs them and so shown on stderr as
-    :func:`main` shows a loaded rig's (``rig_messages_on_stderr``), each once: where the rig is made, not first when
-    it is next loaded. Those in ``said`` are left out: the command said them in its own words already."""
-    log_warnings_and_notes(rig, path, leave_out=said)
 
 
 def _fold_warnings_said(rig: Rig) -> set[str]:
@@ -986,7 +978,7 @@ def cmd_import(args: argparse.Namespace) -> int:
               + ", and the runtime reads y as down with the floor at y = 0 (the skeleton prior, upright crops, the "
               "working volume): import again with --camera-height M (and --pitch, --roll) of the first camera")
         said = _height_warnings_said(rig)
-    _say_rig_messages(rig, out, said=said)
+    log_warnings_and_notes(rig, out, leave_out=said)
     _say_kept(kept)
     print(f"wrote {out}")
     return 0
@@ -1339,7 +1331,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     # a word (exit 143 from the shell, the cameras never closed)
     try:
         # a rig loaded (check, export, synth --rig) shows its notes beside its warnings, each a bare line on stderr:
-        # with no logging set up, Python showed the warnings only
+        # with no logging set up, Python showed the warnings only; so does the rig solve, import and synth write
+        # (log_warnings_and_notes where it is made, not first when it is next loaded)
         with sigterm_as_interrupt(), rig_messages_on_stderr():
             return int(args.run(args))
     except (CalibrationError, RuntimeErrorBase, OSError) as e:

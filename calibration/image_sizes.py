@@ -41,10 +41,13 @@ def camera_image_sizes(root: str | Path, cameras: Sequence[str], views: Mapping[
     return sizes
 
 
-def _usual_size(sizes: Iterable[Size]) -> Size | None:
-    """The size most of ``sizes`` have (the first of equals in their order); None without any."""
-    counts = Counter(sizes)
-    return counts.most_common(1)[0][0] if counts else None
+def _usual_and_odd(named: Iterable[tuple[str, Size]]) -> tuple[Size | None, list[str]]:
+    """The size most of ``named`` (image or view name, size) have, the first of equals in their order (None without
+    any), and the names of those of another size, sorted: what both the files' and the views' checks name."""
+    pairs = list(named)
+    counts = Counter(size for _, size in pairs)
+    usual = counts.most_common(1)[0][0] if counts else None
+    return usual, sorted(name for name, size in pairs if size != usual)
 
 
 def _odd_size_words(what: str, size: Size, camera: str, usual: Size, count: int, kind: str) -> str:
@@ -71,9 +74,11 @@ def _odd_image_words(camera: str, name: str, sizes: Mapping[str, Mapping[str, tu
 
 def mixed_sizes_problem(sizes: Mapping[str, Mapping[str, tuple[Path, Size]]]) -> str | None:
     """The first camera whose images are not all one size, said per odd image (up to three), or None."""
-    usual = {camera: _usual_size(size for _, size in sorted(images.values())) for camera, images in sizes.items()}
-    for camera, images in sizes.items():
-        odd = sorted(name for name, (_, size) in images.items() if size != usual[camera])
+    # the usual size's ties go to the first file by path (a view's name is its file's stem: another order)
+    found = {camera: _usual_and_odd((name, size) for name, (_, size) in sorted(images.items(), key=lambda i: i[1]))
+             for camera, images in sizes.items()}
+    usual = {camera: size for camera, (size, _) in found.items()}
+    for camera, (_, odd) in found.items():
         if odd:
             return "; ".join(_odd_image_words(camera, name, sizes, usual) for name in odd[:3]) + _more(odd)
     return None
@@ -82,8 +87,7 @@ def mixed_sizes_problem(sizes: Mapping[str, Mapping[str, tuple[Path, Size]]]) ->
 def mixed_views_problem(camera: str, views: Mapping[str, BoardView]) -> str | None:
     """One camera's board views not all one size, said per odd view (up to three) as :func:`mixed_sizes_problem`
     says files, or None: the guard of a caller that hands views without their files (``calibrate_intrinsics``)."""
-    usual = _usual_size(views[name].image_size for name in sorted(views))
-    odd = sorted(name for name, view in views.items() if view.image_size != usual)
+    usual, odd = _usual_and_odd((name, views[name].image_size) for name in sorted(views))
     if not odd:
         return None
     assert usual is not None

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.measure_baseline import (baseline_for_angle, framing_cells, lifted, rig_with_baseline,
+from benchmarks.measure_baseline import (baseline_for_angle, framing_cells, in_cold_crop_px, lifted, rig_with_baseline,
                                          standing_person_px, tile_find_rows)
+from ghnerf_runtime.preprocess import roi_from_volume
 from ghnerf_runtime.rig_file import STANDING_PERSON_M, load_rig, pair_angle_deg
 from tests.benchmarks.test_bench_smoke import run_script, scratch_cache  # noqa: F401
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
@@ -105,3 +106,13 @@ def test_the_command_line_prints_the_tile_finds(tiny_model_dir, scratch_cache, c
                      "--baselines", "", "--rigs", str(example), "--lifts", "", "--tile-finds", capsys=capsys,
                      monkeypatch=monkeypatch)
     assert "| rig file | sequence | pair | tile find | person's joints' mean x, y, z, m |" in out, out
+
+
+def test_the_cold_crop_height_wants_one_height_per_camera():
+    """``in_cold_crop_px`` (``framing_cells``' and ``measure_synth_framing.cold_crop_px``'s): one image height per
+    camera of the pair, else a ValueError naming the count (``zip`` would drop the second camera silently)."""
+    rig = rig_with_baseline(0.6, 3.0)
+    crops = [roi_from_volume(cam, rig.volume).size for cam in rig.pair]
+    assert in_cold_crop_px(rig, [200.0, 100.0], 128) == min(200.0 * 128 / crops[0], 100.0 * 128 / crops[1])
+    with pytest.raises(ValueError, match=r"image_px: one height per camera of the pair \(2\), got 1"):
+        in_cold_crop_px(rig, [200.0], 128)

@@ -462,12 +462,18 @@ def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str,
 
     images = _listed_views(views, tmp_path)
     save_rig(rig, tmp_path / "rig.json")
-    if stray is not None:
-        assert cv2.imwrite(str(images / "left" / "stray.png"), np.zeros(stray[::-1], np.uint8))
-    _detection_stood_in_for(views, monkeypatch, None if stray is None else {"left": ["stray"], "right": []})
+    _stand_in_with_stray(views, images, monkeypatch, stray)
     rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
                    "--images", str(images), *options])
     return rc, images
+
+
+def _stand_in_with_stray(views: dict, images: Path, monkeypatch, stray: tuple[int, int] | None) -> None:
+    """The detection stood in for (:func:`_detection_stood_in_for`), and with ``stray`` a ``(width, height)`` image
+    ``images/left/stray.png`` written beside ``views``' images, the board not found in it."""
+    if stray is not None:
+        assert cv2.imwrite(str(images / "left" / "stray.png"), np.zeros(stray[::-1], np.uint8))
+    _detection_stood_in_for(views, monkeypatch, None if stray is None else {"left": ["stray"], "right": []})
 
 
 def test_check_names_the_exchanged_folders_instead_of_calibrating_again(level_rig, level_views, tmp_path, capsys,
@@ -511,11 +517,12 @@ def test_folders_exchanged_between_cameras_of_two_sizes_are_said_so(sized_rig, t
     assert "exchanged, the rig does not fit them either (reprojection" in err and "over 0.1 px" in err
 
 
-def _solve_cli(views: dict, tmp_path, monkeypatch, *more: str) -> tuple[int, Path]:
+def _solve_cli(views: dict, tmp_path, monkeypatch, *more: str,
+               stray: tuple[int, int] | None = None) -> tuple[int, Path]:
     """``ghcal solve`` of ``views`` (the detection stood in for) into ``tmp_path/rig.json``, levelled by a typed
-    height, ``more`` arguments after: its exit status, and the images' folder."""
+    height, ``more`` arguments after: its exit status, and the images' folder. ``stray`` as :func:`_check_cli`'s."""
     images = _listed_views(views, tmp_path)
-    _detection_stood_in_for(views, monkeypatch)
+    _stand_in_with_stray(views, images, monkeypatch, stray)
     rc = cli.main(["solve", "--images", str(images), "--board", str(tmp_path / "board.json"), "--out",
                    str(tmp_path / "rig.json"), "--cameras", "left,right", "--camera-height", "1.4", "--pitch", "9",
                    *more])
@@ -581,12 +588,8 @@ def test_solve_without_a_rig_file_refuses_an_image_of_another_size_the_board_was
         sized_rig, tmp_path, capsys, monkeypatch):
     # the solve compared only the images the board was found in: a stray image at another size went unsaid
     views = _views(sized_rig, _facing_poses(sized_rig, 10, seed=7), noise_px=0.1)
-    images = _listed_views(views, tmp_path)
+    rc, images = _solve_cli(views, tmp_path, monkeypatch, stray=(32, 16))
     stray = images / "left" / "stray.png"
-    assert cv2.imwrite(str(stray), np.zeros((16, 32), np.uint8))
-    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {"left": ["stray"], "right": []}))
-    rc = cli.main(["solve", "--images", str(images), "--board", str(tmp_path / "board.json"), "--out",
-                   str(tmp_path / "rig.json"), "--cameras", "left,right", "--camera-height", "1.4", "--pitch", "9"])
     err = capsys.readouterr().err
     assert rc == 2 and f"{stray} is 32x16, the other 10 image(s) of camera 'left' 960x600: remove or retake it" in err
     stray.unlink()

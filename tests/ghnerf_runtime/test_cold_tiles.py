@@ -20,6 +20,7 @@ from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.scene_change import CALM_AFTER_PASSES, RESTLESS_AFTER_WAKES, pair_copies
 from ghnerf_runtime.tracking import COLD_TILE_SPLITS, cold_person_share, volume_regions, volume_tiles
 from tests.ghnerf_runtime.sim_takes import pair_images
+from tests.one_camera import seen_by
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -469,11 +470,6 @@ def test_a_resting_pair_builds_its_scene_copies_once(example_rig, monkeypatch):
     assert est.cold_tile_passes == 7 and len(built) == 13  # one a pair, not 13 + the 3 resting passes
 
 
-def first_camera_only(joints: np.ndarray) -> np.ndarray:
-    """The oracle's visibility of ``joints`` (``set_truth``'s): every joint in the first camera, none in the second."""
-    return np.stack([np.ones(len(joints), bool), np.zeros(len(joints), bool)])
-
-
 def test_a_screen_read_as_a_person_in_one_view_still_stops_waking_the_rest(example_rig):
     """The model may read a screen's picture as a person in one view (the moving-room bench: 9 pairs in 100). Such a
     sighting on the pair after each wake cleared the wake as not in vain, so the screen's cells never grew restless
@@ -490,7 +486,7 @@ def test_a_screen_read_as_a_person_in_one_view_still_stops_waking_the_rest(examp
         one_view += result.single_view is not None
         woke = est.cold_tile_wakes > (wakes[-1] if wakes else 0)
         wakes.append(est.cold_tile_wakes)
-        oracle.set_truth(seen, first_camera_only(seen)) if woke else oracle.set_truth(None)
+        oracle.set_truth(seen, seen_by(np.ones((2, len(seen)), bool), 0)) if woke else oracle.set_truth(None)
     assert one_view >= RESTLESS_AFTER_WAKES  # each wake's next pair saw 'someone' in one view
     assert RESTLESS_AFTER_WAKES <= wakes[-1] <= 5
     assert wakes[-24] == wakes[-1]  # no wake in the last 24 pairs
@@ -502,7 +498,7 @@ def test_a_walk_in_seen_in_one_view_then_in_both_is_no_vain_wake(example_rig, fa
     the round that finds nobody counts nothing against the cells they moved."""
     images, joints = far_person
     oracle, est = resting_estimator(example_rig, rest_every=8)
-    oracle.set_truth(joints, first_camera_only(joints))
+    oracle.set_truth(joints, seen_by(np.ones((2, len(joints)), bool), 0))
     assert est.estimate(images).missing.all()  # the walk-in wakes the rest; the near left tile draws them too small
     assert est.cold_tile_wakes == 1 and est._woke_on is not None
     assert est.estimate(images).single_view == example_rig.pair[0].name  # the far left tile, one camera
@@ -522,7 +518,7 @@ def test_a_reset_leaves_no_wake_to_judge(example_rig, far_person):
     restless cells: the round after it that finds nobody counts no vain wake against the cells that woke it."""
     images, joints = far_person
     oracle, est = resting_estimator(example_rig, rest_every=8)
-    oracle.set_truth(joints, first_camera_only(joints))
+    oracle.set_truth(joints, seen_by(np.ones((2, len(joints)), bool), 0))
     est.estimate(images)  # the walk-in wakes the rest
     assert est.estimate(images).single_view == example_rig.pair[0].name and est._woke_on is not None
     est.reset()

@@ -22,6 +22,7 @@ from ghnerf_runtime.estimator import NOVEL_STAGES, Estimator, check_crop
 from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.metrics import mpjpe, pck
 from ghnerf_runtime.preprocess import preprocess_image
+from tests.one_camera import seen_by
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -426,13 +427,6 @@ def test_an_empty_room_takes_the_heatmap_maxima_once_for_the_flip_test_and_once_
     assert oracle.run_counts["encoder"] == 3  # nobody: no mirrored run, no turn searched
 
 
-def _seen_by(visible: np.ndarray, k: int) -> np.ndarray:
-    """``(2, 25)`` visibility of a person camera ``k`` sees (as in the truth) and the other camera does not."""
-    one = visible.copy()
-    one[1 - k] = False
-    return one
-
-
 @pytest.mark.parametrize("source, flip", [("encoder", True), ("encoder", False), ("rendered", False)])
 def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, source, flip):
     """Someone entering at the edge of one camera's view, outside the other's: both frames pass the check and
@@ -449,7 +443,7 @@ def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, sour
     est = Estimator(oracle, rig, cfg)
     names = est.camera_names
     for k in (0, 1):
-        oracle.set_truth(truth[0], _seen_by(visible[0], k))
+        oracle.set_truth(truth[0], seen_by(visible[0], k))
         runs = oracle.run_counts["encoder"]
         est.reset()
         r = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.5))
@@ -523,13 +517,13 @@ def test_a_plain_crop_on_the_rays_of_a_working_camera_is_kept_pair_after_pair(cl
     oracle = OracleSession(edge128_contract())
     est = Estimator(oracle, rig, EstimatorConfig())
     names = est.camera_names
-    oracle.set_truth(truth[0], _seen_by(visible[0], 0))
+    oracle.set_truth(truth[0], seen_by(visible[0], 0))
     first = est.estimate(frames[0])
     panel = est.tracker.view_other  # where camera 1 looks next: the panel covers it, and the person, from now on
     assert first.single_view == names[0] and first.rois[names[1]] == est.tracker.volume_regions.rois[1]
     assert panel is not None
     for k in range(1, len(frames)):
-        oracle.set_truth(truth[k], _seen_by(visible[k], 0))
+        oracle.set_truth(truth[k], seen_by(visible[k], 0))
         on_rays, runs = est.tracker.view_other, oracle.run_counts["encoder"]
         hidden = _with_panel(frames[k][1], panel, 16)
         maps, _ = est._crop(est._cams[1], on_rays)
@@ -558,7 +552,7 @@ def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_
     oracle.set_truth(truth[0], visible[0])
     assert est.estimate(frames[0]).num_found > 10 and est.tracker.track is not None
     for k in (1, 2):
-        oracle.set_truth(truth[k], _seen_by(visible[k], 0))
+        oracle.set_truth(truth[k], seen_by(visible[k], 0))
         runs = oracle.run_counts["encoder"]
         r = est.estimate(frames[k])
         assert r.single_view == est.camera_names[0] and r.missing.all() and not r.tracked
@@ -586,7 +580,7 @@ def test_a_person_seen_well_by_one_camera_only_does_not_search_the_turns(clip, k
             est.reset()
         for i in range(7):
             f = 1 + i % 4
-            oracle.set_truth(truth[f], _seen_by(visible[f], k))
+            oracle.set_truth(truth[f], seen_by(visible[f], k))
             runs = oracle.run_counts["encoder"]
             r = est.estimate(frames[f])
             assert r.single_view == est.camera_names[k] and r.missing.all()
@@ -640,7 +634,7 @@ def test_a_person_seen_by_one_camera_only_is_nobody_with_single_view_2d_off(clip
     oracle = OracleSession(edge128_contract())
     est = Estimator(oracle, rig, EstimatorConfig(frame_check=FrameCheckConfig(single_view_2d=False)))
     for k in (0, 1):
-        oracle.set_truth(truth[0], _seen_by(visible[0], k))
+        oracle.set_truth(truth[0], seen_by(visible[0], k))
         r = est.estimate(frames[0])
         assert all(r.frame_ok.values()) and r.single_view is None
         assert r.missing.all() and all(r.missing_2d[n].all() and not r.joints_2d[n].any() for n in rig.names[:2])
