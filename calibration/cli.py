@@ -1330,9 +1330,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # its cameras and says what it kept, the others say they did not finish; by default it killed them without
     # a word (exit 143 from the shell, the cameras never closed)
     try:
-        # a rig loaded (check, export, synth --rig) shows its notes beside its warnings, each a bare line on stderr:
-        # with no logging set up, Python showed the warnings only; so does the rig solve, import and synth write
-        # (log_warnings_and_notes where it is made, not first when it is next loaded)
+        # a rig loaded (check, export, synth --rig) or written (solve, import, synth: log_warnings_and_notes where
+        # it is made, not first when it is next loaded) shows its notes beside its warnings, each a bare line on
+        # stderr: with no logging set up, Python showed the warnings only
         with sigterm_as_interrupt(), rig_messages_on_stderr():
             return int(args.run(args))
     except (CalibrationError, RuntimeErrorBase, OSError) as e:

@@ -14,7 +14,7 @@ compared only the images the board was found in).
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from calibration.capture import camera_folders, list_images, stored_size
@@ -41,13 +41,14 @@ def camera_image_sizes(root: str | Path, cameras: Sequence[str], views: Mapping[
     return sizes
 
 
-def _usual_and_odd(named: Iterable[tuple[str, Size]]) -> tuple[Size | None, list[str]]:
-    """The size most of ``named`` (image or view name, size) have, the first of equals in their order (None without
-    any), and the names of those of another size, sorted: what both the files' and the views' checks name."""
-    pairs = list(named)
-    counts = Counter(size for _, size in pairs)
+def _usual_and_odd(named: Mapping[str, Size]) -> tuple[Size | None, list[str]]:
+    """The size most of ``named`` (image or view name -> size) have, the first image's by name of equals (None
+    without any), and the names of those of another size, sorted: what both the files' and the views' checks name,
+    so that ``ghcal`` and a library caller's views of the same folder call the same size usual."""
+    names = sorted(named)
+    counts = Counter(named[name] for name in names)
     usual = counts.most_common(1)[0][0] if counts else None
-    return usual, sorted(name for name, size in pairs if size != usual)
+    return usual, [name for name in names if named[name] != usual]
 
 
 def _odd_size_words(what: str, size: Size, camera: str, usual: Size, count: int, kind: str) -> str:
@@ -74,8 +75,9 @@ def _odd_image_words(camera: str, name: str, sizes: Mapping[str, Mapping[str, tu
 
 def mixed_sizes_problem(sizes: Mapping[str, Mapping[str, tuple[Path, Size]]]) -> str | None:
     """The first camera whose images are not all one size, said per odd image (up to three), or None."""
-    # the usual size's ties go to the first file by path (a view's name is its file's stem: another order)
-    found = {camera: _usual_and_odd((name, size) for name, (_, size) in sorted(images.items(), key=lambda i: i[1]))
+    # ties by name as for views: by path ("a-b.png" before "a.png", until session 70's review) ghcal called usual
+    # the size that calibrate_intrinsics, given the same folder's views, calls odd
+    found = {camera: _usual_and_odd({name: size for name, (_, size) in images.items()})
              for camera, images in sizes.items()}
     usual = {camera: size for camera, (size, _) in found.items()}
     for camera, (_, odd) in found.items():
@@ -87,7 +89,7 @@ def mixed_sizes_problem(sizes: Mapping[str, Mapping[str, tuple[Path, Size]]]) ->
 def mixed_views_problem(camera: str, views: Mapping[str, BoardView]) -> str | None:
     """One camera's board views not all one size, said per odd view (up to three) as :func:`mixed_sizes_problem`
     says files, or None: the guard of a caller that hands views without their files (``calibrate_intrinsics``)."""
-    usual, odd = _usual_and_odd((name, views[name].image_size) for name in sorted(views))
+    usual, odd = _usual_and_odd({name: view.image_size for name, view in views.items()})
     if not odd:
         return None
     assert usual is not None

@@ -86,7 +86,7 @@ def test_images_of_two_sizes_are_named():
         calibrate_intrinsics(BOARD, views, camera="left")
     for name in ("000", "001"):
         views[name] = BoardView(views[name].ids, views[name].corners, (800, 600))
-    # three of each: the first in name order gives the usual size (a file, the first by path), each other view named
+    # three of each: the first in name order gives the usual size, as for files, and each other view named
     with pytest.raises(SolveError, match=r"^view '002' is 640x480, the other 3 view\(s\) of camera 'left' 800x600: "
                                          r"remove or retake it; view '003' is .*; view '005' is 640x480, .*retake "
                                          r"it\. Solved"):
