@@ -75,7 +75,7 @@ from ghnerf_runtime.flip_test import flip_averaged, joint_peaks, mirror_images, 
     ranked_peak
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
-from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution
+from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution, triangulate_midpoint
 from ghnerf_runtime.handedness import handedness
 from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, depth_centroid_joints, gate_presence, gate_to_box, \
     lower_foot_m, near_the_body, \
@@ -509,19 +509,6 @@ def _whole_sequence(value) -> int:
 def _add_ms(timing: dict[str, float], stage: str, t0: float) -> None:
     """Add the milliseconds since ``t0`` to ``timing[stage]`` (a cold start's second pass adds to the first)."""
     timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
-
-
-def _nearest_meetings(o1: np.ndarray, o2: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> np.ndarray:
-    """``(M, 3)``: the midpoints of where pairs of rays (origins ``o1``, ``o2``, unit directions ``d1``, ``d2``, each
-    ``(N, 3)``) pass nearest each other, leaving out the pairs that are parallel, not finite, or meet behind either
-    origin."""
-    w = o1 - o2
-    b, d, e = (np.einsum("ij,ij->i", x, y) for x, y in ((d1, d2), (d1, w), (d2, w)))
-    det = 1.0 - b * b
-    with np.errstate(divide="ignore", invalid="ignore"):  # parallel rays: dropped below
-        t1, t2 = (b * e - d) / det, (e - b * d) / det
-        ok = np.isfinite(t1) & np.isfinite(t2) & (det > 1e-9) & (t1 > 0) & (t2 > 0)
-    return 0.5 * (o1[ok] + t1[ok, None] * d1[ok] + o2[ok] + t2[ok, None] * d2[ok])
 
 
 @dataclass
@@ -1365,6 +1352,8 @@ class Estimator:
             if self._feet_float(q):
                 self.tile_finds_floating += 1
                 self.tracker.reset()  # the next pair starts cold, as after a tile that found nobody
+                if q.novel is not None:  # the refined pass is tracked: its novel view may be rendering in the worker
+                    q.novel.abandon()
                 found = False
         if not found:
             self._next_tile = k + 1
@@ -1407,9 +1396,9 @@ class Estimator:
     def _weak_evidence_point(self, p: "_Pass") -> np.ndarray | None:
         """``(3,)``: the median, over the joints ``p`` decoded in both views (a peak over ``decoder.threshold``, 0.1,
         under the presence threshold in a pass that found nobody: a person too small to find may leave such peaks where
-        they stand), of where the two views' rays through those peaks pass nearest each other (sub-cell peaks: the
-        views' disparity at 4 m, a pixel or two of the model's input, is under a heatmap cell); None without such a
-        joint or decoded peaks."""
+        they stand), of where the two views' rays through those peaks pass nearest each other (``triangulate_midpoint``;
+        sub-cell peaks: the views' disparity at 4 m, a pixel or two of the model's input, is under a heatmap cell);
+        None without such a joint, decoded peaks or a point in front of both cameras."""
         kp = p.peaks
         if kp is None or p.crops is None:
             return None
@@ -1417,9 +1406,8 @@ class Estimator:
         if not len(both):
             return None
         uv = heatmap_to_model_pixels(kp.uv[:, both], self.grid, self.size)  # (2, M, 2)
-        (o1, d1), (o2, d2) = (crop.rays(uv[i]) for i, crop in enumerate(p.crops))
-        points = _nearest_meetings(o1, o2, d1, d2)
-        return np.median(points, axis=0) if len(points) else None
+        met = triangulate_midpoint(uv, p.crops)  # (rays near parallel, or meeting behind a camera: not valid)
+        return np.median(met.points[met.valid], axis=0) if met.valid.any() else None
 
     @staticmethod
     def _sees_anyone(p: "_Pass") -> bool:
