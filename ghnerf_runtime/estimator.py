@@ -774,7 +774,7 @@ class Estimator:
                                                      for st, roi in zip(self._cams, self.tracker.volume_regions.rois)]),
                                            self.skeleton_prior is not None)
         # tracking.cold_tiles_below_share: the working volume's tiles (none where its whole crop frames a person well
-        # enough), one searched per cold pair that finds nobody, in turn
+        # enough), one searched per cold pair that finds nobody: where its faint peaks meet, else in turn
         self._cold_tiles = self._tiles_for_small_people(rig)
         self._next_tile = 0
         self._tiles_tried: frozenset[int] = frozenset()  # the tiles the current round searched and found nobody in
@@ -890,10 +890,11 @@ class Estimator:
 
     def reset(self) -> None:
         """Forget the tracked subject (the next pair starts from the working volume, through upright crops: a kept
-        crop turn goes with the track, ``roi.turn_search``), the smoothing and the cold tiles' rest (the next cold
-        pair that finds nobody searches the first tile). The counters are statistics over the estimator's life and
-        stay: ``cold_tile_passes``, ``cold_tiles_found``, ``tile_finds_floating``, ``cold_tile_wakes``,
-        ``turn_searches``, ``turns_kept``, ``turns_refused``, ``turn_checks`` and ``turns_left``."""
+        crop turn goes with the track, ``roi.turn_search``), the smoothing and the cold tiles' rest and round (the next
+        cold pair that finds nobody searches a tile: its faint peaks', else the first). The counters are statistics
+        over the estimator's life and stay: ``cold_tile_passes``, ``cold_tiles_found``, ``tile_finds_floating``,
+        ``cold_tile_wakes``, ``turn_searches``, ``turns_kept``, ``turns_refused``, ``turn_checks`` and
+        ``turns_left``."""
         self.tracker.reset()  # the kept turn's tracker (the upright one is reset as the crops return upright)
         self._use_turns((0, 0))
         self._several_track = False
