@@ -30,7 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.measure_baseline import run_sequence, score_cells, standing_person_px  # noqa: E402
+from benchmarks.measure_baseline import in_cold_crop_px, run_sequence, score_cells, standing_person_px  # noqa: E402
 from calibration.render import example_rig, synth_rig  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import load_session  # noqa: E402
@@ -92,12 +92,9 @@ def crop_cells(rig: Rig, people: WorkingVolume, model_px: int) -> str:
     and how tall the same standing person (at ``people``'s centre, whatever the rig is told) is in it, in the model's
     ``model_px`` input (the pair's smaller). Not ``measure_baseline.framing_cells``: its person stands at the told
     volume's centre, which moves with the near edge, and would shrink for that alone."""
-    crops, in_model = [], []
-    for cam in rig.pair:
-        size = roi_from_volume(cam, rig.volume).size
-        crops.append(size)
-        in_model.append(standing_person_px(cam, people) * model_px / size)
-    return f"{max(crops):.0f} | {min(in_model):.0f}"
+    crop = max(roi_from_volume(cam, rig.volume).size for cam in rig.pair)
+    tall = in_cold_crop_px(rig, [standing_person_px(cam, people) for cam in rig.pair], model_px)
+    return f"{crop:.0f} | {tall:.0f}"
 
 
 def rig_named(name: str) -> Rig:

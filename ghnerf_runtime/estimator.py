@@ -75,7 +75,7 @@ from ghnerf_runtime.flip_test import flip_averaged, joint_peaks, mirror_images, 
     ranked_peak
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
-from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution
+from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution, triangulate_midpoint
 from ghnerf_runtime.handedness import handedness
 from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, depth_centroid_joints, gate_presence, gate_to_box, \
     lower_foot_m, near_the_body, \
@@ -511,19 +511,6 @@ def _add_ms(timing: dict[str, float], stage: str, t0: float) -> None:
     timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
 
 
-def _nearest_meetings(o1: np.ndarray, o2: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> np.ndarray:
-    """``(M, 3)``: the midpoints of where pairs of rays (origins ``o1``, ``o2``, unit directions ``d1``, ``d2``, each
-    ``(N, 3)``) pass nearest each other, leaving out the pairs that are parallel, not finite, or meet behind either
-    origin."""
-    w = o1 - o2
-    b, d, e = (np.einsum("ij,ij->i", x, y) for x, y in ((d1, d2), (d1, w), (d2, w)))
-    det = 1.0 - b * b
-    with np.errstate(divide="ignore", invalid="ignore"):  # parallel rays: dropped below
-        t1, t2 = (b * e - d) / det, (e - b * d) / det
-        ok = np.isfinite(t1) & np.isfinite(t2) & (det > 1e-9) & (t1 > 0) & (t2 > 0)
-    return 0.5 * (o1[ok] + t1[ok, None] * d1[ok] + o2[ok] + t2[ok, None] * d2[ok])
-
-
 @dataclass
 class _Pass:
     """What one pass over a pair produced (``j3`` is ``None`` when the frame check stopped it)."""
@@ -787,7 +774,7 @@ class Estimator:
                                                      for st, roi in zip(self._cams, self.tracker.volume_regions.rois)]),
                                            self.skeleton_prior is not None)
         # tracking.cold_tiles_below_share: the working volume's tiles (none where its whole crop frames a person well
-        # enough), one searched per cold pair that finds nobody, in turn
+        # enough), one searched per cold pair that finds nobody: where its faint peaks meet, else in turn
         self._cold_tiles = self._tiles_for_small_people(rig)
         self._next_tile = 0
         self._tiles_tried: frozenset[int] = frozenset()  # the tiles the current round searched and found nobody in
@@ -903,10 +890,11 @@ class Estimator:
 
     def reset(self) -> None:
         """Forget the tracked subject (the next pair starts from the working volume, through upright crops: a kept
-        crop turn goes with the track, ``roi.turn_search``), the smoothing and the cold tiles' rest (the next cold
-        pair that finds nobody searches the first tile). The counters are statistics over the estimator's life and
-        stay: ``cold_tile_passes``, ``cold_tiles_found``, ``tile_finds_floating``, ``cold_tile_wakes``,
-        ``turn_searches``, ``turns_kept``, ``turns_refused``, ``turn_checks`` and ``turns_left``."""
+        crop turn goes with the track, ``roi.turn_search``), the smoothing and the cold tiles' rest and round (the next
+        cold pair that finds nobody searches a tile: its faint peaks', else the first). The counters are statistics
+        over the estimator's life and stay: ``cold_tile_passes``, ``cold_tiles_found``, ``tile_finds_floating``,
+        ``cold_tile_wakes``, ``turn_searches``, ``turns_kept``, ``turns_refused``, ``turn_checks`` and
+        ``turns_left``."""
         self.tracker.reset()  # the kept turn's tracker (the upright one is reset as the crops return upright)
         self._use_turns((0, 0))
         self._several_track = False
@@ -1365,6 +1353,8 @@ class Estimator:
             if self._feet_float(q):
                 self.tile_finds_floating += 1
                 self.tracker.reset()  # the next pair starts cold, as after a tile that found nobody
+                if q.novel is not None:  # the refined pass is tracked: its novel view may be rendering in the worker
+                    q.novel.abandon()
                 found = False
         if not found:
             self._next_tile = k + 1
@@ -1407,9 +1397,9 @@ class Estimator:
     def _weak_evidence_point(self, p: "_Pass") -> np.ndarray | None:
         """``(3,)``: the median, over the joints ``p`` decoded in both views (a peak over ``decoder.threshold``, 0.1,
         under the presence threshold in a pass that found nobody: a person too small to find may leave such peaks where
-        they stand), of where the two views' rays through those peaks pass nearest each other (sub-cell peaks: the
-        views' disparity at 4 m, a pixel or two of the model's input, is under a heatmap cell); None without such a
-        joint or decoded peaks."""
+        they stand), of where the two views' rays through those peaks pass nearest each other (``triangulate_midpoint``;
+        sub-cell peaks: the views' disparity at 4 m, a pixel or two of the model's input, is under a heatmap cell);
+        None without such a joint, decoded peaks or a point in front of both cameras."""
         kp = p.peaks
         if kp is None or p.crops is None:
             return None
@@ -1417,9 +1407,8 @@ class Estimator:
         if not len(both):
             return None
         uv = heatmap_to_model_pixels(kp.uv[:, both], self.grid, self.size)  # (2, M, 2)
-        (o1, d1), (o2, d2) = (crop.rays(uv[i]) for i, crop in enumerate(p.crops))
-        points = _nearest_meetings(o1, o2, d1, d2)
-        return np.median(points, axis=0) if len(points) else None
+        met = triangulate_midpoint(uv, p.crops)  # (rays near parallel, or meeting behind a camera: not valid)
+        return np.median(met.points[met.valid], axis=0) if met.valid.any() else None
 
     @staticmethod
     def _sees_anyone(p: "_Pass") -> bool:

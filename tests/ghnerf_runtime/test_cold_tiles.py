@@ -14,6 +14,7 @@ import pytest
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract
 from benchmarks.empty_rooms import empty_room_pair, scene_with_screen, scene_without_person, with_screen
+from benchmarks.measure_baseline import tile_find_feet
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, RoiConfig, TrackingConfig
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.rig_file import load_rig
@@ -586,3 +587,43 @@ def test_a_tile_find_whose_feet_float_is_refused(example_rig, far_person, lift_m
     assert (est.tracker.track is not None) == kept
     if kept:
         assert first.lowest_foot_m == pytest.approx(lift_m, abs=0.1)
+
+
+def test_a_refused_tile_find_leaves_no_novel_view_rendering(example_rig, far_person, monkeypatch):
+    """The refused find's refined pass is tracked: with ``novel_view.overlap`` it started its novel view in the
+    worker. The pair answers nobody, so that render is abandoned with the pass, not left running behind the pair
+    (a stand-in job on the refined pass: whether it is abandoned is all the test reads)."""
+    images, joints = far_person
+    oracle = FaintSmallPeopleOracle(edge128_contract())
+    est = Estimator(oracle, example_rig, EstimatorConfig())
+    abandoned = []
+
+    class Job:
+        def abandon(self):
+            abandoned.append(self)
+
+    refined = est._refined
+
+    def rendering(images, p, *args):
+        q = refined(images, p, *args)
+        if q is not p:
+            q.novel = Job()
+        return q
+
+    monkeypatch.setattr(est, "_refined", rendering)
+    oracle.set_truth(joints - [0.0, 0.6, 0.0])
+    assert est.estimate(images).missing.all() and est.tile_finds_floating == 1
+    assert len(abandoned) == 1
+
+
+def test_a_refused_tile_find_s_foot_is_the_find_s(example_rig, far_person):
+    """``--tile-finds``' foot is the find's (``tile_find_feet``): a refused find's pair answers nobody, whose
+    ``PairResult.lowest_foot_m`` is None, and the table printed "-" where the estimator read the foot 0.6 m up."""
+    images, joints = far_person
+    oracle = FaintSmallPeopleOracle(edge128_contract())
+    est = Estimator(oracle, example_rig, EstimatorConfig())
+    feet = tile_find_feet(est)
+    oracle.set_truth(joints - [0.0, 0.6, 0.0])  # drawn 0.6 m up: refused (-k feet_float)
+    r = est.estimate(images)
+    assert est.tile_finds_floating == 1 and r.lowest_foot_m is None
+    assert len(feet) == 1 and feet[0] == pytest.approx(0.6, abs=0.1)
