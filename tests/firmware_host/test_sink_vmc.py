@@ -322,8 +322,46 @@ def test_the_first_jump_back_is_logged_once(caplog: pytest.LogCaptureFixture) ->
     clock = VmcClock("vmc://host")
     with caplog.at_level("WARNING", logger="firmware_host.sinks.vmc_time"):
         times = [clock.seconds(us) for us in (5_000_000, 5_100_000, 1_000_000, 6_000_000, 2_000_000, 2_000_000)]
-    # back: one frame step (0.1 s, the smallest seen; not the 5 s gap) on; a repeated stamp repeats T
+    # back: one frame step (0.1 s, the lower median of 0.1 s and the 5 s gap) on; a repeated stamp repeats T
     assert times == pytest.approx([0.0, 0.1, 0.2, 5.2, 5.3, 5.3])
     assert clock.jumps_back == 2
     (record,) = caplog.records
     assert "vmc://host" in record.getMessage() and "went back 4.100 s" in record.getMessage()
+
+
+def _step_across_jump_back_us(stamps_us: list[int]) -> int:
+    """The T step (us) from the last of ``stamps_us`` to a frame stamped 1 s, long before them."""
+    from firmware_host.sinks.vmc_time import VmcClock
+    clock = VmcClock("vmc://host")
+    times = [clock.seconds(us) for us in [*stamps_us, 1_000_000]]
+    assert clock.jumps_back == 1
+    return round((times[-1] - times[-2]) * 1e6)
+
+
+def test_the_step_across_a_jump_back_is_a_frame_whatever_the_jitter() -> None:
+    # 30 fps stamped with +-5 ms of jitter: the smallest forward step (about 24 ms) was the step across a jump
+    # back, 30 % short of a frame; the steps' median is within a few percent of one.
+    rng = np.random.default_rng(71)
+    stamps = [10_000_000 + i * 33_333 + int(rng.integers(-5_000, 5_001)) for i in range(60)]
+    assert abs(_step_across_jump_back_us(stamps) - 33_333) <= 0.2 * 33_333
+
+
+def test_one_hiccup_step_does_not_become_the_frame_interval() -> None:
+    # A driver hiccup stamped two frames 1 ms apart among 33 ms steps: T moved on 1 ms across the jump back.
+    stamps = [10_000_000 + i * 33_333 for i in range(6)]
+    stamps += [stamps[-1] + 1_000] + [stamps[-1] + 1_000 + i * 33_333 for i in range(1, 6)]
+    assert _step_across_jump_back_us(stamps) == 33_333
+
+
+def test_a_pause_does_not_become_the_frame_interval() -> None:
+    # A camera stalled 10 s: one step among the frame steps, right before the jump back, or with one other.
+    frames = [10_000_000 + i * 33_333 for i in range(5)]
+    assert _step_across_jump_back_us([*frames, frames[-1] + 10_000_000]) == 33_333
+    assert _step_across_jump_back_us([10_000_000, 10_033_333, 20_033_333]) == 33_333
+
+
+def test_the_frame_interval_follows_the_last_steps() -> None:
+    # The camera went from 30 to 60 fps: the interval is the recent steps', not the whole stream's median.
+    stamps = [10_000_000 + i * 33_333 for i in range(100)]
+    stamps += [stamps[-1] + i * 16_667 for i in range(1, 21)]
+    assert _step_across_jump_back_us(stamps) == 16_667
