@@ -365,3 +365,32 @@ def test_the_frame_interval_follows_the_last_steps() -> None:
     stamps = [10_000_000 + i * 33_333 for i in range(100)]
     stamps += [stamps[-1] + i * 16_667 for i in range(1, 21)]
     assert _step_across_jump_back_us(stamps) == 16_667
+
+
+def _sent_times(stamps_us: list[int]) -> list[float]:
+    """/VMC/Ext/T as a receiver decodes it (float32) for frames stamped ``stamps_us``, through the sink."""
+    frames = [replace(make_frame(i), capture_time_us=us) for i, us in enumerate(stamps_us)]
+    per_frame, _ = _receive(frames)
+    return [next(p[0] for a, p in f if a == "/VMC/Ext/T") for f in per_frame]
+
+
+def test_the_extreme_stamps_go_out_as_float32_t() -> None:
+    # The wire's whole range, 0 to 2**64 - 1 us, then back to 0: T of 1.8e13 s still packs as a float32 (the
+    # packer refuses only beyond 3.4e38). The jump back moves T on by the one step seen, 33 ms, which is far
+    # below float32's step there: the receiver reads the same T twice, never a smaller one.
+    from firmware_host.sinks.vmc_time import VmcClock
+    u64_max = 2**64 - 1
+    stamps = [0, 33_333, u64_max, 0]
+    clock = VmcClock("vmc://host")
+    assert [clock.seconds(us) for us in stamps][2:] == [u64_max / 1e6, (u64_max + 33_333) / 1e6]
+    times = _sent_times(stamps)
+    assert times == [0.0, pytest.approx(0.033333), np.float32(u64_max / 1e6), np.float32(u64_max / 1e6)]
+
+
+def test_after_six_days_neighbouring_frames_can_send_the_same_t() -> None:
+    # float32 T steps by 62.5 ms from 2**19 s on: 30 fps frames go out in equal pairs, never one going back.
+    stamps = [0] + [2**19 * 1_000_000 + i * 33_333 for i in range(10)]
+    times = _sent_times(stamps)
+    assert all(b >= a for a, b in zip(times, times[1:])), times
+    assert len(set(times[1:])) < len(times) - 1  # some neighbours equal: what the module docstring says
+    assert all(abs(t - s / 1e6) <= 0.032 for t, s in zip(times[1:], stamps[1:]))  # within half a float32 step
