@@ -322,8 +322,75 @@ def test_the_first_jump_back_is_logged_once(caplog: pytest.LogCaptureFixture) ->
     clock = VmcClock("vmc://host")
     with caplog.at_level("WARNING", logger="firmware_host.sinks.vmc_time"):
         times = [clock.seconds(us) for us in (5_000_000, 5_100_000, 1_000_000, 6_000_000, 2_000_000, 2_000_000)]
-    # back: one frame step (0.1 s, the smallest seen; not the 5 s gap) on; a repeated stamp repeats T
+    # back: one frame step (0.1 s, the lower median of 0.1 s and the 5 s gap) on; a repeated stamp repeats T
     assert times == pytest.approx([0.0, 0.1, 0.2, 5.2, 5.3, 5.3])
     assert clock.jumps_back == 2
     (record,) = caplog.records
     assert "vmc://host" in record.getMessage() and "went back 4.100 s" in record.getMessage()
+
+
+def _step_across_jump_back_us(stamps_us: list[int]) -> int:
+    """The T step (us) from the last of ``stamps_us`` to a frame stamped 1 s, long before them."""
+    from firmware_host.sinks.vmc_time import VmcClock
+    clock = VmcClock("vmc://host")
+    times = [clock.seconds(us) for us in [*stamps_us, 1_000_000]]
+    assert clock.jumps_back == 1
+    return round((times[-1] - times[-2]) * 1e6)
+
+
+def test_the_step_across_a_jump_back_is_a_frame_whatever_the_jitter() -> None:
+    # 30 fps stamped with +-5 ms of jitter: the smallest forward step (about 24 ms) was the step across a jump
+    # back, 30 % short of a frame; the steps' median is within a few percent of one.
+    rng = np.random.default_rng(71)
+    stamps = [10_000_000 + i * 33_333 + int(rng.integers(-5_000, 5_001)) for i in range(60)]
+    assert abs(_step_across_jump_back_us(stamps) - 33_333) <= 0.2 * 33_333
+
+
+def test_one_hiccup_step_does_not_become_the_frame_interval() -> None:
+    # A driver hiccup stamped two frames 1 ms apart among 33 ms steps: T moved on 1 ms across the jump back.
+    stamps = [10_000_000 + i * 33_333 for i in range(6)]
+    stamps += [stamps[-1] + 1_000] + [stamps[-1] + 1_000 + i * 33_333 for i in range(1, 6)]
+    assert _step_across_jump_back_us(stamps) == 33_333
+
+
+def test_a_pause_does_not_become_the_frame_interval() -> None:
+    # A camera stalled 10 s: one step among the frame steps, right before the jump back, or with one other.
+    frames = [10_000_000 + i * 33_333 for i in range(5)]
+    assert _step_across_jump_back_us([*frames, frames[-1] + 10_000_000]) == 33_333
+    assert _step_across_jump_back_us([10_000_000, 10_033_333, 20_033_333]) == 33_333
+
+
+def test_the_frame_interval_follows_the_last_steps() -> None:
+    # The camera went from 30 to 60 fps: the interval is the recent steps', not the whole stream's median.
+    stamps = [10_000_000 + i * 33_333 for i in range(100)]
+    stamps += [stamps[-1] + i * 16_667 for i in range(1, 21)]
+    assert _step_across_jump_back_us(stamps) == 16_667
+
+
+def _sent_times(stamps_us: list[int]) -> list[float]:
+    """/VMC/Ext/T as a receiver decodes it (float32) for frames stamped ``stamps_us``, through the sink."""
+    frames = [replace(make_frame(i), capture_time_us=us) for i, us in enumerate(stamps_us)]
+    per_frame, _ = _receive(frames)
+    return [next(p[0] for a, p in f if a == "/VMC/Ext/T") for f in per_frame]
+
+
+def test_the_extreme_stamps_go_out_as_float32_t() -> None:
+    # The wire's whole range, 0 to 2**64 - 1 us, then back to 0: T of 1.8e13 s still packs as a float32 (the
+    # packer refuses only beyond 3.4e38). The jump back moves T on by the one step seen, 33 ms, which is far
+    # below float32's step there: the receiver reads the same T twice, never a smaller one.
+    from firmware_host.sinks.vmc_time import VmcClock
+    u64_max = 2**64 - 1
+    stamps = [0, 33_333, u64_max, 0]
+    clock = VmcClock("vmc://host")
+    assert [clock.seconds(us) for us in stamps][2:] == [u64_max / 1e6, (u64_max + 33_333) / 1e6]
+    times = _sent_times(stamps)
+    assert times == [0.0, pytest.approx(0.033333), np.float32(u64_max / 1e6), np.float32(u64_max / 1e6)]
+
+
+def test_after_six_days_neighbouring_frames_can_send_the_same_t() -> None:
+    # float32 T steps by 62.5 ms from 2**19 s on: 30 fps frames go out in equal pairs, never one going back.
+    stamps = [0] + [2**19 * 1_000_000 + i * 33_333 for i in range(10)]
+    times = _sent_times(stamps)
+    assert all(b >= a for a, b in zip(times, times[1:])), times
+    assert len(set(times[1:])) < len(times) - 1  # some neighbours equal: what the module docstring says
+    assert all(abs(t - s / 1e6) <= 0.032 for t, s in zip(times[1:], stamps[1:]))  # within half a float32 step
