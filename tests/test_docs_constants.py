@@ -47,6 +47,7 @@ from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
 from firmware_host.sinks.udp_sink import MIN_RESOLVE_S, REFUSAL_QUIET_S, RESOLVE_S
 from firmware_host.sinks.url import MAX_HOST_NAME
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
+from firmware_host.sinks.vmc_time import JUMP_FRAMES, NEW_TIMELINE_FRAMES, STEPS_KEPT
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import FOOT_STANDING_M, MAX_FOOT_STANDING_M, MIN_CUTOFF_HZ, Joints3DConfig, RoiConfig, \
@@ -171,6 +172,10 @@ def _doc(name: str) -> str:
     ("docs/rig-file.md", f"outside {CAMERA_HEIGHT_RANGE_M[0]:g}-{CAMERA_HEIGHT_RANGE_M[1]:g} m above the floor "
                          "(`CAMERA_HEIGHT_RANGE_M`)"),
     ("docs/protocol.md", f"`facing` (`{FACINGS[0]}`, the default, or `{FACINGS[1]}`)"),
+    # session 71: /VMC/Ext/T's frame interval and what a glitched stamp is
+    ("docs/protocol.md", f"median of the last {STEPS_KEPT} forward steps"),
+    ("docs/protocol.md", f"by more than {JUMP_FRAMES} frame intervals"),
+    ("docs/protocol.md", f"stay on the new one for {NEW_TIMELINE_FRAMES} frames"),
     # the sink options' defaults, as the common query parameters list them
     ("docs/protocol.md", f"`queue` ({SinkOptions.queue}) frames held"),
     ("docs/protocol.md", f"at most {MAX_QUEUE} (`MAX_QUEUE`:"),

@@ -3,7 +3,7 @@
 Per frame, OSC bundles of at most 1232 bytes (two for all bones, so no path
 fragments them): /VMC/Ext/OK, /VMC/Ext/T, Root/Pos (hip position) and
 Bone/Pos (local rotations) solved by ``vmc_pose``. T is seconds since the first frame and never goes back, even
-when the capture stamps do (``vmc_time``). VMC has no sequence
+when the capture stamps do, nor follows one glitched stamp far off (``vmc_time``). VMC has no sequence
 numbers, so receivers cannot count gaps; the sink's own counters (``stats()``)
 report what it decimated or dropped. ``max_fps`` caps the rate (receivers
 render at display rate; 60 is plenty). Host names are resolved like udp://

@@ -1,13 +1,26 @@
-"""/VMC/Ext/T: seconds since the sink's first frame, never going back.
+"""/VMC/Ext/T: seconds since the sink's first frame, never going back, and not thrown off by a glitched stamp.
 
 Capture stamps can go back: a camera clock reset, a replay that loops, a daemon restarted on a recording.
 VMC receivers (VSeeFace, EVMC4U, VirtualMotionCapture) take T as a time that only moves forward; a jump back
-can make one drop frames as stale or interpolate backwards. So a stamp earlier than the one before it starts a
-new stretch: its frame reads the last T sent plus one frame interval, and the frames after it count on from
-there. The frame interval is the lower median of the last ``STEPS_KEPT`` forward steps between stamps (nothing
-before the first step): jittery stamps, a driver hiccup that stamps two frames 1 ms apart, or a pause of seconds
-each move it by at most one rank. Until session 71 it was the smallest step seen, which jitter made far shorter
-than a frame. The first jump back is logged once per sink; later ones only counted (``jumps_back``).
+can make one drop frames as stale or interpolate backwards. A stamp can also be one bad value (a driver that
+stamped one frame 0 in a stream at 3,600 s): following it, T was thrown an hour ahead for good, since the real
+stamps after it read as a forward step of an hour (session 71).
+
+So T follows one timeline of stamps. A stamp that leaves it (earlier than the one before, or later by more than
+``JUMP_FRAMES`` frame intervals) reads the last T sent plus one frame interval; the timeline before is kept. If a
+later stamp is back on it (at most ``JUMP_FRAMES`` frame intervals past its last stamp, plus one per odd frame
+since), T resumes from it as if the odd frames were normal ones: a glitch (``glitches``). If the stamps stay on
+the new timeline for ``NEW_TIMELINE_FRAMES`` frames, T follows them: a jump back (a reset, a loop: ``jumps_back``)
+counts on from the first odd frame's T, as T did before anyway; a jump forward (a pause) adds the pause to T in
+one step, on the last of those frames, so a receiver that interpolates on T still sees the pause, two frames late.
+T is never below the last T sent: a lone stamp a few frames ahead (a step T follows) moves T on by at most
+``JUMP_FRAMES`` intervals, and the stamps after it, a little back, then read the same T until they pass it. The
+first glitch and the first jump back are each logged once per sink; later ones only counted. Before the first
+forward step there is no frame interval, and every forward step is followed.
+
+The frame interval is the lower median of the last ``STEPS_KEPT`` forward steps between stamps on one timeline:
+jittery stamps, a driver hiccup that stamps two frames 1 ms apart, or a gap of a few frames each move it by at
+most one rank. Until session 71 it was the smallest step seen, which jitter made far shorter than a frame.
 
 Seconds since the first frame, not since boot: OSC floats are float32, whose steps grow with T (0.25 ms after an
 hour, 1 ms after four, 16 ms after 36 hours). From 2**19 s (six days) on a step is 62.5 ms, so two frames of a
@@ -23,8 +36,28 @@ _log = logging.getLogger(__name__)
 
 #: Forward steps whose median is the frame interval: odd, so the median is a step that was seen; half a second at
 #: 30 fps, so a camera switched to another rate is followed within 8 frames, and up to 7 odd steps (jitter, a
-#: hiccup, a pause, frames the sink dropped) leave it alone.
+#: hiccup, a gap, frames the sink dropped) leave it alone.
 STEPS_KEPT = 15
+
+#: A forward step of more than this many frame intervals leaves the timeline. Three frames lost in a row (by the
+#: camera, or the sink's queue) are still a step T follows at once; beyond, one frame cannot tell a pause from a
+#: lone stamp far ahead, and T waits. It is also the most a lone stamp a little ahead can move T forward.
+JUMP_FRAMES = 4
+
+#: Frames in a row on a new timeline (the first odd one included) before T follows it: one or two glitched stamps
+#: in a row are stepped over, and a pause reaches T two frames (67 ms at 30 fps) late.
+NEW_TIMELINE_FRAMES = 3
+
+
+class _Timeline:
+    """Stamps that read T by one offset: ``base_us`` reads ``base_t_us``."""
+
+    def __init__(self, base_us: int, base_t_us: int) -> None:
+        self.base_us = base_us
+        self.base_t_us = base_t_us
+
+    def t_us(self, capture_time_us: int) -> int:
+        return self.base_t_us + capture_time_us - self.base_us
 
 
 class VmcClock:
@@ -32,39 +65,100 @@ class VmcClock:
 
     def __init__(self, shown: str) -> None:
         self._shown = shown  # the sink as its logs name it
-        self._base_us: Optional[int] = None  # the stamp that reads ``_base_t_us``
-        self._base_t_us = 0
-        self._last_us: Optional[int] = None  # the previous frame's stamp
+        self._line: Optional[_Timeline] = None  # the timeline T follows
+        self._line_last_us = 0  # the last stamp on it
+        self._new: Optional[_Timeline] = None  # where the stamps went when they left it, until decided
+        self._new_frames = 0  # frames in a row on ``_new``
+        self._last_us = 0  # the previous frame's stamp
         self._last_t_us = 0  # the T sent with it
         self._steps_us: deque[int] = deque(maxlen=STEPS_KEPT)  # the last forward steps between stamps
-        self.jumps_back = 0
+        self.jumps_back = 0  # new timelines earlier than the one before, followed
+        self.glitches = 0  # times the stamps left the timeline for a frame or two, then came back to it
 
     def seconds(self, capture_time_us: int) -> float:
         """T for a frame stamped ``capture_time_us``."""
-        if self._last_us is None:
-            self._base_us = capture_time_us
-        elif capture_time_us < self._last_us:
-            self._restart_after_jump_back(capture_time_us)
-        elif capture_time_us > self._last_us:
-            self._steps_us.append(capture_time_us - self._last_us)
-        assert self._base_us is not None
+        if self._line is None:
+            self._line = _Timeline(capture_time_us, 0)
+            t_us = 0
+        elif self._new is None:
+            t_us = self._on_the_line(capture_time_us)
+        else:
+            t_us = self._off_the_line(capture_time_us)
         self._last_us = capture_time_us
-        self._last_t_us = self._base_t_us + capture_time_us - self._base_us
+        self._last_t_us = max(t_us, self._last_t_us)  # never back, e.g. an extra glitched frame's step
         return self._last_t_us / 1e6
 
     def frame_step_us(self) -> int:
-        """The frame interval T moves on by across a jump back: the lower median of the kept forward steps (the
+        """The frame interval T moves on by across a jump: the lower median of the kept forward steps (the
         lower one, so one pause among two steps is not it), 0 before the first step."""
         if not self._steps_us:
             return 0
         return sorted(self._steps_us)[(len(self._steps_us) - 1) // 2]
 
-    def _restart_after_jump_back(self, capture_time_us: int) -> None:
-        assert self._last_us is not None
+    def _follows(self, previous_us: int, capture_time_us: int, frames: int = 1) -> bool:
+        """Whether a stamp ``frames`` frames after one stamped ``previous_us`` is on its timeline."""
+        ahead_us = capture_time_us - previous_us
+        step_us = self.frame_step_us()
+        return ahead_us >= 0 and (step_us == 0 or ahead_us <= (frames - 1 + JUMP_FRAMES) * step_us)
+
+    def _on_the_line(self, capture_time_us: int) -> int:
+        assert self._line is not None
+        if not self._follows(self._last_us, capture_time_us):
+            return self._leave(capture_time_us)
+        self._step(capture_time_us)
+        self._line_last_us = capture_time_us
+        return self._line.t_us(capture_time_us)
+
+    def _off_the_line(self, capture_time_us: int) -> int:
+        assert self._line is not None and self._new is not None
+        if self._follows(self._line_last_us, capture_time_us, self._new_frames + 1):
+            return self._back_on_the_line(capture_time_us)
+        if not self._follows(self._last_us, capture_time_us):
+            return self._leave(capture_time_us)  # off again, elsewhere: the line is still the one to come back to
+        self._step(capture_time_us)
+        self._new_frames += 1
+        t_us = self._new.t_us(capture_time_us)
+        if self._new_frames >= NEW_TIMELINE_FRAMES:
+            t_us = self._take_the_new_line(capture_time_us, t_us)
+        return t_us
+
+    def _leave(self, capture_time_us: int) -> int:
+        """The first frame off the line: one frame interval on, the stamps' new timeline kept."""
+        self._new = _Timeline(capture_time_us, self._last_t_us + self.frame_step_us())
+        self._new_frames = 1
+        return self._new.base_t_us
+
+    def _back_on_the_line(self, capture_time_us: int) -> int:
+        assert self._line is not None and self._new is not None
+        if self.glitches == 0:  # once: a driver that glitches every minute would otherwise log every minute
+            _log.warning("%s: %d capture stamp(s) left the stream's timeline (%+.3f s) and it came back; "
+                         "/VMC/Ext/T stepped over them (later glitches are not logged)", self._shown,
+                         self._new_frames, (self._new.base_us - self._line_last_us) / 1e6)
+        self.glitches += 1
+        self._new = None
+        self._line_last_us = capture_time_us
+        return self._line.t_us(capture_time_us)
+
+    def _take_the_new_line(self, capture_time_us: int, t_us: int) -> int:
+        """The stamps stayed on the new timeline: a pause keeps the line (T catches up), a jump back follows it."""
+        assert self._line is not None and self._new is not None
+        if self._new.base_us >= self._line_last_us:
+            t_us = self._line.t_us(capture_time_us)
+        else:
+            self._log_jump_back(self._new)
+            self._line = self._new
+        self._new = None
+        self._line_last_us = capture_time_us
+        return t_us
+
+    def _log_jump_back(self, new: _Timeline) -> None:
         if self.jumps_back == 0:  # once: a looping replay would otherwise log every loop
             _log.warning("%s: capture time went back %.3f s (camera clock reset or replay loop); /VMC/Ext/T "
                          "counts on from %.3f s (later jumps back are not logged)", self._shown,
-                         (self._last_us - capture_time_us) / 1e6, self._last_t_us / 1e6)
+                         (self._line_last_us - new.base_us) / 1e6, new.base_t_us / 1e6)
         self.jumps_back += 1
-        self._base_us = capture_time_us
-        self._base_t_us = self._last_t_us + self.frame_step_us()
+
+    def _step(self, capture_time_us: int) -> None:
+        # steps on a new timeline count before it is decided: two glitched stamps in a row add one odd step
+        if capture_time_us > self._last_us:
+            self._steps_us.append(capture_time_us - self._last_us)

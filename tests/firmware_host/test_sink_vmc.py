@@ -13,6 +13,7 @@ from firmware_host.protocol.constants import Flags
 from firmware_host.sinks import open_sink
 from firmware_host.sinks.vmc_osc import CALIBRATION_SUSPECT_ADDRESS
 from firmware_host.sinks.vmc_pose import BONE_PARENTS, FORWARD, quat_mul, quat_rotate, rig_to_unity, solve_pose
+from firmware_host.sinks.vmc_time import JUMP_FRAMES, NEW_TIMELINE_FRAMES, VmcClock
 from firmware_host.sinks.vmc_view import AvatarView
 from ghnerf_runtime.body25 import JOINT_INDEX as J
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, queued_datagrams, t_pose_rig
@@ -318,24 +319,24 @@ def test_ext_t_never_goes_back_when_the_capture_stamps_do() -> None:
 
 
 def test_the_first_jump_back_is_logged_once(caplog: pytest.LogCaptureFixture) -> None:
-    from firmware_host.sinks.vmc_time import VmcClock
     clock = VmcClock("vmc://host")
+    stamps = (5_000_000, 5_100_000, 1_000_000, 1_100_000, 1_200_000, 500_000, 600_000, 700_000, 700_000)
     with caplog.at_level("WARNING", logger="firmware_host.sinks.vmc_time"):
-        times = [clock.seconds(us) for us in (5_000_000, 5_100_000, 1_000_000, 6_000_000, 2_000_000, 2_000_000)]
-    # back: one frame step (0.1 s, the lower median of 0.1 s and the 5 s gap) on; a repeated stamp repeats T
-    assert times == pytest.approx([0.0, 0.1, 0.2, 5.2, 5.3, 5.3])
-    assert clock.jumps_back == 2
+        times = [clock.seconds(us) for us in stamps]
+    # back twice, staying back: one frame step (0.1 s) on each time; a repeated stamp repeats T
+    assert times == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.7])
+    assert (clock.jumps_back, clock.glitches) == (2, 0)
     (record,) = caplog.records
     assert "vmc://host" in record.getMessage() and "went back 4.100 s" in record.getMessage()
 
 
 def _step_across_jump_back_us(stamps_us: list[int]) -> int:
-    """The T step (us) from the last of ``stamps_us`` to a frame stamped 1 s, long before them."""
-    from firmware_host.sinks.vmc_time import VmcClock
+    """The T step (us) from the last of ``stamps_us`` to a frame stamped 1 s, long before them (and the stamps
+    after it staying there)."""
     clock = VmcClock("vmc://host")
-    times = [clock.seconds(us) for us in [*stamps_us, 1_000_000]]
+    times = [clock.seconds(us) for us in [*stamps_us, 1_000_000, 1_033_333, 1_066_666]]  # back, and staying back
     assert clock.jumps_back == 1
-    return round((times[-1] - times[-2]) * 1e6)
+    return round((times[-3] - times[-4]) * 1e6)
 
 
 def test_the_step_across_a_jump_back_is_a_frame_whatever_the_jitter() -> None:
@@ -357,6 +358,7 @@ def test_a_pause_does_not_become_the_frame_interval() -> None:
     # A camera stalled 10 s: one step among the frame steps, right before the jump back, or with one other.
     frames = [10_000_000 + i * 33_333 for i in range(5)]
     assert _step_across_jump_back_us([*frames, frames[-1] + 10_000_000]) == 33_333
+    assert _step_across_jump_back_us([*frames, *(frames[-1] + 10_000_000 + i * 33_333 for i in range(3))]) == 33_333
     assert _step_across_jump_back_us([10_000_000, 10_033_333, 20_033_333]) == 33_333
 
 
@@ -375,16 +377,17 @@ def _sent_times(stamps_us: list[int]) -> list[float]:
 
 
 def test_the_extreme_stamps_go_out_as_float32_t() -> None:
-    # The wire's whole range, 0 to 2**64 - 1 us, then back to 0: T of 1.8e13 s still packs as a float32 (the
-    # packer refuses only beyond 3.4e38). The jump back moves T on by the one step seen, 33 ms, which is far
-    # below float32's step there: the receiver reads the same T twice, never a smaller one.
-    from firmware_host.sinks.vmc_time import VmcClock
+    # The wire's whole range, 0 to 2**64 - 1 us (reached in three frames, so T follows it as a pause), then back
+    # to 0: T of 1.8e13 s still packs as a float32 (the packer refuses only beyond 3.4e38). The jump back moves T
+    # on by one frame step, 33 ms, far below float32's step there: the receiver reads the same T twice, never a
+    # smaller one.
     u64_max = 2**64 - 1
-    stamps = [0, 33_333, u64_max, 0]
+    stamps = [0, 33_333, u64_max - 66_666, u64_max - 33_333, u64_max, 0]
     clock = VmcClock("vmc://host")
-    assert [clock.seconds(us) for us in stamps][2:] == [u64_max / 1e6, (u64_max + 33_333) / 1e6]
+    assert [clock.seconds(us) for us in stamps][4:] == [u64_max / 1e6, (u64_max + 33_333) / 1e6]
     times = _sent_times(stamps)
-    assert times == [0.0, pytest.approx(0.033333), np.float32(u64_max / 1e6), np.float32(u64_max / 1e6)]
+    assert times[:4] == pytest.approx([0.0, 0.033333, 0.066666, 0.099999])
+    assert times[4:] == [np.float32(u64_max / 1e6), np.float32(u64_max / 1e6)]
 
 
 def test_after_six_days_neighbouring_frames_can_send_the_same_t() -> None:
@@ -394,3 +397,106 @@ def test_after_six_days_neighbouring_frames_can_send_the_same_t() -> None:
     assert all(b >= a for a, b in zip(times, times[1:])), times
     assert len(set(times[1:])) < len(times) - 1  # some neighbours equal: what the module docstring says
     assert all(abs(t - s / 1e6) <= 0.032 for t, s in zip(times[1:], stamps[1:]))  # within half a float32 step
+
+
+# ---- a glitched stamp, a reset, a pause (vmc_time) ------------------------------------------------------------
+
+_HOUR_US = 3_600_000_000
+_FRAME_US = 33_333
+
+
+def _times(stamps_us: list[int]) -> tuple[list[float], VmcClock]:
+    clock = VmcClock("vmc://host")
+    return [clock.seconds(us) for us in stamps_us], clock
+
+
+def _steps_in_frames(times: list[float]) -> np.ndarray:
+    return np.diff(times) / (_FRAME_US / 1e6)
+
+
+def _stream(frames: int, start_us: int = _HOUR_US) -> list[int]:
+    return [start_us + i * _FRAME_US for i in range(frames)]
+
+
+def test_a_lone_stamp_of_0_an_hour_in_does_not_throw_t_an_hour_ahead() -> None:
+    # A driver glitch stamped one frame 0 in a stream at 3,600 s: it went back, and the next real stamp read as
+    # a forward step of an hour, so T jumped an hour ahead for good. Sent as a receiver decodes it (float32).
+    stamps = _stream(40)
+    stamps[20] = 0
+    steps = _steps_in_frames(_sent_times(stamps))
+    assert np.allclose(steps, 1, atol=0.02), steps
+    times, clock = _times(stamps)
+    assert times[-1] == pytest.approx((stamps[-1] - stamps[0]) / 1e6)  # T is back on the stamps' line
+    assert (clock.glitches, clock.jumps_back) == (1, 0)
+
+
+def test_an_extra_frame_stamped_0_repeats_t_once() -> None:
+    # The glitched frame came on top of the stream's, not in place of one: T steps a frame across it, and the
+    # next real frame, one frame after the last before the glitch, repeats that T (T never goes back).
+    stamps = _stream(40)
+    stamps.insert(20, 0)
+    steps = _steps_in_frames(_times(stamps)[0])
+    assert np.allclose(np.delete(steps, 20), 1, atol=1e-4) and steps[20] == 0, steps
+
+
+def test_a_lone_stamp_an_hour_ahead_reads_one_frame_on() -> None:
+    # T cannot follow the lone frame an hour on: T never goes back, so it would stay an hour ahead. The frame
+    # reads one frame step on; the stamps after it come back to the stream, and T with them.
+    stamps = _stream(40)
+    stamps[20] += _HOUR_US
+    times, clock = _times(stamps)
+    assert np.allclose(_steps_in_frames(times), 1, atol=1e-4), times
+    assert (clock.glitches, clock.jumps_back) == (1, 0)
+
+
+def test_two_glitched_stamps_in_a_row_far_apart_are_stepped_over() -> None:
+    stamps = _stream(40)
+    stamps[20], stamps[21] = 0, 2 * _HOUR_US
+    times, clock = _times(stamps)
+    assert np.allclose(_steps_in_frames(times), 1, atol=1e-4), times
+    assert clock.glitches == 1
+
+
+@pytest.mark.parametrize("ahead", range(1, JUMP_FRAMES))
+def test_a_stamp_a_little_ahead_moves_t_on_then_t_waits_for_the_stamps(ahead: int) -> None:
+    # A step T follows at once (at most JUMP_FRAMES frames), then the stamps go back a little: T held there (the
+    # old code added a frame step and stayed ahead for good); it repeats until the stamps pass it, then follows.
+    stamps = _stream(40)
+    stamps[20] += ahead * _FRAME_US
+    times, _ = _times(stamps)
+    steps = _steps_in_frames(times)
+    assert steps.min() >= 0 and steps.max() <= JUMP_FRAMES + 1e-4, steps
+    assert times[-1] == pytest.approx((stamps[-1] - stamps[0]) / 1e6)
+
+
+def test_the_first_glitch_is_logged_once(caplog: pytest.LogCaptureFixture) -> None:
+    stamps = _stream(60)
+    stamps[20], stamps[40] = 0, 0
+    with caplog.at_level("WARNING", logger="firmware_host.sinks.vmc_time"):
+        _, clock = _times(stamps)
+    assert clock.glitches == 2
+    (record,) = caplog.records
+    assert "vmc://host" in record.getMessage() and "-3600.633 s" in record.getMessage()
+
+
+def test_a_clock_reset_that_stays_is_followed_as_before() -> None:
+    # The stamps go back to 0 and stay there: the frame that went back reads one frame step on, as since session
+    # 68, and T counts on with the new stamps from the first frame of the jump back.
+    stamps = _stream(20) + _stream(20, start_us=0)
+    times, clock = _times(stamps)
+    assert times == pytest.approx([i * _FRAME_US / 1e6 for i in range(40)], abs=1e-6)
+    assert (clock.jumps_back, clock.glitches) == (1, 0)
+
+
+def test_a_pause_that_stays_moves_t_on_by_the_pause_one_step_late() -> None:
+    # The stamps skip 10 s and stay: a receiver that interpolates on T must see the pause. The first frames after
+    # it cannot tell it from a lone stamp far ahead, so they read a frame step on each; the third catches up in
+    # one step, and from it T is the stamps' time since the first frame again.
+    stamps = _stream(20) + _stream(20, start_us=_HOUR_US + 20 * _FRAME_US + 10_000_000)
+    times, clock = _times(stamps)
+    steps = _steps_in_frames(times)
+    caught_up = 20 + NEW_TIMELINE_FRAMES - 2  # the step into the third frame after the pause
+    assert np.allclose(np.delete(steps, caught_up), 1, atol=1e-4), steps
+    assert times[caught_up + 1:] == pytest.approx([(s - stamps[0]) / 1e6 for s in stamps[caught_up + 1:]])
+    assert times[caught_up + 1] - times[caught_up] > 10
+    assert (clock.jumps_back, clock.glitches) == (0, 0)
