@@ -432,11 +432,12 @@ class FrameCheckConfig:
             report nothing, as a pair with both crops rejected, or an empty room, does.
         volume_recheck_every: a crop on the rays of a person seen by one camera that the check rejects passes
             where that camera's whole-volume crop of the frame passes (session 70), one more preprocess a pair
-            (about 4 ms at 1280 x 800). Since session 71 a verdict that passed answers the following pairs while
-            the rays crop stays rejected for the same reason at much the same brightness, up to this many pairs in
-            all: a covered lens is reported within this many pairs (at once where covering it darkened the crop,
-            ``ghnerf_runtime.rays_recheck``). 8: within 0.27 s at 30 pairs a second, under ``tracking.max_gap_s``,
-            for an eighth of the cost. 1: every pair checked again (session 70).
+            (2.0-2.4 ms at 1280 x 800, ``benchmarks/time_rays_recheck.py``). Since session 71 a verdict that
+            passed answers the following pairs while the rays crop stays rejected for the same reason at much the
+            same brightness, up to this many pairs in all: a covered lens is reported within this many pairs (at
+            once where covering it darkened the crop, ``ghnerf_runtime.rays_recheck``). 8: within 0.27 s at 30
+            pairs a second, under ``tracking.max_gap_s``, for an eighth of the cost. 1: every pair checked again
+            (session 70).
     """
 
     enabled: bool = True
