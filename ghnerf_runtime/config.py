@@ -430,6 +430,14 @@ class FrameCheckConfig:
             one view's own encoder heatmaps show someone (a person seen by that camera only): that
             camera's 2D joints (``PairResult.single_view`` names the camera). False: such pairs
             report nothing, as a pair with both crops rejected, or an empty room, does.
+        volume_recheck_every: a crop on the rays of a person seen by one camera that the check rejects passes
+            where that camera's whole-volume crop of the frame passes (session 70), one more preprocess a pair
+            (2.0-2.4 ms at 1280 x 800, ``benchmarks/time_rays_recheck.py``). Since session 71 a verdict that
+            passed answers the following pairs while the rays crop stays rejected for the same reason at much the
+            same brightness, up to this many pairs in all: a covered lens is reported within this many pairs (at
+            once where covering it darkened the crop, ``ghnerf_runtime.rays_recheck``). 8: within 0.27 s at 30
+            pairs a second, under ``tracking.max_gap_s``, for an eighth of the cost. 1: every pair checked again
+            (session 70).
     """
 
     enabled: bool = True
@@ -437,10 +445,12 @@ class FrameCheckConfig:
     max_noise_ratio: float = 0.3
     max_coarse_noise_ratio: float = 0.5
     single_view_2d: bool = True
+    volume_recheck_every: int = 8
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
         _boolean(self, "single_view_2d")
+        _integer(self, "volume_recheck_every", 1, 1000)
         _number(self, "min_std", 0.0, 128.0)
         _number(self, "max_noise_ratio", 0.0, 1.0, lo_open=True)
         _number(self, "max_coarse_noise_ratio", 0.0, 1.0)

@@ -101,6 +101,7 @@ from ghnerf_runtime.preprocess import (
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import PriorCameras, disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
+from ghnerf_runtime.rays_recheck import VolumeVerdict, mean_level
 from ghnerf_runtime.scene_change import (CALM_AFTER_PASSES, RESTLESS_AFTER_WAKES, SceneCopy, changed_masks,
                                          masks_wake, pair_copies, restless_with_neighbours)
 from ghnerf_runtime.smoothing import OneEuroJoints
@@ -834,6 +835,10 @@ class Estimator:
         # (two_people.mixed_torso): two people in its crop (the working volume's, too coarse to tell them apart) may
         # have left both people's joints mixed in it (SubjectSelector.keep_tracked_subject)
         self._track_unsorted = False
+        # the whole-volume verdict of a rejected crop on the rays, reused pair after pair
+        # (frame_check.volume_recheck_every)
+        self._volume_verdict: VolumeVerdict | None = None
+        self.volume_rechecks = 0  # whole-volume crops preprocessed for a rejected crop on the rays
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
         self._between: dict[tuple, Camera] = {}  # (alpha, pivot) -> interpolated camera (the rig does not move)
@@ -893,13 +898,14 @@ class Estimator:
         crop turn goes with the track, ``roi.turn_search``), the smoothing and the cold tiles' rest and round (the next
         cold pair that finds nobody searches a tile: its faint peaks', else the first). The counters are statistics
         over the estimator's life and stay: ``cold_tile_passes``, ``cold_tiles_found``, ``tile_finds_floating``,
-        ``cold_tile_wakes``, ``turn_searches``, ``turns_kept``, ``turns_refused``, ``turn_checks`` and
-        ``turns_left``."""
+        ``cold_tile_wakes``, ``turn_searches``, ``turns_kept``, ``turns_refused``, ``turn_checks``, ``turns_left``
+        and ``volume_rechecks``."""
         self.tracker.reset()  # the kept turn's tracker (the upright one is reset as the crops return upright)
         self._use_turns((0, 0))
         self._several_track = False
         self._behind_track = None
         self._track_unsorted = False
+        self._volume_verdict = None
         self._turn_search_wait = 0
         self._failed_search_found = False
         self._failed_search_short = None
@@ -1837,16 +1843,18 @@ class Estimator:
         batch = np.empty((2, 3, S, S), np.float32)
         frame_reason, crops = {}, []  # camera name -> None, or why the frame check rejected its crop
         on_rays = self.tracker.rays_camera(regions)
+        if on_rays is None:
+            self._volume_verdict = None  # a verdict answers only pair after pair on the rays
         for i, (img, st, roi) in enumerate(zip(images, self._cams, regions.rois)):
             maps, crop = self._crop(st, roi)
             crops.append(crop)
             batch[i] = preprocess_image(img, maps, self.contract.normalisation)
             ok, why = check_crop(batch[i, 1], self._levels, cfg.frame_check, maps.inside)
-            if not ok and i == on_rays and self._volume_crop_passes(img, i):
+            if i == on_rays:
                 # a plain part of a working camera's view (a wall, a panel hiding the person from it), not a covered
                 # lens: rejected, the next crop went back to the whole volume and the one after to the rays, pair
                 # after pair, and the camera was reported rejected every other pair (session 70)
-                ok, why = True, ""
+                ok, why = self._rays_crop_verdict(img, i, batch[i, 1], maps.inside, why if not ok else None)
             frame_reason[st.camera.name] = None if ok else why
         _add_ms(timing, "preprocess", t)
         passed = [why is None for why in frame_reason.values()]
@@ -1907,6 +1915,28 @@ class Estimator:
             if job is not None:  # leave no render running behind an error
                 job.abandon()
             raise
+
+    def _rays_crop_verdict(self, image: np.ndarray, camera: int, plane: np.ndarray, inside: np.ndarray | None,
+                           rejected: str | None) -> tuple[bool, str]:
+        """The frame check's ``(ok, reason)`` of camera ``camera``'s crop on the rays, model-input ``plane`` (its
+        ``inside`` pixels show the frame), which the check ``rejected`` for that reason (None: passed): rejected, it
+        passes where the camera's whole-volume crop of ``image`` passes, asked again only where the cached verdict
+        no longer holds (:class:`~ghnerf_runtime.rays_recheck.VolumeVerdict`, ``frame_check.volume_recheck_every``)."""
+        if rejected is None:
+            self._volume_verdict = None
+            return True, ""
+        state, level = self._cams[camera], mean_level(plane, inside, self._levels)
+        kept = self._volume_verdict
+        if kept is not None and kept.holds(state, self.tracker, rejected, level):
+            self._volume_verdict = kept.reused()
+            return True, ""
+        self.volume_rechecks += 1
+        if not self._volume_crop_passes(image, camera):
+            self._volume_verdict = None
+            return False, rejected
+        self._volume_verdict = VolumeVerdict(state, self.tracker, self.tracker.resets, rejected, level,
+                                             self.config.frame_check.volume_recheck_every - 1)
+        return True, ""
 
     def _volume_crop_passes(self, image: np.ndarray, camera: int) -> bool:
         """Whether camera ``camera``'s crop of the whole working volume in ``image`` passes the frame check: the

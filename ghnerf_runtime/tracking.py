@@ -280,6 +280,9 @@ class SubjectTracker:
         self._last_rois: tuple[Roi, ...] | None = None
         self._used: Regions | None = None  # the regions of the pair being estimated (carried joints)
         self.drops = 0
+        #: how many times :meth:`reset` ran: what was judged of the forgotten subject's crops is void past one (the
+        #: estimator's cached whole-volume verdict of a rays crop, ``rays_recheck.VolumeVerdict``)
+        self.resets = 0
 
     @property
     def volume_regions(self) -> Regions:
@@ -395,6 +398,7 @@ class SubjectTracker:
 
     def reset(self) -> None:
         """Forget the subject (next pair starts from the working volume)."""
+        self.resets += 1
         self.track = None
         self.view_track = None
         self.view_other = None

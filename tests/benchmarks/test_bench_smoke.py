@@ -432,6 +432,16 @@ def test_time_frame_check(capsys, monkeypatch):
     assert re.search(r"^ +uniform noise +noise +[\d.]+ +[\d.]+$", out, re.M), out
 
 
+def test_time_rays_recheck(capsys, monkeypatch):
+    """Every pair behind the panel rechecked at ``volume_recheck_every`` 1, one pair in four at 4 (the first of each
+    four: 2 of 5); camera 1 passes throughout (the script stops otherwise)."""
+    out = run_script("time_rays_recheck", "--width", "320", "--height", "240", "--pairs", "5", "--rounds", "1",
+                     "--every", "4", capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^ +1 +[\d.]+ +1\.000$", out, re.M), out
+    assert re.search(r"^ +4 +[\d.]+ +0\.400$", out, re.M), out
+    assert re.search(r"^ratio \(4 / 1\): [\d.]+$", out, re.M), out
+
+
 def test_measure_one_camera(model, capsys, monkeypatch):
     out = run_script("measure_one_camera", "--model-dir", model, *SIZES, "--rooms", "1",
                      capsys=capsys, monkeypatch=monkeypatch)

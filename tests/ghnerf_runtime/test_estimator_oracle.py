@@ -19,6 +19,7 @@ from ghnerf_runtime.config import ConfigError, EstimatorConfig, FrameCheckConfig
     NovelViewConfig, PresenceConfig, TrackingConfig, config_from_dict
 from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.estimator import NOVEL_STAGES, Estimator, check_crop
+from ghnerf_runtime import estimator as estimator_module
 from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.metrics import mpjpe, pck
 from ghnerf_runtime.preprocess import preprocess_image
@@ -537,6 +538,85 @@ def test_a_plain_crop_on_the_rays_of_a_working_camera_is_kept_pair_after_pair(cl
     covered = est.estimate((frames[-1][0], np.zeros_like(frames[-1][1])))
     assert covered.frame_reason == {names[0]: None, names[1]: "flat"} and covered.single_view == names[0]
     assert est.tracker.view_other is None  # camera 1's next crop: the whole volume
+
+
+def _behind_a_panel(est, oracle, clip, pairs, covered_from=None):
+    """Run ``pairs`` pairs of ``clip`` (in turn, from its second) seen by camera 0 only, camera 1 hidden by a plain
+    panel over its first crop on the rays (as in the test above); from pair ``covered_from`` on camera 1's frame is
+    the panel's grey all over (a lens covered by something of the panel's brightness). Returns the results and the
+    preprocess_image calls of each pair."""
+    rig, frames, truth, visible, *_ = clip
+    oracle.set_truth(truth[0], seen_by(visible[0], 0))
+    est.estimate(frames[0])
+    panel = est.tracker.view_other
+    assert panel is not None
+    out, calls = [], []
+    counted = [0]
+    real = estimator_module.preprocess_image
+
+    def counting(*args, **kwargs):
+        counted[0] += 1
+        return real(*args, **kwargs)
+
+    estimator_module.preprocess_image = counting
+    try:
+        for n in range(pairs):
+            k = 1 + n % (len(frames) - 1)
+            oracle.set_truth(truth[k], seen_by(visible[k], 0))
+            hidden = _with_panel(frames[k][1], panel, 16)
+            if covered_from is not None and n >= covered_from:
+                hidden = np.full_like(hidden, 128)
+            before = counted[0]
+            out.append(est.estimate((frames[k][0], hidden)))
+            calls.append(counted[0] - before)
+    finally:
+        estimator_module.preprocess_image = real
+    return out, calls
+
+
+@pytest.mark.parametrize("every", [1, 8])
+def test_a_plain_crop_on_the_rays_pays_the_whole_volume_recheck_once_in_so_many_pairs(clip, every):
+    """Session 71: the whole-volume verdict that keeps a plain rays crop is reused for the next pairs, so such a pair
+    preprocesses its two crops alone; the camera is checked again every ``frame_check.volume_recheck_every`` pairs
+    (1: every pair, session 70's three preprocesses a pair). Answers as before: camera 1 passes, camera 0's joints."""
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, clip[0], EstimatorConfig(frame_check=FrameCheckConfig(volume_recheck_every=every)))
+    results, calls = _behind_a_panel(est, oracle, clip, 10)
+    assert all(r.frame_reason == {n: None for n in est.camera_names} for r in results), [r.frame_reason for r in
+                                                                                        results]
+    assert all(r.single_view == est.camera_names[0] for r in results)
+    assert calls == [2 + (n % every == 0) for n in range(10)], calls
+    assert est.volume_rechecks == sum(c - 2 for c in calls)
+
+
+@pytest.mark.parametrize("every, covered_from", [(3, 1), (3, 3), (8, 2)])
+def test_a_lens_covered_behind_a_cached_whole_volume_verdict_is_reported_within_the_bound(clip, every, covered_from):
+    """Camera 1 covered by something of the panel's brightness after its whole-volume verdict was cached (the rays
+    crop flat at the same level: nothing says the camera changed): reported rejected no later than the
+    ``volume_recheck_every``-th covered pair, and from then on."""
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, clip[0], EstimatorConfig(frame_check=FrameCheckConfig(volume_recheck_every=every)))
+    results, _ = _behind_a_panel(est, oracle, clip, covered_from + every + 2, covered_from)
+    names = est.camera_names
+    rejected = [r.frame_reason[names[1]] == "flat" for r in results]
+    assert not any(rejected[:covered_from]), rejected
+    first = rejected.index(True)
+    assert first - covered_from < every and all(rejected[first:]), (rejected, every)
+    assert all(r.frame_reason[names[0]] is None and r.single_view == names[0] for r in results)
+
+
+def test_a_tracker_reset_voids_the_cached_whole_volume_verdict(clip):
+    """Whatever resets the tracker (a gap in the timestamps, ``Estimator.reset``) voids the cached verdict: the next
+    rejected rays crop is checked again on the whole volume."""
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, clip[0], EstimatorConfig())
+    _, calls = _behind_a_panel(est, oracle, clip, 2)
+    assert calls == [3, 2] and est._volume_verdict is not None
+    est.tracker.reset()
+    assert est._volume_verdict is not None and not est._volume_verdict.holds(
+        est._cams[1], est.tracker, est._volume_verdict.reason, est._volume_verdict.level)
+    est.reset()
+    assert est._volume_verdict is None
 
 
 def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_in_the_other(clip):
