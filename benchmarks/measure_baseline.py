@@ -95,19 +95,17 @@ def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0,
     """Predicted joints, found mask and truth of bench sequence ``k``'s scene (:func:`bench_scene_in`, its person
     drawn in ``people``, default ``rig``'s volume) filmed by ``rig``, one cold estimator given ``rig`` :func:`lifted`
     by ``lift_m`` (truth in ``rig``'s frame). ``tile_finds``: gets ``(pair, kept, foot)`` for each pair whose cold
-    tile search found someone, kept or refused for floating feet, and that find's lower foot (:func:`tile_find_feet`;
-    ``--tile-finds``)."""
+    tile search found someone, kept or refused for floating feet, and that find's lower foot as the refusal judged
+    it (``Estimator.tile_find_foot_m``; ``--tile-finds``)."""
     scene, t0 = bench_scene_in(rig, k, people)
     est = Estimator(session, lifted(rig, lift_m) if lift_m else rig, cfg)
-    feet = tile_find_feet(est) if tile_finds is not None else []
     pred, found, truth = [], [], []
     for i in range(frames):
         t = t0 + i / fps
         before = (est.cold_tiles_found, est.tile_finds_floating)
-        feet.clear()
         r = est.estimate([scene.render(cam, t, with_truth=False)[0] for cam in rig.pair], sequence=i)
         if tile_finds is not None and (est.cold_tiles_found, est.tile_finds_floating) != before:
-            tile_finds.append((i, est.cold_tiles_found > before[0], feet[-1] if feet else None))
+            tile_finds.append((i, est.cold_tiles_found > before[0], est.tile_find_foot_m))
         pred.append(r.joints_3d + [0.0, lift_m, 0.0])
         found.append(~r.missing)
         truth.append(scene.joints_3d(t))
@@ -128,21 +126,6 @@ def score_cells(runs) -> str:
     pred, found, truth = (np.concatenate(a) for a in zip(*runs))
     value = f"{mpjpe(pred, truth, np.ones(found.shape, bool), pred_valid=found).value:.0f}" if found.any() else "-"
     return f"{value} | {found.mean():.3f} | {float((~found.any(axis=1)).mean()):.3f}"
-
-
-def tile_find_feet(est: Estimator) -> list[float | None]:
-    """The lower foot above the floor (``_Pass.lowest_foot_m``, None: no figure) of each cold tile find ``est`` judges
-    from now on, kept or refused: what the refusal of floating feet reads (``Estimator._feet_float``). Not the pair's
-    ``PairResult.lowest_foot_m``: a refused find's pair answers nobody, with no foot."""
-    feet: list[float | None] = []
-    judge = est._feet_float
-
-    def judged(p) -> bool:
-        feet.append(p.lowest_foot_m)
-        return judge(p)
-
-    est._feet_float = judged  # the instance's own: other estimators judge as before
-    return feet
 
 
 def framing_cells(rig: Rig, model_px: int) -> str:
@@ -200,8 +183,8 @@ def tile_find_rows(path: str, k: int, run, finds: list) -> list[str]:
     """``--tile-finds``' rows of sequence ``k``'s ``run`` (:func:`run_sequence`'s) in rig file ``path``: per pair
     whose tile search found someone (``finds``), whether the find was kept, where the person stood (their true
     joints' mean, m, and the nearest joint's depth: the example rig's volume starts 1 m ahead), the find's lower foot
-    above the floor (:func:`tile_find_feet`, what the estimator refuses a tile find on; "-": no figure), the pair's
-    MPJPE and joints found, and the MPJPE of the sequence's pairs from it on (what the track then followed)."""
+    above the floor (``Estimator.tile_find_foot_m``, what the estimator refuses a tile find on; "-": no figure), the
+    pair's MPJPE and joints found, and the MPJPE of the sequence's pairs from it on (what the track then followed)."""
     pred, found, truth = run
     rows = []
     for i, kept, foot in finds:
