@@ -2,7 +2,7 @@
 
     PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_baseline.py [--model-dir models] [--sequences 4]
         [--frames 8] [--baselines 0.02,0.03,0.04,0.06,0.1,0.2,0.6 | --angles 0.5,1,2] [--distances 3]
-        [--hfovs 80] [--rigs docs/examples/rig.json] [--tile-finds] [--lifts 0,1,3,50]
+        [--hfovs 80] [--rigs docs/examples/rig.json] [--tile-finds] [--rig-lift 1.2] [--lifts 0,1,3,50]
 
 The simulator's default rig (``drivers.sim.RigPlacement()``: 640x480, 80 degrees, 1.3 m high, both cameras aimed
 at the subject ``--distances`` ahead) with the pair's centres moved to each baseline, filming the bench's held-out
@@ -18,7 +18,8 @@ of their height in view, what ``load_rig``'s framing warning reads, and their he
 MPJPE of the joints found, the share of joints found and the share of pairs with no 3D joint at all; ``--rigs``
 adds a row per rig file, its own pair filming the same people drawn in its own working volume; ``--tile-finds``
 then a row per pair of theirs whose cold tile search found someone: where the person stood and the error then and
-after (session 70). ``RigPlacement``
+after (session 70); ``--rig-lift`` gives each rig file's estimator that rig :func:`lifted` (the same images: the
+floor no longer at y = 0; session 71). ``RigPlacement``
 refuses baselines under 5 cm, so the cameras are placed here as it places them. Then, per ``--lifts`` (``""``:
 none), the default rig (its own baseline, 1.2 m; the first distance, 80 degrees) with its frame moved that many
 metres up (cameras and working volume alike, the same images): the floor no longer at y = 0, where the runtime
@@ -94,19 +95,17 @@ def run_sequence(session, cfg, rig: Rig, k: int, frames: int, fps: float = 30.0,
     """Predicted joints, found mask and truth of bench sequence ``k``'s scene (:func:`bench_scene_in`, its person
     drawn in ``people``, default ``rig``'s volume) filmed by ``rig``, one cold estimator given ``rig`` :func:`lifted`
     by ``lift_m`` (truth in ``rig``'s frame). ``tile_finds``: gets ``(pair, kept, foot)`` for each pair whose cold
-    tile search found someone, kept or refused for floating feet, and that find's lower foot (:func:`tile_find_feet`;
-    ``--tile-finds``)."""
+    tile search found someone, kept or refused for floating feet, and that find's lower foot as the refusal judged
+    it (``Estimator.tile_find_foot_m``; ``--tile-finds``)."""
     scene, t0 = bench_scene_in(rig, k, people)
     est = Estimator(session, lifted(rig, lift_m) if lift_m else rig, cfg)
-    feet = tile_find_feet(est) if tile_finds is not None else []
     pred, found, truth = [], [], []
     for i in range(frames):
         t = t0 + i / fps
         before = (est.cold_tiles_found, est.tile_finds_floating)
-        feet.clear()
         r = est.estimate([scene.render(cam, t, with_truth=False)[0] for cam in rig.pair], sequence=i)
         if tile_finds is not None and (est.cold_tiles_found, est.tile_finds_floating) != before:
-            tile_finds.append((i, est.cold_tiles_found > before[0], feet[-1] if feet else None))
+            tile_finds.append((i, est.cold_tiles_found > before[0], est.tile_find_foot_m))
         pred.append(r.joints_3d + [0.0, lift_m, 0.0])
         found.append(~r.missing)
         truth.append(scene.joints_3d(t))
@@ -127,21 +126,6 @@ def score_cells(runs) -> str:
     pred, found, truth = (np.concatenate(a) for a in zip(*runs))
     value = f"{mpjpe(pred, truth, np.ones(found.shape, bool), pred_valid=found).value:.0f}" if found.any() else "-"
     return f"{value} | {found.mean():.3f} | {float((~found.any(axis=1)).mean()):.3f}"
-
-
-def tile_find_feet(est: Estimator) -> list[float | None]:
-    """The lower foot above the floor (``_Pass.lowest_foot_m``, None: no figure) of each cold tile find ``est`` judges
-    from now on, kept or refused: what the refusal of floating feet reads (``Estimator._feet_float``). Not the pair's
-    ``PairResult.lowest_foot_m``: a refused find's pair answers nobody, with no foot."""
-    feet: list[float | None] = []
-    judge = est._feet_float
-
-    def judged(p) -> bool:
-        feet.append(p.lowest_foot_m)
-        return judge(p)
-
-    est._feet_float = judged  # the instance's own: other estimators judge as before
-    return feet
 
 
 def framing_cells(rig: Rig, model_px: int) -> str:
@@ -168,6 +152,14 @@ def floats(text: str) -> list[float]:
     return [float(v) for v in text.split(",") if v.strip()]
 
 
+def finite_float(text: str) -> float:
+    """``--rig-lift``: a finite number of metres."""
+    value = float(text)
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"a finite number of metres, got {text!r}")
+    return value
+
+
 def rig_paths(text: str) -> list[str]:
     """``--rigs``: a comma-separated list of rig files ("" is none), as ``benchmarks/measure_cold_tiles.py`` reads
     it too."""
@@ -191,8 +183,8 @@ def tile_find_rows(path: str, k: int, run, finds: list) -> list[str]:
     """``--tile-finds``' rows of sequence ``k``'s ``run`` (:func:`run_sequence`'s) in rig file ``path``: per pair
     whose tile search found someone (``finds``), whether the find was kept, where the person stood (their true
     joints' mean, m, and the nearest joint's depth: the example rig's volume starts 1 m ahead), the find's lower foot
-    above the floor (:func:`tile_find_feet`, what the estimator refuses a tile find on; "-": no figure), the pair's
-    MPJPE and joints found, and the MPJPE of the sequence's pairs from it on (what the track then followed)."""
+    above the floor (``Estimator.tile_find_foot_m``, what the estimator refuses a tile find on; "-": no figure), the
+    pair's MPJPE and joints found, and the MPJPE of the sequence's pairs from it on (what the track then followed)."""
     pred, found, truth = run
     rows = []
     for i, kept, foot in finds:
@@ -212,9 +204,15 @@ def print_tile_finds(rows: list[str]) -> None:
     print("\n".join(rows) if rows else "| (none) |", flush=True)
 
 
+def rig_label(path: str, lift_m: float) -> str:
+    """A ``--rigs`` row's first cell: the rig file, and ``--rig-lift`` where its frame is moved."""
+    return path if not lift_m else f"{path}, frame {lift_m:g} m up"
+
+
 def print_rig_files(args, session, cfg) -> None:
-    """The table of ``--rigs``: each rig file's own pair, framing and scores on the same people; with
-    ``--tile-finds``, then each pair whose cold tile search found someone (:func:`tile_find_rows`)."""
+    """The table of ``--rigs``: each rig file's own pair, framing and scores on the same people (its estimator given
+    the rig :func:`lifted` by ``--rig-lift``); with ``--tile-finds``, then each pair whose cold tile search found
+    someone (:func:`tile_find_rows`)."""
     paths = rig_paths(args.rigs)
     if not paths:
         return
@@ -227,9 +225,11 @@ def print_rig_files(args, session, cfg) -> None:
         runs = []
         for k in range(args.sequences):
             finds: list = []  # (filled with --tile-finds only)
-            runs.append(run_sequence(session, cfg, rig, k, args.frames, tile_finds=finds if args.tile_finds else None))
-            rows += tile_find_rows(path, k, runs[-1], finds)
-        print(f"| {path} | {framing_cells(rig, session.contract.width)} | {score_cells(runs)} |", flush=True)
+            runs.append(run_sequence(session, cfg, rig, k, args.frames, lift_m=args.rig_lift,
+                                     tile_finds=finds if args.tile_finds else None))
+            rows += tile_find_rows(rig_label(path, args.rig_lift), k, runs[-1], finds)
+        print(f"| {rig_label(path, args.rig_lift)} | {framing_cells(rig, session.contract.width)} | "
+              f"{score_cells(runs)} |", flush=True)
     if args.tile_finds:
         print_tile_finds(rows)
 
@@ -254,6 +254,9 @@ def main(argv=None) -> int:
                                                         "(\"\": no such table)")
     ap.add_argument("--tile-finds", action="store_true", help="after the --rigs table, a row per pair whose cold "
                                                                "tile search found someone (kept or refused)")
+    ap.add_argument("--rig-lift", type=finite_float, default=0.0,
+                    help="metres each --rigs file's frame is moved up for its estimator (the same images; a "
+                         "negative one moves it down): where the runtime reads the floor at y = 0")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision))
     session = load_session(cfg)

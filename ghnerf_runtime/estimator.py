@@ -151,7 +151,8 @@ _FLOOR_BODY_M = 1.0
 #: shrunk, the same in both views, so that the skeleton triangulates too far and too high (394 mm MPJPE, its foot
 #: 0.69 m up, then tracked for frames), where the whole volume's crop found them on the next pair (the example rig's
 #: sequence 1, 1.2 m ahead; the other tile finds there and on ghcal synth's rig read -0.16 to -0.01 m:
-#: benchmarks/measure_baseline.py --tile-finds, docs/runtime.md, "The first tile").
+#: benchmarks/measure_baseline.py --tile-finds, docs/runtime.md, "The first tile"). The floor read is
+#: :func:`_tile_find_floor_y`'s.
 _TILE_FIND_MAX_FOOT_M = 0.4
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
@@ -456,6 +457,15 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
 # ------------------------------------------------------------------ estimator
 #: Imported calibrations whose frame is the tool's own (its first camera's, the board's), not gravity-down.
 _TOOL_FRAMES = ("opencv-stereo-calib", "anipose-toml")
+
+
+def _tile_find_floor_y(rig: Rig) -> float:
+    """The floor's y (y down) that the refusal of floating tile finds (``_TILE_FIND_MAX_FOOT_M``) reads: y = 0, or the
+    working volume's floor-side bound (its largest y) where that lies higher. A rig whose frame's origin lies under
+    the floor (its volume ends above y = 0) reads every foot too high by as much, and from y = 0 every tile find was
+    refused; the volume is the one hint of the floor there. Never lower than y = 0: where the floor is not known the
+    guard refuses less, never more (the example rig's and ``ghcal synth``'s volumes reach y = 0: 0.0)."""
+    return min(0.0, float(rig.volume.max_corner[1]))
 
 
 def _warn_if_not_levelled(rig: Rig) -> None:
@@ -792,6 +802,8 @@ class Estimator:
         self.cold_tile_passes = 0  # cold pairs that searched a tile, and those whose tile found someone
         self.cold_tiles_found = 0
         self.tile_finds_floating = 0  # tile finds refused for feet far above the floor (_TILE_FIND_MAX_FOOT_M)
+        self._tile_floor_y = _tile_find_floor_y(rig)  # the floor that refusal reads
+        self._tile_find_foot: float | None = None  # the last pair's tile find's foot as judged (tile_find_foot_m)
         self.cold_tile_wakes = 0  # resting searches a scene change woke (tracking.cold_tiles_wake_levels)
         # roi.turn_search: each camera's crop turn (degrees on top of roi.upright's) and, per turn, the camera
         # state (its own remap tables) and per pair of turns a tracker (volume crops sized for that turn)
@@ -888,6 +900,15 @@ class Estimator:
         """Load the model named by ``config.session`` (only the graphs needed) and build the estimator."""
         config = config or EstimatorConfig()
         return cls(load_session(config), rig, config)
+
+    @property
+    def tile_find_foot_m(self) -> float | None:
+        """The lower foot (m) of the last pair's cold tile find, refined on its subject, above the floor that the
+        refusal of floating feet reads (y = 0, or the working volume's floor-side bound where that lies higher): what
+        the refusal judged, the find kept or refused (``tile_finds_floating``). None where the last pair found no one
+        by a tile or the find gave no foot figure. Not ``PairResult.lowest_foot_m``: a refused find's pair answers
+        nobody, with no foot (``benchmarks/measure_baseline.py --tile-finds`` prints this)."""
+        return self._tile_find_foot
 
     @property
     def camera_names(self) -> tuple[str, str]:
@@ -1069,6 +1090,7 @@ class Estimator:
         if novel_view is not None and novel_view.overlay == "heatmap" and not self.config.novel_view.heatmaps:
             raise ModelError("overlay='heatmap' needs novel_view.heatmaps = true (the 'render' graph)")
         self._sequence = sequence + 1  # after the checks: a refused call leaves the running count as it was
+        self._tile_find_foot = None
         timing: dict[str, float] = {}
         self._forget_a_stale_track(timestamp_s)
         # the kept turn this pair may lose, and the last pass kept through it (_turn_lost_flipped)
@@ -1356,7 +1378,8 @@ class Estimator:
         found = self._sees_anyone(q)
         if found:
             q = self._refined(images, q, sequence, timing, novel_view)
-            if self._feet_float(q):
+            self._tile_find_foot = self._above_tile_floor(q.lowest_foot_m)
+            if self._feet_float(self._tile_find_foot):
                 self.tile_finds_floating += 1
                 self.tracker.reset()  # the next pair starts cold, as after a tile that found nobody
                 if q.novel is not None:  # the refined pass is tracked: its novel view may be rendering in the worker
@@ -1374,11 +1397,16 @@ class Estimator:
         self._wake_tiles()
         return q
 
+    def _above_tile_floor(self, foot_m: float | None) -> float | None:
+        """``foot_m`` (a pass's ``lowest_foot_m``, above y = 0) above the floor the tile finds' refusal reads
+        (:func:`_tile_find_floor_y`); None stays None."""
+        return None if foot_m is None else foot_m + self._tile_floor_y
+
     @staticmethod
-    def _feet_float(p: "_Pass") -> bool:
-        """Whether ``p``'s lower foot stands over ``_TILE_FIND_MAX_FOOT_M`` above the floor (``lowest_foot_m``; no
-        figure: no)."""
-        return p.lowest_foot_m is not None and p.lowest_foot_m > _TILE_FIND_MAX_FOOT_M
+    def _feet_float(foot_m: float | None) -> bool:
+        """Whether a tile find's lower foot, ``foot_m`` above the refusal's floor (:meth:`_above_tile_floor`), stands
+        over ``_TILE_FIND_MAX_FOOT_M`` (no figure: no)."""
+        return foot_m is not None and foot_m > _TILE_FIND_MAX_FOOT_M
 
     def _next_untried_tile(self) -> int:
         """The fixed order: the next tile from ``_next_tile`` on that this round has not searched."""

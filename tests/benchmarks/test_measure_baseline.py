@@ -9,7 +9,7 @@ from benchmarks.measure_baseline import (baseline_for_angle, framing_cells, in_c
                                          standing_person_px, tile_find_rows)
 from ghnerf_runtime.preprocess import roi_from_volume
 from ghnerf_runtime.rig_file import STANDING_PERSON_M, load_rig, pair_angle_deg
-from tests.benchmarks.test_bench_smoke import run_script, scratch_cache  # noqa: F401
+from tests.benchmarks.test_bench_smoke import run_script, run_script_failing, scratch_cache  # noqa: F401
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
 
@@ -106,6 +106,33 @@ def test_the_command_line_prints_the_tile_finds(tiny_model_dir, scratch_cache, c
                      "--baselines", "", "--rigs", str(example), "--lifts", "", "--tile-finds", capsys=capsys,
                      monkeypatch=monkeypatch)
     assert "| rig file | sequence | pair | tile find | person's joints' mean x, y, z, m |" in out, out
+
+
+def test_the_rig_files_estimators_get_the_rig_lifted(tiny_model_dir, scratch_cache, capsys, monkeypatch):  # noqa: F811
+    """``--rig-lift`` (session 71): each ``--rigs`` file's estimator gets that rig with its frame moved up (the same
+    images, the floor no longer at y = 0: docs/runtime.md, "The first tile"), and its rows say so; the framing cells
+    stay the file's."""
+    import benchmarks.measure_baseline as mb
+
+    given = []
+
+    class Recording(mb.Estimator):
+        def __init__(self, session, rig, config):
+            given.append(rig)
+            super().__init__(session, rig, config)
+
+    monkeypatch.setattr(mb, "Estimator", Recording)
+    assert mb.main(["--model-dir", str(tiny_model_dir), "--sequences", "1", "--frames", "1", "--baselines", "",
+                    "--rigs", "docs/examples/rig.json", "--lifts", "", "--tile-finds", "--rig-lift", "1.2"]) == 0
+    out = capsys.readouterr().out
+    assert "| docs/examples/rig.json, frame 1.2 m up | 1.00 | 517 | " in out, out
+    assert [r.volume.max_corner[1] for r in given] == pytest.approx([0.05 - 1.2])
+
+
+@pytest.mark.parametrize("lift", ["nan", "inf", "up"])
+def test_the_rig_lift_is_a_finite_number(lift, capsys, monkeypatch):
+    err = run_script_failing("measure_baseline", "--rig-lift", lift, capsys=capsys, monkeypatch=monkeypatch)
+    assert "--rig-lift" in err, err
 
 
 def test_the_cold_crop_height_wants_one_height_per_camera():

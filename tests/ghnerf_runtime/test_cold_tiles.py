@@ -14,7 +14,7 @@ import pytest
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract
 from benchmarks.empty_rooms import empty_room_pair, scene_with_screen, scene_without_person, with_screen
-from benchmarks.measure_baseline import tile_find_feet
+from benchmarks.measure_baseline import lifted
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, RoiConfig, TrackingConfig
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.rig_file import load_rig
@@ -617,13 +617,37 @@ def test_a_refused_tile_find_leaves_no_novel_view_rendering(example_rig, far_per
 
 
 def test_a_refused_tile_find_s_foot_is_the_find_s(example_rig, far_person):
-    """``--tile-finds``' foot is the find's (``tile_find_feet``): a refused find's pair answers nobody, whose
-    ``PairResult.lowest_foot_m`` is None, and the table printed "-" where the estimator read the foot 0.6 m up."""
+    """``Estimator.tile_find_foot_m`` (``--tile-finds``' foot) is the find's: a refused find's pair answers nobody,
+    whose ``PairResult.lowest_foot_m`` is None, and the table printed "-" where the estimator read the foot 0.6 m up.
+    A pair that searches no tile has none (the next one, tracked, after a kept find)."""
     images, joints = far_person
     oracle = FaintSmallPeopleOracle(edge128_contract())
     est = Estimator(oracle, example_rig, EstimatorConfig())
-    feet = tile_find_feet(est)
     oracle.set_truth(joints - [0.0, 0.6, 0.0])  # drawn 0.6 m up: refused (-k feet_float)
     r = est.estimate(images)
     assert est.tile_finds_floating == 1 and r.lowest_foot_m is None
-    assert len(feet) == 1 and feet[0] == pytest.approx(0.6, abs=0.1)
+    assert est.tile_find_foot_m == pytest.approx(0.6, abs=0.1)
+    oracle.set_truth(joints)
+    est.reset()
+    est.estimate(images)
+    assert est.cold_tiles_found == 1 and est.tile_find_foot_m == pytest.approx(0.0, abs=0.1)
+    est.estimate(images)
+    assert est.cold_tile_passes == 2 and est.tile_find_foot_m is None
+
+
+@pytest.mark.parametrize("lift_m, up_m, kept", [(0.5, 0.0, True), (1.2, 0.0, True), (1.2, 0.6, False)])
+def test_a_tile_find_on_a_rig_whose_frame_lies_under_the_floor_is_judged_on_its_volume_s_floor(
+        example_rig, far_person, lift_m, up_m, kept):
+    """The example rig with its frame's origin ``lift_m`` under the floor (``measure_baseline.lifted``: the floor at
+    y = -lift_m, every foot read that much up): the refusal of floating feet reads the floor at the working volume's
+    floor-side bound there (y = 0.05 - lift_m), so a person standing on the floor is kept (before session 71 every
+    tile find was refused, the feet read 0.5 or 1.2 m up) and one drawn 0.6 m above it is still refused. At 0.5 m
+    ``volume_floor_warning`` is silent (the volume's bound 0.45 m above y = 0)."""
+    images, joints = far_person
+    oracle = FaintSmallPeopleOracle(edge128_contract())
+    est = Estimator(oracle, lifted(example_rig, lift_m), EstimatorConfig())
+    oracle.set_truth(joints - [0.0, lift_m + up_m, 0.0])  # the rig's frame: the same pixels
+    first = est.estimate(images)
+    assert est.cold_tile_passes == 1 and est.tile_finds_floating == int(not kept)
+    assert est.cold_tiles_found == int(kept) and first.missing.all() != kept
+    assert est.tile_find_foot_m == pytest.approx(up_m + 0.05, abs=0.1)  # (the volume's bound 5 cm under the floor)
