@@ -39,7 +39,7 @@ Options:
 * ``loop`` (two videos of the same length in time: 40 frames at 30 fps and 20 at 15 fps are): start
   over at the end instead of ending the stream.
 * ``tolerance_ms``: pairing tolerance (default: half a frame period at the slowest of the rates
-  the cameras report and ``fps``, else 30 fps); ``policy``: ``latest`` (default) or ``all``;
+  the cameras report and ``fps``, else 30 fps; at most 10 s); ``policy``: ``latest`` (default) or ``all``;
   ``max_pending`` (8, at most 256): frames held per camera while waiting for the other's: a camera
   whose frames reach the host that many frames after the other's (a slower USB path or
   hub) never pairs unless it is raised (:mod:`drivers.pairing_options`);
@@ -110,7 +110,7 @@ from drivers.errors import (
     RigOperationError,
 )
 from drivers.frames import Frame
-from drivers.pairing import DropPolicy, PairingConfig, PairingStats
+from drivers.pairing import MAX_TOLERANCE_MS, DropPolicy, PairingConfig, PairingStats
 from drivers.pairing_options import PairingOptions, take_pairing_options
 from drivers.url import RigUrl, redact_url
 from ghnerf_runtime.geometry import Rig
@@ -581,7 +581,9 @@ class OpenCVRigSource(RigSource):
                 # half a frame period at the slowest rate known: a camera's report, or fps= where that
                 # is lower (a webcam may report 30 fps and keep 15 in dim light: fps= says so)
                 rate = min(min((r for r in (cam.fps, o.fps) if r), default=FALLBACK_FPS) for cam in self._cameras)
-                self.pairing = o.pairing.config(500.0 / rate)
+                # at most the pairer's bound: a rate reported under 0.05 fps (a time-lapse file) failed the open
+                # on a tolerance_ms the URL never gave
+                self.pairing = o.pairing.config(min(500.0 / rate, MAX_TOLERANCE_MS))
             self._anchor_ns = self.clock.now_ns()
             self.driver_stamps = all(cam.v4l2 for cam in self._cameras)
             for cam in self._cameras:

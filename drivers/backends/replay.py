@@ -25,7 +25,8 @@ URL options:
 Each camera plays in its recorded order (its image file numbers), the cameras merged by capture time. A
 camera's stamp going back is a clock reset: warned of, and the frames after it re-based to follow on one
 frame period after those before, one shift for both cameras (:func:`playback_order`; with ``keep_time=1``
-too). Indices and ground truth are delivered unchanged on the first pass. Each further ``loop``
+too); one stamp out of line with its neighbours is a bad stamp, played at their midpoint. Indices and
+ground truth are delivered unchanged on the first pass. Each further ``loop``
 pass shifts timestamps by the recording's span (plus one frame period: the median step between a camera's
 successive distinct stamps, else 1/30 s) and indices by the
 per-camera index span (last - first + 1), so both keep increasing per camera. A take that was not closed cleanly plays without the rows
@@ -160,20 +161,22 @@ def playback_order(rows: list[FrameRow], directory: Path | str = "") -> list[Fra
     one after another, in the order recorded, and the cameras keep their relative timing within a segment,
     so pairs stay pairs. The true gap at a reset is not recorded; one frame period stands for it. A warning
     per camera that went back names its first reset and the shift (recorded stamp = played stamp - shift).
+    One stamp out of line with both its neighbours is first mended (:func:`_mend_lone_stamps`), not a reset.
 
     Re-based, not played with the stamps going back: every later stage (pairing, tracking, smoothing, sinks)
     takes a camera's stamps as increasing, and a pairer that sees one camera go back while the other still
     holds a frame of the old timeline loses the first pair after the reset.
     """
     segments: dict[str, list[list[int]]] = {}
+    stamps = {i: row.timestamp_ns for i, row in enumerate(rows)}
     for cam, mine in recorded_order(rows).items():
+        _mend_lone_stamps(rows, mine, stamps, directory)
         split: list[list[int]] = []
         for i in mine:
-            if not split or rows[i].timestamp_ns < rows[split[-1][-1]].timestamp_ns:
+            if not split or stamps[i] < stamps[split[-1][-1]]:
                 split.append([])
             split[-1].append(i)
         segments[cam] = split
-    stamps = {i: row.timestamp_ns for i, row in enumerate(rows)}
     if any(len(split) > 1 for split in segments.values()):
         period = frame_period_ns([rows[i] for split in segments.values() for segment in split for i in segment])
         shifts = [0]
@@ -206,6 +209,26 @@ def playback_order(rows: list[FrameRow], directory: Path | str = "") -> list[Fra
         row = rows[i]
         played.append(row if stamps[i] == row.timestamp_ns else replace(row, timestamp_ns=stamps[i]))
     return played
+
+
+def _mend_lone_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, int], directory: Path | str) -> None:
+    """Give a lone bad stamp of one camera (``mine``: its rows in recorded order) the midpoint of its neighbours'.
+
+    A stamp out of line with the frames either side of it, which are in line with each other (a glitched stamp
+    an hour ahead or back, the frames after it on the old timeline), is one bad stamp, not a clock reset: taken
+    as a reset, it re-based every later frame of that camera by the glitch, so none paired again and a paced
+    replay waited out the glitch (an hour). A camera's first and last frames have one neighbour: not mended."""
+    mended = []
+    for before, here, after in zip(mine, mine[1:], mine[2:]):
+        if stamps[before] <= stamps[after] and not stamps[before] <= stamps[here] <= stamps[after]:
+            mended.append((here, stamps[here]))
+            stamps[here] = (stamps[before] + stamps[after]) // 2
+    if mended:
+        (first, recorded), row = mended[0], rows[mended[0][0]]
+        log.warning("recording %s: camera %r's stamp at frame %s (index %d, %s line %d), %d ns, is out of line with "
+                    "the frames either side of it: taken as a bad stamp, played at their midpoint, %d ns (%d in "
+                    "this camera)", directory, row.camera, row.image, row.index, FRAMES, row.line,
+                    recorded, stamps[first], len(mended))
 
 
 class ReplayRigSource(RigSource):

@@ -635,6 +635,20 @@ def test_the_default_tolerance_is_half_a_period_of_the_slower_camera(webcam):
         assert source._pairer.config.tolerance_ms == pytest.approx(50.0)  # what pairs, not only what is said
 
 
+def test_a_rate_reported_under_a_twentieth_of_a_frame_a_second_gives_the_largest_tolerance(webcam):
+    """Half the period of a camera reporting 0.04 fps (a time-lapse file) is 12.5 s, past the pairer's 10 s bound:
+    the open failed on a tolerance_ms the URL never gave."""
+    from drivers.pairing import MAX_TOLERANCE_MS
+
+    class TimeLapse(_Webcam):
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.props[cv2.CAP_PROP_FPS] = 0.04 if target == 1 else 30.0
+
+    with open_rig("opencv://?first=0&second=1", capture_factory=TimeLapse) as source:
+        assert source._pairer.config.tolerance_ms == MAX_TOLERANCE_MS == 10_000.0
+
+
 def test_fps_given_below_the_reported_rate_sets_the_tolerance(webcam):
     # a webcam that reports 30 fps whatever it is asked and keeps 15 in dim light: fps=15 is the rate
     # the user knows it keeps, and the tolerance must cover it, else half the phases never pair

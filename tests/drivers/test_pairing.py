@@ -481,3 +481,21 @@ def test_an_int_stamp_skips_the_number_check_and_other_finite_stamps_still_pair(
                     for k, kind in enumerate((float, np.float64, np.float32)) for c in "ab"]
     _, pairs = run(PairingConfig(policy=DropPolicy.ALL), float_stamps)
     assert len(pairs) == 3 and len(checked) == 6
+
+
+@pytest.mark.parametrize("glitch_ns", [3600 * 10**9, -3600 * 10**9])
+@pytest.mark.parametrize("camera", ["a", "b"])
+@pytest.mark.parametrize("b_first", [False, True])
+def test_one_stamp_an_hour_off_loses_its_pair_and_one_more_at_most(glitch_ns, camera, b_first):
+    """A camera's one glitched stamp (an hour ahead or back, its next stamps normal again) is a jump and a clock
+    reset to the pairer: pairing goes on from the next frame. Lost: the glitched frame's pair, and, an hour ahead,
+    the other camera's frame that comes before the glitched camera's next (taken as one it is already past)."""
+    events = []
+    for k in range(40):
+        stamps = {"a": 10**12 + k * PERIOD, "b": 10**12 + k * PERIOD + 2 * MS}
+        stamps[camera] += glitch_ns if k == 20 else 0
+        events += [frame(c, k, stamps[c]) for c in ("ba" if b_first else "ab")]
+    pairer, pairs = run(PairingConfig(policy="all"), events)
+    assert all(a.index == b.index for _, a, b in pairs)
+    lost = set(range(40)) - {a.index for _, a, _ in pairs}
+    assert lost == {20} or (glitch_ns > 0 and lost == {20, 21})

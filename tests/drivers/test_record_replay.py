@@ -1315,6 +1315,43 @@ def test_a_reset_of_one_camera_keeps_it_beside_the_other():
         ("left", 3, 99), ("right", 3, 100), ("left", 4, 132), ("right", 4, 133)]
 
 
+@pytest.mark.parametrize("glitch_ms", [3_600_000, -3_600_000])
+def test_one_bad_stamp_is_mended_not_taken_as_a_reset(glitch_ms):
+    """One stamp an hour ahead or back, its neighbours in line: taken as a clock reset, every later frame of that
+    camera was re-based by the hour, and no pair formed again. Played at its neighbours' midpoint instead."""
+    from drivers.backends.recording_format import FrameRow
+    from drivers.backends.replay import playback_order
+
+    ms = 1_000_000
+    left = [FrameRow("left", i, t * ms, f"images/left/{i:08d}.png")
+            for i, t in enumerate([0, 33, 66 + glitch_ms, 100, 133])]
+    right = [FrameRow("right", i, t * ms, f"images/right/{i:08d}.png") for i, t in enumerate([1, 34, 67, 101, 134])]
+    played = playback_order(right[::-1] + left[::-1])
+    assert [(r.camera, r.index, r.timestamp_ns // ms) for r in played] == [
+        ("left", 0, 0), ("right", 0, 1), ("left", 1, 33), ("right", 1, 34), ("left", 2, 66), ("right", 2, 67),
+        ("left", 3, 100), ("right", 3, 101), ("left", 4, 133), ("right", 4, 134)]
+
+
+def test_a_take_with_one_stamp_an_hour_ahead_replays_every_pair_at_its_pace(take, copy_of_take, caplog):
+    """A live camera's one glitched stamp (an hour ahead) is recorded as delivered. Replayed, it was a clock reset:
+    that camera's later frames moved an hour on, a paced replay waited the hour for them, and none paired."""
+    _, live, _ = take
+    rows = journal(copy_of_take)
+    first_camera = live[0].frames[0].camera
+    bad = [r for r in rows if r["camera"] == first_camera][len(live) // 2]
+    bad["timestamp_ns"] += 3600 * 10**9
+    (copy_of_take / FRAMES).write_text("".join(json.dumps(r) + "\n" for r in rows))
+    clock = ManualClock(7_000_000_000)
+    with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"), \
+            open_rig(f"replay://{copy_of_take}?policy=all", clock=clock) as source:
+        replayed = list(source)
+    assert len(replayed) == len(live)
+    span = max(live[-1].timestamps_ns) - min(live[0].timestamps_ns)
+    assert clock.now_ns() - 7_000_000_000 <= span  # paced at the recorded pace: no hour's wait
+    warned = [r.getMessage() for r in caplog.records if "bad stamp" in r.getMessage()]
+    assert len(warned) == 1 and bad["image"] in warned[0]
+
+
 def test_a_recorded_stream_url_keeps_no_password_in_the_manifest(tmp_path, sim_cache):
     """record+opencv://?first=rtsp://user:pass@... wrote the password into manifest.json, in plain text."""
     from drivers.backends.record import RecordingRigSource
