@@ -58,8 +58,8 @@ from typing import Any, Callable, Sequence
 
 import cv2
 import numpy as np
-# np.median (joints3d.triangulate_joints_checked, every pair) imports numpy.ma on its first call: 10-70 ms on
-# session 58's host, paid by the first pair a daemon streams unless imported here, at load
+# np.median (_median_confidence, every pair; the decoding's medians are joints3d.sorted_median) imports numpy.ma on its
+# first call: 10-70 ms on session 58's host, paid by the first pair a daemon streams unless imported here, at load
 import numpy.ma  # noqa: F401
 
 from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_NAMES
@@ -78,7 +78,7 @@ from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution, triangulate_midpoint
 from ghnerf_runtime.handedness import handedness
 from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, depth_centroid_joints, gate_presence, gate_to_box, \
-    lower_foot_m, near_the_body, \
+    lower_foot_m, near_the_body, sorted_median, \
     query_grid, solve_two_view_peaks, triangulate_joints, triangulate_joints_checked, volumetric_joints
 from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
@@ -2415,7 +2415,7 @@ class Estimator:
         lowest = lower_foot_m(Joints3D(tri.points, tri.confidence, feet, tri.reprojection_px), FEET,
                               self.config.joints3d.foot_standing_m, _FLOOR_MIN_FOOT_JOINTS)
         torso = [j for j in _TORSO if seen[j]]
-        if lowest is None or not torso or -np.median(tri.points[torso, 1]) - lowest < _FLOOR_MIN_TORSO_M:
+        if lowest is None or not torso or -sorted_median(tri.points[torso, 1]) - lowest < _FLOOR_MIN_TORSO_M:
             return None  # not seen on their feet (y down: a height is -y)
         return lowest
 

@@ -207,9 +207,18 @@ def _patch3(maps: np.ndarray, pad: int, iy: np.ndarray, ix: np.ndarray, which: n
     that axis).
     """
     which = np.arange(len(iy)) if which is None else which
-    rows = np.clip((iy + pad)[:, None, None] + np.arange(-1, 2)[None, :, None], 0, maps.shape[1] - 1)
-    cols = np.clip((ix + pad)[:, None, None] + np.arange(-1, 2)[None, None, :], 0, maps.shape[2] - 1)
-    return maps[which[:, None, None], rows, cols].astype(np.float64)
+    _, h, w = maps.shape
+    rows = _clipped_index((iy + pad)[:, None] + np.arange(-1, 2), h)  # (N, 3)
+    cols = _clipped_index((ix + pad)[:, None] + np.arange(-1, 2), w)
+    # one take of flat indices: the same pixels as maps[which, rows, cols], in a quarter of the numpy calls' time
+    flat = (which[:, None] * h + rows)[:, :, None] * w + cols[:, None, :]
+    return np.take(maps, flat).astype(np.float64)
+
+
+def _clipped_index(index: np.ndarray, size: int) -> np.ndarray:
+    """Integer indices clipped to ``[0, size - 1]``: ``np.clip``'s values, without its per-call dtype checks (12-25
+    us a call on session 71's host, a few dozen calls a pair's decoding)."""
+    return np.minimum(np.maximum(index, 0), size - 1)
 
 
 #: Smallest determinant of a log-quadratic fit's Hessian (negative along x) read as a maximum: a smaller one is a
@@ -258,7 +267,7 @@ def _climb(maps: np.ndarray, iy: np.ndarray, ix: np.ndarray, steps: int) -> tupl
         patch = _patch3(maps, 0, iy, ix).reshape(len(iy), 9)  # clipped: an edge pixel repeats itself, no move
         best = patch.argmax(axis=1)
         dy, dx = np.divmod(best, 3)
-        to_y, to_x = np.clip(iy + dy - 1, lo_y, hi_y), np.clip(ix + dx - 1, lo_x, hi_x)
+        to_y, to_x = np.minimum(np.maximum(iy + dy - 1, lo_y), hi_y), np.minimum(np.maximum(ix + dx - 1, lo_x), hi_x)
         up = maps[rows, to_y, to_x] > maps[rows, iy, ix]  # (a target clipped off the edge may be no higher)
         if not up.any():
             break

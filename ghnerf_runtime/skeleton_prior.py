@@ -31,6 +31,7 @@ from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
 from ghnerf_runtime.errors import GeometryError, ModelContractError, ModelLoadError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.kept_terms import read_only, same_bits, terms_of
 from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution, triangulate_two_views
+from ghnerf_runtime.joints3d import sorted_median
 from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
 
 __all__ = ["FEATURE_VERSION", "MAX_JOINT_FROM_ROOT_M", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME",
@@ -343,7 +344,7 @@ def disagreement_m(points: np.ndarray, triangulated_points: np.ndarray, triangul
     use = np.asarray(triangulated, bool) & np.isfinite(pts).all(-1) & np.isfinite(tri).all(-1)
     if int(use.sum()) < MIN_CHECK_JOINTS:
         return None
-    return float(np.median(np.linalg.norm(pts[use] - tri[use], axis=-1)))
+    return float(sorted_median(np.linalg.norm(pts[use] - tri[use], axis=-1)))
 
 
 @dataclass(frozen=True)

@@ -606,3 +606,65 @@ def test_the_maxima_the_scaling_hands_on_are_those_of_the_maps_it_returns(dtype,
     want = scaled.max(axis=(1, 2))
     assert np.array_equal(maxima.view(np.uint32), want.view(np.uint32)), (maxima, want)
     assert np.all(maxima <= 1.0)
+
+
+def _patch3_by_loop(maps, pad, iy, ix, which):
+    """The 3x3 neighbourhoods read pixel by pixel, indices clipped to the map: _patch3's reference."""
+    out = np.zeros((len(iy), 3, 3))
+    for k in range(len(iy)):
+        for dy in range(3):
+            for dx in range(3):
+                r = min(max(iy[k] + pad + dy - 1, 0), maps.shape[1] - 1)
+                c = min(max(ix[k] + pad + dx - 1, 0), maps.shape[2] - 1)
+                out[k, dy, dx] = maps[which[k], r, c]
+    return out
+
+
+@pytest.mark.parametrize("pad", [0, 1, 3])
+def test_patch3_reads_the_pixels_a_loop_reads(pad):
+    # session 71 read the 3x3s with one take of flat indices (np.clip's checks cost more than the read): the same
+    # values, edges and corners included, from a contiguous stack and a strided view alike
+    rng = np.random.default_rng(71)
+    stack = rng.random((6, 9 + 2 * pad, 11 + 2 * pad)).astype(np.float32)
+    for maps in (stack, stack[:, :, ::-1]):
+        n = 40
+        iy, ix = rng.integers(0, 9, n), rng.integers(0, 11, n)
+        iy[:4], ix[:4] = [0, 8, 0, 8], [0, 10, 10, 0]  # the four corners
+        which = rng.integers(0, len(maps), n)
+        got = keypoints._patch3(maps, pad, iy, ix, which)
+        assert got.dtype == np.float64
+        np.testing.assert_array_equal(got, _patch3_by_loop(maps, pad, iy, ix, which))
+    np.testing.assert_array_equal(keypoints._patch3(stack, pad, iy[:6], ix[:6]),
+                                  _patch3_by_loop(stack, pad, iy[:6], ix[:6], np.arange(6)))
+
+
+def _climb_by_loop(maps, iy, ix, steps):
+    """Each pixel moved uphill one at a time, as _climb's docstring says: its reference."""
+    h, w = maps.shape[1:]
+    out_y, out_x = np.array(iy), np.array(ix)
+    for k in range(len(iy)):
+        y, x = int(iy[k]), int(ix[k])
+        lo_y, hi_y = (0 if y == 0 else min(1, h - 1)), (h - 1 if y == h - 1 else max(h - 2, 0))
+        lo_x, hi_x = (0 if x == 0 else min(1, w - 1)), (w - 1 if x == w - 1 else max(w - 2, 0))
+        for _ in range(steps):
+            near = [maps[k, min(max(y + dy, 0), h - 1), min(max(x + dx, 0), w - 1)]
+                    for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+            best = int(np.argmax(near))
+            ty, tx = min(max(y + best // 3 - 1, lo_y), hi_y), min(max(x + best % 3 - 1, lo_x), hi_x)
+            if not maps[k, ty, tx] > maps[k, y, x]:
+                break
+            y, x = ty, tx
+        out_y[k], out_x[k] = y, x
+    return out_y, out_x
+
+
+def test_climb_moves_as_a_loop_over_pixels_does():
+    rng = np.random.default_rng(171)
+    maps = rng.random((60, 7, 8)).astype(np.float32)
+    iy, ix = rng.integers(0, 7, 60), rng.integers(0, 8, 60)
+    iy[:8], ix[:8] = [0, 6, 0, 6, 3, 3, 0, 6], [0, 7, 7, 0, 0, 7, 4, 4]  # corners and edges
+    for steps in (1, 3):
+        got = keypoints._climb(maps, iy, ix, steps)
+        want = _climb_by_loop(maps, iy, ix, steps)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
