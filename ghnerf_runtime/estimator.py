@@ -102,8 +102,8 @@ from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import PriorCameras, disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.rays_recheck import VolumeVerdict, mean_level
-from ghnerf_runtime.scene_change import (CALM_AFTER_PASSES, RESTLESS_AFTER_WAKES, SceneCopy, changed_masks,
-                                         masks_wake, pair_copies, restless_with_neighbours)
+from ghnerf_runtime.scene_change import (CALM_AFTER_PASSES, ONE_VIEW_NOT_VAIN_PAIRS, RESTLESS_AFTER_WAKES, SceneCopy,
+                                         changed_masks, masks_wake, pair_copies, restless_with_neighbours)
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners, cold_person_share, volume_tiles
 from ghnerf_runtime.subject import STILL_SEVERAL_MIN_JOINTS, SubjectSelector, guessed_joints, joints_shown_twice, \
@@ -795,6 +795,8 @@ class Estimator:
         self._rest_scene: tuple[SceneCopy, ...] | None = None
         # the cells that woke the search now awake, per camera, until a pair reports a joint or its round ends
         self._woke_on: tuple[np.ndarray, ...] | None = None
+        # the camera that alone saw a person on the last pairs, and on how many in a row (ONE_VIEW_NOT_VAIN_PAIRS)
+        self._one_view_run: tuple[str | None, int] = (None, 0)
         # per camera, each cell's wakes whose round of tiles then found nobody (a screen, a curtain: a restless cell)
         self._vain_wakes: tuple[np.ndarray, ...] | None = None
         # per camera, each cell's tile passes unchanged in a row
@@ -936,6 +938,7 @@ class Estimator:
         self._next_tile = 0
         self._wake_tiles()
         self._woke_on = None  # (a wake outlives _wake_tiles: a reset judges none)
+        self._one_view_run = (None, 0)
         self._vain_wakes = None  # the scene may be another now (a camera moved): its restless cells with it
         self._still_passes = None
         self._forget_scan()
@@ -1176,7 +1179,8 @@ class Estimator:
                 p = turned
         elif p.someone:
             self._end_wait()  # someone found well: the next weak pair searches at once
-        if self._sees_in_3d(p):
+        stays = self._stays_in_one_view(p)  # (read on every pair: the run of one-view pairs)
+        if self._sees_in_3d(p) or stays:
             self._woke_on = None  # someone found: the wake awake, if any, was not in vain
         self._kept_axis = self._kept_turn_axis(p)
         if p.j3 is None:
@@ -1454,6 +1458,17 @@ class Estimator:
         """Whether ``p`` reported a joint: someone both views saw, not a person's 2D joints in one view alone."""
         return p.j3 is not None and p.someone and bool(p.j3.valid.any())
 
+    def _stays_in_one_view(self, p: "_Pass") -> bool:
+        """Whether ``p`` is the :data:`ONE_VIEW_NOT_VAIN_PAIRS`-th pair in a row (or later) whose person one camera
+        alone saw, the same camera each: a person who stays, not a screen's picture read as one now and then. Counts
+        the run, so every pair is read once."""
+        name, run = self._one_view_run
+        if p.single_view is None:
+            self._one_view_run = (None, 0)
+        else:
+            self._one_view_run = (p.single_view, run + 1 if p.single_view == name else 1)
+        return self._one_view_run[1] >= ONE_VIEW_NOT_VAIN_PAIRS
+
     def _tiles_awake(self, images: Sequence[np.ndarray],
                      copies: Callable[[], tuple[SceneCopy, ...]] | None = None) -> bool:
         """Whether this cold pair that found nobody searches a tile: always, until a whole round of tiles found
@@ -1493,8 +1508,8 @@ class Estimator:
         return tuple(restless_with_neighbours(counts >= RESTLESS_AFTER_WAKES) for counts in self._vain_wakes)
 
     def _count_vain_wake(self) -> None:
-        """A woken search's whole round found nobody (a person in one view alone restarted it, no more): the cells
-        that woke it count one vain wake each."""
+        """A woken search's whole round found nobody (a person in one view alone on a pair or a few restarted it, no
+        more): the cells that woke it count one vain wake each."""
         if self._vain_wakes is None:
             self._vain_wakes = tuple(np.zeros(m.shape, np.int32) for m in self._woke_on)
             self._still_passes = tuple(np.zeros(m.shape, np.int32) for m in self._woke_on)
@@ -1535,8 +1550,9 @@ class Estimator:
         """Someone was seen, the scene changed (a wake) or the estimator reset: every cold pair that finds nobody
         searches a tile again. The wake awake, if any, stays to be judged: a person seen in one view only may be a
         screen the model reads as one (a moving picture woke the rest again and again, docs/runtime.md), so only a
-        pair that reports a joint (:meth:`_sees_in_3d`) makes it not vain; else the round that ends in nobody
-        counts it (:meth:`_tile_missed`)."""
+        pair that reports a joint (:meth:`_sees_in_3d`), or a person one camera alone saw over several pairs in a row
+        (:meth:`_stays_in_one_view`), makes it not vain; else the round that ends in nobody counts it
+        (:meth:`_tile_missed`)."""
         self._tiles_missed = 0
         self._tiles_tried = frozenset()
         self._tile_rest_wait = 0

@@ -33,6 +33,10 @@ RESTLESS_AFTER_WAKES = 2
 #: pass is not enough (with one, a screen woke the rest 10 times per 100 pairs, against 4 with none:
 #: benchmarks/measure_cold_tiles.py --moving-room)
 CALM_AFTER_PASSES = 8
+#: a person seen by the same camera alone on this many pairs in a row clears the wake awake as a joint does (not in
+#: vain): someone who stays, whose cells grew restless against a walk-in from there; a screen's pictures read as a
+#: person on one pair at a time (session 71, benchmarks/measure_cold_tiles.py --moving-room: at most 1 in a row)
+ONE_VIEW_NOT_VAIN_PAIRS = 4
 
 
 def _lattice(image: np.ndarray) -> np.ndarray:

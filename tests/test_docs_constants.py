@@ -72,8 +72,8 @@ from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MAX_
                                      MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG, MIN_PERSON_IN_VIEW_SHARE,
                                      PERSON_IN_VIEW_NOTE_SHARE, STANDING_PERSON_M, WIRE_2D_MAX_PX, _PERSON_SAMPLES)
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
-from ghnerf_runtime.scene_change import (CALM_AFTER_PASSES, CELL_SAMPLES, RESTLESS_AFTER_WAKES, THUMB_CELLS,
-                                         WAKE_MIN_CELLS)
+from ghnerf_runtime.scene_change import (CALM_AFTER_PASSES, CELL_SAMPLES, ONE_VIEW_NOT_VAIN_PAIRS,
+                                         RESTLESS_AFTER_WAKES, THUMB_CELLS, WAKE_MIN_CELLS)
 from ghnerf_runtime.proxy_matte import BONE_M
 from ghnerf_runtime.tracking import COLD_TILE_OVERLAP_M, COLD_TILE_SPLITS
 from ghnerf_runtime.two_people import BODY_RADIUS_M, BONE_SLACK_M, MAX_LIMB_M, MIN_APART_M, MIXED_TORSO_SLACK_M, \
@@ -361,6 +361,10 @@ def _doc(name: str) -> str:
     # session 68: a cell that keeps waking the rest in vain wakes it no more (a screen playing)
     ("docs/runtime.md", f"`scene_change.RESTLESS_AFTER_WAKES` ({_words(RESTLESS_AFTER_WAKES)}) such searches in vain"),
     ("docs/runtime.md", f"`scene_change.CALM_AFTER_PASSES` ({_words(CALM_AFTER_PASSES)}) tile passes in a row"),
+    # session 71: a person one camera alone sees over a round's pairs clears the wake
+    ("docs/runtime.md", f"`scene_change.ONE_VIEW_NOT_VAIN_PAIRS` ({_words(ONE_VIEW_NOT_VAIN_PAIRS)}) pairs in a "
+                        "row clears the wake"),
+    ("docs/runtime.md", f"unless one camera sees them over {_words(ONE_VIEW_NOT_VAIN_PAIRS)} pairs in a row"),
     ("docs/runtime.md", f"a new picture of {SCREEN_BLOCKS[0]} x {SCREEN_BLOCKS[1]} coloured blocks every pair"),
     ("docs/runtime.md", f"| docs/examples/rig.json | tiles, rest every {COLD_REST} (default) |"),
     # session 66: why the scan tells nobody behind the subject (the blanked box, the benchmark's own-peak radius)

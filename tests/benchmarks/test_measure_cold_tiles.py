@@ -2,6 +2,7 @@
 export, random weights: the figures mean nothing)."""
 from __future__ import annotations
 
+from benchmarks.measure_cold_tiles import longest_run
 from tests.benchmarks.test_bench_smoke import run_script, scratch_cache  # noqa: F401
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
@@ -70,3 +71,10 @@ def test_the_moving_room_counts_wakes_after_the_first_round(tiny_model_dir, scra
     assert rows[0][4].strip() == "0" and rows[1][4].strip() == "0" and rows[3][4].strip() == "0", out
     assert rows[3][3].strip() == "0" and rows[3][7].strip() == "1.00", out
     assert all(len(r[5].split("/")) == 2 for r in rows), out  # seen in one view / a frame rejected
+    assert all(0 <= int(r[9]) <= 6 for r in rows), out  # the most pairs in a row seen in one view, of 6
+
+
+def test_the_longest_run_counts_true_values_in_a_row():
+    assert longest_run([]) == 0 and longest_run([False, False]) == 0
+    assert longest_run([True, False, True, True, False, True]) == 2
+    assert longest_run([False, True, True, True]) == 3

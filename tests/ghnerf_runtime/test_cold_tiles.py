@@ -18,7 +18,7 @@ from benchmarks.measure_baseline import lifted
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, RoiConfig, TrackingConfig
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.rig_file import load_rig
-from ghnerf_runtime.scene_change import CALM_AFTER_PASSES, RESTLESS_AFTER_WAKES, pair_copies
+from ghnerf_runtime.scene_change import CALM_AFTER_PASSES, ONE_VIEW_NOT_VAIN_PAIRS, RESTLESS_AFTER_WAKES, pair_copies
 from ghnerf_runtime.tracking import COLD_TILE_SPLITS, cold_person_share, volume_regions, volume_tiles
 from tests.ghnerf_runtime.sim_takes import pair_images
 from tests.one_camera import seen_by
@@ -512,6 +512,48 @@ def test_a_walk_in_seen_in_one_view_then_in_both_is_no_vain_wake(example_rig, fa
         assert est.estimate(room).missing.all()
     assert est._tile_rest_wait > 0  # resting again
     assert est._vain_wakes is None
+
+
+def visit_seen_by_one_camera(est, oracle, example_rig, t0: float, one_view_pairs: int) -> list[str | None]:
+    """:data:`FAR_ROOM`'s person walks in at ``t0`` seen by the left camera alone (the walk-in pair wakes the rest;
+    the near left tile draws them too small, the far left tile sees them from the next pair on), stays for
+    ``one_view_pairs`` pairs more and leaves: a whole round of tiles then finds nobody. Each pair's ``single_view``
+    while there."""
+    scene = sim.SimScene(FAR_ROOM)
+    seen = []
+    for i in range(1 + one_view_pairs):
+        t = t0 + i / 30.0
+        joints = scene.joints_3d(t)
+        oracle.set_truth(joints, seen_by(np.ones((2, len(joints)), bool), 0))
+        seen.append(est.estimate(pair_images(scene, example_rig, t)).single_view)
+    oracle.set_truth(None)
+    for room in far_scene_room(example_rig, [t0 + 0.5 + i / 30.0 for i in range(8)]):
+        assert est.estimate(room).missing.all()
+    assert est._tile_rest_wait > 0  # resting again
+    return seen
+
+
+def test_a_person_who_stays_in_one_camera_s_view_is_no_vain_wake(example_rig):
+    """A person seen by one camera alone over a whole round's pairs was someone, not a screen's picture read as a
+    person on a pair: the wake was not in vain. Their cells counted it (25 of each camera's), and after two such visits
+    they were restless: the person walking in there again woke nothing, the search waiting for the rest's own pass."""
+    oracle, est = resting_estimator(example_rig, rest_every=8)
+    for visit in range(RESTLESS_AFTER_WAKES):
+        seen = visit_seen_by_one_camera(est, oracle, example_rig, 3.0 + visit, ONE_VIEW_NOT_VAIN_PAIRS)
+        assert seen[1:] == [example_rig.pair[0].name] * ONE_VIEW_NOT_VAIN_PAIRS
+        assert est._vain_wakes is None
+    wakes = est.cold_tile_wakes
+    visit_seen_by_one_camera(est, oracle, example_rig, 5.0, 0)
+    assert est.cold_tile_wakes == wakes + 1  # the walk-in pair woke the rest
+
+
+def test_a_person_in_one_view_on_fewer_pairs_is_a_vain_wake(example_rig):
+    """One pair short of :data:`ONE_VIEW_NOT_VAIN_PAIRS` in one view alone (a screen's pictures read as a person a
+    pair or two in a row) leaves the wake to its round, which finds nobody: a vain wake for the cells it woke."""
+    oracle, est = resting_estimator(example_rig, rest_every=8)
+    seen = visit_seen_by_one_camera(est, oracle, example_rig, 3.0, ONE_VIEW_NOT_VAIN_PAIRS - 1)
+    assert seen[1:] == [example_rig.pair[0].name] * (ONE_VIEW_NOT_VAIN_PAIRS - 1)
+    assert est._vain_wakes is not None and all(counts.max() == 1 for counts in est._vain_wakes)
 
 
 def test_a_reset_leaves_no_wake_to_judge(example_rig, far_person):
