@@ -16,11 +16,15 @@ one step, on the last of those frames, so a receiver that interpolates on T stil
 T is never below the last T sent: a lone stamp a few frames ahead (a step T follows) moves T on by at most
 ``JUMP_FRAMES`` intervals, and the stamps after it, a little back, then read the same T until they pass it. The
 first glitch and the first jump back are each logged once per sink; later ones only counted. Before the first
-forward step there is no frame interval, and every forward step is followed.
+forward step there is no frame interval, and every forward step is followed: a glitched first or second stamp moves
+T by its glitch, once (a second one that the next stamps leave, back in line with the first, no further).
 
 The frame interval is the lower median of the last ``STEPS_KEPT`` forward steps between stamps on one timeline:
 jittery stamps, a driver hiccup that stamps two frames 1 ms apart, or a gap of a few frames each move it by at
-most one rank. Until session 71 it was the smallest step seen, which jitter made far shorter than a frame.
+most one rank. Until session 71 it was the smallest step seen, which jitter made far shorter than a frame. Stamps
+that leave the timeline at every frame, stepping on at a steady pace (within ``JUMP_FRAMES`` times the step
+before), add their steps too: a camera slowed to under a quarter of its rate, or a first step of 1 ms (a hiccup),
+left it at every frame for good, T creeping on by the stale interval.
 
 Seconds since the first frame, not since boot: OSC floats are float32, whose steps grow with T (0.25 ms after an
 hour, 1 ms after four, 16 ms after 36 hours). From 2**19 s (six days) on a step is 62.5 ms, so two frames of a
@@ -69,6 +73,8 @@ class VmcClock:
         self._line_last_us = 0  # the last stamp on it
         self._new: Optional[_Timeline] = None  # where the stamps went when they left it, until decided
         self._new_frames = 0  # frames in a row on ``_new``
+        self._leave_step_us = 0  # the forward step into the last frame that left a timeline (0: it went back)
+        self._first_us = 0  # the first frame's stamp
         self._last_us = 0  # the previous frame's stamp
         self._last_t_us = 0  # the T sent with it
         self._steps_us: deque[int] = deque(maxlen=STEPS_KEPT)  # the last forward steps between stamps
@@ -79,6 +85,7 @@ class VmcClock:
         """T for a frame stamped ``capture_time_us``."""
         if self._line is None:
             self._line = _Timeline(capture_time_us, 0)
+            self._first_us = self._line_last_us = capture_time_us  # not 0: a second stamp below it is off the line
             t_us = 0
         elif self._new is None:
             t_us = self._on_the_line(capture_time_us)
@@ -124,9 +131,26 @@ class VmcClock:
 
     def _leave(self, capture_time_us: int) -> int:
         """The first frame off the line: one frame interval on, the stamps' new timeline kept."""
-        self._new = _Timeline(capture_time_us, self._last_t_us + self.frame_step_us())
+        self._new = _Timeline(capture_time_us, self._last_t_us + self._jump_step_us(capture_time_us))
         self._new_frames = 1
+        self._count_a_steady_leave(capture_time_us - self._last_us)
         return self._new.base_t_us
+
+    def _jump_step_us(self, capture_time_us: int) -> int:
+        """What T moves on by for a frame off the line: the frame interval, but nothing where the one step seen
+        so far may be the glitch itself (a second frame stamped an hour on, then one back, not before the first):
+        that step as the interval moved T on by the hour again at each frame off the line (session 71)."""
+        if len(self._steps_us) == 1 and self._first_us <= capture_time_us < self._last_us:
+            return 0
+        return self.frame_step_us()
+
+    def _count_a_steady_leave(self, step_us: int) -> None:
+        """Keep a forward step that left a timeline as the one before did, at a like pace (a camera slowed past
+        ``JUMP_FRAMES`` times the interval), so the interval can follow it; a glitch and the stamp back from it
+        are no steady pace."""
+        before_us, self._leave_step_us = self._leave_step_us, max(step_us, 0)
+        if before_us and step_us > 0 and step_us <= JUMP_FRAMES * before_us and before_us <= JUMP_FRAMES * step_us:
+            self._steps_us.append(step_us)
 
     def _back_on_the_line(self, capture_time_us: int) -> int:
         assert self._line is not None and self._new is not None
@@ -135,7 +159,7 @@ class VmcClock:
                          "/VMC/Ext/T stepped over them (later glitches are not logged)", self._shown,
                          self._new_frames, (self._new.base_us - self._line_last_us) / 1e6)
         self.glitches += 1
-        self._new = None
+        self._new, self._leave_step_us = None, 0
         self._line_last_us = capture_time_us
         return self._line.t_us(capture_time_us)
 
@@ -147,7 +171,7 @@ class VmcClock:
         else:
             self._log_jump_back(self._new)
             self._line = self._new
-        self._new = None
+        self._new, self._leave_step_us = None, 0
         self._line_last_us = capture_time_us
         return t_us
 
