@@ -25,7 +25,8 @@ URL options:
 Each camera plays in its recorded order (its image file numbers), the cameras merged by capture time. A
 camera's stamp going back is a clock reset: warned of, and the frames after it re-based to follow on one
 frame period after those before, one shift for both cameras (:func:`playback_order`; with ``keep_time=1``
-too); one stamp out of line with its neighbours is a bad stamp, played at their midpoint. Indices and
+too); one stamp out of line with its neighbours is a bad stamp, played at their midpoint (a camera's first
+or last, one step from its neighbour, where the other cameras' stamps there say so). Indices and
 ground truth are delivered unchanged on the first pass. Each further ``loop``
 pass shifts timestamps by the recording's span (plus one frame period: the median step between a camera's
 successive distinct stamps, else 1/30 s) and indices by the
@@ -169,8 +170,10 @@ def playback_order(rows: list[FrameRow], directory: Path | str = "") -> list[Fra
     """
     segments: dict[str, list[list[int]]] = {}
     stamps = {i: row.timestamp_ns for i, row in enumerate(rows)}
-    for cam, mine in recorded_order(rows).items():
-        _mend_lone_stamps(rows, mine, stamps, directory)
+    order = recorded_order(rows)
+    for cam, mine in order.items():
+        others = [theirs for other, theirs in order.items() if other != cam]
+        _mend_lone_stamps(rows, mine, stamps, directory, others)
         split: list[list[int]] = []
         for i in mine:
             if not split or stamps[i] < stamps[split[-1][-1]]:
@@ -211,24 +214,50 @@ def playback_order(rows: list[FrameRow], directory: Path | str = "") -> list[Fra
     return played
 
 
-def _mend_lone_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, int], directory: Path | str) -> None:
+#: A camera's first (last) step longer than this many times the next (previous) one is out of line.
+END_STEPS = 4
+
+
+def _mend_lone_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, int], directory: Path | str,
+                      others: list[list[int]]) -> None:
     """Give a lone bad stamp of one camera (``mine``: its rows in recorded order) the midpoint of its neighbours'.
 
     A stamp out of line with the frames either side of it, which are in line with each other (a glitched stamp
     an hour ahead or back, the frames after it on the old timeline), is one bad stamp, not a clock reset: taken
     as a reset, it re-based every later frame of that camera by the glitch, so none paired again and a paced
-    replay waited out the glitch (an hour). A camera's first and last frames have one neighbour: not mended."""
+    replay waited out the glitch (an hour). A camera's first and last frames have one neighbour: mended one step
+    from it where the other cameras (``others``: their rows in recorded order) say so (:func:`_bad_end`)."""
     mended = []
     for before, here, after in zip(mine, mine[1:], mine[2:]):
         if stamps[before] <= stamps[after] and not stamps[before] <= stamps[here] <= stamps[after]:
             mended.append((here, stamps[here]))
             stamps[here] = (stamps[before] + stamps[after]) // 2
+    ends = [(mine[:3], [stamps[theirs[0]] for theirs in others if theirs]),
+            (mine[:-4:-1], [stamps[theirs[-1]] for theirs in others if theirs])]
+    for (end, near, far), elsewhere in (ends if len(mine) >= 3 else []):
+        in_line = stamps[near] <= stamps[far] if end == mine[0] else stamps[far] <= stamps[near]
+        if in_line and _bad_end(stamps[end], stamps[near], stamps[far], elsewhere):
+            mended.append((end, stamps[end]))
+            stamps[end] = max(0, 2 * stamps[near] - stamps[far])
     if mended:
         (first, recorded), row = mended[0], rows[mended[0][0]]
         log.warning("recording %s: camera %r's stamp at frame %s (index %d, %s line %d), %d ns, is out of line with "
-                    "the frames either side of it: taken as a bad stamp, played at their midpoint, %d ns (%d in "
+                    "the frames beside it: taken as a bad stamp, played in line with them, at %d ns (%d in "
                     "this camera)", directory, row.camera, row.image, row.index, FRAMES, row.line,
                     recorded, stamps[first], len(mended))
+
+
+def _bad_end(end_ns: int, near_ns: int, far_ns: int, elsewhere_ns: list[int]) -> bool:
+    """Whether a camera's first (or last) stamp ``end_ns`` is a bad one: the step to the next (previous) stamp
+    ``near_ns`` goes the wrong way or is over ``END_STEPS`` times the step on to ``far_ns``, and the other cameras'
+    stamps at that end (``elsewhere_ns``) lie nearer ``near_ns`` than it. From one camera alone a bad first stamp
+    cannot be told from a clock reset after it (nor a bad last one from a pause): not mended."""
+    if not elsewhere_ns:
+        return False
+    wrong_way = (end_ns - near_ns) * (far_ns - near_ns) > 0
+    if not (wrong_way or abs(end_ns - near_ns) > END_STEPS * abs(far_ns - near_ns)):
+        return False
+    return min(abs(o - near_ns) for o in elsewhere_ns) < min(abs(o - end_ns) for o in elsewhere_ns)
 
 
 class ReplayRigSource(RigSource):

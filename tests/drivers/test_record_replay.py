@@ -1332,6 +1332,47 @@ def test_one_bad_stamp_is_mended_not_taken_as_a_reset(glitch_ms):
         ("left", 3, 100), ("right", 3, 101), ("left", 4, 133), ("right", 4, 134)]
 
 
+@pytest.mark.parametrize(("left_ms", "mended_ms"), [
+    ([3_600_000, 33, 66, 100, 133], [0, 33, 66, 100, 133]),  # the first an hour ahead: a "reset" after it moved all
+    ([0, 33, 66, 100, 3_600_133], [0, 33, 66, 100, 134]),  # the last an hour ahead: a paced replay waited the hour
+    ([-3_600_000, 33, 66, 100, 133], [0, 33, 66, 100, 133]),  # the first an hour back: the same, after it
+], ids=["first-ahead", "last-ahead", "first-back"])
+def test_a_bad_first_or_last_stamp_is_mended_where_the_other_camera_says_so(left_ms, mended_ms, caplog):
+    """A camera's first or last stamp far out of line with the next two, the other camera's stamps at that end in
+    line with those two: a bad stamp, played one step from its neighbour (it was played as recorded)."""
+    from drivers.backends.recording_format import FrameRow
+    from drivers.backends.replay import playback_order
+
+    ms, hour_ms = 1_000_000, 3_600_000
+    left = [FrameRow("left", i, (t + hour_ms) * ms, f"images/left/{i:08d}.png") for i, t in enumerate(left_ms)]
+    right = [FrameRow("right", i, (t + hour_ms) * ms, f"images/right/{i:08d}.png")
+             for i, t in enumerate([1, 34, 67, 101, 134])]
+    with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"):
+        played = playback_order(right[::-1] + left[::-1], "take")
+    expected = sorted([("right", i, r.timestamp_ns // ms - hour_ms) for i, r in enumerate(right)]
+                      + [("left", i, t) for i, t in enumerate(mended_ms)], key=lambda row: (row[2], row[0] == "left"))
+    assert [(r.camera, r.index, r.timestamp_ns // ms - hour_ms) for r in played] == expected
+    (warned,) = [r.getMessage() for r in caplog.records]
+    frame = 0 if left_ms[0] != 0 else 4
+    assert "bad stamp" in warned and f"images/left/{frame:08d}.png" in warned and "take" in warned
+
+
+def test_a_reset_after_one_camera_s_first_frame_stays_a_reset():
+    """Left's clock went back after its first frame, right's did not: left's later frames follow its first, beside
+    right's, as before; its first is not taken as the bad stamp (right's first is in line with it)."""
+    from drivers.backends.recording_format import FrameRow
+    from drivers.backends.replay import playback_order
+
+    ms = 1_000_000
+    left = [FrameRow("left", i, t * ms, f"images/left/{i:08d}.png") for i, t in enumerate([1000, 0, 33, 66])]
+    right = [FrameRow("right", i, t * ms, f"images/right/{i:08d}.png")
+             for i, t in enumerate([1001, 1034, 1067, 1100])]
+    played = playback_order(right[::-1] + left[::-1])
+    assert [(r.camera, r.index, r.timestamp_ns // ms) for r in played] == [
+        ("left", 0, 1000), ("right", 0, 1001), ("left", 1, 1033), ("right", 1, 1034), ("left", 2, 1066),
+        ("right", 2, 1067), ("left", 3, 1099), ("right", 3, 1100)]
+
+
 def test_a_take_with_one_stamp_an_hour_ahead_replays_every_pair_at_its_pace(take, copy_of_take, caplog):
     """A live camera's one glitched stamp (an hour ahead) is recorded as delivered. Replayed, it was a clock reset:
     that camera's later frames moved an hour on, a paced replay waited the hour for them, and none paired."""
