@@ -19,6 +19,7 @@ import argparse
 import os
 import sys
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -75,13 +76,27 @@ def run(rig, frames, truth, every: int) -> tuple[float, float]:
     return float(np.median(ms)), est.volume_rechecks / len(ms)
 
 
+def at_least(lo: int) -> Callable[[str], int]:
+    """An argparse type: a whole number of at least ``lo`` (``--pairs 0`` divided by zero, ``--rounds 0`` printed
+    NaN figures, a negative ``--pairs`` failed on an empty clip)."""
+    def whole_number(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"a whole number, got {text!r}") from None
+        if value < lo:
+            raise argparse.ArgumentTypeError(f"a whole number of at least {lo}, got {text!r}")
+        return value
+    return whole_number
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--width", type=int, default=1280)
-    ap.add_argument("--height", type=int, default=800)
-    ap.add_argument("--pairs", type=int, default=24)
-    ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--every", type=int, default=FrameCheckConfig().volume_recheck_every)
+    ap.add_argument("--width", type=at_least(1), default=1280)
+    ap.add_argument("--height", type=at_least(1), default=800)
+    ap.add_argument("--pairs", type=at_least(1), default=24)
+    ap.add_argument("--rounds", type=at_least(1), default=5)
+    ap.add_argument("--every", type=at_least(1), default=FrameCheckConfig().volume_recheck_every)
     args = ap.parse_args(argv)
     rig, frames, truth = clip(args.width, args.height, args.pairs)
     settings = (1, args.every)

@@ -112,8 +112,12 @@ def sorted_median(values, axis: int | None = None):
     s = np.sort(a, axis=axis)  # flattened for axis None; NaN sorts last
     last = -1 if axis is None else axis
     k = n // 2
-    # np.median's mean sums from +0.0 (a median of -0.0 values is 0.0) and halves the middle two's sum
-    middle = 0.0 + s.take(k, last) if n % 2 else (0.0 + s.take(k - 1, last) + s.take(k, last)) / 2
+    # np.median's mean sums from +0.0 (a median of -0.0 values is 0.0) and halves the middle two's sum. The 0 and 2
+    # are of the values' dtype: numpy 1.x (pyproject allows >= 1.26) promotes a float32 scalar with a Python float or
+    # int to float64, which sums and halves float32 values in float64 (another dtype, other bits: np.median's are
+    # float32's)
+    zero, two = s.dtype.type(0.0), s.dtype.type(2.0)
+    middle = zero + s.take(k, last) if n % 2 else (zero + s.take(k - 1, last) + s.take(k, last)) / two
     tail = s.take(-1, last)
     nan = np.isnan(tail)
     if not nan.any():

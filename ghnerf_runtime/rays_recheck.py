@@ -6,8 +6,8 @@ the estimator asks the same camera's whole-volume crop of the frame: passing, th
 kept (session 70). That costs one more preprocess a pair for as long as it lasts (2.0-2.4 ms at 1280 x 800,
 ``benchmarks/time_rays_recheck.py``), so a verdict that passed is reused for the following pairs while the rays crop
 keeps being rejected for the same reason, at much the same brightness, through the same camera state and tracker,
-at most ``frame_check.volume_recheck_every - 1`` times in a row: a covered lens is reported within that many pairs,
-at once where covering it darkened the crop.
+at most ``frame_check.volume_recheck_every - 1`` times in a row: a covered lens is reported within
+``volume_recheck_every`` pairs (the last of them checks the camera again), at once where covering it darkened the crop.
 """
 from __future__ import annotations
 

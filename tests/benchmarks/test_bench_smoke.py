@@ -442,6 +442,15 @@ def test_time_rays_recheck(capsys, monkeypatch):
     assert re.search(r"^ratio \(4 / 1\): [\d.]+$", out, re.M), out
 
 
+@pytest.mark.parametrize("option, value", [("--pairs", "0"), ("--pairs", "-3"), ("--rounds", "0"), ("--every", "0"),
+                                           ("--width", "wide")])
+def test_time_rays_recheck_wants_whole_numbers_of_at_least_one(option, value, capsys, monkeypatch):
+    """A usage error naming the option (before: --pairs 0 divided by zero, --rounds 0 printed NaN figures, --pairs
+    -3 failed on an empty clip, --every 0 raised the config's error after the clip was rendered)."""
+    err = run_script_failing("time_rays_recheck", option, value, capsys=capsys, monkeypatch=monkeypatch)
+    assert f"argument {option}: a whole number" in err and repr(value) in err, err
+
+
 def test_measure_one_camera(model, capsys, monkeypatch):
     out = run_script("measure_one_camera", "--model-dir", model, *SIZES, "--rooms", "1",
                      capsys=capsys, monkeypatch=monkeypatch)
