@@ -19,7 +19,6 @@ import argparse
 import os
 import sys
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -29,6 +28,7 @@ import drivers.sim as sim  # noqa: E402
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
+from training.cli import at_least  # noqa: E402
 
 PANEL_LEVEL = 128
 PANEL_MARGIN_PX = 16
@@ -74,20 +74,6 @@ def run(rig, frames, truth, every: int) -> tuple[float, float]:
             raise RuntimeError(f"camera 1 rejected behind the panel: {r.frame_reason}")
         ms.append(r.timing_ms["preprocess"])
     return float(np.median(ms)), est.volume_rechecks / len(ms)
-
-
-def at_least(lo: int) -> Callable[[str], int]:
-    """An argparse type: a whole number of at least ``lo`` (``--pairs 0`` divided by zero, ``--rounds 0`` printed
-    NaN figures, a negative ``--pairs`` failed on an empty clip)."""
-    def whole_number(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"a whole number, got {text!r}") from None
-        if value < lo:
-            raise argparse.ArgumentTypeError(f"a whole number of at least {lo}, got {text!r}")
-        return value
-    return whole_number
 
 
 def main(argv=None) -> int:
