@@ -262,9 +262,10 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
 #: after all is taken back out of the loss and counted late instead.
 LATE_WINDOW = 32
 _SEQ_MOD = 1 << 32  # sequence numbers wrap (docs/protocol.md)
-#: A HELLO of seq NO_FRAME_SEQ written at most this long before the newest JOINTS (after the HELLO that began their
-#: numbering) is that sender's own, duplicated or reordered on the link, not a new process: about LATE_WINDOW frames
-#: at 30 fps. Kept short, so that a device that rebooted (its monotonic clock restarted) is hardly ever mistaken for it.
+#: A HELLO of seq NO_FRAME_SEQ written at most this long before the newest JOINTS (and after the HELLO that began
+#: their numbering, where one did) is that sender's own, duplicated or reordered on the link, not a new process:
+#: about LATE_WINDOW frames at 30 fps. Kept short, so that a device that rebooted (its monotonic clock restarted) is
+#: hardly ever mistaken for it.
 STALE_HELLO_US = 1_000_000
 
 
@@ -390,9 +391,13 @@ class Tally:
         """Whether a HELLO of seq NO_FRAME_SEQ was written after the one that began this numbering and shortly
         before its newest JOINTS (:data:`STALE_HELLO_US`): a duplicated or reordered datagram of this sender, not a
         new process (whose HELLO is written after its predecessor's frames, on the same monotonic clock). Taken for
-        a new numbering, it counted the frames that had arrived since as lost."""
-        if self._begun_us is None or self._newest_us is None:
+        a new numbering, it counted the frames that had arrived since as lost. A numbering begun by a JOINTS has no
+        HELLO of its own: one written before its newest JOINTS (strictly before: a new process writes after) is its
+        sender's, come after its first frames (until session 72 those were counted lost)."""
+        if self._newest_us is None:
             return False
+        if self._begun_us is None:
+            return send_us < self._newest_us and self._newest_us - send_us <= STALE_HELLO_US
         return self._begun_us <= send_us <= self._newest_us and self._newest_us - send_us <= STALE_HELLO_US
 
     def _begin_at_hello(self, send_us: int) -> None:

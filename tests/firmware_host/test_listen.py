@@ -752,3 +752,21 @@ def test_the_help_names_the_hello_s_layout_warning_and_the_version_errors(capsys
         listen.main(["--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "'(not BODY_25 in mm in the rig frame: ...)'" in text and "'version': a sender of a newer protocol" in text
+
+
+def test_a_new_sender_s_hello_reordered_behind_its_first_frames_counts_none_of_them_lost():
+    """A numbering begun by a JOINTS (the listener started after the HELLO, or a sender restarted far from its old
+    seq) has no HELLO of its own; the new sender's HELLO that UDP delivers after its first frames was taken for yet
+    another new process, and the frames that had arrived (0 and 1 here) were counted lost."""
+    from firmware_host.protocol.constants import NO_FRAME_SEQ
+
+    period = 33_333
+    start = 50_000_000
+    for old_seqs in ((), tuple(range(100, 140))):  # the listener's first message; a restart from seq 139
+        tally = listen.Tally()
+        for seq in old_seqs:
+            tally.add(_at(seq, "JOINTS", start - 10_000_000 + seq * period))
+        for message in (_at(0, "JOINTS", start + period), _at(1, "JOINTS", start + 2 * period),
+                        _at(NO_FRAME_SEQ, "HELLO", start), _at(2, "JOINTS", start + 3 * period)):
+            tally.add(message)
+        assert (tally.total_gaps, tally.total_late, tally.last_seq) == (0, 0, 2), old_seqs
