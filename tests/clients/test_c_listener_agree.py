@@ -305,3 +305,19 @@ def test_restart_after_hello_none_sent_starts_a_new_numbering(uart_example: Path
     _, tally = _listener(_Replay([data]))
     assert tally.total_joints == 2 + 5 + 3 + 2 and tally.total_late == 0
     assert uart["lost_frames"] == tally.total_gaps == 4
+
+
+def _joints_of_set(seq: int, joint_set: int) -> bytes:
+    xyz = np.zeros((10, 3), np.int16)
+    return encode(Joints(make_header(MsgType.JOINTS, seq, 1000 + seq, 2000 + seq), joint_set, xyz,
+                         np.full(10, 200, np.uint8), np.zeros(10, bool)))
+
+
+def test_uart_example_counts_a_joints_of_another_joint_set_as_no_lost_frame(uart_example: Path) -> None:
+    """One seq numbers every JOINTS, whatever its joint set (docs/protocol.md, HELLO): the UART example skips the
+    joints of a set it does not read, not their seq. It counted the seq of BODY_25 JOINTS only, so a JOINTS of
+    another set between two was a lost frame; the listener counts it as arrived."""
+    data = b"\x00" + _hello(NONE_SENT) + _joints(0) + _joints_of_set(1, 7) + _joints(2) + _joints(4)
+    [uart] = _run_c(uart_example, data)
+    _, tally = _listener(_Replay([data]))
+    assert uart["lost_frames"] == tally.total_gaps == 1
