@@ -65,3 +65,53 @@ def test_a_stream_that_ends_inside_a_frame_reports_nothing_for_it(ghj_dump: Path
     events, stats = _dump(ghj_dump, path, 1)
     assert events == [SENTINEL.to_json()] and stats["frames"] == 1
     assert [e.to_json() for e in decode_stream(path.read_bytes())[0]] == events
+
+
+def _edge_messages() -> list:
+    """Every message type at its size extremes: joint counts 0, 1, 25 and 64, the longest HELLO and the empty one,
+    a STATUS of all-ones fields, times at 0 and 2^64 - 1."""
+    from firmware_host.protocol import Hello, Joints, Joints2D, MsgType, Status, make_header
+
+    out: list = []
+    for n in (0, 1, 25, 64):
+        out.append(Joints(make_header(MsgType.JOINTS, 2**32 - 1, 2**64 - 1, 0, 0xFF), 0, np.full((n, 3), -1, np.int16),
+                          np.full(n, 255, np.uint8), np.arange(n) % 3 == 0))
+        out.append(Joints2D(make_header(MsgType.JOINTS_2D, 0, 0, 2**64 - 1), 7, 0, np.full((n, 2), -32768, np.int16),
+                            np.zeros(n, np.uint8), np.zeros(n, bool)))
+    out.append(Status(make_header(MsgType.STATUS, 1, 2, 3), 0xFFFF, 2**32 - 1, 2**32 - 1, 2**32 - 1, 0xFFFF))
+    out.append(Hello(make_header(MsgType.HELLO, 2**32 - 1, 0, 0), 1, 0, 64, 0, 0, "~" * 32, ("c" * 16,) * 8))
+    out.append(Hello(make_header(MsgType.HELLO, 0, 0, 0), 1, 0, 0, 0, 0, "", ()))
+    return out
+
+
+def test_c_and_python_agree_on_every_cut_and_every_flipped_bit(ghj_dump: Path, tmp_path: Path) -> None:
+    """Each edge message cut after every byte of its packet (resealed, so the payload checks decide, and not), its
+    frame cut after every byte and ended there, and each bit of its frame flipped: one event per frame, the same
+    in C and Python, and no flipped bit decodes to a message (one bit is always within the CRC's reach)."""
+    from firmware_host.protocol import encode, encode_packet
+    from firmware_host.protocol.encoder import frame_packet, seal
+
+    cuts, flips = bytearray(), bytearray()
+    for msg in _edge_messages():
+        packet, frame = encode_packet(msg), encode(msg)
+        for n in range(1, len(packet)):
+            cuts += frame_packet(packet[:n]) + frame_packet(seal(packet[:n]))
+        for n in range(1, len(frame) - 1):
+            cuts += frame[:n] + b"\x00"
+        for i in range(len(frame) - 1):
+            for b in range(8):
+                flipped = bytearray(frame)
+                flipped[i] ^= 1 << b
+                flips += b"\x00" + flipped  # a flip to 0x00 splits the frame: the leading 0x00 ends what is left
+    counts = []
+    for data in (bytes(cuts), bytes(flips)):
+        path = tmp_path / "edges.bin"
+        path.write_bytes(data)
+        py_events, py_stats = decode_stream(data)
+        events, stats = _dump(ghj_dump, path, 4096)
+        assert events == [e.to_json() for e in py_events] and stats == py_stats.to_json()
+        counts.append(stats)
+    cut, flip = counts
+    # the resealed cuts reach the payload checks; a cut that keeps a whole message's fields is a message
+    assert cut["malformed"] > 0 and cut["short"] > 0 and cut["cobs"] > 0 and cut["messages"] > 0
+    assert flip["messages"] == 0 and flip["crc"] > 0 and flip["cobs"] > 0
