@@ -353,7 +353,8 @@ class Tally:
     _missing: dict[int, int] = field(default_factory=dict, repr=False)
     _interval: int = field(default=0, repr=False)
     # send_us of the earliest HELLO of seq NO_FRAME_SEQ that began the current numbering (None: begun by a JOINTS),
-    # and of the newest JOINTS in it: a HELLO written between the two is this numbering's own, come late.
+    # and of the newest JOINTS in it: a HELLO written between the two (or, begun by a JOINTS, shortly before the
+    # newest) is this numbering's own, come late.
     _begun_us: Optional[int] = field(default=None, repr=False)
     _newest_us: Optional[int] = field(default=None, repr=False)
 
