@@ -852,6 +852,7 @@ class Estimator:
         # the whole-volume verdict of a rejected crop on the rays, reused pair after pair
         # (frame_check.volume_recheck_every)
         self._volume_verdict: VolumeVerdict | None = None
+        self._pair_on_rays = False  # a pass of the last (or this) pair had a crop on the rays (_verdict_for_pair)
         self.volume_rechecks = 0  # whole-volume crops preprocessed for a rejected crop on the rays
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
@@ -1096,6 +1097,7 @@ class Estimator:
         self._tile_find_foot = None
         timing: dict[str, float] = {}
         self._forget_a_stale_track(timestamp_s)
+        self._verdict_for_pair()
         # the kept turn this pair may lose, and the last pass kept through it (_turn_lost_flipped)
         rolled_from = (self._turns, self._kept_axis) if self._turns != (0, 0) and self._kept_axis is not None else None
         if self.tracker.track is None and self.tracker.view_track is None:
@@ -1887,8 +1889,7 @@ class Estimator:
         batch = np.empty((2, 3, S, S), np.float32)
         frame_reason, crops = {}, []  # camera name -> None, or why the frame check rejected its crop
         on_rays = self.tracker.rays_camera(regions)
-        if on_rays is None:
-            self._volume_verdict = None  # a verdict answers only pair after pair on the rays
+        self._pair_on_rays = self._pair_on_rays or on_rays is not None
         for i, (img, st, roi) in enumerate(zip(images, self._cams, regions.rois)):
             maps, crop = self._crop(st, roi)
             crops.append(crop)
@@ -1959,6 +1960,15 @@ class Estimator:
             if job is not None:  # leave no render running behind an error
                 job.abandon()
             raise
+
+    def _verdict_for_pair(self) -> None:
+        """Void the cached whole-volume verdict where the last pair ran no pass on the rays: it answers pair after pair
+        on them. A pair's own passes off the rays (a turn search's, a refined or a cold retry's) leave it: the next
+        pair's crop on the rays is the same camera's, through the tracker and camera state the verdict names (session
+        72; before, they voided it and that pair checked the camera again)."""
+        if not self._pair_on_rays:
+            self._volume_verdict = None
+        self._pair_on_rays = False
 
     def _rays_crop_verdict(self, image: np.ndarray, camera: int, plane: np.ndarray, inside: np.ndarray | None,
                            rejected: str | None) -> tuple[bool, str]:

@@ -619,6 +619,37 @@ def test_a_tracker_reset_voids_the_cached_whole_volume_verdict(clip):
     assert est._volume_verdict is None
 
 
+def test_a_turn_search_on_a_pair_on_the_rays_keeps_the_cached_whole_volume_verdict(clip):
+    """Session 72: a pair on the rays whose person camera 0 reads weakly beside camera 1's faint view searches the crop
+    turns, its turned passes cropping the working volume (off the rays); none is kept and the next pair is on the
+    rays again. The verdict cached on that pair still answers it: the camera is checked on the whole volume once in
+    ``frame_check.volume_recheck_every`` pairs, as without the search. Before, the turned passes voided it, and the
+    pair after each search checked the camera again (3 rechecks in 10 pairs, not 2)."""
+    rig, frames, truth, visible, *_ = clip
+    oracle = ScaledViews((0.6, 0.25))  # the one-camera pair that searches (the test above)
+    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False)))
+    # the oracle's heatmaps score every turn alike, so no turn would be tried: one is, and reads no better
+    est._turn_candidates = lambda *args, **kwargs: [(90, 90)]
+    oracle.set_truth(truth[0], seen_by(visible[0], 0))
+    est.estimate(frames[0])
+    panel = est.tracker.view_other
+    assert panel is not None
+    rechecks, searches, cached = [], [], []
+    for n in range(10):
+        k = 1 + n % (len(frames) - 1)
+        oracle.set_truth(truth[k], visible[k])  # camera 1's faint view: the search's case
+        before = est.volume_rechecks, est.turn_searches
+        r = est.estimate((frames[k][0], _with_panel(frames[k][1], panel, 16)))
+        assert r.single_view == est.camera_names[0] and r.frame_reason[est.camera_names[1]] is None
+        assert est.tracker.view_other == panel and est.turns_kept == 0
+        rechecks.append(est.volume_rechecks - before[0])
+        searches.append(est.turn_searches - before[1])
+        cached.append(est._volume_verdict is not None)
+    assert sum(searches) >= 2 and searches[0] == 1, searches  # a search on the pair that took the verdict, and later
+    assert rechecks == [int(n % 8 == 0) for n in range(10)], (rechecks, searches)
+    assert all(cached), cached
+
+
 def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_in_the_other(clip):
     """A 3D track, then the person seen by camera 0 only: the tracked pass finds nobody in 3D, the pair is run
     again (``tracking.retry_cold``) from camera 0's view track and, since session 69, camera 1's crop on the seen
