@@ -1988,8 +1988,9 @@ class Estimator:
         if not self._volume_crop_passes(image, camera):
             self._volume_verdict = None
             return False, rejected
+        check = self.config.frame_check
         self._volume_verdict = VolumeVerdict(state, self.tracker, self.tracker.resets, rejected, level,
-                                             self.config.frame_check.volume_recheck_every - 1)
+                                             check.volume_recheck_every - 1, check.volume_recheck_levels)
         return True, ""
 
     def _volume_crop_passes(self, image: np.ndarray, camera: int) -> bool:

@@ -499,11 +499,12 @@ def test_a_covered_cameras_other_view_gets_its_2d_joints_from_the_oracle(clip, f
     assert err.max() < 1.5, err  # exact up to the grid's decoding: the mirrored run's cameras are mirrored too
 
 
-def _with_panel(image: np.ndarray, roi, margin: int) -> np.ndarray:
-    """``image`` with a plain grey panel over ``roi`` grown by ``margin`` pixels each side (clipped to the frame)."""
+def _with_panel(image: np.ndarray, roi, margin: int, grey: int = 128) -> np.ndarray:
+    """``image`` with a plain ``grey`` panel over ``roi`` grown by ``margin`` pixels each side (clipped to the
+    frame)."""
     out = image.copy()
     x0, y0 = max(0, int(roi.x0) - margin), max(0, int(roi.y0) - margin)
-    out[y0:max(0, int(roi.y0 + roi.size) + margin), x0:max(0, int(roi.x0 + roi.size) + margin)] = 128
+    out[y0:max(0, int(roi.y0 + roi.size) + margin), x0:max(0, int(roi.x0 + roi.size) + margin)] = grey
     return out
 
 
@@ -603,6 +604,28 @@ def test_a_lens_covered_behind_a_cached_whole_volume_verdict_is_reported_within_
     first = rejected.index(True)
     assert first - covered_from < every and all(rejected[first:]), (rejected, every)
     assert all(r.frame_reason[names[0]] is None and r.single_view == names[0] for r in results)
+
+
+@pytest.mark.parametrize("levels, rechecks", [(16.0, [1, 0, 0, 0]), (4.0, [1, 1, 0, 1])])
+def test_a_panel_brightening_past_volume_recheck_levels_checks_the_camera_again_at_once(clip, levels, rechecks):
+    """``frame_check.volume_recheck_levels`` (session 72; 16 levels, a module constant before): the panel over camera
+    1's rays crop brightened by 8 levels on the second pair and back on the fourth is the same plain wall at the
+    default bound (the verdict answers), a change at 4 (the camera is checked again at once, each time)."""
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(frame_check=FrameCheckConfig(volume_recheck_levels=levels)))
+    oracle.set_truth(truth[0], seen_by(visible[0], 0))
+    est.estimate(frames[0])
+    panel = est.tracker.view_other
+    assert panel is not None
+    counted = []
+    for k, grey in zip(range(1, 5), (128, 136, 136, 128)):
+        oracle.set_truth(truth[k], seen_by(visible[k], 0))
+        before = est.volume_rechecks
+        r = est.estimate((frames[k][0], _with_panel(frames[k][1], panel, 16, grey)))
+        assert r.frame_reason == {n: None for n in est.camera_names}, r.frame_reason
+        counted.append(est.volume_rechecks - before)
+    assert counted == rechecks
 
 
 def test_a_tracker_reset_voids_the_cached_whole_volume_verdict(clip):
