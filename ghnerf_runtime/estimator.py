@@ -839,6 +839,7 @@ class Estimator:
                                                 self._lowest_foot_m, _FLOOR_BODY_M)
         self._sequence = 0
         self._last_timestamp_s: float | None = None
+        self._after_gap = False  # this pair came over tracking.max_gap_s after the last, or before it
         self._last_pair_cold = False
         self._scan_clock = ScanClock(self.config.presence.scan_every_s)  # presence.scan_every_s
         self._someone_else: bool | None = None  # the latest scan's answer while this track lasts
@@ -1463,12 +1464,15 @@ class Estimator:
     def _stays_in_one_view(self, p: "_Pass") -> bool:
         """Whether ``p`` is the :data:`ONE_VIEW_NOT_VAIN_PAIRS`-th pair in a row (or later) whose person one camera
         alone saw, the same camera each: a person who stays, not a screen's picture read as one now and then. Counts
-        the run, so every pair is read once."""
+        the run, so every pair is read once. A pair over ``tracking.max_gap_s`` after the last (dropped pairs, a
+        stalled camera), or before it, starts a run, as it drops a track: pairs apart in time are no stay (session 72;
+        before, four one-view pairs a minute apart counted in a row)."""
         name, run = self._one_view_run
         if p.single_view is None:
             self._one_view_run = (None, 0)
         else:
-            self._one_view_run = (p.single_view, run + 1 if p.single_view == name else 1)
+            goes_on = p.single_view == name and not self._after_gap
+            self._one_view_run = (p.single_view, run + 1 if goes_on else 1)
         return self._one_view_run[1] >= ONE_VIEW_NOT_VAIN_PAIRS
 
     def _tiles_awake(self, images: Sequence[np.ndarray],
@@ -1861,12 +1865,15 @@ class Estimator:
 
     def _forget_a_stale_track(self, timestamp_s: float | None) -> None:
         """Drop the track when the pair comes more than ``tracking.max_gap_s`` after the last one, or before it
-        (a pair of the same instant, the same frames estimated again, keeps it)."""
+        (a pair of the same instant, the same frames estimated again, keeps it); such a pair is ``_after_gap``
+        (a pair without a time, or after none, is not)."""
+        self._after_gap = False
         if timestamp_s is None:
             return
         t, last = float(timestamp_s), self._last_timestamp_s
         self._last_timestamp_s = t
         if last is not None and not (last <= t <= last + self.config.tracking.max_gap_s):
+            self._after_gap = True
             self.tracker.reset()
 
     def _pass(self, images: Sequence[np.ndarray], regions: Regions, sequence: int, timing: dict,
