@@ -438,6 +438,10 @@ class FrameCheckConfig:
             once where covering it darkened the crop, ``ghnerf_runtime.rays_recheck``). 8: within 0.27 s at 30
             pairs a second, under ``tracking.max_gap_s``, for an eighth of the cost. 1: every pair checked again
             (session 70).
+        volume_recheck_levels: how far (8-bit levels) the rejected rays crop's mean may move from its mean when
+            the cached verdict was taken before the camera is checked again at once: a cap or a hand over the lens
+            darkens a lit wall by far more, while a plain wall seen through a moving crop keeps its level within a
+            few. 0: any move checks again. A config field since session 72 (a module constant before).
     """
 
     enabled: bool = True
@@ -446,11 +450,13 @@ class FrameCheckConfig:
     max_coarse_noise_ratio: float = 0.5
     single_view_2d: bool = True
     volume_recheck_every: int = 8
+    volume_recheck_levels: float = 16.0
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
         _boolean(self, "single_view_2d")
         _integer(self, "volume_recheck_every", 1, 1000)
+        _number(self, "volume_recheck_levels", 0.0, 255.0)
         _number(self, "min_std", 0.0, 128.0)
         _number(self, "max_noise_ratio", 0.0, 1.0, lo_open=True)
         _number(self, "max_coarse_noise_ratio", 0.0, 1.0)

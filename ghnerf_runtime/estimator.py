@@ -839,6 +839,7 @@ class Estimator:
                                                 self._lowest_foot_m, _FLOOR_BODY_M)
         self._sequence = 0
         self._last_timestamp_s: float | None = None
+        self._after_gap = False  # this pair came over tracking.max_gap_s after the last, or before it
         self._last_pair_cold = False
         self._scan_clock = ScanClock(self.config.presence.scan_every_s)  # presence.scan_every_s
         self._someone_else: bool | None = None  # the latest scan's answer while this track lasts
@@ -852,6 +853,7 @@ class Estimator:
         # the whole-volume verdict of a rejected crop on the rays, reused pair after pair
         # (frame_check.volume_recheck_every)
         self._volume_verdict: VolumeVerdict | None = None
+        self._pair_on_rays = False  # a pass of the last (or this) pair had a crop on the rays (_verdict_for_pair)
         self.volume_rechecks = 0  # whole-volume crops preprocessed for a rejected crop on the rays
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
@@ -1096,6 +1098,7 @@ class Estimator:
         self._tile_find_foot = None
         timing: dict[str, float] = {}
         self._forget_a_stale_track(timestamp_s)
+        self._verdict_for_pair()
         # the kept turn this pair may lose, and the last pass kept through it (_turn_lost_flipped)
         rolled_from = (self._turns, self._kept_axis) if self._turns != (0, 0) and self._kept_axis is not None else None
         if self.tracker.track is None and self.tracker.view_track is None:
@@ -1461,12 +1464,15 @@ class Estimator:
     def _stays_in_one_view(self, p: "_Pass") -> bool:
         """Whether ``p`` is the :data:`ONE_VIEW_NOT_VAIN_PAIRS`-th pair in a row (or later) whose person one camera
         alone saw, the same camera each: a person who stays, not a screen's picture read as one now and then. Counts
-        the run, so every pair is read once."""
+        the run, so every pair is read once. A pair over ``tracking.max_gap_s`` after the last (dropped pairs, a
+        stalled camera), or before it, starts a run, as it drops a track: pairs apart in time are no stay (session 72;
+        before, four one-view pairs a minute apart counted in a row)."""
         name, run = self._one_view_run
         if p.single_view is None:
             self._one_view_run = (None, 0)
         else:
-            self._one_view_run = (p.single_view, run + 1 if p.single_view == name else 1)
+            goes_on = p.single_view == name and not self._after_gap
+            self._one_view_run = (p.single_view, run + 1 if goes_on else 1)
         return self._one_view_run[1] >= ONE_VIEW_NOT_VAIN_PAIRS
 
     def _tiles_awake(self, images: Sequence[np.ndarray],
@@ -1859,12 +1865,15 @@ class Estimator:
 
     def _forget_a_stale_track(self, timestamp_s: float | None) -> None:
         """Drop the track when the pair comes more than ``tracking.max_gap_s`` after the last one, or before it
-        (a pair of the same instant, the same frames estimated again, keeps it)."""
+        (a pair of the same instant, the same frames estimated again, keeps it); such a pair is ``_after_gap``
+        (a pair without a time, or after none, is not)."""
+        self._after_gap = False
         if timestamp_s is None:
             return
         t, last = float(timestamp_s), self._last_timestamp_s
         self._last_timestamp_s = t
         if last is not None and not (last <= t <= last + self.config.tracking.max_gap_s):
+            self._after_gap = True
             self.tracker.reset()
 
     def _pass(self, images: Sequence[np.ndarray], regions: Regions, sequence: int, timing: dict,
@@ -1887,8 +1896,7 @@ class Estimator:
         batch = np.empty((2, 3, S, S), np.float32)
         frame_reason, crops = {}, []  # camera name -> None, or why the frame check rejected its crop
         on_rays = self.tracker.rays_camera(regions)
-        if on_rays is None:
-            self._volume_verdict = None  # a verdict answers only pair after pair on the rays
+        self._pair_on_rays = self._pair_on_rays or on_rays is not None
         for i, (img, st, roi) in enumerate(zip(images, self._cams, regions.rois)):
             maps, crop = self._crop(st, roi)
             crops.append(crop)
@@ -1960,6 +1968,15 @@ class Estimator:
                 job.abandon()
             raise
 
+    def _verdict_for_pair(self) -> None:
+        """Void the cached whole-volume verdict where the last pair ran no pass on the rays: it answers pair after pair
+        on them. A pair's own passes off the rays (a turn search's, a refined or a cold retry's) leave it: the next
+        pair's crop on the rays is the same camera's, through the tracker and camera state the verdict names (session
+        72; before, they voided it and that pair checked the camera again)."""
+        if not self._pair_on_rays:
+            self._volume_verdict = None
+        self._pair_on_rays = False
+
     def _rays_crop_verdict(self, image: np.ndarray, camera: int, plane: np.ndarray, inside: np.ndarray | None,
                            rejected: str | None) -> tuple[bool, str]:
         """The frame check's ``(ok, reason)`` of camera ``camera``'s crop on the rays, model-input ``plane`` (its
@@ -1978,8 +1995,9 @@ class Estimator:
         if not self._volume_crop_passes(image, camera):
             self._volume_verdict = None
             return False, rejected
+        check = self.config.frame_check
         self._volume_verdict = VolumeVerdict(state, self.tracker, self.tracker.resets, rejected, level,
-                                             self.config.frame_check.volume_recheck_every - 1)
+                                             check.volume_recheck_every - 1, check.volume_recheck_levels)
         return True, ""
 
     def _volume_crop_passes(self, image: np.ndarray, camera: int) -> bool:

@@ -35,7 +35,8 @@ RESTLESS_AFTER_WAKES = 2
 CALM_AFTER_PASSES = 8
 #: a person seen by the same camera alone on this many pairs in a row clears the wake awake as a joint does (not in
 #: vain): someone who stays, whose cells grew restless against a walk-in from there; a screen's pictures read as a
-#: person on one pair at a time (session 71, benchmarks/measure_cold_tiles.py --moving-room: at most 1 in a row)
+#: person on one pair at a time (session 71, benchmarks/measure_cold_tiles.py --moving-room: at most 1 in a row); each
+#: pair within tracking.max_gap_s of the last (session 72: pairs apart in time are no stay)
 ONE_VIEW_NOT_VAIN_PAIRS = 4
 
 

@@ -514,18 +514,21 @@ def test_a_walk_in_seen_in_one_view_then_in_both_is_no_vain_wake(example_rig, fa
     assert est._vain_wakes is None
 
 
-def visit_seen_by_one_camera(est, oracle, example_rig, t0: float, one_view_pairs: int) -> list[str | None]:
+def visit_seen_by_one_camera(est, oracle, example_rig, t0: float, one_view_pairs: int,
+                             step_s: float | None = None) -> list[str | None]:
     """:data:`FAR_ROOM`'s person walks in at ``t0`` seen by the left camera alone (the walk-in pair wakes the rest;
     the near left tile draws them too small, the far left tile sees them from the next pair on), stays for
     ``one_view_pairs`` pairs more and leaves: a whole round of tiles then finds nobody. Each pair's ``single_view``
-    while there."""
+    while there. ``step_s``: the visit's pairs are given capture times that far apart (None: no times, 30 a second
+    in the scene)."""
     scene = sim.SimScene(FAR_ROOM)
     seen = []
     for i in range(1 + one_view_pairs):
-        t = t0 + i / 30.0
+        t = t0 + i * (1 / 30.0 if step_s is None else step_s)
         joints = scene.joints_3d(t)
         oracle.set_truth(joints, seen_by(np.ones((2, len(joints)), bool), 0))
-        seen.append(est.estimate(pair_images(scene, example_rig, t)).single_view)
+        stamp = None if step_s is None else t
+        seen.append(est.estimate(pair_images(scene, example_rig, t), timestamp_s=stamp).single_view)
     oracle.set_truth(None)
     for room in far_scene_room(example_rig, [t0 + 0.5 + i / 30.0 for i in range(8)]):
         assert est.estimate(room).missing.all()
@@ -554,6 +557,20 @@ def test_a_person_in_one_view_on_fewer_pairs_is_a_vain_wake(example_rig):
     seen = visit_seen_by_one_camera(est, oracle, example_rig, 3.0, ONE_VIEW_NOT_VAIN_PAIRS - 1)
     assert seen[1:] == [example_rig.pair[0].name] * (ONE_VIEW_NOT_VAIN_PAIRS - 1)
     assert est._vain_wakes is not None and all(counts.max() == 1 for counts in est._vain_wakes)
+
+
+@pytest.mark.parametrize("step_s, vain", [(0.4, False), (0.6, True), (60.0, True)])
+def test_one_view_pairs_further_apart_than_max_gap_are_no_run(example_rig, step_s, vain):
+    """Session 72: the pairs of a run in one view alone must each come within ``tracking.max_gap_s`` (0.5 s) of the
+    last, as a track's must: :data:`ONE_VIEW_NOT_VAIN_PAIRS` such pairs 0.6 s or a minute apart (dropped pairs, a
+    stalled camera) are each a run of one, and the wake stays to its round, vain. Before, they counted in a row."""
+    oracle, est = resting_estimator(example_rig, rest_every=8)
+    assert est.config.tracking.max_gap_s == 0.5
+    seen = visit_seen_by_one_camera(est, oracle, example_rig, 3.0, ONE_VIEW_NOT_VAIN_PAIRS, step_s)
+    assert seen[1:] == [example_rig.pair[0].name] * ONE_VIEW_NOT_VAIN_PAIRS
+    assert (est._vain_wakes is not None) == vain
+    if vain:
+        assert all(counts.max() == 1 for counts in est._vain_wakes)
 
 
 def test_a_reset_leaves_no_wake_to_judge(example_rig, far_person):

@@ -499,11 +499,12 @@ def test_a_covered_cameras_other_view_gets_its_2d_joints_from_the_oracle(clip, f
     assert err.max() < 1.5, err  # exact up to the grid's decoding: the mirrored run's cameras are mirrored too
 
 
-def _with_panel(image: np.ndarray, roi, margin: int) -> np.ndarray:
-    """``image`` with a plain grey panel over ``roi`` grown by ``margin`` pixels each side (clipped to the frame)."""
+def _with_panel(image: np.ndarray, roi, margin: int, grey: int = 128) -> np.ndarray:
+    """``image`` with a plain ``grey`` panel over ``roi`` grown by ``margin`` pixels each side (clipped to the
+    frame)."""
     out = image.copy()
     x0, y0 = max(0, int(roi.x0) - margin), max(0, int(roi.y0) - margin)
-    out[y0:max(0, int(roi.y0 + roi.size) + margin), x0:max(0, int(roi.x0 + roi.size) + margin)] = 128
+    out[y0:max(0, int(roi.y0 + roi.size) + margin), x0:max(0, int(roi.x0 + roi.size) + margin)] = grey
     return out
 
 
@@ -605,6 +606,28 @@ def test_a_lens_covered_behind_a_cached_whole_volume_verdict_is_reported_within_
     assert all(r.frame_reason[names[0]] is None and r.single_view == names[0] for r in results)
 
 
+@pytest.mark.parametrize("levels, rechecks", [(16.0, [1, 0, 0, 0]), (4.0, [1, 1, 0, 1])])
+def test_a_panel_brightening_past_volume_recheck_levels_checks_the_camera_again_at_once(clip, levels, rechecks):
+    """``frame_check.volume_recheck_levels`` (session 72; 16 levels, a module constant before): the panel over camera
+    1's rays crop brightened by 8 levels on the second pair and back on the fourth is the same plain wall at the
+    default bound (the verdict answers), a change at 4 (the camera is checked again at once, each time)."""
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(frame_check=FrameCheckConfig(volume_recheck_levels=levels)))
+    oracle.set_truth(truth[0], seen_by(visible[0], 0))
+    est.estimate(frames[0])
+    panel = est.tracker.view_other
+    assert panel is not None
+    counted = []
+    for k, grey in zip(range(1, 5), (128, 136, 136, 128)):
+        oracle.set_truth(truth[k], seen_by(visible[k], 0))
+        before = est.volume_rechecks
+        r = est.estimate((frames[k][0], _with_panel(frames[k][1], panel, 16, grey)))
+        assert r.frame_reason == {n: None for n in est.camera_names}, r.frame_reason
+        counted.append(est.volume_rechecks - before)
+    assert counted == rechecks
+
+
 def test_a_tracker_reset_voids_the_cached_whole_volume_verdict(clip):
     """Whatever resets the tracker (a gap in the timestamps, ``Estimator.reset``) voids the cached verdict: the next
     rejected rays crop is checked again on the whole volume."""
@@ -617,6 +640,37 @@ def test_a_tracker_reset_voids_the_cached_whole_volume_verdict(clip):
         est._cams[1], est.tracker, est._volume_verdict.reason, est._volume_verdict.level)
     est.reset()
     assert est._volume_verdict is None
+
+
+def test_a_turn_search_on_a_pair_on_the_rays_keeps_the_cached_whole_volume_verdict(clip):
+    """Session 72: a pair on the rays whose person camera 0 reads weakly beside camera 1's faint view searches the crop
+    turns, its turned passes cropping the working volume (off the rays); none is kept and the next pair is on the
+    rays again. The verdict cached on that pair still answers it: the camera is checked on the whole volume once in
+    ``frame_check.volume_recheck_every`` pairs, as without the search. Before, the turned passes voided it, and the
+    pair after each search checked the camera again (3 rechecks in 10 pairs, not 2)."""
+    rig, frames, truth, visible, *_ = clip
+    oracle = ScaledViews((0.6, 0.25))  # the one-camera pair that searches (the test above)
+    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False)))
+    # the oracle's heatmaps score every turn alike, so no turn would be tried: one is, and reads no better
+    est._turn_candidates = lambda *args, **kwargs: [(90, 90)]
+    oracle.set_truth(truth[0], seen_by(visible[0], 0))
+    est.estimate(frames[0])
+    panel = est.tracker.view_other
+    assert panel is not None
+    rechecks, searches, cached = [], [], []
+    for n in range(10):
+        k = 1 + n % (len(frames) - 1)
+        oracle.set_truth(truth[k], visible[k])  # camera 1's faint view: the search's case
+        before = est.volume_rechecks, est.turn_searches
+        r = est.estimate((frames[k][0], _with_panel(frames[k][1], panel, 16)))
+        assert r.single_view == est.camera_names[0] and r.frame_reason[est.camera_names[1]] is None
+        assert est.tracker.view_other == panel and est.turns_kept == 0
+        rechecks.append(est.volume_rechecks - before[0])
+        searches.append(est.turn_searches - before[1])
+        cached.append(est._volume_verdict is not None)
+    assert sum(searches) >= 2 and searches[0] == 1, searches  # a search on the pair that took the verdict, and later
+    assert rechecks == [int(n % 8 == 0) for n in range(10)], (rechecks, searches)
+    assert all(cached), cached
 
 
 def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_in_the_other(clip):

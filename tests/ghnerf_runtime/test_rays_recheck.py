@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from ghnerf_runtime.config import ConfigError, FrameCheckConfig
-from ghnerf_runtime.rays_recheck import RECHECK_LEVELS, VolumeVerdict, mean_level
+from ghnerf_runtime.rays_recheck import VolumeVerdict, mean_level
 
 
 class _Tracker:
@@ -24,9 +24,10 @@ def test_mean_level_is_over_the_pixels_that_show_the_frame():
 
 def test_a_verdict_holds_only_for_the_same_camera_tracker_reason_and_brightness_within_its_reuses():
     state, tracker = object(), _Tracker()
-    verdict = VolumeVerdict(state, tracker, 0, "flat", 100.0, 2)
-    assert verdict.holds(state, tracker, "flat", 100.0 + RECHECK_LEVELS)
-    assert not verdict.holds(state, tracker, "flat", 100.0 + RECHECK_LEVELS + 1.0)  # darkened: a cap, a hand
+    verdict = VolumeVerdict(state, tracker, 0, "flat", 100.0, 2, 16.0)
+    assert verdict.holds(state, tracker, "flat", 100.0 + 16.0)
+    assert not verdict.holds(state, tracker, "flat", 100.0 + 17.0)  # darkened: a cap, a hand
+    assert not VolumeVerdict(state, tracker, 0, "flat", 100.0, 2, 4.0).holds(state, tracker, "flat", 105.0)
     assert not verdict.holds(state, tracker, "flat", float("nan"))
     assert not verdict.holds(state, tracker, "noise", 100.0)
     assert not verdict.holds(object(), tracker, "flat", 100.0)  # another crop turn's camera state
@@ -41,3 +42,15 @@ def test_a_verdict_holds_only_for_the_same_camera_tracker_reason_and_brightness_
 def test_volume_recheck_every_must_be_a_whole_number_of_pairs(value):
     with pytest.raises(ConfigError, match="volume_recheck_every"):
         FrameCheckConfig(volume_recheck_every=value)
+
+
+def test_volume_recheck_levels_defaults_to_16_and_must_be_a_level_from_0_to_255():
+    assert FrameCheckConfig().volume_recheck_levels == 16.0
+    assert FrameCheckConfig(volume_recheck_levels=0).volume_recheck_levels == 0  # any move checks again
+
+
+@pytest.mark.parametrize("value", [-1.0, 255.5, float("nan"), float("inf"), True, None, "16"])
+def test_volume_recheck_levels_out_of_range_is_an_error_naming_the_field_and_value(value):
+    with pytest.raises(ConfigError, match="volume_recheck_levels") as e:
+        FrameCheckConfig(volume_recheck_levels=value)
+    assert repr(value) in str(e.value)
