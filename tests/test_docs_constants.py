@@ -28,7 +28,7 @@ from calibration.detect import PATTERN_CHECK_MARKERS
 from calibration.render import SYNTH_BOARD, SYNTH_CAMERA_HEIGHT_M, SYNTH_PITCH_DEG, SYNTH_VOLUME_NEAR_M
 from drivers.backends.depthai.options import DEFAULT_MOUNT_HEIGHT_M, DepthaiOptions
 from drivers.backends.depthai.source import SLOW_SHARE
-from drivers.backends.replay import MIN_SPEED
+from drivers.backends.replay import MENDED_RUN, MIN_SPEED
 from drivers.url import whole_number
 from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.calibration_watch import CLEAR_RATIO
@@ -177,6 +177,7 @@ def _doc(name: str) -> str:
     ("docs/protocol.md", f"by more than {JUMP_FRAMES} frame intervals"),
     ("docs/protocol.md", f"stay on the new one for {NEW_TIMELINE_FRAMES} frames"),
     ("docs/protocol.md", f"producer's rate), else 1/{DEFAULT_FPS:g} s, capped"),  # session 72: before the first step
+    ("docs/recording-format.md", f"Up to {MENDED_RUN} (`MENDED_RUN`) stamps in a row"),  # session 72
     # the sink options' defaults, as the common query parameters list them
     ("docs/protocol.md", f"`queue` ({SinkOptions.queue}) frames held"),
     ("docs/protocol.md", f"at most {MAX_QUEUE} (`MAX_QUEUE`:"),
