@@ -28,7 +28,7 @@ from calibration.detect import PATTERN_CHECK_MARKERS
 from calibration.render import SYNTH_BOARD, SYNTH_CAMERA_HEIGHT_M, SYNTH_PITCH_DEG, SYNTH_VOLUME_NEAR_M
 from drivers.backends.depthai.options import DEFAULT_MOUNT_HEIGHT_M, DepthaiOptions
 from drivers.backends.depthai.source import SLOW_SHARE
-from drivers.backends.replay import MIN_SPEED
+from drivers.backends.replay import MENDED_RUN, MIN_SPEED
 from drivers.url import whole_number
 from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.calibration_watch import CLEAR_RATIO
@@ -47,7 +47,7 @@ from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
 from firmware_host.sinks.udp_sink import MIN_RESOLVE_S, REFUSAL_QUIET_S, RESOLVE_S
 from firmware_host.sinks.url import MAX_HOST_NAME
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
-from firmware_host.sinks.vmc_time import JUMP_FRAMES, NEW_TIMELINE_FRAMES, STEPS_KEPT
+from firmware_host.sinks.vmc_time import DEFAULT_FPS, JUMP_FRAMES, NEW_TIMELINE_FRAMES, STEPS_KEPT
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import FOOT_STANDING_M, MAX_FOOT_STANDING_M, MIN_CUTOFF_HZ, Joints3DConfig, RoiConfig, \
@@ -176,6 +176,8 @@ def _doc(name: str) -> str:
     ("docs/protocol.md", f"median of the last {STEPS_KEPT} forward steps"),
     ("docs/protocol.md", f"by more than {JUMP_FRAMES} frame intervals"),
     ("docs/protocol.md", f"stay on the new one for {NEW_TIMELINE_FRAMES} frames"),
+    ("docs/protocol.md", f"producer's rate), else 1/{DEFAULT_FPS:g} s, capped"),  # session 72: before the first step
+    ("docs/recording-format.md", f"Up to {MENDED_RUN} (`MENDED_RUN`) stamps in a row"),  # session 72
     # the sink options' defaults, as the common query parameters list them
     ("docs/protocol.md", f"`queue` ({SinkOptions.queue}) frames held"),
     ("docs/protocol.md", f"at most {MAX_QUEUE} (`MAX_QUEUE`:"),

@@ -26,7 +26,8 @@ Each camera plays in its recorded order (its image file numbers), the cameras me
 camera's stamp going back is a clock reset: warned of, and the frames after it re-based to follow on one
 frame period after those before, one shift for both cameras (:func:`playback_order`; with ``keep_time=1``
 too); one stamp out of line with its neighbours is a bad stamp, played at their midpoint (a camera's first
-or last, one step from its neighbour, where the other cameras' stamps there say so). Indices and
+or last, one step from its neighbour, where the other cameras' stamps there say so; two in a row, spread between
+their neighbours, where the other cameras' stamps say so). Indices and
 ground truth are delivered unchanged on the first pass. Each further ``loop``
 pass shifts timestamps by the recording's span (plus one frame period: the median step between a camera's
 successive distinct stamps, else 1/30 s) and indices by the
@@ -46,6 +47,7 @@ next read goes on. A camera none of whose images decode at open would play nothi
 """
 from __future__ import annotations
 
+import bisect
 import logging
 import statistics
 from collections import Counter, deque
@@ -162,7 +164,8 @@ def playback_order(rows: list[FrameRow], directory: Path | str = "") -> list[Fra
     one after another, in the order recorded, and the cameras keep their relative timing within a segment,
     so pairs stay pairs. The true gap at a reset is not recorded; one frame period stands for it. A warning
     per camera that went back names its first reset and the shift (recorded stamp = played stamp - shift).
-    One stamp out of line with both its neighbours is first mended (:func:`_mend_lone_stamps`), not a reset.
+    One stamp out of line with both its neighbours, or two in a row, is first mended (:func:`_mend_bad_stamps`),
+    not a reset.
 
     Re-based, not played with the stamps going back: every later stage (pairing, tracking, smoothing, sinks)
     takes a camera's stamps as increasing, and a pairer that sees one camera go back while the other still
@@ -173,7 +176,7 @@ def playback_order(rows: list[FrameRow], directory: Path | str = "") -> list[Fra
     order = recorded_order(rows)
     for cam, mine in order.items():
         others = [theirs for other, theirs in order.items() if other != cam]
-        _mend_lone_stamps(rows, mine, stamps, directory, others)
+        _mend_bad_stamps(rows, mine, stamps, directory, others)
         split: list[list[int]] = []
         for i in mine:
             if not split or stamps[i] < stamps[split[-1][-1]]:
@@ -218,16 +221,22 @@ def playback_order(rows: list[FrameRow], directory: Path | str = "") -> list[Fra
 END_STEPS = 4
 
 
-def _mend_lone_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, int], directory: Path | str,
-                      others: list[list[int]]) -> None:
+#: The most frames in a row of one camera mended as bad stamps: a longer run out of line plays as recorded (a reset).
+MENDED_RUN = 2
+
+
+def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, int], directory: Path | str,
+                     others: list[list[int]]) -> None:
     """Give a lone bad stamp of one camera (``mine``: its rows in recorded order) the midpoint of its neighbours'.
 
     A stamp out of line with the frames either side of it, which are in line with each other (a glitched stamp
     an hour ahead or back, the frames after it on the old timeline), is one bad stamp, not a clock reset: taken
     as a reset, it re-based every later frame of that camera by the glitch, so none paired again and a paced
-    replay waited out the glitch (an hour). A camera's first and last frames have one neighbour: mended one step
-    from it where the other cameras (``others``: their rows in recorded order) say so (:func:`_bad_end`)."""
-    mended = []
+    replay waited out the glitch (an hour). Up to ``MENDED_RUN`` such stamps in a row are mended too, spread
+    evenly between their neighbours, where the other cameras (``others``: their rows in recorded order) say so
+    (:func:`_mend_runs`). A camera's first and last frames have one neighbour: mended one step from it where the
+    other cameras say so (:func:`_bad_end`)."""
+    mended = _mend_runs(mine, stamps, others)  # first: the lone test takes a run's first stamp (back, then ahead)
     for before, here, after in zip(mine, mine[1:], mine[2:]):
         if stamps[before] <= stamps[after] and not stamps[before] <= stamps[here] <= stamps[after]:
             mended.append((here, stamps[here]))
@@ -245,6 +254,41 @@ def _mend_lone_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, i
                     "the frames beside it: taken as a bad stamp, played in line with them, at %d ns (%d in "
                     "this camera)", directory, row.camera, row.image, row.index, FRAMES, row.line,
                     recorded, stamps[first], len(mended))
+
+
+def _mend_runs(mine: list[int], stamps: dict[int, int], others: list[list[int]]) -> list[tuple[int, int]]:
+    """Mend runs of 2 to ``MENDED_RUN`` stamps in a row out of line with the frames either side, those two in line
+    with each other: each run's stamps spread evenly between them, where the other cameras confirm the old
+    timeline (:func:`_run_is_bad`). Returns the rows mended with their recorded stamps. A reset stays on the new
+    timeline and a pause goes on from it, so neither has a frame back in line after it."""
+    mended: list[tuple[int, int]] = []
+    elsewhere: list[int] | None = None  # the other cameras' stamps, sorted once a run is found
+    for length in range(2, MENDED_RUN + 1):
+        for start in range(1, len(mine) - length):
+            before, run, after = mine[start - 1], mine[start:start + length], mine[start + length]
+            low, high = stamps[before], stamps[after]
+            if low > high or any(low <= stamps[i] <= high for i in run):
+                continue
+            if elsewhere is None:
+                elsewhere = sorted(stamps[i] for theirs in others for i in theirs)
+            if _run_is_bad([stamps[i] for i in run], low, high, elsewhere):
+                for k, i in enumerate(run, start=1):
+                    mended.append((i, stamps[i]))
+                    stamps[i] = low + (high - low) * k // (length + 1)
+    return mended
+
+
+def _run_is_bad(run_ns: list[int], low_ns: int, high_ns: int, elsewhere_ns: list[int]) -> bool:
+    """Whether stamps ``run_ns`` in a row, out of line between ``low_ns`` and ``high_ns``, are bad ones: the other
+    cameras' stamps (``elsewhere_ns``, sorted) go on between those two, and none lies within a frame step of the
+    run's (a clock that jumped for every camera at once). From one camera alone a glitch of two frames cannot be
+    told from a reset and a jump back forward: not mended."""
+    inside = bisect.bisect_right(elsewhere_ns, high_ns) - bisect.bisect_left(elsewhere_ns, low_ns)
+    if not inside:
+        return False
+    step_ns = (high_ns - low_ns) // (len(run_ns) + 1)
+    return all(bisect.bisect_right(elsewhere_ns, ns + step_ns) == bisect.bisect_left(elsewhere_ns, ns - step_ns)
+               for ns in run_ns)
 
 
 def _bad_end(end_ns: int, near_ns: int, far_ns: int, elsewhere_ns: list[int]) -> bool:

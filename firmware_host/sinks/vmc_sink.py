@@ -34,7 +34,7 @@ from firmware_host.sinks.udp_sink import RESOLVE_S, DatagramLink, take_resolve_s
 from firmware_host.sinks.url import SinkUrl, boolean, host_port, one_of, parse_url
 from firmware_host.sinks.vmc_osc import build_datagrams
 from firmware_host.sinks.vmc_pose import keep_hemisphere, solve_pose
-from firmware_host.sinks.vmc_time import VmcClock
+from firmware_host.sinks.vmc_time import VmcClock, nominal_step_us
 from firmware_host.sinks.vmc_view import FACINGS, AvatarView
 
 VMC_DEFAULT_PORT = 39539  # the Marionette (receiver) port
@@ -60,7 +60,9 @@ class VmcSink(Sink):
         self.view = view
         self.calibration_flag = calibration_flag  # send /ghnerf/calibration_suspect with a suspect frame
         self._link = DatagramLink(url, host, port, resolve_s)
-        self._clock = VmcClock(self.shown)  # /VMC/Ext/T: never goes back, whatever the capture stamps do
+        # /VMC/Ext/T: never goes back, whatever the capture stamps do; the rates given stand for the frame interval
+        # until the stamps show one
+        self._clock = VmcClock(self.shown, nominal_step_us(options.fps, options.max_fps))
         self._last_rotations: dict[str, np.ndarray] = {}  # by bone name: the sign sent last (keep_hemisphere)
 
     @classmethod

@@ -15,9 +15,18 @@ counts on from the first odd frame's T, as T did before anyway; a jump forward (
 one step, on the last of those frames, so a receiver that interpolates on T still sees the pause, two frames late.
 T is never below the last T sent: a lone stamp a few frames ahead (a step T follows) moves T on by at most
 ``JUMP_FRAMES`` intervals, and the stamps after it, a little back, then read the same T until they pass it. The
-first glitch and the first jump back are each logged once per sink; later ones only counted. Before the first
-forward step there is no frame interval, and every forward step is followed: a glitched first or second stamp moves
-T by its glitch, once (a second one that the next stamps leave, back in line with the first, no further).
+first glitch and the first jump back are each logged once per sink; later ones only counted.
+
+Before the first forward step the frame interval is a nominal one: the sink's ``fps`` (the producer's rate), else
+``DEFAULT_FPS``, capped at its ``max_fps``. So a glitched second stamp leaves the timeline like any other, and a
+glitched first one is left by the stamps after it: until session 72 every first forward step was followed, and
+either moved T by the glitch (an hour), once. A first stamp that the next ``NEW_TIMELINE_FRAMES`` leave forward is
+no timeline to pause on: T counts on from it, as after a jump back (a real pause after the first frame is not added
+to T). A camera under a quarter of the nominal rate leaves it too at its first frames, which read one nominal
+interval on each until its steps become the interval; stamps that only stepped forward and come back are no
+glitch (not counted, not logged). A stamp repeated on a new timeline is no evidence for it: T follows it only
+once its stamps move on (a driver that stamped three frames with one bad value moved T to it, then an hour on when
+the stamps came back, until session 72).
 
 The frame interval is the lower median of the last ``STEPS_KEPT`` forward steps between stamps on one timeline:
 jittery stamps, a driver hiccup that stamps two frames 1 ms apart, or a gap of a few frames each move it by at
@@ -48,6 +57,11 @@ STEPS_KEPT = 15
 #: lone stamp far ahead, and T waits. It is also the most a lone stamp a little ahead can move T forward.
 JUMP_FRAMES = 4
 
+#: The frame rate assumed before the first forward step, where the sink names none: most cameras here run at 30
+#: fps. A camera under a quarter of it (7.5 fps) leaves the timeline at its first steps, and T catches up with it
+#: in one step within a few frames (its steady steps become the interval).
+DEFAULT_FPS = 30.0
+
 #: Frames in a row on a new timeline (the first odd one included) before T follows it: one or two glitched stamps
 #: in a row are stepped over, and a pause reaches T two frames (67 ms at 30 fps) late.
 NEW_TIMELINE_FRAMES = 3
@@ -64,16 +78,25 @@ class _Timeline:
         return self.base_t_us + capture_time_us - self.base_us
 
 
+def nominal_step_us(fps: Optional[float] = None, max_fps: Optional[float] = None) -> int:
+    """The frame interval (us) before any step is seen: the producer's rate ``fps``, else ``DEFAULT_FPS``, capped
+    at ``max_fps`` (the frames it lets through); a cap alone says only how fast the frames can come."""
+    rate = DEFAULT_FPS if fps is None else fps
+    return max(1, round(1e6 / min(rate, max_fps if max_fps is not None else rate)))
+
+
 class VmcClock:
     """Capture stamps (microseconds) -> /VMC/Ext/T seconds, monotonic non-decreasing; one per sink."""
 
-    def __init__(self, shown: str) -> None:
+    def __init__(self, shown: str, nominal_us: Optional[int] = None) -> None:
         self._shown = shown  # the sink as its logs name it
+        self._nominal_us = nominal_step_us() if nominal_us is None else nominal_us  # the interval before a step
         self._line: Optional[_Timeline] = None  # the timeline T follows
         self._line_last_us = 0  # the last stamp on it
         self._new: Optional[_Timeline] = None  # where the stamps went when they left it, until decided
         self._new_frames = 0  # frames in a row on ``_new``
         self._leave_step_us = 0  # the forward step into the last frame that left a timeline (0: it went back)
+        self._left_forward = False  # every frame off the line so far stepped forward
         self._first_us = 0  # the first frame's stamp
         self._last_us = 0  # the previous frame's stamp
         self._last_t_us = 0  # the T sent with it
@@ -97,16 +120,15 @@ class VmcClock:
 
     def frame_step_us(self) -> int:
         """The frame interval T moves on by across a jump: the lower median of the kept forward steps (the
-        lower one, so one pause among two steps is not it), 0 before the first step."""
+        lower one, so one pause among two steps is not it), the nominal one before the first step."""
         if not self._steps_us:
-            return 0
+            return self._nominal_us
         return sorted(self._steps_us)[(len(self._steps_us) - 1) // 2]
 
     def _follows(self, previous_us: int, capture_time_us: int, frames: int = 1) -> bool:
         """Whether a stamp ``frames`` frames after one stamped ``previous_us`` is on its timeline."""
         ahead_us = capture_time_us - previous_us
-        step_us = self.frame_step_us()
-        return ahead_us >= 0 and (step_us == 0 or ahead_us <= (frames - 1 + JUMP_FRAMES) * step_us)
+        return 0 <= ahead_us <= (frames - 1 + JUMP_FRAMES) * self.frame_step_us()
 
     def _on_the_line(self, capture_time_us: int) -> int:
         assert self._line is not None
@@ -125,12 +147,13 @@ class VmcClock:
         self._step(capture_time_us)
         self._new_frames += 1
         t_us = self._new.t_us(capture_time_us)
-        if self._new_frames >= NEW_TIMELINE_FRAMES:
+        if self._new_frames >= NEW_TIMELINE_FRAMES and capture_time_us > self._new.base_us:  # moved on: no repeat
             t_us = self._take_the_new_line(capture_time_us, t_us)
         return t_us
 
     def _leave(self, capture_time_us: int) -> int:
         """The first frame off the line: one frame interval on, the stamps' new timeline kept."""
+        self._left_forward = capture_time_us > self._last_us and (self._new is None or self._left_forward)
         self._new = _Timeline(capture_time_us, self._last_t_us + self._jump_step_us(capture_time_us))
         self._new_frames = 1
         self._count_a_steady_leave(capture_time_us - self._last_us)
@@ -138,8 +161,8 @@ class VmcClock:
 
     def _jump_step_us(self, capture_time_us: int) -> int:
         """What T moves on by for a frame off the line: the frame interval, but nothing where the one step seen
-        so far may be the glitch itself (a second frame stamped an hour on, then one back, not before the first):
-        that step as the interval moved T on by the hour again at each frame off the line (session 71)."""
+        so far may be the glitch itself (a second frame stamped a few frames on, then one back, not before the
+        first): that step as the interval moved T on by it again at each frame off the line (session 71)."""
         if len(self._steps_us) == 1 and self._first_us <= capture_time_us < self._last_us:
             return 0
         return self.frame_step_us()
@@ -154,22 +177,31 @@ class VmcClock:
 
     def _back_on_the_line(self, capture_time_us: int) -> int:
         assert self._line is not None and self._new is not None
+        if not (self._left_forward and capture_time_us >= self._last_us):
+            self._count_a_glitch()
+        # else no stamp went back: late frames on the line, read again at a longer interval (a slow camera)
+        self._new, self._leave_step_us = None, 0
+        self._line_last_us = capture_time_us
+        return self._line.t_us(capture_time_us)
+
+    def _count_a_glitch(self) -> None:
+        assert self._new is not None
         if self.glitches == 0:  # once: a driver that glitches every minute would otherwise log every minute
             _log.warning("%s: %d capture stamp(s) left the stream's timeline (%+.3f s) and it came back; "
                          "/VMC/Ext/T stepped over them (later glitches are not logged)", self._shown,
                          self._new_frames, (self._new.base_us - self._line_last_us) / 1e6)
         self.glitches += 1
-        self._new, self._leave_step_us = None, 0
-        self._line_last_us = capture_time_us
-        return self._line.t_us(capture_time_us)
 
     def _take_the_new_line(self, capture_time_us: int, t_us: int) -> int:
-        """The stamps stayed on the new timeline: a pause keeps the line (T catches up), a jump back follows it."""
+        """The stamps stayed on the new timeline: a pause keeps the line (T catches up), a jump back follows it, and
+        so does a jump forward from a line of one stamp (a glitched first stamp: no pause to add)."""
         assert self._line is not None and self._new is not None
-        if self._new.base_us >= self._line_last_us:
+        paused = self._new.base_us >= self._line_last_us
+        if paused and self._line_last_us > self._line.base_us:
             t_us = self._line.t_us(capture_time_us)
         else:
-            self._log_jump_back(self._new)
+            if not paused:
+                self._log_jump_back(self._new)
             self._line = self._new
         self._new, self._leave_step_us = None, 0
         self._line_last_us = capture_time_us

@@ -1373,14 +1373,82 @@ def test_a_reset_after_one_camera_s_first_frame_stays_a_reset():
         ("right", 2, 1067), ("left", 3, 1099), ("right", 3, 1100)]
 
 
-def test_a_take_with_one_stamp_an_hour_ahead_replays_every_pair_at_its_pace(take, copy_of_take, caplog):
+def _played_ms(left_ms: list[int], right_ms: list[int], caplog) -> tuple[list[tuple[str, int, int]], list[str]]:
+    """``playback_order`` of two cameras stamped ``left_ms`` and ``right_ms`` (journal shuffled): (camera, index,
+    played stamp in ms) in playing order, and the warnings."""
+    from drivers.backends.recording_format import FrameRow
+    from drivers.backends.replay import playback_order
+
+    ms = 1_000_000
+    left = [FrameRow("left", i, t * ms, f"images/left/{i:08d}.png") for i, t in enumerate(left_ms)]
+    right = [FrameRow("right", i, t * ms, f"images/right/{i:08d}.png") for i, t in enumerate(right_ms)]
+    with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"):
+        played = playback_order(right[::-1] + left[::-1], "take")
+    return [(r.camera, r.index, r.timestamp_ns // ms) for r in played], [r.getMessage() for r in caplog.records]
+
+
+_HOUR_MS = 3_600_000
+_RIGHT_MS = [_HOUR_MS + t for t in (1, 34, 67, 101, 134, 167)]
+
+
+@pytest.mark.parametrize("glitch_ms", [(_HOUR_MS, _HOUR_MS), (-_HOUR_MS, -_HOUR_MS), (_HOUR_MS, -_HOUR_MS),
+                                       (-_HOUR_MS, _HOUR_MS)],
+                         ids=["ahead", "back", "ahead-then-back", "back-then-ahead"])
+def test_two_bad_stamps_in_a_row_are_mended_not_taken_as_a_reset(glitch_ms, caplog):
+    """Two frames in a row stamped an hour off, the frames either side in line and the other camera's stamps going
+    on between them: played as two resets (the first re-based every later frame of the camera by the hour, so none
+    paired again), now spread between their neighbours, with one warning naming the first."""
+    left_ms = [_HOUR_MS + t for t in (0, 33, 66 + glitch_ms[0], 100 + glitch_ms[1], 133, 166)]
+    played, warned = _played_ms(left_ms, _RIGHT_MS, caplog)
+    assert [(cam, i, t - _HOUR_MS) for cam, i, t in played] == [
+        ("left", 0, 0), ("right", 0, 1), ("left", 1, 33), ("right", 1, 34), ("left", 2, 66), ("right", 2, 67),
+        ("left", 3, 99), ("right", 3, 101), ("left", 4, 133), ("right", 4, 134), ("left", 5, 166), ("right", 5, 167)]
+    (message,) = warned
+    assert "bad stamp" in message and "images/left/00000002.png" in message and "(2 in this camera)" in message
+
+
+@pytest.mark.parametrize("left_ms", [
+    [0, 33, 66, 100, 5, 38],  # a reset two frames before the end: nothing after it to come back in line
+    [0, 33, 66, 100, 5, 38, 71, 104],  # a reset that stays
+    [0, 33, 66, 10_066, 10_100, 10_133],  # a pause: the stamps go on from it
+    [0, 33, -500, -1_000, -967, -934],  # two resets in a row
+    [0, 33, 66 + _HOUR_MS, 100 + _HOUR_MS, 133 + _HOUR_MS, 166],  # three frames off: more than MENDED_RUN
+], ids=["reset-2-before-the-end", "reset", "pause", "two-resets", "three-off"])
+def test_a_reset_or_a_pause_is_not_mended_as_bad_stamps(left_ms, caplog):
+    """What only a real reset or pause does is played as before: no stamp mended, no "bad stamp" warning."""
+    played, warned = _played_ms([_HOUR_MS + t for t in left_ms], _RIGHT_MS + [_HOUR_MS + 200, _HOUR_MS + 234],
+                                caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+    left_played = [t - _HOUR_MS for cam, _, t in played if cam == "left"]
+    steps = [b - a for a, b in zip(left_ms, left_ms[1:])]
+    if min(steps) > 0:  # no reset: played as recorded
+        assert left_played == left_ms
+    else:  # a reset: the frames after it follow on, spaced as recorded
+        assert all(b > a for a, b in zip(left_played, left_played[1:]))
+        assert any("clock reset" in message for message in warned)
+
+
+def test_two_frames_off_on_both_cameras_at_once_are_not_mended(caplog):
+    """Both cameras stamped two frames an hour on, then back: the other camera does not confirm the old timeline
+    (its own stamps are on the run's), so neither is mended: as before, each camera's frames play as resets."""
+    left_ms = [_HOUR_MS + t for t in (0, 33, 66 + _HOUR_MS, 100 + _HOUR_MS, 133, 166)]
+    right_ms = [_HOUR_MS + t for t in (1, 34, 67 + _HOUR_MS, 101 + _HOUR_MS, 134, 167)]
+    _, warned = _played_ms(left_ms, right_ms, caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+
+
+@pytest.mark.parametrize("bad_frames", [1, 2])
+def test_a_take_with_one_stamp_an_hour_ahead_replays_every_pair_at_its_pace(take, copy_of_take, caplog, bad_frames):
     """A live camera's one glitched stamp (an hour ahead) is recorded as delivered. Replayed, it was a clock reset:
-    that camera's later frames moved an hour on, a paced replay waited the hour for them, and none paired."""
+    that camera's later frames moved an hour on, a paced replay waited the hour for them, and none paired. Two such
+    frames in a row were still a reset until session 72."""
     _, live, _ = take
     rows = journal(copy_of_take)
     first_camera = live[0].frames[0].camera
-    bad = [r for r in rows if r["camera"] == first_camera][len(live) // 2]
-    bad["timestamp_ns"] += 3600 * 10**9
+    mine = [r for r in rows if r["camera"] == first_camera]
+    bad = mine[len(live) // 2]
+    for row in mine[len(live) // 2:len(live) // 2 + bad_frames]:
+        row["timestamp_ns"] += 3600 * 10**9
     (copy_of_take / FRAMES).write_text("".join(json.dumps(r) + "\n" for r in rows))
     clock = ManualClock(7_000_000_000)
     with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"), \
