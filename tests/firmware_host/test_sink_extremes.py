@@ -2,11 +2,16 @@
 close() that lands while the link is still being opened, capture stamps near the top of the u64 range."""
 from __future__ import annotations
 
+import os
+import resource
+import time
+
 import pytest
 
 from firmware_host.errors import SinkConfigError
 from firmware_host.sinks import open_sink
 from firmware_host.sinks.backoff import BackoffPolicy
+from firmware_host.sinks.fd_write import write_within
 from firmware_host.sinks.options import monotonic_us
 
 
@@ -28,3 +33,37 @@ def test_backoff_and_clock_keywords_given_none_take_their_defaults() -> None:
         assert sink.options.clock_us is monotonic_us
     finally:
         sink.close()
+
+
+#: A descriptor number select() refuses (FD_SETSIZE is 1024): a daemon with that many files open gets such ones.
+HIGH_FD = 1500
+
+
+def _high_descriptor(fd: int) -> int:
+    """A duplicate of ``fd`` numbered past select()'s FD_SETSIZE (1024); skips where the limit allows none."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft <= HIGH_FD:
+        pytest.skip(f"RLIMIT_NOFILE {soft}: no descriptor {HIGH_FD} in this process")
+    return os.dup2(fd, HIGH_FD)
+
+
+def test_a_full_pipe_on_a_descriptor_past_1024_times_out_rather_than_failing() -> None:
+    # before: select() raised ValueError ("filedescriptor out of range"), not OSError: the serial and file sinks
+    # counted every frame of a full port as a backend bug, a traceback in the journal for each
+    r, w = os.pipe()
+    os.set_blocking(w, False)
+    high = _high_descriptor(w)
+    try:
+        while True:  # fill the pipe: no reader takes anything
+            try:
+                os.write(high, b"x" * 4096)
+            except BlockingIOError:
+                break
+        started = time.monotonic()
+        assert write_within(high, b"frame", 0.05) == 0
+        assert 0.04 <= time.monotonic() - started < 2.0  # waited its timeout for room, no longer
+        os.read(r, 65536)  # the reader takes some: room again
+        assert write_within(high, b"frame", 0.05) == len(b"frame")
+    finally:
+        for fd in (r, w, high):
+            os.close(fd)
