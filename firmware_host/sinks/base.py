@@ -285,7 +285,8 @@ class Sink(ABC):
     def close(self, timeout: float = 1.0) -> SinkStats:
         """Stop accepting frames, deliver what is queued if the link is up, release it.
 
-        Frames still queued after ``timeout`` are counted as ``dropped_close``.
+        Frames still queued after ``timeout`` are counted as ``dropped_close``. A link still opening then (a slow
+        name lookup) is let go once open, unannounced: no HELLO from a closed sink.
         """
         with self._cond:
             if self._closed:
@@ -334,6 +335,9 @@ class Sink(ABC):
         try:
             self._connect()
             opened = True
+            if self._closed:  # close() came while the link opened (a slow lookup): a closed sink announces nothing
+                self._disconnect()
+                return
             self._on_connected()
         except SinkWriteError as e:  # e.g. HELLO hit a stalled endpoint: the link itself is up
             write_error = str(e)

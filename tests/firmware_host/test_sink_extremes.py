@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import resource
+import threading
 import time
 
 import pytest
@@ -12,7 +13,8 @@ from firmware_host.errors import SinkConfigError
 from firmware_host.sinks import open_sink
 from firmware_host.sinks.backoff import BackoffPolicy
 from firmware_host.sinks.fd_write import write_within
-from firmware_host.sinks.options import monotonic_us
+from firmware_host.sinks.memory_sink import MemorySink
+from firmware_host.sinks.options import SinkOptions, monotonic_us
 
 
 @pytest.mark.parametrize("key, value", [("backoff", "fast"), ("backoff", 0.1), ("clock_us", 5), ("clock_us", "now")])
@@ -67,3 +69,33 @@ def test_a_full_pipe_on_a_descriptor_past_1024_times_out_rather_than_failing() -
     finally:
         for fd in (r, w, high):
             os.close(fd)
+
+
+class SlowToOpen(MemorySink):
+    """A link whose open waits for ``gate`` (a name server slow to answer); counts its releases."""
+
+    def __init__(self) -> None:
+        super().__init__("memory://slow", 1 << 20, SinkOptions())
+        self.gate = threading.Event()
+        self.released = 0
+
+    def _connect(self) -> None:
+        self.gate.wait()
+
+    def _disconnect(self) -> None:
+        self.released += 1
+
+
+def test_a_sink_closed_while_its_link_opens_writes_nothing_once_it_opens() -> None:
+    # before: the worker went on to write HELLO + STATUS into the link it opened after close() had returned, a
+    # closed sink announcing itself beside the one that replaced it (a listener read its HELLO as a restart)
+    sink = SlowToOpen().start()
+    time.sleep(0.05)  # the worker waits in _connect
+    assert sink.close(timeout=0.05).state == "closed"
+    sink.gate.set()
+    assert sink._thread is not None
+    sink._thread.join(5.0)
+    assert not sink._thread.is_alive()
+    assert sink.read() == b""
+    stats = sink.stats()
+    assert (stats.connects, stats.state, sink.released) == (0, "closed", 1)  # the link opened late is let go
