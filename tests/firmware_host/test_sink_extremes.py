@@ -10,11 +10,13 @@ import time
 import pytest
 
 from firmware_host.errors import SinkConfigError
+from firmware_host.protocol.constants import U64_MAX
 from firmware_host.sinks import open_sink
 from firmware_host.sinks.backoff import BackoffPolicy
 from firmware_host.sinks.fd_write import write_within
 from firmware_host.sinks.memory_sink import MemorySink
 from firmware_host.sinks.options import SinkOptions, monotonic_us
+from firmware_host.sinks.rate import RateLimiter
 
 
 @pytest.mark.parametrize("key, value", [("backoff", "fast"), ("backoff", 0.1), ("clock_us", 5), ("clock_us", "now")])
@@ -99,3 +101,13 @@ def test_a_sink_closed_while_its_link_opens_writes_nothing_once_it_opens() -> No
     assert sink.read() == b""
     stats = sink.stats()
     assert (stats.connects, stats.state, sink.released) == (0, "closed", 1)  # the link opened late is let go
+
+
+@pytest.mark.parametrize("first_us", [0, 2**53, U64_MAX - 10**9])
+def test_a_rate_cap_holds_for_capture_stamps_near_the_top_of_their_range(first_us: int) -> None:
+    # before: the schedule was kept as a float of the stamps, which rounds to 2048 µs near 2**64: 60 fps capped at
+    # 30 sent 30.5 a second there
+    lim = RateLimiter(30.0)
+    admitted = [t for t in range(first_us, first_us + 50_000_000, 16_667) if lim.admit(t)]
+    span_s = (admitted[-1] - admitted[0]) / 1e6
+    assert 30 * span_s - 2 <= len(admitted) <= 30 * span_s + 2  # as test_rate_limiter_never_exceeds_its_cap
