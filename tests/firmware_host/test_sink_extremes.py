@@ -6,6 +6,7 @@ import os
 import resource
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
@@ -111,3 +112,17 @@ def test_a_rate_cap_holds_for_capture_stamps_near_the_top_of_their_range(first_u
     admitted = [t for t in range(first_us, first_us + 50_000_000, 16_667) if lim.admit(t)]
     span_s = (admitted[-1] - admitted[0]) / 1e6
     assert 30 * span_s - 2 <= len(admitted) <= 30 * span_s + 2  # as test_rate_limiter_never_exceeds_its_cap
+
+
+@pytest.mark.parametrize("url", [b"memory://", bytearray(b"memory://"), Path("/tmp/joints.jsonl"), 5])
+def test_a_sink_url_that_is_not_text_is_refused_naming_it(url: object) -> None:
+    # before: urlsplit's bare TypeError (bytes) or AttributeError (a Path, a number)
+    with pytest.raises(SinkConfigError) as e:
+        open_sink(url)  # type: ignore[arg-type]
+    assert e.value.field == "url" and f"not {type(url).__name__}" in str(e.value)
+
+
+def test_a_bytes_url_is_refused_without_its_password() -> None:
+    with pytest.raises(SinkConfigError) as e:
+        open_sink(b"udp://robot:hunter2@10.0.0.9:9870")  # type: ignore[arg-type]
+    assert "hunter2" not in str(e.value) and "robot:***@10.0.0.9" in str(e.value)
