@@ -1,7 +1,9 @@
 """Sinks at the extremes (session 72): keyword objects of the wrong kind, descriptors past select()'s range, a
-close() that lands while the link is still being opened, capture stamps near the top of the u64 range."""
+close() that lands while the link is still being opened, capture stamps near the top of the u64 range, a URL that
+is not text, a link lost at every frame."""
 from __future__ import annotations
 
+import logging
 import os
 import resource
 import threading
@@ -10,14 +12,16 @@ from pathlib import Path
 
 import pytest
 
-from firmware_host.errors import SinkConfigError
+from firmware_host.errors import SinkConfigError, SinkUnavailableError
 from firmware_host.protocol.constants import U64_MAX
-from firmware_host.sinks import open_sink
+from firmware_host.protocol import JointFrame
+from firmware_host.sinks import Sink, open_sink
 from firmware_host.sinks.backoff import BackoffPolicy
 from firmware_host.sinks.fd_write import write_within
 from firmware_host.sinks.memory_sink import MemorySink
 from firmware_host.sinks.options import SinkOptions, monotonic_us
 from firmware_host.sinks.rate import RateLimiter
+from tests.firmware_host.joint_stream_helpers import make_frame, wait_until
 
 
 @pytest.mark.parametrize("key, value", [("backoff", "fast"), ("backoff", 0.1), ("clock_us", 5), ("clock_us", "now")])
@@ -126,3 +130,49 @@ def test_a_bytes_url_is_refused_without_its_password() -> None:
     with pytest.raises(SinkConfigError) as e:
         open_sink(b"udp://robot:hunter2@10.0.0.9:9870")  # type: ignore[arg-type]
     assert "hunter2" not in str(e.value) and "robot:***@10.0.0.9" in str(e.value)
+
+
+class LostAtEveryFrame(Sink):
+    """A link that opens (HELLO goes out) but is lost at every frame while ``broken`` (firmware that takes the
+    announcement and fails each transfer after it)."""
+
+    def __init__(self) -> None:
+        # reopened at most every 0.2 s: far fewer times than the test's frames however slow the host
+        super().__init__("flaky://", SinkOptions(backoff=BackoffPolicy(initial_s=0.05, factor=2.0, max_s=0.2)))
+        self.broken = True
+        self.opened = 0
+
+    def _connect(self) -> None:
+        self.opened += 1
+
+    def _disconnect(self) -> None:
+        pass
+
+    def _deliver(self, frame: JointFrame, flags: int) -> None:
+        if self.broken:
+            raise SinkUnavailableError(self.url, "EIO")
+
+
+def _lines(caplog: pytest.LogCaptureFixture, level: int, words: str) -> list[str]:
+    return [r.getMessage() for r in caplog.records
+            if r.name == "firmware_host.sinks.base" and r.levelno == level and words in r.getMessage()]
+
+
+def test_a_link_lost_at_every_frame_is_logged_once_and_reopened_at_the_backoff_s_pace(
+        caplog: pytest.LogCaptureFixture) -> None:
+    # before: a "link lost" WARNING and a "connected again" INFO for every frame, the link reopened per frame
+    sink = LostAtEveryFrame()
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink.start()
+        for seq in range(60):
+            sink.send(make_frame(seq))
+            time.sleep(0.01)
+        wait_until(lambda: sink.stats().disconnects >= 3, what="three losses")
+        assert len(_lines(caplog, logging.WARNING, "link lost")) == 1
+        assert len(_lines(caplog, logging.INFO, "connected again")) == 1
+        assert sink.opened < 30  # reopened at the backoff's pace, not for each of the 60 frames
+        sink.broken = False  # the firmware takes frames again: the journal hears of it once
+        sink.send(make_frame(60))
+        wait_until(lambda: sink.stats().sent >= 1, what="a frame through")
+        wait_until(lambda: _lines(caplog, logging.INFO, "frames get through again"), what="the INFO that says so")
+    assert sink.close().state == "closed"
