@@ -379,6 +379,8 @@ class Sink(ABC):
         with self._cond:
             repeat = error == self._down_error
             self._down, self._down_error = True, error
+            if not repeat:  # the journal hears of this outage anew: its end is worth a "connected again" INFO
+                self._flapping = self._said_again = False
             self._connect_failures += 1
             self._last_error = error
             self._cond.notify_all()

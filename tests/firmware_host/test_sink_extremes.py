@@ -140,9 +140,12 @@ class LostAtEveryFrame(Sink):
         # reopened at most every 0.2 s: far fewer times than the test's frames however slow the host
         super().__init__("flaky://", SinkOptions(backoff=BackoffPolicy(initial_s=0.05, factor=2.0, max_s=0.2)))
         self.broken = True
+        self.absent = False  # unplugged: opening fails
         self.opened = 0
 
     def _connect(self) -> None:
+        if self.absent:
+            raise SinkUnavailableError(self.url, "no such device")
         self.opened += 1
 
     def _disconnect(self) -> None:
@@ -175,4 +178,22 @@ def test_a_link_lost_at_every_frame_is_logged_once_and_reopened_at_the_backoff_s
         sink.send(make_frame(60))
         wait_until(lambda: sink.stats().sent >= 1, what="a frame through")
         wait_until(lambda: _lines(caplog, logging.INFO, "frames get through again"), what="the INFO that says so")
+    assert sink.close().state == "closed"
+
+
+def test_a_flapping_link_that_then_fails_to_open_says_connected_again_when_it_opens(
+        caplog: pytest.LogCaptureFixture) -> None:
+    # the connect failure is a WARNING of its own: the journal hears of its end at INFO, as for any outage
+    sink = LostAtEveryFrame()
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink.start()
+        for seq in range(20):  # lost, reopened (INFO), lost again (DEBUG: flapping)
+            sink.send(make_frame(seq))
+            time.sleep(0.01)
+        wait_until(lambda: sink.stats().disconnects >= 2, what="two losses")
+        sink.absent = True
+        sink.send(make_frame(20))
+        wait_until(lambda: _lines(caplog, logging.WARNING, "no such device"), what="the failed open's WARNING")
+        sink.absent, sink.broken = False, False
+        wait_until(lambda: len(_lines(caplog, logging.INFO, "connected again")) == 2, what="a second INFO")
     assert sink.close().state == "closed"
