@@ -100,6 +100,7 @@ class Sink(ABC):
         self._queue: deque[list] = deque()
         self._thread: Optional[threading.Thread] = None
         self._closed = False
+        self._given_up = False  # close() waited its timeout and returned: a link opening after that is let go
         self._limiter: Optional[RateLimiter] = None
         self._warned_decimation = False
         # Counters, guarded by _cond.
@@ -309,6 +310,7 @@ class Sink(ABC):
             for _, flags in self._queue:  # a gap no frame of this sink will report now
                 self._error_flags |= Flags.DROPPED | (flags & Flags.DECIMATED)
             self._queue.clear()
+            self._given_up = True
         if self._thread is None or not self._thread.is_alive():
             self._release()
         return self.stats()
@@ -345,7 +347,7 @@ class Sink(ABC):
         try:
             self._connect()
             opened = True
-            if self._closed:  # close() came while the link opened (a slow lookup): a closed sink announces nothing
+            if self._given_up:  # close() returned while the link opened (a slow lookup): a closed sink says nothing
                 self._disconnect()
                 return
             self._on_connected()

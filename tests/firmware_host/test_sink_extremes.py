@@ -108,6 +108,17 @@ def test_a_sink_closed_while_its_link_opens_writes_nothing_once_it_opens() -> No
     assert (stats.connects, stats.state, sink.released) == (0, "closed", 1)  # the link opened late is let go
 
 
+def test_a_link_that_opens_within_close_s_timeout_still_gets_the_queued_frames() -> None:
+    # close() delivers what is queued if the link comes up in time: only one opened after it returned is let go
+    sink = SlowToOpen().start()
+    for seq in range(3):
+        sink.send(make_frame(seq))
+    threading.Timer(0.1, sink.gate.set).start()  # the lookup answers while close() waits
+    stats = sink.close(timeout=5.0)
+    assert (stats.sent, stats.dropped_close, stats.connects) == (3, 0, 1)
+    assert len(sink.read()) > 0
+
+
 @pytest.mark.parametrize("first_us", [0, 2**53, U64_MAX - 10**9])
 def test_a_rate_cap_holds_for_capture_stamps_near_the_top_of_their_range(first_us: int) -> None:
     # before: the schedule was kept as a float of the stamps, which rounds to 2048 µs near 2**64: 60 fps capped at
