@@ -124,7 +124,7 @@ class Sink(ABC):
         self._stall_logged = False  # the WARNING for this stall was written: its end gets an INFO
         # A link that opens (its HELLO goes out) but is lost again before a frame or idle write gets through is one
         # outage: a "link lost" WARNING and a "connected again" INFO once, then DEBUG until a write gets through
-        # (an INFO says so). Before, such a link logged both lines for every frame, 50 ms apart. Guarded by _cond.
+        # (an INFO says so). Before, such a link logged both lines, and was reopened, for every frame. Guarded by _cond.
         self._carried = False  # a frame or idle write got through since the last connect
         self._said_again = False  # "connected again" was logged, and no write got through since
         self._flapping = False  # lost again before a write got through: the journal waits for one that does
