@@ -12,7 +12,9 @@ Behaviour written once here:
 
 A link that cannot be (re)opened is retried forever; the journal hears of it
 once per outage (a WARNING, again only when the error changes, repeats at
-DEBUG) and ``stats().state`` says ``down`` with the error in ``last_error``.
+DEBUG) and ``stats().state`` says ``down`` with the error in ``last_error``. So is a link that opens but is lost
+again before a frame gets through (its HELLO went out, every transfer after it fails): after one "link lost" and one
+"connected again" the rest are DEBUG, it is reopened at the backoff's pace, and an INFO says when frames get through.
 
 A link that is open but whose receiver stopped reading (every write times out,
 a buffer stays full) is ``stalled`` rather than ``up`` once no frame has got
@@ -98,6 +100,7 @@ class Sink(ABC):
         self._queue: deque[list] = deque()
         self._thread: Optional[threading.Thread] = None
         self._closed = False
+        self._given_up = False  # close() waited its timeout and returned: a link opening after that is let go
         self._limiter: Optional[RateLimiter] = None
         self._warned_decimation = False
         # Counters, guarded by _cond.
@@ -119,6 +122,12 @@ class Sink(ABC):
         self._failing_since: Optional[float] = None
         self._writing_since: Optional[float] = None
         self._stall_logged = False  # the WARNING for this stall was written: its end gets an INFO
+        # A link that opens (its HELLO goes out) but is lost again before a frame or idle write gets through is one
+        # outage: a "link lost" WARNING and a "connected again" INFO once, then DEBUG until a write gets through
+        # (an INFO says so). Before, such a link logged both lines, and was reopened, for every frame. Guarded by _cond.
+        self._carried = False  # a frame or idle write got through since the last connect
+        self._said_again = False  # "connected again" was logged, and no write got through since
+        self._flapping = False  # lost again before a write got through: the journal waits for one that does
 
     # ---- hooks -------------------------------------------------------------
 
@@ -285,7 +294,8 @@ class Sink(ABC):
     def close(self, timeout: float = 1.0) -> SinkStats:
         """Stop accepting frames, deliver what is queued if the link is up, release it.
 
-        Frames still queued after ``timeout`` are counted as ``dropped_close``.
+        Frames still queued after ``timeout`` are counted as ``dropped_close``. A link still opening then (a slow
+        name lookup) is let go once open, unannounced: no HELLO from a closed sink.
         """
         with self._cond:
             if self._closed:
@@ -300,6 +310,7 @@ class Sink(ABC):
             for _, flags in self._queue:  # a gap no frame of this sink will report now
                 self._error_flags |= Flags.DROPPED | (flags & Flags.DECIMATED)
             self._queue.clear()
+            self._given_up = True
         if self._thread is None or not self._thread.is_alive():
             self._release()
         return self.stats()
@@ -328,12 +339,17 @@ class Sink(ABC):
         """Connect and announce; the link counts as up (state, ``connects``, "connected again") only once
         ``_on_connected`` went through: a port that opens but fails its first write (EIO, a udp:// route
         that is gone) is still the same outage, logged once, not an up/down flicker on every retry."""
+        if self._flapping and self._stop.wait(backoff.next_delay()):
+            return  # a link lost again before a write got through is reopened at the backoff's pace, not per frame
         opened = False
         write_error: Optional[str] = None
         started = time.monotonic()
         try:
             self._connect()
             opened = True
+            if self._given_up:  # close() returned while the link opened (a slow lookup): a closed sink says nothing
+                self._disconnect()
+                return
             self._on_connected()
         except SinkWriteError as e:  # e.g. HELLO hit a stalled endpoint: the link itself is up
             write_error = str(e)
@@ -347,14 +363,15 @@ class Sink(ABC):
             self._connected = True
             self._connects += 1
             was_down, self._down, self._down_error = self._down, False, None
+            quiet, self._carried = self._flapping, False
+            self._said_again = self._said_again or (was_down and not quiet)
             # HELLO met a receiver that does not read: the new link counts toward a stall from the start
             self._failing_since = None if write_error is None else started
             if write_error is not None:
                 self._last_error = write_error
             self._cond.notify_all()
-        if was_down:
-            _log.info("%s: connected again", self.shown)
-        backoff.reset()
+        if was_down:  # the backoff is reset once a write gets through (_got_through): a link that flaps backs off
+            _log.log(logging.DEBUG if quiet else logging.INFO, "%s: connected again", self.shown)
 
     def _connect_failed(self, e: Exception, retry_s: float) -> None:
         """Count a failed connect; log it once per outage and per new error, not on every retry
@@ -364,6 +381,8 @@ class Sink(ABC):
         with self._cond:
             repeat = error == self._down_error
             self._down, self._down_error = True, error
+            if not repeat:  # the journal hears of this outage anew: its end is worth a "connected again" INFO
+                self._flapping = self._said_again = False
             self._connect_failures += 1
             self._last_error = error
             self._cond.notify_all()
@@ -426,10 +445,28 @@ class Sink(ABC):
             self._last_error = refusing[1]
 
     def _log_link_lost(self, e: SinkUnavailableError) -> None:
-        # the error's own text starts with the URL too: the line named it twice
-        _log.warning("%s: link lost (%s); reconnecting", self.shown, e.reason)
+        """A WARNING, or DEBUG when the link was lost again before a write got through since it was said to be
+        connected again (it flaps: the journal heard of this outage)."""
+        with self._cond:
+            quiet = not self._carried and self._said_again
+            self._flapping = self._flapping or quiet
+        if quiet:
+            _log.debug("%s: link lost again before a frame got through (%s); reconnecting", self.shown, e.reason)
+        else:  # the error's own text starts with the URL too: the line named it twice
+            _log.warning("%s: link lost (%s); reconnecting", self.shown, e.reason)
 
-    def _idle(self) -> None:
+    def _got_through(self, backoff: Backoff) -> None:
+        """A frame or idle write got through: the link is proven, its backoff starts afresh, and a link that flapped
+        is said to be back (INFO)."""
+        with self._cond:
+            recovered, self._flapping = self._flapping, False
+            self._carried, self._said_again = True, False
+        backoff.reset()
+        if recovered:
+            _log.info("%s: frames get through again after the link was lost and reopened repeatedly", self.shown)
+
+    def _idle(self) -> bool:
+        """The idle hook's write; returns whether it got through whole."""
         started = self._write_started()
         wrote = failed = False
         try:
@@ -458,6 +495,7 @@ class Sink(ABC):
                     self._failing_since = None
         if wrote or failed:  # with no frame to send the idle writes are what tells of a stall, and of its end
             self._log_stall(failed=failed, what_got_through="idle writes (STATUS)")
+        return wrote
 
     def _run(self) -> None:
         backoff = Backoff(self.options.backoff)
@@ -469,8 +507,8 @@ class Sink(ABC):
                 continue
             item = self._next_frame()
             if item is None:
-                if not self._closed:
-                    self._idle()
+                if not self._closed and self._idle():
+                    self._got_through(backoff)
                 continue  # the loop's condition ends the worker once closed and drained
             frame, flags = item
             error: Optional[str] = None
@@ -503,5 +541,7 @@ class Sink(ABC):
                     self._error_flags |= Flags.DROPPED | (flags & Flags.DECIMATED)
                 self._in_flight = 0
                 self._cond.notify_all()
+            if error is None:
+                self._got_through(backoff)
             self._log_stall(failed=error is not None)
         self._release()

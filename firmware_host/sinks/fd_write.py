@@ -2,10 +2,13 @@
 
 A receiver that stops reading fills the kernel's buffer; a blocking ``write()`` would then hold the sink's
 worker for as long as the receiver stays away (for ever, for a named pipe whose reader hangs). Here each
-write waits for room with ``select()`` (no CPU spent) at most ``timeout_s`` and returns what went out.
+write waits for room with ``poll()`` (no CPU spent) at most ``timeout_s`` and returns what went out. (Until
+session 72 ``select()``, which refuses a descriptor of 1024 or more with a ValueError: in a process with that many
+open, every frame of a full port failed as a backend bug, a traceback in the journal per frame.)
 """
 from __future__ import annotations
 
+import math
 import os
 import select
 import time
@@ -28,6 +31,12 @@ def write_within(fd: int, data: bytes, timeout_s: float) -> int:
         remaining = deadline - time.monotonic()
         if done == len(data) or remaining <= 0:
             return done
-        _, ready, _ = select.select([], [fd], [], remaining)
-        if not ready:
+        if not _wait_writable(fd, remaining):
             return done
+
+
+def _wait_writable(fd: int, timeout_s: float) -> bool:
+    """Whether ``fd`` took room (or an error, which the next write raises) within ``timeout_s``."""
+    poller = select.poll()
+    poller.register(fd, select.POLLOUT)
+    return bool(poller.poll(max(1, math.ceil(timeout_s * 1000))))  # milliseconds, rounded up: never a busy loop

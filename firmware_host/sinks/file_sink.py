@@ -14,7 +14,7 @@ DROPPED. (Until session 62 the sink wrote on into the removed file, ``up``, ever
 on any disk.)
 
 A named pipe (or /dev/stdout on one) whose reader stops reading fills the pipe's buffer: each write then waits
-for room (select, no CPU) at most ``write_timeout_ms`` (default 100, at most 60000), and the frame is dropped
+for room (poll, no CPU) at most ``write_timeout_ms`` (default 100, at most 60000), and the frame is dropped
 and counted, the sink ``stalled`` once that lasts ``stall_s``; a line cut short by the timeout is ended by the
 next write's leading newline. (Blocking writes held the worker for as long as the reader stayed away, the sink
 reading ``up``.) A regular file's write is never cut short by it.

@@ -85,6 +85,31 @@ def camera_names(raw: str) -> list[str]:
     return names
 
 
+def backoff_policy(url: str, value: object) -> BackoffPolicy:
+    """The ``backoff`` keyword: a :class:`BackoffPolicy`, None for the default. Anything else reached the worker,
+    whose first line died on it (a sink ``connecting`` for ever, its frames queued and never sent).
+
+    :raises SinkConfigError: keyed ``backoff``."""
+    if value is None:
+        return BackoffPolicy()
+    if not isinstance(value, BackoffPolicy):
+        raise SinkConfigError(url, "backoff", value, f"must be a BackoffPolicy, not {type(value).__name__}")
+    return value
+
+
+def clock_function(url: str, value: object) -> Callable[[], int]:
+    """The ``clock_us`` keyword: a callable returning microseconds, None for :func:`monotonic_us`. Anything else
+    failed every connect as a backend bug, retried for ever.
+
+    :raises SinkConfigError: keyed ``clock_us``."""
+    if value is None:
+        return monotonic_us
+    if not callable(value):
+        raise SinkConfigError(url, "clock_us", value, f"must be a function returning microseconds, not "
+                                                      f"{type(value).__name__}")
+    return value  # type: ignore[return-value]
+
+
 @dataclass(frozen=True)
 class SinkOptions:
     queue: int = 4
@@ -127,8 +152,8 @@ class SinkOptions:
             rig_id=u.take("rig_id", rig_id_text, cls.rig_id, kw),
             cameras=tuple(u.take("cameras", camera_names, (), kw)),
             joint_count=u.take("joint_count", positive_int, cls.joint_count, kw),
-            backoff=kw.pop("backoff", BackoffPolicy()),
-            clock_us=kw.pop("clock_us", monotonic_us),
+            backoff=backoff_policy(u.url, kw.pop("backoff", None)),
+            clock_us=clock_function(u.url, kw.pop("clock_us", None)),
             scene_flags=scene_flags_mask(u.url, kw.pop("scene_flags", SCENE_FLAGS)),
         )
         problem = camera_names_problem(opts.cameras)  # a keyword's tuple of names: the query's are checked above

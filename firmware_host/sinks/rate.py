@@ -42,7 +42,10 @@ class RateLimiter:
             raise ValueError(f"max_fps={max_fps!r}: must be a finite number >= {MIN_MAX_FPS:.6g} (a frame an hour)")
         self.max_fps = max_fps
         self._interval_us = None if max_fps is None else 1e6 / max_fps
-        self._tat: Optional[float] = None  # theoretical arrival time of the next frame
+        # Theoretical arrival time of the next frame, in µs since _origin_us (the stamp that began the schedule): a
+        # float of the stamp itself rounds to 2048 µs near the top of the u64 range, and 60 fps capped at 30 sent 30.5.
+        self._tat: Optional[float] = None
+        self._origin_us = 0
         self._last_us: Optional[int] = None  # capture time of the last frame admitted
 
     def admit(self, t_us: int) -> bool:
@@ -53,11 +56,12 @@ class RateLimiter:
         # looked like a clock a second back, restarted the schedule and went out too (4x the cap at 0.1 fps).
         if self._tat is None or self._last_us is None or t_us < self._last_us - 1_000_000:
             # First frame, or the capture clock jumped back by more than a second (a new session).
-            self._tat = float(t_us) + self._interval_us
+            self._origin_us, self._tat = t_us, self._interval_us
             self._last_us = t_us
             return True
-        if t_us < self._tat - self._interval_us / 2:
+        t = t_us - self._origin_us  # exact; as a float exact for 285 years of schedule (2**53 µs)
+        if t < self._tat - self._interval_us / 2:
             return False
-        self._tat = max(self._tat, float(t_us)) + self._interval_us
+        self._tat = max(self._tat, float(t)) + self._interval_us
         self._last_us = t_us
         return True

@@ -9,7 +9,7 @@ Unplug shows up as a failed write (EIO on Linux); the port is then reopened by
 path with backoff, so use a stable path such as /dev/serial/by-id/....
 
 A peer that stops reading fills the tty's buffer: each write then waits for
-room (select, no CPU) at most ``write_timeout_ms`` and the rest of the frame is
+room (poll, no CPU) at most ``write_timeout_ms`` and the rest of the frame is
 dropped and counted. The next write starts with a 0x00 delimiter, so the
 receiver discards the cut frame (one decode error) and decodes the next one.
 pyserial's own ``write()`` is not used: on a full buffer it retries without
@@ -147,7 +147,7 @@ class SerialSink(ProtocolSink):
     def _write_within(self, data: bytes, timeout_s: float) -> int:
         """Write ``data`` as far as the port takes it within ``timeout_s``; returns the bytes written.
 
-        Waits for room with select(), so a peer that stops reading costs no CPU.
+        Waits for room with poll(), so a peer that stops reading costs no CPU.
         :raises SinkUnavailableError: the port is gone (EIO after an unplug).
         """
         if self._ser is None:

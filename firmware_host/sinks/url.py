@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import ipaddress
 import math
+import os
 import socket
 from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
@@ -88,7 +89,20 @@ def unquote_part(url: str, field: str, raw: str) -> str:
         raise SinkConfigError(url, e.field, e.value, e.why) from None
 
 
+def _refuse_non_text(url: object) -> None:
+    """:class:`SinkConfigError` (field ``url``) for a URL that is not a ``str``: bytes or a ``Path`` raised a bare
+    TypeError or AttributeError from ``urlsplit``. Named as text, so that its password is redacted like any URL's."""
+    if isinstance(url, str):
+        return
+    as_text = url.decode("utf-8", "backslashreplace") if isinstance(url, (bytes, bytearray)) else str(url)
+    hint = {bytes: ": decode it first", bytearray: ": decode it first"}.get(type(url), "")
+    if isinstance(url, os.PathLike):
+        hint = ": a file is file:///path/to/joints.jsonl (Path.as_uri())"
+    raise SinkConfigError(as_text, "url", as_text, f"must be text (str), not {type(url).__name__}{hint}")
+
+
 def parse_url(url: str) -> SinkUrl:
+    _refuse_non_text(url)
     try:
         parts = urlsplit(url)
     except (ValueError, TypeError) as e:  # e.g. "Invalid IPv6 URL": an unclosed [

@@ -1,0 +1,210 @@
+"""Sinks at the extremes (session 72): keyword objects of the wrong kind, descriptors past select()'s range, a
+close() that lands while the link is still being opened, capture stamps near the top of the u64 range, a URL that
+is not text, a link lost at every frame."""
+from __future__ import annotations
+
+import logging
+import os
+import resource
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from firmware_host.errors import SinkConfigError, SinkUnavailableError
+from firmware_host.protocol.constants import U64_MAX
+from firmware_host.protocol import JointFrame
+from firmware_host.sinks import Sink, open_sink
+from firmware_host.sinks.backoff import BackoffPolicy
+from firmware_host.sinks.fd_write import write_within
+from firmware_host.sinks.memory_sink import MemorySink
+from firmware_host.sinks.options import SinkOptions, monotonic_us
+from firmware_host.sinks.rate import RateLimiter
+from tests.firmware_host.joint_stream_helpers import make_frame, wait_until
+
+
+@pytest.mark.parametrize("key, value", [("backoff", "fast"), ("backoff", 0.1), ("clock_us", 5), ("clock_us", "now")])
+def test_a_backoff_or_clock_keyword_of_the_wrong_kind_is_refused_naming_it(key: str, value: object) -> None:
+    # before: taken as given; a backoff the worker's first line died on, a clock that failed every connect
+    with pytest.raises(SinkConfigError) as e:
+        open_sink("memory://", **{key: value})
+    assert (e.value.field, e.value.value) == (key, value)
+    assert f"invalid {key}={value!r}" in str(e.value)
+
+
+def test_backoff_and_clock_keywords_given_none_take_their_defaults() -> None:
+    # None counts as not given, as for every other keyword (SinkUrl.take); backoff=None killed the worker
+    sink = open_sink("memory://", backoff=None, clock_us=None)
+    try:
+        assert sink.wait_connected(5.0), sink.stats()
+        assert sink.options.backoff == BackoffPolicy()
+        assert sink.options.clock_us is monotonic_us
+    finally:
+        sink.close()
+
+
+#: A descriptor number select() refuses (FD_SETSIZE is 1024): a daemon with that many files open gets such ones.
+HIGH_FD = 1500
+
+
+def _high_descriptor(fd: int) -> int:
+    """A duplicate of ``fd`` numbered past select()'s FD_SETSIZE (1024); skips where the limit allows none."""
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft <= HIGH_FD:
+        pytest.skip(f"RLIMIT_NOFILE {soft}: no descriptor {HIGH_FD} in this process")
+    return os.dup2(fd, HIGH_FD)
+
+
+def test_a_full_pipe_on_a_descriptor_past_1024_times_out_rather_than_failing() -> None:
+    # before: select() raised ValueError ("filedescriptor out of range"), not OSError: the serial and file sinks
+    # counted every frame of a full port as a backend bug, a traceback in the journal for each
+    r, w = os.pipe()
+    os.set_blocking(w, False)
+    high = _high_descriptor(w)
+    try:
+        while True:  # fill the pipe: no reader takes anything
+            try:
+                os.write(high, b"x" * 4096)
+            except BlockingIOError:
+                break
+        started = time.monotonic()
+        assert write_within(high, b"frame", 0.05) == 0
+        assert 0.04 <= time.monotonic() - started < 2.0  # waited its timeout for room, no longer
+        os.read(r, 65536)  # the reader takes some: room again
+        assert write_within(high, b"frame", 0.05) == len(b"frame")
+    finally:
+        for fd in (r, w, high):
+            os.close(fd)
+
+
+class SlowToOpen(MemorySink):
+    """A link whose open waits for ``gate`` (a name server slow to answer); counts its releases."""
+
+    def __init__(self) -> None:
+        super().__init__("memory://slow", 1 << 20, SinkOptions())
+        self.gate = threading.Event()
+        self.released = 0
+
+    def _connect(self) -> None:
+        self.gate.wait()
+
+    def _disconnect(self) -> None:
+        self.released += 1
+
+
+def test_a_sink_closed_while_its_link_opens_writes_nothing_once_it_opens() -> None:
+    # before: the worker went on to write HELLO + STATUS into the link it opened after close() had returned, a
+    # closed sink announcing itself beside the one that replaced it (a listener read its HELLO as a restart)
+    sink = SlowToOpen().start()
+    time.sleep(0.05)  # the worker waits in _connect
+    assert sink.close(timeout=0.05).state == "closed"
+    sink.gate.set()
+    assert sink._thread is not None
+    sink._thread.join(5.0)
+    assert not sink._thread.is_alive()
+    assert sink.read() == b""
+    stats = sink.stats()
+    assert (stats.connects, stats.state, sink.released) == (0, "closed", 1)  # the link opened late is let go
+
+
+def test_a_link_that_opens_within_close_s_timeout_still_gets_the_queued_frames() -> None:
+    # close() delivers what is queued if the link comes up in time: only one opened after it returned is let go
+    sink = SlowToOpen().start()
+    for seq in range(3):
+        sink.send(make_frame(seq))
+    threading.Timer(0.1, sink.gate.set).start()  # the lookup answers while close() waits
+    stats = sink.close(timeout=5.0)
+    assert (stats.sent, stats.dropped_close, stats.connects) == (3, 0, 1)
+    assert len(sink.read()) > 0
+
+
+@pytest.mark.parametrize("first_us", [0, 2**53, U64_MAX - 10**9])
+def test_a_rate_cap_holds_for_capture_stamps_near_the_top_of_their_range(first_us: int) -> None:
+    # before: the schedule was kept as a float of the stamps, which rounds to 2048 µs near 2**64: 60 fps capped at
+    # 30 sent 30.5 a second there
+    lim = RateLimiter(30.0)
+    admitted = [t for t in range(first_us, first_us + 50_000_000, 16_667) if lim.admit(t)]
+    span_s = (admitted[-1] - admitted[0]) / 1e6
+    assert 30 * span_s - 2 <= len(admitted) <= 30 * span_s + 2  # as test_rate_limiter_never_exceeds_its_cap
+
+
+@pytest.mark.parametrize("url", [b"memory://", bytearray(b"memory://"), Path("/tmp/joints.jsonl"), 5])
+def test_a_sink_url_that_is_not_text_is_refused_naming_it(url: object) -> None:
+    # before: urlsplit's bare TypeError (bytes) or AttributeError (a Path, a number)
+    with pytest.raises(SinkConfigError) as e:
+        open_sink(url)  # type: ignore[arg-type]
+    assert e.value.field == "url" and f"not {type(url).__name__}" in str(e.value)
+
+
+def test_a_bytes_url_is_refused_without_its_password() -> None:
+    with pytest.raises(SinkConfigError) as e:
+        open_sink(b"udp://robot:hunter2@10.0.0.9:9870")  # type: ignore[arg-type]
+    assert "hunter2" not in str(e.value) and "robot:***@10.0.0.9" in str(e.value)
+
+
+class LostAtEveryFrame(Sink):
+    """A link that opens (HELLO goes out) but is lost at every frame while ``broken`` (firmware that takes the
+    announcement and fails each transfer after it)."""
+
+    def __init__(self) -> None:
+        # reopened at most every 0.2 s: far fewer times than the test's frames however slow the host
+        super().__init__("flaky://", SinkOptions(backoff=BackoffPolicy(initial_s=0.05, factor=2.0, max_s=0.2)))
+        self.broken = True
+        self.absent = False  # unplugged: opening fails
+        self.opened = 0
+
+    def _connect(self) -> None:
+        if self.absent:
+            raise SinkUnavailableError(self.url, "no such device")
+        self.opened += 1
+
+    def _disconnect(self) -> None:
+        pass
+
+    def _deliver(self, frame: JointFrame, flags: int) -> None:
+        if self.broken:
+            raise SinkUnavailableError(self.url, "EIO")
+
+
+def _lines(caplog: pytest.LogCaptureFixture, level: int, words: str) -> list[str]:
+    return [r.getMessage() for r in caplog.records
+            if r.name == "firmware_host.sinks.base" and r.levelno == level and words in r.getMessage()]
+
+
+def test_a_link_lost_at_every_frame_is_logged_once_and_reopened_at_the_backoff_s_pace(
+        caplog: pytest.LogCaptureFixture) -> None:
+    # before: a "link lost" WARNING and a "connected again" INFO for every frame, the link reopened per frame
+    sink = LostAtEveryFrame()
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink.start()
+        for seq in range(60):
+            sink.send(make_frame(seq))
+            time.sleep(0.01)
+        wait_until(lambda: sink.stats().disconnects >= 3, what="three losses")
+        assert len(_lines(caplog, logging.WARNING, "link lost")) == 1
+        assert len(_lines(caplog, logging.INFO, "connected again")) == 1
+        assert sink.opened < 30  # reopened at the backoff's pace, not for each of the 60 frames
+        sink.broken = False  # the firmware takes frames again: the journal hears of it once
+        sink.send(make_frame(60))
+        wait_until(lambda: sink.stats().sent >= 1, what="a frame through")
+        wait_until(lambda: _lines(caplog, logging.INFO, "frames get through again"), what="the INFO that says so")
+    assert sink.close().state == "closed"
+
+
+def test_a_flapping_link_that_then_fails_to_open_says_connected_again_when_it_opens(
+        caplog: pytest.LogCaptureFixture) -> None:
+    # the connect failure is a WARNING of its own: the journal hears of its end at INFO, as for any outage
+    sink = LostAtEveryFrame()
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink.start()
+        for seq in range(20):  # lost, reopened (INFO), lost again (DEBUG: flapping)
+            sink.send(make_frame(seq))
+            time.sleep(0.01)
+        wait_until(lambda: sink.stats().disconnects >= 2, what="two losses")
+        sink.absent = True
+        sink.send(make_frame(20))
+        wait_until(lambda: _lines(caplog, logging.WARNING, "no such device"), what="the failed open's WARNING")
+        sink.absent, sink.broken = False, False
+        wait_until(lambda: len(_lines(caplog, logging.INFO, "connected again")) == 2, what="a second INFO")
+    assert sink.close().state == "closed"
