@@ -437,13 +437,16 @@ def test_sigterm_ends_the_listener_with_the_totals_as_ctrl_c_does():
                             env={**os.environ, "PYTHONPATH": str(repo)}, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
-        assert "JOINTS/s" in proc.stdout.readline()  # its first summary line: listening, handler installed
+        assert "JOINTS/s" in _line_within(proc.stdout, 60).decode()  # its first summary: listening, handler installed
         with open_sink(f"udp://127.0.0.1:{number}?queue=16", backoff=FAST_BACKOFF, rig_id="bench") as sink:
             for seq in (0, 1, 3):
                 sink.send(make_frame(seq))
-        time.sleep(0.5)  # the three datagrams read
+        # not a fixed 0.5 s: the summary that counts the gap seq 3 leaves says the last datagram was read
+        deadline = time.monotonic() + 60
+        while "; 1 seq gaps" not in (line := _line_within(proc.stdout, 60).decode()):
+            assert line and time.monotonic() < deadline, f"no summary counted the gap before seq 3 (last {line!r})"
         proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=10)
+        _, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
