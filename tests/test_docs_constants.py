@@ -41,12 +41,12 @@ from firmware_host.daemon.sandbox import HOME_FOLDERS, PRIVATE_TMP_FOLDERS
 from firmware_host.daemon.service import MAX_FAILED_RUNS, SIZE_MISMATCH_OPENS
 from firmware_host.listen import LATE_WINDOW
 from firmware_host.protocol.constants import MAX_JOINTS, NO_FRAME_SEQ
+from firmware_host.protocol.quantize import _I16_MAX, _I16_MIN, _MM_PER_M
 from firmware_host.sinks.options import MAX_QUEUE, MAX_STALL_S, MAX_STATUS_S, MIN_STALL_S, MIN_STATUS_S, SinkOptions
 from firmware_host.sinks.rate import MIN_MAX_FPS
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
 from firmware_host.sinks.udp_sink import MIN_RESOLVE_S, REFUSAL_QUIET_S, RESOLVE_S
 from firmware_host.sinks.url import MAX_HOST_NAME
-from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_time import DEFAULT_FPS, JUMP_FRAMES, NEW_TIMELINE_FRAMES, STEPS_KEPT
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
@@ -120,7 +120,7 @@ def _doc(name: str) -> str:
     ("docs/protocol.md", f"`CLOSE_DRAIN_S` ({CLOSE_DRAIN_S:g} s)"),
     ("docs/daemon.md", f"fixes the threshold at {MMAP_THRESHOLD / (1 << 20):g} MiB"),
     ("docs/recording-format.md", f"twice real time; at least {MIN_SPEED:g})"),
-    ("docs/protocol.md", f"a coordinate beyond ±{MAX_COORD_M:.3f} m"),
+    ("docs/protocol.md", f"falls outside {_I16_MIN / _MM_PER_M:.3f} m to {_I16_MAX / _MM_PER_M:.3f} m"),
     ("docs/runtime.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} degrees"),
     ("docs/novel-view.md", f"more than {AUTO_ORBIT_MIN_ANGLE_DEG:g} degrees apart (`AUTO_ORBIT_MIN_ANGLE_DEG`)"),
     ("docs/novel-view.md", f"within {PARALLEL_AXES_DEG:g} degrees (`PARALLEL_AXES_DEG`)"),

@@ -15,20 +15,35 @@ import numpy as np
 from firmware_host.protocol.constants import UV_SCALE
 
 _I16_MIN, _I16_MAX = -32768, 32767
+_MM_PER_M = 1000.0
+
+
+def _rounded(values: np.ndarray, scale: float) -> np.ndarray:
+    """``values`` in wire units (mm, quarter pixels), rounded to the nearest one; call within np.errstate (a value
+    past about 1e305 overflows to inf)."""
+    return np.rint(np.asarray(values, np.float64) * scale)
+
+
+def _fit_int16(scaled: np.ndarray) -> np.ndarray:
+    """Per row: whether every rounded value is a number within int16 (NaN and inf are not)."""
+    return ((scaled >= _I16_MIN) & (scaled <= _I16_MAX)).all(axis=1)
+
+
+def xyz_fits_the_wire(xyz_m: np.ndarray) -> np.ndarray:
+    """(J,3) rig-frame metres -> (J,) whether each joint's coordinates fit a JOINTS message once rounded to the
+    nearest millimetre (-32.768 m and 32.7674 m do, 32.7676 m does not; NaN and inf do not): the encoder's own
+    rule, for a sink that must leave out what the wire would mark missing (vmc://)."""
+    with np.errstate(invalid="ignore", over="ignore"):  # inf and NaN fail the bound: nothing to warn
+        return _fit_int16(_rounded(xyz_m, _MM_PER_M))
 
 
 def _quantise(values: np.ndarray, conf: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     # A coordinate (or confidence) past about 1e305 overflows to inf when scaled; the rules below make it
     # missing (or 255), so numpy's "overflow encountered" warning told nothing, and under -W error it raised.
     with np.errstate(invalid="ignore", over="ignore"):
-        scaled = np.rint(values.astype(np.float64) * scale)
+        scaled = _rounded(values, scale)
         conf = conf.astype(np.float64)
-        missing = (
-            np.isnan(scaled).any(axis=1)
-            | ~(conf > 0.0)  # also true for NaN confidence
-            | (scaled < _I16_MIN).any(axis=1)
-            | (scaled > _I16_MAX).any(axis=1)
-        )
+        missing = ~_fit_int16(scaled) | ~(conf > 0.0)  # NaN confidence fails "> 0" too
         q = np.where(missing[:, None], 0.0, scaled).astype(np.int16)
         c = np.clip(np.rint(conf * 255.0), 1.0, 255.0)
         c = np.where(missing, 0.0, c).astype(np.uint8)
@@ -38,7 +53,7 @@ def _quantise(values: np.ndarray, conf: np.ndarray, scale: float) -> tuple[np.nd
 def quantise_joints_3d(joints_3d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(J,4) metres + confidence -> (xyz_mm int16 (J,3), conf uint8 (J,), missing bool (J,))."""
     j = np.asarray(joints_3d)
-    return _quantise(j[:, :3], j[:, 3], 1000.0)
+    return _quantise(j[:, :3], j[:, 3], _MM_PER_M)
 
 
 def quantise_joints_2d(joints_2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

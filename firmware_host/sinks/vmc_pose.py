@@ -34,9 +34,9 @@ How each bone is solved
   (swing only: BODY_25 has no joint that shows the twist of a limb).
 - Head: a frame from the ears (right) and ear-centre -> nose (forward).
 - Hands: identity local rotation (BODY_25 has no hand joints).
-A bone whose joints are missing (NaN, confidence <= 0, or a coordinate beyond
-``MAX_COORD_M``, as on the binary wire) is left out, so receivers keep its last pose;
-its children are left out too. Without Hips no bone is sent.
+A bone whose joints are missing (NaN, confidence <= 0, or a coordinate the binary
+wire cannot carry: ``xyz_fits_the_wire``, the encoder's own rule) is left out, so
+receivers keep its last pose; its children are left out too. Without Hips no bone is sent.
 
 Local position of each bone is its anchor joint relative to its parent's
 anchor, in the parent's rotated frame, so forward kinematics from Root/Pos
@@ -50,6 +50,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from firmware_host.protocol.quantize import xyz_fits_the_wire
 from ghnerf_runtime.body25 import JOINT_INDEX as J
 
 # ---- frames and quaternions (batch-first: (..., 3) points, (..., 4) quaternions) ----
@@ -221,12 +222,6 @@ class VmcPose:
     bones: dict[str, BonePose]  # only the bones that could be solved, parents first
 
 
-#: Farthest a joint may be from the rig's origin on any axis, in metres: the binary protocol's reach (i16
-#: millimetres, docs/protocol.md). A joint further out is missing here too: it reached the receiver as a root
-#: or bone offset of 1e20 m, and past float32's range (3.4e38) python-osc raised OverflowError on every frame.
-MAX_COORD_M = 32.767
-
-
 class _Joints:
     """Unity-frame joint lookup that knows which joints are missing."""
 
@@ -236,9 +231,10 @@ class _Joints:
         if j.ndim != 2 or j.shape[1] != 4 or j.shape[0] < len(J):
             raise ValueError(f"joints_3d must have shape (25, 4) for BODY_25, got {j.shape}")
         self.p = rig_to_unity(j[:, :3])
-        with np.errstate(invalid="ignore"):
-            # NaN and inf fail the bound too
-            self.ok = (np.abs(self.p) <= MAX_COORD_M).all(axis=1) & (j[:, 3] > 0)
+        # A joint the binary wire cannot carry is missing here too, by the encoder's own rule on the rig frame's
+        # coordinates (its range is not symmetric): it reached the receiver as a root or bone offset of 1e20 m,
+        # and past float32's range (3.4e38) python-osc raised OverflowError on every frame.
+        self.ok = xyz_fits_the_wire(j[:, :3]) & (j[:, 3] > 0)
 
     def get(self, *names: str) -> Optional[list[np.ndarray]]:
         idx = [J[n] for n in names]

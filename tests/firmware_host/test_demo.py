@@ -85,14 +85,29 @@ def test_streams_estimated_joints_and_prints_the_summary(tmp_path, capsys, sim_u
 
 @needs_model
 def test_a_slow_estimator_skips_to_the_newest_pair(tmp_path, capsys, sim_url, monkeypatch):
-    original = Estimator.estimate
+    original, open_rig, estimates = Estimator.estimate, drivers.create_rig_source, []
 
     def slow(self, *args, **kwargs):
         time.sleep(0.1)  # three frame periods at 30 fps
-        return original(self, *args, **kwargs)
+        estimates.append(original(self, *args, **kwargs))
+        return estimates[-1]
+
+    def ending_after_five_estimates(url):
+        # the run ends on a count, not on --seconds: 1 s gave a loaded host two estimates, too few to judge
+        source = open_rig(url)
+        read = source.read
+
+        def read_until_five(timeout_s):
+            if len(estimates) >= 5:
+                raise drivers.EndOfStream("five estimates")
+            return read(timeout_s=timeout_s)
+
+        source.read = read_until_five
+        return source
 
     monkeypatch.setattr(Estimator, "estimate", slow)
-    rc = demo.main(["--url", sim_url, "--seconds", "1.0", "--out", str(tmp_path), "--model-dir", str(MODELS)])
+    monkeypatch.setattr(drivers, "create_rig_source", ending_after_five_estimates)
+    rc = demo.main(["--url", sim_url, "--seconds", "120", "--out", str(tmp_path), "--model-dir", str(MODELS)])
     out = capsys.readouterr().out
     assert rc == 0, out
     delivered, estimated, skipped = _summary(out)

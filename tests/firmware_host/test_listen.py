@@ -437,13 +437,16 @@ def test_sigterm_ends_the_listener_with_the_totals_as_ctrl_c_does():
                             env={**os.environ, "PYTHONPATH": str(repo)}, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
-        assert "JOINTS/s" in proc.stdout.readline()  # its first summary line: listening, handler installed
+        assert "JOINTS/s" in _line_within(proc.stdout, 60).decode()  # its first summary: listening, handler installed
         with open_sink(f"udp://127.0.0.1:{number}?queue=16", backoff=FAST_BACKOFF, rig_id="bench") as sink:
             for seq in (0, 1, 3):
                 sink.send(make_frame(seq))
-        time.sleep(0.5)  # the three datagrams read
+        # not a fixed 0.5 s: the summary that counts the gap seq 3 leaves says the last datagram was read
+        deadline = time.monotonic() + 60
+        while "; 1 seq gaps" not in (line := _line_within(proc.stdout, 60).decode()):
+            assert line and time.monotonic() < deadline, f"no summary counted the gap before seq 3 (last {line!r})"
         proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=10)
+        _, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -545,15 +548,19 @@ def test_the_readme_s_receiver_names_the_ipv6_socket_a_udp_sink_to_an_ipv6_host_
 
 
 _LISTEN_INTO_A_STALLED_PIPE = """
-import os, sys
+import os, select, sys
 from firmware_host import listen
 from firmware_host.sinks import open_sink
 from ghnerf_runtime.cli.sigterm import sigterm_as_interrupt
 from tests.firmware_host.joint_stream_helpers import make_frame
 
 class Port:  # a frame on every read: the pipe fills at once and the listener blocks in a write
-    seq = 0
+    seq, said = 0, False
     def read(self, timeout):
+        if not self.said and not select.select([], [sys.stdout], [], 0)[1]:
+            # said from inside listen(): the stop handlers are in place and a write is about to block
+            print("full", file=sys.stderr, flush=True)
+            self.said = True
         sink = open_sink("memory://", rig_id="pipe")
         sink.send(make_frame(self.seq))
         sink.close()
@@ -568,6 +575,40 @@ if sys.argv[1] == "killed":  # as SIGKILL would after the stop: the exit's flush
 """
 
 
+def _line_within(pipe, seconds: float) -> bytes:
+    """The next line a child writes to the unbuffered ``pipe``, or what came of it in ``seconds``: a child that
+    never says it fails the test instead of hanging it."""
+    import select
+    import time
+
+    line, deadline = b"", time.monotonic() + seconds
+    while not line.endswith(b"\n"):
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([pipe], [], [], left)[0]:
+            break
+        byte = os.read(pipe.fileno(), 1)  # one at a time: the next line stays in the pipe for the next call
+        if not byte:
+            break
+        line += byte
+    return line
+
+
+def _wait_blocked_in_a_pipe_write(pid: int, seconds: float) -> None:
+    """Until ``pid`` sleeps in a write to a full pipe, as Linux's /proc/PID/wchan names it (pipe_write,
+    anon_pipe_write); where there is no /proc the child's own word that its pipe is full is what there is."""
+    import time
+
+    deadline, wchan = time.monotonic() + seconds, ""
+    while "pipe" not in wchan:
+        assert time.monotonic() < deadline, f"the listener never blocked in a write to its pipe (wchan {wchan!r})"
+        time.sleep(0.01)
+        try:
+            with open(f"/proc/{pid}/wchan") as f:
+                wchan = f.read()
+        except FileNotFoundError:
+            return
+
+
 @pytest.mark.parametrize("end", ["exits", "killed"])
 @pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
 def test_a_stop_inside_a_write_blocked_on_a_full_pipe_leaves_no_half_json_line(signum, end):
@@ -580,14 +621,16 @@ def test_a_stop_inside_a_write_blocked_on_a_full_pipe_leaves_no_half_json_line(s
     import signal
     import subprocess
     import sys
-    import time
 
     child = subprocess.Popen([sys.executable, "-c", _LISTEN_INTO_A_STALLED_PIPE, end], stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, cwd=os.getcwd())
-    time.sleep(1.5)  # the pipe full, the listener blocked in a write
-    child.send_signal(getattr(signal, signum))
+                             stderr=subprocess.PIPE, cwd=os.getcwd(), bufsize=0)
     try:
-        assert child.stderr.readline() == b"stopped\n"  # the stop came while its write was blocked
+        # not a fixed sleep: on a loaded host the child was still importing when the signal came (SIGTERM's
+        # default action killed it, SIGINT's KeyboardInterrupt ended it with a traceback)
+        assert _line_within(child.stderr, 60) == b"full\n"
+        _wait_blocked_in_a_pipe_write(child.pid, 60)
+        child.send_signal(getattr(signal, signum))
+        assert _line_within(child.stderr, 60) == b"stopped\n"  # the stop came while its write was blocked
         data = child.stdout.read()
     finally:
         child.kill()

@@ -176,6 +176,28 @@ def test_a_joint_beyond_the_wire_s_reach_is_missing_not_a_dropped_frame() -> Non
     assert [a for a, _ in no_hips] == ["/VMC/Ext/OK", "/VMC/Ext/T"] and no_hips[0][1][3] == 0  # tracking lost
 
 
+# (rig axis, metres, on the wire): the encoder rounds to the nearest mm and keeps what fits int16, -32768 to 32767
+_AT_THE_WIRE_S_REACH = [
+    (0, -32.768, True), (0, 32.7674, True), (0, 32.7676, False), (0, -32.7686, False),
+    (1, -32.768, True), (1, 32.768, False),  # rig y, flipped in Unity: the rule is the rig frame's
+    (2, 32.767, True), (2, -32.7691, False),
+]
+
+
+@pytest.mark.parametrize(("axis", "value", "on_the_wire"), _AT_THE_WIRE_S_REACH)
+def test_a_joint_is_missing_at_the_wire_s_reach_exactly_as_the_encoder_marks_it(axis, value, on_the_wire) -> None:
+    # Session 72: |x| > 32.767 m made a joint missing "as on the binary wire", but the wire carries -32.768 m and
+    # 32.7674 m (rounded to 32767 mm): the VMC avatar lost an arm the JOINTS stream still had.
+    from firmware_host.protocol.quantize import quantise_joints_3d
+
+    joints = t_pose_rig()
+    joints[J["LWrist"], axis] = value
+    assert quantise_joints_3d(joints)[2][J["LWrist"]] == (not on_the_wire)  # the encoder's own verdict
+    (msgs,), _ = _receive([make_frame(0, joints=joints)])
+    bones = [p[0] for a, p in msgs if a == "/VMC/Ext/Bone/Pos"]
+    assert ("LeftLowerArm" in bones) == on_the_wire and "LeftUpperArm" in bones
+
+
 # ---- facing= and mirror= (vmc_view) --------------------------------------------------------------
 
 def _rotation_matrix(q: np.ndarray) -> np.ndarray:
