@@ -595,18 +595,27 @@ def _line_within(pipe, seconds: float) -> bytes:
 
 def _wait_blocked_in_a_pipe_write(pid: int, seconds: float) -> None:
     """Until ``pid`` sleeps in a write to a full pipe, as Linux's /proc/PID/wchan names it (pipe_write,
-    anon_pipe_write); where there is no /proc the child's own word that its pipe is full is what there is."""
+    anon_pipe_write). A kernel that hides wchan (it reads "0") leaves the process state: asleep for a whole second
+    after its word that the pipe is full, the write is what it sleeps in; where there is no /proc that word is all."""
     import time
 
-    deadline, wchan = time.monotonic() + seconds, ""
-    while "pipe" not in wchan:
-        assert time.monotonic() < deadline, f"the listener never blocked in a write to its pipe (wchan {wchan!r})"
-        time.sleep(0.01)
+    deadline, asleep_since = time.monotonic() + seconds, None
+    while True:
         try:
             with open(f"/proc/{pid}/wchan") as f:
                 wchan = f.read()
+            with open(f"/proc/{pid}/stat") as f:
+                state = f.read().rsplit(")", 1)[1].split()[0]
         except FileNotFoundError:
             return
+        if "pipe" in wchan:
+            return
+        now = time.monotonic()
+        asleep_since = (asleep_since or now) if wchan in ("", "0") and state == "S" else None
+        if asleep_since is not None and now - asleep_since >= 1.0:
+            return
+        assert now < deadline, f"the listener never blocked in a write to its pipe (wchan {wchan!r}, state {state})"
+        time.sleep(0.01)
 
 
 @pytest.mark.parametrize("end", ["exits", "killed"])
