@@ -32,6 +32,7 @@ from drivers.backends.replay import MENDED_RUN, MIN_SPEED
 from drivers.url import whole_number
 from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.calibration_watch import CLEAR_RATIO
+from firmware_host.daemon.config import MAX_CONFIG_FILE_BYTES
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
     CALIBRATION_WINDOW, DAEMON_PATH_KEYS
 from firmware_host.daemon.measure_floor import DEFAULT_PAIRS, READS_PER_PAIR
@@ -241,6 +242,8 @@ def _doc(name: str) -> str:
     # session 54: the floor check's default, quoted where it is explained and in the config table
     ("docs/calibration.md", f"`health.calibration_max_floor_m` ({CALIBRATION_MAX_FLOOR_M:g} m)"),
     ("docs/daemon.md", f"| `health.calibration_max_floor_m` | {CALIBRATION_MAX_FLOOR_M:g} |"),
+    # session 72: the daemon's config file cap
+    ("docs/daemon.md", f"A file over {MAX_CONFIG_FILE_BYTES >> 20} MiB (`MAX_CONFIG_FILE_BYTES`"),
     # session 57: the floor check's standing foot (a setting since), its default, range and --measure-floor's pairs
     ("docs/calibration.md", f"`estimator.joints3d.foot_standing_m` ({FOOT_STANDING_M:g} m by default"),
     ("docs/daemon.md", f"`estimator.joints3d.foot_standing_m` ({FOOT_STANDING_M:g} m, bare feet)"),

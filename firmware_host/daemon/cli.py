@@ -326,11 +326,15 @@ class _StopOnSignal:
     ever, and systemd would SIGKILL the daemon with its sinks unflushed. (Handing ``set`` to a new thread
     is no better: starting one takes threading's own locks.) So the handler only writes the signal's
     number to a pipe, which takes no lock; the thread reads it, logs it and sets ``stop``, which wakes
-    the loop's waits at once. A context manager: the handlers are put back and the pipe closed on exit.
+    the loop's waits at once. A context manager: the handlers are put back (``ignore_after``: set to ignore the
+    signals, for a process on its way out) and the pipe closed on exit.
     """
 
-    def __init__(self, stop: threading.Event, signums: Sequence[int] = (signal.SIGTERM, signal.SIGINT)) -> None:
+    def __init__(self, stop: threading.Event, signums: Sequence[int] = (signal.SIGTERM, signal.SIGINT), *,
+                 ignore_after: bool = False) -> None:
         self._stop = stop
+        # on exit, ignore the signals rather than put back what they replaced: for the process's own stop
+        self._ignore_after = ignore_after
         #: the first signal received (set before ``stop``), for a caller whose exit status names it
         self.received: int | None = None
         self._signums = tuple(signums)
@@ -347,7 +351,7 @@ class _StopOnSignal:
 
     def __exit__(self, *exc: object) -> None:
         for signum, previous in self._previous.items():
-            signal.signal(signum, previous)  # type: ignore[arg-type]
+            signal.signal(signum, signal.SIG_IGN if self._ignore_after else previous)  # type: ignore[arg-type]
         os.close(self._write_fd)  # the thread reads the end of the pipe and returns
         self._thread.join(timeout=5)
         os.close(self._read_fd)
@@ -527,7 +531,10 @@ def _main(argv: Sequence[str] | None) -> int:
         timer.daemon = True
         timer.start()
     try:
-        with _StopOnSignal(stop):
+        # In ghnerf-daemon itself, a stop signal after the stop (systemctl stop, then kill; Ctrl-C twice) finds the
+        # handlers ignoring it as the process exits: put back, their defaults killed it (143) or raised
+        # KeyboardInterrupt in the exit. SIG_IGN outlives the interpreter's finalization; a Python handler does not.
+        with _StopOnSignal(stop, ignore_after=early_sighup.is_daemon_process()):
             return daemon.run(stop)
     except DaemonStartError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)

@@ -72,6 +72,10 @@ CALIBRATION_MAX_FLOOR_M = 0.05
 #: health.calibration_window.
 CALIBRATION_MAX_MIRROR = 0.2
 
+#: A config file holds a few KB; a bigger file is another one given as the config (as a rig file's cap,
+#: ``ghnerf_runtime.rig_file.MAX_RIG_FILE_BYTES``).
+MAX_CONFIG_FILE_BYTES = 1 << 20
+
 
 class DaemonConfigError(FirmwareHostError, ValueError):
     """The daemon's config is invalid; ``key`` is the dotted path (``"rig.read_timeout_s"``)."""
@@ -517,6 +521,7 @@ def load_daemon_config(path: str | os.PathLike) -> DaemonConfig:
 def load_daemon_config_noting_paths(path: str | os.PathLike) -> tuple[DaemonConfig, frozenset[str]]:
     """:func:`load_daemon_config`, and the paths that were relative in the file, as read from its folder (absolute):
     an error naming one of them may say where it was read from, one naming a path written absolute must not."""
+    _refuse_unlike_a_config_file(path)
     written = read_json_file(path, lambda message: DaemonConfigError(message, key=str(path)), "the config file")
     try:
         refuse_impossible_paths(written)
@@ -530,6 +535,22 @@ def load_daemon_config_noting_paths(path: str | os.PathLike) -> tuple[DaemonConf
     except DaemonConfigError as e:
         raise DaemonConfigError(str(e), key=str(path)) from None
     return config, _made_absolute(written, data)
+
+
+def _refuse_unlike_a_config_file(path: str | os.PathLike) -> None:
+    """:class:`DaemonConfigError` keyed with ``path`` for a file bigger than any config (``MAX_CONFIG_FILE_BYTES``) or a
+    device, told by ``stat`` before the read: read whole, another file given as the config (a take's frames,
+    ``/dev/zero``) took the memory at the start and at every reload, or its read never ended. A pipe (``--config
+    <(...)``) is read as before; a path that cannot be stat'ed is left to the read, which says why."""
+    try:
+        info = os.stat(path)
+    except (OSError, ValueError):
+        return
+    if stat.S_ISCHR(info.st_mode) or stat.S_ISBLK(info.st_mode):
+        raise DaemonConfigError("a device, not a config file", key=str(path))
+    if stat.S_ISREG(info.st_mode) and info.st_size > MAX_CONFIG_FILE_BYTES:
+        raise DaemonConfigError(f"the file holds {info.st_size} bytes, over the {MAX_CONFIG_FILE_BYTES} (1 MiB, "
+                                "MAX_CONFIG_FILE_BYTES) a config file may: not the config file?", key=str(path))
 
 
 def refuse_impossible_paths(data: Any) -> None:

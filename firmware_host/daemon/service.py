@@ -362,11 +362,16 @@ class Daemon:
             self._status_claim.release()
 
     def _run_claimed(self, stop: threading.Event) -> int:
-        self._load_model()
-        self._check_estimator()
-        self._check_sinks()
+        try:
+            self._load_model()
+            self._check_estimator()
+            self._check_sinks()
+        except Exception as e:
+            self._report_unstarted(f"stopped by {type(e).__name__}: {e}")
+            raise
         if stop.is_set():  # SIGTERM while the model loaded: never report ready
             self.notifier.notify(stopping=1)
+            self._report_unstarted(None)
             return 0
         self.watchdog.start()
         self.notifier.notify(ready=1, status="started: opening the rig", mainpid=os.getpid())
@@ -403,6 +408,14 @@ class Daemon:
         finally:
             self._shutdown()
         return 0
+
+    def _report_unstarted(self, why: Optional[str]) -> None:
+        """The status file of a start that ended before the loop (``why``: the error, None for a stop): it outlives
+        the process (RuntimeDirectoryPreserve=yes), and left unwritten it showed the previous run's report, its pid
+        and state, as if that one had been the last."""
+        self.health.last_error = why
+        self.health.enter(State.STOPPING)
+        self._tick(force=True, tell_systemd=False)
 
     # ------------------------------------------------------------------ model
     def _load_model(self) -> None:

@@ -539,6 +539,34 @@ def test_sigterm_while_waiting_for_the_rig_stops_at_once(tmp_path):
     assert json.loads(status.read_text())["state"] == "stopping"
 
 
+@needs_model
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_stop_signals_repeated_until_it_exits_still_end_it_with_status_0(tmp_path, signum):
+    """A second stop signal (``systemctl stop`` then ``kill``, Ctrl-C twice) may land after the daemon put back the
+    handlers it replaced, as the process exits: SIGTERM's default action then killed it (status 143 where the
+    docs say 0) and SIGINT raised KeyboardInterrupt in the interpreter's exit. Signals sent until it has exited."""
+    sock, proc, status = _daemon_waiting_for_an_absent_rig(tmp_path, "-m", "firmware_host.daemon.cli")
+    notes: list[dict[str, str]] = []
+    sent = 0
+    try:
+        _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("waiting") for n in ns),
+                     "waiting for the rig")
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and time.monotonic() < deadline:
+            proc.send_signal(signum)
+            sent += 1
+            time.sleep(0.001)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        sock.close()
+    assert sent >= 2  # (one alone is test_sigterm_while_waiting_for_the_rig_stops_at_once)
+    assert proc.returncode == 0, err
+    assert f"{signal.Signals(signum).name} received: stopping" in err and "Traceback" not in err
+    assert json.loads(status.read_text())["state"] == "stopping"
+
+
 # ------------------------------------------------------------------ SIGHUP during the start
 # SIGHUP's default action kills, and systemd (Restart=on-failure) counts a death by SIGHUP as clean: a
 # reload landing while the daemon still imports, reads its config or loads its model must not kill it.

@@ -675,3 +675,35 @@ def test_check_config_wants_the_files_of_a_part_turned_on(tmp_path):
     with pytest.raises(DaemonConfigError, match=r"^estimator\.novel_view\.painter"):
         check_config(cfg(session={"model_dir": str(models), "precision": "fp32"},
                          novel_view={"enabled": True, "painter": "on"}))
+
+
+_LOAD_UNDER_A_MEMORY_CAP = """
+import resource, sys
+from firmware_host.daemon.config import DaemonConfigError, load_daemon_config
+resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))  # a device's memory, and this host's kept safe
+try:
+    load_daemon_config(sys.argv[1])
+except DaemonConfigError as e:
+    print(e)
+"""
+
+
+@pytest.mark.parametrize("what", ["big file", "device"])
+def test_a_file_far_bigger_than_a_config_or_a_device_is_refused_unread(tmp_path, what):
+    """Another file given as the config (a take's frames, /dev/zero) was read whole, at the start and at every reload:
+    the memory ran out (MemoryError, exit 1: restarted into the same read) or, a device, the read never ended. As
+    a rig file, a config file holds at most 1 MiB; the size is known before the read."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "frames.jsonl"
+    if what == "big file":
+        with open(path, "wb") as fh:
+            fh.truncate(4 << 30)  # sparse: no disk written
+    else:
+        path = Path("/dev/zero")
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    done = subprocess.run([sys.executable, "-c", _LOAD_UNDER_A_MEMORY_CAP, str(path)], capture_output=True,
+                          text=True, timeout=120, env=env, cwd=Path(__file__).resolve().parents[3])
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    assert done.stdout.startswith(f"{path}: ") and ("1 MiB" in done.stdout or "device" in done.stdout), done.stdout

@@ -718,6 +718,38 @@ def test_stopped_while_loading_never_reports_ready(tmp_path):
         sock.close()
 
 
+_PREVIOUS_RUN = {"state": "running", "pid": 1, "last_error": None}  # a run killed by the watchdog left this
+
+
+def test_a_start_that_fails_before_the_loop_says_why_in_the_status_file(tmp_path):
+    """The status file outlives the process (RuntimeDirectoryPreserve=yes) to say what happened; a start that exited 2
+    before the loop (a model that does not load) left the previous run's report there, "running" under a dead pid."""
+    broken = tmp_path / "models"
+    broken.mkdir()
+    (broken / "encoder.onnx").write_bytes(b"\x08\x07garbage")
+    status = tmp_path / "status.json"
+    status.write_text(json.dumps(_PREVIOUS_RUN))
+    cfg = daemon_config_from_dict({"rig": {"url": "sim://"}, "sinks": ["memory://"],
+                                   "estimator": {"session": {"model_dir": str(broken)}},
+                                   "health": {"status_file": str(status)}})
+    with pytest.raises(DaemonStartError):
+        Daemon(cfg, notifier=SystemdNotifier({})).run(threading.Event())
+    report = json.loads(status.read_text())
+    assert report["pid"] == os.getpid() and report["state"] == "stopping"
+    assert report["last_error"].startswith("stopped by DaemonStartError: ") and str(broken) in report["last_error"]
+
+
+def test_a_stop_while_loading_leaves_this_runs_report(tmp_path):
+    status = tmp_path / "status.json"
+    status.write_text(json.dumps(_PREVIOUS_RUN))
+    stop = threading.Event()
+    stop.set()  # SIGTERM arrived while the model loaded
+    assert Daemon(_config({"url": "sim://"}, tmp_path), notifier=SystemdNotifier({})).run(stop) == 0
+    report = json.loads(status.read_text())
+    assert report["pid"] == os.getpid() and report["state"] == "stopping" and report["last_error"] is None
+    assert report["rig"]["opens"] == 0
+
+
 class _StopWhenReady(SystemdNotifier):
     """Sets ``stop`` as the daemon reports ready: it logs its start, then stops without opening the rig."""
 
