@@ -15,6 +15,8 @@ once per outage (a WARNING, again only when the error changes, repeats at
 DEBUG) and ``stats().state`` says ``down`` with the error in ``last_error``. So is a link that opens but is lost
 again before a frame gets through (its HELLO went out, every transfer after it fails): after one "link lost" and one
 "connected again" the rest are DEBUG, it is reopened at the backoff's pace, and an INFO says when frames get through.
+An outage ends when a write gets through, not when the link opens: a board that resets at every transfer (opens,
+takes HELLO, is lost, is absent while it boots) logs its failed open once.
 
 A link that is open but whose receiver stopped reading (every write times out,
 a buffer stays full) is ``stalled`` rather than ``up`` once no frame has got
@@ -110,7 +112,8 @@ class Sink(ABC):
         self._connected = False
         self._connects = self._connect_failures = self._disconnects = 0
         self._last_error: Optional[str] = None
-        # The error of the current outage (None while up): a repeat of it is not logged again.
+        # The error of the current outage logged last: a repeat of it is not logged again. Kept through a link that
+        # opens but carries nothing (a board that resets at every transfer), None once a write gets through.
         self._down = False
         self._down_error: Optional[str] = None
         # Gap reasons not yet attached to a frame (see protocol Flags): decimation
@@ -362,7 +365,7 @@ class Sink(ABC):
         with self._cond:
             self._connected = True
             self._connects += 1
-            was_down, self._down, self._down_error = self._down, False, None
+            was_down, self._down = self._down, False  # _down_error is kept until a write gets through
             quiet, self._carried = self._flapping, False
             self._said_again = self._said_again or (was_down and not quiet)
             # HELLO met a receiver that does not read: the new link counts toward a stall from the start
@@ -460,7 +463,7 @@ class Sink(ABC):
         is said to be back (INFO)."""
         with self._cond:
             recovered, self._flapping = self._flapping, False
-            self._carried, self._said_again = True, False
+            self._carried, self._said_again, self._down_error = True, False, None
         backoff.reset()
         if recovered:
             _log.info("%s: frames get through again after the link was lost and reopened repeatedly", self.shown)

@@ -208,3 +208,36 @@ def test_a_flapping_link_that_then_fails_to_open_says_connected_again_when_it_op
         sink.absent, sink.broken = False, False
         wait_until(lambda: len(_lines(caplog, logging.INFO, "connected again")) == 2, what="a second INFO")
     assert sink.close().state == "closed"
+
+
+class ResetAtEveryFrame(LostAtEveryFrame):
+    """A board that resets at every transfer (a brown-out): it opens, takes the HELLO, is lost at the frame, and
+    is absent at the next open while it boots, then opens again."""
+
+    def _connect(self) -> None:
+        self.absent = not self.absent  # booting after the reset it took: every other open finds no device
+        super()._connect()
+
+    def _deliver(self, frame: JointFrame, flags: int) -> None:
+        self.absent = False
+        super()._deliver(frame, flags)
+
+
+def test_a_board_that_resets_at_every_frame_logs_its_failed_open_once(caplog: pytest.LogCaptureFixture) -> None:
+    # before: the open that connected again (its HELLO went out) forgot the outage's error, so each boot's failed
+    # open was a new WARNING, and the open after it a new "connected again" INFO: two lines per reset, for ever
+    sink = ResetAtEveryFrame()
+    sink.absent = True  # the first open finds the board
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink.start()
+        for seq in range(40):
+            sink.send(make_frame(seq))
+            time.sleep(0.01)
+        wait_until(lambda: sink.stats().connect_failures >= 4, timeout=30.0, what="four failed opens")
+        assert len(_lines(caplog, logging.WARNING, "no such device")) == 1
+        assert len(_lines(caplog, logging.INFO, "connected again")) == 1
+        sink.broken = False  # the board takes frames again: the outage ends, the journal hears of it
+        wait_until(lambda: sink.stats().connected, timeout=30.0, what="the board open")
+        sink.send(make_frame(40))
+        wait_until(lambda: _lines(caplog, logging.INFO, "frames get through again"), timeout=30.0, what="the INFO")
+    assert sink.close().state == "closed"
