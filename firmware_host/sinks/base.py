@@ -298,7 +298,8 @@ class Sink(ABC):
         """Stop accepting frames, deliver what is queued if the link is up, release it.
 
         Frames still queued after ``timeout`` are counted as ``dropped_close``. A link still opening then (a slow
-        name lookup) is let go once open, unannounced: no HELLO from a closed sink.
+        name lookup) is let go once open, unannounced: no HELLO from a closed sink; an open that fails then is neither
+        logged nor counted.
         """
         with self._cond:
             if self._closed:
@@ -359,6 +360,8 @@ class Sink(ABC):
         except Exception as e:  # SinkUnavailableError, or a backend bug: retry later either way
             if opened:
                 self._disconnect()  # never marked connected, so _release() would not
+            if self._given_up:  # close() returned meanwhile: a closed sink retries nothing, and says so nowhere
+                return
             self._connect_failed(e, backoff.policy.max_s)
             self._stop.wait(backoff.next_delay())
             return

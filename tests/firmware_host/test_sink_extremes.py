@@ -85,11 +85,14 @@ class SlowToOpen(MemorySink):
         super().__init__("memory://slow", 1 << 20, SinkOptions())
         self.gate = threading.Event()
         self.opening = threading.Event()  # the worker is in _connect
+        self.lookup_fails = False  # the open fails once the gate opens
         self.released = 0
 
     def _connect(self) -> None:
         self.opening.set()
         self.gate.wait()
+        if self.lookup_fails:
+            raise SinkUnavailableError(self.url, "cannot resolve slow:9870")
 
     def _disconnect(self) -> None:
         self.released += 1
@@ -109,6 +112,26 @@ def test_a_sink_closed_while_its_link_opens_writes_nothing_once_it_opens() -> No
     assert sink.read() == b""
     stats = sink.stats()
     assert (stats.connects, stats.state, sink.released) == (0, "closed", 1)  # the link opened late is let go
+
+
+def test_a_sink_closed_while_its_link_opens_says_nothing_when_the_open_fails(
+        caplog: pytest.LogCaptureFixture) -> None:
+    # before: the open that failed after close() had returned was logged as a WARNING "retrying at least every 2 s"
+    # and counted, for a sink that retries nothing: it is closed
+    sink = SlowToOpen()
+    sink.lookup_fails = True
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink.start()
+        assert sink.opening.wait(30.0)
+        closed = sink.close(timeout=0.05)
+        sink.gate.set()
+        assert sink._thread is not None
+        sink._thread.join(30.0)
+        assert not sink._thread.is_alive()
+    assert [r.getMessage() for r in caplog.records if r.levelno >= logging.INFO] == []
+    stats = sink.stats()
+    assert (stats.connect_failures, stats.last_error, stats.state) == (0, None, "closed") and stats == closed
+    assert sink.released == 0  # never opened: nothing to let go
 
 
 def test_a_link_that_opens_within_close_s_timeout_still_gets_the_queued_frames() -> None:
