@@ -9,6 +9,7 @@ import resource
 import threading
 import time
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 
@@ -48,15 +49,29 @@ def test_backoff_and_clock_keywords_given_none_take_their_defaults() -> None:
 HIGH_FD = 1500
 
 
+@pytest.fixture
+def high_fd_allowed() -> Iterator[None]:
+    """RLIMIT_NOFILE's soft limit raised past HIGH_FD for the test where the hard limit allows it, then restored:
+    a soft limit of 1024 is the common default, and the test was skipped there. Skips where the hard limit is lower."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft == resource.RLIM_INFINITY or soft > HIGH_FD:
+        yield
+        return
+    if hard != resource.RLIM_INFINITY and hard <= HIGH_FD:
+        pytest.skip(f"RLIMIT_NOFILE hard limit {hard}: no descriptor {HIGH_FD} in this process")
+    resource.setrlimit(resource.RLIMIT_NOFILE, (HIGH_FD + 1, hard))
+    try:
+        yield
+    finally:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+
+
 def _high_descriptor(fd: int) -> int:
-    """A duplicate of ``fd`` numbered past select()'s FD_SETSIZE (1024); skips where the limit allows none."""
-    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
-    if soft <= HIGH_FD:
-        pytest.skip(f"RLIMIT_NOFILE {soft}: no descriptor {HIGH_FD} in this process")
+    """A duplicate of ``fd`` numbered past select()'s FD_SETSIZE (1024)."""
     return os.dup2(fd, HIGH_FD)
 
 
-def test_a_full_pipe_on_a_descriptor_past_1024_times_out_rather_than_failing() -> None:
+def test_a_full_pipe_on_a_descriptor_past_1024_times_out_rather_than_failing(high_fd_allowed: None) -> None:
     # before: select() raised ValueError ("filedescriptor out of range"), not OSError: the serial and file sinks
     # counted every frame of a full port as a backend bug, a traceback in the journal for each
     r, w = os.pipe()
