@@ -16,7 +16,8 @@ DEBUG) and ``stats().state`` says ``down`` with the error in ``last_error``. So 
 again before a frame gets through (its HELLO went out, every transfer after it fails): after one "link lost" and one
 "connected again" the rest are DEBUG, it is reopened at the backoff's pace, and an INFO says when frames get through.
 An outage ends when a write gets through, not when the link opens: a board that resets at every transfer (opens,
-takes HELLO, is lost, is absent while it boots) logs its failed open once.
+takes HELLO, is lost, is absent while it boots) logs its failed open once. A link whose stall was logged is no flap:
+its loss is a WARNING, and so is its failed open.
 
 A link that is open but whose receiver stopped reading (every write times out,
 a buffer stays full) is ``stalled`` rather than ``up`` once no frame has got
@@ -452,10 +453,13 @@ class Sink(ABC):
 
     def _log_link_lost(self, e: SinkUnavailableError) -> None:
         """A WARNING, or DEBUG when the link was lost again before a write got through since it was said to be
-        connected again (it flaps: the journal heard of this outage)."""
+        connected again (it flaps: the journal heard of this outage). A link whose stall was logged meanwhile is no
+        flap: the journal's last word was the stall, so its loss, and its failed opens, are a new outage's."""
         with self._cond:
-            quiet = not self._carried and self._said_again
-            self._flapping = self._flapping or quiet
+            quiet = not self._carried and self._said_again and not self._stall_logged
+            self._flapping = quiet  # (a flapping link is quiet, unless it stalled: then it is told anew)
+            if not quiet:  # told anew: a failed open after it is too, even with the error of the outage before
+                self._down_error = None
         if quiet:
             _log.debug("%s: link lost again before a frame got through (%s); reconnecting", self.shown, e.reason)
         else:  # the error's own text starts with the URL too: the line named it twice

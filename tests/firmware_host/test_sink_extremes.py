@@ -13,7 +13,7 @@ from typing import Iterator
 
 import pytest
 
-from firmware_host.errors import SinkConfigError, SinkUnavailableError
+from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.constants import U64_MAX
 from firmware_host.protocol import JointFrame
 from firmware_host.sinks import Sink, open_sink
@@ -292,4 +292,38 @@ def test_a_board_that_resets_at_every_frame_logs_its_failed_open_once(caplog: py
         wait_until(lambda: sink.stats().connected, timeout=30.0, what="the board open")
         sink.send(make_frame(40))
         wait_until(lambda: _lines(caplog, logging.INFO, "frames get through again"), timeout=30.0, what="the INFO")
+    assert sink.close().state == "closed"
+
+
+class StallsThenUnplugged(LostAtEveryFrame):
+    """A board that opens, takes the HELLO and then reads nothing (every write times out) until it is unplugged."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.options = SinkOptions(backoff=self.options.backoff, stall_s=0.1)
+        self.unplugged = False
+
+    def _deliver(self, frame: JointFrame, flags: int) -> None:
+        if self.unplugged:
+            self.absent = True
+            raise SinkUnavailableError(self.url, "EIO")
+        raise SinkWriteError(self.url, "write timed out")
+
+
+def test_a_link_lost_after_a_stall_is_an_outage_the_journal_hears_of(caplog: pytest.LogCaptureFixture) -> None:
+    # before: a link reopened after an outage that then stalled (the stall's WARNING logged) and was unplugged was
+    # taken for one that flaps: its "link lost" was DEBUG, and so was the failed open, the same error as the outage
+    # before: the journal's last word was the stall while the sink was down
+    sink = StallsThenUnplugged()
+    sink.absent = True  # unplugged at start: the open fails, then the board is plugged in
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink.start()
+        wait_until(lambda: _lines(caplog, logging.WARNING, "no such device"), timeout=30.0, what="the failed open")
+        sink.absent = False
+        wait_until(lambda: _lines(caplog, logging.INFO, "connected again"), timeout=30.0, what="connected again")
+        _feed(sink, lambda: _lines(caplog, logging.WARNING, "stalled"), what="the stall's WARNING")
+        sink.unplugged = True
+        _feed(sink, lambda: sink.stats().connect_failures >= 3, what="failed opens after the unplug")
+        assert len(_lines(caplog, logging.WARNING, "link lost")) == 1
+        assert len(_lines(caplog, logging.WARNING, "no such device")) == 2
     assert sink.close().state == "closed"
