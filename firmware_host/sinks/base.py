@@ -132,6 +132,9 @@ class Sink(ABC):
         self._carried = False  # a frame or idle write got through since the last connect
         self._said_again = False  # "connected again" was logged, and no write got through since
         self._flapping = False  # lost again before a write got through: the journal waits for one that does
+        # The worker's own (no lock): a flapping link was just lost, its reopen waits the backoff first (a failed
+        # open waits its own: both, and a board back from its boot was looked for every 2 * max_s).
+        self._reopen_waits = False
 
     # ---- hooks -------------------------------------------------------------
 
@@ -344,7 +347,8 @@ class Sink(ABC):
         """Connect and announce; the link counts as up (state, ``connects``, "connected again") only once
         ``_on_connected`` went through: a port that opens but fails its first write (EIO, a udp:// route
         that is gone) is still the same outage, logged once, not an up/down flicker on every retry."""
-        if self._flapping and self._stop.wait(backoff.next_delay()):
+        reopen_waits, self._reopen_waits = self._reopen_waits, False
+        if reopen_waits and self._stop.wait(backoff.next_delay()):
             return  # a link lost again before a write got through is reopened at the backoff's pace, not per frame
         opened = False
         write_error: Optional[str] = None
@@ -460,6 +464,7 @@ class Sink(ABC):
             self._flapping = quiet  # (a flapping link is quiet, unless it stalled: then it is told anew)
             if not quiet:  # told anew: a failed open after it is too, even with the error of the outage before
                 self._down_error = None
+        self._reopen_waits = quiet
         if quiet:
             _log.debug("%s: link lost again before a frame got through (%s); reconnecting", self.shown, e.reason)
         else:  # the error's own text starts with the URL too: the line named it twice

@@ -9,7 +9,7 @@ import resource
 import threading
 import time
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, Optional
 
 import pytest
 
@@ -293,6 +293,42 @@ def test_a_board_that_resets_at_every_frame_logs_its_failed_open_once(caplog: py
         sink.send(make_frame(40))
         wait_until(lambda: _lines(caplog, logging.INFO, "frames get through again"), timeout=30.0, what="the INFO")
     assert sink.close().state == "closed"
+
+
+
+class CountingStop(threading.Event):
+    """The sink's stop event, counting the worker's backoff waits on it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.waits = 0
+
+    def wait(self, timeout: Optional[float] = None) -> bool:
+        self.waits += 1
+        return super().wait(timeout)
+
+
+def test_a_board_that_resets_at_every_frame_waits_one_backoff_before_each_open() -> None:
+    # before: a failed open waited its backoff, and the open after it waited another (the link flapped): a board
+    # back from its boot was looked for every 2 * max_s, not "at least every max_s" as the WARNING says
+    sink = ResetAtEveryFrame()
+    sink.absent = True  # the first open finds the board
+    stop = CountingStop()
+    sink._stop = stop
+    waits_at_open: list[int] = []
+    connect = sink._connect
+
+    def counted_connect() -> None:
+        waits_at_open.append(stop.waits)
+        connect()
+
+    sink._connect = counted_connect  # type: ignore[method-assign]
+    sink.start()
+    _feed(sink, lambda: len(waits_at_open) >= 10, what="ten opens")
+    sink.close()
+    # the first two opens are the first and the one right after the link's first loss; then one wait before each
+    steps = [b - a for a, b in zip(waits_at_open[2:], waits_at_open[3:10])]
+    assert steps == [1] * len(steps), waits_at_open
 
 
 class StallsThenUnplugged(LostAtEveryFrame):
