@@ -15,6 +15,9 @@ once per outage (a WARNING, again only when the error changes, repeats at
 DEBUG) and ``stats().state`` says ``down`` with the error in ``last_error``. So is a link that opens but is lost
 again before a frame gets through (its HELLO went out, every transfer after it fails): after one "link lost" and one
 "connected again" the rest are DEBUG, it is reopened at the backoff's pace, and an INFO says when frames get through.
+An outage ends when a write gets through, not when the link opens: a board that resets at every transfer (opens,
+takes HELLO, is lost, is absent while it boots) logs its failed open once. A link whose stall was logged is no flap:
+its loss is a WARNING, and so is its failed open.
 
 A link that is open but whose receiver stopped reading (every write times out,
 a buffer stays full) is ``stalled`` rather than ``up`` once no frame has got
@@ -110,7 +113,8 @@ class Sink(ABC):
         self._connected = False
         self._connects = self._connect_failures = self._disconnects = 0
         self._last_error: Optional[str] = None
-        # The error of the current outage (None while up): a repeat of it is not logged again.
+        # The error of the current outage logged last: a repeat of it is not logged again. Kept through a link that
+        # opens but carries nothing (a board that resets at every transfer), None once a write gets through.
         self._down = False
         self._down_error: Optional[str] = None
         # Gap reasons not yet attached to a frame (see protocol Flags): decimation
@@ -128,6 +132,9 @@ class Sink(ABC):
         self._carried = False  # a frame or idle write got through since the last connect
         self._said_again = False  # "connected again" was logged, and no write got through since
         self._flapping = False  # lost again before a write got through: the journal waits for one that does
+        # The worker's own (no lock): a flapping link was just lost, its reopen waits the backoff first (a failed
+        # open waits its own: both, and a board back from its boot was looked for every 2 * max_s).
+        self._reopen_waits = False
 
     # ---- hooks -------------------------------------------------------------
 
@@ -295,7 +302,8 @@ class Sink(ABC):
         """Stop accepting frames, deliver what is queued if the link is up, release it.
 
         Frames still queued after ``timeout`` are counted as ``dropped_close``. A link still opening then (a slow
-        name lookup) is let go once open, unannounced: no HELLO from a closed sink.
+        name lookup) is let go once open, unannounced: no HELLO from a closed sink; an open that fails then is neither
+        logged nor counted.
         """
         with self._cond:
             if self._closed:
@@ -339,7 +347,8 @@ class Sink(ABC):
         """Connect and announce; the link counts as up (state, ``connects``, "connected again") only once
         ``_on_connected`` went through: a port that opens but fails its first write (EIO, a udp:// route
         that is gone) is still the same outage, logged once, not an up/down flicker on every retry."""
-        if self._flapping and self._stop.wait(backoff.next_delay()):
+        reopen_waits, self._reopen_waits = self._reopen_waits, False
+        if reopen_waits and self._stop.wait(backoff.next_delay()):
             return  # a link lost again before a write got through is reopened at the backoff's pace, not per frame
         opened = False
         write_error: Optional[str] = None
@@ -356,13 +365,15 @@ class Sink(ABC):
         except Exception as e:  # SinkUnavailableError, or a backend bug: retry later either way
             if opened:
                 self._disconnect()  # never marked connected, so _release() would not
+            if self._given_up:  # close() returned meanwhile: a closed sink retries nothing, and says so nowhere
+                return
             self._connect_failed(e, backoff.policy.max_s)
             self._stop.wait(backoff.next_delay())
             return
         with self._cond:
             self._connected = True
             self._connects += 1
-            was_down, self._down, self._down_error = self._down, False, None
+            was_down, self._down = self._down, False  # _down_error is kept until a write gets through
             quiet, self._carried = self._flapping, False
             self._said_again = self._said_again or (was_down and not quiet)
             # HELLO met a receiver that does not read: the new link counts toward a stall from the start
@@ -446,10 +457,14 @@ class Sink(ABC):
 
     def _log_link_lost(self, e: SinkUnavailableError) -> None:
         """A WARNING, or DEBUG when the link was lost again before a write got through since it was said to be
-        connected again (it flaps: the journal heard of this outage)."""
+        connected again (it flaps: the journal heard of this outage). A link whose stall was logged meanwhile is no
+        flap: the journal's last word was the stall, so its loss, and its failed opens, are a new outage's."""
         with self._cond:
-            quiet = not self._carried and self._said_again
-            self._flapping = self._flapping or quiet
+            quiet = not self._carried and self._said_again and not self._stall_logged
+            self._flapping = quiet  # (a flapping link is quiet, unless it stalled: then it is told anew)
+            if not quiet:  # told anew: a failed open after it is too, even with the error of the outage before
+                self._down_error = None
+        self._reopen_waits = quiet
         if quiet:
             _log.debug("%s: link lost again before a frame got through (%s); reconnecting", self.shown, e.reason)
         else:  # the error's own text starts with the URL too: the line named it twice
@@ -460,7 +475,7 @@ class Sink(ABC):
         is said to be back (INFO)."""
         with self._cond:
             recovered, self._flapping = self._flapping, False
-            self._carried, self._said_again = True, False
+            self._carried, self._said_again, self._down_error = True, False, None
         backoff.reset()
         if recovered:
             _log.info("%s: frames get through again after the link was lost and reopened repeatedly", self.shown)
