@@ -236,7 +236,7 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
     evenly between their neighbours, where the other cameras (``others``: their rows in recorded order) say so
     (:func:`_mend_runs`). A camera's first and last frames have one neighbour: mended one step from it where the
     other cameras say so (:func:`_bad_end`)."""
-    mended = _mend_runs(mine, stamps, others)  # first: the lone test takes a run's first stamp (back, then ahead)
+    mended = _mend_runs(rows, mine, stamps, others)  # first: the lone test takes a run's first (back, then ahead)
     for before, here, after in zip(mine, mine[1:], mine[2:]):
         if stamps[before] <= stamps[after] and not stamps[before] <= stamps[here] <= stamps[after]:
             mended.append((here, stamps[here]))
@@ -256,13 +256,17 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
                     recorded, stamps[first], len(mended))
 
 
-def _mend_runs(mine: list[int], stamps: dict[int, int], others: list[list[int]]) -> list[tuple[int, int]]:
+def _mend_runs(rows: list[FrameRow], mine: list[int], stamps: dict[int, int],
+               others: list[list[int]]) -> list[tuple[int, int]]:
     """Mend runs of 2 to ``MENDED_RUN`` stamps in a row out of line with the frames either side, those two in line
-    with each other: each run's stamps spread evenly between them, where the other cameras confirm the old
-    timeline (:func:`_run_is_bad`). Returns the rows mended with their recorded stamps. A reset stays on the new
-    timeline and a pause goes on from it, so neither has a frame back in line after it."""
+    with each other and over a frame period apart (this camera's or the others', the shorter): each run's stamps
+    spread evenly between them, where the other cameras confirm the old timeline (:func:`_run_is_bad`). Returns
+    the rows mended with their recorded stamps. A reset stays on the new timeline and a pause goes on from it, so
+    neither has a frame back in line after it; nor has a reset back two to three frames, but its frame after next
+    lands within a period of the frame before it (session 72: two frames were squeezed in there)."""
     mended: list[tuple[int, int]] = []
     elsewhere: list[int] | None = None  # the other cameras' stamps, sorted once a run is found
+    period_ns = 0  # the frame period, with them
     for length in range(2, MENDED_RUN + 1):
         for start in range(1, len(mine) - length):
             before, run, after = mine[start - 1], mine[start:start + length], mine[start + length]
@@ -271,7 +275,10 @@ def _mend_runs(mine: list[int], stamps: dict[int, int], others: list[list[int]])
                 continue
             if elsewhere is None:
                 elsewhere = sorted(stamps[i] for theirs in others for i in theirs)
-            if _run_is_bad([stamps[i] for i in run], low, high, elsewhere):
+                # the shorter of its own and theirs: cameras at other rates, a camera of a few frames
+                period_ns = min(frame_period_ns([rows[i] for i in mine]),
+                                frame_period_ns([rows[i] for theirs in others for i in theirs]))
+            if high - low > period_ns and _run_is_bad([stamps[i] for i in run], low, high, elsewhere):
                 for k, i in enumerate(run, start=1):
                     mended.append((i, stamps[i]))
                     stamps[i] = low + (high - low) * k // (length + 1)

@@ -93,6 +93,7 @@ class VmcClock:
         self._nominal_us = nominal_step_us() if nominal_us is None else nominal_us  # the interval before a step
         self._line: Optional[_Timeline] = None  # the timeline T follows
         self._line_last_us = 0  # the last stamp on it
+        self._line_stamps = 0  # distinct stamps read on it frame after frame (a taken new line counts as settled)
         self._new: Optional[_Timeline] = None  # where the stamps went when they left it, until decided
         self._new_frames = 0  # frames in a row on ``_new``
         self._leave_step_us = 0  # the forward step into the last frame that left a timeline (0: it went back)
@@ -109,6 +110,7 @@ class VmcClock:
         if self._line is None:
             self._line = _Timeline(capture_time_us, 0)
             self._first_us = self._line_last_us = capture_time_us  # not 0: a second stamp below it is off the line
+            self._line_stamps = 1
             t_us = 0
         elif self._new is None:
             t_us = self._on_the_line(capture_time_us)
@@ -135,6 +137,7 @@ class VmcClock:
         if not self._follows(self._last_us, capture_time_us):
             return self._leave(capture_time_us)
         self._step(capture_time_us)
+        self._line_stamps += capture_time_us > self._line_last_us  # a repeated stamp is no more of the line
         self._line_last_us = capture_time_us
         return self._line.t_us(capture_time_us)
 
@@ -181,7 +184,7 @@ class VmcClock:
             self._count_a_glitch()
         # else no stamp went back: late frames on the line, read again at a longer interval (a slow camera)
         self._new, self._leave_step_us = None, 0
-        self._line_last_us = capture_time_us
+        self._line_last_us = capture_time_us  # (not a stamp more of it: it may be a glitch near a glitched first)
         return self._line.t_us(capture_time_us)
 
     def _count_a_glitch(self) -> None:
@@ -194,15 +197,17 @@ class VmcClock:
 
     def _take_the_new_line(self, capture_time_us: int, t_us: int) -> int:
         """The stamps stayed on the new timeline: a pause keeps the line (T catches up), a jump back follows it, and
-        so does a jump forward from a line of one stamp (a glitched first stamp: no pause to add)."""
+        so does a jump forward from a line that read no second stamp frame after frame: a glitched first stamp (a later
+        glitch back near it, a stamp repeated, came back to it, not after it): no pause to add."""
         assert self._line is not None and self._new is not None
         paused = self._new.base_us >= self._line_last_us
-        if paused and self._line_last_us > self._line.base_us:
+        if paused and self._line_stamps > 1:
             t_us = self._line.t_us(capture_time_us)
         else:
             if not paused:
                 self._log_jump_back(self._new)
             self._line = self._new
+            self._line_stamps = NEW_TIMELINE_FRAMES
         self._new, self._leave_step_us = None, 0
         self._line_last_us = capture_time_us
         return t_us

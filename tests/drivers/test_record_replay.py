@@ -1413,7 +1413,10 @@ def test_two_bad_stamps_in_a_row_are_mended_not_taken_as_a_reset(glitch_ms, capl
     [0, 33, 66, 10_066, 10_100, 10_133],  # a pause: the stamps go on from it
     [0, 33, -500, -1_000, -967, -934],  # two resets in a row
     [0, 33, 66 + _HOUR_MS, 100 + _HOUR_MS, 133 + _HOUR_MS, 166],  # three frames off: more than MENDED_RUN
-], ids=["reset-2-before-the-end", "reset", "pause", "two-resets", "three-off"])
+    # a reset back three frames: the frame after next lands just after the frame before the reset, its two
+    # neighbours 1 ms apart (two frames spread in that ms until the fix)
+    [0, 33, -34, 1, 34, 67, 100],
+], ids=["reset-2-before-the-end", "reset", "pause", "two-resets", "three-off", "reset-back-3-frames"])
 def test_a_reset_or_a_pause_is_not_mended_as_bad_stamps(left_ms, caplog):
     """What only a real reset or pause does is played as before: no stamp mended, no "bad stamp" warning."""
     played, warned = _played_ms([_HOUR_MS + t for t in left_ms], _RIGHT_MS + [_HOUR_MS + 200, _HOUR_MS + 234],

@@ -577,7 +577,8 @@ def test_t_never_goes_back_nor_runs_off_whatever_the_stamps_do(seed: int) -> Non
     # the pauses and JUMP_FRAMES frames per odd stamp (until session 72, plus the first step, followed whatever it
     # was: a glitched first or second stamp moved T by the glitch); memory stays bounded; and the plain frames at
     # the end move T as their stamps do (seeds 60, 76 and 78 failed here: an early step of a few ms left every
-    # later frame off the timeline). 3,000 seeds pass.
+    # later frame off the timeline). 20,000 seeds pass (8 ran off before the fix that
+    # test_a_glitched_first_stamp_and_a_later_glitch_near_it_do_not_move_t_by_the_glitch checks).
     rng = random.Random(7100 + seed)
     stamps, paused_us, odd = _mixed_stamps(rng, 150)
     clock = VmcClock("vmc://host")
@@ -634,6 +635,28 @@ def test_a_glitched_first_or_second_stamp_does_not_move_t_by_its_glitch(stamps: 
     steps = np.sort(_steps_in_frames(times))
     assert steps[0] >= 0 and np.allclose(steps[1:], 1, atol=1e-3), steps
     assert clock.glitches + clock.jumps_back <= 1
+
+
+@pytest.mark.parametrize("back", [
+    [_FRAME_US * 3],  # one glitched stamp, an hour back: near the first's timeline
+    [105_000] * 3,  # one repeated three times
+], ids=["lone", "repeated"])
+def test_a_glitched_first_stamp_and_a_later_glitch_near_it_do_not_move_t_by_the_glitch(back: list[int]) -> None:
+    # The first stamp an hour back (0 in a stream at an hour), and three frames on a glitch back near it: the
+    # glitch came back to the first stamp's timeline, which then read as a line of two stamps, so the stream's
+    # stamps after it were taken as a pause of an hour (seeds 4449, 5004, 7504, 11180 ... of the property check
+    # below, 8 in 20,000). A stamp that comes back to the line is no second stamp of it: T follows the stream.
+    stamps = [0] + _stream(2, start_us=_HOUR_US + _FRAME_US) + back + _stream(30, start_us=_HOUR_US + 6 * _FRAME_US)
+    times, _ = _times(stamps)
+    assert all(b >= a for a, b in zip(times, times[1:]))
+    assert times[-1] <= (stamps[-1] - stamps[1]) / 1e6 + 10 * _FRAME_US / 1e6, times[-1]
+
+
+def test_two_frames_then_a_pause_still_move_t_on_by_the_pause() -> None:
+    # The first line's second stamp read frame after frame settles it: a pause after it is added, as in session 72.
+    stamps = [0, _FRAME_US] + _stream(20, start_us=10_000_000)
+    times, _ = _times(stamps)
+    assert times[-1] == pytest.approx(stamps[-1] / 1e6)
 
 
 def test_a_glitched_second_stamp_sent_through_the_sink_reads_a_frame_on() -> None:
