@@ -377,7 +377,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return _main(argv)
     finally:
-        if installed_here:
+        if early_sighup.is_daemon_process():
+            # On its way out, as _StopOnSignal leaves SIGTERM and SIGINT: the finalization resets the recording
+            # handler to SIGHUP's default, and a reload landing then killed it (restarted: RestartForceExitStatus).
+            signal.signal(signal.SIGHUP, signal.SIG_IGN)
+        elif installed_here:
             early_sighup.uninstall()
 
 

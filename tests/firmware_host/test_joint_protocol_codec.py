@@ -1,6 +1,7 @@
 """Encoder, quantisation and streaming decoder of the joint protocol."""
 from __future__ import annotations
 
+import math
 import warnings
 
 import numpy as np
@@ -30,7 +31,7 @@ from firmware_host.protocol import (
 )
 from firmware_host.protocol.constants import U32_MAX
 from firmware_host.protocol.from_frame import joints2d_messages
-from firmware_host.protocol.quantize import quantise_joints_2d, quantise_joints_3d
+from firmware_host.protocol.quantize import quantise_joints_2d, quantise_joints_3d, xyz_fits_the_wire
 
 header = st.builds(
     make_header,
@@ -119,6 +120,61 @@ def test_absurd_values_quantise_by_the_rules_without_numpy_warnings() -> None:
     assert missing.tolist() == [True, True, False, False, False]
     assert conf.tolist() == [0, 0, 255, 255, 255] and xyz[2].tolist() == [100, 200, 300]
     assert missing2.tolist() == [True, False] and conf2.tolist() == [0, 255] and uv[1].tolist() == [20, 24]
+
+
+def _reference_quantised(row: list[float], scale: float) -> tuple[list[int], int, bool]:
+    """One joint as the wire's rule says it, one value at a time in plain Python: each coordinate times ``scale``,
+    rounded half to even (as ``np.rint``), must be a number within int16, and the confidence above 0; a missing
+    joint goes out as zeros, a present one's confidence as round(255 c) within 1..255."""
+    coords, conf = row[:-1], row[-1]
+    scaled = [v * scale for v in coords]
+    fits = all(math.isfinite(s) and -32768 <= round(s) <= 32767 for s in scaled)
+    if not (fits and conf > 0):
+        return [0] * len(coords), 0, True
+    c = conf * 255
+    return [round(s) for s in scaled], 255 if c >= 255 else max(1, round(c)), False
+
+
+def _edge_rows(rng: np.random.Generator, n: int, dims: int, scale: float) -> np.ndarray:
+    """``n`` joints of ``dims`` coordinates and a confidence, each value drawn from the wire's edges: ties half a
+    unit either side of its ends (32767.5 mm: 32.7675 m), the ends themselves, ties anywhere, NaN, inf, overflow
+    when scaled, -0.0, the smallest subnormal, and plain values within and beyond the range."""
+    ends = np.array([-32768.5, -32768.0, -32767.5, 32766.5, 32767.0, 32767.5, 32768.0, -32769.5]) / scale
+    specials = np.array([np.nan, np.inf, -np.inf, 1e305, -1e305, 1e308, -1e308, -0.0, 5e-324])
+    confs = np.array([np.nan, -1.0, 0.0, 5e-324, 1e-4, 0.5, 254.5 / 255, 2.0, 1e308, np.inf])
+
+    def draw(size: int, pool: np.ndarray, span: float) -> np.ndarray:
+        kind = rng.integers(0, 4, size)
+        ties = (rng.integers(-33000, 33000, size) + 0.5) / scale
+        return np.select([kind == 0, kind == 1, kind == 2], [rng.choice(pool, size), ties,
+                                                            rng.uniform(-span, span, size)], rng.choice(specials, size))
+
+    coords = draw(n * dims, ends, 40000 / scale).reshape(n, dims)
+    conf = np.where(rng.random(n) < 0.5, rng.choice(confs, n), (rng.integers(0, 256, n) + 0.5) / 255)
+    return np.column_stack([coords, conf])
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("seed", range(8))
+def test_quantisation_is_the_plain_rule_value_by_value_at_the_wire_s_edges(seed: int, dtype: type) -> None:
+    # Session 72 moved the rule into xyz_fits_the_wire, shared with the VMC sink: the encoder's output must stay
+    # what the rule says for every value, ties at +-32.7675 m, NaN and inf included (the frame's bytes are these).
+    rng = np.random.default_rng(7200 + seed)
+    for quantise, dims, scale in ((quantise_joints_3d, 3, 1000.0), (quantise_joints_2d, 2, 4.0)):
+        with np.errstate(over="ignore"):  # float64 values past float32's range are inf there
+            rows = _edge_rows(rng, 400, dims, scale).astype(dtype)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            q, c, missing = quantise(rows)
+        expected = [_reference_quantised([float(v) for v in row], scale) for row in rows]
+        assert (q.dtype, c.dtype, missing.dtype) == (np.int16, np.uint8, np.bool_)
+        assert q.tolist() == [e[0] for e in expected]
+        assert c.tolist() == [e[1] for e in expected]
+        assert missing.tolist() == [e[2] for e in expected]
+        if dims == 3:  # the VMC sink's rule: the coordinates alone
+            fits = [_reference_quantised([float(v) for v in row[:3]] + [1.0], scale)[2] is False for row in rows]
+            assert xyz_fits_the_wire(rows[:, :3]).tolist() == fits
+
 
 def test_sequence_wraps_modulo_2_32() -> None:
     frame = JointFrame(2**32 + 5, 0, 0, np.zeros((25, 4)))

@@ -567,6 +567,34 @@ def test_stop_signals_repeated_until_it_exits_still_end_it_with_status_0(tmp_pat
     assert json.loads(status.read_text())["state"] == "stopping"
 
 
+@needs_model
+def test_a_sighup_as_it_exits_does_not_kill_it(tmp_path):
+    """A SIGHUP after the stop (``systemctl reload`` as the daemon stops, or exits at its replay's end) found SIGHUP's
+    default action put back: the interpreter's finalization resets a Python handler (the recording one) to it. The
+    daemon died of SIGHUP in place of exit 0, a death the unit's RestartForceExitStatus=SIGHUP restarts."""
+    sock, proc, status = _daemon_waiting_for_an_absent_rig(tmp_path, "-m", "firmware_host.daemon.cli")
+    notes: list[dict[str, str]] = []
+    sent = 0
+    try:
+        _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("waiting") for n in ns),
+                     "waiting for the rig")
+        proc.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and time.monotonic() < deadline:
+            proc.send_signal(signal.SIGHUP)
+            sent += 1
+            time.sleep(0.001)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        sock.close()
+    assert sent >= 2
+    assert proc.returncode == 0, err
+    assert "SIGTERM received: stopping" in err and "Traceback" not in err
+    assert json.loads(status.read_text())["state"] == "stopping"
+
+
 # ------------------------------------------------------------------ SIGHUP during the start
 # SIGHUP's default action kills, and systemd (Restart=on-failure) counts a death by SIGHUP as clean: a
 # reload landing while the daemon still imports, reads its config or loads its model must not kill it.

@@ -707,3 +707,23 @@ def test_a_file_far_bigger_than_a_config_or_a_device_is_refused_unread(tmp_path,
                           text=True, timeout=120, env=env, cwd=Path(__file__).resolve().parents[3])
     assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr[-2000:]
     assert done.stdout.startswith(f"{path}: ") and ("1 MiB" in done.stdout or "device" in done.stdout), done.stdout
+
+
+def test_the_size_cap_reads_the_file_a_link_names_and_leaves_a_pipe_to_the_read(tmp_path):
+    """The cap is the named file's, through a symlink (a link's own size is its target's name); a pipe
+    (``--config <(...)``), which has no size, is read as before, as docs/daemon.md says."""
+    import threading
+
+    big = tmp_path / "frames.jsonl"
+    with open(big, "wb") as fh:
+        fh.truncate(2 << 20)  # sparse: read whole, it would be "not valid JSON", not refused for its size
+    link = tmp_path / "daemon.json"
+    link.symlink_to(big)
+    with pytest.raises(DaemonConfigError, match=r"holds 2097152 bytes, over the 1048576 \(1 MiB"):
+        load_daemon_config(link)
+    fifo = tmp_path / "fifo.json"
+    os.mkfifo(fifo)
+    writer = threading.Thread(target=fifo.write_text, args=('{"sinks": ["memory://"]}',), daemon=True)
+    writer.start()
+    assert load_daemon_config(fifo).sinks == ("memory://",)
+    writer.join(timeout=10)
