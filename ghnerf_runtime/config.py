@@ -1103,20 +1103,25 @@ def _json_given_as_path(path: str | os.PathLike) -> str:
     return ""
 
 
-def read_json_file(path: str | os.PathLike, fail: Callable[[str], Exception], what: str = "config file") -> Any:
+def read_json_file(path: str | os.PathLike, fail: Callable[[str], Exception], what: str = "config file",
+                   max_chars: int | None = None) -> Any:
     """The JSON value in ``path``; an unreadable file, invalid JSON, non-UTF-8 text or a key given twice in one
     object (JSON keeps the last: the first would be lost without a word) raises ``fail(message)`` (the caller's
     error type, naming the file), the message saying which and where; so does an empty (or blank) file. A UTF-8
-    byte order mark is skipped."""
+    byte order mark is skipped. With ``max_chars``, text longer than that raises ``fail`` after reading at most one
+    character more: a pipe or a file that grows is not read whole (a size told by ``stat`` can change before the
+    read, and a pipe has none)."""
     try:
         with open(path, encoding="utf-8-sig") as fh:
-            text = fh.read()
+            text = fh.read() if max_chars is None else fh.read(max_chars + 1)
     except OSError as e:
         raise fail(f"cannot read {what} ({e.strerror or e}){_json_given_as_path(path)}") from e
     except UnicodeDecodeError as e:
         raise fail(f"not UTF-8 text (byte {e.start}): {e.reason}") from e
     except ValueError as e:  # a NUL character in the path
         raise fail(f"cannot read {what} ({e})") from e
+    if max_chars is not None and len(text) > max_chars:
+        raise fail(f"{what} holds over {max_chars} characters, more than one may")
     if not text.strip():  # said "not valid JSON (line 1, column 1: Expecting value)"
         raise fail(f"{what} is empty")
     try:

@@ -522,7 +522,8 @@ def load_daemon_config_noting_paths(path: str | os.PathLike) -> tuple[DaemonConf
     """:func:`load_daemon_config`, and the paths that were relative in the file, as read from its folder (absolute):
     an error naming one of them may say where it was read from, one naming a path written absolute must not."""
     _refuse_unlike_a_config_file(path)
-    written = read_json_file(path, lambda message: DaemonConfigError(message, key=str(path)), "the config file")
+    written = read_json_file(path, lambda message: DaemonConfigError(message, key=str(path)), "the config file",
+                             max_chars=MAX_CONFIG_FILE_BYTES)  # a pipe, a file grown since the stat: not read whole
     try:
         refuse_impossible_paths(written)
     except DaemonConfigError as e:

@@ -727,3 +727,32 @@ def test_the_size_cap_reads_the_file_a_link_names_and_leaves_a_pipe_to_the_read(
     writer.start()
     assert load_daemon_config(fifo).sinks == ("memory://",)
     writer.join(timeout=10)
+
+
+def test_a_pipe_longer_than_a_config_is_refused_after_a_bounded_read(tmp_path):
+    """A pipe has no size for the stat check: one that carries more than a config may (another program's output
+    given as ``--config <(...)``) is refused after reading one character past the cap, not read whole."""
+    import threading
+
+    from firmware_host.daemon.config import MAX_CONFIG_FILE_BYTES
+
+    fifo = tmp_path / "fifo.json"
+    os.mkfifo(fifo)
+    written = []
+
+    def write_far_past_the_cap() -> None:
+        try:
+            with open(fifo, "w") as fh:
+                for _ in range(8):  # 8 MiB in all, if the reader took it
+                    fh.write(" " * MAX_CONFIG_FILE_BYTES)
+                    written.append(MAX_CONFIG_FILE_BYTES)
+        except BrokenPipeError:  # the reader stopped: what it did not take was never read
+            pass
+
+    writer = threading.Thread(target=write_far_past_the_cap, daemon=True)
+    writer.start()
+    with pytest.raises(DaemonConfigError, match=rf"holds over {MAX_CONFIG_FILE_BYTES} characters") as caught:
+        load_daemon_config(fifo)
+    assert str(caught.value).startswith(f"{fifo}: ")
+    writer.join(timeout=30)
+    assert not writer.is_alive() and sum(written) < 8 * MAX_CONFIG_FILE_BYTES
