@@ -231,15 +231,19 @@ def feet_span(feet: list[float]) -> str:
 
 def tile_find_summary(outcomes: list, good_mm: float, bounds: Sequence[float] = (0.3, 0.4, 0.5)) -> list[str]:
     """``--tile-finds``' closing lines over :func:`find_outcomes`' ``outcomes``: the kept finds good (their pair's
-    MPJPE under ``good_mm``) and bad with their judged feet, the refused ones (their error unseen: the pair answered
-    nobody) and those with no foot figure; then what each foot bound in ``bounds`` would refuse of the kept ones."""
-    judged = [(foot, mm) for kept, foot, mm in outcomes if kept and foot is not None and mm is not None]
-    good = [foot for foot, mm in judged if mm < good_mm]
-    bad = [foot for foot, mm in judged if mm >= good_mm]
-    refused = [foot for kept, foot, _ in outcomes if not kept and foot is not None]
+    MPJPE under ``good_mm``) and bad with their judged feet, those with no foot figure (good and bad: no bound judges
+    them) and with no joint found, the refused ones (their error unseen: the pair answered nobody); then what each
+    foot bound in ``bounds`` would refuse of the kept ones."""
+    scored = [(foot, mm) for kept, foot, mm in outcomes if kept and mm is not None]
+    good = [foot for foot, mm in scored if foot is not None and mm < good_mm]
+    bad = [foot for foot, mm in scored if foot is not None and mm >= good_mm]
+    footless = [mm for foot, mm in scored if foot is None]
+    refused = [foot for kept, foot, _ in outcomes if not kept]
     lines = [f"tile finds kept and judged: good (pair MPJPE < {good_mm:g} mm) {feet_span(good)}; bad "
-             f"{feet_span(bad)}; refused {feet_span(refused)} (error unseen); no foot figure or no joint "
-             f"{len(outcomes) - len(judged) - len(refused)}"]
+             f"{feet_span(bad)}; with no foot figure good {sum(mm < good_mm for mm in footless)}, bad "
+             f"{sum(mm >= good_mm for mm in footless)}; kept with no joint found "
+             f"{sum(kept and mm is None for kept, _, mm in outcomes)}; refused "
+             f"{feet_span([f for f in refused if f is not None])} (error unseen)"]
     lines += [f"a {b:g} m bound would refuse of those kept: good {sum(f > b for f in good)}, bad "
               f"{sum(f > b for f in bad)}" for b in bounds]
     return lines

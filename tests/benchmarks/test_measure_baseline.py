@@ -109,21 +109,23 @@ def test_a_find_s_outcome_is_its_pair_s_error_and_none_where_no_joint_was_found(
 
 
 def test_the_tile_find_summary_counts_the_feet_of_good_and_bad_finds_and_what_each_bound_refuses():
-    """Session 72: the judged feet of the kept finds, good (pair MPJPE under the bound) and bad, the refused ones
-    apart (their error unseen), and per foot bound the kept good and bad finds it would refuse."""
+    """Session 72: the judged feet of the kept finds, good (pair MPJPE under the bound) and bad, those with no foot
+    figure (which no bound judges) and no joint found apart, the refused ones apart (their error unseen), and per foot
+    bound the kept good and bad finds it would refuse."""
     outcomes = [(True, -0.16, 40.0), (True, 0.35, 149.0), (True, 0.45, 150.0), (True, 0.69, 394.0),
-                (False, 0.8, None), (True, None, 60.0), (True, 0.1, None)]
+                (False, 0.8, None), (True, None, 60.0), (True, None, 1111.0), (True, None, 344.0), (True, 0.1, None)]
     assert tile_find_summary(outcomes, 150.0) == [
         "tile finds kept and judged: good (pair MPJPE < 150 mm) 2, feet -0.16 to 0.35 m; bad 2, feet 0.45 to 0.69 m; "
-        "refused 1, feet 0.80 to 0.80 m (error unseen); no foot figure or no joint 2",
+        "with no foot figure good 1, bad 2; kept with no joint found 1; refused 1, feet 0.80 to 0.80 m (error unseen)",
         "a 0.3 m bound would refuse of those kept: good 1, bad 2",
         "a 0.4 m bound would refuse of those kept: good 0, bad 2",
         "a 0.5 m bound would refuse of those kept: good 0, bad 1"]
     assert tile_find_summary([], 150.0)[0] == ("tile finds kept and judged: good (pair MPJPE < 150 mm) 0; bad 0; "
-                                               "refused 0 (error unseen); no foot figure or no joint 0")
+                                               "with no foot figure good 0, bad 0; kept with no joint found 0; "
+                                               "refused 0 (error unseen)")
 
 
-def test_the_rig_files_estimators_refuse_feet_over_the_bound_asked_for(tiny_model_dir, scratch_cache, capsys,  # noqa: F811
+def test_the_rig_files_estimators_refuse_feet_over_the_bound_asked_for(tiny_model_dir, scratch_cache,  # noqa: F811
                                                                         monkeypatch):
     """``--tile-find-max-foot`` (session 72): the ``--rigs`` estimators run with that bound (``inf``: every find kept,
     each showing its own error), and the runtime's comes back after."""
