@@ -2,7 +2,8 @@
 
     PYTHONPATH=$PWD .venv/bin/python benchmarks/measure_baseline.py [--model-dir models] [--sequences 4]
         [--frames 8] [--baselines 0.02,0.03,0.04,0.06,0.1,0.2,0.6 | --angles 0.5,1,2] [--distances 3]
-        [--hfovs 80] [--rigs docs/examples/rig.json] [--tile-finds] [--rig-lift 1.2] [--lifts 0,1,3,50]
+        [--hfovs 80] [--rigs docs/examples/rig.json] [--tile-finds] [--rig-lift 1.2] [--tile-find-max-foot inf]
+        [--good-find-mm 150] [--lifts 0,1,3,50]
 
 The simulator's default rig (``drivers.sim.RigPlacement()``: 640x480, 80 degrees, 1.3 m high, both cameras aimed
 at the subject ``--distances`` ahead) with the pair's centres moved to each baseline, filming the bench's held-out
@@ -19,7 +20,10 @@ MPJPE of the joints found, the share of joints found and the share of pairs with
 adds a row per rig file, its own pair filming the same people drawn in its own working volume; ``--tile-finds``
 then a row per pair of theirs whose cold tile search found someone: where the person stood and the error then and
 after (session 70); ``--rig-lift`` gives each rig file's estimator that rig :func:`lifted` (the same images: the
-floor no longer at y = 0; session 71). ``RigPlacement``
+floor no longer at y = 0; session 71); ``--tile-finds`` ends with the judged feet of the finds good (their pair's
+MPJPE under ``--good-find-mm``) and bad, and what each foot bound would refuse; ``--tile-find-max-foot`` runs the
+rigs' estimators with that bound instead of ``_TILE_FIND_MAX_FOOT_M`` (``inf``: every find kept, so each shows its
+own error; session 72). ``RigPlacement``
 refuses baselines under 5 cm, so the cameras are placed here as it places them. Then, per ``--lifts`` (``""``:
 none), the default rig (its own baseline, 1.2 m; the first distance, 80 degrees) with its frame moved that many
 metres up (cameras and working volume alike, the same images): the floor no longer at y = 0, where the runtime
@@ -30,6 +34,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from unittest import mock
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE, depth_per_disparity_px  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
+import ghnerf_runtime.estimator as estimator_module  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, look_at  # noqa: E402
 from ghnerf_runtime.metrics import mpjpe  # noqa: E402
@@ -160,6 +166,14 @@ def finite_float(text: str) -> float:
     return value
 
 
+def bound_m(text: str) -> float:
+    """``--tile-find-max-foot`` and ``--good-find-mm``: a number, inf allowed, not nan."""
+    value = float(text)
+    if np.isnan(value):
+        raise argparse.ArgumentTypeError(f"a number (inf allowed), got {text!r}")
+    return value
+
+
 def rig_paths(text: str) -> list[str]:
     """``--rigs``: a comma-separated list of rig files ("" is none), as ``benchmarks/measure_cold_tiles.py`` reads
     it too."""
@@ -196,12 +210,52 @@ def tile_find_rows(path: str, k: int, run, finds: list) -> list[str]:
     return rows
 
 
-def print_tile_finds(rows: list[str]) -> None:
-    """``--tile-finds``' table (:func:`tile_find_rows`)."""
+def find_outcomes(run, finds: list) -> list[tuple[bool, float | None, float | None]]:
+    """Per tile find of ``run`` (``finds``, as :func:`tile_find_rows` reads them): kept or not, the judged foot (m)
+    and the pair's MPJPE (mm; None where no joint was found, as on a refused find's pair)."""
+    pred, found, truth = run
+    return [(kept, foot, pair_mpjpe_mm(pred[i], found[i], truth[i])) for i, kept, foot in finds]
+
+
+def pair_mpjpe_mm(pred: np.ndarray, found: np.ndarray, truth: np.ndarray) -> float | None:
+    """One pair's MPJPE (mm) over its joints found, as the rows' cell; None with none found."""
+    if not found.any():
+        return None
+    return mpjpe(pred, truth, np.ones(found.shape, bool), pred_valid=found).value
+
+
+def feet_span(feet: list[float]) -> str:
+    """"N, feet A to B m" (N alone with none)."""
+    return f"{len(feet)}" + (f", feet {min(feet):.2f} to {max(feet):.2f} m" if feet else "")
+
+
+def tile_find_summary(outcomes: list, good_mm: float, bounds: Sequence[float] = (0.3, 0.4, 0.5)) -> list[str]:
+    """``--tile-finds``' closing lines over :func:`find_outcomes`' ``outcomes``: the kept finds good (their pair's
+    MPJPE under ``good_mm``) and bad with their judged feet, those with no foot figure (good and bad: no bound judges
+    them) and with no joint found, the refused ones (their error unseen: the pair answered nobody); then what each
+    foot bound in ``bounds`` would refuse of the kept ones."""
+    scored = [(foot, mm) for kept, foot, mm in outcomes if kept and mm is not None]
+    good = [foot for foot, mm in scored if foot is not None and mm < good_mm]
+    bad = [foot for foot, mm in scored if foot is not None and mm >= good_mm]
+    footless = [mm for foot, mm in scored if foot is None]
+    refused = [foot for kept, foot, _ in outcomes if not kept]
+    lines = [f"tile finds kept and judged: good (pair MPJPE < {good_mm:g} mm) {feet_span(good)}; bad "
+             f"{feet_span(bad)}; with no foot figure good {sum(mm < good_mm for mm in footless)}, bad "
+             f"{sum(mm >= good_mm for mm in footless)}; kept with no joint found "
+             f"{sum(kept and mm is None for kept, _, mm in outcomes)}; refused "
+             f"{feet_span([f for f in refused if f is not None])} (error unseen)"]
+    lines += [f"a {b:g} m bound would refuse of those kept: good {sum(f > b for f in good)}, bad "
+              f"{sum(f > b for f in bad)}" for b in bounds]
+    return lines
+
+
+def print_tile_finds(rows: list[str], summary: list[str]) -> None:
+    """``--tile-finds``' table (:func:`tile_find_rows`) and closing lines (:func:`tile_find_summary`)."""
     print("\n| rig file | sequence | pair | tile find | person's joints' mean x, y, z, m | nearest joint ahead, m | "
           "lower foot above the floor, m | MPJPE mm | joints found | MPJPE mm from this pair on |")
     print("|---|---|---|---|---|---|---|---|---|---|")
-    print("\n".join(rows) if rows else "| (none) |", flush=True)
+    print("\n".join(rows) if rows else "| (none) |")
+    print("\n" + "\n".join(summary), flush=True)
 
 
 def rig_label(path: str, lift_m: float) -> str:
@@ -219,19 +273,21 @@ def print_rig_files(args, session, cfg) -> None:
     print("\n| rig file | standing person in view, share | person tall, image px | person tall in the cold crop, "
           "model px | MPJPE mm | joints found | pairs with no joint |")
     print("|---|---|---|---|---|---|---|")
-    rows = []
+    rows, outcomes = [], []
     for path in paths:
         rig = load_rig(path)
         runs = []
         for k in range(args.sequences):
             finds: list = []  # (filled with --tile-finds only)
-            runs.append(run_sequence(session, cfg, rig, k, args.frames, lift_m=args.rig_lift,
-                                     tile_finds=finds if args.tile_finds else None))
+            with mock.patch.object(estimator_module, "_TILE_FIND_MAX_FOOT_M", args.tile_find_max_foot):
+                runs.append(run_sequence(session, cfg, rig, k, args.frames, lift_m=args.rig_lift,
+                                         tile_finds=finds if args.tile_finds else None))
             rows += tile_find_rows(rig_label(path, args.rig_lift), k, runs[-1], finds)
+            outcomes += find_outcomes(runs[-1], finds)
         print(f"| {rig_label(path, args.rig_lift)} | {framing_cells(rig, session.contract.width)} | "
               f"{score_cells(runs)} |", flush=True)
     if args.tile_finds:
-        print_tile_finds(rows)
+        print_tile_finds(rows, tile_find_summary(outcomes, args.good_find_mm))
 
 
 def main(argv=None) -> int:
@@ -257,6 +313,11 @@ def main(argv=None) -> int:
     ap.add_argument("--rig-lift", type=finite_float, default=0.0,
                     help="metres each --rigs file's frame is moved up for its estimator (the same images; a "
                          "negative one moves it down): where the runtime reads the floor at y = 0")
+    ap.add_argument("--tile-find-max-foot", type=bound_m, default=estimator_module._TILE_FIND_MAX_FOOT_M,
+                    help="metres: the --rigs estimators refuse a tile find whose lower foot stands higher (default "
+                         "the runtime's _TILE_FIND_MAX_FOOT_M; inf: every find kept, each showing its own error)")
+    ap.add_argument("--good-find-mm", type=bound_m, default=150.0,
+                    help="--tile-finds' closing lines count a kept find good where its pair's MPJPE is under this")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision))
     session = load_session(cfg)

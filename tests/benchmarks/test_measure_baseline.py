@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.measure_baseline import (baseline_for_angle, framing_cells, in_cold_crop_px, lifted, rig_with_baseline,
-                                         standing_person_px, tile_find_rows)
+from benchmarks.measure_baseline import (baseline_for_angle, find_outcomes, framing_cells, in_cold_crop_px, lifted,
+                                         rig_with_baseline, standing_person_px, tile_find_rows, tile_find_summary)
 from ghnerf_runtime.preprocess import roi_from_volume
 from ghnerf_runtime.rig_file import STANDING_PERSON_M, load_rig, pair_angle_deg
 from tests.benchmarks.test_bench_smoke import run_script, run_script_failing, scratch_cache  # noqa: F401
@@ -98,6 +98,61 @@ def test_the_tile_find_rows_say_where_the_person_stood_and_the_error_then_and_af
                     "| rig.json | 4 | 0 | refused | 0.00, 0.00, 1.97 | 1.20 | - | - | 0.000 | 200 |"]
 
 
+def test_a_find_s_outcome_is_its_pair_s_error_and_none_where_no_joint_was_found():
+    """``--tile-finds``' closing lines (session 72) judge a find by its own pair's MPJPE, the rows' cell."""
+    truth = np.zeros((2, 25, 3))
+    pred = truth + np.array([0.0, 0.3, 0.0])
+    found = np.ones((2, 25), bool)
+    found[1] = False
+    outcomes = find_outcomes((pred, found, truth), [(0, True, 0.2), (1, False, 0.6)])
+    assert outcomes == [(True, 0.2, pytest.approx(300.0)), (False, 0.6, None)]
+
+
+def test_the_tile_find_summary_counts_the_feet_of_good_and_bad_finds_and_what_each_bound_refuses():
+    """Session 72: the judged feet of the kept finds, good (pair MPJPE under the bound) and bad, those with no foot
+    figure (which no bound judges) and no joint found apart, the refused ones apart (their error unseen), and per foot
+    bound the kept good and bad finds it would refuse."""
+    outcomes = [(True, -0.16, 40.0), (True, 0.35, 149.0), (True, 0.45, 150.0), (True, 0.69, 394.0),
+                (False, 0.8, None), (True, None, 60.0), (True, None, 1111.0), (True, None, 344.0), (True, 0.1, None)]
+    assert tile_find_summary(outcomes, 150.0) == [
+        "tile finds kept and judged: good (pair MPJPE < 150 mm) 2, feet -0.16 to 0.35 m; bad 2, feet 0.45 to 0.69 m; "
+        "with no foot figure good 1, bad 2; kept with no joint found 1; refused 1, feet 0.80 to 0.80 m (error unseen)",
+        "a 0.3 m bound would refuse of those kept: good 1, bad 2",
+        "a 0.4 m bound would refuse of those kept: good 0, bad 2",
+        "a 0.5 m bound would refuse of those kept: good 0, bad 1"]
+    assert tile_find_summary([], 150.0)[0] == ("tile finds kept and judged: good (pair MPJPE < 150 mm) 0; bad 0; "
+                                               "with no foot figure good 0, bad 0; kept with no joint found 0; "
+                                               "refused 0 (error unseen)")
+
+
+def test_the_rig_files_estimators_refuse_feet_over_the_bound_asked_for(tiny_model_dir, scratch_cache,  # noqa: F811
+                                                                        monkeypatch):
+    """``--tile-find-max-foot`` (session 72): the ``--rigs`` estimators run with that bound (``inf``: every find kept,
+    each showing its own error), and the runtime's comes back after."""
+    import benchmarks.measure_baseline as mb
+    import ghnerf_runtime.estimator as estimator_module
+
+    runtime_bound = estimator_module._TILE_FIND_MAX_FOOT_M
+    seen = []
+
+    class Recording(mb.Estimator):
+        def __init__(self, session, rig, config):
+            seen.append((estimator_module._TILE_FIND_MAX_FOOT_M, self._feet_float(runtime_bound + 1.0)))
+            super().__init__(session, rig, config)
+
+    monkeypatch.setattr(mb, "Estimator", Recording)
+    assert mb.main(["--model-dir", str(tiny_model_dir), "--sequences", "2", "--frames", "1", "--baselines", "",
+                    "--rigs", "docs/examples/rig.json", "--lifts", "", "--tile-find-max-foot", "inf"]) == 0
+    assert seen == [(float("inf"), False)] * 2
+    assert estimator_module._TILE_FIND_MAX_FOOT_M == runtime_bound
+
+
+@pytest.mark.parametrize("option", ["--tile-find-max-foot", "--good-find-mm"])
+def test_the_bounds_are_numbers(option, capsys, monkeypatch):
+    err = run_script_failing("measure_baseline", option, "nan", capsys=capsys, monkeypatch=monkeypatch)
+    assert option in err, err
+
+
 def test_the_command_line_prints_the_tile_finds(tiny_model_dir, scratch_cache, capsys, monkeypatch):  # noqa: F811
     from pathlib import Path
 
@@ -106,6 +161,7 @@ def test_the_command_line_prints_the_tile_finds(tiny_model_dir, scratch_cache, c
                      "--baselines", "", "--rigs", str(example), "--lifts", "", "--tile-finds", capsys=capsys,
                      monkeypatch=monkeypatch)
     assert "| rig file | sequence | pair | tile find | person's joints' mean x, y, z, m |" in out, out
+    assert "tile finds kept and judged: good (pair MPJPE < 150 mm) " in out, out
 
 
 def test_the_rig_files_estimators_get_the_rig_lifted(tiny_model_dir, scratch_cache, capsys, monkeypatch):  # noqa: F811
