@@ -22,8 +22,8 @@ then a row per pair of theirs whose cold tile search found someone: where the pe
 after (session 70); ``--rig-lift`` gives each rig file's estimator that rig :func:`lifted` (the same images: the
 floor no longer at y = 0; session 71); ``--tile-finds`` ends with the judged feet of the finds good (their pair's
 MPJPE under ``--good-find-mm``) and bad, and what each foot bound would refuse; ``--tile-find-max-foot`` runs the
-rigs' estimators with that bound instead of ``_TILE_FIND_MAX_FOOT_M`` (``inf``: every find kept, so each shows its
-own error; session 72). ``RigPlacement``
+rigs' estimators with that bound instead of ``tracking.cold_tiles_max_foot_m``'s default (``inf``: every find
+kept, so each shows its own error; session 72). ``RigPlacement``
 refuses baselines under 5 cm, so the cameras are placed here as it places them. Then, per ``--lifts`` (``""``:
 none), the default rig (its own baseline, 1.2 m; the first distance, 80 degrees) with its frame moved that many
 metres up (cameras and working volume alike, the same images): the floor no longer at y = 0, where the runtime
@@ -32,9 +32,9 @@ reads it (``load_rig``'s camera height warning). A tool, not a test.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 import sys
 from collections.abc import Sequence
-from unittest import mock
 from pathlib import Path
 
 import numpy as np
@@ -42,8 +42,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE, depth_per_disparity_px  # noqa: E402
-from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
-import ghnerf_runtime.estimator as estimator_module  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, SessionConfig, TrackingConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, look_at  # noqa: E402
 from ghnerf_runtime.metrics import mpjpe  # noqa: E402
@@ -263,6 +262,12 @@ def rig_label(path: str, lift_m: float) -> str:
     return path if not lift_m else f"{path}, frame {lift_m:g} m up"
 
 
+def with_max_foot(cfg: EstimatorConfig, max_foot_m: float) -> EstimatorConfig:
+    """``cfg`` with ``tracking.cold_tiles_max_foot_m`` set to ``max_foot_m`` (``inf``: None, every find kept)."""
+    bound = None if max_foot_m == float("inf") else float(max_foot_m)
+    return replace(cfg, tracking=replace(cfg.tracking, cold_tiles_max_foot_m=bound))
+
+
 def print_rig_files(args, session, cfg) -> None:
     """The table of ``--rigs``: each rig file's own pair, framing and scores on the same people (its estimator given
     the rig :func:`lifted` by ``--rig-lift``); with ``--tile-finds``, then each pair whose cold tile search found
@@ -270,6 +275,7 @@ def print_rig_files(args, session, cfg) -> None:
     paths = rig_paths(args.rigs)
     if not paths:
         return
+    rig_cfg = with_max_foot(cfg, args.tile_find_max_foot)
     print("\n| rig file | standing person in view, share | person tall, image px | person tall in the cold crop, "
           "model px | MPJPE mm | joints found | pairs with no joint |")
     print("|---|---|---|---|---|---|---|")
@@ -279,9 +285,8 @@ def print_rig_files(args, session, cfg) -> None:
         runs = []
         for k in range(args.sequences):
             finds: list = []  # (filled with --tile-finds only)
-            with mock.patch.object(estimator_module, "_TILE_FIND_MAX_FOOT_M", args.tile_find_max_foot):
-                runs.append(run_sequence(session, cfg, rig, k, args.frames, lift_m=args.rig_lift,
-                                         tile_finds=finds if args.tile_finds else None))
+            runs.append(run_sequence(session, rig_cfg, rig, k, args.frames, lift_m=args.rig_lift,
+                                     tile_finds=finds if args.tile_finds else None))
             rows += tile_find_rows(rig_label(path, args.rig_lift), k, runs[-1], finds)
             outcomes += find_outcomes(runs[-1], finds)
         print(f"| {rig_label(path, args.rig_lift)} | {framing_cells(rig, session.contract.width)} | "
@@ -313,9 +318,10 @@ def main(argv=None) -> int:
     ap.add_argument("--rig-lift", type=finite_float, default=0.0,
                     help="metres each --rigs file's frame is moved up for its estimator (the same images; a "
                          "negative one moves it down): where the runtime reads the floor at y = 0")
-    ap.add_argument("--tile-find-max-foot", type=bound_m, default=estimator_module._TILE_FIND_MAX_FOOT_M,
+    ap.add_argument("--tile-find-max-foot", type=bound_m, default=TrackingConfig().cold_tiles_max_foot_m,
                     help="metres: the --rigs estimators refuse a tile find whose lower foot stands higher (default "
-                         "the runtime's _TILE_FIND_MAX_FOOT_M; inf: every find kept, each showing its own error)")
+                         "the runtime's tracking.cold_tiles_max_foot_m; inf: every find kept, each showing its own "
+                         "error)")
     ap.add_argument("--good-find-mm", type=bound_m, default=150.0,
                     help="--tile-finds' closing lines count a kept find good where its pair's MPJPE is under this")
     args = ap.parse_args(argv)

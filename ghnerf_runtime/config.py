@@ -367,6 +367,10 @@ class TrackingConfig:
             nobody (a screen, a curtain) wakes none after, nor do its neighbours, until it stays still over eight tile
             passes in a row (or a reset). 0 or None never
             wakes (docs/runtime.md, "Cold tiles").
+        cold_tiles_max_foot_m: a tile's find whose lower foot stands over this many metres above the floor is refused
+            (the track dropped, counted in ``Estimator.tile_finds_floating``): a person the frame's near edge cuts,
+            read whole and shrunk, triangulates too far and too high. Good finds' feet read -0.16 to 0.07 m over
+            three rigs, the one floating bad find 0.69 m (docs/runtime.md, "The first tile"). None keeps every find.
     """
 
     enabled: bool = True
@@ -382,9 +386,12 @@ class TrackingConfig:
     cold_tiles_below_share: float = 0.47
     cold_tiles_rest_every: int = 4
     cold_tiles_wake_levels: float | None = 6.0
+    cold_tiles_max_foot_m: float | None = 0.4
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
+        if self.cold_tiles_max_foot_m is not None:  # None: no find refused for its feet
+            _number(self, "cold_tiles_max_foot_m", 0.0, 10.0)
         _number(self, "cold_tiles_below_share", 0.0, 1.0)
         _integer(self, "cold_tiles_rest_every", 1, 1000)
         if self.cold_tiles_wake_levels is not None:  # None: never wakes, as 0

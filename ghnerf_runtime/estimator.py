@@ -146,15 +146,14 @@ _FLOOR_MIN_FOOT_JOINTS = 2
 #: lunge costs one joint, not the pair's figure; stray ones kept would pull their foot's median down (two of its four
 #: joints, or one of a foot with two seen: tests/ghnerf_runtime/test_floor_big_pan.py).
 _FLOOR_BODY_M = 1.0
-#: A cold tile's find (refined on its subject) whose lower foot (PairResult.lowest_foot_m) stands over this (m) above
-#: the floor is refused: a person the frame's bottom edge cuts near the cameras, whom the tile's crop reads whole and
-#: shrunk, the same in both views, so that the skeleton triangulates too far and too high (394 mm MPJPE, its foot
-#: 0.69 m up, then tracked for frames), where the whole volume's crop found them on the next pair (the example rig's
-#: sequence 1, 1.2 m ahead; the other tile finds there and on ghcal synth's rig read -0.16 to -0.01 m:
-#: benchmarks/measure_baseline.py --tile-finds, docs/runtime.md, "The first tile"). Session 72, 48 sequences on each
-#: of three rigs with no refusal: 56 good finds' feet -0.16 to 0.07 m, one floating bad one (that 0.69 m); any bound
-#: from 0.3 to 0.5 m refuses the same (--tile-find-max-foot inf). The floor read is :func:`_tile_find_floor_y`'s.
-_TILE_FIND_MAX_FOOT_M = 0.4
+#: A cold tile's find (refined on its subject) whose lower foot (PairResult.lowest_foot_m) stands over
+#: ``tracking.cold_tiles_max_foot_m`` (0.4 m) above the floor is refused: a person the frame's bottom edge cuts near
+#: the cameras, whom the tile's crop reads whole and shrunk, the same in both views, so that the skeleton triangulates
+#: too far and too high (394 mm MPJPE, its foot 0.69 m up, then tracked for frames), where the whole volume's crop
+#: found them on the next pair (the example rig's sequence 1, 1.2 m ahead; benchmarks/measure_baseline.py
+#: --tile-finds, docs/runtime.md, "The first tile"). Session 72, 48 sequences on each of three rigs with no refusal:
+#: 56 good finds' feet -0.16 to 0.07 m, one floating bad one (that 0.69 m); any bound from 0.3 to 0.5 m refuses the
+#: same (--tile-find-max-foot inf). The floor read is :func:`_tile_find_floor_y`'s.
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "turn_search", "volume", "render_heat", "decode_2d",
@@ -461,8 +460,8 @@ _TOOL_FRAMES = ("opencv-stereo-calib", "anipose-toml")
 
 
 def _tile_find_floor_y(rig: Rig) -> float:
-    """The floor's y (y down) that the refusal of floating tile finds (``_TILE_FIND_MAX_FOOT_M``) reads: y = 0, or the
-    working volume's floor-side bound (its largest y) where that lies higher. A rig whose frame's origin lies under
+    """The floor's y (y down) that the refusal of floating tile finds (``tracking.cold_tiles_max_foot_m``) reads: y =
+    0, or the working volume's floor-side bound (its largest y) where that lies higher. A rig whose frame's origin lies under
     the floor (its volume ends above y = 0) reads every foot too high by as much, and from y = 0 every tile find was
     refused; the volume is the one hint of the floor there. Never lower than y = 0: where the floor is not known the
     guard refuses less, never more (the example rig's and ``ghcal synth``'s volumes reach y = 0: 0.0)."""
@@ -804,7 +803,7 @@ class Estimator:
         self._still_passes: tuple[np.ndarray, ...] | None = None
         self.cold_tile_passes = 0  # cold pairs that searched a tile, and those whose tile found someone
         self.cold_tiles_found = 0
-        self.tile_finds_floating = 0  # tile finds refused for feet far above the floor (_TILE_FIND_MAX_FOOT_M)
+        self.tile_finds_floating = 0  # tile finds refused for feet far above the floor (cold_tiles_max_foot_m)
         self._tile_floor_y = _tile_find_floor_y(rig)  # the floor that refusal reads
         self._tile_find_foot: float | None = None  # the last pair's tile find's foot as judged (tile_find_foot_m)
         self.cold_tile_wakes = 0  # resting searches a scene change woke (tracking.cold_tiles_wake_levels)
@@ -1410,11 +1409,11 @@ class Estimator:
         (:func:`_tile_find_floor_y`); None stays None."""
         return None if foot_m is None else foot_m + self._tile_floor_y
 
-    @staticmethod
-    def _feet_float(foot_m: float | None) -> bool:
+    def _feet_float(self, foot_m: float | None) -> bool:
         """Whether a tile find's lower foot, ``foot_m`` above the refusal's floor (:meth:`_above_tile_floor`), stands
-        over ``_TILE_FIND_MAX_FOOT_M`` (no figure: no)."""
-        return foot_m is not None and foot_m > _TILE_FIND_MAX_FOOT_M
+        over ``tracking.cold_tiles_max_foot_m`` (no figure, or no bound: no)."""
+        bound = self.config.tracking.cold_tiles_max_foot_m
+        return foot_m is not None and bound is not None and foot_m > bound
 
     def _next_untried_tile(self) -> int:
         """The fixed order: the next tile from ``_next_tile`` on that this round has not searched."""

@@ -92,6 +92,7 @@ TRACK_CONF = TrackingConfig().min_confidence
 COLD_SHARE = TrackingConfig().cold_tiles_below_share
 COLD_REST = TrackingConfig().cold_tiles_rest_every
 COLD_WAKE = TrackingConfig().cold_tiles_wake_levels
+COLD_MAX_FOOT = TrackingConfig().cold_tiles_max_foot_m
 SOLVER_RAY = inspect.signature(triangulate_dlt).parameters["min_ray_angle_deg"].default
 
 
@@ -358,7 +359,11 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"`COLD_TILE_SPLITS`, each grown `COLD_TILE_OVERLAP_M` = {COLD_TILE_OVERLAP_M:g} m into"),
     ("docs/rig-file.md", f"under {COLD_SHARE * 128:.0f} model pixels ({COLD_SHARE:g} of the crop, the tiles' bound)"),
     ("docs/runtime.md", f"(`tracking.cold_tiles_rest_every`, default {COLD_REST}, session 66)"),
-    ("docs/runtime.md", f'"cold_tiles_rest_every": {COLD_REST}, "cold_tiles_wake_levels": {COLD_WAKE!r}}}'),
+    ("docs/runtime.md", f'"cold_tiles_rest_every": {COLD_REST}, "cold_tiles_wake_levels": {COLD_WAKE!r}, '
+                        f'"cold_tiles_max_foot_m": {COLD_MAX_FOOT!r}}}'),
+    # session 72: the floating-foot bound of tile finds, a config field
+    ("docs/runtime.md", f"over {COLD_MAX_FOOT:g} m above the floor is refused and its track dropped "
+                        f"(`tracking.cold_tiles_max_foot_m`, {COLD_MAX_FOOT:g} m,"),
     # session 67: the resting search's wake-up (tracking.cold_tiles_wake_levels; scene_change's copy and its cells)
     ("docs/runtime.md", f"(`tracking.cold_tiles_wake_levels`, default {COLD_WAKE:g}, session 67)"),
     ("docs/runtime.md", f"{THUMB_CELLS[0]} x {THUMB_CELLS[1]} cells, each the mean of {CELL_SAMPLES ** 2} pixels"),

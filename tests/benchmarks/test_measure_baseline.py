@@ -127,24 +127,30 @@ def test_the_tile_find_summary_counts_the_feet_of_good_and_bad_finds_and_what_ea
 
 def test_the_rig_files_estimators_refuse_feet_over_the_bound_asked_for(tiny_model_dir, scratch_cache,  # noqa: F811
                                                                         monkeypatch):
-    """``--tile-find-max-foot`` (session 72): the ``--rigs`` estimators run with that bound (``inf``: every find kept,
-    each showing its own error), and the runtime's comes back after."""
+    """``--tile-find-max-foot`` (session 72): the ``--rigs`` estimators run with that bound in their config,
+    ``tracking.cold_tiles_max_foot_m`` (``inf``: None, every find kept, each showing its own error); without it, the
+    runtime's default."""
     import benchmarks.measure_baseline as mb
-    import ghnerf_runtime.estimator as estimator_module
+    from ghnerf_runtime.config import TrackingConfig
 
-    runtime_bound = estimator_module._TILE_FIND_MAX_FOOT_M
     seen = []
 
     class Recording(mb.Estimator):
         def __init__(self, session, rig, config):
-            seen.append((estimator_module._TILE_FIND_MAX_FOOT_M, self._feet_float(runtime_bound + 1.0)))
             super().__init__(session, rig, config)
+            seen.append((config.tracking.cold_tiles_max_foot_m, self._feet_float(5.0)))
 
     monkeypatch.setattr(mb, "Estimator", Recording)
-    assert mb.main(["--model-dir", str(tiny_model_dir), "--sequences", "2", "--frames", "1", "--baselines", "",
-                    "--rigs", "docs/examples/rig.json", "--lifts", "", "--tile-find-max-foot", "inf"]) == 0
-    assert seen == [(float("inf"), False)] * 2
-    assert estimator_module._TILE_FIND_MAX_FOOT_M == runtime_bound
+    common = ["--model-dir", str(tiny_model_dir), "--sequences", "2", "--frames", "1", "--baselines", "",
+              "--rigs", "docs/examples/rig.json", "--lifts", ""]
+    assert mb.main(common + ["--tile-find-max-foot", "inf"]) == 0
+    assert seen == [(None, False)] * 2
+    seen.clear()
+    assert mb.main(common + ["--tile-find-max-foot", "0.25"]) == 0
+    assert seen == [(0.25, True)] * 2
+    seen.clear()
+    assert mb.main(common) == 0
+    assert seen == [(TrackingConfig().cold_tiles_max_foot_m, True)] * 2
 
 
 @pytest.mark.parametrize("option", ["--tile-find-max-foot", "--good-find-mm"])

@@ -648,6 +648,25 @@ def test_a_tile_find_whose_feet_float_is_refused(example_rig, far_person, lift_m
         assert first.lowest_foot_m == pytest.approx(lift_m, abs=0.1)
 
 
+@pytest.mark.parametrize("bound, kept", [(None, True), (0.8, True), (0.4, False), (0.2, False)])
+def test_the_floating_foot_bound_is_the_config_s(example_rig, far_person, bound, kept):
+    """``tracking.cold_tiles_max_foot_m`` (session 72; a module constant before, which the benchmark patched): the
+    person drawn 0.6 m up is refused under a bound below that and kept under one above it, or under None."""
+    images, joints = far_person
+    oracle = FaintSmallPeopleOracle(edge128_contract())
+    est = Estimator(oracle, example_rig, EstimatorConfig(tracking=TrackingConfig(cold_tiles_max_foot_m=bound)))
+    oracle.set_truth(joints - [0.0, 0.6, 0.0])
+    est.estimate(images)
+    assert est.cold_tiles_found == int(kept) and est.tile_finds_floating == int(not kept)
+
+
+@pytest.mark.parametrize("value", [-0.1, 10.5, float("nan"), float("inf"), "0.4", True])
+def test_the_floating_foot_bound_out_of_range_is_an_error_naming_the_field_and_value(value):
+    with pytest.raises(ConfigError, match="cold_tiles_max_foot_m") as e:
+        TrackingConfig(cold_tiles_max_foot_m=value)
+    assert repr(value) in str(e.value) or str(value) in str(e.value)
+
+
 def test_a_refused_tile_find_leaves_no_novel_view_rendering(example_rig, far_person, monkeypatch):
     """The refused find's refined pass is tracked: with ``novel_view.overlap`` it started its novel view in the
     worker. The pair answers nobody, so that render is abandoned with the pass, not left running behind the pair
