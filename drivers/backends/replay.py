@@ -261,14 +261,24 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
 
 
 def _mending_period_ns(rows: list[FrameRow], mine: list[int], others: list[list[int]]) -> int:
-    """The frame period a mended stamp's neighbours must lie over apart: the shorter of this camera's (``mine``)
-    and the other cameras' (``others``), for cameras at other rates and a camera of a few frames, whose median
-    step a bad stamp skews. A camera alone has only its own: the 1/30 s that :func:`frame_period_ns` gives for no
-    rows measures nothing of the take, and a slower camera alone had a reset back one to two of its frames mended
-    by it as a bad stamp."""
-    own_ns = frame_period_ns([rows[i] for i in mine])
+    """The frame period a mended stamp's neighbours must lie over apart: this camera's (``mine``) lower median step
+    forward among those with no step back beside them (:func:`_steady_steps`), which leaves out a bad stamp's
+    hour-long steps (the lower median, the one two stamps ahead in a row keep). Not the shorter of its and the
+    other cameras' (``others``): a slower camera beside faster ones had a reset back one to two of its own frames
+    mended by their period (session 72 review). Where no step is steady (a camera of a few frames), the others'
+    period stands for it; a camera alone then has its median step (:func:`frame_period_ns`), not 1/30 s."""
+    steady = _steady_steps([rows[i].timestamp_ns for i in mine])
+    if steady:
+        return int(statistics.median_low(steady))
     theirs = [rows[i] for group in others for i in group]
-    return min(own_ns, frame_period_ns(theirs)) if theirs else own_ns
+    return frame_period_ns(theirs or [rows[i] for i in mine])
+
+
+def _steady_steps(stamps_ns: list[int]) -> list[int]:
+    """The steps forward between successive stamps that have no step back beside them."""
+    steps = [b - a for a, b in zip(stamps_ns, stamps_ns[1:])]
+    return [step for k, step in enumerate(steps)
+            if step > 0 and (k == 0 or steps[k - 1] >= 0) and (k + 1 == len(steps) or steps[k + 1] >= 0)]
 
 
 def _out_of_line(run_ns: list[int], low_ns: int, high_ns: int, period_ns: int) -> bool:

@@ -1465,6 +1465,18 @@ def test_a_reset_back_under_two_frames_does_not_get_the_last_stamp_mended(caplog
     assert not any("bad stamp" in r.getMessage() and "'left'" in r.getMessage() for r in caplog.records)
 
 
+def test_a_slower_camera_s_reset_is_judged_by_its_own_frame_period(caplog):
+    """The host clock set back 86 ms (1.3 of left's 66 ms frames): left's 200 ms frame lay out of line between
+    frames 47 ms apart, over right's 33 ms period, and was mended by it as a bad stamp (the fuzz of the session 72
+    review). Its own period says a reset: both cameras' frames after it follow on, spaced as recorded."""
+    right_ms = [1, 34, 67, 101, 134, 167, 201] + [t - 86 for t in (234, 267, 301, 334, 367, 401)]
+    played, warned = _played_ms([0, 66, 133, 200, 180, 246, 313], right_ms, caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+    left_played = [t for cam, _, t in played if cam == "left"]
+    assert left_played[:4] == [0, 66, 133, 200] and left_played[4] > 200
+    assert [b - a for a, b in zip(left_played[4:], left_played[5:])] == [66, 67]
+
+
 @pytest.mark.parametrize(("alone_ms", "mended_ms"), [
     ([0, 33, 66 + _HOUR_MS, 100, 133], [0, 33, 66, 100, 133]),  # a glitch: its neighbours two periods apart
     ([0, 100, 200, 300, 250, 350, 450], None),  # 10 fps, a reset back a frame and a half: 50 ms apart
