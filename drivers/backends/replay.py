@@ -265,13 +265,14 @@ def _mending_period_ns(rows: list[FrameRow], mine: list[int], others: list[list[
     forward among those with no step back beside them (:func:`_steady_steps`), which leaves out a bad stamp's
     hour-long steps (the lower median, the one two stamps ahead in a row keep). Not the shorter of its and the
     other cameras' (``others``): a slower camera beside faster ones had a reset back one to two of its own frames
-    mended by their period (session 72 review). Where no step is steady (a camera of a few frames), the others'
-    period stands for it; a camera alone then has its median step (:func:`frame_period_ns`), not 1/30 s."""
+    mended by their period (session 72 review). A camera of a few frames, with under two such steps, keeps that
+    shorter one (its median step, :func:`frame_period_ns`, may be a bad stamp's); alone, its own, not 1/30 s."""
     steady = _steady_steps([rows[i].timestamp_ns for i in mine])
-    if steady:
+    if len(steady) >= 2:
         return int(statistics.median_low(steady))
+    own_ns = frame_period_ns([rows[i] for i in mine])
     theirs = [rows[i] for group in others for i in group]
-    return frame_period_ns(theirs or [rows[i] for i in mine])
+    return min(own_ns, frame_period_ns(theirs)) if theirs else own_ns
 
 
 def _steady_steps(stamps_ns: list[int]) -> list[int]:

@@ -1451,7 +1451,8 @@ def test_a_reset_back_one_frame_on_both_cameras_plays_as_a_reset_with_its_pairs(
 def test_a_reset_back_under_two_frames_does_not_get_the_last_stamp_mended(caplog):
     """Left's stamps 0.07, 35.3, 12.5, 47.2 ms (a reset back under two frames): 35.3 was mended to the midpoint of
     its neighbours (6.3), which made the last stamp a bad end, mended too: left played 0.07, 6.3, 12.5, 18.7.
-    Now a reset: the frames after it follow on, spaced as recorded."""
+    Now a reset: the frames after it follow on, spaced as recorded. (Right's last stamp, back under two frames
+    too, is the end check's to judge (``_bad_end``): left's last lies nearer its neighbour, so it mends it.)"""
     from drivers.backends.recording_format import FrameRow
     from drivers.backends.replay import playback_order
 
