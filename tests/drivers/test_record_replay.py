@@ -1466,6 +1466,14 @@ def test_a_reset_back_under_two_frames_does_not_get_the_last_stamp_mended(caplog
     assert not any("bad stamp" in r.getMessage() and "'left'" in r.getMessage() for r in caplog.records)
 
 
+def test_two_bad_stamps_in_a_camera_of_four_frames_are_mended(caplog):
+    """Four frames, the middle two an hour on: the camera's own steps are one frame's and the hour's, no period to
+    go by; the other camera's (the shorter) stands for it, and the run is mended."""
+    played, warned = _played_ms([0, 33 + _HOUR_MS, 66 + _HOUR_MS, 100], [1, 34, 67, 101], caplog)
+    assert [t for cam, _, t in played if cam == "left"] == [0, 33, 66, 100]
+    assert "bad stamp" in warned[0] and "(2 in this camera)" in warned[0]
+
+
 def test_a_slower_camera_s_reset_is_judged_by_its_own_frame_period(caplog):
     """The host clock set back 86 ms (1.3 of left's 66 ms frames): left's 200 ms frame lay out of line between
     frames 47 ms apart, over right's 33 ms period, and was mended by it as a bad stamp (the fuzz of the session 72
