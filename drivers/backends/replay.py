@@ -25,9 +25,9 @@ URL options:
 Each camera plays in its recorded order (its image file numbers), the cameras merged by capture time. A
 camera's stamp going back is a clock reset: warned of, and the frames after it re-based to follow on one
 frame period after those before, one shift for both cameras (:func:`playback_order`; with ``keep_time=1``
-too); one stamp out of line with its neighbours is a bad stamp, played at their midpoint (a camera's first
-or last, one step from its neighbour, where the other cameras' stamps there say so; two in a row, spread between
-their neighbours, where the other cameras' stamps say so). Indices and
+too); one stamp out of line with its neighbours, they over a frame period apart, is a bad stamp, played at their
+midpoint (a camera's first or last, one step from its neighbour, where the other cameras' stamps there say so;
+two in a row, spread between their neighbours, where the other cameras' stamps say so). Indices and
 ground truth are delivered unchanged on the first pass. Each further ``loop``
 pass shifts timestamps by the recording's span (plus one frame period: the median step between a camera's
 successive distinct stamps, else 1/30 s) and indices by the
