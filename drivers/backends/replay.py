@@ -25,9 +25,9 @@ URL options:
 Each camera plays in its recorded order (its image file numbers), the cameras merged by capture time. A
 camera's stamp going back is a clock reset: warned of, and the frames after it re-based to follow on one
 frame period after those before, one shift for both cameras (:func:`playback_order`; with ``keep_time=1``
-too); one stamp out of line with its neighbours is a bad stamp, played at their midpoint (a camera's first
-or last, one step from its neighbour, where the other cameras' stamps there say so; two in a row, spread between
-their neighbours, where the other cameras' stamps say so). Indices and
+too); one stamp out of line with its neighbours, they over a frame period apart, is a bad stamp, played at their
+midpoint (a camera's first or last, one step from its neighbour, where the other cameras' stamps there say so;
+two in a row, spread between their neighbours, where the other cameras' stamps say so). Indices and
 ground truth are delivered unchanged on the first pass. Each further ``loop``
 pass shifts timestamps by the recording's span (plus one frame period: the median step between a camera's
 successive distinct stamps, else 1/30 s) and indices by the
@@ -234,11 +234,15 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
     as a reset, it re-based every later frame of that camera by the glitch, so none paired again and a paced
     replay waited out the glitch (an hour). Up to ``MENDED_RUN`` such stamps in a row are mended too, spread
     evenly between their neighbours, where the other cameras (``others``: their rows in recorded order) say so
-    (:func:`_mend_runs`). A camera's first and last frames have one neighbour: mended one step from it where the
-    other cameras say so (:func:`_bad_end`)."""
-    mended = _mend_runs(rows, mine, stamps, others)  # first: the lone test takes a run's first (back, then ahead)
+    (:func:`_mend_runs`). Lone or in a run, only where the neighbours lie over a frame period apart
+    (:func:`_out_of_line`): a clock reset back one to three frames brings one back within a period. A camera's
+    first and last frames have one neighbour: mended one step from it where the other cameras say so
+    (:func:`_bad_end`)."""
+    period_ns = _mending_period_ns(rows, mine, others)
+    # runs first: the lone test takes a run's first (back, then ahead)
+    mended = _mend_runs(mine, stamps, others, period_ns)
     for before, here, after in zip(mine, mine[1:], mine[2:]):
-        if stamps[before] <= stamps[after] and not stamps[before] <= stamps[here] <= stamps[after]:
+        if _out_of_line([stamps[here]], stamps[before], stamps[after], period_ns):
             mended.append((here, stamps[here]))
             stamps[here] = (stamps[before] + stamps[after]) // 2
     ends = [(mine[:3], [stamps[theirs[0]] for theirs in others if theirs]),
@@ -256,29 +260,57 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
                     recorded, stamps[first], len(mended))
 
 
-def _mend_runs(rows: list[FrameRow], mine: list[int], stamps: dict[int, int],
-               others: list[list[int]]) -> list[tuple[int, int]]:
-    """Mend runs of 2 to ``MENDED_RUN`` stamps in a row out of line with the frames either side, those two in line
-    with each other and over a frame period apart (this camera's or the others', the shorter): each run's stamps
-    spread evenly between them, where the other cameras confirm the old timeline (:func:`_run_is_bad`). Returns
-    the rows mended with their recorded stamps. A reset stays on the new timeline and a pause goes on from it, so
-    neither has a frame back in line after it; nor has a reset back two to three frames, but its frame after next
-    lands within a period of the frame before it (session 72: two frames were squeezed in there)."""
+def _mending_period_ns(rows: list[FrameRow], mine: list[int], others: list[list[int]]) -> int:
+    """The frame period a mended stamp's neighbours must lie over apart: this camera's (``mine``) lower median step
+    forward among those with no step back beside them (:func:`_steady_steps`), which leaves out a bad stamp's
+    hour-long steps (the lower median, the one two stamps ahead in a row keep). Not the shorter of its and the
+    other cameras' (``others``): a slower camera beside faster ones had a reset back one to two of its own frames
+    mended by their period (session 72 review). A camera of a few frames, with under two such steps, keeps that
+    shorter one (its median step, :func:`frame_period_ns`, may be a bad stamp's); alone, its own, not 1/30 s."""
+    steady = _steady_steps([rows[i].timestamp_ns for i in mine])
+    if len(steady) >= 2:
+        return int(statistics.median_low(steady))
+    own_ns = frame_period_ns([rows[i] for i in mine])
+    theirs = [rows[i] for group in others for i in group]
+    return min(own_ns, frame_period_ns(theirs)) if theirs else own_ns
+
+
+def _steady_steps(stamps_ns: list[int]) -> list[int]:
+    """The steps forward between successive stamps that have no step back beside them."""
+    steps = [b - a for a, b in zip(stamps_ns, stamps_ns[1:])]
+    return [step for k, step in enumerate(steps)
+            if step > 0 and (k == 0 or steps[k - 1] >= 0) and (k + 1 == len(steps) or steps[k + 1] >= 0)]
+
+
+def _out_of_line(run_ns: list[int], low_ns: int, high_ns: int, period_ns: int) -> bool:
+    """Whether stamps ``run_ns`` in a row, between neighbours stamped ``low_ns`` and ``high_ns``, are out of line in
+    a way a bad stamp (or run) is: every one outside the neighbours, those two in line with each other and over
+    ``period_ns`` apart, room for the frames between them. A reset back one to three frames also has a frame back
+    in line after the one or two before it, but within a period (session 72: these were mended as bad stamps)."""
+    if not low_ns <= high_ns or high_ns - low_ns <= period_ns:
+        return False
+    return not any(low_ns <= ns <= high_ns for ns in run_ns)
+
+
+def _mend_runs(mine: list[int], stamps: dict[int, int], others: list[list[int]],
+               period_ns: int) -> list[tuple[int, int]]:
+    """Mend runs of 2 to ``MENDED_RUN`` stamps in a row out of line with the frames either side
+    (:func:`_out_of_line`, ``period_ns`` its frame period): each run's stamps spread evenly between them, where the
+    other cameras confirm the old timeline (:func:`_run_is_bad`). Returns the rows mended with their recorded
+    stamps. A reset stays on the new timeline and a pause goes on from it, so neither has a frame back in line
+    after it; nor has a reset back two to three frames, but its frame after next lands within a period of the frame
+    before it (session 72: two frames were squeezed in there)."""
     mended: list[tuple[int, int]] = []
     elsewhere: list[int] | None = None  # the other cameras' stamps, sorted once a run is found
-    period_ns = 0  # the frame period, with them
     for length in range(2, MENDED_RUN + 1):
         for start in range(1, len(mine) - length):
             before, run, after = mine[start - 1], mine[start:start + length], mine[start + length]
             low, high = stamps[before], stamps[after]
-            if low > high or any(low <= stamps[i] <= high for i in run):
+            if not _out_of_line([stamps[i] for i in run], low, high, period_ns):
                 continue
             if elsewhere is None:
                 elsewhere = sorted(stamps[i] for theirs in others for i in theirs)
-                # the shorter of its own and theirs: cameras at other rates, a camera of a few frames
-                period_ns = min(frame_period_ns([rows[i] for i in mine]),
-                                frame_period_ns([rows[i] for theirs in others for i in theirs]))
-            if high - low > period_ns and _run_is_bad([stamps[i] for i in run], low, high, elsewhere):
+            if _run_is_bad([stamps[i] for i in run], low, high, elsewhere):
                 for k, i in enumerate(run, start=1):
                     mended.append((i, stamps[i]))
                     stamps[i] = low + (high - low) * k // (length + 1)

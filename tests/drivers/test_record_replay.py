@@ -1416,7 +1416,12 @@ def test_two_bad_stamps_in_a_row_are_mended_not_taken_as_a_reset(glitch_ms, capl
     # a reset back three frames: the frame after next lands just after the frame before the reset, its two
     # neighbours 1 ms apart (two frames spread in that ms until the fix)
     [0, 33, -34, 1, 34, 67, 100],
-], ids=["reset-2-before-the-end", "reset", "pause", "two-resets", "three-off", "reset-back-3-frames"])
+    # a reset back two frames (a frame and a half): the frame after it lands just after (within a period of) the
+    # frame before the one before it, which was mended as one bad stamp until the session 72 review
+    [0, 33, 66, 100, 67, 100, 133],
+    [0, 33, 66, 100, 83, 116, 149],
+], ids=["reset-2-before-the-end", "reset", "pause", "two-resets", "three-off", "reset-back-3-frames",
+        "reset-back-2-frames", "reset-back-1.5-frames"])
 def test_a_reset_or_a_pause_is_not_mended_as_bad_stamps(left_ms, caplog):
     """What only a real reset or pause does is played as before: no stamp mended, no "bad stamp" warning."""
     played, warned = _played_ms([_HOUR_MS + t for t in left_ms], _RIGHT_MS + [_HOUR_MS + 200, _HOUR_MS + 234],
@@ -1429,6 +1434,71 @@ def test_a_reset_or_a_pause_is_not_mended_as_bad_stamps(left_ms, caplog):
     else:  # a reset: the frames after it follow on, spaced as recorded
         assert all(b > a for a, b in zip(left_played, left_played[1:]))
         assert any("clock reset" in message for message in warned)
+
+
+def test_a_reset_back_one_frame_on_both_cameras_plays_as_a_reset_with_its_pairs(caplog):
+    """The host clock set back a frame (and 1 ms) mid-take: each camera's frame before the reset lay out of line
+    between its neighbours, 33 ms apart, and was moved in there as a bad stamp (breaking its pair). Now a reset: the
+    frames after it follow on one period later, every pair kept."""
+    played, warned = _played_ms([0, 33, 66, 100, 99, 132, 165], [1, 34, 67, 101, 100, 133, 166], caplog)
+    assert played == [("left", 0, 0), ("right", 0, 1), ("left", 1, 33), ("right", 1, 34), ("left", 2, 66),
+                      ("right", 2, 67), ("left", 3, 100), ("right", 3, 101), ("left", 4, 134), ("right", 4, 135),
+                      ("left", 5, 167), ("right", 5, 168), ("left", 6, 200), ("right", 6, 201)]
+    assert not any("bad stamp" in message for message in warned), warned
+    assert sum("clock reset" in message for message in warned) == 2
+
+
+def test_a_reset_back_under_two_frames_does_not_get_the_last_stamp_mended(caplog):
+    """Left's stamps 0.07, 35.3, 12.5, 47.2 ms (a reset back under two frames): 35.3 was mended to the midpoint of
+    its neighbours (6.3), which made the last stamp a bad end, mended too: left played 0.07, 6.3, 12.5, 18.7.
+    Now a reset: the frames after it follow on, spaced as recorded. (Right's last stamp, back under two frames
+    too, is the end check's to judge (``_bad_end``): left's last lies nearer its neighbour, so it mends it.)"""
+    from drivers.backends.recording_format import FrameRow
+    from drivers.backends.replay import playback_order
+
+    us = 1_000
+    left = [FrameRow("left", i, t * us, f"images/left/{i:08d}.png") for i, t in enumerate([70, 35_300, 12_500, 47_200])]
+    right = [FrameRow("right", i, t * us, f"images/right/{i:08d}.png") for i, t in enumerate([100, 35_400, 12_600])]
+    with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"):
+        played = [r.timestamp_ns // us for r in playback_order(right[::-1] + left[::-1], "take") if r.camera == "left"]
+    assert played[:2] == [70, 35_300] and played[3] - played[2] == 47_200 - 12_500
+    assert played[2] - played[1] > 30_000  # the unknown gap at the reset: a frame period
+    assert not any("bad stamp" in r.getMessage() and "'left'" in r.getMessage() for r in caplog.records)
+
+
+def test_two_bad_stamps_in_a_camera_of_four_frames_are_mended(caplog):
+    """Four frames, the middle two an hour on: the camera's own steps are one frame's and the hour's, no period to
+    go by; the other camera's (the shorter) stands for it, and the run is mended."""
+    played, warned = _played_ms([0, 33 + _HOUR_MS, 66 + _HOUR_MS, 100], [1, 34, 67, 101], caplog)
+    assert [t for cam, _, t in played if cam == "left"] == [0, 33, 66, 100]
+    assert "bad stamp" in warned[0] and "(2 in this camera)" in warned[0]
+
+
+def test_a_slower_camera_s_reset_is_judged_by_its_own_frame_period(caplog):
+    """The host clock set back 86 ms (1.3 of left's 66 ms frames): left's 200 ms frame lay out of line between
+    frames 47 ms apart, over right's 33 ms period, and was mended by it as a bad stamp (the fuzz of the session 72
+    review). Its own period says a reset: both cameras' frames after it follow on, spaced as recorded."""
+    right_ms = [1, 34, 67, 101, 134, 167, 201] + [t - 86 for t in (234, 267, 301, 334, 367, 401)]
+    played, warned = _played_ms([0, 66, 133, 200, 180, 246, 313], right_ms, caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+    left_played = [t for cam, _, t in played if cam == "left"]
+    assert left_played[:4] == [0, 66, 133, 200] and left_played[4] > 200
+    assert [b - a for a, b in zip(left_played[4:], left_played[5:])] == [66, 67]
+
+
+@pytest.mark.parametrize(("alone_ms", "mended_ms"), [
+    ([0, 33, 66 + _HOUR_MS, 100, 133], [0, 33, 66, 100, 133]),  # a glitch: its neighbours two periods apart
+    ([0, 100, 200, 300, 250, 350, 450], None),  # 10 fps, a reset back a frame and a half: 50 ms apart
+], ids=["glitch", "slow-reset"])
+def test_a_camera_alone_mends_a_lone_stamp_by_its_own_frame_period(alone_ms, mended_ms, caplog):
+    """A camera alone in a take has no other camera's period: its own says whether its neighbours have room for
+    a bad stamp between them (1/30 s, the period of no rows, took a 10 fps camera's reset for one)."""
+    played, warned = _played_ms([_HOUR_MS + t for t in alone_ms], [], caplog)
+    if mended_ms:
+        assert [t - _HOUR_MS for _, _, t in played] == mended_ms and "bad stamp" in warned[0]
+    else:
+        assert not any("bad stamp" in message for message in warned), warned
+        assert [t - _HOUR_MS for _, _, t in played] == [0, 100, 200, 300, 400, 500, 600]
 
 
 def test_two_frames_off_on_both_cameras_at_once_are_not_mended(caplog):
@@ -1448,7 +1518,8 @@ def test_a_take_with_one_stamp_an_hour_ahead_replays_every_pair_at_its_pace(take
     _, live, _ = take
     rows = journal(copy_of_take)
     first_camera = live[0].frames[0].camera
-    mine = [r for r in rows if r["camera"] == first_camera]
+    # in recorded order (the file numbers): the journal's, which writer threads swap, made two frames apart the run
+    mine = sorted((r for r in rows if r["camera"] == first_camera), key=lambda r: r["image"])
     bad = mine[len(live) // 2]
     for row in mine[len(live) // 2:len(live) // 2 + bad_frames]:
         row["timestamp_ns"] += 3600 * 10**9
