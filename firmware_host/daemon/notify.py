@@ -3,7 +3,9 @@
 The protocol is one datagram of ``KEY=VALUE`` lines to the unix socket named by ``$NOTIFY_SOCKET``
 (sd_notify(3)); it is written here in a few lines rather than taken from a library, because the
 maintained binding (python-systemd) needs libsystemd's headers to build, which a small ARM board's
-image often lacks. Outside systemd (no ``$NOTIFY_SOCKET``) every call is a no-op.
+image often lacks. Outside systemd (no ``$NOTIFY_SOCKET``) every call is a no-op. The socket never blocks:
+a full queue drops WATCHDOG= and STATUS=, while READY=, STOPPING= and RELOADING= are tried again for up to a
+second (``STATE_RETRY_S``), as systemd acts on them.
 
 :class:`HangWatchdog` turns systemd's watchdog into a hang detector for the main loop: the loop
 calls :meth:`HangWatchdog.beat` on each pass (or :meth:`HangWatchdog.allow` around a call known to
@@ -15,6 +17,7 @@ process can undo (a camera thread stuck in a device call holds the device, and e
 """
 from __future__ import annotations
 
+import errno
 import faulthandler
 import logging
 import os
@@ -30,15 +33,26 @@ __all__ = ["SystemdNotifier", "HangWatchdog"]
 
 _log = logging.getLogger(__name__)
 
+#: How long READY=1, STOPPING=1 and RELOADING=1 wait for room in a full queue: one of them lost leaves systemd
+#: waiting (a lost READY: TimeoutStartSec, then a restart). WATCHDOG= and STATUS= alone are dropped at once.
+STATE_RETRY_S = 1.0
+#: The sleep between two tries of a message that waits for room.
+_RETRY_SLEEP_S = 0.01
+#: The fields that change the service's state in systemd (lower case, as :meth:`SystemdNotifier.notify` takes them).
+_STATE_FIELDS = frozenset({"ready", "stopping", "reloading"})
+#: sendto's errors for a queue with no room (ENOBUFS: the kernel's buffers for it), not a socket gone.
+_FULL_ERRNOS = frozenset({errno.EAGAIN, errno.EWOULDBLOCK, errno.ENOBUFS})
+
 
 class SystemdNotifier:
     """Send sd_notify(3) messages to ``$NOTIFY_SOCKET`` (pass ``environ`` to read another mapping).
 
     ``watchdog_s`` is systemd's ``WatchdogSec`` as the service sees it (``$WATCHDOG_USEC``, honoured
     only when ``$WATCHDOG_PID`` is absent or this process), or None when the watchdog is off.
+    ``retry_s``: how long a state message (READY, STOPPING, RELOADING) waits for room in a full queue.
     """
 
-    def __init__(self, environ: Optional[Mapping[str, str]] = None) -> None:
+    def __init__(self, environ: Optional[Mapping[str, str]] = None, *, retry_s: float = STATE_RETRY_S) -> None:
         env = os.environ if environ is None else environ
         address = env.get("NOTIFY_SOCKET", "")
         # A leading "@" names a socket in the abstract namespace (a NUL byte on the wire).
@@ -46,7 +60,9 @@ class SystemdNotifier:
         self._sock: Optional[socket.socket] = None
         self._lock = threading.Lock()
         self._warned = False
+        self._retry_s = float(retry_s)
         self.dropped = 0  # messages not sent because the socket's queue was full
+        self.held = 0  # state messages that found the queue full and waited for room (sent or, past retry_s, dropped)
         usec, pid = env.get("WATCHDOG_USEC", ""), env.get("WATCHDOG_PID", "")
         mine = not pid or pid == str(os.getpid())
         self.watchdog_s: Optional[float] = int(usec) / 1e6 if usec.isdigit() and int(usec) > 0 and mine else None
@@ -56,25 +72,55 @@ class SystemdNotifier:
         return bool(self._address)
 
     def notify(self, **fields: object) -> bool:
-        """Send ``KEY=value`` lines (``ready=1`` becomes ``READY=1``); False when not sent."""
+        """Send ``KEY=value`` lines (``ready=1`` becomes ``READY=1``); False when not sent.
+
+        A full queue drops WATCHDOG= and STATUS= at once (the next follows soon); a message with READY, STOPPING or
+        RELOADING is tried again for up to ``retry_s``, blocking the caller that long at most."""
         if not self._address:
             return False
         # one line per field: a value's own line break (an error message quoting a file) would start a
         # new assignment, READY= or ERRNO= among them
         text = "\n".join(f"{key.upper()}={' '.join(str(value).splitlines())}" for key, value in fields.items())
+        data = text.encode("utf-8")
+        sent = self._send(data)
+        if sent is not None:
+            return sent
+        if _STATE_FIELDS.isdisjoint(key.lower() for key in fields):
+            return self._drop()
+        return self._send_when_room(data)
+
+    def _send_when_room(self, data: bytes) -> bool:
+        """Try ``data`` again until it fits or ``retry_s`` has passed; the lock is let go between tries, so the
+        watchdog's pings are not held up behind it."""
+        with self._lock:
+            self.held += 1
+        deadline = time.monotonic() + self._retry_s
+        while time.monotonic() < deadline:
+            time.sleep(_RETRY_SLEEP_S)
+            sent = self._send(data)
+            if sent is not None:
+                return sent
+        return self._drop()
+
+    def _drop(self) -> bool:
+        with self._lock:
+            self.dropped += 1
+        return False
+
+    def _send(self, data: bytes) -> Optional[bool]:
+        """One try: True sent, False not (no such socket: warned once), None the queue is full."""
         with self._lock:
             try:
                 if self._sock is None:
                     # Non-blocking: a manager that is not reading (its queue full) must never stall the
-                    # main loop; a message that does not fit is dropped and counted.
+                    # main loop beyond a state message's retry_s.
                     self._sock = socket.socket(socket.AF_UNIX,
                                                socket.SOCK_DGRAM | socket.SOCK_CLOEXEC | socket.SOCK_NONBLOCK)
-                self._sock.sendto(text.encode("utf-8"), self._address)
+                self._sock.sendto(data, self._address)
                 return True
-            except BlockingIOError:
-                self.dropped += 1
-                return False
             except OSError as e:
+                if e.errno in _FULL_ERRNOS:
+                    return None
                 # systemd gone (a restart of the manager) or a wrong path: the service goes on.
                 if not self._warned:
                     _log.warning("cannot notify systemd at %r: %s", self._address, e)

@@ -1,13 +1,18 @@
 """sd_notify over a real unix datagram socket, and the hang watchdog on a manual clock."""
 from __future__ import annotations
 
+import errno
+import logging
 import os
 import socket
+import threading
 import uuid
+from typing import Callable
 
 import pytest
 
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
+from tests.firmware_host.joint_stream_helpers import wait_until
 
 
 @pytest.fixture
@@ -213,3 +218,92 @@ def test_a_wedge_stops_the_pings_for_good_and_is_reported_once(notify_socket, tm
     sock.settimeout(0.2)
     with pytest.raises(socket.timeout):
         sock.recv(4096)
+
+
+def _fill(sock_path: str) -> SystemdNotifier:
+    """A notifier whose socket's queue is full (STATUS messages, dropped once it is) and a state message's wait is
+    long enough for a loaded host."""
+    n = SystemdNotifier({"NOTIFY_SOCKET": sock_path}, retry_s=30.0)
+    for _ in range(100_000):
+        if not n.notify(status="x" * 200):
+            return n
+    raise AssertionError("the socket's queue never filled")
+
+
+def _drain_when(sock: socket.socket, ready: Callable[[], bool], got: list[bytes]) -> threading.Thread:
+    """A thread standing in for systemd: once ``ready()``, reads every datagram queued into ``got``."""
+    def drain() -> None:
+        wait_until(ready, timeout=30, what="the state message waiting for room")
+        sock.settimeout(2.0)
+        try:
+            while True:
+                got.append(sock.recv(4096))
+        except socket.timeout:
+            pass
+
+    thread = threading.Thread(target=drain, daemon=True)
+    thread.start()
+    return thread
+
+
+@pytest.mark.parametrize("fields, line", [({"ready": 1, "status": "running"}, b"READY=1"),
+                                          ({"stopping": 1}, b"STOPPING=1"),
+                                          ({"reloading": 1, "monotonic_usec": 5}, b"RELOADING=1")])
+def test_a_state_message_waits_for_room_in_a_full_queue(tmp_path, fields, line):
+    """READY, STOPPING and RELOADING are sent once systemd reads again (within retry_s): a READY lost to a full
+    queue left the start to TimeoutStartSec and a restart."""
+    path = tmp_path / "full.sock"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(path))
+    try:
+        n = _fill(str(path))
+        dropped, got = n.dropped, []
+        reader = _drain_when(sock, lambda: n.held >= 1, got)
+        assert n.notify(**fields) is True
+        reader.join(timeout=30)
+        assert any(d.startswith(line) for d in got), got[-3:]
+        assert n.dropped == dropped and n.held == 1
+    finally:
+        sock.close()
+
+
+def test_watchdog_and_status_are_still_dropped_at_once_and_a_state_message_past_its_bound(tmp_path):
+    path = tmp_path / "full.sock"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(path))  # never read
+    try:
+        n = _fill(str(path))
+        dropped = n.dropped
+        assert n.notify(watchdog=1) is False and n.notify(status="y") is False
+        assert n.held == 0 and n.dropped == dropped + 2  # never waited for room
+        quick = SystemdNotifier({"NOTIFY_SOCKET": str(path)}, retry_s=0.05)
+        assert quick.notify(ready=1) is False  # returns: bounded
+        assert quick.held == 1 and quick.dropped == 1
+    finally:
+        sock.close()
+
+
+class _NoBuffersOnce:
+    """A socket whose first send fails with ENOBUFS (the kernel out of buffers for the queue), then sends."""
+
+    def __init__(self) -> None:
+        self.sent: list[bytes] = []
+        self.failed = False
+
+    def sendto(self, data: bytes, address: str) -> None:
+        if not self.failed:
+            self.failed = True
+            raise OSError(errno.ENOBUFS, "No buffer space available")
+        self.sent.append(data)
+
+    def close(self) -> None:
+        pass
+
+
+def test_enobufs_counts_as_a_full_queue_not_a_missing_socket(caplog):
+    n = SystemdNotifier({"NOTIFY_SOCKET": "/run/systemd/notify"})
+    n._sock = _NoBuffersOnce()  # type: ignore[assignment]
+    with caplog.at_level(logging.WARNING):
+        assert n.notify(ready=1) is True
+    assert n._sock.sent == [b"READY=1"]
+    assert "cannot notify" not in caplog.text
