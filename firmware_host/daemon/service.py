@@ -81,6 +81,7 @@ from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
 from firmware_host.daemon.health import Health, State, scene_flags_of, write_status_file
 from firmware_host.daemon.memory import pin_mmap_threshold, return_freed_memory
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
+from firmware_host.daemon.rig_open import open_unless_stopped
 from firmware_host.daemon.sandbox import rig_url_hint, service_hint
 from firmware_host.daemon.status_claim import StatusFileClaim, StatusFileTaken, names_one_file
 from firmware_host.errors import CaptureTimeError, FirmwareHostError
@@ -461,7 +462,8 @@ class Daemon:
 
     # ------------------------------------------------------------------ rig
     def _open_rig(self, stop: threading.Event) -> Optional[drivers.RigSource]:
-        """Open the rig, retrying with backoff until it opens or ``stop`` is set (then None)."""
+        """Open the rig, retrying with backoff until it opens or ``stop`` is set (then None). A stop during an open
+        does not wait for it (an OAK's may take longer than systemd's TimeoutStopSec): :func:`open_unless_stopped`."""
         while not stop.is_set():
             self._maybe_reload(None)  # nothing is open: this attempt opens the reloaded rig.url
             rig_cfg = self.config.rig
@@ -474,7 +476,12 @@ class Daemon:
                 with self.watchdog.allow(self.config.health.open_allowance_s, "opening the rig"):
                     source = drivers.create_rig_source(rig_cfg.url, **self._rig_kwargs)
                     source.log_rig_warnings_once(self._rig_warnings_logged)
-                    source.open()
+                    if not open_unless_stopped(source, stop):
+                        _log.info("stopped while the rig was opening: not waiting for the open")
+                        return None  # (the open's thread closes the source once it returns)
+                    if stop.is_set():  # opened just as the stop came: no estimator or sinks built for it
+                        self._close_rig(source)
+                        return None
                     self._estimator_for(source.rig)
                     self._open_sinks(source.rig)
             except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:

@@ -634,6 +634,64 @@ def test_stop_while_waiting_is_prompt(tmp_path):
         assert time.monotonic() - t0 < 5.0  # not after the 30 s backoff: the wait watches the stop event
 
 
+class _GatedOpens:
+    """``drivers.create_rig_source`` for the daemon: the sources after the first ``free`` ones block in their open
+    until ``release`` is set (an OAK's open, which may take longer than systemd's TimeoutStopSec)."""
+
+    def __init__(self, real: Callable, free: int = 1) -> None:
+        self._real, self._free = real, free
+        self.release, self.entered = threading.Event(), threading.Event()
+        self.sources: list = []
+
+    def __call__(self, url: str, **kw):
+        source = self._real(url, **kw)
+        if len(self.sources) >= self._free:
+            opener = source._open
+
+            def gated() -> None:
+                self.entered.set()
+                self.release.wait()
+                opener()
+
+            source._open = gated
+        self.sources.append(source)
+        return source
+
+
+def test_a_stop_during_an_open_does_not_wait_for_it(sim_url, tmp_path, monkeypatch):
+    """A stop while the rig reopens ends the daemon without waiting for the open (up to health.open_allowance_s,
+    60 s, while systemd SIGKILLs after TimeoutStopSec=20): the sinks are closed with what was sent, STOPPING and the
+    status file's last report written, exit 0. The open, completing later in its abandoned thread, closes its
+    source: no device is left claimed."""
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _CountingEstimator)
+    opens = _GatedOpens(drivers.create_rig_source)
+    monkeypatch.setattr(service.drivers, "create_rig_source", opens)
+    cfg = _config({"url": f"{sim_url}&unplug_after_s=0.6", "reopen_min_s": 0.01}, tmp_path)
+    run = _Running(cfg, tmp_path)
+    try:
+        with run:
+            assert opens.entered.wait(60), "the rig was never reopened"
+            sink = run.daemon.sinks["memory://?status_s=0.05"]
+            run.stop.set()
+            run.thread.join(timeout=15)
+            assert not run.thread.is_alive(), "the stop waited for the open"
+            assert not opens.release.is_set() and run.rc == [0]
+        assert sink.stats().state == "closed"
+        joints = [m for m in messages_of(sink.read()) if isinstance(m, Joints)]
+        assert joints and len(joints) == sink.stats().sent
+        report = json.loads((tmp_path / "status.json").read_text())
+        assert report["state"] == State.STOPPING and report["rig"]["opens"] == 1
+        assert "STOPPING" in run.notes[-1]
+    finally:
+        opens.release.set()
+    late = opens.sources[-1]
+    wait_until(lambda: late._closed, timeout=30, what="the abandoned open closing its source")
+    assert not late.is_open
+
+
 def test_a_model_that_does_not_load_stops_the_start(tmp_path):
     broken = tmp_path / "models"
     broken.mkdir()
