@@ -38,6 +38,8 @@ from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX
 from firmware_host.daemon.measure_floor import DEFAULT_PAIRS, READS_PER_PAIR
 from firmware_host.daemon.health import STATUS_KEEP, STATUS_MAX, STATUS_RELOAD_MAX
 from firmware_host.daemon.memory import MMAP_THRESHOLD
+from firmware_host.daemon.notify import STATE_RETRY_S
+from firmware_host.daemon.rig_open import POLL_S
 from firmware_host.daemon.sandbox import HOME_FOLDERS, PRIVATE_TMP_FOLDERS
 from firmware_host.daemon.service import MAX_FAILED_RUNS, SIZE_MISMATCH_OPENS
 from firmware_host.listen import LATE_WINDOW
@@ -121,6 +123,8 @@ def _doc(name: str) -> str:
     ("docs/daemon.md", f"gives the queue {CLOSE_DRAIN_S:g} s (`CLOSE_DRAIN_S`"),
     ("docs/protocol.md", f"`CLOSE_DRAIN_S` ({CLOSE_DRAIN_S:g} s)"),
     ("docs/daemon.md", f"fixes the threshold at {MMAP_THRESHOLD / (1 << 20):g} MiB"),
+    ("docs/daemon.md", f"tried again for up to {STATE_RETRY_S:g} s (`STATE_RETRY_S`"),
+    ("docs/daemon.md", f"looks at the stop every {POLL_S:g} s (`POLL_S`)"),
     ("docs/recording-format.md", f"twice real time; at least {MIN_SPEED:g})"),
     ("docs/protocol.md", f"falls outside {_I16_MIN / _MM_PER_M:.3f} m to {_I16_MAX / _MM_PER_M:.3f} m"),
     ("docs/runtime.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} degrees"),
