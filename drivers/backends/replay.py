@@ -237,7 +237,7 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
     (:func:`_mend_runs`). Lone or in a run, only where the neighbours lie over a frame period apart
     (:func:`_out_of_line`): a clock reset back one to three frames brings one back within a period. A camera's
     first and last frames have one neighbour: mended one step from it where the other cameras say so
-    (:func:`_bad_end`)."""
+    (:func:`_bad_end`), unless their clocks went back there too (:func:`_on_their_reset`)."""
     period_ns = _mending_period_ns(rows, mine, others)
     # runs first: the lone test takes a run's first (back, then ahead)
     mended = _mend_runs(mine, stamps, others, period_ns)
@@ -245,11 +245,12 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
         if _out_of_line([stamps[here]], stamps[before], stamps[after], period_ns):
             mended.append((here, stamps[here]))
             stamps[here] = (stamps[before] + stamps[after]) // 2
-    ends = [(mine[:3], [stamps[theirs[0]] for theirs in others if theirs]),
-            (mine[:-4:-1], [stamps[theirs[-1]] for theirs in others if theirs])]
-    for (end, near, far), elsewhere in (ends if len(mine) >= 3 else []):
+    ends = [(mine[:3], [stamps[theirs[0]] for theirs in others if theirs], _across_a_reset(others, stamps, False)),
+            (mine[:-4:-1], [stamps[theirs[-1]] for theirs in others if theirs], _across_a_reset(others, stamps, True))]
+    for (end, near, far), elsewhere, across in (ends if len(mine) >= 3 else []):
         in_line = stamps[near] <= stamps[far] if end == mine[0] else stamps[far] <= stamps[near]
-        if in_line and _bad_end(stamps[end], stamps[near], stamps[far], elsewhere):
+        reset_there_too = _on_their_reset(stamps[end], across, period_ns)
+        if in_line and not reset_there_too and _bad_end(stamps[end], stamps[near], stamps[far], elsewhere):
             mended.append((end, stamps[end]))
             stamps[end] = max(0, 2 * stamps[near] - stamps[far])
     if mended:
@@ -341,6 +342,28 @@ def _bad_end(end_ns: int, near_ns: int, far_ns: int, elsewhere_ns: list[int]) ->
     if not (wrong_way or abs(end_ns - near_ns) > END_STEPS * abs(far_ns - near_ns)):
         return False
     return min(abs(o - near_ns) for o in elsewhere_ns) < min(abs(o - end_ns) for o in elsewhere_ns)
+
+
+def _across_a_reset(others: list[list[int]], stamps: dict[int, int], last: bool) -> list[int]:
+    """The other cameras' (``others``: rows in recorded order) stamps across a step back from one end of the take:
+    those after each one's last step back (``last``), else before its first; none from a camera that never went
+    back."""
+    across: list[int] = []
+    for theirs in others:
+        ns = [stamps[i] for i in theirs]
+        backs = [k for k in range(1, len(ns)) if ns[k] < ns[k - 1]]
+        if backs:
+            across += ns[backs[-1]:] if last else ns[:backs[0]]
+    return across
+
+
+def _on_their_reset(end_ns: int, across_ns: list[int], period_ns: int) -> bool:
+    """Whether a camera's first (last) stamp ``end_ns``, out of line at its end, lies within ``period_ns`` of another
+    camera's stamps across a step back (``across_ns``, :func:`_across_a_reset`): a clock reset that hit that camera
+    too, at that place, not a bad stamp. Another camera with one more frame on the new timeline (the old, at the
+    first end) has its end stamp nearer this one's neighbour, and the reset was mended as a bad end stamp (session
+    72 review)."""
+    return any(abs(ns - end_ns) <= period_ns for ns in across_ns)
 
 
 class ReplayRigSource(RigSource):

@@ -1336,7 +1336,8 @@ def test_one_bad_stamp_is_mended_not_taken_as_a_reset(glitch_ms):
     ([3_600_000, 33, 66, 100, 133], [0, 33, 66, 100, 133]),  # the first an hour ahead: a "reset" after it moved all
     ([0, 33, 66, 100, 3_600_133], [0, 33, 66, 100, 134]),  # the last an hour ahead: a paced replay waited the hour
     ([-3_600_000, 33, 66, 100, 133], [0, 33, 66, 100, 133]),  # the first an hour back: the same, after it
-], ids=["first-ahead", "last-ahead", "first-back"])
+    ([0, 33, 66, 100, 133 - 3_600_000], [0, 33, 66, 100, 134]),  # the last an hour back: a "reset" at the end
+], ids=["first-ahead", "last-ahead", "first-back", "last-back"])
 def test_a_bad_first_or_last_stamp_is_mended_where_the_other_camera_says_so(left_ms, mended_ms, caplog):
     """A camera's first or last stamp far out of line with the next two, the other camera's stamps at that end in
     line with those two: a bad stamp, played one step from its neighbour (it was played as recorded)."""
@@ -1452,7 +1453,7 @@ def test_a_reset_back_under_two_frames_does_not_get_the_last_stamp_mended(caplog
     """Left's stamps 0.07, 35.3, 12.5, 47.2 ms (a reset back under two frames): 35.3 was mended to the midpoint of
     its neighbours (6.3), which made the last stamp a bad end, mended too: left played 0.07, 6.3, 12.5, 18.7.
     Now a reset: the frames after it follow on, spaced as recorded. (Right's last stamp, back under two frames
-    too, is the end check's to judge (``_bad_end``): left's last lies nearer its neighbour, so it mends it.)"""
+    too, is the end check's to judge: a reset too, see the test after next.)"""
     from drivers.backends.recording_format import FrameRow
     from drivers.backends.replay import playback_order
 
@@ -1464,6 +1465,41 @@ def test_a_reset_back_under_two_frames_does_not_get_the_last_stamp_mended(caplog
     assert played[:2] == [70, 35_300] and played[3] - played[2] == 47_200 - 12_500
     assert played[2] - played[1] > 30_000  # the unknown gap at the reset: a frame period
     assert not any("bad stamp" in r.getMessage() and "'left'" in r.getMessage() for r in caplog.records)
+
+
+@pytest.mark.parametrize(("left_us", "right_us", "pairs"), [
+    ([70, 35_300, 12_500, 47_200], [100, 35_400, 12_600], [(2, 2)]),
+    ([0, 33_000, 66_000, 100_000, 83_000, 116_000], [1_000, 34_000, 67_000, 101_000, 84_000], [(4, 4)]),
+    ([12_500, 47_200, 70, 35_300], [47_300, 100, 35_400], [(1, 0), (2, 1)]),
+], ids=["last-example", "last-back-1.5-frames", "first"])
+def test_a_reset_on_both_cameras_at_one_s_end_is_not_mended_as_a_bad_end_stamp(left_us, right_us, pairs, caplog):
+    """Both clocks went back at right's last frame (first), left having one more frame across the reset: left's end
+    stamp lay nearer right's neighbour than right's, so the end check mended right's as a bad stamp (the fuzz of the
+    session 72 review) and its pair broke. Right's lies within a period of left's across the reset: both reset."""
+    from drivers.backends.recording_format import FrameRow
+    from drivers.backends.replay import playback_order
+
+    us = 1_000
+    rows = [FrameRow(cam, i, t * us, f"images/{cam}/{i:08d}.png")
+            for cam, stamps in (("right", right_us), ("left", left_us)) for i, t in enumerate(stamps)]
+    with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"):
+        played = {(r.camera, r.index): r.timestamp_ns // us for r in playback_order(rows[::-1], "take")}
+    warned = [r.getMessage() for r in caplog.records]
+    assert not any("bad stamp" in message for message in warned), warned
+    assert sum("clock reset" in message for message in warned) == 2
+    for left, right in pairs:  # the pairs across the reset kept, as recorded
+        assert played["right", right] - played["left", left] == right_us[right] - left_us[left]
+
+
+def test_a_bad_last_stamp_beside_a_camera_that_reset_is_still_mended(caplog):
+    """Both clocks went back mid-take, then left's last stamp came an hour ahead: right's stamps across its reset lie
+    nowhere near it, so it is a bad stamp, mended one step on from its neighbour."""
+    left_ms = [_HOUR_MS + t for t in (0, 33, 66, 100, 20, 53, 86 + _HOUR_MS)]
+    right_ms = [_HOUR_MS + t for t in (1, 34, 67, 101, 21, 54, 87, 120)]
+    played, warned = _played_ms(left_ms, right_ms, caplog)
+    left_played = [t for cam, _, t in played if cam == "left"]
+    assert [b - a for a, b in zip(left_played[4:], left_played[5:])] == [33, 33]
+    assert any("bad stamp" in message and "images/left/00000006.png" in message for message in warned), warned
 
 
 def test_two_bad_stamps_in_a_camera_of_four_frames_are_mended(caplog):
