@@ -272,8 +272,15 @@ def _mending_period_ns(rows: list[FrameRow], mine: list[int], others: list[list[
     if len(steady) >= 2:
         return int(statistics.median_low(steady))
     own_ns = frame_period_ns([rows[i] for i in mine])
-    theirs = [rows[i] for group in others for i in group]
+    # only cameras with a step forward tell a period: others of one frame, or of two across a reset, gave
+    # frame_period_ns's 1/30 s, which beat a 10 fps camera's own and had its reset mended (session 72 review)
+    theirs = [rows[i] for group in others if _steps_forward([rows[i].timestamp_ns for i in group]) for i in group]
     return min(own_ns, frame_period_ns(theirs)) if theirs else own_ns
+
+
+def _steps_forward(stamps_ns: list[int]) -> bool:
+    """Whether a camera's stamps, in its playing order, step forward anywhere."""
+    return any(b > a for a, b in zip(stamps_ns, stamps_ns[1:]))
 
 
 def _steady_steps(stamps_ns: list[int]) -> list[int]:

@@ -1467,6 +1467,25 @@ def test_a_reset_back_under_two_frames_does_not_get_the_last_stamp_mended(caplog
     assert not any("bad stamp" in r.getMessage() and "'left'" in r.getMessage() for r in caplog.records)
 
 
+def test_cameras_with_no_step_forward_lend_no_period_to_a_camera_of_a_few_frames(caplog):
+    """A 10 fps camera of four frames with a reset after its first (1.6, -52.4, 46.9, 147.0 ms) beside two cameras of
+    two frames each, reset after their first: theirs had no step forward, so their period read 1/30 s, which beat its
+    own 100 ms; the reset was mended as a bad stamp, then its last stamp as a bad end (the session 72 review's fuzz,
+    seed 2999). Now it plays as a reset, its frames after it spaced as recorded."""
+    from drivers.backends.recording_format import FrameRow
+    from drivers.backends.replay import playback_order
+
+    us = 100_000  # tenths of a millisecond
+    takes = {"cam0": [16, -524, 469, 1470], "cam1": [20, -520], "cam2": [25, -515]}
+    rows = [FrameRow(cam, i, t * us, f"images/{cam}/{i:08d}.png") for cam, stamps in takes.items()
+            for i, t in enumerate(stamps)]
+    with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"):
+        played = [r.timestamp_ns // us for r in playback_order(rows, "take") if r.camera == "cam0"]
+    warned = [r.getMessage() for r in caplog.records]
+    assert not any("bad stamp" in message for message in warned), warned
+    assert played[2] - played[1] == 469 + 524 and played[3] - played[2] == 1470 - 469
+
+
 @pytest.mark.parametrize(("left_us", "right_us", "pairs"), [
     ([70, 35_300, 12_500, 47_200], [100, 35_400, 12_600], [(2, 2)]),
     ([0, 33_000, 66_000, 100_000, 83_000, 116_000], [1_000, 34_000, 67_000, 101_000, 84_000], [(4, 4)]),
