@@ -460,11 +460,11 @@ _TOOL_FRAMES = ("opencv-stereo-calib", "anipose-toml")
 
 
 def _tile_find_floor_y(rig: Rig) -> float:
-    """The floor's y (y down) that the refusal of floating tile finds (``tracking.cold_tiles_max_foot_m``) reads: y =
-    0, or the working volume's floor-side bound (its largest y) where that lies higher. A rig whose frame's origin lies under
-    the floor (its volume ends above y = 0) reads every foot too high by as much, and from y = 0 every tile find was
-    refused; the volume is the one hint of the floor there. Never lower than y = 0: where the floor is not known the
-    guard refuses less, never more (the example rig's and ``ghcal synth``'s volumes reach y = 0: 0.0)."""
+    """The floor's y (y down) that the refusal of floating tile finds (``tracking.cold_tiles_max_foot_m``) reads:
+    y = 0, or the working volume's floor-side bound (its largest y) where that lies higher. A rig whose frame's origin
+    lies under the floor (its volume ends above y = 0) reads every foot too high by as much, and from y = 0 every tile
+    find was refused; the volume is the one hint of the floor there. Never lower than y = 0: where the floor is not
+    known the guard refuses less, never more (the example rig's and ``ghcal synth``'s volumes reach y = 0: 0.0)."""
     return min(0.0, float(rig.volume.max_corner[1]))
 
 
