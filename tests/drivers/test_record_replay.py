@@ -1665,3 +1665,13 @@ def test_a_bad_last_stamp_back_among_the_stamps_of_an_earlier_reset_is_still_men
     left_played = [t for cam, _, t in played if cam == "left"]
     assert [b - a for a, b in zip(left_played[4:], left_played[5:])] == [33, 33, 34, 33, 33, 33]
     assert any("bad stamp" in message and "images/left/00000010.png" in message for message in warned), warned
+
+
+def test_a_bad_first_stamp_among_the_stamps_before_a_later_reset_is_still_mended(caplog):
+    """Left's first stamp came 47 ms late, among right's stamps before a reset that came later (both clocks back a
+    second mid-take): that reset lies elsewhere, so the stamp is a bad one, mended one step before its neighbour."""
+    left_ms = [_HOUR_MS + t for t in (80, 33, 66, 100, -900, -867, -834)]
+    right_ms = [_HOUR_MS + t for t in (1, 34, 67, 101, -899, -866, -833)]
+    played, warned = _played_ms(left_ms, right_ms, caplog)
+    assert [t - _HOUR_MS for cam, _, t in played if cam == "left"][:4] == [0, 33, 66, 100]
+    assert any("bad stamp" in message and "images/left/00000000.png" in message for message in warned), warned
