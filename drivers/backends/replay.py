@@ -245,10 +245,11 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
         if _out_of_line([stamps[here]], stamps[before], stamps[after], period_ns):
             mended.append((here, stamps[here]))
             stamps[here] = (stamps[before] + stamps[after]) // 2
-    ends = [(mine[:3], [stamps[theirs[0]] for theirs in others if theirs], _across_a_reset(others, stamps, False)),
-            (mine[:-4:-1], [stamps[theirs[-1]] for theirs in others if theirs], _across_a_reset(others, stamps, True))]
-    for (end, near, far), elsewhere, across in (ends if len(mine) >= 3 else []):
+    ends = [(mine[:3], [stamps[theirs[0]] for theirs in others if theirs], False),
+            (mine[:-4:-1], [stamps[theirs[-1]] for theirs in others if theirs], True)]
+    for (end, near, far), elsewhere, last in (ends if len(mine) >= 3 else []):
         in_line = stamps[near] <= stamps[far] if end == mine[0] else stamps[far] <= stamps[near]
+        across = _across_a_reset(others, stamps, last, stamps[near], period_ns)
         reset_there_too = _on_their_reset(stamps[end], across, period_ns)
         if in_line and not reset_there_too and _bad_end(stamps[end], stamps[near], stamps[far], elsewhere):
             mended.append((end, stamps[end]))
@@ -351,16 +352,23 @@ def _bad_end(end_ns: int, near_ns: int, far_ns: int, elsewhere_ns: list[int]) ->
     return min(abs(o - near_ns) for o in elsewhere_ns) < min(abs(o - end_ns) for o in elsewhere_ns)
 
 
-def _across_a_reset(others: list[list[int]], stamps: dict[int, int], last: bool) -> list[int]:
-    """The other cameras' (``others``: rows in recorded order) stamps across a step back from one end of the take:
-    those after each one's last step back (``last``), else before its first; none from a camera that never went
-    back."""
+def _across_a_reset(others: list[list[int]], stamps: dict[int, int], last: bool, near_ns: int,
+                    period_ns: int) -> list[int]:
+    """The other cameras' (``others``: rows in recorded order) stamps across a step back at one end of the take:
+    those after each one's last step back (``last``), else before its first, where its stamp on this side of that
+    step lies within ``period_ns`` of ``near_ns`` (the end stamp's neighbour: the reset came there); none from a
+    camera that never went back, or went back elsewhere (a reset mid-take: its stamps after it span the take's
+    rest, and a bad end stamp among them was kept as a reset, session 72 review)."""
     across: list[int] = []
     for theirs in others:
         ns = [stamps[i] for i in theirs]
         backs = [k for k in range(1, len(ns)) if ns[k] < ns[k - 1]]
-        if backs:
-            across += ns[backs[-1]:] if last else ns[:backs[0]]
+        if not backs:
+            continue
+        back = backs[-1] if last else backs[0]
+        beside_ns = ns[back - 1] if last else ns[back]
+        if abs(beside_ns - near_ns) <= period_ns:
+            across += ns[back:] if last else ns[:back]
     return across
 
 

@@ -1653,3 +1653,25 @@ def test_a_recorded_tiff_whose_uncompressed_strip_is_short_is_a_corrupt_frame_na
         load_image(path)
     assert str(info.value) == (f"recording image {path} is corrupt: its strip 2 holds 4223 of the 4224 bytes its "
                                f"pixels need (uncompressed): OpenCV would deliver the rest black")
+
+
+def test_a_bad_last_stamp_back_among_the_stamps_of_an_earlier_reset_is_still_mended(caplog):
+    """Both clocks went back mid-take; at the end left's last stamp came back 146 ms, among right's stamps after
+    that reset, while right went on: right's reset lies mid-take, not at this end, so the stamp is a bad one, mended
+    one step on (it was left as a reset of left's alone: its pair lost, a paced replay waiting on it)."""
+    left_ms = [_HOUR_MS + t for t in (0, 33, 66, 100, 20, 53, 86, 120, 153, 186, 40)]
+    right_ms = [_HOUR_MS + t for t in (1, 34, 67, 101, 21, 54, 87, 121, 154, 187, 220)]
+    played, warned = _played_ms(left_ms, right_ms, caplog)
+    left_played = [t for cam, _, t in played if cam == "left"]
+    assert [b - a for a, b in zip(left_played[4:], left_played[5:])] == [33, 33, 34, 33, 33, 33]
+    assert any("bad stamp" in message and "images/left/00000010.png" in message for message in warned), warned
+
+
+def test_a_bad_first_stamp_among_the_stamps_before_a_later_reset_is_still_mended(caplog):
+    """Left's first stamp came 47 ms late, among right's stamps before a reset that came later (both clocks back a
+    second mid-take): that reset lies elsewhere, so the stamp is a bad one, mended one step before its neighbour."""
+    left_ms = [_HOUR_MS + t for t in (80, 33, 66, 100, -900, -867, -834)]
+    right_ms = [_HOUR_MS + t for t in (1, 34, 67, 101, -899, -866, -833)]
+    played, warned = _played_ms(left_ms, right_ms, caplog)
+    assert [t - _HOUR_MS for cam, _, t in played if cam == "left"][:4] == [0, 33, 66, 100]
+    assert any("bad stamp" in message and "images/left/00000000.png" in message for message in warned), warned
