@@ -166,10 +166,18 @@ def finite_float(text: str) -> float:
 
 
 def bound_m(text: str) -> float:
-    """``--tile-find-max-foot`` and ``--good-find-mm``: a number, inf allowed, not nan."""
+    """``--good-find-mm``: a number, inf allowed, not nan."""
     value = float(text)
     if np.isnan(value):
         raise argparse.ArgumentTypeError(f"a number (inf allowed), got {text!r}")
+    return value
+
+
+def max_foot_m(text: str) -> float:
+    """``--tile-find-max-foot``: a bound ``tracking.cold_tiles_max_foot_m`` takes (0-10 m), or inf (none)."""
+    value = bound_m(text)
+    if value != float("inf") and not 0.0 <= value <= 10.0:
+        raise argparse.ArgumentTypeError(f"metres from 0 to 10 (tracking.cold_tiles_max_foot_m), or inf, got {text!r}")
     return value
 
 
@@ -318,7 +326,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rig-lift", type=finite_float, default=0.0,
                     help="metres each --rigs file's frame is moved up for its estimator (the same images; a "
                          "negative one moves it down): where the runtime reads the floor at y = 0")
-    ap.add_argument("--tile-find-max-foot", type=bound_m, default=TrackingConfig().cold_tiles_max_foot_m,
+    ap.add_argument("--tile-find-max-foot", type=max_foot_m, default=TrackingConfig().cold_tiles_max_foot_m,
                     help="metres: the --rigs estimators refuse a tile find whose lower foot stands higher (default "
                          "the runtime's tracking.cold_tiles_max_foot_m; inf: every find kept, each showing its own "
                          "error)")

@@ -159,6 +159,15 @@ def test_the_bounds_are_numbers(option, capsys, monkeypatch):
     assert option in err, err
 
 
+@pytest.mark.parametrize("value", ["-0.1", "12", "-inf"])
+def test_a_foot_bound_the_config_refuses_is_a_usage_error(value, capsys, monkeypatch):
+    """Past tracking.cold_tiles_max_foot_m's 0-10 m (inf: none), a usage error naming the option and the value, not
+    the config's traceback from inside the run."""
+    err = run_script_failing("measure_baseline", f"--tile-find-max-foot={value}", capsys=capsys,
+                             monkeypatch=monkeypatch)  # (=: argparse reads a lone -0.1 as an option)
+    assert "--tile-find-max-foot" in err and value in err, err
+
+
 def test_the_command_line_prints_the_tile_finds(tiny_model_dir, scratch_cache, capsys, monkeypatch):  # noqa: F811
     from pathlib import Path
 
