@@ -539,21 +539,21 @@ def test_sigterm_while_waiting_for_the_rig_stops_at_once(tmp_path):
     assert json.loads(status.read_text())["state"] == "stopping"
 
 
-@needs_model
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
-def test_stop_signals_repeated_until_it_exits_still_end_it_with_status_0(tmp_path, signum):
-    """A second stop signal (``systemctl stop`` then ``kill``, Ctrl-C twice) may land after the daemon put back the
-    handlers it replaced, as the process exits: SIGTERM's default action then killed it (status 143 where the
-    docs say 0) and SIGINT raised KeyboardInterrupt in the interpreter's exit. Signals sent until it has exited."""
+def _signalled_until_it_exits(tmp_path, first: signal.Signals | None, repeated: signal.Signals):
+    """The daemon, waiting for an absent rig, sent ``first`` once (None: not), then ``repeated`` every millisecond
+    until it has exited (60 s at most): how many were repeated, its exit status, its stderr, its status file's
+    state."""
     sock, proc, status = _daemon_waiting_for_an_absent_rig(tmp_path, "-m", "firmware_host.daemon.cli")
     notes: list[dict[str, str]] = []
     sent = 0
     try:
         _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("waiting") for n in ns),
                      "waiting for the rig")
+        if first is not None:
+            proc.send_signal(first)
         deadline = time.monotonic() + 60
         while proc.poll() is None and time.monotonic() < deadline:
-            proc.send_signal(signum)
+            proc.send_signal(repeated)
             sent += 1
             time.sleep(0.001)
         _, err = proc.communicate(timeout=60)
@@ -561,10 +561,20 @@ def test_stop_signals_repeated_until_it_exits_still_end_it_with_status_0(tmp_pat
         if proc.poll() is None:
             proc.kill()
         sock.close()
+    return sent, proc.returncode, err, json.loads(status.read_text())["state"]
+
+
+@needs_model
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_stop_signals_repeated_until_it_exits_still_end_it_with_status_0(tmp_path, signum):
+    """A second stop signal (``systemctl stop`` then ``kill``, Ctrl-C twice) may land after the daemon put back the
+    handlers it replaced, as the process exits: SIGTERM's default action then killed it (status 143 where the
+    docs say 0) and SIGINT raised KeyboardInterrupt in the interpreter's exit. Signals sent until it has exited."""
+    sent, returncode, err, state = _signalled_until_it_exits(tmp_path, None, signum)
     assert sent >= 2  # (one alone is test_sigterm_while_waiting_for_the_rig_stops_at_once)
-    assert proc.returncode == 0, err
+    assert returncode == 0, err
     assert f"{signal.Signals(signum).name} received: stopping" in err and "Traceback" not in err
-    assert json.loads(status.read_text())["state"] == "stopping"
+    assert state == "stopping"
 
 
 @needs_model
@@ -572,27 +582,11 @@ def test_a_sighup_as_it_exits_does_not_kill_it(tmp_path):
     """A SIGHUP after the stop (``systemctl reload`` as the daemon stops, or exits at its replay's end) found SIGHUP's
     default action put back: the interpreter's finalization resets a Python handler (the recording one) to it. The
     daemon died of SIGHUP in place of exit 0, a death the unit's RestartForceExitStatus=SIGHUP restarts."""
-    sock, proc, status = _daemon_waiting_for_an_absent_rig(tmp_path, "-m", "firmware_host.daemon.cli")
-    notes: list[dict[str, str]] = []
-    sent = 0
-    try:
-        _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("waiting") for n in ns),
-                     "waiting for the rig")
-        proc.send_signal(signal.SIGTERM)
-        deadline = time.monotonic() + 60
-        while proc.poll() is None and time.monotonic() < deadline:
-            proc.send_signal(signal.SIGHUP)
-            sent += 1
-            time.sleep(0.001)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        sock.close()
+    sent, returncode, err, state = _signalled_until_it_exits(tmp_path, signal.SIGTERM, signal.SIGHUP)
     assert sent >= 2
-    assert proc.returncode == 0, err
+    assert returncode == 0, err
     assert "SIGTERM received: stopping" in err and "Traceback" not in err
-    assert json.loads(status.read_text())["state"] == "stopping"
+    assert state == "stopping"
 
 
 # ------------------------------------------------------------------ SIGHUP during the start
