@@ -249,9 +249,9 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
             (mine[:-4:-1], [stamps[theirs[-1]] for theirs in others if theirs], True)]
     for (end, near, far), elsewhere, last in (ends if len(mine) >= 3 else []):
         in_line = stamps[near] <= stamps[far] if end == mine[0] else stamps[far] <= stamps[near]
-        across = _across_a_reset(others, stamps, last, stamps[near], period_ns)
-        reset_there_too = _on_their_reset(stamps[end], across, period_ns)
-        if in_line and not reset_there_too and _bad_end(stamps[end], stamps[near], stamps[far], elsewhere):
+        if (in_line and _bad_end(stamps[end], stamps[near], stamps[far], elsewhere)
+                and not _on_their_reset(stamps[end], _across_a_reset(others, stamps, last, stamps[near], period_ns),
+                                        period_ns)):
             mended.append((end, stamps[end]))
             stamps[end] = max(0, 2 * stamps[near] - stamps[far])
     if mended:
