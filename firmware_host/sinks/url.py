@@ -94,10 +94,11 @@ def _refuse_non_text(url: object) -> None:
     TypeError or AttributeError from ``urlsplit``. Named as text, so that its password is redacted like any URL's."""
     if isinstance(url, str):
         return
-    as_text = url.decode("utf-8", "backslashreplace") if isinstance(url, (bytes, bytearray)) else str(url)
-    hint = {bytes: ": decode it first", bytearray: ": decode it first"}.get(type(url), "")
-    if isinstance(url, os.PathLike):
-        hint = ": a file is file:///path/to/joints.jsonl (Path.as_uri())"
+    if isinstance(url, (bytes, bytearray)):
+        as_text, hint = url.decode("utf-8", "backslashreplace"), ": decode it first"
+    else:
+        as_text = str(url)
+        hint = ": a file is file:///path/to/joints.jsonl (Path.as_uri())" if isinstance(url, os.PathLike) else ""
     raise SinkConfigError(as_text, "url", as_text, f"must be text (str), not {type(url).__name__}{hint}")
 
 
