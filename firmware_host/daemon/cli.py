@@ -463,8 +463,9 @@ def _measure_floor(path: str, pairs: int) -> int:
     stop = threading.Event()
     # as the daemon stops: the signal sets ``stop``, looked at between two reads, so the rig and the estimator
     # close by their ``with`` (a SIGTERM from systemd or timeout killed it with neither closed; Ctrl-C's
-    # KeyboardInterrupt could land inside a close)
-    with _StopOnSignal(stop) as signals:
+    # KeyboardInterrupt could land inside a close). Ignored on the way out, as the daemon's: a second Ctrl-C as it
+    # exited raised KeyboardInterrupt there (a traceback)
+    with _StopOnSignal(stop, ignore_after=early_sighup.is_daemon_process()) as signals:
         try:
             with _stdout_for_the_json_alone():  # and as it opens and runs the device
                 m = measure_floor_of_config(config, pairs, load_model=load_model, stop=stop)

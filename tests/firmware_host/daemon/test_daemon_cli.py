@@ -589,6 +589,56 @@ def test_a_sighup_as_it_exits_does_not_kill_it(tmp_path):
     assert state == "stopping"
 
 
+_NOTE_THE_MEASURE = '''
+import os, sys
+sys.argv[0] = os.path.join(os.path.dirname(sys.executable), "ghnerf-daemon")  # as the console script
+from firmware_host.daemon import cli
+
+_measure = cli.measure_floor_of_config
+
+def _noted(*args, **kwargs):
+    open(os.environ["MEASURE_STARTED"], "w").close()  # the stop handlers are in place from here on
+    return _measure(*args, **kwargs)
+
+cli.measure_floor_of_config = _noted
+sys.exit(cli.main(sys.argv[1:]))
+'''
+
+
+@needs_model
+def test_a_second_ctrl_c_as_measure_floor_exits_prints_no_traceback(tmp_path):
+    """``--measure-floor`` put back SIGINT's default handler once stopped: a second Ctrl-C as it exited raised
+    KeyboardInterrupt in the print or the interpreter's exit, a traceback (and no status 130 of its own). Ignored
+    there now, as the daemon's exit ignores it. SIGINT sent once the measurement began, then every millisecond until
+    it has exited."""
+    path = _write(tmp_path, {
+        "rig": {"url": f"sim://?fps=30&seed=0&motion=wave&width=320&height=240&cache={tmp_path / 'sim'}"},
+        "sinks": ["memory://"], "estimator": {"session": {"model_dir": str(MODELS), "warmup": False}}})
+    started = tmp_path / "started"
+    proc = subprocess.Popen([sys.executable, "-c", _NOTE_THE_MEASURE, "--config", str(path), "--measure-floor",
+                             "100000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
+                            env={**os.environ, "MEASURE_STARTED": str(started)})
+    sent = 0
+    try:
+        deadline = time.monotonic() + 120
+        while not started.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert started.exists(), proc.communicate(timeout=60)[1] if proc.poll() is not None else "not started"
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and time.monotonic() < deadline:
+            proc.send_signal(signal.SIGINT)
+            sent += 1
+            time.sleep(0.001)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert sent >= 2
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    assert proc.returncode == 130, err
+    assert out == "" and "SIGINT received: --measure-floor stopped before 100000 pairs" in err
+
+
 # ------------------------------------------------------------------ SIGHUP during the start
 # SIGHUP's default action kills, and systemd (Restart=on-failure) counts a death by SIGHUP as clean: a
 # reload landing while the daemon still imports, reads its config or loads its model must not kill it.
