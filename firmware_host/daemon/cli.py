@@ -33,7 +33,8 @@ SIGHUP (``systemctl reload ghnerf``) reads the config file again: a file that pa
 changed; one that does not is refused with its error in the journal, and the daemon runs on as it was.
 A SIGHUP during the start (imports, config, model load) does not kill it: it is recorded from the
 first import of the package on (``early_sighup``); one that came before the config file was read is
-met by that read, one after it becomes a reload once the daemon runs.
+met by that read, one after it becomes a reload once the daemon runs. A SIGTERM or SIGINT there is recorded too,
+and stops the daemon (or ``--measure-floor``) once its stop handlers are in place, loading no model.
 
 Exit status: 0 after SIGTERM / SIGINT or the end of a recording; 2 for what a restart cannot fix
 (a bad config, a sink URL, a model that does not load or cannot serve the estimator's settings: the
@@ -347,6 +348,10 @@ class _StopOnSignal:
         self._thread.start()
         for signum in self._signums:
             self._previous[signum] = signal.signal(signum, self.handler)
+        early = early_sighup.take_stop()  # one during the imports or the config read: stop as for one now
+        if early is not None:  # (not in a handler: set here, so that the caller starts nothing for nothing)
+            self._note(early)
+            self._stop.set()
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -362,12 +367,15 @@ class _StopOnSignal:
         except OSError:  # full: the numbers already in it stop the daemon
             pass
 
+    def _note(self, signum: int) -> None:
+        logging.getLogger("ghnerf.daemon").info("%s received: stopping", signal.Signals(signum).name)
+        if self.received is None:
+            self.received = signum
+
     def _watch(self) -> None:
         while data := os.read(self._read_fd, 64):
             for signum in data:
-                logging.getLogger("ghnerf.daemon").info("%s received: stopping", signal.Signals(signum).name)
-                if self.received is None:
-                    self.received = signum
+                self._note(signum)
             self._stop.set()
 
 
@@ -430,6 +438,7 @@ def _validate(path: str, *, with_model: bool) -> int:
 
     :raises DaemonConfigError: naming the file and the key.
     """
+    early_sighup.release_stop()  # no stop handlers here: a stop during the imports, and any from now on, kills
     # the rig's notes on stderr beside its warnings, bare (no logging is set up here: Python showed the warnings
     # only), a rig file's and a rig built in memory's (sim://, said by its source as its open says it); depthai may
     # log to stdout

@@ -10,8 +10,15 @@ just before it reads the config file (a request before that read is met by the r
 once the daemon's own handler is in place, turns a request recorded since into a reload
 (:meth:`Daemon.request_reload`): the file may have changed after it was read.
 
+SIGTERM and SIGINT, likewise, from the package's first import in ``ghnerf-daemon`` (:func:`install_stop`): a
+``systemctl stop`` landing while Python imported the runtime killed the process (status 143, no log line), and
+Ctrl-C there printed a KeyboardInterrupt traceback. The first one is recorded; the daemon's own stop handlers
+(``cli._StopOnSignal``) take it (:func:`take_stop`) as they are installed, after the config read, and stop as for
+a signal of their own. ``--validate-config``, which installs none, puts back what was there (:func:`release_stop`)
+and meets a recorded one as it would have been met.
+
 What is left: the interpreter's own start-up, before this module runs (tens of milliseconds), where
-only the unit's ``RestartForceExitStatus=SIGHUP`` helps.
+only the unit's ``RestartForceExitStatus=SIGHUP`` helps (and a stop there kills as before).
 """
 from __future__ import annotations
 
@@ -19,13 +26,19 @@ import os
 import signal
 import sys
 
-__all__ = ["install", "uninstall", "take", "is_daemon_process"]
+__all__ = ["install", "uninstall", "take", "is_daemon_process", "install_stop", "take_stop", "release_stop"]
 
 PROG = "ghnerf-daemon"
 
 _requested = False
 _installed = False
 _previous: object = None
+#: the stop signal recorded first (None: none), and the handlers :func:`install_stop` replaced
+_stop_signal: int | None = None
+_previous_stop: dict[int, object] = {}
+
+#: the signals that stop the daemon (cli._StopOnSignal's)
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT)
 
 
 def _record(_signum: int, _frame: object) -> None:
@@ -69,3 +82,42 @@ def take() -> bool:
     global _requested
     requested, _requested = _requested, False
     return requested
+
+
+def _record_stop(signum: int, _frame: object) -> None:
+    global _stop_signal
+    if _stop_signal is None:
+        _stop_signal = signum
+
+
+def install_stop() -> bool:
+    """Record SIGTERM and SIGINT instead of dying of them (or raising KeyboardInterrupt), until the daemon's own stop
+    handlers replace these. True if installed by this call (False: already, or not the main thread)."""
+    if _previous_stop:
+        return False
+    try:
+        for signum in STOP_SIGNALS:
+            _previous_stop[signum] = signal.signal(signum, _record_stop)
+    except ValueError:  # not the main thread (nothing was installed: the first call fails)
+        return False
+    return True
+
+
+def take_stop() -> int | None:
+    """The stop signal recorded since the last call (None: none); clears it."""
+    global _stop_signal
+    signum, _stop_signal = _stop_signal, None
+    return signum
+
+
+def release_stop() -> None:
+    """Put back the handlers :func:`install_stop` replaced (where its own is still in place), then deliver a stop
+    recorded meanwhile to them: for a mode that installs no stop handlers of its own (``--validate-config``), a
+    stop during its imports acts as it did before they were recorded."""
+    for signum, previous in _previous_stop.items():
+        if signal.getsignal(signum) is _record_stop:
+            signal.signal(signum, previous)  # type: ignore[arg-type]
+    _previous_stop.clear()
+    signum = take_stop()
+    if signum is not None:
+        signal.raise_signal(signum)

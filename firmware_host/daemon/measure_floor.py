@@ -242,8 +242,10 @@ def measure_floor_of_config(config: DaemonConfig, pairs: int = DEFAULT_PAIRS, *,
     """
     from ghnerf_runtime.estimator import Estimator  # the model's runtime: only once the config checked out
 
-    session = load_model(config)
     stop = threading.Event() if stop is None else stop  # waited on between opens
+    if stop.is_set():  # a stop during the imports or the config read (ghnerf-daemon's): no model loaded for nothing
+        raise FloorMeasureStopped(pairs)
+    session = load_model(config)
     backoff_s = config.rig.reopen_min_s
     for opens in range(1, SIZE_MISMATCH_OPENS + 1):
         if stop.is_set():  # SIGTERM while the model loaded, or between opens: no camera opened for nothing

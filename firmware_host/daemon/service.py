@@ -364,13 +364,14 @@ class Daemon:
 
     def _run_claimed(self, stop: threading.Event) -> int:
         try:
-            self._load_model()
-            self._check_estimator()
-            self._check_sinks()
+            if not stop.is_set():  # a stop during the imports or the config read: no model loaded for nothing
+                self._load_model()
+                self._check_estimator()
+                self._check_sinks()
         except Exception as e:
             self._report_unstarted(f"stopped by {type(e).__name__}: {e}")
             raise
-        if stop.is_set():  # SIGTERM while the model loaded: never report ready
+        if stop.is_set():  # SIGTERM before or while the model loaded: never report ready
             self.notifier.notify(stopping=1)
             self._report_unstarted(None)
             return 0

@@ -677,6 +677,69 @@ def test_a_sighup_during_the_imports_does_not_kill_it(tmp_path, how):
     assert json.loads(proc.stdout)["rig"]["url"] == "sim://"
 
 
+_STOP_ON_IMPORT = '''
+import os, signal, sys
+
+class _StopOnImport:
+    """Sends this process the signal named in GHNERF_TEST_STOP as the package's first heavy module is imported."""
+    def find_spec(self, name, path=None, target=None):
+        if name == "firmware_host.daemon.config":
+            sys.meta_path.remove(self)
+            os.kill(os.getpid(), getattr(signal, os.environ["GHNERF_TEST_STOP"]))
+        return None
+
+sys.meta_path.insert(0, _StopOnImport())
+'''
+
+
+def _stopped_during_the_imports(tmp_path: Path, signum: signal.Signals, *args: str) -> subprocess.CompletedProcess:
+    """``python -m firmware_host.daemon.cli *args``, sent ``signum`` as the package's first heavy module is imported
+    (after the package's first lines), with the journal's log format; run to its end."""
+    (tmp_path / "hook").mkdir()
+    (tmp_path / "hook/sitecustomize.py").write_text(_STOP_ON_IMPORT)
+    env = {**os.environ, "GHNERF_TEST_STOP": signum.name, "JOURNAL_STREAM": "8:1",
+           "PYTHONPATH": os.pathsep.join(filter(None, [str(tmp_path / "hook"), str(REPO),
+                                                       os.environ.get("PYTHONPATH")]))}
+    return subprocess.run([sys.executable, "-m", "firmware_host.daemon.cli", *args], capture_output=True, text=True,
+                          timeout=120, env=env, cwd=REPO)
+
+
+@needs_model
+@pytest.mark.parametrize("signum, mode, status", [(signal.SIGTERM, (), 0), (signal.SIGINT, (), 0),
+                                                  (signal.SIGTERM, ("--measure-floor",), 143)])
+def test_a_stop_during_the_imports_stops_it_as_the_daemon_stops(tmp_path, signum, mode, status):
+    """A SIGTERM (``systemctl stop``) while Python imported the runtime, before the daemon's stop handlers were in
+    place, killed it: status 143 where the docs say 0, no log line, the status file unwritten; Ctrl-C there raised
+    KeyboardInterrupt, a traceback. Recorded from the package's first import now: the daemon stops once its own
+    handlers are in place, with the one line of any stop, no model loaded; ``--measure-floor`` exits 128 + the
+    signal's number, as for a stop of its own."""
+    status_file = tmp_path / "status.json"
+    path = _write(tmp_path, {
+        "rig": {"url": f"replay://{tmp_path / 'never'}", "reopen_min_s": 300, "reopen_max_s": 300},
+        "sinks": [f"file://{tmp_path / 'joints.jsonl'}"],
+        "estimator": {"session": {"model_dir": str(MODELS), "warmup": False}},
+        "health": {"status_file": str(status_file)}})
+    proc = _stopped_during_the_imports(tmp_path, signum, "--config", str(path), *mode)
+    assert proc.returncode != -signum, f"killed by the {signum.name}"
+    assert proc.returncode == status, proc.stderr
+    assert "Traceback" not in proc.stderr and "loaded" not in proc.stderr, proc.stderr
+    if mode:
+        assert proc.stderr.strip() == (f"ghnerf-daemon: {path}: {signum.name} received: --measure-floor stopped "
+                                       "before 60 pairs measured a foot (0 did, of 0 read): nothing to set")
+    else:
+        assert proc.stderr.count("received: stopping") == 1 and f"{signum.name} received: stopping" in proc.stderr
+        assert json.loads(status_file.read_text())["state"] == "stopping"
+
+
+def test_validate_config_meets_a_stop_during_the_imports_as_before(tmp_path):
+    """``--validate-config`` installs no stop handlers: a SIGTERM recorded during its imports kills it when the
+    recording ones are put back, as one did before they were recorded (it does not validate on after a stop)."""
+    path = _write(tmp_path, {"rig": {"url": "sim://"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": str(MODELS)}}})
+    proc = _stopped_during_the_imports(tmp_path, signal.SIGTERM, "--config", str(path), "--validate-config")
+    assert proc.returncode == -signal.SIGTERM and proc.stdout == "", proc.stderr
+
+
 _HUP_AFTER_THE_READ = '''
 import os, signal, sys
 sys.argv[0] = os.path.join(os.path.dirname(sys.executable), "ghnerf-daemon")  # as the console script

@@ -455,9 +455,11 @@ def test_stop_set_ends_the_measurement_before_the_next_read_or_before_the_rig_op
     opened: list[str] = []
     monkeypatch.setattr(drivers, "create_rig_source", lambda url, **kwargs: opened.append(url))
     config = daemon_config_from_dict({"rig": {"url": "sim://"}, "sinks": ["memory://"]})
+    loads: list[object] = []
     with pytest.raises(FloorMeasureStopped, match=r"\(0 did, of 0 read\)"):
-        measure_floor_of_config(config, 5, load_model=lambda c: "session", stop=stop)
+        measure_floor_of_config(config, 5, load_model=loads.append, stop=stop)
     assert opened == []
+    assert loads == []  # set before the load (a stop during ghnerf-daemon's imports): no model loaded for nothing
 
 
 def test_measure_floor_refuses_a_pair_count_that_is_no_count():
