@@ -762,12 +762,24 @@ def test_a_bad_sink_url_stops_the_start_without_a_rig(tmp_path):
         Daemon(cfg, notifier=SystemdNotifier({})).run(threading.Event())
 
 
+class _StopWhileLoading(threading.Event):
+    """A SIGTERM that arrives while the model loads: clear at the start's first look (a stop set before it loads no
+    model), set from the next on."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.looks = 0
+
+    def is_set(self) -> bool:
+        self.looks += 1
+        return self.looks > 1 or super().is_set()
+
+
 def test_stopped_while_loading_never_reports_ready(tmp_path):
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     sock.bind(str(tmp_path / "n.sock"))
     sock.settimeout(0.5)
-    stop = threading.Event()
-    stop.set()  # SIGTERM arrived while the model loaded
+    stop = _StopWhileLoading()
     cfg = _config({"url": "sim://"}, tmp_path)
     try:
         assert Daemon(cfg, notifier=SystemdNotifier({"NOTIFY_SOCKET": str(tmp_path / "n.sock")})).run(stop) == 0
@@ -800,8 +812,7 @@ def test_a_start_that_fails_before_the_loop_says_why_in_the_status_file(tmp_path
 def test_a_stop_while_loading_leaves_this_runs_report(tmp_path):
     status = tmp_path / "status.json"
     status.write_text(json.dumps(_PREVIOUS_RUN))
-    stop = threading.Event()
-    stop.set()  # SIGTERM arrived while the model loaded
+    stop = _StopWhileLoading()
     assert Daemon(_config({"url": "sim://"}, tmp_path), notifier=SystemdNotifier({})).run(stop) == 0
     report = json.loads(status.read_text())
     assert report["pid"] == os.getpid() and report["state"] == "stopping" and report["last_error"] is None
@@ -1204,7 +1215,12 @@ def test_the_daemon_keeps_the_models_big_blocks_out_of_the_heap():
         "import threading",
         "from firmware_host.daemon import Daemon, daemon_config_from_dict",
         "from firmware_host.daemon.notify import SystemdNotifier",
-        "stop = threading.Event(); stop.set()  # the model loaded, then stopped before the rig",
+        "class Stop(threading.Event):",
+        "    looks = 0",
+        "    def is_set(self):  # clear at the start's first look (a stop set before it loads no model), then set",
+        "        self.looks += 1",
+        "        return self.looks > 1",
+        "stop = Stop()  # the model loaded, then stopped before the rig",
         f"assert Daemon(daemon_config_from_dict({cfg!r}), notifier=SystemdNotifier({{}})).run(stop) == 0"])
     assert probe_big_block(started) == "mapped"
 
