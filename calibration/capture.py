@@ -26,7 +26,7 @@ from calibration.board import BoardSpec
 from calibration.detect import BoardDetector, BoardView, board_mismatch, mirrored_corners, mirrored_words
 from calibration.errors import BoardError, CaptureError
 from ghnerf_runtime.image_files import read_image_or_none, unread_because
-from ghnerf_runtime.json_keys import loads_remembering
+from ghnerf_runtime.json_keys import first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import write_text_atomic
 
 __all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
@@ -128,6 +128,10 @@ def read_camera_order(root: str | os.PathLike, *, check_folders: bool = True) ->
         data = loads_remembering(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as e:
         raise CaptureError(f"{path}: cannot read the camera order ({e})") from e
+    if (repeated := first_repeat(data)) is not None:
+        # JSON keeps the last: a swapped order typed in above the old line (docs: edit cameras.json to match a
+        # swapped rig URL) was undone by it, and the pair solved in the old order without a word
+        raise CaptureError(f"{path}: the key {repeated!r} is given twice (JSON keeps the last): keep one")
     names = data.get("cameras") if isinstance(data, dict) else None
     if (not isinstance(names, list) or len(names) != 2 or not all(isinstance(n, str) for n in names)
             or len(set(names)) != 2):  # strings first: a list entry is unhashable

@@ -286,3 +286,16 @@ def test_cameras_given_against_the_recorded_order_are_refused(image, tmp_path, c
     assert rc == 2 and "--cameras right,left reverses the order" in err and "(left,right: 'left' is the camera" in err
     assert "swap first= and second= in the rig URL and edit cameras.json" in err
     assert not (tmp_path / "rig.json").exists()
+
+
+def test_a_camera_order_file_with_a_key_given_twice_is_refused_naming_it(tmp_path, capsys):
+    # the docs say to edit cameras.json to match a swapped rig URL: the new order typed in above the old line was
+    # undone by it (JSON keeps the last), and the pair solved in the old order without a word
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+    (tmp_path / "cameras.json").write_text('{"cameras": ["right", "left"],\n "cameras": ["left", "right"]}\n')
+    rc = cli.main(["solve", "--board", _board_file(tmp_path), "--images", str(tmp_path), "--camera-height", "1.4",
+                   "--out", str(tmp_path / "rig.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"{tmp_path / 'cameras.json'}: the key 'cameras' is given twice" in err
+    assert "Traceback" not in err and not (tmp_path / "rig.json").exists()
