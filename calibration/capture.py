@@ -125,7 +125,9 @@ def read_camera_order(root: str | os.PathLike, *, check_folders: bool = True) ->
     try:
         # JsonTextError (a ValueError): not JSON, nested past MAX_JSON_DEPTH (129 levels read as a wrong layout
         # before) or an integer past 4300 digits; the other ValueError: not UTF-8
-        data = loads_remembering(path.read_text(encoding="utf-8"))
+        # utf-8-sig: edited in Notepad (docs: edit it to match a swapped rig URL), it starts with a byte-order mark,
+        # which was refused as invalid JSON
+        data = loads_remembering(path.read_text(encoding="utf-8-sig"))
     except (OSError, ValueError) as e:
         raise CaptureError(f"{path}: cannot read the camera order ({e})") from e
     if (repeated := first_repeat(data)) is not None:

@@ -299,3 +299,13 @@ def test_a_camera_order_file_with_a_key_given_twice_is_refused_naming_it(tmp_pat
     err = capsys.readouterr().err
     assert rc == 2 and f"{tmp_path / 'cameras.json'}: the key 'cameras' is given twice" in err
     assert "Traceback" not in err and not (tmp_path / "rig.json").exists()
+
+
+def test_a_camera_order_file_saved_with_a_byte_order_mark_reads(tmp_path):
+    from calibration.capture import read_camera_order
+
+    # Notepad's UTF-8 starts with one: the file edited as the docs say was refused as invalid JSON
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+    (tmp_path / "cameras.json").write_bytes(b'\xef\xbb\xbf{"cameras": ["right", "left"]}\n')
+    assert read_camera_order(tmp_path) == ["right", "left"]
