@@ -453,6 +453,10 @@ def cmd_capture(args: argparse.Namespace) -> int:
             source.open()
         cams = [check_camera_name(c.name) for c in source.rig.pair]
         folders = [out / cam for cam in cams]
+        for cam, folder in zip(cams, folders):  # mkdir said only "[Errno 17] File exists", after cameras.json
+            if folder.exists() and not folder.is_dir():
+                raise UsageError(f"--out {out}: {folder} is a file, where camera {cam!r}'s images go: move it away "
+                                 "or give another folder")
         if args.floor and not args.force and any((f / f"{FLOOR_VIEW}{suffix}").exists()
                                                  for f in folders for suffix in IMAGE_SUFFIXES):
             raise UsageError(f"{out} already has a floor view: pass --force to replace it")
