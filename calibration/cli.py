@@ -989,7 +989,7 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from calibration.formats import write_anipose_toml, write_opencv_rig
+    from calibration.formats import dumps_anipose_toml, dumps_opencv_rig
 
     rig = load_rig(args.rig)
     out = _output_path(args.out, "--out", "export")
@@ -1004,11 +1004,12 @@ def cmd_export(args: argparse.Namespace) -> int:
         if args.units_to_metres is None:
             raise UsageError("anipose files do not record the unit of their translations: pass --units-to-metres "
                              "(0.001 to write millimetres, 1 for metres), the unit the reading tool expects")
+    # made before the file it replaces is kept: a rig the format cannot hold (a skew) replaced the kept copy, the
+    # other tool's own calibration, with a copy of the file this export then left as it was
+    text = (dumps_anipose_toml(rig, units_to_metres=args.units_to_metres) if fmt == "anipose" else
+            dumps_opencv_rig(rig, out, units_to_metres=1.0 if args.units_to_metres is None else args.units_to_metres))
     kept = {out: _keep_previous(out, previous[out])}
-    if fmt == "anipose":
-        write_anipose_toml(rig, out, units_to_metres=args.units_to_metres)
-    else:
-        write_opencv_rig(rig, out, units_to_metres=1.0 if args.units_to_metres is None else args.units_to_metres)
+    write_text_atomic(out, text)
     _say_kept(kept)
     print(f"wrote {out} ({fmt}, cameras {', '.join(repr(c.name) for c in rig.cameras)})")
     return 0
