@@ -91,6 +91,10 @@ def rotation(path, field: str, value: Any) -> np.ndarray:
     if arr.size == 3:
         arr = as_array(path, field, arr, [(3,)], "a 3x3 rotation matrix or a Rodrigues 3-vector")
         R, _ = cv2.Rodrigues(arr.reshape(3, 1))
+        if not np.all(np.isfinite(R)):  # |r| past 1e154 overflows: its NaN matrix was refused later, naming the
+            # camera's own file (not stereo_calib's extrinsics file it came from) and not the value
+            raise fail(path, field, "a Rodrigues vector this long gives no rotation (OpenCV's is NaN), "
+                                    f"got {show(arr)}")
         return R
     R = as_array(path, field, arr, [(3, 3)], "a 3x3 rotation matrix or a Rodrigues 3-vector")
     dev = float(np.abs(R @ R.T - np.eye(3)).max())

@@ -361,6 +361,13 @@ def test_stereo_calib_errors_name_the_right_file(tmp_path):
         read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "bad_ext.yml", image_size=(640, 480),
                         **mm)
     assert info.value.path == str(tmp_path / "bad_ext.yml") and info.value.field == "R"
+    # a Rodrigues vector so long its matrix is NaN: said as the extrinsics file's R, with the value (it was the
+    # intrinsics file's R, shown as a matrix of NaN)
+    (tmp_path / "bad_ext.yml").write_text("%YAML:1.0\n---\nR: [0, 1e300, 0]\nT: [-60, 0.5, 1]\n")
+    with pytest.raises(RigFileError, match=r"a Rodrigues vector this long gives no rotation.*1\.e\+300") as info:
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "bad_ext.yml", image_size=(640, 480),
+                        **mm)
+    assert info.value.path == str(tmp_path / "bad_ext.yml") and info.value.field == "R"
 
 
 # ----------------------------------------------------------------------------- errors
