@@ -266,6 +266,18 @@ def test_exporting_over_a_file_keeps_the_previous_one(rig_file, tmp_path, capsys
     assert kept.read_bytes() == before and (tmp_path / "lab.json").read_text() == "an export of another rig\n"
 
 
+def test_a_failed_import_leaves_the_kept_copy_and_the_rig_file_as_they_were(rig_file, tmp_path, capsys):
+    # a --volume the rig file's reader refuses (past MAX_DEPTH_M): save_rig refused it after the rig file was kept,
+    # over the older kept copy
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(tmp_path / "lab.yml")]) == 0
+    out, prev = tmp_path / "rig.json", tmp_path / "rig.prev.json"
+    out.write_text("the rig in use\n")
+    prev.write_text("the one before it\n")
+    assert cli.main(["import", str(tmp_path / "lab.yml"), "--out", str(out), "--volume=-1,-1,20000,1,1,20001"]) == 2
+    assert "MAX_DEPTH_M" in capsys.readouterr().err
+    assert prev.read_text() == "the one before it\n" and out.read_text() == "the rig in use\n"
+
+
 @pytest.mark.parametrize("suffix, units", [(".toml", ["--units-to-metres", "0.001"]), (".yml", [])])
 def test_a_failed_export_leaves_the_kept_copy_and_the_file_as_they_were(tmp_path, capsys, suffix, units):
     # a rig the format cannot hold (a skew): the file it would replace was kept first, over the older kept copy
