@@ -39,14 +39,14 @@ _SAFE_NAME = re.compile(r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*$")
 _NUMBERED = re.compile(r"^(\d+)$")
 
 
-def check_camera_name(name: str) -> str:
+def check_camera_name(name: str, fix: str = "rename the camera in the rig file") -> str:
     """A camera name used as a folder name: letters, digits, ``_ - .``, not starting with a dot.
 
-    :raises CaptureError: another name (``..`` or one with ``/`` would write outside the folder).
+    :raises CaptureError: another name (``..`` or one with ``/`` would write outside the folder), with ``fix``.
     """
     if not _SAFE_NAME.match(name):
         raise CaptureError(f"camera name {name!r} cannot be a folder name (letters, digits, '_', '-', '.'; "
-                           "not starting with '.'): rename the camera in the rig file")
+                           f"not starting with '.'): {fix}")
     return name
 
 
@@ -138,8 +138,8 @@ def read_camera_order(root: str | os.PathLike, *, check_folders: bool = True) ->
     if (not isinstance(names, list) or len(names) != 2 or not all(isinstance(n, str) for n in names)
             or len(set(names)) != 2):  # strings first: a list entry is unhashable
         raise CaptureError(f"{path}: must be {{\"cameras\": [FIRST, SECOND]}}, two different names, got {data!r}")
-    for name in names:
-        check_camera_name(name)
+    for name in names:  # the file named, and its own fix: "rename the camera in the rig file" named neither
+        check_camera_name(name, fix=f"{path} names the pair's two folders, in the order the rig source opens them")
     missing = [n for n in names if not (Path(root) / n).is_dir()] if check_folders else []
     if missing:
         raise CaptureError(f"{path} names the cameras {names}, but {root} has no folder {missing[0]!r}: restore it, "

@@ -309,3 +309,14 @@ def test_a_camera_order_file_saved_with_a_byte_order_mark_reads(tmp_path):
         (tmp_path / cam).mkdir()
     (tmp_path / "cameras.json").write_bytes(b'\xef\xbb\xbf{"cameras": ["right", "left"]}\n')
     assert read_camera_order(tmp_path) == ["right", "left"]
+
+
+def test_a_camera_order_file_naming_no_folder_name_is_named(tmp_path):
+    from calibration.capture import read_camera_order
+
+    # said as a camera to rename in the rig file, the file that named it unnamed
+    (tmp_path / "cameras.json").write_text('{"cameras": ["../left", "right"]}')
+    with pytest.raises(CaptureError) as e:
+        read_camera_order(tmp_path)
+    assert "camera name '../left' cannot be a folder name" in str(e.value)
+    assert f"{tmp_path / 'cameras.json'} names the pair's two folders" in str(e.value) and "rig file" not in str(e.value)
