@@ -166,7 +166,9 @@ def camera_folders(root: str | os.PathLike, cameras: Iterable[str] | None = None
         cameras = found
     out = {}
     for name in cameras:
-        folder = root / check_camera_name(name)
+        # the name of a folder, or given with --cameras: there is no rig file to rename it in
+        folder = root / check_camera_name(name, fix=f"the camera folders of {root} name the pair (rename the folder), "
+                                                    "or --cameras FIRST,SECOND does")
         if not folder.is_dir():
             raise CaptureError(f"{folder}: no such folder (camera {name!r})")
         out[name] = folder

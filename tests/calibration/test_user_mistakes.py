@@ -320,3 +320,15 @@ def test_a_camera_order_file_naming_no_folder_name_is_named(tmp_path):
         read_camera_order(tmp_path)
     assert "camera name '../left' cannot be a folder name" in str(e.value)
     assert f"{tmp_path / 'cameras.json'} names the pair's two folders" in str(e.value) and "rig file" not in str(e.value)
+
+
+def test_a_camera_folder_whose_name_is_no_camera_name_is_said_as_a_folder_to_rename(tmp_path):
+    from calibration.capture import camera_folders
+
+    # a folder copied from a phone as "cam 1": it was "rename the camera in the rig file", which solve has none of
+    for name in ("cam 1", "cam2"):
+        (tmp_path / name).mkdir()
+    with pytest.raises(CaptureError) as e:
+        camera_folders(tmp_path)
+    assert "camera name 'cam 1' cannot be a folder name" in str(e.value) and "rig file" not in str(e.value)
+    assert f"the camera folders of {tmp_path} name the pair (rename the folder)" in str(e.value)
