@@ -26,7 +26,7 @@ from calibration.board import BoardSpec
 from calibration.detect import BoardDetector, BoardView, board_mismatch, mirrored_corners, mirrored_words
 from calibration.errors import BoardError, CaptureError
 from ghnerf_runtime.image_files import read_image_or_none, unread_because
-from ghnerf_runtime.json_keys import loads_remembering
+from ghnerf_runtime.json_keys import first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import write_text_atomic
 
 __all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
@@ -39,14 +39,14 @@ _SAFE_NAME = re.compile(r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*$")
 _NUMBERED = re.compile(r"^(\d+)$")
 
 
-def check_camera_name(name: str) -> str:
+def check_camera_name(name: str, fix: str = "rename the camera in the rig file") -> str:
     """A camera name used as a folder name: letters, digits, ``_ - .``, not starting with a dot.
 
-    :raises CaptureError: another name (``..`` or one with ``/`` would write outside the folder).
+    :raises CaptureError: another name (``..`` or one with ``/`` would write outside the folder), with ``fix``.
     """
     if not _SAFE_NAME.match(name):
         raise CaptureError(f"camera name {name!r} cannot be a folder name (letters, digits, '_', '-', '.'; "
-                           "not starting with '.'): rename the camera in the rig file")
+                           f"not starting with '.'): {fix}")
     return name
 
 
@@ -125,15 +125,21 @@ def read_camera_order(root: str | os.PathLike, *, check_folders: bool = True) ->
     try:
         # JsonTextError (a ValueError): not JSON, nested past MAX_JSON_DEPTH (129 levels read as a wrong layout
         # before) or an integer past 4300 digits; the other ValueError: not UTF-8
-        data = loads_remembering(path.read_text(encoding="utf-8"))
+        # utf-8-sig: edited in Notepad (docs: edit it to match a swapped rig URL), it starts with a byte-order mark,
+        # which was refused as invalid JSON
+        data = loads_remembering(path.read_text(encoding="utf-8-sig"))
     except (OSError, ValueError) as e:
         raise CaptureError(f"{path}: cannot read the camera order ({e})") from e
+    if (repeated := first_repeat(data)) is not None:
+        # JSON keeps the last: a swapped order typed in above the old line (docs: edit cameras.json to match a
+        # swapped rig URL) was undone by it, and the pair solved in the old order without a word
+        raise CaptureError(f"{path}: the key {repeated!r} is given twice (JSON keeps the last): keep one")
     names = data.get("cameras") if isinstance(data, dict) else None
     if (not isinstance(names, list) or len(names) != 2 or not all(isinstance(n, str) for n in names)
             or len(set(names)) != 2):  # strings first: a list entry is unhashable
         raise CaptureError(f"{path}: must be {{\"cameras\": [FIRST, SECOND]}}, two different names, got {data!r}")
-    for name in names:
-        check_camera_name(name)
+    for name in names:  # the file named, and its own fix: "rename the camera in the rig file" named neither
+        check_camera_name(name, fix=f"{path} names the pair's two folders, in the order the rig source opens them")
     missing = [n for n in names if not (Path(root) / n).is_dir()] if check_folders else []
     if missing:
         raise CaptureError(f"{path} names the cameras {names}, but {root} has no folder {missing[0]!r}: restore it, "
@@ -160,7 +166,9 @@ def camera_folders(root: str | os.PathLike, cameras: Iterable[str] | None = None
         cameras = found
     out = {}
     for name in cameras:
-        folder = root / check_camera_name(name)
+        # the name of a folder, or given with --cameras: there is no rig file to rename it in
+        folder = root / check_camera_name(name, fix=f"the camera folders of {root} name the pair (rename the folder), "
+                                                    "or --cameras FIRST,SECOND does")
         if not folder.is_dir():
             raise CaptureError(f"{folder}: no such folder (camera {name!r})")
         out[name] = folder

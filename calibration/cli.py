@@ -52,8 +52,9 @@ from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stder
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, lens_fold_warning, load_rig,
-                                     log_warnings_and_notes, save_rig, write_bytes_atomic, write_text_atomic)
+from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, dumps_rig, lens_fold_warning,
+                                     load_rig, loads_rig, log_warnings_and_notes, save_rig, write_bytes_atomic,
+                                     write_text_atomic)
 from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser"]
@@ -453,6 +454,10 @@ def cmd_capture(args: argparse.Namespace) -> int:
             source.open()
         cams = [check_camera_name(c.name) for c in source.rig.pair]
         folders = [out / cam for cam in cams]
+        for cam, folder in zip(cams, folders):  # mkdir said only "[Errno 17] File exists", after cameras.json
+            if folder.exists() and not folder.is_dir():
+                raise UsageError(f"--out {out}: {folder} is a file, where camera {cam!r}'s images go: move it away "
+                                 "or give another folder")
         if args.floor and not args.force and any((f / f"{FLOOR_VIEW}{suffix}").exists()
                                                  for f in folders for suffix in IMAGE_SUFFIXES):
             raise UsageError(f"{out} already has a floor view: pass --force to replace it")
@@ -668,13 +673,15 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          board_thickness_m=args.board_thickness, camera_height_m=args.camera_height,
                          pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=_volume(args.volume),
                          rig_id=args.rig_id, tangential=not args.no_tangential)
-    # the previous rig and report kept first (copies: rig.prev.json, rig.report.prev.json), then the report, so
-    # the rig file is never newer than its report; if save_rig then fails, the new report is left beside the old rig
+    # the rig file's text made (and checked) first; then the previous rig and report kept (copies: rig.prev.json,
+    # rig.report.prev.json), then the report, so the rig file is never newer than its report; if the rig file's
+    # write then fails, the new report is left beside the old rig
     for cam in names:
         solution.report["cameras"][cam]["repeated_views"] = repeats[cam]
+    text = _rig_file_text(solution.rig, out)
     kept = {path: _keep_previous(path, prev) for path, prev in previous.items()}
     write_text_atomic(report_path, json.dumps(solution.report, indent=1) + "\n")
-    save_rig(solution.rig, out)
+    write_text_atomic(out, text)
     r = solution.report
     for cam in names:
         c = r["cameras"][cam]
@@ -866,6 +873,15 @@ def _check_kept_apart(previous: dict[Path, Path], others: dict[str, Path]) -> No
                 raise UsageError(f"{flag} {path} is where the previous {out} is kept ({prev}): give another path")
 
 
+def _rig_file_text(rig: Rig, out: Path) -> str:
+    """The text ``save_rig`` writes to ``out``, read back with the rig file reader's every check, as ``save_rig`` does:
+    made before the previous file is kept. A rig the reader refuses (a ``--volume`` past ``MAX_DEPTH_M``) was
+    refused by ``save_rig`` after the copy, which replaced the older kept copy with the file left as it was."""
+    text = dumps_rig(rig, path=out)
+    loads_rig(text, path=out, warn=False)
+    return text
+
+
 def _keep_previous(out: Path, prev: Path) -> Path | None:
     """Copy ``out``, when it exists, to ``prev`` (atomically, replacing an older one) before a new ``out`` takes
     its name; the copy's path, or ``None`` when there was nothing to keep. Copied, not renamed: a daemon reading
@@ -949,8 +965,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     if args.camera_height is not None:
         rig = level_rig(rig, camera_height_m=args.camera_height, pitch_deg=args.pitch or 0.0,
                         roll_deg=args.roll or 0.0, volume=volume)
+    text = _rig_file_text(rig, out)
     kept = {out: _keep_previous(out, previous[out])}
-    save_rig(rig, out)
+    write_text_atomic(out, text)
     a, b = rig.pair
     units = rig.metadata.get("source", {}).get("units_to_metres")
     print(f"{source} ({fmt}): cameras {a.name!r} {a.width}x{a.height} and {b.name!r} {b.width}x{b.height}, "
@@ -985,7 +1002,7 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from calibration.formats import write_anipose_toml, write_opencv_rig
+    from calibration.formats import dumps_anipose_toml, dumps_opencv_rig
 
     rig = load_rig(args.rig)
     out = _output_path(args.out, "--out", "export")
@@ -1000,11 +1017,12 @@ def cmd_export(args: argparse.Namespace) -> int:
         if args.units_to_metres is None:
             raise UsageError("anipose files do not record the unit of their translations: pass --units-to-metres "
                              "(0.001 to write millimetres, 1 for metres), the unit the reading tool expects")
+    # made before the file it replaces is kept: a rig the format cannot hold (a skew) replaced the kept copy, the
+    # other tool's own calibration, with a copy of the file this export then left as it was
+    text = (dumps_anipose_toml(rig, units_to_metres=args.units_to_metres) if fmt == "anipose" else
+            dumps_opencv_rig(rig, out, units_to_metres=1.0 if args.units_to_metres is None else args.units_to_metres))
     kept = {out: _keep_previous(out, previous[out])}
-    if fmt == "anipose":
-        write_anipose_toml(rig, out, units_to_metres=args.units_to_metres)
-    else:
-        write_opencv_rig(rig, out, units_to_metres=1.0 if args.units_to_metres is None else args.units_to_metres)
+    write_text_atomic(out, text)
     _say_kept(kept)
     print(f"wrote {out} ({fmt}, cameras {', '.join(repr(c.name) for c in rig.cameras)})")
     return 0

@@ -15,6 +15,7 @@ Keys are documented in docs/rig-file.md ("Importing and exporting").
 from calibration.formats._common import default_working_volume
 from calibration.formats.anipose_toml import dumps_anipose_toml, read_anipose_toml, write_anipose_toml
 from calibration.formats.opencv_yaml import (
+    dumps_opencv_rig,
     read_opencv_camera,
     read_opencv_rig,
     write_opencv_camera,
@@ -24,6 +25,7 @@ from calibration.formats.opencv_yaml import (
 __all__ = [
     "default_working_volume",
     "dumps_anipose_toml",
+    "dumps_opencv_rig",
     "read_anipose_toml",
     "write_anipose_toml",
     "read_opencv_camera",

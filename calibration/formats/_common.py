@@ -91,6 +91,10 @@ def rotation(path, field: str, value: Any) -> np.ndarray:
     if arr.size == 3:
         arr = as_array(path, field, arr, [(3,)], "a 3x3 rotation matrix or a Rodrigues 3-vector")
         R, _ = cv2.Rodrigues(arr.reshape(3, 1))
+        if not np.all(np.isfinite(R)):  # |r| past 1e154 overflows: its NaN matrix was refused later, naming the
+            # camera's own file (not stereo_calib's extrinsics file it came from) and not the value
+            raise fail(path, field, "a Rodrigues vector this long gives no rotation (OpenCV's is NaN), "
+                                    f"got {show(arr)}")
         return R
     R = as_array(path, field, arr, [(3, 3)], "a 3x3 rotation matrix or a Rodrigues 3-vector")
     dev = float(np.abs(R @ R.T - np.eye(3)).max())
@@ -124,7 +128,7 @@ def make_camera(path, field: str, *, name: str, width: Any, height: Any, K: Any,
         sizes = " x ".join(dict.fromkeys(size_keys))
         raise fail(path, join(field, K_key), f"camera {str(name)!r}, image size from {sizes}: {problem}")
     if K[0, 1] != 0:  # the tools that write these files project without it: ours would disagree with theirs
-        raise fail(path, join(field, K_key), f"has a skew K[0][1] = {K[0, 1]!r}, which OpenCV's camera model (and "
+        raise fail(path, join(field, K_key), f"has a skew K[0][1] = {float(K[0, 1])!r}, which OpenCV's camera model (and "
                                              "so this file's writer) ignores; set it to 0")
     try:
         d = np.asarray(dist if dist is not None else [], dtype=np.float64).reshape(-1)
@@ -226,5 +230,5 @@ def refuse_skew(cameras: Sequence[Camera], what: str) -> None:
     """Foreign formats follow OpenCV's camera model, which has no skew: writing one would lose it silently."""
     for cam in cameras:
         if cam.K[0, 1] != 0.0:
-            raise GeometryError(f"camera {cam.name!r} has a skew K[0][1] = {cam.K[0, 1]!r}; {what} cannot hold it "
+            raise GeometryError(f"camera {cam.name!r} has a skew K[0][1] = {float(cam.K[0, 1])!r}; {what} cannot hold it "
                                 "(OpenCV's camera model has none): keep this rig in our rig file")

@@ -509,6 +509,12 @@ def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
         path: destination, replaced atomically.
         units_to_metres: metres per unit of the written ``T`` (1.0: metres).
     """
+    write_text_atomic(path, dumps_opencv_rig(rig, path, units_to_metres=units_to_metres))
+
+
+def dumps_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> str:
+    """The text :func:`write_opencv_rig` writes to ``path`` (its suffix picks YAML or JSON; errors name it), checked
+    as it is, nothing written: ``ghcal export`` keeps the file it replaces only once the export can be made."""
     units = check_units(units_to_metres)
     refuse_skew(rig.cameras, "an OpenCV YAML file")
     fs = _memory_writer(path)
@@ -536,7 +542,7 @@ def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
     if levelling is not None:  # the first camera's name again: checked above, named as the camera's
         strings[LEVELLING_KEYS[0]] = (lambda root: root.getNode(LEVELLING_KEYS[0]), levelling["reference"])
     _check_strings_read_back(text, path, strings)
-    write_text_atomic(path, text)
+    return text
 
 
 def write_opencv_camera(camera: Camera, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> None:

@@ -1238,6 +1238,19 @@ def test_solving_again_keeps_the_previous_rig_and_its_report(capture, tmp_path, 
     assert not list(tmp_path.glob(".*tmp"))
 
 
+def test_a_solve_the_rig_file_refuses_leaves_the_kept_copies_and_the_files_as_they_were(capture, tmp_path, capsys):
+    # a --volume past MAX_DEPTH_M: save_rig refused the solved rig after the rig and report were kept, over the older
+    # kept copies, and after the new report was written beside the old rig
+    files = {name: f"{name} as it was\n".encode() for name in ("rig.json", "rig.prev.json", "rig.report.json",
+                                                                "rig.report.prev.json")}
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(data)
+    assert cli.main(["solve", "--images", str(capture), "--floor-view", "floor", "--out", str(tmp_path / "rig.json"),
+                     "--volume=-1,-1,20000,1,1,20001"]) == 2
+    assert "MAX_DEPTH_M" in capsys.readouterr().err
+    assert {name: (tmp_path / name).read_bytes() for name in files} == files
+
+
 def test_solve_refuses_to_keep_the_previous_rig_on_its_report_or_in_a_folder(tmp_path, capsys, monkeypatch):
     def no_detection(*args, **kwargs):
         raise AssertionError("the images were read before the outputs were checked")

@@ -266,6 +266,37 @@ def test_exporting_over_a_file_keeps_the_previous_one(rig_file, tmp_path, capsys
     assert kept.read_bytes() == before and (tmp_path / "lab.json").read_text() == "an export of another rig\n"
 
 
+def test_a_failed_import_leaves_the_kept_copy_and_the_rig_file_as_they_were(rig_file, tmp_path, capsys):
+    # a --volume the rig file's reader refuses (past MAX_DEPTH_M): save_rig refused it after the rig file was kept,
+    # over the older kept copy
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(tmp_path / "lab.yml")]) == 0
+    out, prev = tmp_path / "rig.json", tmp_path / "rig.prev.json"
+    out.write_text("the rig in use\n")
+    prev.write_text("the one before it\n")
+    assert cli.main(["import", str(tmp_path / "lab.yml"), "--out", str(out), "--volume=-1,-1,20000,1,1,20001"]) == 2
+    assert "MAX_DEPTH_M" in capsys.readouterr().err
+    assert prev.read_text() == "the one before it\n" and out.read_text() == "the rig in use\n"
+
+
+@pytest.mark.parametrize("suffix, units", [(".toml", ["--units-to-metres", "0.001"]), (".yml", [])])
+def test_a_failed_export_leaves_the_kept_copy_and_the_file_as_they_were(tmp_path, capsys, suffix, units):
+    # a rig the format cannot hold (a skew): the file it would replace was kept first, over the older kept copy
+    # (the other tool's own calibration, kept by the export before), and the export then refused
+    from ghnerf_runtime.geometry.camera import Camera
+
+    first, second = example_rig().pair
+    K = first.K.copy()
+    K[0, 1] = 0.5
+    skewed = Camera(first.name, first.width, first.height, K, first.dist, first.R, first.t)
+    save_rig(Rig((skewed, second), example_rig().volume, rig_id="skewed"), tmp_path / "skewed.json")
+    out, prev = tmp_path / f"calibration{suffix}", tmp_path / f"calibration.prev{suffix}"
+    out.write_text("# our earlier export\n")
+    prev.write_text("# the other tool's own calibration\n")
+    assert cli.main(["export", "--rig", str(tmp_path / "skewed.json"), "--out", str(out), *units]) == 2
+    assert "has a skew K[0][1]" in capsys.readouterr().err
+    assert prev.read_text() == "# the other tool's own calibration\n" and out.read_text() == "# our earlier export\n"
+
+
 @pytest.mark.parametrize("units", [[], ["--units-to-metres", "1"]])
 def test_import_of_an_anipose_file_whose_metadata_is_not_a_table_names_file_and_key(rig_file, tmp_path, capsys,
                                                                                      units):

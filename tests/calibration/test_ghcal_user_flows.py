@@ -104,6 +104,18 @@ def test_capture_refuses_a_folder_it_cannot_write_before_opening_the_cameras(tmp
     assert f"cannot write the views in {refusing} (" in capsys.readouterr().err
 
 
+def test_capture_refuses_a_file_where_a_camera_s_folder_goes(tmp_path, capsys):
+    # mkdir stopped it with a bare "[Errno 17] File exists: 'c/right'", cameras.json written before it
+    out = tmp_path / "c"
+    out.mkdir()
+    (out / "right").write_text("not a folder")
+    url = "sim://?width=64&height=48&fps=5&cache=off&workers=1"
+    assert cli.main(["capture", "--url", url, "--out", str(out), "--max-seconds", "5"]) == 2
+    err = capsys.readouterr().err
+    assert f"--out {out}: {out / 'right'} is a file, where camera 'right'\'s images go" in err, err
+    assert "Errno" not in err and sorted(p.name for p in out.iterdir()) == ["right"]
+
+
 def _no_rendering(*args, **kwargs):
     raise AssertionError("the views were rendered before the output was checked")
 

@@ -286,3 +286,49 @@ def test_cameras_given_against_the_recorded_order_are_refused(image, tmp_path, c
     assert rc == 2 and "--cameras right,left reverses the order" in err and "(left,right: 'left' is the camera" in err
     assert "swap first= and second= in the rig URL and edit cameras.json" in err
     assert not (tmp_path / "rig.json").exists()
+
+
+def test_a_camera_order_file_with_a_key_given_twice_is_refused_naming_it(tmp_path, capsys):
+    # the docs say to edit cameras.json to match a swapped rig URL: the new order typed in above the old line was
+    # undone by it (JSON keeps the last), and the pair solved in the old order without a word
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+    (tmp_path / "cameras.json").write_text('{"cameras": ["right", "left"],\n "cameras": ["left", "right"]}\n')
+    rc = cli.main(["solve", "--board", _board_file(tmp_path), "--images", str(tmp_path), "--camera-height", "1.4",
+                   "--out", str(tmp_path / "rig.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"{tmp_path / 'cameras.json'}: the key 'cameras' is given twice" in err
+    assert "Traceback" not in err and not (tmp_path / "rig.json").exists()
+
+
+def test_a_camera_order_file_saved_with_a_byte_order_mark_reads(tmp_path):
+    from calibration.capture import read_camera_order
+
+    # Notepad's UTF-8 starts with one: the file edited as the docs say was refused as invalid JSON
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+    (tmp_path / "cameras.json").write_bytes(b'\xef\xbb\xbf{"cameras": ["right", "left"]}\n')
+    assert read_camera_order(tmp_path) == ["right", "left"]
+
+
+def test_a_camera_order_file_naming_no_folder_name_is_named(tmp_path):
+    from calibration.capture import read_camera_order
+
+    # said as a camera to rename in the rig file, the file that named it unnamed
+    (tmp_path / "cameras.json").write_text('{"cameras": ["../left", "right"]}')
+    with pytest.raises(CaptureError) as e:
+        read_camera_order(tmp_path)
+    assert "camera name '../left' cannot be a folder name" in str(e.value)
+    assert f"{tmp_path / 'cameras.json'} names the pair's two folders" in str(e.value) and "rig file" not in str(e.value)
+
+
+def test_a_camera_folder_whose_name_is_no_camera_name_is_said_as_a_folder_to_rename(tmp_path):
+    from calibration.capture import camera_folders
+
+    # a folder copied from a phone as "cam 1": it was "rename the camera in the rig file", which solve has none of
+    for name in ("cam 1", "cam2"):
+        (tmp_path / name).mkdir()
+    with pytest.raises(CaptureError) as e:
+        camera_folders(tmp_path)
+    assert "camera name 'cam 1' cannot be a folder name" in str(e.value) and "rig file" not in str(e.value)
+    assert f"the camera folders of {tmp_path} name the pair (rename the folder)" in str(e.value)
