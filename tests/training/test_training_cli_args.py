@@ -432,6 +432,34 @@ def test_a_pretraining_s_human_pt_given_as_a_model_is_named_as_such(data64, tmp_
     assert not (tmp_path / "m").exists()
 
 
+@pytest.mark.parametrize("tool", ["export", "eval"])
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_a_checkpoint_holding_non_finite_weights_is_named_before_the_export(data64, tmp_path, capsys, tool, bad):
+    """A diverged run's weights (one NaN) were exported, then quantized into onnxruntime's bare "AssertionError:
+    scale issue" (--int8), or refused as "onnxruntime differs from torch by nan: the export is wrong"; ghnerf-eval
+    scored them as a model that finds no one."""
+    import torch
+
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    model = GHNeRF(preset("tiny"))
+    state = model.state_dict()
+    name = next(k for k, v in state.items() if v.is_floating_point() and k.endswith("weight"))
+    state[name].view(-1)[0] = bad
+    ckpt = tmp_path / "last.pt"
+    torch.save({"model": state, "model_config": model.config.to_dict(), "step": 3}, ckpt)
+    words = f"{ckpt}: tensor {name!r} holds 1 NaN or infinite value(s) of {state[name].numel()}"
+    if tool == "export":
+        from training.export.cli import main
+
+        rc = main(["--checkpoint", str(ckpt), "--out", str(tmp_path / "m"), "--int8"])
+    else:
+        rc = evaluate.main(["--data", str(data64), "--model", str(ckpt), "--limit", "1", "--no-novel"])
+    assert rc == 2 and words in capsys.readouterr().err
+    assert not (tmp_path / "m").exists() and not (tmp_path / "m.staging").exists()
+
+
 def test_the_opset_range_is_what_torch_exports():
     """``training.export.opsets``: 16 needs GridSample (ONNX 16), 20 is the TorchScript exporter's newest here."""
     from torch.onnx import _constants
