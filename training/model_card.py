@@ -298,12 +298,14 @@ def check_card_dir(card_dir: str | Path, out: str | Path, flag: str) -> None:
                         "list it") from None
 
 
-def add_painter_to_card(card_dir: str | Path, out: Path, more: list[Path] = ()) -> Path:
+def add_painter_to_card(card_dir: str | Path, out: Path, more: list[Path] = (), removed: list[Path] = ()) -> Path:
     """Record the painter ``out`` (its ``.json`` figures; size and hash of it and of ``more``, its int8 file)
-    in the model card of ``card_dir``."""
+    in the model card of ``card_dir``, and no longer the files ``removed`` (the previous painter's int8 file)."""
     card_dir = Path(card_dir)
     card = json.loads((card_dir / "model_card.json").read_text())
     card.setdefault("novel_painter", {})[out.parent.name] = json.loads(out.with_suffix(".json").read_text())
+    for path in removed:
+        card.get("files", {}).pop(str(path.resolve().relative_to(card_dir.resolve())), None)
     for path in (out, *more):
         card.setdefault("files", {})[str(path.resolve().relative_to(card_dir.resolve()))] = {
             "bytes": path.stat().st_size, "sha256": sha256(path)}

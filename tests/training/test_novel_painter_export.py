@@ -234,3 +234,22 @@ def test_an_export_cut_short_leaves_the_previous_graph_not_half_of_one(tmp_path,
     monkeypatch.undo()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["novel_painter.onnx"]  # no temporary file beside it
     assert out.read_bytes() == before and NovelPainter.load(out).meta["ghnerf_painter.trained_on"] == "first"
+
+
+def test_an_export_without_int8_removes_the_int8_file_of_the_painter_it_replaces(tmp_path, data64, capsys):
+    """The previous painter's novel_painter.int8.onnx stayed beside the new fp32 one, and the runtime, which takes
+    the int8 file first (precision auto or int8), ran the old painter without a word; the card kept listing it."""
+    card_dir, out = _export_setup(tmp_path, data64)
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 "--calib-cache", str(tmp_path / "cache.npz")]) == 0
+    assert NovelPainter.find(out.parent).name == "novel_painter.int8.onnx"
+    net = _net(1)
+    save_net(net, FillTrainConfig(net=net.cfg), tmp_path / "next.pt", steps=9, seconds=1.0, hardware="cpu")
+    capsys.readouterr()
+    assert main(["export", "--net", str(tmp_path / "next.pt"), "--out", str(out), "--card-dir", str(card_dir)]) == 0
+    assert not out.with_suffix(".int8.onnx").exists()
+    assert f"{out.with_suffix('.int8.onnx')}: removed" in capsys.readouterr().err
+    found = NovelPainter.find(out.parent)
+    assert found == out and NovelPainter.load(found).meta["ghnerf_painter.steps"] == "9"
+    files = json.loads((card_dir / "model_card.json").read_text())["files"]
+    assert "ghnerf/novel_painter.onnx" in files and "ghnerf/novel_painter.int8.onnx" not in files
