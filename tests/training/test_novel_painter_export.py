@@ -253,3 +253,21 @@ def test_an_export_without_int8_removes_the_int8_file_of_the_painter_it_replaces
     assert found == out and NovelPainter.load(found).meta["ghnerf_painter.steps"] == "9"
     files = json.loads((card_dir / "model_card.json").read_text())["files"]
     assert "ghnerf/novel_painter.onnx" in files and "ghnerf/novel_painter.int8.onnx" not in files
+
+
+@pytest.mark.parametrize(("card", "said"), [
+    ('{"files": {"ghnerf/encoder.onnx"', "cannot be read as JSON (JSONDecodeError"),  # cut short
+    ('[]', "holds a JSON list, not a model card object"),
+    ('{"files": []}', "'files' is a JSON list, not an object"),
+    ('{"novel_painter": "w16"}', "'novel_painter' is a JSON str, not an object"),
+])
+def test_a_card_that_cannot_take_the_record_is_named_before_the_export(tmp_path, data64, capsys, card, said):
+    """A cut or hand-edited model_card.json was read only once the painter had been written into the model
+    folder: a JSONDecodeError or TypeError traceback, the new painter in place and no card record of it."""
+    card_dir, out = _export_setup(tmp_path, data64)
+    (card_dir / "model_card.json").write_text(card)
+    with pytest.raises(SystemExit) as e:
+        main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir)])
+    assert e.value.code == 2
+    assert f"--card-dir {card_dir}: " in (err := capsys.readouterr().err) and said in err
+    assert not out.exists() and (card_dir / "model_card.json").read_text() == card
