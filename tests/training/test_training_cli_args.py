@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("torch")
@@ -458,6 +459,37 @@ def test_a_checkpoint_holding_non_finite_weights_is_named_before_the_export(data
         rc = evaluate.main(["--data", str(data64), "--model", str(ckpt), "--limit", "1", "--no-novel"])
     assert rc == 2 and words in capsys.readouterr().err
     assert not (tmp_path / "m").exists() and not (tmp_path / "m.staging").exists()
+
+
+@pytest.mark.parametrize("precision", ["", "#int8"])
+def test_a_model_folder_of_two_exports_is_named_not_scored_as_one_model(tmp_path, precision):
+    """A folder whose graphs carry two weights ids (a move into it cut short; the runtime refuses to load it) was
+    scored by ghnerf-eval as one model."""
+    import onnx
+    import torch
+
+    from ghnerf_runtime.contract import WEIGHTS_ID_KEY
+    from training.configs import preset
+    from training.export.export import example_inputs, export_all
+    from training.export.quantize import calibration_feeds, quantize_all
+    from training.model import GHNeRF
+
+    model = GHNeRF(preset("tiny")).eval()
+    fp32 = export_all(model, tmp_path, graphs=("encoder", "human", "volume", "render_heat", "render_rgb"),
+                      inputs=example_inputs(model))
+    if precision:
+        frames = np.random.default_rng(0).random((4, 2, 3, 64, 64), dtype=np.float32)
+        calib = [example_inputs(model, images=torch.from_numpy(f), targets=1, ray_stride=4, seed=i)
+                 for i, f in enumerate(frames)]
+        quantize_all(fp32, tmp_path, calibration_feeds(model, calib, tuple(fp32), rays_per_target=64))
+    evaluate.make_renderer(f"{tmp_path}{precision}")  # one export: taken
+    other = tmp_path / ("render_rgb.int8.onnx" if precision else "render_rgb.onnx")
+    graph = onnx.load(str(other))
+    next(p for p in graph.metadata_props if p.key == WEIGHTS_ID_KEY).value = "0" * 64
+    onnx.save(graph, str(other))
+    with pytest.raises(evaluate.EvalInputError, match=rf"^{other}: weights id 0{{16}}\.\.\., and \S+ [0-9a-f]{{16}}"
+                                                      r"\.\.\.: the graph files come from two different exports"):
+        evaluate.make_renderer(f"{tmp_path}{precision}")
 
 
 def test_the_opset_range_is_what_torch_exports():
