@@ -271,3 +271,26 @@ def test_a_card_that_cannot_take_the_record_is_named_before_the_export(tmp_path,
     assert e.value.code == 2
     assert f"--card-dir {card_dir}: " in (err := capsys.readouterr().err) and said in err
     assert not out.exists() and (card_dir / "model_card.json").read_text() == card
+
+
+def test_an_export_stopped_in_its_calibration_leaves_no_int8_file_of_the_previous_painter(tmp_path, data64,
+                                                                                         monkeypatch):
+    """A Ctrl-C while the int8 file was calibrated left the new fp32 painter beside the previous painter's int8
+    file, which the runtime takes first."""
+    from training import learnt_fill
+
+    card_dir, out = _export_setup(tmp_path, data64)
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 "--calib-cache", str(tmp_path / "cache.npz")]) == 0
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(learnt_fill, "quantize_painter", stopped)
+    net = _net(1)
+    save_net(net, FillTrainConfig(net=net.cfg), tmp_path / "next.pt", steps=9, seconds=1.0, hardware="cpu")
+    with pytest.raises(KeyboardInterrupt):
+        main(["export", "--net", str(tmp_path / "next.pt"), "--out", str(out), "--calib-cache",
+              str(tmp_path / "cache.npz")])
+    assert not out.with_suffix(".int8.onnx").exists()
+    assert NovelPainter.load(NovelPainter.find(out.parent)).meta["ghnerf_painter.steps"] == "9"
