@@ -43,7 +43,8 @@ What is checked at load (each failure names the file and what is wrong):
   PermissionError);
 * at warm-up, and on every run after it, each output has the contract's shape, its symbolic sizes
   those of the inputs (:class:`ModelRunError`): the file's own output shapes leave some fixed sizes
-  symbolic, so this is where a graph returning 24 joints shows.
+  symbolic, so this is where a graph returning 24 joints shows; and at warm-up each output is finite (a graph
+  whose weights hold NaN answers NaN to every input: :class:`ModelRunError` naming the graph and file).
 
 Threads: the graphs run one after another on a 2-core CPU. Measured here (docs/runtime.md),
 per-session pools whose workers do not spin are as fast as one global pool and far faster
@@ -690,22 +691,35 @@ class ModelSession:
         order = [g for g in ("human", "encoder", "volume", "render_heat", "query") if g in self._sessions]
         for graph in order:
             t0 = time.perf_counter()
-            feeds.update(self.run(graph, feeds))
+            feeds.update(self._warm_run(graph, feeds))
             self.warmup_ms[graph] = 1e3 * (time.perf_counter() - t0)
         novel = [g for g in ("render_rgb", "render") if g in self._sessions]
         if novel:
             one = warmup_feeds(self.contract, targets=1, ray_stride=1)
             one.update({k: feeds[k] for k in ("feat_s1", "feat_s2", "feat_s4", "human_feat") if k in feeds})
-            one.update(self.run("volume", one))
+            one.update(self._warm_run("volume", one))
             for graph in novel:
                 t0 = time.perf_counter()
-                self.run(graph, one)
+                self._warm_run(graph, one)
                 self.warmup_ms[graph] = 1e3 * (time.perf_counter() - t0)
         if self.skeleton_prior is not None:
             self.warmup_ms["skeleton_prior"] = self.skeleton_prior.warm_up()
         for graph in self.run_counts:  # warm-up runs are not counted as work
             self.run_counts[graph] = 0
         return dict(self.warmup_ms)
+
+    def _warm_run(self, graph: str, feeds: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """:meth:`run` at warm-up, refusing NaN or infinite outputs: a graph whose weights hold them (a diverged
+        run's, exported) answers NaN to every input, and ran without a word, finding no one, frame after frame.
+        Only here: on a real frame a graph's output may be what the estimator treats as missing."""
+        outputs = self.run(graph, feeds)
+        for name, value in outputs.items():
+            if not np.isfinite(value).all():
+                bad = int(np.size(value) - np.count_nonzero(np.isfinite(value)))
+                raise ModelRunError(f"graph {graph!r} returned {bad} NaN or infinite value(s) of {np.size(value)} in "
+                                    f"{name!r} at warm-up: its weights hold NaN or infinite values (a run that "
+                                    "diverged?); export a checkpoint from before it", path=str(self.files[graph].path))
+        return outputs
 
     def reset_counts(self) -> None:
         for graph in self.run_counts:

@@ -409,7 +409,13 @@ class SkeletonPrior:
         encoder = Path(folder) / name
         fix = (f"retrain it on this encoder (python -m training.skeleton_prior --model-dir {folder} ...) or run "
                f"without it (joints3d.skeleton_prior: off)")
-        if not encoder.is_file():
+        try:
+            present = encoder.is_file()
+        except OSError as e:  # a name no file can have (longer than the file system takes): was a bare OSError
+            raise ModelContractError(f"names the encoder file {name[:60]!r}{'...' if len(name) > 60 else ''}, "
+                                     f"which no file in {folder} can be ({e.strerror or e})", path=str(self.path),
+                                     key=META_PREFIX + "encoder_file") from None
+        if not present:
             raise ModelContractError(f"was trained on the 2D joints of {name}, which {folder} does not have: {fix}",
                                      path=str(self.path), key=META_PREFIX + "encoder_file")
         try:

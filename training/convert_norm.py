@@ -20,6 +20,7 @@ if __name__ == "__main__":  # python -m: the arguments are parsed before torch l
 
     raise SystemExit(_cli_main())
 
+import io
 import pickle
 import sys
 from pathlib import Path
@@ -27,6 +28,7 @@ from pathlib import Path
 import torch
 
 from training.model import ModelConfig
+from training.model_card import write_atomic
 
 RUNNING_KEYS = ("running_mean", "running_var", "num_batches_tracked")
 
@@ -55,6 +57,15 @@ def to_scene_norm(checkpoint: dict) -> dict:
     return out
 
 
+def write_checkpoint(checkpoint: dict, dst: Path) -> None:
+    """``checkpoint`` saved to ``dst`` whole or not at all (``write_atomic``): a full disk or Ctrl-C halfway
+    through left a cut file under the name, replacing what was there (``dst`` may be an earlier conversion)."""
+    buf = io.BytesIO()
+    torch.save(checkpoint, buf)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(dst, buf.getvalue())
+
+
 def main(argv: list[str] | None = None) -> int:
     from training.cli.convert_norm import build_parser  # noqa: PLC0415
 
@@ -77,8 +88,12 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         print(f"convert_norm: {src}: {e}", file=sys.stderr)
         return 2
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    torch.save(converted, str(dst))
+    try:
+        write_checkpoint(converted, dst)
+    except OSError as e:
+        print(f"convert_norm: {dst}: cannot write the converted checkpoint ({e.strerror or e}); "
+              f"{'the file there is as it was' if dst.exists() else 'nothing was written'}", file=sys.stderr)
+        return 1
     print(f"{src} -> {dst}: image feature network normalised by scene statistics")
     return 0
 

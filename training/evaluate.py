@@ -211,6 +211,7 @@ class OnnxRenderer:
         self.sessions = {g: _session(p, threads) for g, p in self.paths.items()}
         if self.keypoint_graph == "human":
             self.sessions["human"] = _session(human, threads)
+        _check_one_export({self.paths.get(g, human): sess for g, sess in self.sessions.items()})
         self.height, self.width = self.contract.height, self.contract.width
         self.heatmap_stride = self.contract.heatmap_stride
         self.background = self.contract.background
@@ -233,6 +234,24 @@ class OnnxRenderer:
 
     def colour(self, scene, targets, ray_uv):
         return self._run(scene, targets, ray_uv, "render_rgb")["rgb"]
+
+
+def _check_one_export(sessions: Mapping[Path, object]) -> None:
+    """The graph files' weights ids (``ghnerf.weights_id``) agree, as the runtime's load checks: a folder holding
+    graphs of two exports (a move into it cut short) was scored as one model. Files without an id are taken."""
+    from ghnerf_runtime.contract import ContractError, weights_id_of
+
+    first: tuple[Path, str] | None = None
+    for path, sess in sessions.items():
+        try:
+            weights = weights_id_of(dict(sess.get_modelmeta().custom_metadata_map))
+        except ContractError as e:
+            raise EvalInputError(f"{path}: {e}") from e
+        if weights is not None and first is not None and weights != first[1]:
+            raise EvalInputError(f"{path}: weights id {weights[:16]}..., and {first[0].name} {first[1][:16]}...: the "
+                                 "graph files come from two different exports; export the model again into "
+                                 f"{path.parent}")
+        first = first or ((path, weights) if weights is not None else None)
 
 
 def _session(path: Path, threads: int):

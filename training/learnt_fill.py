@@ -584,6 +584,22 @@ def _config_problem(cfg: FillTrainConfig) -> str | None:
     return None
 
 
+def drop_stale_int8(out: Path, remade: bool) -> list[Path]:
+    """Remove the int8 twin of the painter ``out`` an export replaces (returned, to be dropped from the card
+    too): the runtime takes the int8 file first (precision auto or int8), and ran the previous painter in place
+    of the new one where the export made no int8 file, or stopped before it (a Ctrl-C in the calibration).
+    Removed before the new fp32 file is written: a stop between the two leaves the previous fp32 painter alone,
+    not two painters. ``remade``: the export writes a new one (no word then)."""
+    stale = Path(out).with_suffix(".int8.onnx")
+    if not stale.is_file():
+        return []
+    stale.unlink()
+    if not remade:
+        print(f"{stale}: removed, the int8 file of the painter this export replaces (--calib-cache makes this "
+              "one's)", file=sys.stderr)
+    return [stale]
+
+
 def _export_cli(args) -> int:
     import hashlib  # noqa: PLC0415
 
@@ -608,6 +624,7 @@ def _export_cli(args) -> int:
                   "used", file=sys.stderr)
     meta = {"trained_on": str(args.net), "hardware": str(trained.get("hardware", "")),
             "seconds": str(trained.get("seconds", ""))}
+    dropped = drop_stale_int8(args.out, remade=calib is not None)
     out = export_painter(net, args.out, meta)
     report = {"command": "python -m training.learnt_fill export " + " ".join(
                   f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k != "cmd" and v is not None),
@@ -637,7 +654,7 @@ def _export_cli(args) -> int:
     if args.card_dir is not None:
         from training.model_card import add_painter_to_card  # noqa: PLC0415
 
-        print(add_painter_to_card(args.card_dir, out, outs[1:]))
+        print(add_painter_to_card(args.card_dir, out, outs[1:], dropped))
     return 0
 
 

@@ -296,14 +296,37 @@ def check_card_dir(card_dir: str | Path, out: str | Path, flag: str) -> None:
     except ValueError:
         raise CardError(f"{flag} {card_dir}: the output {out} is not inside that folder, so its card could not "
                         "list it") from None
+    if problem := _card_problem(card_dir / "model_card.json"):
+        raise CardError(f"{flag} {card_dir}: {problem}")
 
 
-def add_painter_to_card(card_dir: str | Path, out: Path, more: list[Path] = ()) -> Path:
+#: The card's sections a prior or painter is recorded in: each an object where the card has it.
+_CARD_SECTIONS = ("files", "skeleton_prior", "novel_painter")
+
+
+def _card_problem(path: Path) -> str | None:
+    """Why the card ``path`` cannot take a record (None: it can): read before the work, as a cut or hand-edited card
+    was a traceback once the prior or painter had been trained and written."""
+    try:
+        card = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError) as e:  # ValueError: not JSON, or not UTF-8
+        return f"{path} cannot be read as JSON ({type(e).__name__}: {e}); `make model` writes it whole"
+    if not isinstance(card, dict):
+        return f"{path} holds a JSON {type(card).__name__}, not a model card object"
+    wrong = next((k for k in _CARD_SECTIONS if k in card and not isinstance(card[k], dict)), None)
+    if wrong is not None:
+        return f"{path}: {wrong!r} is a JSON {type(card[wrong]).__name__}, not an object"
+    return None
+
+
+def add_painter_to_card(card_dir: str | Path, out: Path, more: list[Path] = (), removed: list[Path] = ()) -> Path:
     """Record the painter ``out`` (its ``.json`` figures; size and hash of it and of ``more``, its int8 file)
-    in the model card of ``card_dir``."""
+    in the model card of ``card_dir``, and no longer the files ``removed`` (the previous painter's int8 file)."""
     card_dir = Path(card_dir)
     card = json.loads((card_dir / "model_card.json").read_text())
     card.setdefault("novel_painter", {})[out.parent.name] = json.loads(out.with_suffix(".json").read_text())
+    for path in removed:
+        card.get("files", {}).pop(str(path.resolve().relative_to(card_dir.resolve())), None)
     for path in (out, *more):
         card.setdefault("files", {})[str(path.resolve().relative_to(card_dir.resolve()))] = {
             "bytes": path.stat().st_size, "sha256": sha256(path)}

@@ -724,7 +724,19 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu",
         model.load_state_dict(ck.get("model", ck))
     except RuntimeError as e:  # missing or mis-shaped tensors
         raise ConfigError(f"{path}: its weights do not fit its model config ({error_words(e)})") from e
+    refuse_non_finite(path, model)
     return model.eval(), ck
+
+
+def refuse_non_finite(path: str | Path, model: torch.nn.Module) -> None:
+    """:class:`ConfigError` naming ``path`` and its first tensor holding NaN or infinite values: such weights
+    exported (a parity check of NaN against NaN is no check) and quantized into a traceback deep in onnxruntime
+    ("scale issue"), or evaluated as a model that finds no one."""
+    for name, t in model.state_dict().items():
+        if t.is_floating_point() and not bool(torch.isfinite(t).all()):
+            bad = int((~torch.isfinite(t)).sum())
+            raise ConfigError(f"{path}: tensor {name!r} holds {bad} NaN or infinite value(s) of {t.numel()}: weights "
+                              f"of a run that diverged; {READ_HINT}")
 
 
 # ------------------------------------------------------------------------------------------ progress

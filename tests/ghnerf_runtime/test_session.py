@@ -523,6 +523,26 @@ def test_a_graph_whose_outputs_break_the_contract_is_refused_at_warm_up(tiny_mod
     assert "'heatmaps'" in str(e.value)
 
 
+@pytest.mark.parametrize("graph", ["encoder", "render_heat"])
+def test_a_graph_whose_weights_hold_nan_is_refused_at_warm_up(tiny_model_dir, tmp_path, graph):
+    """A graph exported from a diverged run's weights answers NaN to every input: it loaded and warmed up without
+    a word, and the estimator found no one, frame after frame."""
+    onnx = pytest.importorskip("onnx")
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    model = onnx.load(str(folder / f"{graph}.onnx"))
+    weights = max(model.graph.initializer, key=lambda t: int(np.prod(t.dims)))
+    values = onnx.numpy_helper.to_array(weights).copy()
+    values.flat[0] = np.nan
+    weights.CopyFrom(onnx.numpy_helper.from_array(values, weights.name))
+    onnx.save(model, str(folder / f"{graph}.onnx"))
+    graphs = ("encoder", "volume", "render_heat")
+    with pytest.raises(ModelRunError) as e:
+        ModelSession.load(SessionConfig(model_dir=str(folder)), graphs)
+    assert e.value.path == str(folder / f"{graph}.onnx")
+    assert f"graph {graph!r} returned" in str(e.value) and "NaN or infinite value(s)" in str(e.value)
+    ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir)), graphs)  # the export it was made from loads
+
+
 @pytest.mark.parametrize("precision", ["fp16", ""])
 def test_a_precision_the_runtime_does_not_know_is_refused(tiny_model_dir, tmp_path, precision):
     folder = _copy(tiny_model_dir, tmp_path / "m")

@@ -420,6 +420,21 @@ def test_a_prior_beside_another_encoder_than_its_own_is_refused(model_with_prior
     assert e.value.key == "ghnerf_skeleton.encoder_file"
 
 
+def test_a_prior_naming_an_encoder_file_no_file_can_be_is_refused_by_key(model_with_prior, tiny_prior, tmp_path):
+    """A damaged ``encoder_file`` longer than a file name may be was a bare ``OSError: File name too long`` from
+    the daemon's start."""
+    from ghnerf_runtime.estimator import load_session
+    from training.skeleton_prior import export
+
+    folder = tmp_path / "m"
+    shutil.copytree(model_with_prior, folder)
+    export(tiny_prior.net, folder / FILE_NAME, {"trained_on": "test", "encoder_file": "e" * 300,
+                                                "encoder_sha256": "0" * 64})
+    with pytest.raises(ModelContractError, match="names the encoder file 'e{60}'\\.\\.\\., which no file in") as e:
+        load_session(_config(folder))
+    assert e.value.key == "ghnerf_skeleton.encoder_file" and e.value.path == str(folder / FILE_NAME)
+
+
 def test_a_prior_whose_encoder_file_this_user_may_not_read_is_a_load_error_naming_it(model_with_prior, tiny_prior,
                                                                                     tmp_path):
     """The encoder the prior names need not be a graph the configuration loads (the keypoint path runs

@@ -77,3 +77,18 @@ def test_conversion_errors_name_the_problem(tmp_path, capsys):
     assert "missing.pt" in capsys.readouterr().err
     assert main([str(src), str(tmp_path / "out" / "scene.pt")]) == 0
     assert (tmp_path / "out" / "scene.pt").exists()
+
+
+def test_a_write_cut_short_leaves_the_earlier_conversion_whole_and_is_named(tmp_path, capsys, disk_full_at):
+    """A full disk halfway through the write left half a checkpoint under the output's name, in place of the
+    earlier conversion there, and a traceback."""
+    model = trained_looking_batchnorm_model()
+    src, dst = tmp_path / "last.pt", tmp_path / "scene.pt"
+    torch.save({"model": model.state_dict(), "model_config": model.config.to_dict()}, src)
+    assert main([str(src), str(dst)]) == 0
+    before = dst.read_bytes()
+    disk_full_at(tmp_path, "scene.pt")
+    assert main([str(src), str(dst)]) == 1
+    assert f"convert_norm: {dst}: cannot write the converted checkpoint (No space left on device); the file there " \
+           "is as it was" in capsys.readouterr().err
+    assert dst.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["last.pt", "scene.pt"]

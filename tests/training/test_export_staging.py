@@ -74,3 +74,17 @@ def test_a_whole_move_leaves_no_list_behind(tmp_path):
     assert st.move_into(staging, folder, [staging / n for n in NAMES]) == [folder / n for n in NAMES]
     assert _contents(folder) == dict.fromkeys(NAMES, b"new") and not staging.exists()
     assert st.finish_interrupted_move(staging, folder) == []
+
+
+@pytest.mark.parametrize("files", [["ghnerf/encoder.onnx"], "ghnerf/encoder.onnx", 3])
+def test_a_card_whose_files_are_no_object_is_left_as_unreadable_cards_are_and_the_move_goes_on(tmp_path, files):
+    """A hand-edited card whose ``files`` is a list stopped the export after its parity checks, in an
+    AttributeError traceback from the staleness check before the move."""
+    import json
+
+    folder, staging = _folders(tmp_path)
+    card = tmp_path / "model_card.json"
+    card.write_text(json.dumps({"files": files}))
+    st.move_into(staging, folder, [staging / n for n in NAMES])
+    assert _contents(folder) == dict.fromkeys(NAMES, b"new") and not staging.exists()
+    assert json.loads(card.read_text()) == {"files": files} and not (tmp_path / st.STALE_CARD).exists()

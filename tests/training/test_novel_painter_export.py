@@ -234,3 +234,63 @@ def test_an_export_cut_short_leaves_the_previous_graph_not_half_of_one(tmp_path,
     monkeypatch.undo()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["novel_painter.onnx"]  # no temporary file beside it
     assert out.read_bytes() == before and NovelPainter.load(out).meta["ghnerf_painter.trained_on"] == "first"
+
+
+def test_an_export_without_int8_removes_the_int8_file_of_the_painter_it_replaces(tmp_path, data64, capsys):
+    """The previous painter's novel_painter.int8.onnx stayed beside the new fp32 one, and the runtime, which takes
+    the int8 file first (precision auto or int8), ran the old painter without a word; the card kept listing it."""
+    card_dir, out = _export_setup(tmp_path, data64)
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 "--calib-cache", str(tmp_path / "cache.npz")]) == 0
+    assert NovelPainter.find(out.parent).name == "novel_painter.int8.onnx"
+    net = _net(1)
+    save_net(net, FillTrainConfig(net=net.cfg), tmp_path / "next.pt", steps=9, seconds=1.0, hardware="cpu")
+    capsys.readouterr()
+    assert main(["export", "--net", str(tmp_path / "next.pt"), "--out", str(out), "--card-dir", str(card_dir)]) == 0
+    assert not out.with_suffix(".int8.onnx").exists()
+    assert f"{out.with_suffix('.int8.onnx')}: removed" in capsys.readouterr().err
+    found = NovelPainter.find(out.parent)
+    assert found == out and NovelPainter.load(found).meta["ghnerf_painter.steps"] == "9"
+    files = json.loads((card_dir / "model_card.json").read_text())["files"]
+    assert "ghnerf/novel_painter.onnx" in files and "ghnerf/novel_painter.int8.onnx" not in files
+
+
+@pytest.mark.parametrize(("card", "said"), [
+    ('{"files": {"ghnerf/encoder.onnx"', "cannot be read as JSON (JSONDecodeError"),  # cut short
+    ('[]', "holds a JSON list, not a model card object"),
+    ('{"files": []}', "'files' is a JSON list, not an object"),
+    ('{"novel_painter": "w16"}', "'novel_painter' is a JSON str, not an object"),
+])
+def test_a_card_that_cannot_take_the_record_is_named_before_the_export(tmp_path, data64, capsys, card, said):
+    """A cut or hand-edited model_card.json was read only once the painter had been written into the model
+    folder: a JSONDecodeError or TypeError traceback, the new painter in place and no card record of it."""
+    card_dir, out = _export_setup(tmp_path, data64)
+    (card_dir / "model_card.json").write_text(card)
+    with pytest.raises(SystemExit) as e:
+        main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir)])
+    assert e.value.code == 2
+    assert f"--card-dir {card_dir}: " in (err := capsys.readouterr().err) and said in err
+    assert not out.exists() and (card_dir / "model_card.json").read_text() == card
+
+
+def test_an_export_stopped_in_its_calibration_leaves_no_int8_file_of_the_previous_painter(tmp_path, data64,
+                                                                                         monkeypatch):
+    """A Ctrl-C while the int8 file was calibrated left the new fp32 painter beside the previous painter's int8
+    file, which the runtime takes first."""
+    from training import learnt_fill
+
+    card_dir, out = _export_setup(tmp_path, data64)
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 "--calib-cache", str(tmp_path / "cache.npz")]) == 0
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(learnt_fill, "quantize_painter", stopped)
+    net = _net(1)
+    save_net(net, FillTrainConfig(net=net.cfg), tmp_path / "next.pt", steps=9, seconds=1.0, hardware="cpu")
+    with pytest.raises(KeyboardInterrupt):
+        main(["export", "--net", str(tmp_path / "next.pt"), "--out", str(out), "--calib-cache",
+              str(tmp_path / "cache.npz")])
+    assert not out.with_suffix(".int8.onnx").exists()
+    assert NovelPainter.load(NovelPainter.find(out.parent)).meta["ghnerf_painter.steps"] == "9"

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("torch")
@@ -430,6 +431,65 @@ def test_a_pretraining_s_human_pt_given_as_a_model_is_named_as_such(data64, tmp_
         rc = evaluate.main(["--data", str(data64), "--model", str(human), "--limit", "1", "--no-novel"])
     assert rc == 2 and words in capsys.readouterr().err
     assert not (tmp_path / "m").exists()
+
+
+@pytest.mark.parametrize("tool", ["export", "eval"])
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_a_checkpoint_holding_non_finite_weights_is_named_before_the_export(data64, tmp_path, capsys, tool, bad):
+    """A diverged run's weights (one NaN) were exported, then quantized into onnxruntime's bare "AssertionError:
+    scale issue" (--int8), or refused as "onnxruntime differs from torch by nan: the export is wrong"; ghnerf-eval
+    scored them as a model that finds no one."""
+    import torch
+
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    model = GHNeRF(preset("tiny"))
+    state = model.state_dict()
+    name = next(k for k, v in state.items() if v.is_floating_point() and k.endswith("weight"))
+    state[name].view(-1)[0] = bad
+    ckpt = tmp_path / "last.pt"
+    torch.save({"model": state, "model_config": model.config.to_dict(), "step": 3}, ckpt)
+    words = f"{ckpt}: tensor {name!r} holds 1 NaN or infinite value(s) of {state[name].numel()}"
+    if tool == "export":
+        from training.export.cli import main
+
+        rc = main(["--checkpoint", str(ckpt), "--out", str(tmp_path / "m"), "--int8"])
+    else:
+        rc = evaluate.main(["--data", str(data64), "--model", str(ckpt), "--limit", "1", "--no-novel"])
+    assert rc == 2 and words in capsys.readouterr().err
+    assert not (tmp_path / "m").exists() and not (tmp_path / "m.staging").exists()
+
+
+@pytest.mark.parametrize("precision", ["", "#int8"])
+def test_a_model_folder_of_two_exports_is_named_not_scored_as_one_model(tmp_path, precision):
+    """A folder whose graphs carry two weights ids (a move into it cut short; the runtime refuses to load it) was
+    scored by ghnerf-eval as one model."""
+    import onnx
+    import torch
+
+    from ghnerf_runtime.contract import WEIGHTS_ID_KEY
+    from training.configs import preset
+    from training.export.export import example_inputs, export_all
+    from training.export.quantize import calibration_feeds, quantize_all
+    from training.model import GHNeRF
+
+    model = GHNeRF(preset("tiny")).eval()
+    fp32 = export_all(model, tmp_path, graphs=("encoder", "human", "volume", "render_heat", "render_rgb"),
+                      inputs=example_inputs(model))
+    if precision:
+        frames = np.random.default_rng(0).random((4, 2, 3, 64, 64), dtype=np.float32)
+        calib = [example_inputs(model, images=torch.from_numpy(f), targets=1, ray_stride=4, seed=i)
+                 for i, f in enumerate(frames)]
+        quantize_all(fp32, tmp_path, calibration_feeds(model, calib, tuple(fp32), rays_per_target=64))
+    evaluate.make_renderer(f"{tmp_path}{precision}")  # one export: taken
+    other = tmp_path / ("render_rgb.int8.onnx" if precision else "render_rgb.onnx")
+    graph = onnx.load(str(other))
+    next(p for p in graph.metadata_props if p.key == WEIGHTS_ID_KEY).value = "0" * 64
+    onnx.save(graph, str(other))
+    with pytest.raises(evaluate.EvalInputError, match=rf"^{other}: weights id 0{{16}}\.\.\., and \S+ [0-9a-f]{{16}}"
+                                                      r"\.\.\.: the graph files come from two different exports"):
+        evaluate.make_renderer(f"{tmp_path}{precision}")
 
 
 def test_the_opset_range_is_what_torch_exports():

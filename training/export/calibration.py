@@ -51,7 +51,7 @@ def load_calibration_npz(path: str | Path, contract: ModelContract) -> list[np.n
             if KEY not in npz.files:
                 raise CalibrationDataError(path, f"no {KEY!r} array (it holds {sorted(npz.files)})")
             images = npz[KEY]
-    except (OSError, ValueError, zipfile.BadZipFile) as e:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # EOFError: an empty file
         if isinstance(e, CalibrationDataError):
             raise
         raise CalibrationDataError(path, f"cannot read it as an npz file ({type(e).__name__}: {e})") from e

@@ -168,6 +168,8 @@ def _card_is_stale(card: Path, sub: Path, incoming: Mapping[str, str], gone: set
         files = json.loads(card.read_text()).get("files") or {}
     except (OSError, ValueError, AttributeError):
         return None  # no card (an unreadable one is its writer's to redo)
+    if not isinstance(files, dict):  # unreadable as well ("files" a list, say): was an AttributeError before the move
+        return None
     for name, new_hash in sorted(incoming.items()):
         rec = files.get(str(sub / name))
         if rec is not None and (rec.get("sha256") if isinstance(rec, dict) else None) != new_hash:
