@@ -9,31 +9,39 @@ stamps after it read as a forward step of an hour (session 71).
 So T follows one timeline of stamps. A stamp that leaves it (earlier than the one before, or later by more than
 ``JUMP_FRAMES`` frame intervals) reads the last T sent plus one frame interval; the timeline before is kept. If a
 later stamp is back on it (at most ``JUMP_FRAMES`` frame intervals past its last stamp, plus one per odd frame
-since), T resumes from it as if the odd frames were normal ones: a glitch (``glitches``). If the stamps stay on
-the new timeline for ``NEW_TIMELINE_FRAMES`` frames, T follows them: a jump back (a reset, a loop: ``jumps_back``)
-counts on from the first odd frame's T, as T did before anyway; a jump forward (a pause) adds the pause to T in
-one step, on the last of those frames, so a receiver that interpolates on T still sees the pause, two frames late.
-T is never below the last T sent: a lone stamp a few frames ahead (a step T follows) moves T on by at most
-``JUMP_FRAMES`` intervals, and the stamps after it, a little back, then read the same T until they pass it. The
-first glitch and the first jump back are each logged once per sink; later ones only counted.
+since), T resumes from it as if the odd frames were normal ones: a glitch (``glitches``). A stamp also one frame on
+from the odd one before it, and more than a frame short of where the timeline's stamps would be by then, is not
+back: the stamps went back a frame or two and stay (a clock resync; read as a glitch until session 73, T repeating
+for two or three frames); an extra odd stamp a frame or two back leaves the stream at most a frame short. If the
+stamps stay on the new timeline for ``NEW_TIMELINE_FRAMES`` frames, T follows them: a jump back (a reset, a loop:
+``jumps_back``) counts on from the first odd frame's T, as T did before anyway; a jump forward (a pause) adds the
+pause to T in one step, on the last of those frames, so a receiver that interpolates on T still sees the pause, two
+frames late. T is never below the last T sent: a lone stamp a few frames ahead (a step T follows) moves T on by at
+most ``JUMP_FRAMES`` intervals, and the stamps after it, a little back, then read the same T until they pass it.
+The first glitch and the first jump back are each logged once per sink; later ones only counted.
 
 Before the first forward step the frame interval is a nominal one: the sink's ``fps`` (the producer's rate), else
 ``DEFAULT_FPS``, capped at its ``max_fps``. So a glitched second stamp leaves the timeline like any other, and a
 glitched first one is left by the stamps after it: until session 72 every first forward step was followed, and
 either moved T by the glitch (an hour), once. A first stamp that the next ``NEW_TIMELINE_FRAMES`` leave forward is
 no timeline to pause on: T counts on from it, as after a jump back (a real pause after the first frame is not added
-to T). A camera under a quarter of the nominal rate leaves it too at its first frames, which read one nominal
-interval on each until its steps become the interval; stamps that only stepped forward and come back are no
-glitch (not counted, not logged). A stamp repeated on a new timeline is no evidence for it: T follows it only
-once its stamps move on (a driver that stamped three frames with one bad value moved T to it, then an hour on when
-the stamps came back, until session 72).
+to T); stamps that come back to it settle it only as a new timeline is settled, ``NEW_TIMELINE_FRAMES`` distinct
+ones (until session 73 two, near a glitched first, took the stream after them for a pause of the glitch). A camera
+under a quarter of the nominal rate leaves it too at its first two frames, which read one nominal interval on each;
+their steps, alike, become the interval, and T catches up on the third frame (not sooner: two glitched stamps an
+hour apart step alike too); stamps that only stepped forward and come back are no glitch (not counted, not logged).
+A stamp repeated on a new timeline is no evidence for it: T follows it only once its stamps move on (a driver that
+stamped three frames with one bad value moved T to it, then an hour on when the stamps came back, until session
+72).
 
 The frame interval is the lower median of the last ``STEPS_KEPT`` forward steps between stamps on one timeline:
-jittery stamps, a driver hiccup that stamps two frames 1 ms apart, or a gap of a few frames each move it by at
-most one rank. Until session 71 it was the smallest step seen, which jitter made far shorter than a frame. Stamps
-that leave the timeline at every frame, stepping on at a steady pace (within ``JUMP_FRAMES`` times the step
-before), add their steps too: a camera slowed to under a quarter of its rate, or a first step of 1 ms (a hiccup),
-left it at every frame for good, T creeping on by the stale interval.
+jittery stamps, a driver hiccup that stamps two frames 1 ms apart, or a gap of a few frames each move it by at most
+one rank. Until session 71 it was the smallest step seen, which jitter made far shorter than a frame. Stamps that
+leave the timeline at every frame, stepping on at a steady pace (within ``JUMP_FRAMES`` times the step before), add
+their steps too: a camera slowed to under a quarter of its rate, or a first step of 1 ms (a hiccup), left it at
+every frame for good, T creeping on by the stale interval. Only frames leaving one after another keep a pace, and
+the steps of odd frames the stream then comes back below are dropped: two glitches an hour apart stepped alike, and
+until session 73 that hour became the interval, which T moved on by at the next jump.
 
 Seconds since the first frame, not since boot: OSC floats are float32, whose steps grow with T (0.25 ms after an
 hour, 1 ms after four, 16 ms after 36 hours). From 2**19 s (six days) on a step is 62.5 ms, so two frames of a
@@ -59,11 +67,12 @@ JUMP_FRAMES = 4
 
 #: The frame rate assumed before the first forward step, where the sink names none: most cameras here run at 30
 #: fps. A camera under a quarter of it (7.5 fps) leaves the timeline at its first steps, and T catches up with it
-#: in one step within a few frames (its steady steps become the interval).
+#: in one step on the third frame (its steady steps become the interval).
 DEFAULT_FPS = 30.0
 
 #: Frames in a row on a new timeline (the first odd one included) before T follows it: one or two glitched stamps
-#: in a row are stepped over, and a pause reaches T two frames (67 ms at 30 fps) late.
+#: in a row are stepped over, and a pause reaches T two frames (67 ms at 30 fps) late. Not one: a pause's first two
+#: frames look like two glitched stamps a frame apart, and following those threw T an hour ahead for good.
 NEW_TIMELINE_FRAMES = 3
 
 
@@ -93,7 +102,9 @@ class VmcClock:
         self._nominal_us = nominal_step_us() if nominal_us is None else nominal_us  # the interval before a step
         self._line: Optional[_Timeline] = None  # the timeline T follows
         self._line_last_us = 0  # the last stamp on it
+        self._line_step_us = 0  # the forward step into it on the line (0: none, or the stamps came back to it)
         self._line_stamps = 0  # distinct stamps read on it frame after frame (a taken new line counts as settled)
+        self._line_settles_at = 2  # stamps that settle it: a pause from it is added to T (more after a way back)
         self._new: Optional[_Timeline] = None  # where the stamps went when they left it, until decided
         self._new_frames = 0  # frames in a row on ``_new``
         self._leave_step_us = 0  # the forward step into the last frame that left a timeline (0: it went back)
@@ -102,6 +113,7 @@ class VmcClock:
         self._last_us = 0  # the previous frame's stamp
         self._last_t_us = 0  # the T sent with it
         self._steps_us: deque[int] = deque(maxlen=STEPS_KEPT)  # the last forward steps between stamps
+        self._steps_on_the_line: tuple[int, ...] = ()  # ``_steps_us`` as the stamps left the line
         self.jumps_back = 0  # new timelines earlier than the one before, followed
         self.glitches = 0  # times the stamps left the timeline for a frame or two, then came back to it
 
@@ -137,25 +149,42 @@ class VmcClock:
         if not self._follows(self._last_us, capture_time_us):
             return self._leave(capture_time_us)
         self._step(capture_time_us)
-        self._line_stamps += capture_time_us > self._line_last_us  # a repeated stamp is no more of the line
+        if capture_time_us > self._line_last_us:  # a repeated stamp is no more of the line
+            self._line_stamps += 1
+            self._line_step_us = capture_time_us - self._line_last_us
         self._line_last_us = capture_time_us
         return self._line.t_us(capture_time_us)
 
     def _off_the_line(self, capture_time_us: int) -> int:
         assert self._line is not None and self._new is not None
-        if self._follows(self._line_last_us, capture_time_us, self._new_frames + 1):
+        left_again = not self._follows(self._last_us, capture_time_us)
+        on_the_new_line = not left_again and self._short_of_the_line(capture_time_us)
+        if self._follows(self._line_last_us, capture_time_us, self._new_frames + 1) and not on_the_new_line:
             return self._back_on_the_line(capture_time_us)
-        if not self._follows(self._last_us, capture_time_us):
+        if left_again:
             return self._leave(capture_time_us)  # off again, elsewhere: the line is still the one to come back to
         self._step(capture_time_us)
         self._new_frames += 1
+        self._leave_step_us = 0  # a steady pace is frames leaving one after another, not across frames on ``_new``
         t_us = self._new.t_us(capture_time_us)
         if self._new_frames >= NEW_TIMELINE_FRAMES and capture_time_us > self._new.base_us:  # moved on: no repeat
             t_us = self._take_the_new_line(capture_time_us, t_us)
         return t_us
 
+    def _short_of_the_line(self, capture_time_us: int) -> bool:
+        """Whether a stamp one frame on from the last (off the line) is more than a frame short of where the line's
+        stamps would be by now: a jump back of a frame or two that stays, not a glitch the stream comes back from
+        (read as one until session 73: T repeated for two or three frames). Judged leniently: from the stamp
+        before the line's last where that step was long (a stamp a little ahead, the stream then back under it,
+        is a glitch), and an extra odd frame a frame back is within the frame."""
+        step_us = self.frame_step_us()
+        line_us = self._line_last_us + (self._new_frames + 1) * step_us - max(0, self._line_step_us - step_us)
+        return line_us - capture_time_us - abs(capture_time_us - self._last_us - step_us) > step_us
+
     def _leave(self, capture_time_us: int) -> int:
         """The first frame off the line: one frame interval on, the stamps' new timeline kept."""
+        if self._new is None:
+            self._steps_on_the_line = tuple(self._steps_us)
         self._left_forward = capture_time_us > self._last_us and (self._new is None or self._left_forward)
         self._new = _Timeline(capture_time_us, self._last_t_us + self._jump_step_us(capture_time_us))
         self._new_frames = 1
@@ -173,7 +202,8 @@ class VmcClock:
     def _count_a_steady_leave(self, step_us: int) -> None:
         """Keep a forward step that left a timeline as the one before did, at a like pace (a camera slowed past
         ``JUMP_FRAMES`` times the interval), so the interval can follow it; a glitch and the stamp back from it
-        are no steady pace."""
+        are no steady pace. Counted once the frame is placed: two steps off the line alike may be two glitched
+        stamps alike (an hour apart: counted first, that hour was the interval at once, and T followed it)."""
         before_us, self._leave_step_us = self._leave_step_us, max(step_us, 0)
         if before_us and step_us > 0 and step_us <= JUMP_FRAMES * before_us and before_us <= JUMP_FRAMES * step_us:
             self._steps_us.append(step_us)
@@ -182,10 +212,22 @@ class VmcClock:
         assert self._line is not None and self._new is not None
         if not (self._left_forward and capture_time_us >= self._last_us):
             self._count_a_glitch()
+            # the odd frames' steps were no camera's: two glitches an hour apart stepped "steadily", and that hour
+            # became the interval T then moved on by at a jump (the property check's seed 119515, session 73)
+            self._steps_us = deque(self._steps_on_the_line, maxlen=STEPS_KEPT)
         # else no stamp went back: late frames on the line, read again at a longer interval (a slow camera)
-        self._new, self._leave_step_us = None, 0
-        self._line_last_us = capture_time_us  # (not a stamp more of it: it may be a glitch near a glitched first)
+        if self._line_stamps < self._line_settles_at:
+            self._unsettle_the_line(capture_time_us)
+        self._new, self._leave_step_us, self._line_step_us = None, 0, 0
+        self._line_last_us = capture_time_us
         return self._line.t_us(capture_time_us)
+
+    def _unsettle_the_line(self, capture_time_us: int) -> None:
+        """Stamps back on a line of one stamp (the first) may be glitches near a glitched first: a lone one, or one
+        repeated, took the stream after it for a pause of the glitch (session 72), and so did two different ones
+        (until session 73). The line settles as a new one would: ``NEW_TIMELINE_FRAMES`` stamps from this one."""
+        self._line_stamps = int(capture_time_us > self._line_last_us)
+        self._line_settles_at = NEW_TIMELINE_FRAMES
 
     def _count_a_glitch(self) -> None:
         assert self._new is not None
@@ -201,14 +243,14 @@ class VmcClock:
         glitch back near it, a stamp repeated, came back to it, not after it): no pause to add."""
         assert self._line is not None and self._new is not None
         paused = self._new.base_us >= self._line_last_us
-        if paused and self._line_stamps > 1:
+        if paused and self._line_stamps >= self._line_settles_at:
             t_us = self._line.t_us(capture_time_us)
         else:
             if not paused:
                 self._log_jump_back(self._new)
             self._line = self._new
             self._line_stamps = NEW_TIMELINE_FRAMES
-        self._new, self._leave_step_us = None, 0
+        self._new, self._leave_step_us, self._line_step_us = None, 0, 0
         self._line_last_us = capture_time_us
         return t_us
 
