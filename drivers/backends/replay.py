@@ -225,6 +225,11 @@ END_STEPS = 4
 MENDED_RUN = 2
 
 
+#: The most frame periods a frame between a mended stamp's (or run's) neighbours, themselves in line: wider apart, a
+#: pause lies there too (a reset then a pause reads as a glitch by its own camera alone, session 73).
+MENDED_ROOM = 4
+
+
 def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, int], directory: Path | str,
                      others: list[list[int]]) -> None:
     """Give a lone bad stamp of one camera (``mine``: its rows in recorded order) the midpoint of its neighbours'.
@@ -232,7 +237,8 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
     A stamp out of line with the frames either side of it, which are in line with each other (a glitched stamp
     an hour ahead or back, the frames after it on the old timeline), is one bad stamp, not a clock reset: taken
     as a reset, it re-based every later frame of that camera by the glitch, so none paired again and a paced
-    replay waited out the glitch (an hour). Up to ``MENDED_RUN`` such stamps in a row are mended too, spread
+    replay waited out the glitch (an hour); not where another camera jumped with it (:func:`_jumped_with_them`).
+    Up to ``MENDED_RUN`` such stamps in a row are mended too, spread
     evenly between their neighbours, where the other cameras (``others``: their rows in recorded order) say so
     (:func:`_mend_runs`). Lone or in a run, only where the neighbours lie over a frame period apart
     (:func:`_out_of_line`): a clock reset back one to three frames brings one back within a period. A camera's
@@ -242,7 +248,8 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
     # runs first: the lone test takes a run's first (back, then ahead)
     mended = _mend_runs(mine, stamps, others, period_ns)
     for before, here, after in zip(mine, mine[1:], mine[2:]):
-        if _out_of_line([stamps[here]], stamps[before], stamps[after], period_ns):
+        if (_out_of_line([stamps[here]], stamps[before], stamps[after], period_ns)
+                and not _jumped_with_them(stamps[here], stamps[before], stamps[after], others, stamps)):
             mended.append((here, stamps[here]))
             stamps[here] = (stamps[before] + stamps[after]) // 2
     ends = [(mine[:3], [stamps[theirs[0]] for theirs in others if theirs], False),
@@ -294,9 +301,13 @@ def _steady_steps(stamps_ns: list[int]) -> list[int]:
 def _out_of_line(run_ns: list[int], low_ns: int, high_ns: int, period_ns: int) -> bool:
     """Whether stamps ``run_ns`` in a row, between neighbours stamped ``low_ns`` and ``high_ns``, are out of line in
     a way a bad stamp (or run) is: every one outside the neighbours, those two in line with each other and over
-    ``period_ns`` apart, room for the frames between them. A reset back one to three frames also has a frame back
-    in line after the one or two before it, but within a period (session 72: these were mended as bad stamps)."""
+    ``period_ns`` apart, room for the frames between them, but at most ``MENDED_ROOM`` periods a frame. A reset back
+    one to three frames also has a frame back in line after the one or two before it, but within a period (session
+    72: these were mended as bad stamps)."""
     if not low_ns <= high_ns or high_ns - low_ns <= period_ns:
+        return False
+    # a pause beside a reset (after it, or before) keeps the camera on the new line, its neighbours far apart
+    if high_ns - low_ns > MENDED_ROOM * (len(run_ns) + 1) * period_ns:
         return False
     return not any(low_ns <= ns <= high_ns for ns in run_ns)
 
@@ -337,6 +348,22 @@ def _run_is_bad(run_ns: list[int], low_ns: int, high_ns: int, elsewhere_ns: list
     step_ns = (high_ns - low_ns) // (len(run_ns) + 1)
     return all(bisect.bisect_right(elsewhere_ns, ns + step_ns) == bisect.bisect_left(elsewhere_ns, ns - step_ns)
                for ns in run_ns)
+
+
+def _jumped_with_them(here_ns: int, low_ns: int, high_ns: int, others: list[list[int]],
+                      stamps: dict[int, int]) -> bool:
+    """Whether another camera (``others``: rows in recorded order) jumped with a lone stamp ``here_ns`` out of line
+    between ``low_ns`` and ``high_ns``: it has a stamp within a frame step of it (half the neighbours' gap) next to
+    one within a step of either neighbour. A clock reset, or one then a pause, hits every camera of a synced rig at
+    once: mended as a bad stamp, it broke the pairs there (session 73). A glitch an hour off lands near none, or
+    (a take longer than the glitch) among stamps that go on in line there, far from its neighbours."""
+    step_ns = (high_ns - low_ns) // 2
+
+    def jump(on_ns: int, beside_ns: int) -> bool:
+        return abs(on_ns - here_ns) <= step_ns and min(abs(beside_ns - low_ns), abs(beside_ns - high_ns)) <= step_ns
+
+    successive = ((stamps[a], stamps[b]) for theirs in others for a, b in zip(theirs, theirs[1:]))
+    return any(jump(a, b) or jump(b, a) for a, b in successive)
 
 
 def _bad_end(end_ns: int, near_ns: int, far_ns: int, elsewhere_ns: list[int]) -> bool:

@@ -1437,6 +1437,30 @@ def test_a_reset_or_a_pause_is_not_mended_as_bad_stamps(left_ms, caplog):
         assert any("clock reset" in message for message in warned)
 
 
+def test_a_reset_then_a_pause_on_both_cameras_is_not_mended_as_a_bad_stamp(caplog):
+    """Both clocks went back 40 ms, then the take paused 60 ms: each camera's first frame after the reset lay out of
+    line between neighbours 86 ms apart (its own camera alone reads a glitch) and was mended to their midpoint, its
+    pair kept only by chance. The other camera jumped with it, at the same place: a reset, the pairs kept."""
+    played, warned = _played_ms([0, 33, 66, 100, 93, 186, 219], [1, 34, 67, 101, 94, 187, 220], caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+    assert sum("clock reset" in message for message in warned) == 2
+    left = [t for cam, _, t in played if cam == "left"]
+    right = [t for cam, _, t in played if cam == "right"]
+    assert [b - a for a, b in zip(left[4:], left[5:])] == [93, 33]  # spaced as recorded after the reset
+    assert [r - le for le, r in zip(left, right)] == [1] * 7
+
+
+@pytest.mark.parametrize("right_ms", [[], [1, 34, 67, 101, 134, 167, 201, 234, 267]], ids=["alone", "beside"])
+def test_a_reset_then_a_long_pause_on_one_camera_is_not_mended_as_a_bad_stamp(right_ms, caplog):
+    """Left's clock went back 90 ms, then it paused 1.9 s (the other camera, where there is one, went on): its first
+    frame after the reset lay out of line between neighbours in line, and was mended to their midpoint (1.05 s). A
+    glitch leaves its neighbours a frame or two apart, not 57: a reset, the frames after it spaced as recorded."""
+    played, warned = _played_ms([0, 33, 66, 100, 10, 2000, 2033], right_ms, caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+    left = [t for cam, _, t in played if cam == "left"]
+    assert left[:4] == [0, 33, 66, 100] and [b - a for a, b in zip(left[4:], left[5:])] == [1990, 33]
+
+
 def test_a_reset_back_one_frame_on_both_cameras_plays_as_a_reset_with_its_pairs(caplog):
     """The host clock set back a frame (and 1 ms) mid-take: each camera's frame before the reset lay out of line
     between its neighbours, 33 ms apart, and was moved in there as a bad stamp (breaking its pair). Now a reset: the
