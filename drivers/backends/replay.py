@@ -243,7 +243,8 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
     (:func:`_mend_runs`). Lone or in a run, only where the neighbours lie over a frame period apart
     (:func:`_out_of_line`): a clock reset back one to three frames brings one back within a period. A camera's
     first and last frames have one neighbour: mended one step from it where the other cameras say so
-    (:func:`_bad_end`), unless their clocks went back there too (:func:`_on_their_reset`)."""
+    (:func:`_bad_end`), unless their clocks went back there too (:func:`_on_their_reset`); ``MENDED_RUN`` of them in
+    a row likewise (:func:`_mend_end_runs`)."""
     period_ns = _mending_period_ns(rows, mine, others)
     # runs first: the lone test takes a run's first (back, then ahead)
     mended = _mend_runs(mine, stamps, others, period_ns)
@@ -252,6 +253,7 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
                 and not _jumped_with_them(stamps[here], stamps[before], stamps[after], others, stamps)):
             mended.append((here, stamps[here]))
             stamps[here] = (stamps[before] + stamps[after]) // 2
+    mended += _mend_end_runs(mine, stamps, others, period_ns)
     ends = [(mine[:3], [stamps[theirs[0]] for theirs in others if theirs], False),
             (mine[:-4:-1], [stamps[theirs[-1]] for theirs in others if theirs], True)]
     for (end, near, far), elsewhere, last in (ends if len(mine) >= 3 else []):
@@ -347,6 +349,48 @@ def _run_is_bad(run_ns: list[int], low_ns: int, high_ns: int, elsewhere_ns: list
         return False
     step_ns = (high_ns - low_ns) // (len(run_ns) + 1)
     return all(bisect.bisect_right(elsewhere_ns, ns + step_ns) == bisect.bisect_left(elsewhere_ns, ns - step_ns)
+               for ns in run_ns)
+
+
+def _mend_end_runs(mine: list[int], stamps: dict[int, int], others: list[list[int]],
+                   period_ns: int) -> list[tuple[int, int]]:
+    """Mend ``MENDED_RUN`` stamps at a camera's first (last) frames out of line with the two frames beyond them,
+    themselves in line, where the other cameras say so (:func:`_end_run_is_bad`): each played one step further out
+    from the nearer of those two. Returns the rows mended with their recorded stamps."""
+    mended: list[tuple[int, int]] = []
+    if len(mine) < MENDED_RUN + 2 or not others:
+        return mended
+    elsewhere = sorted(stamps[i] for theirs in others for i in theirs)
+    # each end from the take's inside out: the frame beyond, the neighbour, then the run; out: the way stamps go
+    for (far, near, *run), out in ((mine[MENDED_RUN + 1::-1], -1), (mine[-MENDED_RUN - 2:], 1)):
+        step_ns = (stamps[near] - stamps[far]) * out
+        if step_ns > 0 and _end_run_is_bad([stamps[i] for i in run], stamps[near], out, step_ns, period_ns,
+                                           elsewhere):
+            fixes = [(i, max(0, stamps[near] + out * k * step_ns)) for k, i in enumerate(run, start=1)]
+            for i, ns in fixes if out > 0 else fixes[::-1]:  # in recorded order: the warning names the first
+                mended.append((i, stamps[i]))
+                stamps[i] = ns
+    return mended
+
+
+def _end_run_is_bad(run_ns: list[int], near_ns: int, out: int, step_ns: int, period_ns: int,
+                    elsewhere_ns: list[int]) -> bool:
+    """Whether stamps ``run_ns`` at a camera's end, from its neighbour ``near_ns`` outward (``out``: +1 the last end,
+    -1 the first; ``step_ns`` the camera's step there), are bad ones: each the wrong way or over ``END_STEPS`` times
+    its steps out, and so from each other; the other cameras' stamps (``elsewhere_ns``, sorted) going on across the
+    run's frames (1.5 to 6 periods out from ``near_ns``) and none within a period of the run's. One side to check
+    against (session 73): a camera that began (ended) after (before) the run's frames lends nothing there, one whose
+    clock reset or paused with this one's has its stamps by the run's, and two stamps in line with each other may
+    be this camera's clock alone gone to a new line and staying there."""
+    if any(0 < (ns - near_ns) * out <= END_STEPS * k * step_ns for k, ns in enumerate(run_ns, start=1)):
+        return False
+    # two in line with each other: as far as the take shows, this camera's clock alone reset or paused there
+    if any(0 < (b - a) * out <= END_STEPS * step_ns for a, b in zip(run_ns, run_ns[1:])):
+        return False
+    low_ns, high_ns = sorted((near_ns + out * 3 * period_ns // 2, near_ns + out * 2 * (len(run_ns) + 1) * period_ns))
+    if bisect.bisect_right(elsewhere_ns, high_ns) == bisect.bisect_left(elsewhere_ns, low_ns):
+        return False
+    return all(bisect.bisect_right(elsewhere_ns, ns + period_ns) == bisect.bisect_left(elsewhere_ns, ns - period_ns)
                for ns in run_ns)
 
 

@@ -1437,6 +1437,36 @@ def test_a_reset_or_a_pause_is_not_mended_as_bad_stamps(left_ms, caplog):
         assert any("clock reset" in message for message in warned)
 
 
+@pytest.mark.parametrize(("glitch_ms", "first"), [
+    ((_HOUR_MS, -_HOUR_MS), True), ((-_HOUR_MS, 5_000), True), ((_HOUR_MS, -_HOUR_MS), False),
+    ((-7_000, _HOUR_MS), False),
+], ids=["first-ahead-then-back", "first-back-then-ahead", "last-ahead-then-back", "last-back-then-ahead"])
+def test_two_bad_stamps_at_a_camera_s_end_are_mended_where_the_other_camera_says_so(glitch_ms, first, caplog):
+    """A camera's first (last) two stamps off, and off from each other, the other camera's stamps going on across
+    their frames: they played as recorded (a reset after them moved every later frame by the glitch; at the last
+    end a paced replay waited on it), or one of them was mended by the one-stamp end check, on its off neighbour.
+    Now each is mended one step on from the frames beyond them."""
+    left_ms = [0, 33, 66, 99, 132, 165]
+    glitched = list(left_ms)
+    for k, off in zip((0, 1) if first else (4, 5), glitch_ms):
+        glitched[k] += off
+    played, warned = _played_ms([_HOUR_MS + t for t in glitched], _RIGHT_MS, caplog)
+    assert [t - _HOUR_MS for cam, _, t in played if cam == "left"] == left_ms
+    frame = 0 if first else 4
+    assert any("bad stamp" in message and f"images/left/{frame:08d}.png" in message for message in warned), warned
+
+
+@pytest.mark.parametrize("left_ms", [[1_000, 1_033, 66, 99, 132, 165], [0, 33, 66, 99, 132, -900, -867]],
+                         ids=["first", "last"])
+def test_two_stamps_in_line_at_a_camera_s_end_are_not_mended(left_ms, caplog):
+    """A camera's first (last) two stamps out of line with the rest but in line with each other: its clock alone
+    set to the others' (or away from them) there, as far as the take shows: played as recorded, a reset."""
+    played, warned = _played_ms([_HOUR_MS + t for t in left_ms], _RIGHT_MS + [_HOUR_MS + 200, _HOUR_MS + 234], caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+    left = [t - _HOUR_MS for cam, _, t in played if cam == "left"]
+    assert [b - a for a, b in zip(left, left[1:])][:1] + [b - a for a, b in zip(left, left[1:])][-1:] == [33, 33]
+
+
 def test_a_reset_then_a_pause_on_both_cameras_is_not_mended_as_a_bad_stamp(caplog):
     """Both clocks went back 40 ms, then the take paused 60 ms: each camera's first frame after the reset lay out of
     line between neighbours 86 ms apart (its own camera alone reads a glitch) and was mended to their midpoint, its
