@@ -243,7 +243,8 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
     (:func:`_mend_runs`). Lone or in a run, only where the neighbours lie over a frame period apart
     (:func:`_out_of_line`): a clock reset back one to three frames brings one back within a period. A camera's
     first and last frames have one neighbour: mended one step from it where the other cameras say so
-    (:func:`_bad_end`), unless their clocks went back there too (:func:`_on_their_reset`); ``MENDED_RUN`` of them in
+    (:func:`_bad_end`) and recorded at that frame's time (:func:`_recorded_beyond`), unless their clocks went back
+    there too (:func:`_on_their_reset`); ``MENDED_RUN`` of them in
     a row likewise (:func:`_mend_end_runs`)."""
     period_ns = _mending_period_ns(rows, mine, others)
     # runs first: the lone test takes a run's first (back, then ahead)
@@ -259,6 +260,7 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
     for (end, near, far), elsewhere, last in (ends if len(mine) >= 3 else []):
         in_line = stamps[near] <= stamps[far] if end == mine[0] else stamps[far] <= stamps[near]
         if (in_line and _bad_end(stamps[end], stamps[near], stamps[far], elsewhere)
+                and _recorded_beyond(elsewhere, stamps[near], last, period_ns)
                 and not _on_their_reset(stamps[end], _across_a_reset(others, stamps, last, stamps[near], period_ns),
                                         period_ns)):
             mended.append((end, stamps[end]))
@@ -421,6 +423,15 @@ def _bad_end(end_ns: int, near_ns: int, far_ns: int, elsewhere_ns: list[int]) ->
     if not (wrong_way or abs(end_ns - near_ns) > END_STEPS * abs(far_ns - near_ns)):
         return False
     return min(abs(o - near_ns) for o in elsewhere_ns) < min(abs(o - end_ns) for o in elsewhere_ns)
+
+
+def _recorded_beyond(elsewhere_ns: list[int], near_ns: int, last: bool, period_ns: int) -> bool:
+    """Whether another camera recorded at the time of a camera's first (``last``) frame: its first (last) stamp, one
+    of ``elsewhere_ns``, half a period or more before (after) that frame's neighbour ``near_ns``. A camera whose
+    clock reset at its last frame, after the others' last (before their first), left no other stamp there, and
+    its reset was mended as a bad end stamp (session 72's closing note)."""
+    way = 1 if last else -1
+    return any((ns - near_ns) * way >= period_ns // 2 for ns in elsewhere_ns)
 
 
 def _across_a_reset(others: list[list[int]], stamps: dict[int, int], last: bool, near_ns: int,

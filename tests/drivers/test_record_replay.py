@@ -1564,6 +1564,20 @@ def test_a_reset_on_both_cameras_at_one_s_end_is_not_mended_as_a_bad_end_stamp(l
         assert played["right", right] - played["left", left] == right_us[right] - left_us[left]
 
 
+@pytest.mark.parametrize(("left_ms", "right_ms"), [
+    ([0, 33, 66, 100, 133, 40], [1, 34, 67, 101, 134]),
+    ([900, 0, 33, 66, 100, 133], [1, 34, 67, 101, 134, 167]),
+], ids=["last", "first"])
+def test_a_reset_at_one_camera_s_end_beyond_the_other_camera_s_frames_is_not_mended(left_ms, right_ms, caplog):
+    """Left's clock went back at its last frame, after right's last (or forward at its first, before right's first):
+    right's end stamp lay nearer left's neighbour, and the reset was mended as a bad end stamp. No other camera
+    recorded at that frame's time, nothing tells a glitch there: played as recorded (a reset), not mended."""
+    played, warned = _played_ms([_HOUR_MS + t for t in left_ms], [_HOUR_MS + t for t in right_ms], caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+    assert any("clock reset" in message and "'left'" in message for message in warned), warned
+    assert len(played) == len(left_ms) + len(right_ms)
+
+
 def test_a_bad_last_stamp_beside_a_camera_that_reset_is_still_mended(caplog):
     """Both clocks went back mid-take, then left's last stamp came an hour ahead: right's stamps across its reset lie
     nowhere near it, so it is a bad stamp, mended one step on from its neighbour."""
