@@ -225,6 +225,11 @@ END_STEPS = 4
 MENDED_RUN = 2
 
 
+#: The most frame periods a frame between a mended stamp's (or run's) neighbours, themselves in line: wider apart, a
+#: pause lies there too (a reset then a pause reads as a glitch by its own camera alone, session 73).
+MENDED_ROOM = 4
+
+
 def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, int], directory: Path | str,
                      others: list[list[int]]) -> None:
     """Give a lone bad stamp of one camera (``mine``: its rows in recorded order) the midpoint of its neighbours'.
@@ -232,24 +237,30 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
     A stamp out of line with the frames either side of it, which are in line with each other (a glitched stamp
     an hour ahead or back, the frames after it on the old timeline), is one bad stamp, not a clock reset: taken
     as a reset, it re-based every later frame of that camera by the glitch, so none paired again and a paced
-    replay waited out the glitch (an hour). Up to ``MENDED_RUN`` such stamps in a row are mended too, spread
+    replay waited out the glitch (an hour); not where another camera jumped with it (:func:`_jumped_with_them`).
+    Up to ``MENDED_RUN`` such stamps in a row are mended too, spread
     evenly between their neighbours, where the other cameras (``others``: their rows in recorded order) say so
     (:func:`_mend_runs`). Lone or in a run, only where the neighbours lie over a frame period apart
     (:func:`_out_of_line`): a clock reset back one to three frames brings one back within a period. A camera's
     first and last frames have one neighbour: mended one step from it where the other cameras say so
-    (:func:`_bad_end`), unless their clocks went back there too (:func:`_on_their_reset`)."""
+    (:func:`_bad_end`) and recorded at that frame's time (:func:`_recorded_beyond`), unless their clocks went back
+    there too (:func:`_on_their_reset`); ``MENDED_RUN`` of them in
+    a row likewise (:func:`_mend_end_runs`)."""
     period_ns = _mending_period_ns(rows, mine, others)
     # runs first: the lone test takes a run's first (back, then ahead)
     mended = _mend_runs(mine, stamps, others, period_ns)
     for before, here, after in zip(mine, mine[1:], mine[2:]):
-        if _out_of_line([stamps[here]], stamps[before], stamps[after], period_ns):
+        if (_out_of_line([stamps[here]], stamps[before], stamps[after], period_ns)
+                and not _jumped_with_them(stamps[here], stamps[before], stamps[after], others, stamps)):
             mended.append((here, stamps[here]))
             stamps[here] = (stamps[before] + stamps[after]) // 2
+    mended += _mend_end_runs(mine, stamps, others, period_ns)
     ends = [(mine[:3], [stamps[theirs[0]] for theirs in others if theirs], False),
             (mine[:-4:-1], [stamps[theirs[-1]] for theirs in others if theirs], True)]
     for (end, near, far), elsewhere, last in (ends if len(mine) >= 3 else []):
         in_line = stamps[near] <= stamps[far] if end == mine[0] else stamps[far] <= stamps[near]
         if (in_line and _bad_end(stamps[end], stamps[near], stamps[far], elsewhere)
+                and _recorded_beyond(elsewhere, stamps[near], last, period_ns)
                 and not _on_their_reset(stamps[end], _across_a_reset(others, stamps, last, stamps[near], period_ns),
                                         period_ns)):
             mended.append((end, stamps[end]))
@@ -294,9 +305,13 @@ def _steady_steps(stamps_ns: list[int]) -> list[int]:
 def _out_of_line(run_ns: list[int], low_ns: int, high_ns: int, period_ns: int) -> bool:
     """Whether stamps ``run_ns`` in a row, between neighbours stamped ``low_ns`` and ``high_ns``, are out of line in
     a way a bad stamp (or run) is: every one outside the neighbours, those two in line with each other and over
-    ``period_ns`` apart, room for the frames between them. A reset back one to three frames also has a frame back
-    in line after the one or two before it, but within a period (session 72: these were mended as bad stamps)."""
+    ``period_ns`` apart, room for the frames between them, but at most ``MENDED_ROOM`` periods a frame. A reset back
+    one to three frames also has a frame back in line after the one or two before it, but within a period (session
+    72: these were mended as bad stamps)."""
     if not low_ns <= high_ns or high_ns - low_ns <= period_ns:
+        return False
+    # a pause beside a reset (after it, or before) keeps the camera on the new line, its neighbours far apart
+    if high_ns - low_ns > MENDED_ROOM * (len(run_ns) + 1) * period_ns:
         return False
     return not any(low_ns <= ns <= high_ns for ns in run_ns)
 
@@ -339,6 +354,64 @@ def _run_is_bad(run_ns: list[int], low_ns: int, high_ns: int, elsewhere_ns: list
                for ns in run_ns)
 
 
+def _mend_end_runs(mine: list[int], stamps: dict[int, int], others: list[list[int]],
+                   period_ns: int) -> list[tuple[int, int]]:
+    """Mend ``MENDED_RUN`` stamps at a camera's first (last) frames out of line with the two frames beyond them,
+    themselves in line, where the other cameras say so (:func:`_end_run_is_bad`): each played one step further out
+    from the nearer of those two. Returns the rows mended with their recorded stamps."""
+    mended: list[tuple[int, int]] = []
+    if len(mine) < MENDED_RUN + 2 or not others:
+        return mended
+    elsewhere = sorted(stamps[i] for theirs in others for i in theirs)
+    # each end from the take's inside out: the frame beyond, the neighbour, then the run; out: the way stamps go
+    for (far, near, *run), out in ((mine[MENDED_RUN + 1::-1], -1), (mine[-MENDED_RUN - 2:], 1)):
+        step_ns = (stamps[near] - stamps[far]) * out
+        if step_ns > 0 and _end_run_is_bad([stamps[i] for i in run], stamps[near], out, step_ns, period_ns,
+                                           elsewhere):
+            fixes = [(i, max(0, stamps[near] + out * k * step_ns)) for k, i in enumerate(run, start=1)]
+            for i, ns in fixes if out > 0 else fixes[::-1]:  # in recorded order: the warning names the first
+                mended.append((i, stamps[i]))
+                stamps[i] = ns
+    return mended
+
+
+def _end_run_is_bad(run_ns: list[int], near_ns: int, out: int, step_ns: int, period_ns: int,
+                    elsewhere_ns: list[int]) -> bool:
+    """Whether stamps ``run_ns`` at a camera's end, from its neighbour ``near_ns`` outward (``out``: +1 the last end,
+    -1 the first; ``step_ns`` the camera's step there), are bad ones: each the wrong way or over ``END_STEPS`` times
+    its steps out, and so from each other; the other cameras' stamps (``elsewhere_ns``, sorted) going on across the
+    run's frames (1.5 to 6 periods out from ``near_ns``) and none within a period of the run's. One side to check
+    against (session 73): a camera that began (ended) after (before) the run's frames lends nothing there, one whose
+    clock reset or paused with this one's has its stamps by the run's, and two stamps in line with each other may
+    be this camera's clock alone gone to a new line and staying there."""
+    if any(0 < (ns - near_ns) * out <= END_STEPS * k * step_ns for k, ns in enumerate(run_ns, start=1)):
+        return False
+    # two in line with each other: as far as the take shows, this camera's clock alone reset or paused there
+    if any(0 < (b - a) * out <= END_STEPS * step_ns for a, b in zip(run_ns, run_ns[1:])):
+        return False
+    low_ns, high_ns = sorted((near_ns + out * 3 * period_ns // 2, near_ns + out * 2 * (len(run_ns) + 1) * period_ns))
+    if bisect.bisect_right(elsewhere_ns, high_ns) == bisect.bisect_left(elsewhere_ns, low_ns):
+        return False
+    return all(bisect.bisect_right(elsewhere_ns, ns + period_ns) == bisect.bisect_left(elsewhere_ns, ns - period_ns)
+               for ns in run_ns)
+
+
+def _jumped_with_them(here_ns: int, low_ns: int, high_ns: int, others: list[list[int]],
+                      stamps: dict[int, int]) -> bool:
+    """Whether another camera (``others``: rows in recorded order) jumped with a lone stamp ``here_ns`` out of line
+    between ``low_ns`` and ``high_ns``: it has a stamp within a frame step of it (half the neighbours' gap) next to
+    one within a step of either neighbour. A clock reset, or one then a pause, hits every camera of a synced rig at
+    once: mended as a bad stamp, it broke the pairs there (session 73). A glitch an hour off lands near none, or
+    (a take longer than the glitch) among stamps that go on in line there, far from its neighbours."""
+    step_ns = (high_ns - low_ns) // 2
+
+    def jump(on_ns: int, beside_ns: int) -> bool:
+        return abs(on_ns - here_ns) <= step_ns and min(abs(beside_ns - low_ns), abs(beside_ns - high_ns)) <= step_ns
+
+    successive = ((stamps[a], stamps[b]) for theirs in others for a, b in zip(theirs, theirs[1:]))
+    return any(jump(a, b) or jump(b, a) for a, b in successive)
+
+
 def _bad_end(end_ns: int, near_ns: int, far_ns: int, elsewhere_ns: list[int]) -> bool:
     """Whether a camera's first (or last) stamp ``end_ns`` is a bad one: the step to the next (previous) stamp
     ``near_ns`` goes the wrong way or is over ``END_STEPS`` times the step on to ``far_ns``, and the other cameras'
@@ -350,6 +423,15 @@ def _bad_end(end_ns: int, near_ns: int, far_ns: int, elsewhere_ns: list[int]) ->
     if not (wrong_way or abs(end_ns - near_ns) > END_STEPS * abs(far_ns - near_ns)):
         return False
     return min(abs(o - near_ns) for o in elsewhere_ns) < min(abs(o - end_ns) for o in elsewhere_ns)
+
+
+def _recorded_beyond(elsewhere_ns: list[int], near_ns: int, last: bool, period_ns: int) -> bool:
+    """Whether another camera recorded at the time of a camera's first (``last``) frame: its first (last) stamp, one
+    of ``elsewhere_ns``, half a period or more before (after) that frame's neighbour ``near_ns``. A camera whose
+    clock reset at its last frame, after the others' last (before their first), left no other stamp there, and
+    its reset was mended as a bad end stamp (session 72's closing note)."""
+    way = 1 if last else -1
+    return any((ns - near_ns) * way >= period_ns // 2 for ns in elsewhere_ns)
 
 
 def _across_a_reset(others: list[list[int]], stamps: dict[int, int], last: bool, near_ns: int,

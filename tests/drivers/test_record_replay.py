@@ -1437,6 +1437,60 @@ def test_a_reset_or_a_pause_is_not_mended_as_bad_stamps(left_ms, caplog):
         assert any("clock reset" in message for message in warned)
 
 
+@pytest.mark.parametrize(("glitch_ms", "first"), [
+    ((_HOUR_MS, -_HOUR_MS), True), ((-_HOUR_MS, 5_000), True), ((_HOUR_MS, -_HOUR_MS), False),
+    ((-7_000, _HOUR_MS), False),
+], ids=["first-ahead-then-back", "first-back-then-ahead", "last-ahead-then-back", "last-back-then-ahead"])
+def test_two_bad_stamps_at_a_camera_s_end_are_mended_where_the_other_camera_says_so(glitch_ms, first, caplog):
+    """A camera's first (last) two stamps off, and off from each other, the other camera's stamps going on across
+    their frames: they played as recorded (a reset after them moved every later frame by the glitch; at the last
+    end a paced replay waited on it), or one of them was mended by the one-stamp end check, on its off neighbour.
+    Now each is mended one step on from the frames beyond them."""
+    left_ms = [0, 33, 66, 99, 132, 165]
+    glitched = list(left_ms)
+    for k, off in zip((0, 1) if first else (4, 5), glitch_ms):
+        glitched[k] += off
+    played, warned = _played_ms([_HOUR_MS + t for t in glitched], _RIGHT_MS, caplog)
+    assert [t - _HOUR_MS for cam, _, t in played if cam == "left"] == left_ms
+    frame = 0 if first else 4
+    assert any("bad stamp" in message and f"images/left/{frame:08d}.png" in message for message in warned), warned
+
+
+@pytest.mark.parametrize("left_ms", [[1_000, 1_033, 66, 99, 132, 165], [0, 33, 66, 99, 132, -900, -867]],
+                         ids=["first", "last"])
+def test_two_stamps_in_line_at_a_camera_s_end_are_not_mended(left_ms, caplog):
+    """A camera's first (last) two stamps out of line with the rest but in line with each other: its clock alone
+    set to the others' (or away from them) there, as far as the take shows: played as recorded, a reset."""
+    played, warned = _played_ms([_HOUR_MS + t for t in left_ms], _RIGHT_MS + [_HOUR_MS + 200, _HOUR_MS + 234], caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+    left = [t - _HOUR_MS for cam, _, t in played if cam == "left"]
+    assert [b - a for a, b in zip(left, left[1:])][:1] + [b - a for a, b in zip(left, left[1:])][-1:] == [33, 33]
+
+
+def test_a_reset_then_a_pause_on_both_cameras_is_not_mended_as_a_bad_stamp(caplog):
+    """Both clocks went back 40 ms, then the take paused 60 ms: each camera's first frame after the reset lay out of
+    line between neighbours 86 ms apart (its own camera alone reads a glitch) and was mended to their midpoint, its
+    pair kept only by chance. The other camera jumped with it, at the same place: a reset, the pairs kept."""
+    played, warned = _played_ms([0, 33, 66, 100, 93, 186, 219], [1, 34, 67, 101, 94, 187, 220], caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+    assert sum("clock reset" in message for message in warned) == 2
+    left = [t for cam, _, t in played if cam == "left"]
+    right = [t for cam, _, t in played if cam == "right"]
+    assert [b - a for a, b in zip(left[4:], left[5:])] == [93, 33]  # spaced as recorded after the reset
+    assert [r - le for le, r in zip(left, right)] == [1] * 7
+
+
+@pytest.mark.parametrize("right_ms", [[], [1, 34, 67, 101, 134, 167, 201, 234, 267]], ids=["alone", "beside"])
+def test_a_reset_then_a_long_pause_on_one_camera_is_not_mended_as_a_bad_stamp(right_ms, caplog):
+    """Left's clock went back 90 ms, then it paused 1.9 s (the other camera, where there is one, went on): its first
+    frame after the reset lay out of line between neighbours in line, and was mended to their midpoint (1.05 s). A
+    glitch leaves its neighbours a frame or two apart, not 57: a reset, the frames after it spaced as recorded."""
+    played, warned = _played_ms([0, 33, 66, 100, 10, 2000, 2033], right_ms, caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+    left = [t for cam, _, t in played if cam == "left"]
+    assert left[:4] == [0, 33, 66, 100] and [b - a for a, b in zip(left[4:], left[5:])] == [1990, 33]
+
+
 def test_a_reset_back_one_frame_on_both_cameras_plays_as_a_reset_with_its_pairs(caplog):
     """The host clock set back a frame (and 1 ms) mid-take: each camera's frame before the reset lay out of line
     between its neighbours, 33 ms apart, and was moved in there as a bad stamp (breaking its pair). Now a reset: the
@@ -1508,6 +1562,20 @@ def test_a_reset_on_both_cameras_at_one_s_end_is_not_mended_as_a_bad_end_stamp(l
     assert sum("clock reset" in message for message in warned) == 2
     for left, right in pairs:  # the pairs across the reset kept, as recorded
         assert played["right", right] - played["left", left] == right_us[right] - left_us[left]
+
+
+@pytest.mark.parametrize(("left_ms", "right_ms"), [
+    ([0, 33, 66, 100, 133, 40], [1, 34, 67, 101, 134]),
+    ([900, 0, 33, 66, 100, 133], [1, 34, 67, 101, 134, 167]),
+], ids=["last", "first"])
+def test_a_reset_at_one_camera_s_end_beyond_the_other_camera_s_frames_is_not_mended(left_ms, right_ms, caplog):
+    """Left's clock went back at its last frame, after right's last (or forward at its first, before right's first):
+    right's end stamp lay nearer left's neighbour, and the reset was mended as a bad end stamp. No other camera
+    recorded at that frame's time, nothing tells a glitch there: played as recorded (a reset), not mended."""
+    played, warned = _played_ms([_HOUR_MS + t for t in left_ms], [_HOUR_MS + t for t in right_ms], caplog)
+    assert not any("bad stamp" in message for message in warned), warned
+    assert any("clock reset" in message and "'left'" in message for message in warned), warned
+    assert len(played) == len(left_ms) + len(right_ms)
 
 
 def test_a_bad_last_stamp_beside_a_camera_that_reset_is_still_mended(caplog):
