@@ -385,6 +385,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return _main(argv)
     finally:
+        # a mode that installed no stop handlers to take it (--print-example-config, a usage error, a config the
+        # start refused) meets a stop recorded during its imports as before it was recorded: it was dropped
+        early_sighup.release_stop()
         if early_sighup.is_daemon_process():
             # On its way out, as _StopOnSignal leaves SIGTERM and SIGINT: the finalization resets the recording
             # handler to SIGHUP's default, and a reload landing then killed it (restarted: RestartForceExitStatus).

@@ -15,7 +15,8 @@ SIGTERM and SIGINT, likewise, from the package's first import in ``ghnerf-daemon
 Ctrl-C there printed a KeyboardInterrupt traceback. The first one is recorded; the daemon's own stop handlers
 (``cli._StopOnSignal``) take it (:func:`take_stop`) as they are installed, after the config read, and stop as for
 a signal of their own. ``--validate-config``, which installs none, puts back what was there (:func:`release_stop`)
-and meets a recorded one as it would have been met.
+and meets a recorded one as it would have been met; so does any run that ends without them (``cli.main``'s exit:
+``--print-example-config``, a usage error, a config the start refused).
 
 What is left: the interpreter's own start-up, before this module runs (tens of milliseconds), where
 only the unit's ``RestartForceExitStatus=SIGHUP`` helps (and a stop there kills as before).

@@ -740,6 +740,17 @@ def test_validate_config_meets_a_stop_during_the_imports_as_before(tmp_path):
     assert proc.returncode == -signal.SIGTERM and proc.stdout == "", proc.stderr
 
 
+@pytest.mark.parametrize("args", [("--print-example-config",), ("--config", "daemon.json", "--no-model"),
+                                  ("--config", "no-such-daemon.json")])
+def test_a_mode_without_stop_handlers_meets_a_stop_during_the_imports_as_before(tmp_path, args):
+    """``--print-example-config``, a usage error and a config the start refuses install no stop handlers either: a
+    SIGTERM recorded during their imports was dropped, and the run went on as if none came (the example printed,
+    exit 0: a script's ``&&`` ran on after a ``kill``). It kills them on their way out now, as it did before stops
+    were recorded."""
+    proc = _stopped_during_the_imports(tmp_path, signal.SIGTERM, *args)
+    assert proc.returncode == -signal.SIGTERM, (proc.returncode, proc.stderr)
+
+
 _HUP_AFTER_THE_READ = '''
 import os, signal, sys
 sys.argv[0] = os.path.join(os.path.dirname(sys.executable), "ghnerf-daemon")  # as the console script
