@@ -114,10 +114,14 @@ def take_stop() -> int | None:
 def release_stop() -> None:
     """Put back the handlers :func:`install_stop` replaced (where its own is still in place), then deliver a stop
     recorded meanwhile to them: for a mode that installs no stop handlers of its own (``--validate-config``), a
-    stop during its imports acts as it did before they were recorded."""
-    for signum, previous in _previous_stop.items():
-        if signal.getsignal(signum) is _record_stop:
-            signal.signal(signum, previous)  # type: ignore[arg-type]
+    stop during its imports acts as it did before they were recorded. Off the main thread, where Python sets no
+    handler, nothing is put back nor delivered: the recording, and a stop it holds, stay as they are."""
+    try:
+        for signum, previous in _previous_stop.items():
+            if signal.getsignal(signum) is _record_stop:
+                signal.signal(signum, previous)  # type: ignore[arg-type]
+    except ValueError:  # not the main thread (the first one set fails: nothing was put back)
+        return
     _previous_stop.clear()
     signum = take_stop()
     if signum is not None:
