@@ -331,7 +331,7 @@ class _StopOnSignal:
     signals, for a process on its way out) and the pipe closed on exit.
     """
 
-    def __init__(self, stop: threading.Event, signums: Sequence[int] = (signal.SIGTERM, signal.SIGINT), *,
+    def __init__(self, stop: threading.Event, signums: Sequence[int] = early_sighup.STOP_SIGNALS, *,
                  ignore_after: bool = False) -> None:
         self._stop = stop
         # on exit, ignore the signals rather than put back what they replaced: for the process's own stop
