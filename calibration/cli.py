@@ -455,6 +455,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
         cams = [check_camera_name(c.name) for c in source.rig.pair]
         folders = [out / cam for cam in cams]
         for cam, folder in zip(cams, folders):  # mkdir said only "[Errno 17] File exists", after cameras.json
+            if (dangling := dangling_link_words(folder)) is not None:  # exists() says no: the link's target does not
+                raise UsageError(f"--out {out}: {dangling}, or give another folder")
             if folder.exists() and not folder.is_dir():
                 raise UsageError(f"--out {out}: {folder} is a file, where camera {cam!r}'s images go: move it away "
                                  "or give another folder")

@@ -128,8 +128,8 @@ def make_camera(path, field: str, *, name: str, width: Any, height: Any, K: Any,
         sizes = " x ".join(dict.fromkeys(size_keys))
         raise fail(path, join(field, K_key), f"camera {str(name)!r}, image size from {sizes}: {problem}")
     if K[0, 1] != 0:  # the tools that write these files project without it: ours would disagree with theirs
-        raise fail(path, join(field, K_key), f"has a skew K[0][1] = {float(K[0, 1])!r}, which OpenCV's camera model (and "
-                                             "so this file's writer) ignores; set it to 0")
+        raise fail(path, join(field, K_key), f"has a skew K[0][1] = {float(K[0, 1])!r}, which OpenCV's camera "
+                                             "model (and so this file's writer) ignores; set it to 0")
     try:
         d = np.asarray(dist if dist is not None else [], dtype=np.float64).reshape(-1)
     except (TypeError, ValueError, OverflowError):
@@ -230,5 +230,5 @@ def refuse_skew(cameras: Sequence[Camera], what: str) -> None:
     """Foreign formats follow OpenCV's camera model, which has no skew: writing one would lose it silently."""
     for cam in cameras:
         if cam.K[0, 1] != 0.0:
-            raise GeometryError(f"camera {cam.name!r} has a skew K[0][1] = {float(cam.K[0, 1])!r}; {what} cannot hold it "
-                                "(OpenCV's camera model has none): keep this rig in our rig file")
+            raise GeometryError(f"camera {cam.name!r} has a skew K[0][1] = {float(cam.K[0, 1])!r}; {what} cannot "
+                                "hold it (OpenCV's camera model has none): keep this rig in our rig file")

@@ -331,7 +331,7 @@ class _StopOnSignal:
     signals, for a process on its way out) and the pipe closed on exit.
     """
 
-    def __init__(self, stop: threading.Event, signums: Sequence[int] = (signal.SIGTERM, signal.SIGINT), *,
+    def __init__(self, stop: threading.Event, signums: Sequence[int] = early_sighup.STOP_SIGNALS, *,
                  ignore_after: bool = False) -> None:
         self._stop = stop
         # on exit, ignore the signals rather than put back what they replaced: for the process's own stop
@@ -385,6 +385,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return _main(argv)
     finally:
+        # a mode that installed no stop handlers to take it (--print-example-config, a usage error, a config the
+        # start refused) meets a stop recorded during its imports as before it was recorded: it was dropped
+        early_sighup.release_stop()
         if early_sighup.is_daemon_process():
             # On its way out, as _StopOnSignal leaves SIGTERM and SIGINT: the finalization resets the recording
             # handler to SIGHUP's default, and a reload landing then killed it (restarted: RestartForceExitStatus).

@@ -15,7 +15,8 @@ SIGTERM and SIGINT, likewise, from the package's first import in ``ghnerf-daemon
 Ctrl-C there printed a KeyboardInterrupt traceback. The first one is recorded; the daemon's own stop handlers
 (``cli._StopOnSignal``) take it (:func:`take_stop`) as they are installed, after the config read, and stop as for
 a signal of their own. ``--validate-config``, which installs none, puts back what was there (:func:`release_stop`)
-and meets a recorded one as it would have been met.
+and meets a recorded one as it would have been met; so does any run that ends without them (``cli.main``'s exit:
+``--print-example-config``, a usage error, a config the start refused).
 
 What is left: the interpreter's own start-up, before this module runs (tens of milliseconds), where
 only the unit's ``RestartForceExitStatus=SIGHUP`` helps (and a stop there kills as before).
@@ -113,10 +114,14 @@ def take_stop() -> int | None:
 def release_stop() -> None:
     """Put back the handlers :func:`install_stop` replaced (where its own is still in place), then deliver a stop
     recorded meanwhile to them: for a mode that installs no stop handlers of its own (``--validate-config``), a
-    stop during its imports acts as it did before they were recorded."""
-    for signum, previous in _previous_stop.items():
-        if signal.getsignal(signum) is _record_stop:
-            signal.signal(signum, previous)  # type: ignore[arg-type]
+    stop during its imports acts as it did before they were recorded. Off the main thread, where Python sets no
+    handler, nothing is put back nor delivered: the recording, and a stop it holds, stay as they are."""
+    try:
+        for signum, previous in _previous_stop.items():
+            if signal.getsignal(signum) is _record_stop:
+                signal.signal(signum, previous)  # type: ignore[arg-type]
+    except ValueError:  # not the main thread (the first one set fails: nothing was put back)
+        return
     _previous_stop.clear()
     signum = take_stop()
     if signum is not None:

@@ -227,7 +227,8 @@ def measure_floor_of_config(config: DaemonConfig, pairs: int = DEFAULT_PAIRS, *,
     """:func:`measure_floor` on the rig of ``config.rig.url`` and the model and estimator settings of
     ``config.estimator``, opened as the daemon opens them (``load_model``: the daemon's, raising
     ``DaemonConfigError``; ``rig_kwargs`` to :func:`drivers.create_rig_source`, tests pass a clock). ``stop`` set
-    while the model loads: the rig is not opened. The rig and the estimator are closed however it ends.
+    while the model loads: the rig is not opened (set before: nor the model loaded). The rig and the estimator are
+    closed however it ends.
 
     Cameras that deliver another size than the rig's before any pair (``drivers.FrameSizeError`` at the open, or at
     the first read for ``depthai://``) are opened again, after the daemon's backoff (``rig.reopen_min_s`` doubling

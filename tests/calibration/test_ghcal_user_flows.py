@@ -116,6 +116,19 @@ def test_capture_refuses_a_file_where_a_camera_s_folder_goes(tmp_path, capsys):
     assert "Errno" not in err and sorted(p.name for p in out.iterdir()) == ["right"]
 
 
+def test_capture_refuses_a_link_to_nowhere_where_a_camera_s_folder_goes(tmp_path, capsys):
+    # the file check passed it (it exists() not), and mkdir stopped it with "[Errno 17] File exists", after
+    # cameras.json
+    out = tmp_path / "c"
+    out.mkdir()
+    (out / "right").symlink_to(tmp_path / "gone")
+    url = "sim://?width=64&height=48&fps=5&cache=off&workers=1"
+    assert cli.main(["capture", "--url", url, "--out", str(out), "--max-seconds", "5"]) == 2
+    err = capsys.readouterr().err
+    assert f"--out {out}: {out / 'right'} is a symbolic link to {tmp_path / 'gone'}, which does not exist" in err, err
+    assert "Errno" not in err and sorted(p.name for p in out.iterdir()) == ["right"]
+
+
 def _no_rendering(*args, **kwargs):
     raise AssertionError("the views were rendered before the output was checked")
 

@@ -740,6 +740,48 @@ def test_validate_config_meets_a_stop_during_the_imports_as_before(tmp_path):
     assert proc.returncode == -signal.SIGTERM and proc.stdout == "", proc.stderr
 
 
+@pytest.mark.parametrize("args", [("--print-example-config",), ("--config", "daemon.json", "--no-model"),
+                                  ("--config", "no-such-daemon.json")])
+def test_a_mode_without_stop_handlers_meets_a_stop_during_the_imports_as_before(tmp_path, args):
+    """``--print-example-config``, a usage error and a config the start refuses install no stop handlers either: a
+    SIGTERM recorded during their imports was dropped, and the run went on as if none came (the example printed,
+    exit 0: a script's ``&&`` ran on after a ``kill``). It kills them on their way out now, as it did before stops
+    were recorded."""
+    proc = _stopped_during_the_imports(tmp_path, signal.SIGTERM, *args)
+    assert proc.returncode == -signal.SIGTERM, (proc.returncode, proc.stderr)
+
+
+def test_validate_config_off_the_main_thread_leaves_the_stop_recording_as_it_is(tmp_path, capsys):
+    """``ghnerf-daemon``'s stop recording put back from a thread other than the main one (``cli.main`` called from
+    one, the package imported on the main thread): Python sets handlers on the main thread only, and
+    ``--validate-config`` died of the ValueError. It validates there, the recording and a stop it holds left as they
+    are (the main thread's to put back)."""
+    path = _write(tmp_path, {"rig": {"url": "sim://"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": str(MODELS)}}})
+    assert cli.early_sighup.install_stop()
+    try:
+        cli.early_sighup._record_stop(signal.SIGTERM, None)  # a stop recorded as a signal's would be
+        statuses: list[object] = []
+
+        def validate() -> None:
+            try:
+                statuses.append(cli.main(["--config", str(path), "--validate-config", "--no-model"]))
+            except Exception as e:  # noqa: BLE001 - said by the assertion below
+                statuses.append(e)
+
+        thread = threading.Thread(target=validate)
+        thread.start()
+        thread.join(timeout=60)
+        assert statuses == [0], statuses
+        assert signal.getsignal(signal.SIGTERM) is cli.early_sighup._record_stop
+        assert cli.early_sighup.take_stop() == signal.SIGTERM
+    finally:
+        cli.early_sighup.take_stop()  # not raised at this test's process by the put back
+        cli.early_sighup.release_stop()
+    assert signal.getsignal(signal.SIGTERM) is not cli.early_sighup._record_stop  # put back
+    capsys.readouterr()
+
+
 _HUP_AFTER_THE_READ = '''
 import os, signal, sys
 sys.argv[0] = os.path.join(os.path.dirname(sys.executable), "ghnerf-daemon")  # as the console script
