@@ -316,6 +316,10 @@ def _card_problem(path: Path) -> str | None:
     wrong = next((k for k in _CARD_SECTIONS if k in card and not isinstance(card[k], dict)), None)
     if wrong is not None:
         return f"{path}: {wrong!r} is a JSON {type(card[wrong]).__name__}, not an object"
+    try:  # the record is written with MODEL_CARD.md made from the whole card: an entry it cannot read fails there
+        render_markdown(card)
+    except (AttributeError, TypeError, KeyError, ValueError, IndexError) as e:
+        return f"{path}: MODEL_CARD.md cannot be made from it ({type(e).__name__}: {e}); `make model` writes it whole"
     return None
 
 
