@@ -566,6 +566,8 @@ def update_prior_metrics(card_dir: str | Path, eval_report: str | Path) -> list[
     card_dir, eval_report = Path(card_dir), Path(eval_report)
     report = json.loads(eval_report.read_text())
     _check_report_shape(report, eval_report)
+    if problem := _card_problem(card_dir / "model_card.json"):  # a card that is a list was a TypeError traceback
+        raise CardUpdateError(problem)
     card = json.loads((card_dir / "model_card.json").read_text())
     scored, listed = (report.get("data"), report.get("split")), (card["data"]["path"], card["data"]["eval_split"])
     if scored != listed:

@@ -73,3 +73,13 @@ def test_a_report_that_is_no_eval_report_object_is_named_not_a_traceback(tmp_pat
     err = capsys.readouterr().err
     assert err.startswith(f"python -m training.model_card: error: {path}: ") and words in err, err
     assert {name: (card_dir / name).read_bytes() for name in CARD_FILES} == before
+
+
+def test_a_card_that_is_no_card_object_is_named_not_a_traceback(tmp_path, card_dir, capsys):
+    """A model_card.json that is a JSON list ended in a TypeError traceback."""
+    report = _report(tmp_path, card_dir)
+    (card_dir / "model_card.json").write_text("[]")
+    assert model_card.main(["--card-dir", str(card_dir), "--prior-metrics", str(report)]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {card_dir / 'model_card.json'} holds a JSON list, not a model card object" in err, err
+    assert (card_dir / "model_card.json").read_text() == "[]"
