@@ -450,16 +450,24 @@ class SkeletonPrior:
     def warm_up(self) -> float:
         """Run the network once at each batch the estimator runs, one pair with its mirror
         (``joints3d.prior_flip_test``) and without, so that the first pair does not pay onnxruntime's first run of
-        a shape (0.8-6 ms against 0.5 after in a one-off timing on session 68's host); returns its milliseconds."""
+        a shape (0.8-6 ms against 0.5 after in a one-off timing on session 68's host); returns its milliseconds.
+        An answer holding NaN or infinite values is a :class:`ModelRunError` (weights that hold them)."""
         t0 = time.perf_counter()
         for batch in WARMUP_BATCHES:
             feeds = (np.zeros((batch, NUM_JOINTS, JOINT_FEATURES), np.float32),
                      np.zeros((batch, CONTEXT_FEATURES), np.float32))
             try:
-                self._session.run(list(OUTPUTS), dict(zip(INPUTS, feeds)))
+                outs = self._session.run(list(OUTPUTS), dict(zip(INPUTS, feeds)))
             except Exception as e:  # onnxruntime's pybind exceptions, named as a pair's run names them
                 raise ModelRunError(f"skeleton prior failed its warm-up run (batch {batch}): {type(e).__name__}: "
                                     f"{ort_reason(e, 200)}", path=str(self.path)) from e
+            # as the graphs' warm-up (ModelSession._warm_run): NaN weights answer NaN to every pair, which answer()
+            # takes as no estimate, so the prior dropped out of every pair without a word
+            bad = next((name for name, value in zip(OUTPUTS, outs) if not np.isfinite(value).all()), None)
+            if bad is not None:
+                raise ModelRunError(f"skeleton prior returned NaN or infinite values in {bad!r} at its warm-up run "
+                                    f"(batch {batch}): its weights hold NaN or infinite values (a run that "
+                                    "diverged?); train it again", path=str(self.path))
         return 1e3 * (time.perf_counter() - t0)
 
     def answer(self, inputs: PriorInputs, flip_test: bool = True) -> SkeletonEstimate:

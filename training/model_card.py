@@ -316,6 +316,10 @@ def _card_problem(path: Path) -> str | None:
     wrong = next((k for k in _CARD_SECTIONS if k in card and not isinstance(card[k], dict)), None)
     if wrong is not None:
         return f"{path}: {wrong!r} is a JSON {type(card[wrong]).__name__}, not an object"
+    try:  # the record is written with MODEL_CARD.md made from the whole card: an entry it cannot read fails there
+        render_markdown(card)
+    except (AttributeError, TypeError, KeyError, ValueError, IndexError) as e:
+        return f"{path}: MODEL_CARD.md cannot be made from it ({type(e).__name__}: {e}); `make model` writes it whole"
     return None
 
 
@@ -535,6 +539,20 @@ class CardUpdateError(ValueError):
     """An eval report that cannot update a card: another dataset or split, or a model the card does not list."""
 
 
+def _check_report_shape(report: Any, path: Path) -> None:
+    """:class:`CardUpdateError` where ``report`` is not what ``ghnerf-eval --out`` writes: an object whose
+    ``models`` is an object of objects (a JSON list, or another tool's report, was an AttributeError traceback)."""
+    if not isinstance(report, dict):
+        raise CardUpdateError(f"{path}: holds a JSON {type(report).__name__}, not a ghnerf-eval --out report object")
+    models = report.get("models")
+    if models is not None and not isinstance(models, dict):
+        raise CardUpdateError(f"{path}: 'models' is a JSON {type(models).__name__}, not an object of models")
+    wrong = next((label for label, m in (models or {}).items() if not isinstance(m, dict)), None)
+    if wrong is not None:
+        raise CardUpdateError(f"{path}: models[{wrong!r}] is a JSON {type(models[wrong]).__name__}, not an object "
+                              "of metrics")
+
+
 def update_prior_metrics(card_dir: str | Path, eval_report: str | Path) -> list[Path]:
     """Copy the ``skeleton_prior_*`` keys of a ``ghnerf-eval --out`` report into ``card_dir``'s ``metrics.json``,
     ``metrics_<variant>.json`` and ``model_card.json``, and re-render ``MODEL_CARD.md``; returns the files written.
@@ -547,6 +565,9 @@ def update_prior_metrics(card_dir: str | Path, eval_report: str | Path) -> list[
     """
     card_dir, eval_report = Path(card_dir), Path(eval_report)
     report = json.loads(eval_report.read_text())
+    _check_report_shape(report, eval_report)
+    if problem := _card_problem(card_dir / "model_card.json"):  # a card that is a list was a TypeError traceback
+        raise CardUpdateError(problem)
     card = json.loads((card_dir / "model_card.json").read_text())
     scored, listed = (report.get("data"), report.get("split")), (card["data"]["path"], card["data"]["eval_split"])
     if scored != listed:

@@ -13,7 +13,7 @@ import pytest
 
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
 from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig
-from ghnerf_runtime.errors import ConfigError, ModelContractError, ModelError, ModelLoadError
+from ghnerf_runtime.errors import ConfigError, ModelContractError, ModelError, ModelLoadError, ModelRunError
 from ghnerf_runtime.geometry.camera import Camera, look_at
 from ghnerf_runtime.geometry.triangulation import MIN_BLOCK_VOLUME, block_volume
 from ghnerf_runtime.skeleton_prior import (
@@ -217,6 +217,24 @@ def tiny_prior(tmp_path_factory) -> SimpleNamespace:
                 PriorTrainConfig(steps=3, hidden=16, batch=8), progress=False)
     path = export(net, tmp_path_factory.mktemp("prior") / FILE_NAME, {"trained_on": "test"})
     return SimpleNamespace(path=path, net=net, data=(inp, inp.frame.to_canonical(truth)))  # file, torch twin
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_a_prior_whose_weights_hold_nan_is_refused_at_warm_up(tiny_prior, tmp_path, bad):
+    """NaN weights answer NaN to every pair, which the estimator takes as no prior estimate: the prior warmed up
+    and then dropped out of every pair without a word (the graphs' warm-up refuses such outputs)."""
+    onnx = pytest.importorskip("onnx")
+    model = onnx.load(str(tiny_prior.path))
+    weights = max(model.graph.initializer, key=lambda t: int(np.prod(t.dims)))
+    values = onnx.numpy_helper.to_array(weights).copy()
+    values.flat[0] = bad
+    weights.CopyFrom(onnx.numpy_helper.from_array(values, weights.name))
+    onnx.save(model, str(tmp_path / FILE_NAME))
+    with pytest.raises(ModelRunError, match=r"^.*skeleton prior returned NaN or infinite values in '(joints|"
+                                            r"log_error)' at its warm-up run \(batch \d+\)") as e:
+        SkeletonPrior.load(tmp_path / FILE_NAME).warm_up()
+    assert e.value.path == str(tmp_path / FILE_NAME)
+    assert SkeletonPrior.load(tiny_prior.path).warm_up() >= 0  # the file it was made from warms up
 
 
 def test_onnx_matches_torch_and_answers_in_the_rig_frame(tiny_prior):

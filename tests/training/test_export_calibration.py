@@ -56,6 +56,35 @@ def test_frames_unlike_the_runtime_input_are_refused_naming_the_file(tmp_path, c
         load_calibration_npz(path, contract)
 
 
+def _damaged_npz(path, damage: str):
+    """An npz whose ``images.npy`` is damaged: its deflate stream (``zlib``), or its header cut inside the shape
+    (``header``), as a disk or a cut copy leaves one."""
+    import zipfile
+
+    if damage == "zlib":  # 0xff opens a deflate block of the reserved type: zlib.error on the first read
+        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
+            zf.writestr("images.npy", bytes(4096))
+            info = zf.getinfo("images.npy")
+        raw = bytearray(path.read_bytes())
+        start = 30 + len(info.filename)  # the local header, no extra field
+        raw[start:start + info.compress_size] = b"\xff" * info.compress_size
+        path.write_bytes(bytes(raw))
+    else:  # numpy reads a version 1.0 header through tokenize: an open bracket was its TokenError
+        header = b"{'descr': '<f4', 'fortran_order': False, 'shape': (4, 2, "
+        header += b" " * (63 - (10 + len(header)) % 64) + b"\n"
+        with zipfile.ZipFile(path, "w") as zf:
+            zf.writestr("images.npy", b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header)
+    return path
+
+
+@pytest.mark.parametrize("damage", ["zlib", "header"])
+def test_a_damaged_file_is_named_not_a_traceback(tmp_path, contract, damage):
+    """zlib's and tokenize's errors from a damaged npz were tracebacks of the export."""
+    path = _damaged_npz(tmp_path / "calib.npz", damage)
+    with pytest.raises(CalibrationDataError, match=rf"^{re.escape(str(path))}: cannot read it as an npz file"):
+        load_calibration_npz(path, contract)
+
+
 @pytest.mark.parametrize("content", [b"not a zip", b""])  # b"": numpy's EOFError was a traceback of the export
 def test_an_unreadable_file_is_named(tmp_path, contract, content):
     path = tmp_path / "calib.npz"

@@ -59,3 +59,27 @@ def test_a_report_of_another_dataset_or_model_is_refused_and_nothing_is_written(
     err = capsys.readouterr().err
     assert err.startswith("python -m training.model_card: error: ") and words in err, err
     assert {name: (card_dir / name).read_bytes() for name in CARD_FILES} == before
+
+
+@pytest.mark.parametrize("report, words", [([], "holds a JSON list, not a ghnerf-eval --out report object"),
+                                           ({"models": ["ghnerf_fp32"]}, "'models' is a JSON list, not an object"),
+                                           ({"models": {"ghnerf_fp32": 1}}, "models['ghnerf_fp32'] is a JSON int")])
+def test_a_report_that_is_no_eval_report_object_is_named_not_a_traceback(tmp_path, card_dir, capsys, report, words):
+    """A report that is a JSON list (or whose models are) ended in an AttributeError traceback."""
+    before = {name: (card_dir / name).read_bytes() for name in CARD_FILES}
+    path = tmp_path / "eval.json"
+    path.write_text(json.dumps(report))
+    assert model_card.main(["--card-dir", str(card_dir), "--prior-metrics", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"python -m training.model_card: error: {path}: ") and words in err, err
+    assert {name: (card_dir / name).read_bytes() for name in CARD_FILES} == before
+
+
+def test_a_card_that_is_no_card_object_is_named_not_a_traceback(tmp_path, card_dir, capsys):
+    """A model_card.json that is a JSON list ended in a TypeError traceback."""
+    report = _report(tmp_path, card_dir)
+    (card_dir / "model_card.json").write_text("[]")
+    assert model_card.main(["--card-dir", str(card_dir), "--prior-metrics", str(report)]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {card_dir / 'model_card.json'} holds a JSON list, not a model card object" in err, err
+    assert (card_dir / "model_card.json").read_text() == "[]"

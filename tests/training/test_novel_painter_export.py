@@ -260,6 +260,8 @@ def test_an_export_without_int8_removes_the_int8_file_of_the_painter_it_replaces
     ('[]', "holds a JSON list, not a model card object"),
     ('{"files": []}', "'files' is a JSON list, not an object"),
     ('{"novel_painter": "w16"}', "'novel_painter' is a JSON str, not an object"),
+    # another variant's entry no object: the MODEL_CARD.md written with the record failed on it
+    ('{"novel_painter": {"baseline": "w16"}}', "MODEL_CARD.md cannot be made from it (AttributeError"),
 ])
 def test_a_card_that_cannot_take_the_record_is_named_before_the_export(tmp_path, data64, capsys, card, said):
     """A cut or hand-edited model_card.json was read only once the painter had been written into the model

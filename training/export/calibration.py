@@ -10,7 +10,9 @@ be told from the values: the docs say it.
 """
 from __future__ import annotations
 
+import tokenize
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +27,11 @@ KEY = "images"
 #: optimum: ``make model`` calibrates on 16 training scenes, ``python -m training.export`` on 8 random frames
 #: (``--calib-frames``, which refuses fewer than this floor too).
 MIN_FRAMES = 4
+#: What numpy and zipfile raise for a file that is no readable npz: EOFError an empty file; zlib.error a damaged
+#: deflate stream; tokenize.TokenError and SyntaxError a damaged array header; KeyError and NotImplementedError a
+#: damaged zip directory (each was a traceback of the export).
+UNREADABLE = (OSError, ValueError, EOFError, KeyError, NotImplementedError, SyntaxError, zipfile.BadZipFile,
+              zlib.error, tokenize.TokenError)
 
 
 class CalibrationDataError(ValueError):
@@ -51,7 +58,7 @@ def load_calibration_npz(path: str | Path, contract: ModelContract) -> list[np.n
             if KEY not in npz.files:
                 raise CalibrationDataError(path, f"no {KEY!r} array (it holds {sorted(npz.files)})")
             images = npz[KEY]
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # EOFError: an empty file
+    except UNREADABLE as e:
         if isinstance(e, CalibrationDataError):
             raise
         raise CalibrationDataError(path, f"cannot read it as an npz file ({type(e).__name__}: {e})") from e
