@@ -35,12 +35,14 @@ from __future__ import annotations
 
 import argparse
 import ast
+import contextlib
 import functools
 import importlib
 import importlib.util
 import inspect
 import re
 import shlex
+import signal
 import sys
 import tomllib
 from collections.abc import Callable, Iterator
@@ -397,13 +399,24 @@ class _ParserReached(BaseException):  # BaseException: a main's `except Exceptio
         self.parser = parser
 
 
+@contextlib.contextmanager
+def _signal_handlers_kept() -> Iterator[None]:
+    kept = {signum: signal.getsignal(signum) for signum in (signal.SIGHUP, signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for signum, handler in kept.items():
+            signal.signal(signum, handler)
+
+
 def parser_of_main(main: Callable[..., object], prog: str) -> argparse.ArgumentParser:
     """The parser ``main`` parses its arguments with, stopped there: nothing after the parse runs."""
     def reached(self: argparse.ArgumentParser, *args: object, **kwargs: object) -> None:
         raise _ParserReached(self)
 
     takes_argv = bool(inspect.signature(main).parameters)
-    with (mock.patch.object(argparse.ArgumentParser, "parse_args", reached),
+    with (_signal_handlers_kept(),  # a main run by its program's name (ghnerf-daemon) sets some for its process
+          mock.patch.object(argparse.ArgumentParser, "parse_args", reached),
           mock.patch.object(argparse.ArgumentParser, "parse_known_args", reached),
           mock.patch.object(argparse.ArgumentParser, "parse_intermixed_args", reached),
           mock.patch.object(sys, "argv", [prog])):

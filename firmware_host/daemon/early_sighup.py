@@ -57,10 +57,12 @@ def is_daemon_process() -> bool:
 
 
 def install() -> bool:
-    """Record SIGHUP instead of dying of it. True if installed by this call (False: already, or not the
-    main thread, where Python cannot set handlers)."""
+    """Record SIGHUP instead of dying of it. True if installed by this call (False: already in place, or not
+    the main thread, where Python cannot set handlers)."""
     global _installed, _previous
-    if _installed:
+    # installed and still in place (one replaced since, as by the daemon's SIG_IGN at exit, is installed again:
+    # a later main() in the same process, ghnerf-daemon's by name, met a SIGHUP with no recording handler)
+    if _installed and signal.getsignal(signal.SIGHUP) is _record:
         return False
     try:
         _previous = signal.signal(signal.SIGHUP, _record)

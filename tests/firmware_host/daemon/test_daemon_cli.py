@@ -1011,3 +1011,23 @@ def test_validate_config_and_the_start_refuse_a_take_of_another_size_than_its_ri
                     f"{takes[name] / 'manifest.json'} is 40x30: the take was recorded at another size than the rig it "
                     "carries") in err
             assert err.count("ghnerf-daemon: error:") == 2  # --validate-config, then the start: one line each
+
+
+def test_a_second_main_in_the_process_records_sighup_after_the_first_left_it_ignored(monkeypatch):
+    """A main() run as ghnerf-daemon (by argv[0]) leaves SIGHUP ignored on its way out; a later main() in the same
+    process installs the recording handler again (it took the stale 'installed' flag for one in place, and a SIGHUP
+    fell through to whatever handler was there)."""
+    before = signal.getsignal(signal.SIGHUP)
+    try:
+        monkeypatch.setattr(sys, "argv", [cli.early_sighup.PROG])
+        with pytest.raises(SystemExit):
+            cli.main(["--help"])
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+        monkeypatch.setattr(sys, "argv", ["python"])
+        signal.signal(signal.SIGHUP, signal.SIG_DFL)
+        assert cli.early_sighup.install()
+        assert signal.getsignal(signal.SIGHUP) is cli.early_sighup._record
+        cli.early_sighup.uninstall()
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_DFL
+    finally:
+        signal.signal(signal.SIGHUP, before)
