@@ -615,7 +615,7 @@ class OpenCVRigSource(RigSource):
                     break
                 left = deadline - time.monotonic()
                 if left <= 0:
-                    silent = [f"{cam.name!r} ({cam.spec})" for cam in self._cameras if cam.name not in self._delivered]
+                    silent = [f"{cam.name!r} ({cam.shown})" for cam in self._cameras if cam.name not in self._delivered]
                     raise RigInitializationError(
                         f"camera(s) {', '.join(silent)} delivered no frame within {self.options.open_timeout_s:g} s "
                         f"(open_timeout_s)")
@@ -743,7 +743,7 @@ class OpenCVRigSource(RigSource):
         silent = [cam for cam in live if now - cam.last_frame_s >= limit]
         if silent:
             self._fail(RigDisconnectedError(
-                ", ".join(f"camera {cam.name!r} ({cam.spec})" for cam in silent)
+                ", ".join(f"camera {cam.name!r} ({cam.shown})" for cam in silent)
                 + f" delivered no frame for {limit:g} s (open_timeout_s): stalled or unplugged"))
             return math.inf
         return min((cam.last_frame_s + limit - now for cam in live), default=math.inf)
@@ -777,7 +777,7 @@ class OpenCVRigSource(RigSource):
     def lingering(self) -> tuple[str, ...]:
         if not self._stop.is_set():  # open (or never opened): nothing was left behind yet
             return ()
-        return tuple(f"camera {cam.name!r} ({cam.spec})" for cam in self._cameras if cam.thread.is_alive())
+        return tuple(f"camera {cam.name!r} ({cam.shown})" for cam in self._cameras if cam.thread.is_alive())
 
     def _close(self) -> None:
         self._stop.set()
@@ -793,4 +793,4 @@ class OpenCVRigSource(RigSource):
             # releasing it from here, under the grab, is what OpenCV's captures do not survive.
             if cam.thread.is_alive():
                 log.warning("opencv: camera %r (%s) is still in a read; it is released when that returns",
-                            cam.name, cam.spec)
+                            cam.name, cam.shown)

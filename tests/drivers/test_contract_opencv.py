@@ -855,3 +855,27 @@ def test_a_stream_that_does_not_open_is_named_without_its_password(caplog):
             source.open()
     assert "rtsp://admin:***@cam1/stream" in str(info.value)
     assert "hunter2" not in str(info.value) and "hunter2" not in caplog.text
+
+
+def test_a_stream_that_stalls_at_open_or_later_is_named_without_its_password(webcam, caplog):
+    # the open's timeout, the stall's disconnect, lingering() and close()'s warning showed the URL as given:
+    # rtsp://admin:hunter2@... in the daemon's journal and on screen
+    stream = "rtsp%3A%2F%2Fadmin%3Ahunter2%40cam1%2Fs"
+    url = f"opencv://?first={stream}&second={stream.replace('cam1', 'cam2')}&open_timeout_s=0.3&tolerance_ms=40"
+    webcam.frames, webcam.block_s = 0, 2.5  # a first grab that hangs past close()'s 2 s wait
+    t0 = time.monotonic()
+    source = create_rig_source(url, capture_factory=webcam)
+    with caplog.at_level(logging.DEBUG), pytest.raises(RigInitializationError) as at_open:
+        source.open()
+    said = [str(at_open.value), " ".join(source.lingering()), caplog.text]
+    assert "rtsp://admin:***@cam1/s" in said[0] and "rtsp://admin:***@cam2/s" in said[1]
+    time.sleep(max(0.0, t0 + 2.8 - time.monotonic()))  # the hung grabs return and their threads end
+    webcam.frames = 3  # three frames each, then a grab that hangs: a stall
+    with open_rig(url, capture_factory=webcam) as source:
+        with pytest.raises(RigDisconnectedError, match=r"delivered no frame for 0\.3 s") as stalled:
+            while True:
+                source.read(timeout_s=5.0)
+    said.append(str(stalled.value))
+    assert "rtsp://admin:***@cam1/s" in said[-1]
+    assert not [text for text in said if "hunter2" in text], said
+    time.sleep(2.6)  # the stalled grabs return and their threads end
