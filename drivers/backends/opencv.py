@@ -136,6 +136,8 @@ HFOV_RANGE = (20.0, 150.0)
 DRIVER_STAMP_MAX_AGE_S = 2.0
 #: Grabbed frames in a row that cannot be decoded before a camera counts as lost (fewer are skipped).
 MAX_UNDECODABLE = 10
+#: The largest device index ``cv2.VideoCapture`` takes (a C int).
+MAX_DEVICE_INDEX = 2**31 - 1
 
 
 @dataclass
@@ -176,6 +178,10 @@ class OpenCVOptions:
         for name, value in (("first", first), ("second", second)):
             if not value:
                 raise fail(f"option {name}= (a device path or index, a video file or a stream URL) is required")
+        for name, value in (("first", first), ("second", second)):
+            if is_device_index(value) and int(value) > MAX_DEVICE_INDEX:  # type: ignore[arg-type]
+                # cv2.VideoCapture takes a C int: a larger index was a bare cv2.error naming no option
+                raise fail(f"option {name}={value!r}: a device index is at most {MAX_DEVICE_INDEX}")
         if _same_camera(first, second):  # type: ignore[arg-type]
             raise fail(f"first= and second= are the same camera ({redact_url(first)!r}, {redact_url(second)!r})")
         rig_path = url.take_str("rig")

@@ -191,6 +191,9 @@ def test_a_rig_file_s_note_is_logged_at_open_once_by_sources_sharing_a_logged_se
     ("", "option first="),
     ("first=0", "option second="),
     ("first=0&second=0", "the same camera"),
+    # cv2.VideoCapture takes a C int: a bare cv2.error ("Overload resolution failed") at open named no option
+    ("first=0&second=2147483648", r"option second='2147483648': a device index is at most 2147483647"),
+    ("first=99999999999999999999&second=1", r"option first='99999999999999999999': a device index is at most"),
     ("first=0&second=00", "the same camera"),  # both open index 0
     ("first=0&second=1&fsp=30", r"unknown option\(s\) \['fsp'\]"),
     ("first=0&second=1&fourcc=MJPEG", "four characters"),
