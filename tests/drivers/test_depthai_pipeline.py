@@ -408,6 +408,10 @@ def test_record_a_depthai_source_and_replay_it(tmp_path):
     ("url", "word"),
     [
         ("depthai://A,B", "two-device"),
+        # an empty name opened the first device found, or the one named, as if the ',' were not there
+        ("depthai://,", r"device ',' has an empty name around ','"),
+        ("depthai://1.3,", r"device '1.3,' has an empty name"),
+        ("depthai://,,A", r"device ',,A' has an empty name"),
         ("depthai://?left=CAM_B&right=CAM_B", "same socket"),
         ("depthai://?left=CAM_Z", "left"),
         ("depthai://?fps=0", "fps"),
