@@ -77,7 +77,8 @@ rotation in its container (a phone's, held upright) is ignored, as an image's EX
 (:func:`ghnerf_runtime.video_files.read_as_stored`). Not modelled:
 exposure, white balance or rolling-shutter differences between the two cameras.
 
-Ends. A live camera that stops delivering (unplugged) raises :class:`RigDisconnectedError` from the
+Ends. A live camera that stops delivering (unplugged: ``MAX_UNDECODABLE`` failed grabs in a row, a frame period
+apart; fewer are tried again, since session 73) raises :class:`RigDisconnectedError` from the
 next read, after the frames it delivered before; so does one whose grab hangs (a stalled stream or
 pipeline) for ``open_timeout_s``, naming it, and one whose grabbed frames do not decode ``MAX_UNDECODABLE``
 times in a row (fewer are skipped: the camera's index gap). When a video ends, the stream ends
@@ -134,7 +135,8 @@ FALLBACK_FPS = 30.0
 HFOV_RANGE = (20.0, 150.0)
 #: A V4L2 driver's frame stamp older than this at the grab is not on the host's monotonic clock.
 DRIVER_STAMP_MAX_AGE_S = 2.0
-#: Grabbed frames in a row that cannot be decoded before a camera counts as lost (fewer are skipped).
+#: Grabbed frames in a row that cannot be decoded, or a live camera's grabs in a row that fail, before it counts as
+#: lost (fewer are skipped, or tried again).
 MAX_UNDECODABLE = 10
 #: The largest device index ``cv2.VideoCapture`` takes (a C int).
 MAX_DEVICE_INDEX = 2**31 - 1
@@ -333,8 +335,16 @@ class _Camera:
         src = self.source
         since_rewind = 0
         undecodable = 0  # grabbed frames in a row that did not decode
+        failed_grabs = 0  # a live camera's grabs in a row that failed
         while not src._stop.is_set():
             if not self.capture.grab():
+                failed_grabs += 1
+                if not self.video and failed_grabs < MAX_UNDECODABLE:
+                    # A stream's hiccup or a USB frame error fails one grab: tried again a frame later (no busy
+                    # loop), where one such grab took the whole rig down; a run of them is a lost camera.
+                    if src._stop.wait(1.0 / self.pace_fps):
+                        return
+                    continue
                 if self.video and src.options.loop and since_rewind > 0:
                     # Each video starts over at its own end: two of one length stay paired frame by frame, as
                     # indices and stamps run on across passes; two of different lengths would not.
@@ -352,8 +362,9 @@ class _Camera:
                         f"bus: try fourcc=MJPG, a smaller size or a lower fps)"))
                 else:
                     src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.shown}) stopped delivering frames "
-                                                   f"(unplugged?)"))
+                                                   f"(unplugged?): {failed_grabs} grabs in a row failed"))
                 return
+            failed_grabs = 0
             grabbed_ns = src.clock.now_ns()
             since_rewind += 1
             ok, image = self.capture.retrieve()

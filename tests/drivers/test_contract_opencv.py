@@ -819,18 +819,21 @@ def test_loop_refuses_videos_that_turn_out_to_differ_in_length(tmp_path, webcam)
 def test_close_wakes_a_blocked_read(takes, webcam):
     import threading
 
-    webcam.frames, webcam.block_s = 1, 3.0  # one frame each, then a grab that hangs
+    # two frames each, then a grab that hangs; the thread reads what pair is left, then waits. With one frame the
+    # first pair was decided by the disconnect its failed grab was, and the thread's read raised that at once
+    webcam.frames, webcam.block_s = 2, 3.0
     source = open_rig("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=webcam)
     source.read(timeout_s=5.0)
     errors = []
-    reader = threading.Thread(target=lambda: errors.append(_raises(lambda: source.read(timeout_s=10.0))))
+    reader = threading.Thread(
+        target=lambda: errors.append(_raises(lambda: [source.read(timeout_s=10.0) for _ in range(3)])))
     reader.start()
     time.sleep(0.2)
     t0 = time.monotonic()
     source.close()
     reader.join(timeout=5.0)
     assert not reader.is_alive() and time.monotonic() - t0 < 5.0
-    assert isinstance(errors[0], RigOperationError)
+    assert type(errors[0]) is RigOperationError and "source closed" in str(errors[0])
     time.sleep(3.2)  # the hung grabs return and their threads end
 
 
@@ -882,3 +885,32 @@ def test_a_stream_that_stalls_at_open_or_later_is_named_without_its_password(web
     assert "rtsp://admin:***@cam1/s" in said[-1]
     assert not [text for text in said if "hunter2" in text], said
     time.sleep(2.6)  # the stalled grabs return and their threads end
+
+
+def test_a_live_camera_s_grab_that_fails_a_few_times_is_tried_again_and_a_run_of_failures_is_a_disconnect(webcam):
+    # a stream's hiccup or a USB frame error fails one grab; one such grab took the whole rig down (a reopen)
+    class Hiccups(_Webcam):
+        failing: set[int] = set()
+
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.left, self.grabs = 200, 0
+
+        def grab(self) -> bool:
+            self.grabs += 1
+            ok = super().grab()
+            return ok and not (self.target == 1 and self.grabs in self.failing)
+
+    Hiccups.failing = {4, 6, 7, 8}
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=Hiccups) as source:
+        pairs = [source.read(timeout_s=2.0) for _ in range(10)]
+    assert pairs[-1].frames[1].index >= 9  # it delivered on after the failed grabs
+    Hiccups.failing = set(range(4, 1000))
+    t0 = time.monotonic()
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30", capture_factory=Hiccups) as source:
+        with pytest.raises(RigDisconnectedError, match=r"camera 'right' \(1\) stopped delivering frames \(unplugged\?\): "
+                                                       r"10 grabs in a row failed"):
+            for _ in range(100):
+                source.read(timeout_s=2.0)
+        right = [cam for cam in webcam.made if cam.target == 1][-1]  # this open's
+    assert time.monotonic() - t0 < 5.0 and right.grabs == 3 + 10  # a frame apart, not a busy loop
