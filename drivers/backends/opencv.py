@@ -33,7 +33,8 @@ Options:
   a rate or format it does not take is a warning. ``fps`` is also the pace of a video whose file does
   not state its rate.
 * ``api``: OpenCV's capture backend: ``any`` (default), ``v4l2``, ``ffmpeg``, ``gstreamer``,
-  ``dshow``, ``msmf``, ``avfoundation``.
+  ``dshow``, ``msmf``, ``avfoundation``. One this OpenCV lacks (a build without GStreamer) fails the open saying
+  so, naming those it has (since session 73; it was said to be an unplugged camera or a file it cannot decode).
 * ``names``, ``hfov`` (without ``rig``): the nominal rig's camera names (default ``left,right``) and
   horizontal field of view in degrees (20 to 150, default 70).
 * ``loop`` (two videos of the same length in time: 40 frames at 30 fps and 20 at 15 fps are): start
@@ -279,6 +280,9 @@ class _Camera:
         capture = self.source._capture_factory(capture_target(self.spec), APIS[o.api])
         if not capture.isOpened():
             capture.release()
+            why = missing_api(o.api)
+            if why is not None:
+                raise RigInitializationError(f"camera {self.name!r}: OpenCV cannot open {self.shown!r}: {why}")
             raise RigInitializationError(
                 f"camera {self.name!r}: OpenCV cannot open {self.shown!r} (api={o.api}): "
                 + ("not a video OpenCV decodes" if self.video else
@@ -491,6 +495,18 @@ def _pass_mismatch(videos: list[tuple[_Camera, int]]) -> str | None:
     if len({cam.pace_fps for cam, _ in videos}) == 1:
         return " and ".join(str(frames) for _, frames in videos) + " frames"
     return " and ".join(f"{frames} frames at {cam.pace_fps:g} fps" for cam, frames in videos)
+
+
+def missing_api(api: str) -> str | None:
+    """Why ``api=`` cannot open anything where this OpenCV lacks that capture backend (a build without GStreamer,
+    DirectShow off Windows), naming the ones it has; None where it has it (or ``any``). Without it a camera that did
+    not open was said to be unplugged, busy or without permission, or a video file not one OpenCV decodes."""
+    registry = cv2.videoio_registry
+    if api == "any" or registry.hasBackend(APIS[api]):
+        return None
+    present = sorted({registry.getBackendName(b) for b in registry.getBackends() if registry.hasBackend(b)})
+    return (f"option api={api}: this OpenCV has no {api} capture backend (it has {', '.join(present) or 'none'}; "
+            f"api=any picks one)")
 
 
 def _backend_name(capture: Any) -> str:

@@ -914,3 +914,20 @@ def test_a_live_camera_s_grab_that_fails_a_few_times_is_tried_again_and_a_run_of
                 source.read(timeout_s=2.0)
         right = [cam for cam in webcam.made if cam.target == 1][-1]  # this open's
     assert time.monotonic() - t0 < 5.0 and right.grabs == 3 + 10  # a frame apart, not a busy loop
+
+
+def test_an_api_this_opencv_lacks_is_said_not_an_unplugged_camera_or_a_file_it_cannot_decode(takes, monkeypatch):
+    # api=gstreamer on an OpenCV built without GStreamer: "not plugged in, busy in another program, no permission"
+    # for a webcam, "not a video OpenCV decodes" for a good video file
+    from drivers.backends import opencv
+
+    first, second, _, _ = takes[0]
+    monkeypatch.setattr(cv2.videoio_registry, "hasBackend", lambda api: api != cv2.CAP_GSTREAMER)
+    for spec in (first, "0"):
+        with pytest.raises(RigInitializationError) as info:
+            open_rig(f"opencv://?first={spec}&second={second}&api=gstreamer")
+        message = str(info.value)
+        assert f"OpenCV cannot open '{spec}': option api=gstreamer: this OpenCV has no gstreamer capture backend" \
+            in message and "api=any picks one" in message
+        assert "not a video" not in message and "plugged" not in message
+    assert opencv.missing_api("any") is None and opencv.missing_api("v4l2") is None
