@@ -134,6 +134,8 @@ APIS = {"any": cv2.CAP_ANY, "v4l2": cv2.CAP_V4L2, "ffmpeg": cv2.CAP_FFMPEG, "gst
 FALLBACK_FPS = 30.0
 #: The nominal rig's field of view bounds (those of :class:`drivers.sim.placement.RigPlacement`).
 HFOV_RANGE = (20.0, 150.0)
+#: The nominal rig's image size bounds, each way (those of :class:`drivers.sim.placement.RigPlacement`).
+NOMINAL_SIZE_RANGE = (16, 8192)
 #: A V4L2 driver's frame stamp older than this at the grab is not on the host's monotonic clock.
 DRIVER_STAMP_MAX_AGE_S = 2.0
 #: Grabbed frames in a row that cannot be decoded, or a live camera's grabs in a row that fail, before it counts as
@@ -198,8 +200,9 @@ class OpenCVOptions:
         options = cls(
             first=first, second=second,  # type: ignore[arg-type]
             rig_path=rig_path,
-            width=url.take_int("width", 0, lo=16, hi=16384) or None,
-            height=url.take_int("height", 0, lo=16, hi=16384) or None,
+            # the nominal rig's bounds: width= and height= are given without rig=, for it
+            width=url.take_int("width", 0, lo=NOMINAL_SIZE_RANGE[0], hi=NOMINAL_SIZE_RANGE[1]) or None,
+            height=url.take_int("height", 0, lo=NOMINAL_SIZE_RANGE[0], hi=NOMINAL_SIZE_RANGE[1]) or None,
             fps=url.take_float("fps", 0.0, lo=0.1, hi=1000.0) or None,
             fourcc=fourcc,
             api=url.take_str("api", "any", choices=tuple(APIS)) or "any",
@@ -385,10 +388,10 @@ class _Camera:
                                                f"in a row could not be decoded"))
                 return
             undecodable = 0
-            image = _bgr(image)
+            raw, image = image, _bgr(image)
             if image is None:
                 src._fail(RigOperationError(f"camera {self.name!r} ({self.shown}) delivered an image that is not "
-                                            f"8-bit colour or grey"))
+                                            f"8-bit colour or grey (shape {raw.shape}, {raw.dtype})"))
                 return
             if self.size is not None and (image.shape[1], image.shape[0]) != self.size:
                 src._fail(self._size_error((image.shape[1], image.shape[0])))
@@ -518,8 +521,9 @@ def _backend_name(capture: Any) -> str:
 
 
 def _bgr(image: np.ndarray) -> np.ndarray | None:
-    """``(H, W, 3)`` uint8 BGR, as every frame is (grey and BGRA converted); None for anything else."""
-    if image.dtype != np.uint8:
+    """``(H, W, 3)`` uint8 BGR, as every frame is (grey and BGRA converted); None for anything else, an empty image
+    too (cvtColor's assertion on it was the error)."""
+    if image.dtype != np.uint8 or image.size == 0:
         return None
     if image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 1):
         return cv2.cvtColor(image.reshape(image.shape[:2]), cv2.COLOR_GRAY2BGR)
@@ -663,6 +667,11 @@ class OpenCVRigSource(RigSource):
             raise RigInitializationError(f"the cameras deliver {sizes[0][0]}x{sizes[0][1]} and "
                                          f"{sizes[1][0]}x{sizes[1][1]}; give width= and height= so both match")
         width, height = sizes[0]
+        lo, hi = NOMINAL_SIZE_RANGE
+        if not (lo <= width <= hi and lo <= height <= hi):
+            # RigPlacement refused it naming only its own field: "RigPlacement.width: must be an int in [16, 8192]"
+            raise RigInitializationError(f"the cameras deliver {width}x{height}: the nominal rig (no rig=) takes {lo} "
+                                         f"to {hi} pixels each way; give width= and height= or a rig file (rig=)")
         rig = RigPlacement(width=width, height=height, hfov_deg=o.hfov_deg, names=o.names).build(rig_id=NOMINAL_RIG_ID)
         # marked, so that a recording of it, replayed, is still known for what it is (the daemon refuses it)
         return Rig(rig.cameras, rig.volume, rig.rig_id, metadata={**rig.metadata, "uncalibrated": True})

@@ -199,6 +199,8 @@ def test_a_rig_file_s_note_is_logged_at_open_once_by_sources_sharing_a_logged_se
     ("first=0&second=1&fourcc=MJPEG", "four characters"),
     ("first=0&second=1&names=a,a", "two different names"),
     ("first=0&second=1&width=640", "width= and height= together"),
+    # the nominal rig's bound: 16384 was taken, then refused at open naming RigPlacement.width, no option
+    ("first=0&second=1&width=10000&height=480", r"option width='10000' must be an integer in \[16, 8192\]"),
     ("first=0&second=1&api=qt", "option api='qt'"),
     ("first=0&second=1&hfov=15", "option hfov='15'"),
     ("first=0&second=1&rig=x.json&width=640&height=480", r"\['height', 'width'\] do not apply with rig="),
@@ -931,3 +933,17 @@ def test_an_api_this_opencv_lacks_is_said_not_an_unplugged_camera_or_a_file_it_c
             in message and "api=any picks one" in message
         assert "not a video" not in message and "plugged" not in message
     assert opencv.missing_api("any") is None and opencv.missing_api("v4l2") is None
+
+
+@pytest.mark.parametrize(("shape", "said"), [
+    # RigPlacement refused the nominal rig naming its own field ("RigPlacement.width: must be an int in [16, 8192]")
+    ((1, 1, 3), r"the cameras deliver 1x1: the nominal rig \(no rig=\) takes 16 to 8192 pixels each way"),
+    ((8, 8), r"the cameras deliver 8x8: the nominal rig"),
+    # cvtColor's assertion (!_src.empty()) was the message
+    ((0, 64), r"camera '(left|right)' \((0|1)\) delivered an image that is not 8-bit colour or grey \(shape \(0, 64\)"),
+    ((0, 0, 3), r"delivered an image that is not 8-bit colour or grey \(shape \(0, 0, 3\), uint8\)"),
+])
+def test_frames_too_small_for_the_nominal_rig_or_empty_fail_the_open_naming_the_size(webcam, shape, said):
+    webcam.make = staticmethod(lambda width, height: np.zeros(shape, np.uint8))
+    with pytest.raises(RigInitializationError, match=said):
+        open_rig("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=webcam)
