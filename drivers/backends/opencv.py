@@ -38,7 +38,7 @@ Options:
 * ``names``, ``hfov`` (without ``rig``): the nominal rig's camera names (default ``left,right``) and
   horizontal field of view in degrees (20 to 150, default 70).
 * ``loop`` (two videos of the same length in time: 40 frames at 30 fps and 20 at 15 fps are): start
-  over at the end instead of ending the stream.
+  over at the end instead of ending the stream; refused for two live cameras (since session 73: it did nothing).
 * ``tolerance_ms``: pairing tolerance (default: half a frame period at the slowest of the rates
   the cameras report and ``fps``, else 30 fps; at most 10 s); ``policy``: ``latest`` (default) or ``all``;
   ``max_pending`` (8, at most 256): frames held per camera while waiting for the other's: a camera
@@ -214,6 +214,8 @@ class OpenCVOptions:
             pairing=take_pairing_options(url),
         )
         url.finish()
+        if options.loop and not (is_video_file(options.first) or is_video_file(options.second)):
+            raise fail("option loop=1 starts videos over; first= and second= are live cameras (loop= did nothing)")
         if (options.width is None) != (options.height is None):
             raise fail("give width= and height= together")
         if rig_path is not None:

@@ -199,6 +199,8 @@ def test_a_rig_file_s_note_is_logged_at_open_once_by_sources_sharing_a_logged_se
     ("first=0&second=1&fourcc=MJPEG", "four characters"),
     ("first=0&second=1&names=a,a", "two different names"),
     ("first=0&second=1&width=640", "width= and height= together"),
+    # taken and ignored: two live cameras have nothing to start over
+    ("first=0&second=/dev/video2&loop=1", r"option loop=1 starts videos over; first= and second= are live cameras"),
     # the nominal rig's bound: 16384 was taken, then refused at open naming RigPlacement.width, no option
     ("first=0&second=1&width=10000&height=480", r"option width='10000' must be an integer in \[16, 8192\]"),
     ("first=0&second=1&api=qt", "option api='qt'"),
