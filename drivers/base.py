@@ -248,6 +248,8 @@ class RigSource(abc.ABC):
                 backends that reconnect, otherwise close it.
             EndOfStream: a finite source (a recording) is exhausted.
         """
+        if self._closed:  # "call open()" sent the reader to an open() that refuses a closed source
+            raise RigOperationError(f"{type(self).__name__} was closed; open a new source")
         if not self._is_open:
             raise RigOperationError(f"{type(self).__name__} is not open; call open() or use open_rig()")
         try:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 
 from drivers.base import RigSource
-from drivers.errors import BackendNotAvailableError
+from drivers.errors import BackendNotAvailableError, RigConfigError
 from drivers.url import RigUrl
 from drivers.url_paths import check_url_paths
 from drivers.wrappers import WRAPPERS, wrapper_prefix
@@ -55,6 +55,8 @@ def open_rig(url: str, **kwargs) -> RigSource:
 
 def create_rig_source(url: str, **kwargs) -> RigSource:
     """Like :func:`open_rig` but returns the source unopened."""
+    if not isinstance(url, str):  # the checks below read it as text: an AttributeError from str.startswith
+        raise RigConfigError(f"rig URL must be text, 'scheme://target?options', got {url!r}")
     check_url_paths(url)  # a NUL byte or a name too long: one line, not a traceback from the backend
     prefix = wrapper_prefix(url)
     if prefix is not None:

@@ -3,7 +3,8 @@
 Every option a backend reads is taken through a typed getter; whatever is left
 afterwards is an unknown option and :meth:`RigUrl.finish` rejects it by name,
 so a typo such as ``sim://?fsp=60`` fails loudly instead of being ignored.
-A ``#`` would start a fragment, which URL parsing drops: it is refused (write ``%23``).
+A ``#`` would start a fragment, which URL parsing drops: it is refused (write ``%23``). So is a tab, CR or LF
+anywhere, which URL parsing removes (write ``%09``, ``%0D``, ``%0A``; since session 73).
 
 :func:`redact_url` is how a URL is shown (messages, logs, a recording's manifest): without the passwords
 it may carry (a stream URL ``rtsp://user:pass@host/...`` inside an option, a ``token=``).
@@ -204,6 +205,20 @@ def _refuse_not_utf8(url: str, where: str, raw: str, decoded: str) -> None:
         raise RigConfigError(f"rig URL {redact_url(url)!r}: {where} {problem}")
 
 
+#: The characters ``urlsplit`` removes from anywhere in a URL without a word, and how a URL writes each.
+_DROPPED = {"\t": ("a tab", "%09"), "\r": ("a carriage return", "%0D"), "\n": ("a line feed", "%0A")}
+
+
+def _refuse_dropped_characters(url: str) -> None:
+    """:class:`RigConfigError` naming the first tab, CR or LF in ``url``: ``urlsplit`` drops them, so
+    ``replay:///data/ta<TAB>ke`` played ``/data/take`` and ``fps=3<LF>0`` ran at 30 (a value pasted from a file)."""
+    at = next((k for k, char in enumerate(url) if char in _DROPPED), None)
+    if at is not None:
+        what, escape = _DROPPED[url[at]]
+        raise RigConfigError(f"rig URL {redact_url(url)!r}: holds {what} at character {at + 1}, which URL parsing "
+                             f"drops; remove it, or write it as {escape}")
+
+
 @dataclass
 class RigUrl:
     """A parsed rig URL.
@@ -228,6 +243,7 @@ class RigUrl:
             parts = urlsplit(url)
         except ValueError as e:  # e.g. an unclosed '[' reads as a broken IPv6 host
             raise RigConfigError(f"rig URL {redact_url(url)!r} cannot be parsed: {e}") from None
+        _refuse_dropped_characters(url)
         if "#" in url:  # urlsplit would drop the fragment: record into, or play, another directory
             raise RigConfigError(
                 f"rig URL {redact_url(url)!r}: '#' starts a URL fragment ({'#' + parts.fragment!r}), which rig URLs do not "

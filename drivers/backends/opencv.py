@@ -33,11 +33,12 @@ Options:
   a rate or format it does not take is a warning. ``fps`` is also the pace of a video whose file does
   not state its rate.
 * ``api``: OpenCV's capture backend: ``any`` (default), ``v4l2``, ``ffmpeg``, ``gstreamer``,
-  ``dshow``, ``msmf``, ``avfoundation``.
+  ``dshow``, ``msmf``, ``avfoundation``. One this OpenCV lacks (a build without GStreamer) fails the open saying
+  so, naming those it has (since session 73; it was said to be an unplugged camera or a file it cannot decode).
 * ``names``, ``hfov`` (without ``rig``): the nominal rig's camera names (default ``left,right``) and
   horizontal field of view in degrees (20 to 150, default 70).
 * ``loop`` (two videos of the same length in time: 40 frames at 30 fps and 20 at 15 fps are): start
-  over at the end instead of ending the stream.
+  over at the end instead of ending the stream; refused for two live cameras (since session 73: it did nothing).
 * ``tolerance_ms``: pairing tolerance (default: half a frame period at the slowest of the rates
   the cameras report and ``fps``, else 30 fps; at most 10 s); ``policy``: ``latest`` (default) or ``all``;
   ``max_pending`` (8, at most 256): frames held per camera while waiting for the other's: a camera
@@ -77,7 +78,8 @@ rotation in its container (a phone's, held upright) is ignored, as an image's EX
 (:func:`ghnerf_runtime.video_files.read_as_stored`). Not modelled:
 exposure, white balance or rolling-shutter differences between the two cameras.
 
-Ends. A live camera that stops delivering (unplugged) raises :class:`RigDisconnectedError` from the
+Ends. A live camera that stops delivering (unplugged: ``MAX_UNDECODABLE`` failed grabs in a row, a frame period
+apart; fewer are tried again, since session 73) raises :class:`RigDisconnectedError` from the
 next read, after the frames it delivered before; so does one whose grab hangs (a stalled stream or
 pipeline) for ``open_timeout_s``, naming it, and one whose grabbed frames do not decode ``MAX_UNDECODABLE``
 times in a row (fewer are skipped: the camera's index gap). When a video ends, the stream ends
@@ -132,10 +134,15 @@ APIS = {"any": cv2.CAP_ANY, "v4l2": cv2.CAP_V4L2, "ffmpeg": cv2.CAP_FFMPEG, "gst
 FALLBACK_FPS = 30.0
 #: The nominal rig's field of view bounds (those of :class:`drivers.sim.placement.RigPlacement`).
 HFOV_RANGE = (20.0, 150.0)
+#: The nominal rig's image size bounds, each way (those of :class:`drivers.sim.placement.RigPlacement`).
+NOMINAL_SIZE_RANGE = (16, 8192)
 #: A V4L2 driver's frame stamp older than this at the grab is not on the host's monotonic clock.
 DRIVER_STAMP_MAX_AGE_S = 2.0
-#: Grabbed frames in a row that cannot be decoded before a camera counts as lost (fewer are skipped).
+#: Grabbed frames in a row that cannot be decoded, or a live camera's grabs in a row that fail, before it counts as
+#: lost (fewer are skipped, or tried again).
 MAX_UNDECODABLE = 10
+#: The largest device index ``cv2.VideoCapture`` takes (a C int).
+MAX_DEVICE_INDEX = 2**31 - 1
 
 
 @dataclass
@@ -176,6 +183,10 @@ class OpenCVOptions:
         for name, value in (("first", first), ("second", second)):
             if not value:
                 raise fail(f"option {name}= (a device path or index, a video file or a stream URL) is required")
+        for name, value in (("first", first), ("second", second)):
+            if is_device_index(value) and int(value) > MAX_DEVICE_INDEX:  # type: ignore[arg-type]
+                # cv2.VideoCapture takes a C int: a larger index was a bare cv2.error naming no option
+                raise fail(f"option {name}={value!r}: a device index is at most {MAX_DEVICE_INDEX}")
         if _same_camera(first, second):  # type: ignore[arg-type]
             raise fail(f"first= and second= are the same camera ({redact_url(first)!r}, {redact_url(second)!r})")
         rig_path = url.take_str("rig")
@@ -189,8 +200,9 @@ class OpenCVOptions:
         options = cls(
             first=first, second=second,  # type: ignore[arg-type]
             rig_path=rig_path,
-            width=url.take_int("width", 0, lo=16, hi=16384) or None,
-            height=url.take_int("height", 0, lo=16, hi=16384) or None,
+            # the nominal rig's bounds: width= and height= are given without rig=, for it
+            width=url.take_int("width", 0, lo=NOMINAL_SIZE_RANGE[0], hi=NOMINAL_SIZE_RANGE[1]) or None,
+            height=url.take_int("height", 0, lo=NOMINAL_SIZE_RANGE[0], hi=NOMINAL_SIZE_RANGE[1]) or None,
             fps=url.take_float("fps", 0.0, lo=0.1, hi=1000.0) or None,
             fourcc=fourcc,
             api=url.take_str("api", "any", choices=tuple(APIS)) or "any",
@@ -202,6 +214,8 @@ class OpenCVOptions:
             pairing=take_pairing_options(url),
         )
         url.finish()
+        if options.loop and not (is_video_file(options.first) or is_video_file(options.second)):
+            raise fail("option loop=1 starts videos over; first= and second= are live cameras (loop= did nothing)")
         if (options.width is None) != (options.height is None):
             raise fail("give width= and height= together")
         if rig_path is not None:
@@ -271,6 +285,9 @@ class _Camera:
         capture = self.source._capture_factory(capture_target(self.spec), APIS[o.api])
         if not capture.isOpened():
             capture.release()
+            why = missing_api(o.api)
+            if why is not None:
+                raise RigInitializationError(f"camera {self.name!r}: OpenCV cannot open {self.shown!r}: {why}")
             raise RigInitializationError(
                 f"camera {self.name!r}: OpenCV cannot open {self.shown!r} (api={o.api}): "
                 + ("not a video OpenCV decodes" if self.video else
@@ -327,8 +344,16 @@ class _Camera:
         src = self.source
         since_rewind = 0
         undecodable = 0  # grabbed frames in a row that did not decode
+        failed_grabs = 0  # a live camera's grabs in a row that failed
         while not src._stop.is_set():
             if not self.capture.grab():
+                failed_grabs += 1
+                if not self.video and failed_grabs < MAX_UNDECODABLE:
+                    # A stream's hiccup or a USB frame error fails one grab: tried again a frame later (no busy
+                    # loop), where one such grab took the whole rig down; a run of them is a lost camera.
+                    if src._stop.wait(1.0 / self.pace_fps):
+                        return
+                    continue
                 if self.video and src.options.loop and since_rewind > 0:
                     # Each video starts over at its own end: two of one length stay paired frame by frame, as
                     # indices and stamps run on across passes; two of different lengths would not.
@@ -346,8 +371,9 @@ class _Camera:
                         f"bus: try fourcc=MJPG, a smaller size or a lower fps)"))
                 else:
                     src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.shown}) stopped delivering frames "
-                                                   f"(unplugged?)"))
+                                                   f"(unplugged?): {failed_grabs} grabs in a row failed"))
                 return
+            failed_grabs = 0
             grabbed_ns = src.clock.now_ns()
             since_rewind += 1
             ok, image = self.capture.retrieve()
@@ -364,10 +390,10 @@ class _Camera:
                                                f"in a row could not be decoded"))
                 return
             undecodable = 0
-            image = _bgr(image)
+            raw, image = image, _bgr(image)
             if image is None:
                 src._fail(RigOperationError(f"camera {self.name!r} ({self.shown}) delivered an image that is not "
-                                            f"8-bit colour or grey"))
+                                            f"8-bit colour or grey (shape {raw.shape}, {raw.dtype})"))
                 return
             if self.size is not None and (image.shape[1], image.shape[0]) != self.size:
                 src._fail(self._size_error((image.shape[1], image.shape[0])))
@@ -476,6 +502,18 @@ def _pass_mismatch(videos: list[tuple[_Camera, int]]) -> str | None:
     return " and ".join(f"{frames} frames at {cam.pace_fps:g} fps" for cam, frames in videos)
 
 
+def missing_api(api: str) -> str | None:
+    """Why ``api=`` cannot open anything where this OpenCV lacks that capture backend (a build without GStreamer,
+    DirectShow off Windows), naming the ones it has; None where it has it (or ``any``). Without it a camera that did
+    not open was said to be unplugged, busy or without permission, or a video file not one OpenCV decodes."""
+    registry = cv2.videoio_registry
+    if api == "any" or registry.hasBackend(APIS[api]):
+        return None
+    present = sorted({registry.getBackendName(b) for b in registry.getBackends() if registry.hasBackend(b)})
+    return (f"option api={api}: this OpenCV has no {api} capture backend (it has {', '.join(present) or 'none'}; "
+            f"api=any picks one)")
+
+
 def _backend_name(capture: Any) -> str:
     """The capture's OpenCV backend (``"V4L2"``, ``"FFMPEG"``, ...); ``""`` where it does not say."""
     try:
@@ -485,8 +523,9 @@ def _backend_name(capture: Any) -> str:
 
 
 def _bgr(image: np.ndarray) -> np.ndarray | None:
-    """``(H, W, 3)`` uint8 BGR, as every frame is (grey and BGRA converted); None for anything else."""
-    if image.dtype != np.uint8:
+    """``(H, W, 3)`` uint8 BGR, as every frame is (grey and BGRA converted); None for anything else, an empty image
+    too (cvtColor's assertion on it was the error)."""
+    if image.dtype != np.uint8 or image.size == 0:
         return None
     if image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 1):
         return cv2.cvtColor(image.reshape(image.shape[:2]), cv2.COLOR_GRAY2BGR)
@@ -615,7 +654,7 @@ class OpenCVRigSource(RigSource):
                     break
                 left = deadline - time.monotonic()
                 if left <= 0:
-                    silent = [f"{cam.name!r} ({cam.spec})" for cam in self._cameras if cam.name not in self._delivered]
+                    silent = [f"{cam.name!r} ({cam.shown})" for cam in self._cameras if cam.name not in self._delivered]
                     raise RigInitializationError(
                         f"camera(s) {', '.join(silent)} delivered no frame within {self.options.open_timeout_s:g} s "
                         f"(open_timeout_s)")
@@ -630,6 +669,11 @@ class OpenCVRigSource(RigSource):
             raise RigInitializationError(f"the cameras deliver {sizes[0][0]}x{sizes[0][1]} and "
                                          f"{sizes[1][0]}x{sizes[1][1]}; give width= and height= so both match")
         width, height = sizes[0]
+        lo, hi = NOMINAL_SIZE_RANGE
+        if not (lo <= width <= hi and lo <= height <= hi):
+            # RigPlacement refused it naming only its own field: "RigPlacement.width: must be an int in [16, 8192]"
+            raise RigInitializationError(f"the cameras deliver {width}x{height}: the nominal rig (no rig=) takes {lo} "
+                                         f"to {hi} pixels each way; give width= and height= or a rig file (rig=)")
         rig = RigPlacement(width=width, height=height, hfov_deg=o.hfov_deg, names=o.names).build(rig_id=NOMINAL_RIG_ID)
         # marked, so that a recording of it, replayed, is still known for what it is (the daemon refuses it)
         return Rig(rig.cameras, rig.volume, rig.rig_id, metadata={**rig.metadata, "uncalibrated": True})
@@ -743,7 +787,7 @@ class OpenCVRigSource(RigSource):
         silent = [cam for cam in live if now - cam.last_frame_s >= limit]
         if silent:
             self._fail(RigDisconnectedError(
-                ", ".join(f"camera {cam.name!r} ({cam.spec})" for cam in silent)
+                ", ".join(f"camera {cam.name!r} ({cam.shown})" for cam in silent)
                 + f" delivered no frame for {limit:g} s (open_timeout_s): stalled or unplugged"))
             return math.inf
         return min((cam.last_frame_s + limit - now for cam in live), default=math.inf)
@@ -777,7 +821,7 @@ class OpenCVRigSource(RigSource):
     def lingering(self) -> tuple[str, ...]:
         if not self._stop.is_set():  # open (or never opened): nothing was left behind yet
             return ()
-        return tuple(f"camera {cam.name!r} ({cam.spec})" for cam in self._cameras if cam.thread.is_alive())
+        return tuple(f"camera {cam.name!r} ({cam.shown})" for cam in self._cameras if cam.thread.is_alive())
 
     def _close(self) -> None:
         self._stop.set()
@@ -793,4 +837,4 @@ class OpenCVRigSource(RigSource):
             # releasing it from here, under the grab, is what OpenCV's captures do not survive.
             if cam.thread.is_alive():
                 log.warning("opencv: camera %r (%s) is still in a read; it is released when that returns",
-                            cam.name, cam.spec)
+                            cam.name, cam.shown)

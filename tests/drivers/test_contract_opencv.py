@@ -191,11 +191,18 @@ def test_a_rig_file_s_note_is_logged_at_open_once_by_sources_sharing_a_logged_se
     ("", "option first="),
     ("first=0", "option second="),
     ("first=0&second=0", "the same camera"),
+    # cv2.VideoCapture takes a C int: a bare cv2.error ("Overload resolution failed") at open named no option
+    ("first=0&second=2147483648", r"option second='2147483648': a device index is at most 2147483647"),
+    ("first=99999999999999999999&second=1", r"option first='99999999999999999999': a device index is at most"),
     ("first=0&second=00", "the same camera"),  # both open index 0
     ("first=0&second=1&fsp=30", r"unknown option\(s\) \['fsp'\]"),
     ("first=0&second=1&fourcc=MJPEG", "four characters"),
     ("first=0&second=1&names=a,a", "two different names"),
     ("first=0&second=1&width=640", "width= and height= together"),
+    # taken and ignored: two live cameras have nothing to start over
+    ("first=0&second=/dev/video2&loop=1", r"option loop=1 starts videos over; first= and second= are live cameras"),
+    # the nominal rig's bound: 16384 was taken, then refused at open naming RigPlacement.width, no option
+    ("first=0&second=1&width=10000&height=480", r"option width='10000' must be an integer in \[16, 8192\]"),
     ("first=0&second=1&api=qt", "option api='qt'"),
     ("first=0&second=1&hfov=15", "option hfov='15'"),
     ("first=0&second=1&rig=x.json&width=640&height=480", r"\['height', 'width'\] do not apply with rig="),
@@ -816,18 +823,21 @@ def test_loop_refuses_videos_that_turn_out_to_differ_in_length(tmp_path, webcam)
 def test_close_wakes_a_blocked_read(takes, webcam):
     import threading
 
-    webcam.frames, webcam.block_s = 1, 3.0  # one frame each, then a grab that hangs
+    # two frames each, then a grab that hangs; the thread reads what pair is left, then waits. With one frame the
+    # first pair was decided by the disconnect its failed grab was, and the thread's read raised that at once
+    webcam.frames, webcam.block_s = 2, 3.0
     source = open_rig("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=webcam)
     source.read(timeout_s=5.0)
     errors = []
-    reader = threading.Thread(target=lambda: errors.append(_raises(lambda: source.read(timeout_s=10.0))))
+    reader = threading.Thread(
+        target=lambda: errors.append(_raises(lambda: [source.read(timeout_s=10.0) for _ in range(3)])))
     reader.start()
     time.sleep(0.2)
     t0 = time.monotonic()
     source.close()
     reader.join(timeout=5.0)
     assert not reader.is_alive() and time.monotonic() - t0 < 5.0
-    assert isinstance(errors[0], RigOperationError)
+    assert type(errors[0]) is RigOperationError and "source closed" in str(errors[0])
     time.sleep(3.2)  # the hung grabs return and their threads end
 
 
@@ -855,3 +865,87 @@ def test_a_stream_that_does_not_open_is_named_without_its_password(caplog):
             source.open()
     assert "rtsp://admin:***@cam1/stream" in str(info.value)
     assert "hunter2" not in str(info.value) and "hunter2" not in caplog.text
+
+
+def test_a_stream_that_stalls_at_open_or_later_is_named_without_its_password(webcam, caplog):
+    # the open's timeout, the stall's disconnect, lingering() and close()'s warning showed the URL as given:
+    # rtsp://admin:hunter2@... in the daemon's journal and on screen
+    stream = "rtsp%3A%2F%2Fadmin%3Ahunter2%40cam1%2Fs"
+    url = f"opencv://?first={stream}&second={stream.replace('cam1', 'cam2')}&open_timeout_s=0.3&tolerance_ms=40"
+    webcam.frames, webcam.block_s = 0, 2.5  # a first grab that hangs past close()'s 2 s wait
+    t0 = time.monotonic()
+    source = create_rig_source(url, capture_factory=webcam)
+    with caplog.at_level(logging.DEBUG), pytest.raises(RigInitializationError) as at_open:
+        source.open()
+    said = [str(at_open.value), " ".join(source.lingering()), caplog.text]
+    assert "rtsp://admin:***@cam1/s" in said[0] and "rtsp://admin:***@cam2/s" in said[1]
+    time.sleep(max(0.0, t0 + 2.8 - time.monotonic()))  # the hung grabs return and their threads end
+    webcam.frames = 3  # three frames each, then a grab that hangs: a stall
+    with open_rig(url, capture_factory=webcam) as source:
+        with pytest.raises(RigDisconnectedError, match=r"delivered no frame for 0\.3 s") as stalled:
+            while True:
+                source.read(timeout_s=5.0)
+    said.append(str(stalled.value))
+    assert "rtsp://admin:***@cam1/s" in said[-1]
+    assert not [text for text in said if "hunter2" in text], said
+    time.sleep(2.6)  # the stalled grabs return and their threads end
+
+
+def test_a_live_camera_s_grab_that_fails_a_few_times_is_tried_again_and_a_run_of_failures_is_a_disconnect(webcam):
+    # a stream's hiccup or a USB frame error fails one grab; one such grab took the whole rig down (a reopen)
+    class Hiccups(_Webcam):
+        failing: set[int] = set()
+
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.left, self.grabs = 200, 0
+
+        def grab(self) -> bool:
+            self.grabs += 1
+            ok = super().grab()
+            return ok and not (self.target == 1 and self.grabs in self.failing)
+
+    Hiccups.failing = {4, 6, 7, 8}
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=Hiccups) as source:
+        pairs = [source.read(timeout_s=2.0) for _ in range(10)]
+    assert pairs[-1].frames[1].index >= 9  # it delivered on after the failed grabs
+    Hiccups.failing = set(range(4, 1000))
+    t0 = time.monotonic()
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30", capture_factory=Hiccups) as source:
+        said = r"camera 'right' \(1\) stopped delivering frames \(unplugged\?\): 10 grabs in a row failed"
+        with pytest.raises(RigDisconnectedError, match=said):
+            for _ in range(100):
+                source.read(timeout_s=2.0)
+        right = [cam for cam in webcam.made if cam.target == 1][-1]  # this open's
+    assert time.monotonic() - t0 < 5.0 and right.grabs == 3 + 10  # a frame apart, not a busy loop
+
+
+def test_an_api_this_opencv_lacks_is_said_not_an_unplugged_camera_or_a_file_it_cannot_decode(takes, monkeypatch):
+    # api=gstreamer on an OpenCV built without GStreamer: "not plugged in, busy in another program, no permission"
+    # for a webcam, "not a video OpenCV decodes" for a good video file
+    from drivers.backends import opencv
+
+    first, second, _, _ = takes[0]
+    monkeypatch.setattr(cv2.videoio_registry, "hasBackend", lambda api: api != cv2.CAP_GSTREAMER)
+    for spec in (first, "0"):
+        with pytest.raises(RigInitializationError) as info:
+            open_rig(f"opencv://?first={spec}&second={second}&api=gstreamer")
+        message = str(info.value)
+        assert f"OpenCV cannot open '{spec}': option api=gstreamer: this OpenCV has no gstreamer capture backend" \
+            in message and "api=any picks one" in message
+        assert "not a video" not in message and "plugged" not in message
+    assert opencv.missing_api("any") is None and opencv.missing_api("v4l2") is None
+
+
+@pytest.mark.parametrize(("shape", "said"), [
+    # RigPlacement refused the nominal rig naming its own field ("RigPlacement.width: must be an int in [16, 8192]")
+    ((1, 1, 3), r"the cameras deliver 1x1: the nominal rig \(no rig=\) takes 16 to 8192 pixels each way"),
+    ((8, 8), r"the cameras deliver 8x8: the nominal rig"),
+    # cvtColor's assertion (!_src.empty()) was the message
+    ((0, 64), r"camera '(left|right)' \((0|1)\) delivered an image that is not 8-bit colour or grey \(shape \(0, 64\)"),
+    ((0, 0, 3), r"delivered an image that is not 8-bit colour or grey \(shape \(0, 0, 3\), uint8\)"),
+])
+def test_frames_too_small_for_the_nominal_rig_or_empty_fail_the_open_naming_the_size(webcam, shape, said):
+    webcam.make = staticmethod(lambda width, height: np.zeros(shape, np.uint8))
+    with pytest.raises(RigInitializationError, match=said):
+        open_rig("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=webcam)

@@ -212,3 +212,15 @@ def test_the_production_link_checks_the_cameras_before_building_its_pipeline(mon
     with pytest.raises(RigInitializationError, match="no camera on socket CAM_D"):
         open_rig("depthai://?right=CAM_D")
     assert len(made) == 1 and made[0].closed
+
+
+def test_a_group_asked_of_a_link_not_started_or_closed_is_a_typed_error():
+    # an AssertionError ("start() first") reached a reader whose read raced a close() from another thread
+    from drivers import RigOperationError
+    from drivers.backends.depthai.link import DaiDeviceLink
+
+    link = DaiDeviceLink()
+    for _ in range(2):
+        with pytest.raises(RigOperationError, match="depthai link is not started, or was closed"):
+            link.next_group(0.0)
+        link.close()

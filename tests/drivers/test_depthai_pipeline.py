@@ -408,6 +408,10 @@ def test_record_a_depthai_source_and_replay_it(tmp_path):
     ("url", "word"),
     [
         ("depthai://A,B", "two-device"),
+        # an empty name opened the first device found, or the one named, as if the ',' were not there
+        ("depthai://,", r"device ',' has an empty name around ','"),
+        ("depthai://1.3,", r"device '1.3,' has an empty name"),
+        ("depthai://,,A", r"device ',,A' has an empty name"),
         ("depthai://?left=CAM_B&right=CAM_B", "same socket"),
         ("depthai://?left=CAM_Z", "left"),
         ("depthai://?fps=0", "fps"),
@@ -505,3 +509,29 @@ def test_frames_of_another_size_than_the_rig_file_name_the_device_camera_file_an
                                                  r"the size the device was asked for \(width=160&height=100\): ask "
                                                  r"for another width=/height=, one its sensors deliver$"):
             source.read(timeout_s=1.0)
+
+
+def test_a_read_waiting_when_another_thread_closes_says_the_source_closed_not_that_the_device_was_lost():
+    # it raised RigDisconnectedError ("reading from depthai device ..."): a daemon reopens a lost device, and one
+    # closing its source from another thread (a stop) was told its device was gone; sim:// and opencv:// say closed
+    import threading
+
+    link = HostPipelineLink()
+    source = open_rig(f"{URL}&policy=all", link_factory=lambda: link)
+    source.read(timeout_s=3.0)
+    errors: list[Exception] = []
+
+    def read_on() -> None:
+        try:
+            while True:
+                source.read(timeout_s=5.0)
+        except Exception as e:  # noqa: BLE001 - kept for the test to look at
+            errors.append(e)
+
+    reader = threading.Thread(target=read_on)
+    reader.start()
+    time.sleep(0.3)
+    source.close()
+    reader.join(timeout=8.0)
+    assert not reader.is_alive() and len(errors) == 1
+    assert type(errors[0]) is RigOperationError and "source closed while a read waited" in str(errors[0])

@@ -114,3 +114,11 @@ def test_the_wrappers_helpers_have_one_import_path():
 
     assert not hasattr(registry, "innermost_url") and not hasattr(registry, "RECORD_PREFIX")
     assert set(registry.__all__) == {"BACKENDS", "backend_class", "create_rig_source", "open_rig"}
+
+
+@pytest.mark.parametrize("url", [None, b"sim://", 5, Path("sim://")])
+def test_a_rig_url_that_is_not_text_is_refused_naming_it(url):
+    # the path checks and the wrapper prefixes read it as text first: AttributeError: 'NoneType' object has no
+    # attribute 'startswith', naming no URL (a config value left null)
+    with pytest.raises(RigConfigError, match=r"rig URL must be text, 'scheme://target\?options', got "):
+        create_rig_source(url)

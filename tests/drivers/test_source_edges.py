@@ -180,3 +180,14 @@ def test_a_recording_that_cannot_start_leaves_its_folder_as_it_found_it(tmp_path
     with open_rig(url, clock=ManualClock()) as source:  # space freed: the same out= records
         source.read(timeout_s=5.0)
     assert (out / MANIFEST).is_file()
+
+
+def test_a_read_or_an_iteration_after_close_says_the_source_was_closed(sim_cache):
+    # it said "is not open; call open() or use open_rig()", and that open() refuses a closed source
+    source = open_rig(f"sim://?width=64&height=48&cache={sim_cache}", clock=ManualClock())
+    source.read(timeout_s=1.0)
+    source.close()
+    source.close()  # twice: nothing more to do
+    for use in (lambda: source.read(timeout_s=0.1), lambda: next(iter(source)), source.open):
+        with pytest.raises(RigOperationError, match=r"SimRigSource was closed; open a new source"):
+            use()

@@ -300,3 +300,19 @@ def test_one_helper_decodes_a_url_part_and_refuses_escapes_that_are_not_utf8_nam
 def test_escapes_of_utf8_text_are_decoded_as_before():
     url = RigUrl.parse("replay:///data/t%C3%A9?out=%E2%82%AC")
     assert url.target == "/data/t\u00e9" and url.options == {"out": "\u20ac"}
+
+
+@pytest.mark.parametrize(("url", "said"), [
+    # urlsplit removes a tab, CR or LF from anywhere in a URL: another take played, another rate run
+    ("replay:///data/ta\tke?loop=1", "holds a tab at character 18, which URL parsing drops; remove it, or write "
+                                     "it as %09"),
+    ("sim://?fps=3\n0", "holds a line feed at character 13"),
+    ("opencv://?first=a\r.mp4&second=b.mp4", "holds a carriage return at character 18"),
+    ("sim://?fps=30\n", "holds a line feed at character 14"),
+    ("record+sim://?out=/data/t\tx", "holds a tab at character"),
+])
+def test_a_tab_or_line_break_that_url_parsing_drops_is_refused_naming_it(url, said):
+    with pytest.raises(RigConfigError) as info:
+        create_rig_source(url)
+    assert said in str(info.value)
+    assert RigUrl.parse("replay:///data/ta%09ke").target == "/data/ta\tke"  # the way to write one

@@ -22,7 +22,7 @@ import depthai as dai
 
 from drivers.backends.depthai.options import board_socket
 from drivers.backends.depthai.pipeline import build_sync_stage
-from drivers.errors import RigInitializationError
+from drivers.errors import RigInitializationError, RigOperationError
 
 log = logging.getLogger(__name__)
 
@@ -276,8 +276,10 @@ class DaiDeviceLink:
         return self._device.readCalibration()
 
     def next_group(self, timeout_s: float) -> dai.MessageGroup | None:
-        assert self._queue is not None, "start() first"
-        return self._queue.get(datetime.timedelta(seconds=max(timeout_s, 0.0)))
+        queue = self._queue  # once: close() from another thread sets it to None
+        if queue is None:  # closed, or never started: an AssertionError reached a reader racing a close
+            raise RigOperationError("depthai link is not started, or was closed")
+        return queue.get(datetime.timedelta(seconds=max(timeout_s, 0.0)))
 
     def is_running(self) -> bool:
         """The pipeline runs and its device is connected. ``getDeviceState()`` (thread-safe) also sees a device

@@ -72,7 +72,10 @@ class DepthaiOptions:
 
     @classmethod
     def from_url(cls, url: RigUrl) -> "DepthaiOptions":
-        ids = [part for part in url.target.split(",") if part]
+        ids = url.target.split(",") if url.target else []
+        if "" in ids:  # depthai://, opened the first device found, depthai://ID, the device ID: a device never named
+            raise RigConfigError(f"rig URL {url.url!r}: device {url.target!r} has an empty name around ','; give one "
+                                 "device id, or none for the first device found")
         if len(ids) > 1:
             raise RigConfigError(
                 f"rig URL {url.url!r}: two-device rigs (depthai://ID1,ID2) are not supported by this build; "

@@ -186,16 +186,21 @@ class DepthaiRigSource(RigSource):
         if link is None:
             raise RigOperationError("depthai link is not open")
         deadline = self.clock.now_ns() + int(timeout_s * 1e9)
-        with depthai_errors(f"reading from {self._where()}", RigDisconnectedError):
-            group = link.next_group(timeout_s)
-            if group is None:
-                if not link.is_running():
-                    raise RigDisconnectedError(
-                        f"{self._where()}: both cameras stopped: the device was lost or its pipeline ended"
-                    )
-                self.clock.sleep_until(deadline)  # the timeout has passed on our clock too (a ManualClock jumps)
-                return None
-            first, second = self._frames(group)
+        try:
+            with depthai_errors(f"reading from {self._where()}", RigDisconnectedError):
+                group = link.next_group(timeout_s)
+                if group is None:
+                    if not link.is_running():
+                        raise RigDisconnectedError(
+                            f"{self._where()}: both cameras stopped: the device was lost or its pipeline ended"
+                        )
+                    self.clock.sleep_until(deadline)  # the timeout has passed on our clock too (a ManualClock jumps)
+                    return None
+                first, second = self._frames(group)
+        except RigDisconnectedError:
+            if self._link is not link:  # closed by another thread meanwhile: no device was lost, nothing to reopen
+                raise RigOperationError(f"{self._where()}: source closed while a read waited for its frames") from None
+            raise
         self._pending.append(second)
         if self.pairing.policy is DropPolicy.LATEST:
             self._measure_rate([first.timestamp_ns] + self._take_queued_groups(link))
