@@ -706,3 +706,13 @@ def test_the_estimator_s_import_loads_numpy_ma_before_the_first_pair():
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "True", out.stdout
+
+
+def test_box_block_of_a_finite_box_projecting_past_float64():
+    """A finite box whose corners project past float64's pixels (NaN from ``Camera.project``) reached
+    ``int(np.floor(nan))``: numpy's bare ValueError."""
+    cam = Camera("c", 128, 128, K128)  # at the origin, looking along +z
+    box = np.array([[1e307, 0.0, 1e-5], [1e307, 0.0, 2e-5]])  # just in front of the camera, 1e307 m to its right
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert box_block(cam, box, 4) == (0, 0, 32, 32)  # unbounded projection: the whole grid
