@@ -600,11 +600,12 @@ def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
     _check_image_range(pred, target, p, t, m, data_range)
     batch_shape = np.asarray(mask).shape[:-2]
     counts = m.sum(axis=(1, 2))
-    sq = ((p - t) ** 2).sum(axis=-1)  # (N, H, W), summed over channels
+    # in units of data_range: data_range ** 2 under- or overflowed (1e-200: 0 / 0, a NaN and a warning; 1e200: inf)
+    sq = (((p - t) / data_range) ** 2).sum(axis=-1)  # (N, H, W), summed over channels
     sq = np.where(m, sq, 0.0)  # not sq * m: a NaN outside the mask would poison the sum (0 * NaN is NaN)
     mse = np.where(counts > 0, sq.sum(axis=(1, 2)) / np.maximum(counts * p.shape[-1], 1), np.nan)
     with np.errstate(divide="ignore"):
-        values = 10.0 * np.log10(data_range ** 2 / mse)
+        values = 10.0 * np.log10(1.0 / mse)
     return _per_image_result(values, counts, batch_shape)
 
 
@@ -702,7 +703,8 @@ def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
         if counts[i] == 0:
             continue
         mi = m[i].astype(np.float64)
-        per_channel = [(_ssim_map(p[i, ..., c], t[i, ..., c], mi, data_range)[m[i]]).mean()
+        # in units of data_range (L = 1), as masked_psnr: squares of 1e-200 images underflowed (0 / 0, a NaN)
+        per_channel = [(_ssim_map(p[i, ..., c] / data_range, t[i, ..., c] / data_range, mi, 1.0)[m[i]]).mean()
                        for c in range(p.shape[-1])]
         values[i] = float(np.mean(per_channel))
     return _per_image_result(values, counts, batch_shape)

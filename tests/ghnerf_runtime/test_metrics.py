@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import doctest
 import math
+import warnings
 
 import cv2
 import numpy as np
@@ -348,6 +349,19 @@ def test_image_metrics_refuse_images_outside_the_data_range(metric):
     assert math.isfinite(metric(b8 / 255.0, b8 / 255.0 * 1.005, m).value)
     with pytest.raises(ShapeError, match="at least 1x1"):
         metric(np.zeros((0, 0)), np.zeros((0, 0)), np.ones((0, 0), bool))
+
+
+@pytest.mark.parametrize("metric", [masked_psnr, masked_ssim])
+@pytest.mark.parametrize("data_range", [1e-200, 1e200])
+def test_image_metrics_at_a_data_range_whose_square_leaves_float64(metric, data_range):
+    """The scores depend on the images over data_range alone: at 1e-200 its square underflowed (0 / 0: a NaN PSNR
+    and SSIM with a RuntimeWarning), at 1e200 it overflowed (the same)."""
+    rng = np.random.default_rng(7)
+    a, b, m = rng.random((12, 12)), rng.random((12, 12)), np.ones((12, 12), bool)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scaled = metric(a * data_range, b * data_range, m, data_range=data_range).value
+    assert scaled == pytest.approx(metric(a, b, m).value, rel=1e-12)
 
 
 def test_image_metrics_on_images_smaller_than_the_ssim_window():
