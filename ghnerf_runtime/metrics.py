@@ -751,7 +751,7 @@ def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: fl
             model-input pixels first, e.g. ``keypoints.model_to_heatmap_pixels``).
         visible: ``(..., J)`` bool.
         size: heatmap ``(H, W)``, or one int for a square map.
-        sigma: Gaussian standard deviation in heatmap pixels (> 0).
+        sigma: Gaussian standard deviation in heatmap pixels (> 0, at least about 1e-162: ValueError).
 
     Returns:
         ``(..., J, H, W)`` float32.
@@ -766,12 +766,15 @@ def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: fl
     h, w = (int(size), int(size)) if np.ndim(size) == 0 else (int(size[0]), int(size[1]))
     if h < 1 or w < 1:
         raise ShapeError(f"heatmap size must be positive, got {(h, w)}")
-    if not (np.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"sigma must be a positive number, got {sigma}")
+    # below 1e-162 the 2 sigma^2 of the exponent underflows to 0: 0 / 0 on a joint's own pixel, a NaN target
+    if not (np.isfinite(sigma) and sigma > 0 and 2 * sigma * sigma > 0):
+        raise ValueError(f"sigma must be a positive number whose square float64 holds, got {sigma}")
     x = np.where(vis, joints[..., 0], 0.0)[..., None]
     y = np.where(vis, joints[..., 1], 0.0)[..., None]
-    # Separable: exp(-dx^2) * exp(-dy^2) as an outer product, cheap for any batch size.
-    gx = np.exp(-((np.arange(w) - x) ** 2) / (2 * sigma * sigma))
-    gy = np.exp(-((np.arange(h) - y) ** 2) / (2 * sigma * sigma))
+    # Separable: exp(-dx^2) * exp(-dy^2) as an outer product, cheap for any batch size. A joint 1e154 pixels
+    # off squares to inf (its map is 0, as it should be): no overflow warning for it.
+    with np.errstate(over="ignore"):
+        gx = np.exp(-((np.arange(w) - x) ** 2) / (2 * sigma * sigma))
+        gy = np.exp(-((np.arange(h) - y) ** 2) / (2 * sigma * sigma))
     maps = gy[..., :, None] * gx[..., None, :]
     return (maps * vis[..., None, None]).astype(np.float32)

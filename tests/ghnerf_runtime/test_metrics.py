@@ -403,6 +403,17 @@ def test_gaussian_heatmaps():
         gaussian_heatmaps([[2.0, 2.0]], [True], 5, sigma=0.0)
 
 
+def test_gaussian_heatmaps_at_the_ends_of_float64():
+    """A sigma of 1e-200 squared to 0 (0 / 0 on the joint's pixel: a NaN target, with a warning); a joint 1e300
+    pixels off squared to inf, a warning for its (right) all-zero map."""
+    with pytest.raises(ValueError, match="sigma must be a positive number whose square float64 holds, got 1e-200"):
+        gaussian_heatmaps([[2.0, 2.0]], [True], 5, sigma=1e-200)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        far = gaussian_heatmaps([[1e300, 2.0], [2.0, 2.0]], [True, True], 5, sigma=1.0)
+    assert np.all(far[0] == 0) and far[1].max() == 1.0
+
+
 # ------------------------------------------------------------------- properties
 @settings(max_examples=60, deadline=None)
 @given(data=st.data(), batch=st.integers(1, 3))
