@@ -35,6 +35,7 @@ from ghnerf_runtime.contract import near_far_from_box, target_inputs
 from ghnerf_runtime.errors import ConfigError, DepthRangeError, GeometryError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.orbit import axes_angle_deg, axes_pivot, in_front, orbit_centre, orbit_pivot
+from ghnerf_runtime.plain_values import is_finite_number, plain_scalar
 from ghnerf_runtime.preprocess import crop_camera, roi_from_volume
 from ghnerf_runtime.rays import (
     block_ray_uv,
@@ -168,6 +169,9 @@ def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray
     rig's up (-y), forward (+z) and right (+x) is nearest the turn's axis: for two upright cameras facing each
     other, counterclockwise seen from above (the view leaves the first camera to its right).
 
+    Raises:
+        GeometryError: ``alpha`` is not a finite number.
+
     Example:
         >>> from ghnerf_runtime.geometry import look_at
         >>> Ra, _ = look_at((-1, 0, 0), (0, 0, 3)); Rb, _ = look_at((1, 0, 0), (0, 0, 3))
@@ -178,6 +182,8 @@ def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray
         >>> np.round(slerp_rotation(Ra, Rb, 0.5)[2], 6).tolist()  # halfway: looking forward (+z), from z < 3
         [0.0, 0.0, 1.0]
     """
+    if not is_finite_number(plain_scalar(alpha)):  # a NaN gave a NaN rotation without a word
+        raise GeometryError(f"slerp_rotation: alpha must be a finite number, got {alpha!r}")
     qa, qb = _quat(R_a), _quat(R_b)
     dot = float(np.dot(qa, qb))
     if abs(dot) < np.sin(np.radians(HALF_TURN_BAND_DEG) / 2.0):  # |dot| is the cosine of half the turn
