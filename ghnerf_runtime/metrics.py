@@ -600,11 +600,12 @@ def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
     _check_image_range(pred, target, p, t, m, data_range)
     batch_shape = np.asarray(mask).shape[:-2]
     counts = m.sum(axis=(1, 2))
-    sq = ((p - t) ** 2).sum(axis=-1)  # (N, H, W), summed over channels
+    # in units of data_range: data_range ** 2 under- or overflowed (1e-200: 0 / 0, a NaN and a warning; 1e200: inf)
+    sq = (((p - t) / data_range) ** 2).sum(axis=-1)  # (N, H, W), summed over channels
     sq = np.where(m, sq, 0.0)  # not sq * m: a NaN outside the mask would poison the sum (0 * NaN is NaN)
     mse = np.where(counts > 0, sq.sum(axis=(1, 2)) / np.maximum(counts * p.shape[-1], 1), np.nan)
     with np.errstate(divide="ignore"):
-        values = 10.0 * np.log10(data_range ** 2 / mse)
+        values = 10.0 * np.log10(1.0 / mse)
     return _per_image_result(values, counts, batch_shape)
 
 
@@ -702,7 +703,8 @@ def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
         if counts[i] == 0:
             continue
         mi = m[i].astype(np.float64)
-        per_channel = [(_ssim_map(p[i, ..., c], t[i, ..., c], mi, data_range)[m[i]]).mean()
+        # in units of data_range (L = 1), as masked_psnr: squares of 1e-200 images underflowed (0 / 0, a NaN)
+        per_channel = [(_ssim_map(p[i, ..., c] / data_range, t[i, ..., c] / data_range, mi, 1.0)[m[i]]).mean()
                        for c in range(p.shape[-1])]
         values[i] = float(np.mean(per_channel))
     return _per_image_result(values, counts, batch_shape)
@@ -749,7 +751,7 @@ def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: fl
             model-input pixels first, e.g. ``keypoints.model_to_heatmap_pixels``).
         visible: ``(..., J)`` bool.
         size: heatmap ``(H, W)``, or one int for a square map.
-        sigma: Gaussian standard deviation in heatmap pixels (> 0).
+        sigma: Gaussian standard deviation in heatmap pixels (> 0, at least about 1e-162: ValueError).
 
     Returns:
         ``(..., J, H, W)`` float32.
@@ -764,12 +766,15 @@ def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: fl
     h, w = (int(size), int(size)) if np.ndim(size) == 0 else (int(size[0]), int(size[1]))
     if h < 1 or w < 1:
         raise ShapeError(f"heatmap size must be positive, got {(h, w)}")
-    if not (np.isfinite(sigma) and sigma > 0):
-        raise ValueError(f"sigma must be a positive number, got {sigma}")
+    # below 1e-162 the 2 sigma^2 of the exponent underflows to 0: 0 / 0 on a joint's own pixel, a NaN target
+    if not (np.isfinite(sigma) and sigma > 0 and 2 * sigma * sigma > 0):
+        raise ValueError(f"sigma must be a positive number whose square float64 holds, got {sigma}")
     x = np.where(vis, joints[..., 0], 0.0)[..., None]
     y = np.where(vis, joints[..., 1], 0.0)[..., None]
-    # Separable: exp(-dx^2) * exp(-dy^2) as an outer product, cheap for any batch size.
-    gx = np.exp(-((np.arange(w) - x) ** 2) / (2 * sigma * sigma))
-    gy = np.exp(-((np.arange(h) - y) ** 2) / (2 * sigma * sigma))
+    # Separable: exp(-dx^2) * exp(-dy^2) as an outer product, cheap for any batch size. A joint 1e154 pixels
+    # off squares to inf (its map is 0, as it should be): no overflow warning for it.
+    with np.errstate(over="ignore"):
+        gx = np.exp(-((np.arange(w) - x) ** 2) / (2 * sigma * sigma))
+        gy = np.exp(-((np.arange(h) - y) ** 2) / (2 * sigma * sigma))
     maps = gy[..., :, None] * gx[..., None, :]
     return (maps * vis[..., None, None]).astype(np.float32)

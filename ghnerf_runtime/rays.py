@@ -36,7 +36,7 @@ def box_block(camera: Camera, box: np.ndarray, stride: int, margin_cells: int = 
     """The grid block covering a rig box in a pinhole ``camera`` whose image is the model input.
 
     Returns ``None`` when the box is entirely behind the camera or outside its image; the full
-    grid when a corner is behind the camera (the projection is unbounded).
+    grid when a corner is behind the camera or projects past float64's range (the projection is unbounded).
 
     Raises:
         ShapeError: ``box`` is not a finite ``(2, 3)`` array.
@@ -46,13 +46,15 @@ def box_block(camera: Camera, box: np.ndarray, stride: int, margin_cells: int = 
         raise ShapeError(f"box must be a finite (2, 3) array (min and max corners), got shape {box.shape}: "
                          f"{box.tolist()}")
     gh, gw = camera.height // stride, camera.width // stride
-    pc = camera.to_camera(_box_corners(box))
-    z = pc[:, 2]
+    corners = _box_corners(box)
+    z = camera.to_camera(corners)[:, 2]
     if np.all(z <= 1e-6):
         return None
     if np.any(z <= 1e-6):
         return full_block(gh, gw)
-    uv, _ = camera.project(_box_corners(box), distort=False)
+    uv, _ = camera.project(corners, distort=False)
+    if not np.isfinite(uv).all():  # in front, but past float64's pixels (1e307 m aside at 1e-5 m): int(nan) raised
+        return full_block(gh, gw)
     lo = (uv.min(axis=0) + 0.5) / stride - 0.5  # model pixels -> grid cells (pixel-centre rule)
     hi = (uv.max(axis=0) + 0.5) / stride - 0.5
     c0, r0 = (int(np.floor(v)) - margin_cells for v in lo)

@@ -67,7 +67,7 @@ class OneEuroJoints:
 
         Raises:
             ShapeError: ``points`` is not ``(J, 3)`` or ``valid`` not ``(J,)``.
-            FrameError: ``t_s`` is neither None nor a number (a string, True).
+            FrameError: ``t_s`` is neither None nor a number (a string, True), or an integer past float64.
         """
         cfg = self.config
         x = np.asarray(points, np.float64)
@@ -79,6 +79,10 @@ class OneEuroJoints:
             return x.copy()
         if not is_real_number(plain_scalar(t_s)):  # was a bare TypeError (None, a string) or True read as 1 s
             raise FrameError(f"t_s must be a capture time in seconds (a number) or None, got {t_s!r}")
+        try:
+            t_s = float(t_s)
+        except OverflowError:  # an int past float64 (10**400): the daemon's loop skips a FrameError, not this
+            raise FrameError(f"t_s must be a capture time in seconds within float64's range, got {t_s!r}") from None
         # a non-finite joint is not reported: it must not enter (and poison) the state
         valid = valid & np.isfinite(x).all(axis=-1)
         dt = None if self._t is None else float(t_s) - self._t

@@ -662,19 +662,39 @@ def nearest_rotation(R) -> np.ndarray:
     return u @ vt
 
 
+def _look_at_vector(name: str, value) -> np.ndarray:
+    """``value`` as a finite float64 3-vector; else a GeometryError naming ``name`` (a NaN gave a NaN rotation)."""
+    try:
+        v = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        v = None
+    if v is None or v.shape != (3,) or not np.isfinite(v).all():
+        raise GeometryError(f"look_at: {name} must be a finite 3-vector, got {value!r}")
+    return v
+
+
 def look_at(eye, target, up=(0.0, -1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
     """Extrinsics ``(R, t)`` of a camera at ``eye`` looking at ``target``.
 
     ``up`` is the rig-frame direction that should appear up in the image (the rig
     frame is y-down, so the default is ``-y``).
     """
-    eye = np.asarray(eye, dtype=np.float64)
-    forward = np.asarray(target, dtype=np.float64) - eye
-    norm = np.linalg.norm(forward)
+    eye, target, up = (_look_at_vector(name, v) for name, v in (("eye", eye), ("target", target), ("up", up)))
+    with np.errstate(over="ignore", invalid="ignore"):  # eye and target 2e308 apart: refused below
+        forward = target - eye
+    if not np.isfinite(forward).all():
+        raise GeometryError(f"look_at: eye {eye.tolist()} and target {target.tolist()} are too far apart for float64")
+    with np.errstate(over="ignore"):
+        norm = np.linalg.norm(forward)
+    if norm == np.inf:  # an offset past 1e154 m: its length overflowed (a warning, then a zero direction)
+        scale = np.abs(forward).max()
+        forward, norm = forward / scale, np.linalg.norm(forward / scale)
     if norm < 1e-12:
         raise GeometryError("look_at: eye and target coincide")
     z = forward / norm
-    x = np.cross(-np.asarray(up, dtype=np.float64), z)
+    if not np.any(up):
+        raise GeometryError("look_at: up must be a direction, got (0, 0, 0)")
+    x = np.cross(-up, z)
     if np.linalg.norm(x) < 1e-9:
         raise GeometryError("look_at: viewing direction is parallel to up")
     x /= np.linalg.norm(x)

@@ -1,6 +1,8 @@
 """Camera model: checked against OpenCV (projectPoints, undistortPoints) and geometry identities."""
 from __future__ import annotations
 
+import warnings
+
 import cv2
 import numpy as np
 import pytest
@@ -179,6 +181,29 @@ def test_look_at_axes():
         look_at(eye, eye)
     with pytest.raises(GeometryError):
         look_at([0, 0, 0], [0, -1, 0])  # looking straight up
+
+
+@pytest.mark.parametrize("args, named", [
+    (((0.0, 0.0, np.nan), (0.0, 0.0, 1.0)), "eye must be a finite 3-vector"),
+    (((0.0, 0.0, 0.0), (np.inf, 0.0, 1.0)), "target must be a finite 3-vector"),
+    (((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (np.nan, -1.0, 0.0)), "up must be a finite 3-vector"),
+    (((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 0.0, 0.0)), "up must be a direction"),
+    (((-1e308, 0.0, 0.0), (1e308, 0.0, 1.0)), "too far apart for float64"),
+])
+def test_look_at_names_what_has_no_direction(args, named):
+    """A NaN or infinite eye, target or up gave a NaN rotation without a word; a zero up was "parallel to up"."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(GeometryError, match=named):
+            look_at(*args)
+
+
+def test_look_at_a_target_past_1e154_m():
+    """Its distance overflowed (a RuntimeWarning), the direction came out zero and the camera "parallel to up"."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        R, t = look_at((0.0, 0.0, 0.0), (1e300, 0.0, 1e300))
+    np.testing.assert_allclose(R[2], [2 ** -0.5, 0.0, 2 ** -0.5], atol=1e-12)
 
 
 def test_intrinsics_from_fov():

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from ghnerf_runtime.config import FrameCheckConfig, Joints3DConfig, RoiConfig, TrackingConfig
-from ghnerf_runtime.errors import ConfigError, ShapeError
+from ghnerf_runtime.errors import ConfigError, GeometryError, ShapeError
 from ghnerf_runtime.estimator import check_crop, coarse_detail_share, crop_statistics
 from ghnerf_runtime.geometry import Camera, look_at
 from ghnerf_runtime.joints3d import depth_centroid_joints, query_grid, triangulate_joints, volumetric_joints
@@ -565,7 +565,6 @@ def test_interpolated_camera_keeps_square_pixels_between_images_of_different_sha
 def test_interpolated_camera_of_one_shape_is_unchanged_and_extrapolation_keeps_a_positive_focal_length():
     from dataclasses import replace
 
-    from ghnerf_runtime.errors import GeometryError
     from ghnerf_runtime.novel_view import fit_intrinsics
 
     a, b = _cams()
@@ -706,3 +705,21 @@ def test_the_estimator_s_import_loads_numpy_ma_before_the_first_pair():
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "True", out.stdout
+
+
+def test_box_block_of_a_finite_box_projecting_past_float64():
+    """A finite box whose corners project past float64's pixels (NaN from ``Camera.project``) reached
+    ``int(np.floor(nan))``: numpy's bare ValueError."""
+    cam = Camera("c", 128, 128, K128)  # at the origin, looking along +z
+    box = np.array([[1e307, 0.0, 1e-5], [1e307, 0.0, 2e-5]])  # just in front of the camera, 1e307 m to its right
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert box_block(cam, box, 4) == (0, 0, 32, 32)  # unbounded projection: the whole grid
+
+
+@pytest.mark.parametrize("alpha", [float("nan"), float("inf"), None])
+def test_slerp_rotation_names_an_alpha_that_is_no_finite_number(alpha):
+    """A NaN alpha gave a NaN rotation without a word (None a bare TypeError)."""
+    a, b = _cams()
+    with pytest.raises(GeometryError, match=r"slerp_rotation: alpha must be a finite number, got (nan|inf|None)"):
+        slerp_rotation(a.R, b.R, alpha)

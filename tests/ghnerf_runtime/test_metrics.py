@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import doctest
 import math
+import warnings
 
 import cv2
 import numpy as np
@@ -350,6 +351,19 @@ def test_image_metrics_refuse_images_outside_the_data_range(metric):
         metric(np.zeros((0, 0)), np.zeros((0, 0)), np.ones((0, 0), bool))
 
 
+@pytest.mark.parametrize("metric", [masked_psnr, masked_ssim])
+@pytest.mark.parametrize("data_range", [1e-200, 1e200])
+def test_image_metrics_at_a_data_range_whose_square_leaves_float64(metric, data_range):
+    """The scores depend on the images over data_range alone: at 1e-200 its square underflowed (0 / 0: a NaN PSNR
+    and SSIM with a RuntimeWarning), at 1e200 it overflowed (the same)."""
+    rng = np.random.default_rng(7)
+    a, b, m = rng.random((12, 12)), rng.random((12, 12)), np.ones((12, 12), bool)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scaled = metric(a * data_range, b * data_range, m, data_range=data_range).value
+    assert scaled == pytest.approx(metric(a, b, m).value, rel=1e-12)
+
+
 def test_image_metrics_on_images_smaller_than_the_ssim_window():
     """1x1 and 3x3 images: the window is renormalised over the pixels there are, never NaN."""
     one = masked_ssim(np.full((1, 1), 0.5), np.full((1, 1), 0.6), np.ones((1, 1), bool))
@@ -387,6 +401,17 @@ def test_gaussian_heatmaps():
     np.testing.assert_allclose(sq[0], sq[0].T)
     with pytest.raises(ValueError):
         gaussian_heatmaps([[2.0, 2.0]], [True], 5, sigma=0.0)
+
+
+def test_gaussian_heatmaps_at_the_ends_of_float64():
+    """A sigma of 1e-200 squared to 0 (0 / 0 on the joint's pixel: a NaN target, with a warning); a joint 1e300
+    pixels off squared to inf, a warning for its (right) all-zero map."""
+    with pytest.raises(ValueError, match="sigma must be a positive number whose square float64 holds, got 1e-200"):
+        gaussian_heatmaps([[2.0, 2.0]], [True], 5, sigma=1e-200)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        far = gaussian_heatmaps([[1e300, 2.0], [2.0, 2.0]], [True, True], 5, sigma=1.0)
+    assert np.all(far[0] == 0) and far[1].max() == 1.0
 
 
 # ------------------------------------------------------------------- properties

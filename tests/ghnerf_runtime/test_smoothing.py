@@ -368,7 +368,8 @@ def test_no_capture_time_reports_the_joints_raw_and_restarts_the_filter():
     np.testing.assert_array_equal(f(1 / FPS, np.zeros((2, 3)), ok), np.zeros((2, 3)))  # restarted: raw again
 
 
-@pytest.mark.parametrize("bad", ["0.5", True, b"1", [0.1]])
+@pytest.mark.parametrize("bad", ["0.5", True, b"1", [0.1], 10**400],  # 10**400: a bare OverflowError
+                         ids=["text", "bool", "bytes", "list", "int-past-float64"])
 def test_a_time_that_is_no_number_is_a_frame_error_naming_it(bad):
     with pytest.raises(FrameError, match=re.escape(repr(bad))):
         OneEuroJoints(SmoothingConfig())(bad, np.zeros((2, 3)), np.ones(2, bool))
