@@ -31,8 +31,8 @@ two in a row, spread between their neighbours, where the other cameras' stamps s
 ground truth are delivered unchanged on the first pass. Each further ``loop``
 pass shifts timestamps by the recording's span (plus one frame period: the median step between a camera's
 successive distinct stamps, else 1/30 s) and indices by the
-per-camera index span (last - first + 1), so both keep increasing per camera. A take that was not closed cleanly plays without the rows
-whose files are missing, empty or cut short
+per-camera index span (last - first + 1), so both keep increasing per camera. A take that was not closed cleanly
+plays without the rows whose files are missing, empty or cut short
 (:func:`~drivers.backends.recording_format.broken_rows_split`; the warning names the first). Layout and
 validation: docs/recording-format.md.
 
@@ -244,8 +244,8 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
     (:func:`_out_of_line`): a clock reset back one to three frames brings one back within a period. A camera's
     first and last frames have one neighbour: mended one step from it where the other cameras say so
     (:func:`_bad_end`) and recorded at that frame's time (:func:`_recorded_beyond`), unless their clocks went back
-    there too (:func:`_on_their_reset`); ``MENDED_RUN`` of them in
-    a row likewise (:func:`_mend_end_runs`)."""
+    there too (:func:`_on_their_reset`) or one jumped with it (:func:`_jumped_at_the_end`);
+    ``MENDED_RUN`` of them in a row likewise (:func:`_mend_end_runs`)."""
     period_ns = _mending_period_ns(rows, mine, others)
     # runs first: the lone test takes a run's first (back, then ahead)
     mended = _mend_runs(mine, stamps, others, period_ns)
@@ -261,6 +261,7 @@ def _mend_bad_stamps(rows: list[FrameRow], mine: list[int], stamps: dict[int, in
         in_line = stamps[near] <= stamps[far] if end == mine[0] else stamps[far] <= stamps[near]
         if (in_line and _bad_end(stamps[end], stamps[near], stamps[far], elsewhere)
                 and _recorded_beyond(elsewhere, stamps[near], last, period_ns)
+                and not _jumped_at_the_end(stamps[end], stamps[near], last, others, stamps, period_ns)
                 and not _on_their_reset(stamps[end], _across_a_reset(others, stamps, last, stamps[near], period_ns),
                                         period_ns)):
             mended.append((end, stamps[end]))
@@ -412,6 +413,19 @@ def _jumped_with_them(here_ns: int, low_ns: int, high_ns: int, others: list[list
     return any(jump(a, b) or jump(b, a) for a, b in successive)
 
 
+def _jumped_at_the_end(end_ns: int, near_ns: int, last: bool, others: list[list[int]], stamps: dict[int, int],
+                       period_ns: int) -> bool:
+    """Whether another camera (``others``: rows in recorded order) jumped with a camera's first (``last``) stamp
+    ``end_ns``: two successive stamps of its, in that order, within ``period_ns`` of the end stamp and of its
+    neighbour ``near_ns``. Two cameras' clocks paused at their last frame, a third camera's take ended before: its
+    last stamp lay nearer their neighbours, and both ends were mended as bad stamps (session 73 review). In that
+    order: in any order, the other cameras' stamps going on in line lie by a stamp a frame or two off and its
+    neighbour (a first stamp 47 ms late was kept)."""
+    before_ns, after_ns = (near_ns, end_ns) if last else (end_ns, near_ns)
+    return any(abs(stamps[a] - before_ns) <= period_ns and abs(stamps[b] - after_ns) <= period_ns
+               for theirs in others for a, b in zip(theirs, theirs[1:]))
+
+
 def _bad_end(end_ns: int, near_ns: int, far_ns: int, elsewhere_ns: list[int]) -> bool:
     """Whether a camera's first (or last) stamp ``end_ns`` is a bad one: the step to the next (previous) stamp
     ``near_ns`` goes the wrong way or is over ``END_STEPS`` times the step on to ``far_ns``, and the other cameras'
@@ -503,7 +517,8 @@ class ReplayRigSource(RigSource):
         self._unloaded: dict[Frame, tuple[FrameRow, int]] = {}  # frames pushed by _catch_up, image not read yet
 
     @classmethod
-    def from_url(cls, url: RigUrl, *, clock: Clock | None = None, pairing: PairingConfig | None = None) -> "ReplayRigSource":
+    def from_url(cls, url: RigUrl, *, clock: Clock | None = None,
+                 pairing: PairingConfig | None = None) -> "ReplayRigSource":
         if not url.target:
             raise RigConfigError(f"rig URL {url.url!r}: give the recording directory, e.g. replay:///data/take1")
         speed = _parse_speed(url)

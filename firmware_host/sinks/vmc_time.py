@@ -41,7 +41,9 @@ leave the timeline at every frame, stepping on at a steady pace (within ``JUMP_F
 their steps too: a camera slowed to under a quarter of its rate, or a first step of 1 ms (a hiccup), left it at
 every frame for good, T creeping on by the stale interval. Only frames leaving one after another keep a pace, and
 the steps of odd frames the stream then comes back below are dropped: two glitches an hour apart stepped alike, and
-until session 73 that hour became the interval, which T moved on by at the next jump.
+until session 73 that hour became the interval, which T moved on by at the next jump. So are those of odd frames
+before one that goes back (a steady pace never does), and a step from a frame that went back keeps no pace: at 10
+or 5 fps a glitched first stamp, the stream, then a glitch an hour on stepped alike, and that hour moved T on.
 
 Seconds since the first frame, not since boot: OSC floats are float32, whose steps grow with T (0.25 ms after an
 hour, 1 ms after four, 16 ms after 36 hours). From 2**19 s (six days) on a step is 62.5 ms, so two frames of a
@@ -107,7 +109,7 @@ class VmcClock:
         self._line_settles_at = 2  # stamps that settle it: a pause from it is added to T (more after a way back)
         self._new: Optional[_Timeline] = None  # where the stamps went when they left it, until decided
         self._new_frames = 0  # frames in a row on ``_new``
-        self._leave_step_us = 0  # the forward step into the last frame that left a timeline (0: it went back)
+        self._leave_step_us = 0  # the forward step into the last frame that left a timeline (0: none, -1: back)
         self._left_forward = False  # every frame off the line so far stepped forward
         self._first_us = 0  # the first frame's stamp
         self._last_us = 0  # the previous frame's stamp
@@ -185,6 +187,10 @@ class VmcClock:
         """The first frame off the line: one frame interval on, the stamps' new timeline kept."""
         if self._new is None:
             self._steps_on_the_line = tuple(self._steps_us)
+        elif capture_time_us < self._last_us:
+            # a steady pace never goes back: steps of frames off the line before it were glitches stepping alike
+            # (two an hour apart after the stream's frame, at 5 fps): that hour moved T on here (session 73 review)
+            self._steps_us = deque(self._steps_on_the_line, maxlen=STEPS_KEPT)
         self._left_forward = capture_time_us > self._last_us and (self._new is None or self._left_forward)
         self._new = _Timeline(capture_time_us, self._last_t_us + self._jump_step_us(capture_time_us))
         self._new_frames = 1
@@ -204,8 +210,11 @@ class VmcClock:
         ``JUMP_FRAMES`` times the interval), so the interval can follow it; a glitch and the stamp back from it
         are no steady pace. Counted once the frame is placed: two steps off the line alike may be two glitched
         stamps alike (an hour apart: counted first, that hour was the interval at once, and T followed it)."""
-        before_us, self._leave_step_us = self._leave_step_us, max(step_us, 0)
-        if before_us and step_us > 0 and step_us <= JUMP_FRAMES * before_us and before_us <= JUMP_FRAMES * step_us:
+        before_us = self._leave_step_us
+        # a step from a frame that went back may be from a glitch to the stream, then one an hour on: alike (at 10 fps
+        # the hour was the interval, T then an hour on at a repeat of it; session 73 review): no pace to count from
+        self._leave_step_us = -1 if step_us <= 0 else 0 if before_us < 0 else step_us
+        if before_us > 0 and step_us > 0 and step_us <= JUMP_FRAMES * before_us and before_us <= JUMP_FRAMES * step_us:
             self._steps_us.append(step_us)
 
     def _back_on_the_line(self, capture_time_us: int) -> int:

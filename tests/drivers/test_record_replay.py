@@ -1578,6 +1578,28 @@ def test_a_reset_at_one_camera_s_end_beyond_the_other_camera_s_frames_is_not_men
     assert len(played) == len(left_ms) + len(right_ms)
 
 
+@pytest.mark.parametrize("last", [True, False], ids=["last", "first"])
+def test_a_pause_of_two_cameras_at_their_end_beside_a_third_that_stopped_is_not_mended(last, caplog):
+    """Left's and right's clocks paused 2.25 s at their last frame (before their first), a third camera's take ended
+    (began) before it: its end stamp lay nearer their neighbours, so each one's end was mended as a bad stamp, the
+    pause gone. Right jumped with left there (and left with right): a pause, played as recorded (session 73 review)."""
+    from drivers.backends.recording_format import FrameRow
+    from drivers.backends.replay import playback_order
+
+    ms, pause_ms = 1_000_000, 2_250
+    stamps_ms = {"left": [2, 101, 200 + pause_ms], "right": [5, 104, 205 + pause_ms], "middle": [3, 102]}
+    if not last:
+        stamps_ms = {"left": [0, 100 + pause_ms, 200 + pause_ms], "right": [5, 105 + pause_ms, 205 + pause_ms],
+                     "middle": [103 + pause_ms, 203 + pause_ms]}
+    rows = [FrameRow(cam, i, (_HOUR_MS + t) * ms, f"images/{cam}/{i:08d}.png")
+            for cam, ts in stamps_ms.items() for i, t in enumerate(ts)]
+    with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"):
+        played = playback_order(rows[::-1], "take")
+    assert not any("bad stamp" in r.getMessage() for r in caplog.records), caplog.records
+    assert sorted((r.camera, r.index, r.timestamp_ns // ms - _HOUR_MS) for r in played) == sorted(
+        (cam, i, t) for cam, ts in stamps_ms.items() for i, t in enumerate(ts))
+
+
 def test_a_bad_last_stamp_beside_a_camera_that_reset_is_still_mended(caplog):
     """Both clocks went back mid-take, then left's last stamp came an hour ahead: right's stamps across its reset lie
     nowhere near it, so it is a bad stamp, mended one step on from its neighbour."""

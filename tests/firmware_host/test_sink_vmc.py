@@ -811,3 +811,22 @@ def test_the_steps_of_glitches_the_stream_came_back_from_are_not_the_interval() 
     assert all(b >= a for a, b in zip(times, times[1:]))
     assert times[-1] <= len(stamps) * _FRAME_US / 1e6, times[-1]
     assert clock.jumps_back == 1
+
+
+
+@pytest.mark.parametrize("frame_us, odd", [
+    (100_000, [_HOUR_US + 100_000, 0, _HOUR_US + 300_000, 2 * _HOUR_US + 300_000, 0]),  # seed 903: one back
+    (100_000, [_HOUR_US + 100_000, 0, _HOUR_US + 300_000, 2 * _HOUR_US + 300_000, 2 * _HOUR_US + 300_000]),  # 6862
+    (200_000, [2 * _HOUR_US, _HOUR_US + 400_000, _HOUR_US + 600_000, 2 * _HOUR_US + 600_000, 3 * _HOUR_US]),  # 14700
+], ids=["then-back", "then-repeated", "from-the-stream-then-back"])
+def test_glitches_stepping_alike_off_the_line_do_not_move_t_by_their_step(frame_us: int, odd: list[int]) -> None:
+    # A 10 (5) fps camera, the nominal interval 1/30 s: a glitched first or second stamp, the stream's next frame an
+    # hour from it, a glitch an hour on again. The two hour-long steps off the line counted as a steady pace (a slow
+    # camera's), and that hour as the interval moved T on at the next frame back, or took a repeat of the glitch for
+    # the stream back on the line: T ran hours ahead for good (the property check at 10 and 5 fps; session 73
+    # review). A step from a frame that went back is no pace, and a steady pace never goes back.
+    stamps = odd + [odd[2] + i * frame_us for i in range(1, 31)]
+    times, _ = _times(stamps)
+    assert all(b >= a for a, b in zip(times, times[1:]))
+    assert times[-1] < 10, times
+    assert np.allclose(np.diff(times[-5:]), frame_us / 1e6)
