@@ -209,14 +209,25 @@ def _refuse_not_utf8(url: str, where: str, raw: str, decoded: str) -> None:
 _DROPPED = {"\t": ("a tab", "%09"), "\r": ("a carriage return", "%0D"), "\n": ("a line feed", "%0A")}
 
 
+def dropped_characters(url: str) -> str | None:
+    """Why ``url`` is not read as written where it holds a tab, CR or LF (the first, named with its place), None
+    where it holds none: ``urlsplit`` drops them, so ``replay:///data/ta<TAB>ke`` played ``/data/take`` and
+    ``fps=3<LF>0`` ran at 30 (a value pasted from a file). The one rule for rig and sink URLs."""
+    char = next((char for char in url if char in _DROPPED), None)
+    if char is None:
+        return None
+    what, escape = _DROPPED[char]
+    # its place in the URL as messages show it: a password before it is *** there (none where it is in one)
+    at = redact_url(url).find(char)
+    where = f" at character {at + 1}" if at >= 0 else ""
+    return f"holds {what}{where}, which URL parsing drops; remove it, or write it as {escape}"
+
+
 def _refuse_dropped_characters(url: str) -> None:
-    """:class:`RigConfigError` naming the first tab, CR or LF in ``url``: ``urlsplit`` drops them, so
-    ``replay:///data/ta<TAB>ke`` played ``/data/take`` and ``fps=3<LF>0`` ran at 30 (a value pasted from a file)."""
-    at = next((k for k, char in enumerate(url) if char in _DROPPED), None)
-    if at is not None:
-        what, escape = _DROPPED[url[at]]
-        raise RigConfigError(f"rig URL {redact_url(url)!r}: holds {what} at character {at + 1}, which URL parsing "
-                             f"drops; remove it, or write it as {escape}")
+    """:class:`RigConfigError` naming the first tab, CR or LF in ``url`` (:func:`dropped_characters`)."""
+    problem = dropped_characters(url)
+    if problem is not None:
+        raise RigConfigError(f"rig URL {redact_url(url)!r}: {problem}")
 
 
 @dataclass

@@ -184,7 +184,7 @@ class OpenCVOptions:
             if not value:
                 raise fail(f"option {name}= (a device path or index, a video file or a stream URL) is required")
         for name, value in (("first", first), ("second", second)):
-            if is_device_index(value) and int(value) > MAX_DEVICE_INDEX:  # type: ignore[arg-type]
+            if is_device_index(value) and _index_too_large(value):  # type: ignore[arg-type]
                 # cv2.VideoCapture takes a C int: a larger index was a bare cv2.error naming no option
                 raise fail(f"option {name}={value!r}: a device index is at most {MAX_DEVICE_INDEX}")
         if _same_camera(first, second):  # type: ignore[arg-type]
@@ -231,7 +231,7 @@ def _same_camera(first: str, second: str) -> bool:
     def resolved(spec: str) -> str:
         if "://" in spec:
             return spec
-        return os.path.realpath(f"/dev/video{int(spec)}" if is_device_index(spec) else spec)  # int(): 00 is 0
+        return os.path.realpath(f"/dev/video{device_index(spec)}" if is_device_index(spec) else spec)  # 00 is 0
     return resolved(first) == resolved(second)
 
 
@@ -243,7 +243,19 @@ def is_device_index(spec: str) -> bool:
 
 def capture_target(spec: str) -> int | str:
     """What ``cv2.VideoCapture`` is given for ``first=`` / ``second=``: a device index as an int."""
-    return int(spec) if is_device_index(spec) else spec
+    return device_index(spec) if is_device_index(spec) else spec
+
+
+def device_index(spec: str) -> int:
+    """A device index (:func:`is_device_index`) as an int, its leading zeros dropped first: ``int()`` refuses text
+    of over 4300 digits (a bare ValueError naming no option), ``00...01`` included."""
+    return int(spec.lstrip("0") or "0")
+
+
+def _index_too_large(spec: str) -> bool:
+    """A device index over :data:`MAX_DEVICE_INDEX`, told by its digits before any ``int()`` (:func:`device_index`)."""
+    digits = spec.lstrip("0")
+    return len(digits) > len(str(MAX_DEVICE_INDEX)) or device_index(spec) > MAX_DEVICE_INDEX
 
 
 def is_video_file(spec: str) -> bool:

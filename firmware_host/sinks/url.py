@@ -12,8 +12,8 @@ from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
 from urllib.parse import SplitResult, parse_qs, urlsplit
 
-from drivers.url import UrlPartError, decimal_number, decode_url_part, not_utf8_escapes, whole_number, \
-    with_kept_bytes_escaped, yes_no
+from drivers.url import UrlPartError, decimal_number, decode_url_part, dropped_characters, not_utf8_escapes, \
+    whole_number, with_kept_bytes_escaped, yes_no
 from firmware_host.errors import SinkConfigError
 from ghnerf_runtime.plain_values import plain_scalar
 
@@ -108,6 +108,9 @@ def parse_url(url: str) -> SinkUrl:
         parts = urlsplit(url)
     except (ValueError, TypeError) as e:  # e.g. "Invalid IPv6 URL": an unclosed [
         raise SinkConfigError(url, "url", url, f"cannot be parsed: {e}") from e
+    dropped = dropped_characters(url)
+    if dropped is not None:  # urlsplit removed it: file:///tmp/a<TAB>b.jsonl wrote /tmp/ab.jsonl, baud=96<LF>00 9600
+        raise SinkConfigError(url, "url", url, dropped)
     if not parts.scheme:
         raise SinkConfigError(url, "scheme", "", "expected e.g. serial://, usb://, udp://, vmc://, file://, memory://")
     if "#" in url:  # urlsplit drops a fragment: file:///tmp/run#2/joints.jsonl would write to /tmp/run

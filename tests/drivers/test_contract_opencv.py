@@ -194,6 +194,9 @@ def test_a_rig_file_s_note_is_logged_at_open_once_by_sources_sharing_a_logged_se
     # cv2.VideoCapture takes a C int: a bare cv2.error ("Overload resolution failed") at open named no option
     ("first=0&second=2147483648", r"option second='2147483648': a device index is at most 2147483647"),
     ("first=99999999999999999999&second=1", r"option first='99999999999999999999': a device index is at most"),
+    # int() refuses text of over 4300 digits: a bare ValueError ("Exceeds the limit") named no option
+    ("first=0&second=" + "9" * 5000, r"option second='9{5000}': a device index is at most 2147483647"),
+    ("first=1&second=" + "0" * 5000 + "1", "the same camera"),  # device 1, leading zeros and all
     ("first=0&second=00", "the same camera"),  # both open index 0
     ("first=0&second=1&fsp=30", r"unknown option\(s\) \['fsp'\]"),
     ("first=0&second=1&fourcc=MJPEG", "four characters"),

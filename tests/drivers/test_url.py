@@ -310,6 +310,9 @@ def test_escapes_of_utf8_text_are_decoded_as_before():
     ("opencv://?first=a\r.mp4&second=b.mp4", "holds a carriage return at character 18"),
     ("sim://?fps=30\n", "holds a line feed at character 14"),
     ("record+sim://?out=/data/t\tx", "holds a tab at character"),
+    # counted in the URL as shown: the password before it is *** there (it was counted in the URL as given)
+    ("opencv://?first=rtsp%3A%2F%2Fa%3Ahunter2%40h%2Fs&second=x\t.mp4", "holds a tab at character 54,"),
+    ("opencv://?first=a.mp4&second=b.mp4&password=hunt\ter2", "holds a tab, which URL parsing drops"),
 ])
 def test_a_tab_or_line_break_that_url_parsing_drops_is_refused_naming_it(url, said):
     with pytest.raises(RigConfigError) as info:

@@ -229,3 +229,16 @@ def test_vmc_takes_facing_and_mirror(url: str, kw: dict, facing: str, mirror: bo
         assert sink.view == AvatarView(facing=facing, mirror=mirror)  # type: ignore[attr-defined]
     finally:
         sink.close()
+
+
+@pytest.mark.parametrize(("url", "said"), [
+    # urlsplit removes a tab, CR or LF from anywhere in a URL: another file written, another rate or port used
+    ("file:///tmp/a\tb.jsonl", "holds a tab at character 14, which URL parsing drops; remove it, or write it as %09"),
+    ("serial:///dev/ttyACM0?baud=96\n00", "holds a line feed at character 30"),
+    ("udp://127.0.0.1:98\r70", "holds a carriage return at character 19"),
+    ("memory://?queue=8\n", "holds a line feed at character 18"),
+])
+def test_a_tab_or_line_break_that_url_parsing_drops_is_refused_as_rig_urls_refuse_it(url: str, said: str) -> None:
+    with pytest.raises(SinkConfigError) as info:
+        open_sink(url)
+    assert (info.value.field, info.value.value) == ("url", url) and said in str(info.value)
