@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from urllib.parse import parse_qsl, quote, unquote, urlsplit
 
 from drivers.errors import RigConfigError
-from ghnerf_runtime.path_check import NOT_UTF8
+from ghnerf_runtime.path_check import NOT_UTF8, shown
 
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
@@ -114,6 +114,13 @@ def redact_url(text: str) -> str:
             value = quote(redact_url(plain), safe="*")
         pieces.append(key + eq + value)
     return head + sep + before + question + "&".join(pieces) + hash_ + fragment
+
+
+def shown_url(text: str) -> str:
+    """``text`` as a one-line message shows it: :func:`redact_url`'s form, written as ``repr`` where it holds a
+    character a terminal or log would hide, mangle or break the line at (a tab, CR, LF, NUL, a byte that is not
+    UTF-8: :func:`ghnerf_runtime.path_check.shown`). The sinks' and ``ghnerf-listen``'s messages name URLs so."""
+    return shown(redact_url(text))
 
 
 def redact_location(netloc: str) -> str:

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 from typing import Any, Optional, TextIO
 from urllib.parse import parse_qs, urlsplit
 
-from drivers.url import UrlPartError, decode_url_part, redact_location, redact_url
+from drivers.url import UrlPartError, decode_url_part, dropped_characters, redact_location, shown_url
 from firmware_host.addresses import ipv4_first
 from firmware_host.errors import shown_value
 from firmware_host.protocol.constants import NO_FRAME_SEQ, PROTOCOL_VERSION, SCENE_FLAGS, CoordFrame, Fault, Flags, JointSet, Units
@@ -197,15 +197,19 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
 
     ``ephemeral``: accept port 0, a port the system picks (read it from ``.address``); the command line
     refuses it, since nothing would tell the sender which port to use. Its errors show the URL without any password
-    (``drivers.url.redact_url``), as the sinks' do: a terminal's scrollback and a shell's log keep them.
+    (``drivers.url.redact_url``), as the sinks' do: a terminal's scrollback and a shell's log keep them; and on one
+    line (``drivers.url.shown_url``: escaped where it holds a control character).
     """
     if not url:  # a "$UNSET" in a script: was ": the listener reads udp:// or serial://", the URL shown as nothing
         raise ListenError("the URL is empty: give udp://[HOST]:PORT or serial:///dev/DEVICE?baud=N")
-    shown = redact_url(url)
+    shown = shown_url(url)
     try:
         parts = urlsplit(url)
     except ValueError as e:  # e.g. "Invalid IPv6 URL": an unclosed [
         raise ListenError(f"{shown}: cannot be parsed: {e}") from None
+    dropped = dropped_characters(url)
+    if dropped is not None:  # urlsplit removed it: udp://:98<LF>70 listened on 9870 (the sinks' rule)
+        raise ListenError(f"{shown}: {dropped}")
     if "#" in url:
         # urlsplit drops a fragment, and with it what followed: serial:///dev/by-id/x#1?baud=9600 opened
         # /dev/by-id/x at 115200. The sinks refuse it too (firmware_host.sinks.url.parse_url)
