@@ -5,7 +5,7 @@ with ``raise ... from e`` so callers only need to catch these.
 """
 from __future__ import annotations
 
-from drivers.url import REDACTED, is_secret_key, redact_location, redact_url
+from drivers.url import REDACTED, is_secret_key, redact_location, redact_url, shown_url
 
 
 class FirmwareHostError(Exception):
@@ -33,14 +33,14 @@ def shown_value(field: str, value: object) -> object:
 
 class SinkConfigError(SinkError, ValueError):
     """A sink URL or keyword is invalid; the message names the URL, field and value, without the passwords the
-    URL may carry (``drivers.url.redact_url``: messages reach logs and the journal). ``url`` and ``value`` keep
-    what was given."""
+    URL may carry (``drivers.url.redact_url``: messages reach logs and the journal), on one line (``shown_url``: a
+    control character escaped). ``url`` and ``value`` keep what was given."""
 
     def __init__(self, url: str, field: str, value: object, reason: str) -> None:
         self.url = url
         self.field = field
         self.value = value
-        super().__init__(f"{redact_url(url)}: invalid {field}={shown_value(field, value)!r}: {reason}")
+        super().__init__(f"{shown_url(url)}: invalid {field}={shown_value(field, value)!r}: {reason}")
 
 
 class SinkUnavailableError(SinkError):
@@ -51,7 +51,7 @@ class SinkUnavailableError(SinkError):
     def __init__(self, url: str, reason: str) -> None:
         self.url = url
         self.reason = reason
-        super().__init__(f"{redact_url(url)}: unavailable: {reason}")
+        super().__init__(f"{shown_url(url)}: unavailable: {reason}")
 
 
 class SinkWriteError(SinkError):
@@ -60,7 +60,7 @@ class SinkWriteError(SinkError):
 
     def __init__(self, url: str, reason: str) -> None:
         self.url = url
-        super().__init__(f"{redact_url(url)}: write failed: {reason}")
+        super().__init__(f"{shown_url(url)}: write failed: {reason}")
 
 
 class SinkClosedError(SinkError):

@@ -19,7 +19,7 @@ from typing import Any, Iterable, Optional
 
 import numpy as np
 
-from drivers.url import redact_url
+from drivers.url import redact_url, shown_url
 from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch, fixes, \
     status_words
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
@@ -289,7 +289,7 @@ def _sinks_down(sinks: dict[str, Any], room: int) -> str:
 def _why(url: str, error: Optional[str], unknown: str = "not connected") -> str:
     """A sink's error without the URL (as its errors show it: redacted) and the ``unavailable:`` (``write
     failed:``) its exception message starts with; ``unknown`` where it has none."""
-    why = (error or unknown).removeprefix(f"{redact_url(url)}: ")
+    why = (error or unknown).removeprefix(f"{shown_url(url)}: ")
     return why.removeprefix("unavailable: ").removeprefix("write failed: ")
 
 

@@ -43,7 +43,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Optional
 
-from drivers.url import redact_url
+from drivers.url import shown_url
 from firmware_host.errors import SinkClosedError, SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.constants import Flags
 from firmware_host.protocol.messages import JointFrame
@@ -94,8 +94,9 @@ class Sink(ABC):
 
     def __init__(self, url: str, options: SinkOptions) -> None:
         self.url = url
-        #: How logs, the thread name and repr show the URL: without its passwords (they reach the journal).
-        self.shown = redact_url(url)
+        #: How logs, the thread name and repr show the URL: without its passwords (they reach the journal), on one
+        #: line (a control character escaped).
+        self.shown = shown_url(url)
         self.options = options
         self._cond = threading.Condition()
         self._stop = threading.Event()

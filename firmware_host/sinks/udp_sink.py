@@ -33,7 +33,7 @@ import threading
 import time
 from typing import Any, Optional
 
-from drivers.url import redact_url
+from drivers.url import shown_url
 from firmware_host.addresses import ipv4_first
 from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.constants import MsgType
@@ -113,7 +113,7 @@ class DatagramLink:
 
     def __init__(self, url: str, host: str, port: int, resolve_s: float = RESOLVE_S) -> None:
         self.url, self.host, self.port = url, host, port
-        self.shown = redact_url(url)  # as logs show it: without a password
+        self.shown = shown_url(url)  # as logs show it: without a password, on one line
         self.resolve_s = resolve_s
         self._sock: Optional[socket.socket] = None
         self._family = 0

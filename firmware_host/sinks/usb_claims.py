@@ -18,7 +18,7 @@ from __future__ import annotations
 import threading
 from typing import NamedTuple, Optional
 
-from drivers.url import redact_url
+from drivers.url import shown_url
 from firmware_host.errors import SinkUnavailableError
 from firmware_host.sinks.usb_select import BoardName
 
@@ -58,7 +58,7 @@ class UsbBoardTaken(SinkUnavailableError):
         self.name, self.holder, self.taken = name, holder, taken
         super().__init__(url, (
             f"interface {taken.interface} of the {taken.vid_pid} board at {taken.board} is held by another sink of "
-            f"this daemon, {redact_url(holder.url)}, which names it {name_text(holder.name)}; this sink names it "
+            f"this daemon, {shown_url(holder.url)}, which names it {name_text(holder.name)}; this sink names it "
             f"{name_text(name)}: two names of one board; remove one of the two sinks or name another board (this "
             "one takes the board once the other lets it go: a reload that removes it, the board moved)"))
 

@@ -128,3 +128,40 @@ def test_a_stalled_sink_logs_its_stall_and_its_end_without_its_password(caplog):
     stall_lines = [r.getMessage() for r in caplog.records if "stall" in r.getMessage()]
     assert len(stall_lines) >= 2 and all("scripted://viewer:***@here?token=***" in m for m in stall_lines)
     assert SECRET not in caplog.text and "abc" not in caplog.text
+
+
+@pytest.mark.parametrize("url", [
+    f"udp://viewer:{SECRET}@127.0.0.1:90\n00",  # refused: a line feed (URL parsing drops it)
+    f"file:///tmp/a\r\nb.jsonl?token={SECRET}",
+    f"memory://a\x0bb?password={SECRET}",  # a vertical tab, which URL parsing keeps: an unknown (secret) parameter
+])
+def test_a_refused_sink_url_with_a_line_break_is_named_on_one_line_without_its_password(url):
+    """A log line per error: the URL as written split it (a line feed, a vertical tab), the rest of the message
+    on a line of its own; it is shown escaped now, as a rig URL's message shows it (``drivers.url.shown_url``)."""
+    with pytest.raises(SinkConfigError) as refused:
+        open_sink(url).close()
+    text = str(refused.value)
+    assert len(text.splitlines()) == 1 and SECRET not in text, text
+    assert text.startswith(repr(url.replace(SECRET, "***")) + ": invalid "), text
+
+
+@pytest.mark.parametrize("error, said", [(SinkUnavailableError, "unavailable"), (SinkWriteError, "write failed")])
+def test_a_link_error_names_a_url_with_a_control_character_on_one_line(error, said):
+    e = error(f"scripted://viewer:{SECRET}@here\x0b2?token={SECRET}", "gone")
+    assert str(e) == f"'scripted://viewer:***@here\\x0b2?token=***': {said}: gone", str(e)
+
+
+def test_a_sink_names_itself_on_one_line_where_its_url_holds_a_control_character():
+    sink = _DownSink(f"scripted://viewer:{SECRET}@here\x0b2")
+    assert repr(sink) == "<_DownSink 'scripted://viewer:***@here\\x0b2'>"
+
+
+def test_the_status_line_gives_a_down_sink_s_reason_without_its_url_where_the_url_holds_a_control_character():
+    """The daemon's status line names the sink, then its error less the URL the error starts with: the one the
+    errors show (escaped), or the URL came twice."""
+    from firmware_host.daemon.health import Health
+
+    url = f"memory://viewer:{SECRET}@a\x0bb"
+    line = Health(rig_url="sim://").status_line({url: {"state": "down",
+                                                       "last_error": str(SinkUnavailableError(url, "gone"))}})
+    assert line.endswith(" down: gone"), line
