@@ -16,7 +16,7 @@ from pathlib import Path
 from urllib.parse import quote, unquote
 
 from drivers.errors import RigConfigError
-from drivers.url import RigUrl, redact_url, unquote_keeping_bytes
+from drivers.url import RigUrl, shown_url, unquote_keeping_bytes
 from drivers.wrappers import WRAPPER_FILE_OPTIONS, innermost_url, wrapper_prefixes
 from ghnerf_runtime.path_check import path_problem, shown
 
@@ -104,7 +104,7 @@ def check_url_paths(url: str) -> None:
     problem = url_path_problem(url)
     if problem is not None:
         # redacted as every other rig URL error is: a stream's password beside the file would reach the log
-        raise RigConfigError(f"rig URL {shown(redact_url(url))}: {problem}")
+        raise RigConfigError(f"rig URL {shown_url(url)}: {problem}")
 
 
 def url_path_problem(url: str) -> str | None:
