@@ -51,10 +51,11 @@ from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancesto
 from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stderr
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
+from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, dumps_rig, lens_fold_warning,
-                                     load_rig, loads_rig, log_warnings_and_notes, save_rig, write_bytes_atomic,
-                                     write_text_atomic)
+                                     load_rig, loads_rig, log_warnings_and_notes, save_rig, volume_reach_problem_from,
+                                     write_bytes_atomic, write_text_atomic)
 from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser"]
@@ -215,6 +216,18 @@ def _volume(text: str | None) -> WorkingVolume | None:
     except (ValueError, RuntimeErrorBase) as e:
         raise UsageError(f"--volume must be six numbers xmin,ymin,zmin,xmax,ymax,zmax (metres, rig frame), "
                          f"min < max, got {text!r}") from e
+
+
+def _solve_volume(text: str | None) -> WorkingVolume | None:
+    """``solve``'s ``--volume``, checked before the detection by the rig file's reach rule, seen from the rig frame's
+    origin: the solved cameras are not known yet, and stand within a few metres of it (on the floor below the pair)."""
+    volume = _volume(text)
+    if volume is None:
+        return None
+    origin = Camera("origin", 640, 480, K=np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]))
+    if problem := volume_reach_problem_from(volume, [origin]):
+        raise UsageError(f"--volume {text}: {problem}")
+    return volume
 
 
 def _cameras(text: str | None) -> list[str] | None:
@@ -635,6 +648,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     previous = {out: _previous_path(out, "--out"), report_path: _previous_path(report_path, "--report")}
     _check_kept_apart(previous, {"--out": out, "--report": report_path})
     _stream_name(args.rig_id, MAX_RIG_ID_LEN, "--rig-id")
+    volume = _solve_volume(args.volume)  # before any image is read, as the rig file would refuse it after the solve
     cameras = _cameras(args.cameras)
     recorded = read_camera_order(args.images)
     _refuse_reversed_order(cameras, recorded, args.images)
@@ -673,7 +687,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          "(ghcal capture --floor names it 'floor')")
     solution = solve_rig(board, views, names, lens=args.lens, floor_view=args.floor_view,
                          board_thickness_m=args.board_thickness, camera_height_m=args.camera_height,
-                         pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=_volume(args.volume),
+                         pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=volume,
                          rig_id=args.rig_id, tangential=not args.no_tangential)
     # the rig file's text made (and checked) first; then the previous rig and report kept (copies: rig.prev.json,
     # rig.report.prev.json), then the report, so the rig file is never newer than its report; if the rig file's
