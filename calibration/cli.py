@@ -647,6 +647,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
         raise UsageError(f"--report {report_path} is the rig file (--out {out}): give the report another path")
     previous = {out: _previous_path(out, "--out"), report_path: _previous_path(report_path, "--report")}
     _check_kept_apart(previous, {"--out": out, "--report": report_path})
+    board_path = Path(args.board) if args.board else Path(args.images) / BOARD_FILE
+    _refuse_out_among_inputs({"--out": out, "--report": report_path}, {"the board file read (--board)": board_path})
     _stream_name(args.rig_id, MAX_RIG_ID_LEN, "--rig-id")
     volume = _solve_volume(args.volume)  # before any image is read, as the rig file would refuse it after the solve
     cameras = _cameras(args.cameras)
@@ -880,6 +882,16 @@ def _previous_path(out: Path, flag: str) -> Path:
     return prev
 
 
+def _refuse_out_among_inputs(outputs: Mapping[str, Path], inputs: Mapping[str, Path]) -> None:
+    """Refuse an output path that is one of the run's input files (resolved: ``./b.json`` is ``b.json``), before
+    anything is written: ``import a.yml --extrinsics b.json --out b.json`` replaced the extrinsics it read.
+    ``outputs``: flag -> path; ``inputs``: what the input is ("the file being imported") -> path."""
+    for flag, out in outputs.items():
+        for what, path in inputs.items():
+            if out.resolve() == path.resolve():
+                raise UsageError(f"{flag} {out} is {what} ({path}): give {flag} another path")
+
+
 def _check_kept_apart(previous: dict[Path, Path], others: dict[str, Path]) -> None:
     """Refuse a run where a previous file would be kept on top of another file it reads or writes
     (``--report rig.prev.json``; ``import calib.prev.yml --out calib.yml`` copied the old rig over its input)."""
@@ -950,8 +962,8 @@ def cmd_import(args: argparse.Namespace) -> int:
 
     source = Path(args.file)
     out = _output_path(args.out, "--out", "rig file")
-    if out.exists() and out.resolve() == source.resolve():
-        raise UsageError(f"--out {out} is the file being imported: give the rig file another path")
+    _refuse_out_among_inputs({"--out": out}, {"the file being imported": source} |
+                             ({"the extrinsics read (--extrinsics)": Path(args.extrinsics)} if args.extrinsics else {}))
     previous = {out: _previous_path(out, "--out")}
     _check_kept_apart(previous, {"FILE": source} | ({"--extrinsics": Path(args.extrinsics)} if args.extrinsics else {}))
     if args.camera_height is None and (args.pitch is not None or args.roll is not None):

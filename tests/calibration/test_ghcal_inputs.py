@@ -28,3 +28,37 @@ def test_solve_refuses_a_volume_the_rig_file_refuses_before_reading_images(tmp_p
     err = capsys.readouterr().err
     assert f"--volume {volume}" in err or f"got {volume!r}" in err, err
     assert words in err and "--out" not in err, err
+
+
+def test_import_refuses_an_out_that_is_the_extrinsics_file(tmp_path, capsys, monkeypatch):
+    from calibration.render import example_rig
+    from tests.calibration.test_ghcal_import_export import _write_stereo_calib_of
+
+    intrinsics, extrinsics = _write_stereo_calib_of(example_rig(), tmp_path, square_m=1.0)
+    before = extrinsics.read_bytes()
+    monkeypatch.chdir(tmp_path)  # ./extrinsics.yml and extrinsics.yml: one file
+    argv = ["import", str(intrinsics), "--extrinsics", "./extrinsics.yml", "--out", "extrinsics.yml",
+            "--image-size", "960x600"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--out extrinsics.yml is the extrinsics read (--extrinsics)" in err, err
+    assert extrinsics.read_bytes() == before and not (tmp_path / "extrinsics.prev.yml").exists()
+
+
+@pytest.mark.parametrize("flag", ["--out", "--report"])
+@pytest.mark.parametrize("board_given", [True, False])
+def test_solve_refuses_an_output_that_is_the_board_file(tmp_path, capsys, monkeypatch, flag, board_given):
+    monkeypatch.setattr(cli, "detect_folder", _no_detection)
+    images = tmp_path / "cap"
+    for cam in ("left", "right"):
+        (images / cam).mkdir(parents=True)
+    board = images / "board.json"
+    board.write_text('{"squares_x": 9}\n')  # never read: the refusal comes first
+    monkeypatch.chdir(tmp_path)
+    argv = ["solve", "--images", "cap", "--out", "r.json", "--camera-height", "1.4", flag, "./cap/board.json"]
+    if board_given:
+        argv += ["--board", "cap/board.json"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"{flag} cap/board.json is the board file read (--board)" in err, err
+    assert board.read_text() == '{"squares_x": 9}\n'
