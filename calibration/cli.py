@@ -274,8 +274,9 @@ def cmd_board(args: argparse.Namespace) -> int:
         # later solve would be scaled wrong
         try:
             same = load_board(spec) == board
-        except CalibrationError:
-            same = False
+        except CalibrationError as e:  # said why: it was called "another board", its fault not named
+            raise UsageError(f"{e} (the board.json in --out, not loaded: it may hold the square size measured on "
+                             "the print): fix it, or pass --force to replace it") from e
         if not same:
             raise UsageError(f"{spec} exists and defines another board (measured on the print?): give it as "
                              f"--board {spec} to print it again, or --force to replace it")

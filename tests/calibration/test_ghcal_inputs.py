@@ -62,3 +62,23 @@ def test_solve_refuses_an_output_that_is_the_board_file(tmp_path, capsys, monkey
     err = capsys.readouterr().err
     assert f"{flag} cap/board.json is the board file read (--board)" in err, err
     assert board.read_text() == '{"squares_x": 9}\n'
+
+
+@pytest.mark.parametrize("text, words", [
+    ('{"squares_x": 9,}', "not a JSON file: Expecting property name"),
+    ('{"squares_x": "nine"}', "squares_y: missing"),
+])
+def test_board_names_why_an_existing_board_file_does_not_load(tmp_path, capsys, text, words):
+    spec = tmp_path / "board.json"
+    spec.write_text(text)
+    assert cli.main(["board", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{spec}: {words}" in err and "--force" in err and "defines another board" not in err, err
+    assert spec.read_text() == text and not (tmp_path / "board.png").exists()
+
+
+def test_board_names_an_unreadable_board_file(tmp_path, capsys):
+    (tmp_path / "board.json").mkdir()  # a folder of that name: read by no one, whoever runs the test
+    assert cli.main(["board", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'board.json'}: cannot read the board file" in err, err
