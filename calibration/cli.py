@@ -51,10 +51,11 @@ from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancesto
 from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stderr
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
+from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, dumps_rig, lens_fold_warning,
-                                     load_rig, loads_rig, log_warnings_and_notes, save_rig, write_bytes_atomic,
-                                     write_text_atomic)
+                                     load_rig, loads_rig, log_warnings_and_notes, save_rig, volume_reach_problem_from,
+                                     write_bytes_atomic, write_text_atomic)
 from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser"]
@@ -217,6 +218,18 @@ def _volume(text: str | None) -> WorkingVolume | None:
                          f"min < max, got {text!r}") from e
 
 
+def _solve_volume(text: str | None) -> WorkingVolume | None:
+    """``solve``'s ``--volume``, checked before the detection by the rig file's reach rule, seen from the rig frame's
+    origin: the solved cameras are not known yet, and stand within a few metres of it (on the floor below the pair)."""
+    volume = _volume(text)
+    if volume is None:
+        return None
+    origin = Camera("origin", 640, 480, K=np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]))
+    if problem := volume_reach_problem_from(volume, [origin]):
+        raise UsageError(f"--volume {text}: {problem}")
+    return volume
+
+
 def _cameras(text: str | None) -> list[str] | None:
     if text is None:
         return None
@@ -261,8 +274,9 @@ def cmd_board(args: argparse.Namespace) -> int:
         # later solve would be scaled wrong
         try:
             same = load_board(spec) == board
-        except CalibrationError:
-            same = False
+        except CalibrationError as e:  # said why: it was called "another board", its fault not named
+            raise UsageError(f"{e} (the board.json in --out, not loaded: it may hold the square size measured on "
+                             "the print): fix it, or pass --force to replace it") from e
         if not same:
             raise UsageError(f"{spec} exists and defines another board (measured on the print?): give it as "
                              f"--board {spec} to print it again, or --force to replace it")
@@ -634,7 +648,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
         raise UsageError(f"--report {report_path} is the rig file (--out {out}): give the report another path")
     previous = {out: _previous_path(out, "--out"), report_path: _previous_path(report_path, "--report")}
     _check_kept_apart(previous, {"--out": out, "--report": report_path})
+    board_path = Path(args.board) if args.board else Path(args.images) / BOARD_FILE
+    _refuse_out_among_inputs({"--out": out, "--report": report_path}, {"the board file read (--board)": board_path})
     _stream_name(args.rig_id, MAX_RIG_ID_LEN, "--rig-id")
+    volume = _solve_volume(args.volume)  # before any image is read, as the rig file would refuse it after the solve
     cameras = _cameras(args.cameras)
     recorded = read_camera_order(args.images)
     _refuse_reversed_order(cameras, recorded, args.images)
@@ -673,7 +690,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          "(ghcal capture --floor names it 'floor')")
     solution = solve_rig(board, views, names, lens=args.lens, floor_view=args.floor_view,
                          board_thickness_m=args.board_thickness, camera_height_m=args.camera_height,
-                         pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=_volume(args.volume),
+                         pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=volume,
                          rig_id=args.rig_id, tangential=not args.no_tangential)
     # the rig file's text made (and checked) first; then the previous rig and report kept (copies: rig.prev.json,
     # rig.report.prev.json), then the report, so the rig file is never newer than its report; if the rig file's
@@ -866,6 +883,16 @@ def _previous_path(out: Path, flag: str) -> Path:
     return prev
 
 
+def _refuse_out_among_inputs(outputs: Mapping[str, Path], inputs: Mapping[str, Path]) -> None:
+    """Refuse an output path that is one of the run's input files (resolved: ``./b.json`` is ``b.json``), before
+    anything is written: ``import a.yml --extrinsics b.json --out b.json`` replaced the extrinsics it read.
+    ``outputs``: flag -> path; ``inputs``: what the input is ("the file being imported") -> path."""
+    for flag, out in outputs.items():
+        for what, path in inputs.items():
+            if out.resolve() == path.resolve():
+                raise UsageError(f"{flag} {out} is {what} ({path}): give {flag} another path")
+
+
 def _check_kept_apart(previous: dict[Path, Path], others: dict[str, Path]) -> None:
     """Refuse a run where a previous file would be kept on top of another file it reads or writes
     (``--report rig.prev.json``; ``import calib.prev.yml --out calib.yml`` copied the old rig over its input)."""
@@ -936,8 +963,8 @@ def cmd_import(args: argparse.Namespace) -> int:
 
     source = Path(args.file)
     out = _output_path(args.out, "--out", "rig file")
-    if out.exists() and out.resolve() == source.resolve():
-        raise UsageError(f"--out {out} is the file being imported: give the rig file another path")
+    _refuse_out_among_inputs({"--out": out}, {"the file being imported": source} |
+                             ({"the extrinsics read (--extrinsics)": Path(args.extrinsics)} if args.extrinsics else {}))
     previous = {out: _previous_path(out, "--out")}
     _check_kept_apart(previous, {"FILE": source} | ({"--extrinsics": Path(args.extrinsics)} if args.extrinsics else {}))
     if args.camera_height is None and (args.pitch is not None or args.roll is not None):

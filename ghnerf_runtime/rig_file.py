@@ -169,6 +169,7 @@ __all__ = [
     "skew_problem",
     "distortion_problem",
     "volume_reach_problem",
+    "volume_reach_problem_from",
     "lens_fold_warning",
     "rig_warnings",
     "log_warnings_and_notes",
@@ -747,8 +748,14 @@ def volume_reach_problem(rig: Rig) -> str | None:
     farther than :data:`~ghnerf_runtime.contract.MAX_DEPTH_M` from the camera along one of its axes, where
     ``near_far_from_box`` refuses it (``DepthRangeError``): on every pair, since a pair with no subject tracked
     sweeps the whole volume."""
-    lo, hi = rig.volume.min_corner, rig.volume.max_corner
-    for cam in rig.cameras:
+    return volume_reach_problem_from(rig.volume, rig.cameras)
+
+
+def volume_reach_problem_from(volume: WorkingVolume, cameras: Collection) -> str | None:
+    """:func:`volume_reach_problem` for ``volume`` seen from ``cameras`` (each with ``name``, ``K``, ``R``, ``t``):
+    the rule, for a tool that checks a volume before it has the rig's cameras (``ghcal solve --volume``)."""
+    lo, hi = volume.min_corner, volume.max_corner
+    for cam in cameras:
         reach = box_reach(cam, np.stack([lo, hi]), MAX_NEAR_FAR_MARGIN_M)
         if not reach <= MAX_DEPTH_M:
             return (f"from {lo.tolist()} to {hi.tolist()} reaches {reach:.6g} m from camera {cam.name!r} (grown by "

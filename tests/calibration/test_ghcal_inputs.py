@@ -1,0 +1,84 @@
+"""``ghcal``'s inputs checked before any work (session 73): ``solve --volume`` by the rig file's rules before an image
+is read, a ``board.json`` that does not load named with why, and ``--out`` refused where it is one of the inputs."""
+from __future__ import annotations
+
+import pytest
+
+from calibration import cli
+
+
+def _no_detection(*args, **kwargs):
+    raise AssertionError("the images were read before --volume was checked")
+
+
+@pytest.mark.parametrize("volume, words", [
+    ("-1,-2,0.5,1,0.1,2e4", "MAX_DEPTH_M"),  # the rig file refuses it (volume_reach_problem)
+    ("0,0,2,1,1,1", "min < max"),
+])
+def test_solve_refuses_a_volume_the_rig_file_refuses_before_reading_images(tmp_path, capsys, monkeypatch, volume,
+                                                                           words):
+    monkeypatch.setattr(cli, "detect_folder", _no_detection)
+    monkeypatch.setattr(cli, "read_camera_order", _no_detection)
+    images = tmp_path / "cap"
+    for cam in ("left", "right"):
+        (images / cam).mkdir(parents=True)
+    argv = ["solve", "--images", str(images), "--out", str(tmp_path / "r.json"), "--camera-height", "1.4",
+            f"--volume={volume}"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"--volume {volume}" in err or f"got {volume!r}" in err, err
+    assert words in err and "--out" not in err, err
+
+
+def test_import_refuses_an_out_that_is_the_extrinsics_file(tmp_path, capsys, monkeypatch):
+    from calibration.render import example_rig
+    from tests.calibration.test_ghcal_import_export import _write_stereo_calib_of
+
+    intrinsics, extrinsics = _write_stereo_calib_of(example_rig(), tmp_path, square_m=1.0)
+    before = extrinsics.read_bytes()
+    monkeypatch.chdir(tmp_path)  # ./extrinsics.yml and extrinsics.yml: one file
+    argv = ["import", str(intrinsics), "--extrinsics", "./extrinsics.yml", "--out", "extrinsics.yml",
+            "--image-size", "960x600"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--out extrinsics.yml is the extrinsics read (--extrinsics)" in err, err
+    assert extrinsics.read_bytes() == before and not (tmp_path / "extrinsics.prev.yml").exists()
+
+
+@pytest.mark.parametrize("flag", ["--out", "--report"])
+@pytest.mark.parametrize("board_given", [True, False])
+def test_solve_refuses_an_output_that_is_the_board_file(tmp_path, capsys, monkeypatch, flag, board_given):
+    monkeypatch.setattr(cli, "detect_folder", _no_detection)
+    images = tmp_path / "cap"
+    for cam in ("left", "right"):
+        (images / cam).mkdir(parents=True)
+    board = images / "board.json"
+    board.write_text('{"squares_x": 9}\n')  # never read: the refusal comes first
+    monkeypatch.chdir(tmp_path)
+    argv = ["solve", "--images", "cap", "--out", "r.json", "--camera-height", "1.4", flag, "./cap/board.json"]
+    if board_given:
+        argv += ["--board", "cap/board.json"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"{flag} cap/board.json is the board file read (--board)" in err, err
+    assert board.read_text() == '{"squares_x": 9}\n'
+
+
+@pytest.mark.parametrize("text, words", [
+    ('{"squares_x": 9,}', "not a JSON file: Expecting property name"),
+    ('{"squares_x": "nine"}', "squares_y: missing"),
+])
+def test_board_names_why_an_existing_board_file_does_not_load(tmp_path, capsys, text, words):
+    spec = tmp_path / "board.json"
+    spec.write_text(text)
+    assert cli.main(["board", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{spec}: {words}" in err and "--force" in err and "defines another board" not in err, err
+    assert spec.read_text() == text and not (tmp_path / "board.png").exists()
+
+
+def test_board_names_an_unreadable_board_file(tmp_path, capsys):
+    (tmp_path / "board.json").mkdir()  # a folder of that name: read by no one, whoever runs the test
+    assert cli.main(["board", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'board.json'}: cannot read the board file" in err, err
