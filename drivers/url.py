@@ -268,6 +268,8 @@ class RigUrl:
 
     @classmethod
     def parse(cls, url: str) -> "RigUrl":
+        if isinstance(url, str):  # first: urlsplit reads "sim:/<TAB>/" as a URL, so name the tab, not the form
+            _refuse_dropped_characters(url)
         if not isinstance(url, str) or "://" not in url:
             # redacted: urlsplit reads "rtsp:/<TAB>/user:pass@cam" as a URL with a password
             raise RigConfigError(f"rig URL must look like 'scheme://target?options', got {redact_url(url)!r}")
@@ -275,7 +277,6 @@ class RigUrl:
             parts = urlsplit(url)
         except ValueError as e:  # e.g. an unclosed '[' reads as a broken IPv6 host
             raise RigConfigError(f"rig URL {redact_url(url)!r} cannot be parsed: {e}") from None
-        _refuse_dropped_characters(url)
         if "#" in url:  # urlsplit would drop the fragment: record into, or play, another directory
             raise RigConfigError(
                 f"rig URL {redact_url(url)!r}: '#' starts a URL fragment ({'#' + parts.fragment!r}), which rig URLs do not "

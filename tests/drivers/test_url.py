@@ -334,3 +334,11 @@ def test_a_secret_that_url_parsing_reads_past_a_dropped_character_is_not_shown(u
         create_rig_source(url)
     assert "hunter2" not in str(info.value), str(info.value)
     assert "hunter2" not in redact_url(url) and "***" in redact_url(url)
+
+
+@pytest.mark.parametrize("url", ["sim:/\t/?fps=30", "rtsp:\r\n//user:hunter2@cam/s"])
+def test_a_dropped_character_inside_the_scheme_separator_is_named(url):
+    """urlsplit reads these as URLs (it drops the tab, CR or LF): named as the sinks and ghnerf-listen name it, not
+    as a text without '://'."""
+    with pytest.raises(RigConfigError, match="which URL parsing drops"):
+        RigUrl.parse(url)
