@@ -95,9 +95,13 @@ def redact_url(text: str) -> str:
     URLs nested in option values (``opencv://?first=rtsp%3A%2F%2Fuser%3Apass%40cam``). Anything else is
     returned as written, so text without a secret comes back unchanged.
     """
-    if not isinstance(text, str) or "://" not in text:
+    if not isinstance(text, str):
         return text
-    head, sep, rest = text.partition("://")
+    # "://" as urlsplit reads it: it drops a tab, CR or LF first, so "rtsp:/<TAB>/user:pass@cam" holds a password
+    scheme_sep = _SCHEME_SEP.search(text)
+    if scheme_sep is None:
+        return text
+    head, sep, rest = text[:scheme_sep.start()], scheme_sep.group(), text[scheme_sep.end():]
     netloc = re.match(r"[^/?#]*", rest).group()  # as urlsplit takes it, without its ValueErrors (a broken host)
     rest = redact_location(netloc) + rest[len(netloc):]
     before, question, query = rest.partition("?")
@@ -108,12 +112,21 @@ def redact_url(text: str) -> str:
     for piece in query.split("&"):
         key, eq, value = piece.partition("=")
         plain = unquote(value)
-        if eq and is_secret_key(unquote(key)):
+        if eq and is_secret_key(unquote(_without_dropped(key))):  # "pass<TAB>word=" is read as password=
             value = REDACTED
-        elif "://" in plain and redact_url(plain) != plain:
+        elif _SCHEME_SEP.search(plain) and redact_url(plain) != plain:
             value = quote(redact_url(plain), safe="*")
         pieces.append(key + eq + value)
     return head + sep + before + question + "&".join(pieces) + hash_ + fragment
+
+
+#: A URL's "://", with the tabs, CRs and LFs urlsplit drops (:data:`_DROPPED`) allowed inside it.
+_SCHEME_SEP = re.compile(r":[\t\r\n]*/[\t\r\n]*/")
+
+
+def _without_dropped(text: str) -> str:
+    """``text`` without the tabs, CRs and LFs ``urlsplit`` drops: the key it reads."""
+    return text.translate({ord(char): None for char in _DROPPED})
 
 
 def shown_url(text: str) -> str:
@@ -255,13 +268,15 @@ class RigUrl:
 
     @classmethod
     def parse(cls, url: str) -> "RigUrl":
+        if isinstance(url, str):  # first: urlsplit reads "sim:/<TAB>/" as a URL, so name the tab, not the form
+            _refuse_dropped_characters(url)
         if not isinstance(url, str) or "://" not in url:
-            raise RigConfigError(f"rig URL must look like 'scheme://target?options', got {url!r}")
+            # redacted: urlsplit reads "rtsp:/<TAB>/user:pass@cam" as a URL with a password
+            raise RigConfigError(f"rig URL must look like 'scheme://target?options', got {redact_url(url)!r}")
         try:
             parts = urlsplit(url)
         except ValueError as e:  # e.g. an unclosed '[' reads as a broken IPv6 host
             raise RigConfigError(f"rig URL {redact_url(url)!r} cannot be parsed: {e}") from None
-        _refuse_dropped_characters(url)
         if "#" in url:  # urlsplit would drop the fragment: record into, or play, another directory
             raise RigConfigError(
                 f"rig URL {redact_url(url)!r}: '#' starts a URL fragment ({'#' + parts.fragment!r}), which rig URLs do not "

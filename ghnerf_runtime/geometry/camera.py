@@ -666,7 +666,7 @@ def _look_at_vector(name: str, value) -> np.ndarray:
     """``value`` as a finite float64 3-vector; else a GeometryError naming ``name`` (a NaN gave a NaN rotation)."""
     try:
         v = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an int past float64 (10 ** 400)
         v = None
     if v is None or v.shape != (3,) or not np.isfinite(v).all():
         raise GeometryError(f"look_at: {name} must be a finite 3-vector, got {value!r}")

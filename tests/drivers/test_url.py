@@ -2,7 +2,7 @@
 import pytest
 
 from drivers import RigConfigError, create_rig_source
-from drivers.url import RigUrl, UrlPartError, decode_url_part
+from drivers.url import RigUrl, UrlPartError, decode_url_part, redact_url
 
 
 def test_parse_scheme_target_and_options():
@@ -319,3 +319,26 @@ def test_a_tab_or_line_break_that_url_parsing_drops_is_refused_naming_it(url, sa
         create_rig_source(url)
     assert said in str(info.value)
     assert RigUrl.parse("replay:///data/ta%09ke").target == "/data/ta\tke"  # the way to write one
+
+
+@pytest.mark.parametrize("url", [
+    # urlsplit reads these as a password (it drops the tab, CR or LF), so their refusal must hide it too
+    "rtsp:/\t/user:hunter2@cam/s",
+    "rtsp:\r\n//user:hunter2@cam/s",
+    "sim://?pass\tword=hunter2",
+    "sim://?token\n=hunter2",
+    "opencv://?first=rtsp:/\t/user:hunter2@cam&second=b.mp4",
+])
+def test_a_secret_that_url_parsing_reads_past_a_dropped_character_is_not_shown(url):
+    with pytest.raises(RigConfigError) as info:
+        create_rig_source(url)
+    assert "hunter2" not in str(info.value), str(info.value)
+    assert "hunter2" not in redact_url(url) and "***" in redact_url(url)
+
+
+@pytest.mark.parametrize("url", ["sim:/\t/?fps=30", "rtsp:\r\n//user:hunter2@cam/s"])
+def test_a_dropped_character_inside_the_scheme_separator_is_named(url):
+    """urlsplit reads these as URLs (it drops the tab, CR or LF): named as the sinks and ghnerf-listen name it, not
+    as a text without '://'."""
+    with pytest.raises(RigConfigError, match="which URL parsing drops"):
+        RigUrl.parse(url)

@@ -112,6 +112,8 @@ def test_serial_json_lines_over_a_pty():
                                 "drops; remove it, or write it as %0A"),
     ("serial:///dev/null?baud=96\t00", "holds a tab at character 27"),
     ("udp://viewer:s3cret@127.0.0.1:98\r70", "'udp://viewer:***@127.0.0.1:98\\r70': holds a carriage return"),
+    # urlsplit reads past the tab to a password: hidden in the refusal too (redact_url matched '://' as written)
+    ("udp:/\t/viewer:s3cret@127.0.0.1:9870", "'udp:/\\t/viewer:***@127.0.0.1:9870': holds a tab at character 6"),
 ])
 def test_bad_urls_are_one_line_exit_2(url, message, capsys):
     assert listen.main([url, "--seconds", "0.1"]) == 2

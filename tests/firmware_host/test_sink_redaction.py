@@ -165,3 +165,13 @@ def test_the_status_line_gives_a_down_sink_s_reason_without_its_url_where_the_ur
     line = Health(rig_url="sim://").status_line({url: {"state": "down",
                                                        "last_error": str(SinkUnavailableError(url, "gone"))}})
     assert line.endswith(" down: gone"), line
+
+
+@pytest.mark.parametrize("url", [
+    f"udp:/\t/viewer:{SECRET}@127.0.0.1:9000",  # urlsplit drops the tab: a password it reads, refused for the tab
+    f"udp://127.0.0.1:9000?pass\nword={SECRET}",
+])
+def test_a_sink_url_refused_for_a_dropped_character_hides_the_secret_url_parsing_reads_past_it(url):
+    with pytest.raises(SinkConfigError) as refused:
+        open_sink(url).close()
+    assert SECRET not in str(refused.value) and "***" in str(refused.value), str(refused.value)

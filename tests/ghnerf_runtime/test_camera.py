@@ -189,6 +189,9 @@ def test_look_at_axes():
     (((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (np.nan, -1.0, 0.0)), "up must be a finite 3-vector"),
     (((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 0.0, 0.0)), "up must be a direction"),
     (((-1e308, 0.0, 0.0), (1e308, 0.0, 1.0)), "too far apart for float64"),
+    # an int past float64: a bare OverflowError (int too large to convert to float), naming no argument
+    (((0, 0, 10 ** 400), (0, 0, 1)), "eye must be a finite 3-vector"),
+    (((0, 0, 0), (0, 0, 1), (0, -10 ** 400, 0)), "up must be a finite 3-vector"),
 ])
 def test_look_at_names_what_has_no_direction(args, named):
     """A NaN or infinite eye, target or up gave a NaN rotation without a word; a zero up was "parallel to up"."""
