@@ -41,7 +41,7 @@ from dataclasses import replace
 import numpy as np
 
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
-from ghnerf_runtime.cli.output_path import OutputPathError, existing_ancestor, ready_output
+from ghnerf_runtime.cli.output_path import OutputPathError, existing_ancestor, model_file_clash, ready_output
 from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig
 from ghnerf_runtime.errors import ConfigError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_MATTE_STAGE, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
@@ -722,6 +722,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.sequences * args.frames <= args.warmup:
             print(f"ghnerf-bench: error: {args.sequences} x {args.frames} pairs leave none after --warmup "
                   f"{args.warmup}: nothing would be timed", file=sys.stderr)
+            return 2
+        if clash := model_file_clash({"--json": args.json}, args.model_dir, f"--model-dir {args.model_dir}"):
+            print(f"ghnerf-bench: error: {clash}", file=sys.stderr)
             return 2
         if args.json:  # written after the whole bench: its place is settled first
             args.json = ready_output(args.json, "--json")
