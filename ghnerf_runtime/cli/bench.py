@@ -736,6 +736,12 @@ def main(argv: list[str] | None = None) -> int:
             text = strict_json(report, indent=2)  # NaN becomes null
             write_text_atomic(args.json, text + "\n")
         return 0
+    except BrokenPipeError:  # `ghnerf-bench ... | head`: was "error: [Errno 32] Broken pipe" and status 2
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
+        if args.command == "runtime" and args.json:  # asked for, and the bench ended before writing it
+            print("ghnerf-bench: stopped: stdout was closed; no report written", file=sys.stderr)
+            return 2
+        return 0
     except (RuntimeErrorBase, OSError, OutputPathError, RenderPlanError) as e:
         print(f"ghnerf-bench: error: {e}", file=sys.stderr)
         return 2
