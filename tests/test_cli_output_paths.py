@@ -100,3 +100,51 @@ def test_a_card_folder_without_a_card_or_not_holding_the_output_is_refused_befor
     with pytest.raises(SystemExit):
         run([*argv, str(tmp_path / "elsewhere" / "x.onnx")])
     assert f"{flag} {card}: the output {tmp_path / 'elsewhere' / 'x.onnx'} is not inside" in capsys.readouterr().err
+
+
+def _model_folder(root: Path) -> Path:
+    """A model folder's file names (contents never read here): a graph, and the skeleton prior's graph and settings."""
+    root.mkdir(parents=True)
+    for name in ("encoder.onnx", "skeleton_prior.onnx", "skeleton_prior.json"):
+        (root / name).write_text(f"{name} itself")
+    return root
+
+
+def test_ghnerf_bench_refuses_a_json_report_over_a_model_graph(tmp_path, capsys):
+    """``--json models/ghnerf/encoder.onnx`` replaced the graph with the report (session 73's review)."""
+    from ghnerf_runtime.cli.bench import main
+
+    models = _model_folder(tmp_path / "m")
+    assert main(["runtime", "--model-dir", str(models), "--json", str(models / "encoder.onnx")]) == 2
+    err = capsys.readouterr()
+    assert f"--json {models / 'encoder.onnx'} is a file of the model folder (--model-dir {models})" in err.err
+    assert "load average" not in err.out and (models / "encoder.onnx").read_text() == "encoder.onnx itself"
+
+
+def test_ghnerf_run_refuses_joints_over_the_model_folder_s_settings(tmp_path, capsys):
+    """``--out`` over the skeleton prior's settings (a ``.json`` beside its graph), the folder named by its parent
+    (``models`` reads ``models/ghnerf``), was replaced by the joints before the model load failed on it."""
+    import cv2
+    import numpy as np
+
+    from ghnerf_runtime.cli.run import main
+
+    models = _model_folder(tmp_path / "models" / "ghnerf").parent
+    prior = models / "ghnerf" / "skeleton_prior.json"
+    images = [str(tmp_path / f"{side}.png") for side in ("l", "r")]
+    for path in images:
+        cv2.imwrite(path, np.zeros((8, 8, 3), np.uint8))
+    rig = Path(__file__).resolve().parents[1] / "docs" / "examples" / "rig.json"
+    argv = ["--rig", str(rig), "--images", *images, "--model-dir", str(models), "--out", str(prior)]
+    assert main(argv) == 2
+    assert f"--out {prior} is a file of the model folder (--model-dir {models})" in capsys.readouterr().err
+    assert prior.read_text() == "skeleton_prior.json itself"
+
+
+def test_a_report_of_the_user_s_own_in_the_model_folder_is_no_model_file(tmp_path):
+    from ghnerf_runtime.cli.output_path import is_model_file
+
+    models = _model_folder(tmp_path / "m")
+    (models / "bench.json").write_text("{}")
+    assert is_model_file(models / "skeleton_prior.json", models) and is_model_file(models / "encoder.onnx", models)
+    assert not is_model_file(models / "bench.json", models) and not is_model_file(models / "new.onnx", models)

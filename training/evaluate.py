@@ -71,7 +71,7 @@ import torch
 from torch import Tensor
 
 from ghnerf_runtime.body25 import BODY_PARTS, MID_HIP, NECK
-from ghnerf_runtime.cli.output_path import output_clash, ready_output_arg
+from ghnerf_runtime.cli.output_path import model_file_clash, output_clash, ready_output_arg
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
 from ghnerf_runtime.contract import ModelContract, ray_grid
 from ghnerf_runtime.config import Joints3DConfig
@@ -767,6 +767,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.out:  # written after minutes of evaluation: its place is settled first
         # --out x.pt beside --model x.pt replaced the checkpoint with the scores, after the evaluation
         clash = output_clash({"--out": args.out}, {f"--model {item.text}": item.path for item in args.model})
+        # --out m/encoder.onnx beside --model m (a graph folder) replaced the graph the same way
+        clash = clash or next(filter(None, (model_file_clash({"--out": args.out}, item.path, f"--model {item.text}")
+                                            for item in args.model if Path(item.path).is_dir())), None)
         if clash:
             ap.error(clash)
         args.out = ready_output_arg(ap, args.out, "--out")

@@ -41,7 +41,7 @@ from dataclasses import replace
 import numpy as np
 
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
-from ghnerf_runtime.cli.output_path import OutputPathError, existing_ancestor, ready_output
+from ghnerf_runtime.cli.output_path import OutputPathError, existing_ancestor, model_file_clash, ready_output
 from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig
 from ghnerf_runtime.errors import ConfigError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_MATTE_STAGE, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
@@ -723,6 +723,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"ghnerf-bench: error: {args.sequences} x {args.frames} pairs leave none after --warmup "
                   f"{args.warmup}: nothing would be timed", file=sys.stderr)
             return 2
+        if clash := model_file_clash({"--json": args.json}, args.model_dir, f"--model-dir {args.model_dir}"):
+            print(f"ghnerf-bench: error: {clash}", file=sys.stderr)
+            return 2
         if args.json:  # written after the whole bench: its place is settled first
             args.json = ready_output(args.json, "--json")
         if args.cache and args.cache != "off":  # a file there was "[Errno 20] Not a directory: '<it>/seq-...'"
@@ -732,6 +735,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.json:  # whole or not at all (an earlier report left as it was): a Ctrl-C in the write cut it short
             text = strict_json(report, indent=2)  # NaN becomes null
             write_text_atomic(args.json, text + "\n")
+        return 0
+    except BrokenPipeError:  # `ghnerf-bench ... | head`: was "error: [Errno 32] Broken pipe" and status 2
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
+        if args.command == "runtime" and args.json:  # asked for, and the bench ended before writing it
+            print("ghnerf-bench: stopped: stdout was closed; no report written", file=sys.stderr)
+            return 2
         return 0
     except (RuntimeErrorBase, OSError, OutputPathError, RenderPlanError) as e:
         print(f"ghnerf-bench: error: {e}", file=sys.stderr)

@@ -171,3 +171,36 @@ def ready_output_arg(ap: argparse.ArgumentParser, path: str | os.PathLike, flag:
         return ready_output(path, flag, kind, suffix)
     except OutputPathError as e:
         ap.error(str(e))
+
+
+#: what a model folder is read for: graphs and checkpoints; a ``.json`` is one when an ``.onnx`` of its name is
+#: beside it (the skeleton prior's and the painter's settings). A report of the user's own there may be rewritten.
+MODEL_FILE_SUFFIXES = (".onnx", ".pt")
+
+
+def is_model_file(path: str | os.PathLike, model_dir: str | os.PathLike) -> bool:
+    """``path`` (through links) is an existing file of the model folder ``model_dir`` (or the subfolder of it that
+    a session reads: ``models`` is ``models/ghnerf``) that a session reads."""
+    from ghnerf_runtime.errors import ModelError  # local: the path checks import nothing of the model
+    from ghnerf_runtime.session import resolve_model_dir
+
+    p = Path(os.path.realpath(path))
+    try:
+        folder = resolve_model_dir(model_dir)
+    except ModelError:  # an unreadable folder: said by the load, which names it
+        return False
+    if not p.is_file() or p.parent != Path(os.path.realpath(folder)):
+        return False
+    return p.suffix in MODEL_FILE_SUFFIXES or (p.suffix == ".json" and p.with_suffix(".onnx").is_file())
+
+
+def model_file_clash(outputs: dict[str, str | os.PathLike | None], model_dir: str | os.PathLike,
+                     model_flag: str) -> str | None:
+    """Why one of ``outputs`` (flag -> path; ``None`` for one not given) cannot be written: it is a file of the
+    model folder (:func:`is_model_file`; ``model_flag``, what named the folder). ``ghnerf-bench --json
+    models/ghnerf/encoder.onnx`` replaced the graph with the report."""
+    for flag, path in outputs.items():
+        if path is not None and is_model_file(path, model_dir):
+            return (f"{flag} {path} is a file of the model folder ({model_flag}): writing it would destroy it; "
+                    "give another path")
+    return None

@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
-from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output, same_file
+from ghnerf_runtime.cli.output_path import OutputPathError, model_file_clash, output_clash, ready_output, same_file
 from ghnerf_runtime.cli.rig_messages import rig_notes_let_through
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
@@ -541,6 +541,16 @@ def _say_a_prior_flag_without_a_prior(args, cfg: EstimatorConfig, estimator) -> 
                 cfg.session.model_dir, PRIOR_FILE)
 
 
+def _refuse_model_file_outputs(args, cfg: EstimatorConfig) -> None:
+    """No output over a file of the model folder (:func:`model_file_clash`): ``--out
+    models/ghnerf/skeleton_prior.json`` replaced the prior's settings with the joints."""
+    outputs = {"--out": None if args.out == "-" else args.out, "--overlay": args.overlay,
+               "--novel-view": args.novel_view}
+    where = _model_dir_source(args, cfg) or f"the default, {cfg.session.model_dir}"
+    if clash := model_file_clash(outputs, cfg.session.model_dir, where):
+        raise UsageError(clash)
+
+
 def _run(args) -> int:
     cfg = _config(args)
     _refuse_flags_the_settings_ignore(args, cfg)
@@ -548,6 +558,7 @@ def _run(args) -> int:
         _check_named_model_folder(args, cfg)
         print(json.dumps(config_to_dict(cfg), indent=2))
         return 0
+    _refuse_model_file_outputs(args, cfg)
     to_stdout = args.out == "-"
     out_path = None if to_stdout else _ready(args.out, "--out")
     rig = load_rig(args.rig)

@@ -292,3 +292,22 @@ class _Sequence:
 
     def __len__(self) -> int:
         return len(self.images)
+
+
+@pytest.mark.parametrize("json_report", [False, True])
+def test_stdout_closed_by_its_reader_ends_the_bench_without_an_error_unless_a_report_is_lost(tmp_path, json_report):
+    """``ghnerf-bench runtime | head -1`` said "error: [Errno 32] Broken pipe" with status 2 (session 73's review);
+    a ``--json`` report the early end leaves unwritten is said, and the status is not 0."""
+    import subprocess
+    import sys
+
+    argv = [sys.executable, "-m", "ghnerf_runtime.cli.bench", "runtime", "--sequences", "1", "--frames", "1",
+            "--warmup", "0", "--model-dir", str(tmp_path / "none")]
+    if json_report:
+        argv += ["--json", str(tmp_path / "r.json")]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # the reader gone before the first line
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == (2 if json_report else 0)
+    assert "Broken pipe" not in err and "Traceback" not in err
+    assert ("no report written" in err) == json_report and not (tmp_path / "r.json").exists()

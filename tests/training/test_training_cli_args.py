@@ -41,6 +41,19 @@ def test_an_out_that_is_a_models_checkpoint_is_refused_before_the_work(tmp_path,
     assert ckpt.read_bytes() == b"weights"
 
 
+def test_an_out_that_is_a_graph_of_a_model_folder_is_refused_before_the_work(tmp_path, capsys, monkeypatch):
+    """``--out m/encoder.int8.onnx`` beside ``--model m#int8`` replaced the graph with the scores (session 73)."""
+    monkeypatch.setattr(evaluate, "prepare", lambda *a: pytest.fail("the models were loaded"))
+    graph = tmp_path / "m" / "encoder.int8.onnx"
+    graph.parent.mkdir()
+    graph.write_bytes(b"graph")
+    with pytest.raises(SystemExit) as e:
+        evaluate.main(["--data", str(tmp_path), "--model", f"{graph.parent}#int8", "--out", str(graph)])
+    assert e.value.code == 2
+    assert f"--out {graph} is a file of the model folder (--model {graph.parent}#int8)" in capsys.readouterr().err
+    assert graph.read_bytes() == b"graph"
+
+
 def test_a_model_spec_that_is_a_file_not_named_pt_is_named_as_a_file():
     """A checkpoint saved as ``.pth`` was "no such model folder", as if the file were not there."""
     import tempfile
