@@ -53,9 +53,9 @@ from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_s
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, dumps_rig, lens_fold_warning,
-                                     load_rig, loads_rig, log_warnings_and_notes, save_rig, volume_reach_problem_from,
-                                     write_bytes_atomic, write_text_atomic)
+from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, checked_rig_text,
+                                     lens_fold_warning, load_rig, log_warnings_and_notes, save_rig,
+                                     volume_reach_problem_from, write_bytes_atomic, write_text_atomic)
 from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser"]
@@ -697,7 +697,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     # write then fails, the new report is left beside the old rig
     for cam in names:
         solution.report["cameras"][cam]["repeated_views"] = repeats[cam]
-    text = _rig_file_text(solution.rig, out)
+    text = checked_rig_text(solution.rig, out)
     kept = {path: _keep_previous(path, prev) for path, prev in previous.items()}
     write_text_atomic(report_path, json.dumps(solution.report, indent=1) + "\n")
     write_text_atomic(out, text)
@@ -902,15 +902,6 @@ def _check_kept_apart(previous: dict[Path, Path], others: dict[str, Path]) -> No
                 raise UsageError(f"{flag} {path} is where the previous {out} is kept ({prev}): give another path")
 
 
-def _rig_file_text(rig: Rig, out: Path) -> str:
-    """The text ``save_rig`` writes to ``out``, read back with the rig file reader's every check, as ``save_rig`` does:
-    made before the previous file is kept. A rig the reader refuses (a ``--volume`` past ``MAX_DEPTH_M``) was
-    refused by ``save_rig`` after the copy, which replaced the older kept copy with the file left as it was."""
-    text = dumps_rig(rig, path=out)
-    loads_rig(text, path=out, warn=False)
-    return text
-
-
 def _keep_previous(out: Path, prev: Path) -> Path | None:
     """Copy ``out``, when it exists, to ``prev`` (atomically, replacing an older one) before a new ``out`` takes
     its name; the copy's path, or ``None`` when there was nothing to keep. Copied, not renamed: a daemon reading
@@ -994,7 +985,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     if args.camera_height is not None:
         rig = level_rig(rig, camera_height_m=args.camera_height, pitch_deg=args.pitch or 0.0,
                         roll_deg=args.roll or 0.0, volume=volume)
-    text = _rig_file_text(rig, out)
+    # made before the previous file is kept: a rig the reader refuses (a --volume past MAX_DEPTH_M) was refused by
+    # save_rig after the copy, which replaced the older kept copy with the file left as it was
+    text = checked_rig_text(rig, out)
     kept = {out: _keep_previous(out, previous[out])}
     write_text_atomic(out, text)
     a, b = rig.pair
