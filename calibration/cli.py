@@ -47,7 +47,7 @@ from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.image_sizes import camera_image_sizes, mixed_sizes_problem
 from calibration.render import SYNTH_BOARD, calibration_views, synth_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
-from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, unwritable_reason
+from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, same_file, unwritable_reason
 from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stderr
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
@@ -884,12 +884,12 @@ def _previous_path(out: Path, flag: str) -> Path:
 
 
 def _refuse_out_among_inputs(outputs: Mapping[str, Path], inputs: Mapping[str, Path]) -> None:
-    """Refuse an output path that is one of the run's input files (resolved: ``./b.json`` is ``b.json``), before
+    """Refuse an output path that is one of the run's input files (``same_file``: ``./b.json`` is ``b.json``), before
     anything is written: ``import a.yml --extrinsics b.json --out b.json`` replaced the extrinsics it read.
     ``outputs``: flag -> path; ``inputs``: what the input is ("the file being imported") -> path."""
     for flag, out in outputs.items():
         for what, path in inputs.items():
-            if out.resolve() == path.resolve():
+            if same_file(out, path):
                 raise UsageError(f"{flag} {out} is {what} ({path}): give {flag} another path")
 
 
