@@ -47,15 +47,15 @@ from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.image_sizes import camera_image_sizes, mixed_sizes_problem
 from calibration.render import SYNTH_BOARD, calibration_views, synth_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
-from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, unwritable_reason
+from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, same_file, unwritable_reason
 from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stderr
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, dumps_rig, lens_fold_warning,
-                                     load_rig, loads_rig, log_warnings_and_notes, save_rig, volume_reach_problem_from,
-                                     write_bytes_atomic, write_text_atomic)
+from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, checked_rig_text,
+                                     lens_fold_warning, load_rig, log_warnings_and_notes, save_rig,
+                                     volume_reach_problem_from, write_bytes_atomic, write_text_atomic)
 from ghnerf_runtime.path_check import user_path
 
 __all__ = ["main", "build_parser"]
@@ -697,7 +697,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     # write then fails, the new report is left beside the old rig
     for cam in names:
         solution.report["cameras"][cam]["repeated_views"] = repeats[cam]
-    text = _rig_file_text(solution.rig, out)
+    text = checked_rig_text(solution.rig, out)
     kept = {path: _keep_previous(path, prev) for path, prev in previous.items()}
     write_text_atomic(report_path, json.dumps(solution.report, indent=1) + "\n")
     write_text_atomic(out, text)
@@ -884,12 +884,12 @@ def _previous_path(out: Path, flag: str) -> Path:
 
 
 def _refuse_out_among_inputs(outputs: Mapping[str, Path], inputs: Mapping[str, Path]) -> None:
-    """Refuse an output path that is one of the run's input files (resolved: ``./b.json`` is ``b.json``), before
+    """Refuse an output path that is one of the run's input files (``same_file``: ``./b.json`` is ``b.json``), before
     anything is written: ``import a.yml --extrinsics b.json --out b.json`` replaced the extrinsics it read.
     ``outputs``: flag -> path; ``inputs``: what the input is ("the file being imported") -> path."""
     for flag, out in outputs.items():
         for what, path in inputs.items():
-            if out.resolve() == path.resolve():
+            if same_file(out, path):
                 raise UsageError(f"{flag} {out} is {what} ({path}): give {flag} another path")
 
 
@@ -900,15 +900,6 @@ def _check_kept_apart(previous: dict[Path, Path], others: dict[str, Path]) -> No
         for flag, path in others.items():
             if path.exists() and path.resolve() == prev.resolve() or path.absolute() == prev.absolute():
                 raise UsageError(f"{flag} {path} is where the previous {out} is kept ({prev}): give another path")
-
-
-def _rig_file_text(rig: Rig, out: Path) -> str:
-    """The text ``save_rig`` writes to ``out``, read back with the rig file reader's every check, as ``save_rig`` does:
-    made before the previous file is kept. A rig the reader refuses (a ``--volume`` past ``MAX_DEPTH_M``) was
-    refused by ``save_rig`` after the copy, which replaced the older kept copy with the file left as it was."""
-    text = dumps_rig(rig, path=out)
-    loads_rig(text, path=out, warn=False)
-    return text
 
 
 def _keep_previous(out: Path, prev: Path) -> Path | None:
@@ -994,7 +985,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     if args.camera_height is not None:
         rig = level_rig(rig, camera_height_m=args.camera_height, pitch_deg=args.pitch or 0.0,
                         roll_deg=args.roll or 0.0, volume=volume)
-    text = _rig_file_text(rig, out)
+    # made before the previous file is kept: a rig the reader refuses (a --volume past MAX_DEPTH_M) was refused by
+    # save_rig after the copy, which replaced the older kept copy with the file left as it was
+    text = checked_rig_text(rig, out)
     kept = {out: _keep_previous(out, previous[out])}
     write_text_atomic(out, text)
     a, b = rig.pair

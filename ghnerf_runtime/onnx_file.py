@@ -13,11 +13,14 @@ import os
 import re
 import threading
 from pathlib import Path
+from typing import Iterable
+
+import numpy as np
 
 from ghnerf_runtime.errors import ModelError, ModelLoadError
 
 __all__ = ["ORT_LOG_SEVERITY", "open_onnx_file", "ensure_global_pool", "global_pool_threads", "load_failure",
-           "ort_reason"]
+           "ort_reason", "non_finite_output"]
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +61,17 @@ _ORT_ERRNO = re.compile(r"system error number (\d+)")
 #: raises as its own naming the graph and file; logged as well, each put a second, raw line in the journal
 #: (ANSI-coloured, with the C++ source location) before the daemon's own.
 ORT_LOG_SEVERITY = 4
+
+
+def non_finite_output(outputs: Iterable[tuple[str, np.ndarray]]) -> tuple[str, int, int] | None:
+    """The first of a warm-up run's ``(name, value)`` outputs holding NaN or infinite values, as ``(name, how many,
+    of how many)``; None where all are finite. Weights that hold them answer them to every input: the model's
+    graphs and the skeleton prior refuse them at warm-up by this one check."""
+    for name, value in outputs:
+        finite = np.isfinite(value)
+        if not finite.all():
+            return name, int(finite.size - np.count_nonzero(finite)), int(finite.size)
+    return None
 
 
 def ort_reason(error: Exception, limit: int = _REASON_CHARS) -> str:

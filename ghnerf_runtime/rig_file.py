@@ -158,6 +158,7 @@ __all__ = [
     "VERSION",
     "load_rig",
     "save_rig",
+    "checked_rig_text",
     "rig_to_dict",
     "rig_from_dict",
     "dumps_rig",
@@ -940,11 +941,21 @@ def save_rig(rig: Rig, path: str | os.PathLike) -> None:
     Raises:
         RigFileError: the rig cannot be serialised, or the file cannot be written.
     """
+    write_text_atomic(path, checked_rig_text(rig, path))
+
+
+def checked_rig_text(rig: Rig, path: str | os.PathLike) -> str:
+    """The text :func:`save_rig` writes to ``path``, read back with the reader's every check, nothing written: for a
+    caller that must know the file can be written before it touches others (``ghcal`` keeps the previous one).
+
+    Raises:
+        RigFileError: the rig cannot be serialised, or the reader refuses the text.
+    """
     text = dumps_rig(rig, path=path)
     # a file the reader refuses is worse than none: read the text back with the reader's every check (a Camera
     # accepts what the file may not hold, such as a 40000-pixel side from an imported calibration)
     rig_from_dict(json.loads(text, object_pairs_hook=remember_repeats), path=path, warn=False)
-    write_text_atomic(path, text)
+    return text
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:

@@ -86,7 +86,7 @@ from ghnerf_runtime.contract import (
 from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, ModelRunError
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
 from ghnerf_runtime.novel_painter import NovelPainter
-from ghnerf_runtime.onnx_file import ORT_LOG_SEVERITY, ensure_global_pool, load_failure, ort_reason
+from ghnerf_runtime.onnx_file import ORT_LOG_SEVERITY, ensure_global_pool, load_failure, non_finite_output, ort_reason
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import SkeletonPrior
 
@@ -713,12 +713,11 @@ class ModelSession:
         run's, exported) answers NaN to every input, and ran without a word, finding no one, frame after frame.
         Only here: on a real frame a graph's output may be what the estimator treats as missing."""
         outputs = self.run(graph, feeds)
-        for name, value in outputs.items():
-            if not np.isfinite(value).all():
-                bad = int(np.size(value) - np.count_nonzero(np.isfinite(value)))
-                raise ModelRunError(f"graph {graph!r} returned {bad} NaN or infinite value(s) of {np.size(value)} in "
-                                    f"{name!r} at warm-up: its weights hold NaN or infinite values (a run that "
-                                    "diverged?); export a checkpoint from before it", path=str(self.files[graph].path))
+        if (non_finite := non_finite_output(outputs.items())) is not None:
+            name, bad, size = non_finite
+            raise ModelRunError(f"graph {graph!r} returned {bad} NaN or infinite value(s) of {size} in {name!r} at "
+                                "warm-up: its weights hold NaN or infinite values (a run that diverged?); export a "
+                                "checkpoint from before it", path=str(self.files[graph].path))
         return outputs
 
     def reset_counts(self) -> None:

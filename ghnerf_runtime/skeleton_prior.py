@@ -32,7 +32,7 @@ from ghnerf_runtime.errors import GeometryError, ModelContractError, ModelLoadEr
 from ghnerf_runtime.geometry.kept_terms import read_only, same_bits, terms_of
 from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution, triangulate_two_views
 from ghnerf_runtime.joints3d import sorted_median
-from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
+from ghnerf_runtime.onnx_file import non_finite_output, open_onnx_file, ort_reason
 
 __all__ = ["FEATURE_VERSION", "MAX_JOINT_FROM_ROOT_M", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME",
            "META_PREFIX", "INPUTS", "OUTPUTS", "CanonicalFrame", "PriorCameras",
@@ -463,11 +463,10 @@ class SkeletonPrior:
                                     f"{ort_reason(e, 200)}", path=str(self.path)) from e
             # as the graphs' warm-up (ModelSession._warm_run): NaN weights answer NaN to every pair, which answer()
             # takes as no estimate, so the prior dropped out of every pair without a word
-            bad = next((name for name, value in zip(OUTPUTS, outs) if not np.isfinite(value).all()), None)
-            if bad is not None:
-                raise ModelRunError(f"skeleton prior returned NaN or infinite values in {bad!r} at its warm-up run "
-                                    f"(batch {batch}): its weights hold NaN or infinite values (a run that "
-                                    "diverged?); train it again", path=str(self.path))
+            if (non_finite := non_finite_output(zip(OUTPUTS, outs))) is not None:
+                raise ModelRunError(f"skeleton prior returned NaN or infinite values in {non_finite[0]!r} at its "
+                                    f"warm-up run (batch {batch}): its weights hold NaN or infinite values (a run "
+                                    "that diverged?); train it again", path=str(self.path))
         return 1e3 * (time.perf_counter() - t0)
 
     def answer(self, inputs: PriorInputs, flip_test: bool = True) -> SkeletonEstimate:

@@ -85,7 +85,7 @@ class OneEuroJoints:
             raise FrameError(f"t_s must be a capture time in seconds within float64's range, got {t_s!r}") from None
         # a non-finite joint is not reported: it must not enter (and poison) the state
         valid = valid & np.isfinite(x).all(axis=-1)
-        dt = None if self._t is None else float(t_s) - self._t
+        dt = None if self._t is None else t_s - self._t
         if dt == 0.0 and self._x is not None and self._x.shape == x.shape:
             return self._same_instant(x, valid)
         if dt is None or not (0.0 < dt <= cfg.max_gap_s) or self._x is None or self._x.shape != x.shape:
@@ -93,7 +93,7 @@ class OneEuroJoints:
             self._x, self._dx = x.copy(), np.zeros_like(x)
             self._alive = valid.copy()
             self._raw = x.copy()
-            self._t = float(t_s)
+            self._t = t_s
             return x.copy()
         keep = valid & self._alive
         a_d = smoothing_alpha(cfg.d_cutoff_hz, dt)
@@ -115,7 +115,7 @@ class OneEuroJoints:
         self._x = out
         self._alive = valid.copy()
         self._raw = x.copy()
-        self._t = float(t_s)
+        self._t = t_s
         return out.copy()
 
     def _same_instant(self, x: np.ndarray, valid: np.ndarray) -> np.ndarray:

@@ -232,9 +232,10 @@ class VmcClock:
         return self._line.t_us(capture_time_us)
 
     def _unsettle_the_line(self, capture_time_us: int) -> None:
-        """Stamps back on a line of one stamp (the first) may be glitches near a glitched first: a lone one, or one
-        repeated, took the stream after it for a pause of the glitch (session 72), and so did two different ones
-        (until session 73). The line settles as a new one would: ``NEW_TIMELINE_FRAMES`` stamps from this one."""
+        """Stamps back on the first stamp's line, not yet settled (``_line_settles_at``), may be glitches near a
+        glitched first: a lone one, or one repeated, took the stream after it for a pause of the glitch (session 72),
+        and so did two different ones (until session 73). The line settles as a new one would:
+        ``NEW_TIMELINE_FRAMES`` stamps from this one."""
         self._line_stamps = int(capture_time_us > self._line_last_us)
         self._line_settles_at = NEW_TIMELINE_FRAMES
 

@@ -319,7 +319,8 @@ def test_a_camera_order_file_naming_no_folder_name_is_named(tmp_path):
     with pytest.raises(CaptureError) as e:
         read_camera_order(tmp_path)
     assert "camera name '../left' cannot be a folder name" in str(e.value)
-    assert f"{tmp_path / 'cameras.json'} names the pair's two folders" in str(e.value) and "rig file" not in str(e.value)
+    message = str(e.value)
+    assert f"{tmp_path / 'cameras.json'} names the pair's two folders" in message and "rig file" not in message
 
 
 def test_a_camera_folder_whose_name_is_no_camera_name_is_said_as_a_folder_to_rename(tmp_path):
