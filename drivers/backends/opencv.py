@@ -82,7 +82,10 @@ Ends. A live camera that stops delivering (unplugged: ``MAX_UNDECODABLE`` failed
 apart; fewer are tried again, since session 73) raises :class:`RigDisconnectedError` from the
 next read, after the frames it delivered before; so does one whose grab hangs (a stalled stream or
 pipeline) for ``open_timeout_s``, naming it, and one whose grabbed frames do not decode ``MAX_UNDECODABLE``
-times in a row (fewer are skipped: the camera's index gap). When a video ends, the stream ends
+times in a row (fewer are skipped). Each frame lost to a failed grab tried again or to a frame skipped is a gap in
+the camera's frame index (``stats.camera_gaps``), and a run of them is one warning as it ends, naming the frames
+and why (since session 74: a failed grab tried again was neither logged nor counted, and each skipped frame was a
+warning of its own, a flood at 30 fps). When a video ends, the stream ends
 (:class:`EndOfStream`) once the other camera has delivered past the ended one's last frame: no pair
 can follow, so a longer video is not played out to its end.
 """
@@ -265,6 +268,27 @@ def is_video_file(spec: str) -> bool:
     return not is_device_index(spec) and "://" not in spec and not spec.startswith("/dev/") and "!" not in spec
 
 
+@dataclass
+class _LostRun:
+    """A camera's frames lost in a row, each a gap in its frame index (``stats.camera_gaps``): failed grabs
+    tried again and grabbed frames that did not decode. Logged once as the run ends, not once per frame: every
+    undecodable frame logged was a flood at 30 fps, and a failed grab tried again was not logged at all."""
+
+    failed_grabs: int = 0
+    undecodable: int = 0
+
+    def words(self, next_index: int) -> str | None:
+        """What was lost before frame ``next_index`` and why; None: nothing."""
+        lost = self.failed_grabs + self.undecodable
+        if not lost:
+            return None
+        first = next_index - lost
+        frames = f"frame {first}" if lost == 1 else f"frames {first} to {next_index - 1}"
+        why = [f"{n} {what}" for n, what in ((self.failed_grabs, "failed grab(s), tried again"),
+                                            (self.undecodable, "grabbed frame(s) that did not decode, skipped")) if n]
+        return f"{frames} ({'; '.join(why)}): a gap in its frame index, counted in stats.camera_gaps"
+
+
 class _Camera:
     """One ``cv2.VideoCapture`` and the thread that owns it: grabs, decodes, checks and queues its frames."""
 
@@ -284,6 +308,7 @@ class _Camera:
         self.last_stamp_ns = -1  # the last queued frame's (written under the source's lock)
         self.last_frame_s = 0.0  # time.monotonic() of its last queued frame, or of its start (under the lock)
         self.v4l2 = False  # a live V4L2 device: its driver stamps frames on the host's monotonic clock
+        self.lost = _LostRun()  # the frames lost since its last decoded frame (its own thread's)
         self.thread = threading.Thread(target=self._run, name=f"opencv {name}", daemon=True)
 
     # The capture is opened on the caller's thread (errors are raised from open()), then only the
@@ -363,6 +388,8 @@ class _Camera:
                 if not self.video and failed_grabs < MAX_UNDECODABLE:
                     # A stream's hiccup or a USB frame error fails one grab: tried again a frame later (no busy
                     # loop), where one such grab took the whole rig down; a run of them is a lost camera.
+                    self.lost.failed_grabs += 1
+                    self.index += 1  # the frame it lost: the camera's index gap, as an undecodable frame's
                     if src._stop.wait(1.0 / self.pace_fps):
                         return
                     continue
@@ -377,7 +404,7 @@ class _Camera:
                 if self.video:
                     src._end(self, EndOfStream(f"video {self.shown} (camera {self.name!r}) ended after {self.index} "
                                                f"frames"))
-                elif self.index == 0:
+                elif self.index_queued < 0:  # not its index: the frames it lost moved that on
                     src._fail(RigInitializationError(
                         f"camera {self.name!r} ({self.shown}) opened but delivered no frame (two webcams on one USB "
                         f"bus: try fourcc=MJPG, a smaller size or a lower fps)"))
@@ -394,14 +421,14 @@ class _Camera:
                 # index moves on), where one such frame took the whole rig down; a run of them is a lost camera.
                 undecodable += 1
                 if undecodable < MAX_UNDECODABLE:
-                    log.warning("camera %r (%s): grabbed frame %d could not be decoded; skipped", self.name,
-                                self.shown, self.index)
+                    self.lost.undecodable += 1
                     self.index += 1
                     continue
                 src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.shown}): {undecodable} grabbed frames "
                                                f"in a row could not be decoded"))
                 return
             undecodable = 0
+            self._end_lost_run()
             raw, image = image, _bgr(image)
             if image is None:
                 src._fail(RigOperationError(f"camera {self.name!r} ({self.shown}) delivered an image that is not "
@@ -423,6 +450,12 @@ class _Camera:
                 return
             self.index += 1
 
+    def _end_lost_run(self) -> None:
+        """A frame came: the run of frames lost before it (if any) is logged, once."""
+        words = self.lost.words(self.index)
+        if words is not None:
+            log.warning("camera %r (%s) lost %s", self.name, self.shown, words)
+        self.lost = _LostRun()
 
     def _size_error(self, delivered: tuple[int, int]) -> FrameSizeError:
         """A frame of ``delivered`` (width, height), not this camera's size; worded by where that size came from."""

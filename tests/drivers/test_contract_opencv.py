@@ -923,6 +923,71 @@ def test_a_live_camera_s_grab_that_fails_a_few_times_is_tried_again_and_a_run_of
     assert time.monotonic() - t0 < 5.0 and right.grabs == 3 + 10  # a frame apart, not a busy loop
 
 
+class _Flaky(_Webcam):
+    """The second camera's grabs numbered in ``failing`` fail; those in ``garbled`` grab a frame that does not
+    decode (grabs count from 1; each good one is the next frame)."""
+
+    failing: set[int] = set()
+    garbled: set[int] = set()
+
+    def __init__(self, target, api) -> None:
+        super().__init__(target, api)
+        self.left, self.grabs = 200, 0
+
+    def grab(self) -> bool:
+        self.grabs += 1
+        ok = super().grab()
+        return ok and not (self.target == 1 and self.grabs in self.failing)
+
+    def retrieve(self):
+        return (False, None) if self.target == 1 and self.grabs in self.garbled else super().retrieve()
+
+
+def _camera_logs(caplog) -> list[str]:
+    """What the cameras' own threads logged, WARNING and up (the open's nominal-rig warning is not theirs)."""
+    return [r.getMessage() for r in caplog.records
+            if r.threadName.startswith("opencv ") and r.levelno >= logging.WARNING]
+
+
+def _read_until_index(source, index: int) -> list:
+    """Pairs until the second camera's frame ``index`` (or a later one) has been paired."""
+    pairs = [source.read(timeout_s=2.0)]
+    while pairs[-1].frames[1].index < index and len(pairs) < 60:
+        pairs.append(source.read(timeout_s=2.0))
+    assert pairs[-1].frames[1].index >= index, [p.frames[1].index for p in pairs]
+    return pairs
+
+
+def test_a_run_of_lost_frames_is_logged_once_as_it_ends_and_counted_as_the_camera_s_gap(webcam, caplog):
+    """Session 74: a failed grab that was tried again left no log line and no count (a flaky USB webcam lost frames
+    unseen), and each undecodable frame was a warning of its own (a flood at 30 fps)."""
+    caplog.set_level(logging.WARNING, logger="drivers.backends.opencv")
+    # frames 0-2, frame 3 lost (grab 4), 4-7, frames 8 and 9 lost (grabs 9, 10), 10 and 11 not decoded, then 12 on
+    _Flaky.failing, _Flaky.garbled = {4, 9, 10}, {11, 12}
+    try:
+        with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_Flaky) as source:
+            _read_until_index(source, 13)
+            stats = source.stats
+    finally:
+        _Flaky.failing, _Flaky.garbled = set(), set()
+    assert _camera_logs(caplog) == [
+        "camera 'right' (1) lost frame 3 (1 failed grab(s), tried again): a gap in its frame index, counted in "
+        "stats.camera_gaps",
+        "camera 'right' (1) lost frames 8 to 11 (2 failed grab(s), tried again; 2 grabbed frame(s) that did not "
+        "decode, skipped): a gap in its frame index, counted in stats.camera_gaps",
+    ]
+    # the five lost, and any frame a slow reader let its full queue drop (overruns) between those it paired
+    assert 5 <= stats.camera_gaps["right"] <= 5 + stats.overruns["right"], stats
+
+
+def test_a_camera_that_delivers_every_frame_logs_nothing(webcam, caplog):
+    caplog.set_level(logging.DEBUG, logger="drivers.backends.opencv")
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_Flaky) as source:
+        _read_until_index(source, 40)
+        stats = source.stats
+    assert _camera_logs(caplog) == [] and stats.camera_gaps["right"] <= stats.overruns["right"], stats
+
+
 def test_an_api_this_opencv_lacks_is_said_not_an_unplugged_camera_or_a_file_it_cannot_decode(takes, monkeypatch):
     # api=gstreamer on an OpenCV built without GStreamer: "not plugged in, busy in another program, no permission"
     # for a webcam, "not a video OpenCV decodes" for a good video file
