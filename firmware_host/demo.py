@@ -36,7 +36,8 @@ loose cable passed the bring-up's camera check). A recording that ends (``replay
 
 A ``file://`` ``--sink`` on a file the run reads (the rig URL's ``rig=``, ``bvh=`` or video files, the ``--config``
 file) or on ``OUT/sim_pair.png`` is a usage error before anything is opened, as the daemon refuses its sinks there
-(``ghnerf_runtime.cli.output_path.output_clash``).
+(``ghnerf_runtime.cli.output_path.output_clash``); so is one on a folder or in a folder that is not there (since
+session 74: the sink, which tries again what it cannot open, failed the run only after the model load and the run).
 
 Ctrl-C stops the reading and still prints the summary (exit 0); SIGTERM (``timeout``, ``kill``: how a
 ``record+`` take is often ended) does the same, a recorder closing its take complete, and exits 143 with one
@@ -50,6 +51,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import signal
 import statistics
 import sys
@@ -670,12 +672,35 @@ def _refuse_clashing_outputs(parser: argparse.ArgumentParser, args: argparse.Nam
         parser.error(clash)
 
 
+def _sink_file_problem(path: str) -> str | None:
+    """Why a ``file://`` sink can never write ``path``: a folder, or a file in a folder that is not there (None: it
+    may). The sink tries again what it cannot open (a daemon's USB stick mounted later), so the demo loaded the
+    model and ran its seconds against a sink that never opened, and only then failed ("sent none of the frames")."""
+    if os.path.isdir(path):
+        return f"{path} is a folder, not a file; name a file in it ({Path(path, 'joints.jsonl').as_uri()})"
+    folder = os.path.dirname(path)
+    if os.path.isdir(folder):
+        return None
+    what = "is a file, not a folder" if os.path.exists(folder) else "does not exist"
+    return f"its folder {folder} {what} (the sink makes the file, not its folder)"
+
+
+def _refuse_unwritable_sink(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """A ``file://`` --sink on a folder, or in a folder that is not there: a usage error before anything is opened
+    (since session 74), not a run that ends failed."""
+    path = _sink_file(args.sink)
+    problem = _sink_file_problem(path) if path is not None else None
+    if problem is not None:
+        parser.error(f"--sink {redact_url(args.sink)}: {problem}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     prog = prog_name()
     parser = build_parser(prog)
     args = parser.parse_args(argv)
     _refuse_ignored_flags(parser, args)
     _refuse_clashing_outputs(parser, args)
+    _refuse_unwritable_sink(parser, args)
     try:
         # SIGTERM stops it as Ctrl-C does: its default action killed it outright, a record+ take left
         # complete: false and the frames still queued for the recorder lost

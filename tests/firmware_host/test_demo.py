@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import re
 import time
 from pathlib import Path
@@ -397,11 +398,33 @@ def test_the_default_sink_writes_into_an_out_folder_with_a_space_and_a_hash(tmp_
 
 
 def test_a_sink_that_sent_nothing_fails_the_run(tmp_path, capsys, sim_url):
-    # a sink folder that does not exist: it retried, sent nothing, and the demo exited 0
+    # a named pipe no program reads: it retried, sent nothing, and the demo exited 0 (a sink folder that does not
+    # exist, this test's case until session 74, is refused before the run now)
+    fifo = tmp_path / "j.fifo"
+    os.mkfifo(fifo)
     rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.5", "--out", str(tmp_path / "out"),
-                    "--sink", (tmp_path / "nowhere" / "j.jsonl").as_uri()])
+                    "--sink", fifo.as_uri()])
     err = capsys.readouterr().err
-    assert rc == 2 and "sent none of the" in err and "No such file or directory" in err
+    assert rc == 2 and "sent none of the" in err and "a named pipe with no reader" in err
+
+
+@pytest.mark.parametrize(("where", "said"), [
+    ("folder", "{path} is a folder, not a file; name a file in it ({path_uri}/joints.jsonl)"),
+    ("folder/", "{path}/ is a folder, not a file; name a file in it ({path_uri}/joints.jsonl)"),
+    ("nowhere/j.jsonl", "its folder {tmp}/nowhere does not exist (the sink makes the file, not its folder)"),
+    ("a.txt/j.jsonl", "its folder {tmp}/a.txt is a file, not a folder (the sink makes the file, not its folder)"),
+])
+def test_a_file_sink_that_can_never_be_written_is_refused_before_the_run(tmp_path, capsys, sim_url, where, said):
+    """Session 74: the file sink tries again what it cannot open (a daemon's USB stick mounted later), so the demo
+    loaded the model and ran its seconds against a sink that never opened, then failed: 'sent none of the frames'."""
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "a.txt").write_text("")
+    url = f"file://{tmp_path}/{where}"
+    err = _refused(["--truth-only", "--url", sim_url, "--seconds", "5", "--out", str(tmp_path / "out"),
+                    "--sink", url], capsys)
+    path = f"{tmp_path}/folder"
+    assert f"error: --sink {url}: " + said.format(path=path, path_uri=Path(path).as_uri(), tmp=tmp_path) in err
+    assert not (tmp_path / "out").exists()  # refused before anything is opened or written
 
 
 def test_a_camera_that_vanishes_mid_run_fails_the_run_naming_it(tmp_path, capsys, sim_url):
