@@ -226,8 +226,8 @@ def _refuse_not_utf8(url: str, where: str, raw: str, decoded: str) -> None:
         raise RigConfigError(f"rig URL {redact_url(url)!r}: {where} {problem}")
 
 
-#: The characters ``urlsplit`` removes from anywhere in a URL without a word, and how a URL writes each.
-_DROPPED = {"\t": ("a tab", "%09"), "\r": ("a carriage return", "%0D"), "\n": ("a line feed", "%0A")}
+#: The characters ``urlsplit`` removes from anywhere in a URL without a word, and how a message names each.
+_DROPPED = {"\t": "a tab", "\r": "a carriage return", "\n": "a line feed"}
 
 
 def dropped_characters(url: str) -> str | None:
@@ -236,7 +236,7 @@ def dropped_characters(url: str) -> str | None:
     so ``replay:///data/ta<TAB>ke`` played ``/data/take`` and ``fps=3<LF>0`` ran at 30 (a value pasted from a file).
     Any other C0 control, DEL or C1 control (U+0080-U+009F; since session 74): kept, it reached log and status lines,
     where an ESC rewrites a terminal. Printable text that is not ASCII (a UTF-8 folder name) is not refused."""
-    char = next((char for char in url if char in _DROPPED or _is_control(char)), None)
+    char = next((char for char in url if _is_control(char)), None)
     if char is None:
         return None
     # its place in the URL as messages show it: a password before it is *** there (none where it is in one)
@@ -244,13 +244,14 @@ def dropped_characters(url: str) -> str | None:
     where = f" at character {at + 1}" if at >= 0 else ""
     escape = _percent_escape(char)
     if char in _DROPPED:
-        return f"holds {_DROPPED[char][0]}{where}, which URL parsing drops; remove it, or write it as {escape}"
+        return f"holds {_DROPPED[char]}{where}, which URL parsing drops; remove it, or write it as {escape}"
     return (f"holds a control character (U+{ord(char):04X}){where}, which logs and terminals would act on or hide; "
             f"remove it, or write it as {escape}")
 
 
 def _is_control(char: str) -> bool:
-    # C0 controls, DEL and the C1 controls: none is text, and an ESC (or a C1 CSI) starts a terminal's command
+    # C0 controls (tab, CR and LF among them), DEL and the C1 controls: none is text, and an ESC (or a C1 CSI)
+    # starts a terminal's command
     return char < " " or "\x7f" <= char <= "\x9f"
 
 
