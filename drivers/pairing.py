@@ -14,6 +14,7 @@ from enum import Enum
 
 from drivers.errors import RigConfigError, RigOperationError
 from drivers.frames import Frame
+from ghnerf_runtime.path_check import shown
 from ghnerf_runtime.plain_values import is_finite_number, is_real_number, is_true_false
 
 
@@ -374,9 +375,10 @@ def why_no_pair(before: PairingStats, after: PairingStats, config: PairingConfig
     if len(silent) == len(came):
         return "neither camera delivered a frame"
     if silent:
-        others = ", ".join(f"{cam}: {n}" for cam, n in came.items() if n)
+        # a rig file's names, which may hold any text: escaped where a log or status line would act on it (an ESC)
+        others = ", ".join(f"{shown(cam)}: {n}" for cam, n in came.items() if n)
         return f"camera {silent[0]!r} delivered no frame ({others})"
-    counts = ", ".join(f"{cam} {n}" for cam, n in came.items())
+    counts = ", ".join(f"{shown(cam)} {n}" for cam, n in came.items())
     waited_out = _overflowed_since(before, after)
     if any(waited_out.values()):
         # the pairer's wait ran out (max_pending): the other camera's frames were still to come when these went

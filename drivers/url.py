@@ -4,7 +4,8 @@ Every option a backend reads is taken through a typed getter; whatever is left
 afterwards is an unknown option and :meth:`RigUrl.finish` rejects it by name,
 so a typo such as ``sim://?fsp=60`` fails loudly instead of being ignored.
 A ``#`` would start a fragment, which URL parsing drops: it is refused (write ``%23``). So is a tab, CR or LF
-anywhere, which URL parsing removes (write ``%09``, ``%0D``, ``%0A``; since session 73).
+anywhere, which URL parsing removes (write ``%09``, ``%0D``, ``%0A``; since session 73), and any other control
+character (C0, DEL, C1), which reached log and status lines raw (write its %XX escape; since session 74).
 
 :func:`redact_url` is how a URL is shown (messages, logs, a recording's manifest): without the passwords
 it may carry (a stream URL ``rtsp://user:pass@host/...`` inside an option, a ``token=``).
@@ -225,26 +226,42 @@ def _refuse_not_utf8(url: str, where: str, raw: str, decoded: str) -> None:
         raise RigConfigError(f"rig URL {redact_url(url)!r}: {where} {problem}")
 
 
-#: The characters ``urlsplit`` removes from anywhere in a URL without a word, and how a URL writes each.
-_DROPPED = {"\t": ("a tab", "%09"), "\r": ("a carriage return", "%0D"), "\n": ("a line feed", "%0A")}
+#: The characters ``urlsplit`` removes from anywhere in a URL without a word, and how a message names each.
+_DROPPED = {"\t": "a tab", "\r": "a carriage return", "\n": "a line feed"}
 
 
 def dropped_characters(url: str) -> str | None:
-    """Why ``url`` is not read as written where it holds a tab, CR or LF (the first, named with its place), None
-    where it holds none: ``urlsplit`` drops them, so ``replay:///data/ta<TAB>ke`` played ``/data/take`` and
-    ``fps=3<LF>0`` ran at 30 (a value pasted from a file). The one rule for rig and sink URLs."""
-    char = next((char for char in url if char in _DROPPED), None)
+    """Why ``url`` is not read as written where it holds a control character (the first, named with its place),
+    None where it holds none. The one rule for rig, sink and listen URLs. A tab, CR or LF: ``urlsplit`` drops them,
+    so ``replay:///data/ta<TAB>ke`` played ``/data/take`` and ``fps=3<LF>0`` ran at 30 (a value pasted from a file).
+    Any other C0 control, DEL or C1 control (U+0080-U+009F; since session 74): kept, it reached log and status lines,
+    where an ESC rewrites a terminal. Printable text that is not ASCII (a UTF-8 folder name) is not refused."""
+    char = next((char for char in url if _is_control(char)), None)
     if char is None:
         return None
-    what, escape = _DROPPED[char]
     # its place in the URL as messages show it: a password before it is *** there (none where it is in one)
     at = redact_url(url).find(char)
     where = f" at character {at + 1}" if at >= 0 else ""
-    return f"holds {what}{where}, which URL parsing drops; remove it, or write it as {escape}"
+    escape = _percent_escape(char)
+    if char in _DROPPED:
+        return f"holds {_DROPPED[char]}{where}, which URL parsing drops; remove it, or write it as {escape}"
+    return (f"holds a control character (U+{ord(char):04X}){where}, which logs and terminals would act on or hide; "
+            f"remove it, or write it as {escape}")
+
+
+def _is_control(char: str) -> bool:
+    # C0 controls (tab, CR and LF among them), DEL and the C1 controls: none is text, and an ESC (or a C1 CSI)
+    # starts a terminal's command
+    return char < " " or "\x7f" <= char <= "\x9f"
+
+
+def _percent_escape(char: str) -> str:
+    """``char`` as a URL writes it: its UTF-8 bytes as %XX escapes (U+0085 is %C2%85)."""
+    return "".join(f"%{byte:02X}" for byte in char.encode("utf-8"))
 
 
 def _refuse_dropped_characters(url: str) -> None:
-    """:class:`RigConfigError` naming the first tab, CR or LF in ``url`` (:func:`dropped_characters`)."""
+    """:class:`RigConfigError` naming the first control character in ``url`` (:func:`dropped_characters`)."""
     problem = dropped_characters(url)
     if problem is not None:
         raise RigConfigError(f"rig URL {redact_url(url)!r}: {problem}")

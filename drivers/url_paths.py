@@ -16,7 +16,7 @@ from pathlib import Path
 from urllib.parse import quote, unquote
 
 from drivers.errors import RigConfigError
-from drivers.url import RigUrl, shown_url, unquote_keeping_bytes
+from drivers.url import RigUrl, dropped_characters, shown_url, unquote_keeping_bytes
 from drivers.wrappers import WRAPPER_FILE_OPTIONS, innermost_url, wrapper_prefixes
 from ghnerf_runtime.path_check import path_problem, shown
 
@@ -139,15 +139,15 @@ def rig_url_from_folder(url: str, folder: str | os.PathLike) -> str:
     The new path is percent-encoded (a space, ``#``, ``%``, ``&`` or ``+`` in the folder or the path reads
     back as itself through :class:`drivers.url.RigUrl`); the rest of the URL, the other options and their
     encoding included, is kept byte for byte. A URL of an unknown scheme, or one its parser refuses
-    (no ``://``, a ``#``), is returned as it is, for the backend to report.
+    (no ``://``, a ``#``, a control character), is returned as it is, for the backend to report.
 
     >>> rig_url_from_folder("opencv://?first=0&second=/dev/video2&rig=rigs/a%20b.json", "/etc/ghnerf")
     'opencv://?first=0&second=/dev/video2&rig=/etc/ghnerf/rigs/a%20b.json'
     >>> rig_url_from_folder("replay://takes/walk?loop=1", "/etc/ghnerf")
     'replay:///etc/ghnerf/takes/walk?loop=1'
     """
-    if not isinstance(url, str) or "://" not in url or "#" in url:
-        return url
+    if not isinstance(url, str) or "://" not in url or "#" in url or dropped_characters(url) is not None:
+        return url  # a control character too: requoted, a raw ESC or tab in a relative path passed as %1B or %09
     scheme, _, rest = url.partition("://")
     parts = FILE_PARTS.get(scheme.lower())
     if parts is None:

@@ -203,13 +203,13 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
     if not url:  # a "$UNSET" in a script: was ": the listener reads udp:// or serial://", the URL shown as nothing
         raise ListenError("the URL is empty: give udp://[HOST]:PORT or serial:///dev/DEVICE?baud=N")
     shown = shown_url(url)
+    dropped = dropped_characters(url)
+    if dropped is not None:  # urlsplit removed it: udp://:98<LF>70 listened on 9870 (the sinks' rule); first, as an
+        raise ListenError(f"{shown}: {dropped}")  # ESC sequence's '[' read as a broken IPv6 host
     try:
         parts = urlsplit(url)
     except ValueError as e:  # e.g. "Invalid IPv6 URL": an unclosed [
         raise ListenError(f"{shown}: cannot be parsed: {e}") from None
-    dropped = dropped_characters(url)
-    if dropped is not None:  # urlsplit removed it: udp://:98<LF>70 listened on 9870 (the sinks' rule)
-        raise ListenError(f"{shown}: {dropped}")
     if "#" in url:
         # urlsplit drops a fragment, and with it what followed: serial:///dev/by-id/x#1?baud=9600 opened
         # /dev/by-id/x at 115200. The sinks refuse it too (firmware_host.sinks.url.parse_url)

@@ -64,7 +64,7 @@ from drivers.backends.opencv import (is_nominal_rig, is_video_file, rig_size_mes
 from drivers.backends.recording_format import MANIFEST, read_manifest
 from drivers.backends.replay import ReplayRigSource
 from drivers.base import log as rig_source_log
-from drivers.url import RigUrl, redact_url
+from drivers.url import RigUrl, redact_url, shown_url
 from firmware_host.daemon import early_sighup
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config_noting_paths
 from firmware_host.daemon.measure_floor import (DEFAULT_PAIRS, FloorMeasureError, FloorMeasureStopped,
@@ -83,7 +83,7 @@ from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.session import resolve_model_dir
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.video_files import is_still_image
-from ghnerf_runtime.path_check import user_path
+from ghnerf_runtime.path_check import shown, user_path
 
 __all__ = ["main", "build_parser", "check_config", "check_model", "read_checked_config", "EXAMPLE_CONFIG"]
 
@@ -257,8 +257,12 @@ def _where_url_read(why: str, url: str, source: str | os.PathLike | None, from_f
     relative in the config file (``drivers.url_paths`` read it from the file's folder), outside the URL it quotes
     (which holds all of them). Not for one written absolute: a config under /etc/ghnerf was told of relative paths it
     did not have."""
-    named = why.replace(redact_url(url), "").replace(url, "")
-    if source is not None and any(path in named for path in from_folder):
+    named = why
+    # every form a message quotes the URL in, repr first: its escapes (a backslash doubled, a control character
+    # written \x1b) kept the URL, and the path in it, in the text, and the hint came for an option's error
+    for form in (repr(redact_url(url)), shown_url(url), redact_url(url), url):
+        named = named.replace(form, "")
+    if source is not None and any(path in named or shown(path) in named for path in from_folder):
         return f" (a relative path in {source} is read from its folder, {config_folder(source)})"
     return ""
 

@@ -19,6 +19,7 @@ import os
 from typing import Optional
 
 from firmware_host.errors import FirmwareHostError
+from ghnerf_runtime.path_check import shown
 
 __all__ = ["FileTaken", "claim_file", "holder_pid", "holder_text"]
 
@@ -115,4 +116,5 @@ def holder_text(pid: Optional[int]) -> str:
             name = f.read().strip()
     except OSError:
         name = ""
-    return f"pid {pid} ({name})" if name else f"pid {pid}"
+    # any program sets its own name (prctl, /proc/self/comm): an ESC in it reached the log and STATUS line raw
+    return f"pid {pid} ({shown(name)})" if name else f"pid {pid}"

@@ -104,13 +104,13 @@ def _refuse_non_text(url: object) -> None:
 
 def parse_url(url: str) -> SinkUrl:
     _refuse_non_text(url)
+    dropped = dropped_characters(url)
+    if dropped is not None:  # urlsplit removed it: file:///tmp/a<TAB>b.jsonl wrote /tmp/ab.jsonl, baud=96<LF>00 9600;
+        raise SinkConfigError(url, "url", url, dropped)  # first, as an ESC sequence's '[' read as a broken IPv6 host
     try:
         parts = urlsplit(url)
     except (ValueError, TypeError) as e:  # e.g. "Invalid IPv6 URL": an unclosed [
         raise SinkConfigError(url, "url", url, f"cannot be parsed: {e}") from e
-    dropped = dropped_characters(url)
-    if dropped is not None:  # urlsplit removed it: file:///tmp/a<TAB>b.jsonl wrote /tmp/ab.jsonl, baud=96<LF>00 9600
-        raise SinkConfigError(url, "url", url, dropped)
     if not parts.scheme:
         raise SinkConfigError(url, "scheme", "", "expected e.g. serial://, usb://, udp://, vmc://, file://, memory://")
     if "#" in url:  # urlsplit drops a fragment: file:///tmp/run#2/joints.jsonl would write to /tmp/run

@@ -169,6 +169,24 @@ def test_without_an_id_the_first_free_device_is_opened_and_the_others_named(capl
 
 
 # ----------------------------------------------------------------- what the sensors can give
+def test_a_device_or_sensor_name_holding_a_control_character_is_escaped():
+    """The names a device and XLink report reached the log raw: an ESC sequence in one rewrote the terminal."""
+    with pytest.raises(RigInitializationError) as caught:
+        connect(request(), devices=[info(ID_A, "1.3\x1b[2J", IN_USE)])
+    assert f"{ID_A} ('1.3\\x1b[2J') is in use by another process" in str(caught.value), str(caught.value)
+    with pytest.raises(RigInitializationError) as caught:
+        connect(request("oak\x85"), devices=[info(ID_A, "oak\x85"), info(ID_B, "oak\x85")])
+    assert f"({ID_A} ('oak\\x85', UNBOOTED), {ID_B} ('oak\\x85', UNBOOTED))" in str(caught.value), str(caught.value)
+    odd = [camera("CAM_B", "OV\x1b9282", (1280, 800), 120.0), camera("CAM_C", "OV9282", (1280, 800), 120.0)]
+    with pytest.raises(RigInitializationError) as caught:
+        check_cameras(request(fps=200.0), ID_A, odd)
+    assert "exceeds the CAM_B sensor's ('OV\\x1b9282') fastest mode" in str(caught.value), str(caught.value)
+    req = StereoRequest(None, "CAM_B", "CAM_D", 30.0, 640, 400, 11.0, 4)
+    with pytest.raises(RigInitializationError) as caught:
+        check_cameras(req, ID_A, odd)
+    assert "its cameras: CAM_B ('OV\\x1b9282', 1280x800), CAM_C (OV9282, 1280x800)" in str(caught.value)
+
+
 def test_a_stream_the_sensors_can_give_passes():
     check_cameras(request(width=1280, height=800, fps=120.0), ID_A, OAK_D)
     check_cameras(StereoRequest(None, "CAM_A", "CAM_B", 30.0, 640, 400, 11.0, 4), ID_A, OAK_D)

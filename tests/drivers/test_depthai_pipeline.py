@@ -511,6 +511,34 @@ def test_frames_of_another_size_than_the_rig_file_name_the_device_camera_file_an
             source.read(timeout_s=1.0)
 
 
+class _OddlyNamed(_OtherSize):
+    """:class:`_OtherSize` at an XLink name holding an ESC sequence (the device's text, not the user's)."""
+
+    def device_name(self) -> str:
+        return "1.3\x1b[2J"
+
+
+def test_a_device_or_camera_name_holding_a_control_character_is_escaped_in_the_device_s_words(tmp_path, rig):
+    """The device's XLink name and a rig file's camera names reached the log and the daemon's STATUS line raw: an
+    ESC sequence in one rewrote the terminal (session 74). Escaped as repr now; plain names as before."""
+    import json
+
+    from ghnerf_runtime.rig_file import save_rig
+
+    save_rig(rig, tmp_path / "rig.json")
+    data = json.loads((tmp_path / "rig.json").read_text())
+    data["cameras"][0]["name"] = "le\x9bft"
+    (tmp_path / "rig.json").write_text(json.dumps(data))
+    url = f"depthai://?width=160&height=100&rig={tmp_path / 'rig.json'}"
+    with open_rig(url, link_factory=lambda: _OddlyNamed((320, 200))) as source:
+        with pytest.raises(FrameSizeError) as caught:
+            source.read(timeout_s=1.0)
+    said = str(caught.value)
+    assert said.startswith(f"depthai device 14442C10D1 ({url}) at '1.3\\x1b[2J', cameras 'le\\x9bft' (CAM_B) and "
+                           "right (CAM_C): "), said
+    assert "\x1b" not in said and "\x9b" not in said
+
+
 def test_a_read_waiting_when_another_thread_closes_says_the_source_closed_not_that_the_device_was_lost():
     # it raised RigDisconnectedError ("reading from depthai device ..."): a daemon reopens a lost device, and one
     # closing its source from another thread (a stop) was told its device was gone; sim:// and opencv:// say closed

@@ -384,6 +384,18 @@ def test_a_camera_that_delivers_nothing_is_named():
     assert why_no_pair(before, before, PairingConfig()) == "neither camera delivered a frame"
 
 
+def test_a_camera_name_holding_a_control_character_is_escaped_in_the_words():
+    """A rig file's camera name reaches the daemon's log and STATUS line through these words: an ESC in it, printed
+    raw, rewrote the terminal (session 74); a plain name is shown as before."""
+    names = ("le\x1b[2Jft", "right")
+    before = PairingStats(frames_in=dict.fromkeys(names, 10), unpaired=dict.fromkeys(names, 0))
+    after = PairingStats(frames_in={names[0]: 40, "right": 10}, unpaired={names[0]: 22, "right": 0})
+    assert why_no_pair(before, after, PairingConfig()) == "camera 'right' delivered no frame ('le\\x1b[2Jft': 30)"
+    both = PairingStats(frames_in={names[0]: 40, "right": 40}, unpaired={names[0]: 30, "right": 30})
+    said = why_no_pair(before, both, PairingConfig())
+    assert said.startswith("frames came from both cameras ('le\\x1b[2Jft' 30, right 30)") and "\x1b" not in said
+
+
 def _push_lagging(pairer: FramePairer, lag: int, frames: int = 60, offset_ns: int = 1000) -> int:
     """``frames`` of 'left' at 30 fps, each of 'right' (``offset_ns`` later in capture time) pushed ``lag`` frames
     after its 'left' partner, as a slower transport delivers it; returns the pairs formed."""

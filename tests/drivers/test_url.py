@@ -321,6 +321,30 @@ def test_a_tab_or_line_break_that_url_parsing_drops_is_refused_naming_it(url, sa
     assert RigUrl.parse("replay:///data/ta%09ke").target == "/data/ta\tke"  # the way to write one
 
 
+@pytest.mark.parametrize(("url", "said"), [
+    # kept by urlsplit, they reached log lines raw: an ESC sequence rewrote the terminal (session 74)
+    ("replay:///data/ta\x1b[2Jke", "'replay:///data/ta\\x1b[2Jke': holds a control character (U+001B) at character 18, "
+                                   "which logs and terminals would act on or hide; remove it, or write it as %1B"),
+    ("sim://?fps=3\x000", "holds a control character (U+0000) at character 13"),
+    ("sim://?fps=30\x7f", "holds a control character (U+007F) at character 14"),
+    ("replay:///data/\x85take", "'replay:///data/\\x85take': holds a control character (U+0085) at character 16, "
+                                "which logs and terminals would act on or hide; remove it, or write it as %C2%85"),
+    ("sim://?fps=30&seed=1\x0b", "(U+000B) at character 21"),
+    ("sim://?fps=30\x0c", "(U+000C) at character 14"),
+    ("\x01sim://?fps=30", "(U+0001) at character 1"),  # urlsplit strips a leading C0 control: refused as well
+])
+def test_every_other_control_character_is_refused_naming_its_code_point_and_place(url, said):
+    with pytest.raises(RigConfigError) as info:
+        create_rig_source(url)
+    assert said in str(info.value) and len(str(info.value).splitlines()) == 1, str(info.value)
+    assert "\x1b" not in str(info.value)
+
+
+def test_printable_text_that_is_not_ascii_is_still_taken():
+    assert RigUrl.parse("replay:///data/caf\u00e9/\u6f14\u793a\u00a0x").target == "/data/caf\u00e9/\u6f14\u793a\u00a0x"
+    assert RigUrl.parse("replay:///data/t%1Bx").target == "/data/t\x1bx"  # written as an escape, as a tab's %09 is
+
+
 @pytest.mark.parametrize("url", [
     # urlsplit reads these as a password (it drops the tab, CR or LF), so their refusal must hide it too
     "rtsp:/\t/user:hunter2@cam/s",

@@ -114,11 +114,16 @@ def test_serial_json_lines_over_a_pty():
     ("udp://viewer:s3cret@127.0.0.1:98\r70", "'udp://viewer:***@127.0.0.1:98\\r70': holds a carriage return"),
     # urlsplit reads past the tab to a password: hidden in the refusal too (redact_url matched '://' as written)
     ("udp:/\t/viewer:s3cret@127.0.0.1:9870", "'udp:/\\t/viewer:***@127.0.0.1:9870': holds a tab at character 6"),
+    # any other control character: kept by urlsplit, printed raw (an ESC sequence rewrote the terminal; session 74)
+    ("udp://127.0.0.1:98\x1b[2J70", "'udp://127.0.0.1:98\\x1b[2J70': holds a control character (U+001B) at "
+                                    "character 19, which logs and terminals would act on or hide"),
+    ("serial:///dev/null\x85?baud=9600", "'serial:///dev/null\\x85?baud=9600': holds a control character (U+0085)"),
 ])
 def test_bad_urls_are_one_line_exit_2(url, message, capsys):
     assert listen.main([url, "--seconds", "0.1"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("ghnerf-listen: error: ") and message in err and "\n" not in err and "\r" not in err
+    assert "\x1b" not in err and "\x85" not in err
     assert "s3cret" not in err
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from firmware_host.sinks import open_sink
 from firmware_host.sinks.base import Sink
-from firmware_host.sinks.file_claim import holder_pid
+from firmware_host.sinks.file_claim import holder_pid, holder_text
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, wait_until
 
 _REPO = Path(__file__).resolve().parents[2]
@@ -90,6 +90,20 @@ def test_a_sink_of_another_process_is_named_by_its_pid(tmp_path: Path) -> None:
         if sink is not None:
             sink.close()
     assert _hellos(path) == 2
+
+
+def test_a_holder_whose_name_holds_a_control_character_is_named_escaped() -> None:
+    """A program names itself (/proc/PID/comm): an ESC sequence in that name reached the log and the daemon's STATUS
+    line raw through the sink's error (session 74)."""
+    script = "import sys, time; open('/proc/self/comm', 'w').write('ev\\x1b[2Jil'); print(flush=True); time.sleep(30)"
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE)
+    try:
+        assert child.stdout is not None and child.stdout.readline() == b"\n"
+        assert holder_text(child.pid) == f"pid {child.pid} ('ev\\x1b[2Jil')"
+    finally:
+        child.kill()
+        child.wait()
+    assert holder_text(os.getpid()).startswith("another sink of this process")
 
 
 def test_the_claim_holds_through_copytruncate_and_moves_with_a_rename(tmp_path: Path) -> None:

@@ -242,3 +242,21 @@ def test_a_tab_or_line_break_that_url_parsing_drops_is_refused_as_rig_urls_refus
     with pytest.raises(SinkConfigError) as info:
         open_sink(url)
     assert (info.value.field, info.value.value) == ("url", url) and said in str(info.value)
+
+
+@pytest.mark.parametrize(("url", "said"), [
+    # kept by urlsplit, each reached the daemon's STATUS line and status-file keys raw (session 74)
+    ("file:///tmp/a\x1b]0;x\x07b.jsonl", "holds a control character (U+001B) at character 14, which logs and "
+                                        "terminals would act on or hide; remove it, or write it as %1B"),
+    ("memory://a\x0bb", "(U+000B) at character 11"),
+    ("udp://127.0.0.1:90\x1b[2J00", "(U+001B) at character 19"),  # its [ was read as a broken IPv6 host
+    ("udp://127.0.0.1:9000?x=\x00", "(U+0000) at character 24"),
+    ("serial:///dev/ttyACM0\x7f", "(U+007F) at character 22"),
+    ("udp://127.0.0.1:9000\x9b", "(U+009B) at character 21, which logs and terminals would act on or hide; remove "
+                                 "it, or write it as %C2%9B"),
+])
+def test_every_other_control_character_is_refused_as_rig_urls_refuse_it(url: str, said: str) -> None:
+    with pytest.raises(SinkConfigError) as info:
+        open_sink(url)
+    assert (info.value.field, info.value.value) == ("url", url) and said in str(info.value), str(info.value)
+    assert str(info.value).startswith(repr(url) + ": invalid url=")  # escaped, on one line

@@ -23,6 +23,7 @@ import depthai as dai
 from drivers.backends.depthai.options import board_socket
 from drivers.backends.depthai.pipeline import build_sync_stage
 from drivers.errors import RigInitializationError, RigOperationError
+from ghnerf_runtime.path_check import shown
 
 log = logging.getLogger(__name__)
 
@@ -84,12 +85,14 @@ def describe_devices(devices: list[dai.DeviceInfo]) -> str:
     """``id (name, STATE)`` for each device, for messages that must say what is connected."""
     if not devices:
         return "none"
-    return ", ".join(f"{d.getDeviceId()} ({d.name}, {_state(d).removeprefix('X_LINK_')})" for d in devices)
+    # the id and name as the device and XLink report them: escaped where one holds a control character
+    return ", ".join(f"{shown(d.getDeviceId())} ({shown(d.name)}, {_state(d).removeprefix('X_LINK_')})"
+                     for d in devices)
 
 
 def _in_use_error(info: dai.DeviceInfo) -> RigInitializationError:
     return RigInitializationError(
-        f"depthai device {info.getDeviceId()} ({info.name}) is in use by another process (XLink state "
+        f"depthai device {shown(info.getDeviceId())} ({shown(info.name)}) is in use by another process (XLink state "
         f"{_state(info).removeprefix('X_LINK_')}): stop that process, or wait a few seconds if it crashed "
         "(the device resets itself)"
     )
@@ -127,7 +130,7 @@ def choose_device(target: str | None, connected: list[dai.DeviceInfo]) -> dai.De
         # "The first found" depends on USB enumeration order: which OAK a restart opens could change.
         log.warning(
             "depthai: %d devices are free (%s) and the URL names none: opening %s; give its id in the URL "
-            "(depthai://ID) to keep the choice", len(free), describe_devices(free), free[0].getDeviceId(),
+            "(depthai://ID) to keep the choice", len(free), describe_devices(free), shown(free[0].getDeviceId()),
         )
     return free[0] if free else None
 
@@ -180,11 +183,11 @@ def open_device(
             log.warning(
                 "depthai device %s is on a USB link of speed %s (USB2 or slower): two %dx%d streams at %.0f fps "
                 "need about %.0f MB/s as NV12; frames will drop if the link cannot carry them. Use a USB3 port "
-                "and cable, or lower width/height/fps", device.getDeviceId(), name, request.width, request.height,
-                request.fps, mb_s,
+                "and cable, or lower width/height/fps", shown(device.getDeviceId()), name, request.width,
+                request.height, request.fps, mb_s,
             )
         else:
-            log.info("depthai device %s on USB speed %s", device.getDeviceId(), name)
+            log.info("depthai device %s on USB speed %s", shown(device.getDeviceId()), name)
     except BaseException:
         device.close()
         raise
@@ -200,7 +203,8 @@ def check_cameras(request: StereoRequest, device_id: str, features: list[dai.Cam
         RigInitializationError: naming the option, its value and what the device has.
     """
     by_socket = {f.socket.name: f for f in features}
-    have = ", ".join(f"{f.socket.name} ({f.sensorName}, {f.width}x{f.height})" for f in features) or "none"
+    # a sensor's name is the device's text (its EEPROM): escaped where it holds a control character
+    have = ", ".join(f"{f.socket.name} ({shown(f.sensorName)}, {f.width}x{f.height})" for f in features) or "none"
     for option, socket in (("left", request.left), ("right", request.right)):
         feature = by_socket.get(socket)
         if feature is None:
@@ -208,7 +212,7 @@ def check_cameras(request: StereoRequest, device_id: str, features: list[dai.Cam
                 f"depthai device {device_id} has no camera on socket {socket} (option {option}={socket}); "
                 f"its cameras: {have}"
             )
-        sensor = f"the {socket} sensor's ({feature.sensorName})"
+        sensor = f"the {socket} sensor's ({shown(feature.sensorName)})"
         known = feature.width > 0 and feature.height > 0  # CameraFeatures' default is -1: not reported
         if known and (request.width > feature.width or request.height > feature.height):
             raise RigInitializationError(

@@ -18,6 +18,7 @@ from drivers.frames import Frame
 from drivers.pairing import DropPolicy, PairingConfig
 from drivers.url import RigUrl
 from ghnerf_runtime.geometry import Rig
+from ghnerf_runtime.path_check import shown
 
 if TYPE_CHECKING:
     import depthai as dai
@@ -171,12 +172,13 @@ class DepthaiRigSource(RigSource):
     def _where(self) -> str:
         """The device (id, URL, XLink name) and its cameras: with two OAKs, which one to look at."""
         o = self.options
-        where = f"depthai device {self._device_id or o.device_id or '(first found)'}"
+        # the device's id and XLink name, a rig file's camera names: escaped where one holds a control character
+        where = f"depthai device {shown(self._device_id or o.device_id or '(first found)')}"
         if o.url:
             where += f" ({o.url})"
         if self._device_name:
-            where += f" at {self._device_name}"
-        names = (self._rig.pair[0].name, self._rig.pair[1].name) if self._rig is not None else ("left", "right")
+            where += f" at {shown(self._device_name)}"
+        names = tuple(shown(c.name) for c in self._rig.pair) if self._rig is not None else ("left", "right")
         return f"{where}, cameras {names[0]} ({o.left}) and {names[1]} ({o.right})"
 
     def _read_frame(self, timeout_s: float) -> Frame | None:

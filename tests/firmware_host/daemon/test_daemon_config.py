@@ -603,6 +603,40 @@ def test_the_relative_path_note_comes_only_where_the_failing_value_was_written_r
     assert error("opencv://?first=0&second=1&rig=missing.json", "models").endswith(note)
 
 
+def test_the_relative_path_note_does_not_come_for_an_option_s_error_in_a_url_its_message_escapes(tmp_path):
+    """The note looked for a relative path in the message less the URL as written; the message quotes it as repr
+    does, a backslash doubled, so the URL stayed, and with it the path: fps=3\\0 was told of relative paths."""
+    from firmware_host.daemon.cli import read_checked_config
+
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "x.onnx").write_bytes(b"")
+    (tmp_path / "walk.bvh").write_bytes(b"")
+    path = tmp_path / "daemon.json"
+    path.write_text(json.dumps({"rig": {"url": "sim://?bvh=walk.bvh&fps=3\\0"}, "sinks": [SINK],
+                                "estimator": {"session": {"model_dir": "models"}}}))
+    with pytest.raises(DaemonConfigError) as e:
+        read_checked_config(str(path))
+    assert "option fps='3\\\\0' must be a number" in str(e.value) and "relative path" not in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize("written", ["takes/wa\tlk", "takes/wa\x1b[2Jlk", "takes/wa\x85lk"])
+def test_a_control_character_in_a_relative_path_of_the_config_s_rig_url_is_refused(tmp_path, written):
+    """Made absolute, the path was percent-encoded, the raw character with it: a tab or ESC the command line refuses
+    passed as %09 or %1B, and the daemon looked for a folder named with it (session 74)."""
+    from firmware_host.daemon.cli import read_checked_config
+
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "x.onnx").write_bytes(b"")
+    path = tmp_path / "daemon.json"
+    path.write_text(json.dumps({"rig": {"url": f"replay://{written}"}, "sinks": [SINK],
+                                "estimator": {"session": {"model_dir": "models"}}}))
+    with pytest.raises(DaemonConfigError) as e:
+        read_checked_config(str(path))
+    said = str(e.value)
+    assert f"rig.url: rig URL {'replay://' + written!r}: holds a " in said and "at character 18" in said, said
+    assert "relative path" not in said and len(said.splitlines()) == 1
+
+
 def test_check_config_reads_a_plus_in_the_rig_file_as_the_backend_does(tmp_path):
     # parse_qs read rig=/etc/rig+1.json as '/etc/rig 1.json', which the backend (a '+' is a plus) never opens
     models = tmp_path / "models"
