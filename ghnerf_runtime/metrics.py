@@ -233,12 +233,37 @@ def _joints_pair(pred, true, valid, pred_valid, dim: int, kind: str):
     return pred, true, valid_b, pred_ok & np.all(np.isfinite(pred), axis=-1)
 
 
-def _check_pck_args(num_joints: int, joints, alpha: float) -> None:
+def _is_int(value) -> bool:
+    """An int or NumPy integer, not a bool (an int to Python: True was taken as 1)."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+_FLOAT64_MAX = float(np.finfo(np.float64).max)
+
+
+def _positive_number(name: str, value, hint: str = ""):
+    """``value`` if it is a finite number > 0, else ValueError naming ``name`` and ``value``: a bool is an int to
+    Python (True was taken as 1), text reached numpy's bare TypeError, an int past float64 overflowed later."""
+    # an int is compared with float64's largest, a float with inf (a float32 against 1.8e308 warned of a cast)
+    whole = _is_int(value) and 0 < value <= _FLOAT64_MAX
+    if not (whole or isinstance(value, (float, np.floating)) and 0 < value < np.inf):
+        raise ValueError(f"{name} must be a positive number{hint}, got {value!r}")
+    return value
+
+
+def _check_joint_indices(name: str, joints, num_joints: int) -> None:
+    """Each of ``joints`` an int in ``[0, num_joints)``: ``int()`` took True as joint 1 and "3" as joint 3."""
     for j in joints:
-        if not 0 <= int(j) < num_joints:
-            raise ShapeError(f"joint index {j} out of range for {num_joints} joints")
-    if not (np.isfinite(alpha) and alpha > 0):
-        raise ValueError(f"alpha must be a positive number, got {alpha}")
+        if not _is_int(j):
+            raise ValueError(f"{name}: a joint index must be an int, got {j!r}")
+        if not 0 <= j < num_joints:
+            raise ShapeError(f"{name}: joint index {j} out of range for {num_joints} joints")
+
+
+def _check_pck_args(num_joints: int, torso_joints, box_joints, alpha: float) -> None:
+    _check_joint_indices("torso_joints", torso_joints, num_joints)
+    _check_joint_indices("box_joints", box_joints, num_joints)
+    _positive_number("alpha", alpha)
 
 
 def _mean_or_nan(total: float, count: int) -> float:
@@ -345,8 +370,8 @@ def pck(pred_2d, true_2d, valid, torso_joints: tuple[int, int] = (NECK, MID_HIP)
         pred_2d: ``(..., J, 2)`` predicted pixels.
         true_2d: ``(..., J, 2)`` true pixels (same image space as ``pred_2d``).
         valid: ``(..., J)`` bool, truth is visible and labelled.
-        torso_joints: the two joints whose distance is the reference length.
-        alpha: threshold as a fraction of the reference length.
+        torso_joints: the two joints whose distance is the reference length (int indices, as ``box_joints``).
+        alpha: threshold as a fraction of the reference length (a number > 0, else ValueError).
         pred_valid: optional ``(..., J)`` bool, the predictor produced the joint.
         box_joints: joints whose bounding-box diagonal is the fallback reference.
 
@@ -361,7 +386,7 @@ def pck(pred_2d, true_2d, valid, torso_joints: tuple[int, int] = (NECK, MID_HIP)
         (0.6666666666666666, [True, False, True])
     """
     pred, true, valid_b, pred_ok = _joints_pair(pred_2d, true_2d, valid, pred_valid, 2, "2d")
-    _check_pck_args(true.shape[-2], (*torso_joints, *box_joints), alpha)
+    _check_pck_args(true.shape[-2], torso_joints, box_joints, alpha)
     ref = _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
     evaluated = valid_b & (ref > 0)[..., None]
     dist = _norms(np.where(pred_ok[..., None], _differences(pred, true), 0.0))
@@ -409,8 +434,9 @@ def left_right_swaps(pred_2d, true_2d, valid, *, pred_valid=None,
         (1.0, 1)
     """
     pred, true, valid_b, pred_ok = _joints_pair(pred_2d, true_2d, valid, pred_valid, 2, "2d")
-    pairs = [(int(a), int(b)) for a, b in pairs]
-    _check_pck_args(true.shape[-2], (*(j for p in pairs for j in p), *torso_joints, *box_joints), alpha)
+    pairs = [tuple(p) for p in pairs]
+    _check_joint_indices("pairs", [j for p in pairs for j in p], true.shape[-2])
+    _check_pck_args(true.shape[-2], torso_joints, box_joints, alpha)
     with np.errstate(over="ignore"):  # as in pck
         radius = alpha * _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
     shape = true.shape[:-2] + (len(pairs),)
@@ -639,10 +665,7 @@ def _check_image_range(pred, target, p: np.ndarray, t: np.ndarray, m: np.ndarray
 
 def _check_data_range(data_range) -> None:
     """A peak value of -1 scored as 1 (it is squared) and 0 gave -inf dB and a NaN SSIM: refuse them by name."""
-    # a bool is an int to Python: True scored as a peak of 1
-    if isinstance(data_range, bool) or not (isinstance(data_range, (int, float, np.number)) and 0 < data_range < np.inf):
-        raise ValueError(f"data_range must be a positive number (1.0 for [0, 1] images, 255 for 8-bit), "
-                         f"got {data_range!r}")
+    _positive_number("data_range", data_range, " (1.0 for [0, 1] images, 255 for 8-bit)")
 
 
 def _per_image_result(values: np.ndarray, counts: np.ndarray, batch_shape: tuple[int, ...]) -> ImageMetricResult:
@@ -904,6 +927,14 @@ def _mean_square(p: np.ndarray, t: np.ndarray, keep: np.ndarray, count: int) -> 
         return float(top * (top * ((unit * unit).sum() / count)))
 
 
+def _heatmap_size(size) -> tuple[int, int]:
+    """``(H, W)`` from one int or two: ``int()`` took True as 1, 8.7 as 8 and "8" as 8."""
+    dims = (size, size) if np.ndim(size) == 0 else tuple(size)
+    if len(dims) != 2 or not all(_is_int(d) and d >= 1 for d in dims):
+        raise ShapeError(f"heatmap size must be a positive int or (H, W) of them, got {size!r}")
+    return int(dims[0]), int(dims[1])
+
+
 def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: float) -> np.ndarray:
     """Ground-truth joint heatmaps: one unnormalised Gaussian (peak 1) per visible joint.
 
@@ -916,8 +947,9 @@ def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: fl
         joints_2d: ``(..., J, 2)`` joint positions **in heatmap pixels** (convert image or
             model-input pixels first, e.g. ``keypoints.model_to_heatmap_pixels``).
         visible: ``(..., J)`` bool.
-        size: heatmap ``(H, W)``, or one int for a square map.
-        sigma: Gaussian standard deviation in heatmap pixels (> 0, at least about 1e-162: ValueError).
+        size: heatmap ``(H, W)``, or one int for a square map (positive ints; else ShapeError).
+        sigma: Gaussian standard deviation in heatmap pixels: a number > 0, at least about 1e-162 (else, and for a
+            bool or text, ValueError naming it).
 
     Returns:
         ``(..., J, H, W)`` float32.
@@ -929,11 +961,10 @@ def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: fl
     """
     joints = _points("joints_2d", joints_2d, 2)
     vis = _mask("visible", visible, joints.shape[:-1]) & np.all(np.isfinite(joints), axis=-1)
-    h, w = (int(size), int(size)) if np.ndim(size) == 0 else (int(size[0]), int(size[1]))
-    if h < 1 or w < 1:
-        raise ShapeError(f"heatmap size must be positive, got {(h, w)}")
+    h, w = _heatmap_size(size)
+    _positive_number("sigma", sigma, " (heatmap pixels)")
     # below 1e-162 the 2 sigma^2 of the exponent underflows to 0: 0 / 0 on a joint's own pixel, a NaN target
-    if not (np.isfinite(sigma) and sigma > 0 and 2 * sigma * sigma > 0):
+    if not 2 * sigma * sigma > 0:
         raise ValueError(f"sigma must be a positive number whose square float64 holds, got {sigma}")
     x = np.where(vis, joints[..., 0], 0.0)[..., None]
     y = np.where(vis, joints[..., 1], 0.0)[..., None]

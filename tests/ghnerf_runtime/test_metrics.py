@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import doctest
 import math
+import re
 import warnings
 
 import cv2
@@ -556,3 +557,48 @@ def test_wild_ssim_map_agrees_with_the_plain_one_where_both_hold():
     wild, plain = metrics._wild_ssim_map(x, y, m, plain_max=1e3), metrics._ssim_map(x, y, m, 1.0)
     np.testing.assert_allclose(wild, plain, rtol=1e-12, atol=1e-15)
     assert not np.array_equal(wild, metrics._wild_ssim_map(x, y, m))  # the lowered bound took the scaled path
+
+
+# ------------------------------------------------------------ scalar arguments
+@pytest.mark.parametrize("bad", [True, np.True_, "2", None, 0, -1.0, math.nan, math.inf,
+                                 pytest.param(10 ** 400, id="int-past-float64")])
+def test_gaussian_heatmaps_refuses_a_sigma_that_is_not_a_positive_number(bad):
+    """True was a sigma of 1 (a bool is an int), "2" and None raised numpy's bare TypeError."""
+    with pytest.raises(ValueError, match=r"sigma must be a positive number \(heatmap pixels\), got "
+                                         + re.escape(repr(bad)[:40])):
+        gaussian_heatmaps([[2.0, 2.0]], [True], 5, sigma=bad)
+
+
+def test_gaussian_heatmaps_takes_numpy_and_int_sigmas_and_sizes():
+    ref = gaussian_heatmaps([[2.0, 1.0]], [True], (5, 4), sigma=2.0)
+    for size, sigma in (((np.int64(5), 4), 2), (np.array([5, 4]), np.float32(2.0)), ([5, 4], np.float64(2.0))):
+        np.testing.assert_array_equal(_no_warnings(gaussian_heatmaps, [[2.0, 1.0]], [True], size, sigma), ref)
+
+
+@pytest.mark.parametrize("bad", [True, "8", 8.7, (4,), (4, 5, 6), (4, 0)])
+def test_gaussian_heatmaps_refuses_a_size_that_is_not_positive_ints(bad):
+    """int() took True as a 1x1 map, 8.7 as 8, "8" as 8, and (4, 5, 6) as (4, 5)."""
+    with pytest.raises(ShapeError, match="heatmap size must be a positive int or"):
+        gaussian_heatmaps([[2.0, 2.0]], [True], bad, sigma=1.0)
+
+
+@pytest.mark.parametrize(("kw", "message"), [
+    ({"alpha": True}, "alpha must be a positive number, got True"),
+    ({"alpha": "0.2"}, "alpha must be a positive number, got '0.2'"),
+    ({"torso_joints": (0, True)}, "torso_joints: a joint index must be an int, got True"),
+    ({"box_joints": ("0", 1)}, "box_joints: a joint index must be an int, got '0'"),
+    ({"box_joints": (0, 1.0)}, "box_joints: a joint index must be an int, got 1.0"),
+])
+def test_pck_and_swaps_refuse_bool_and_text_arguments(kw, message):
+    """int() took True as joint 1 and "0" as joint 0; alpha=True was PCK@1 and "0.2" numpy's bare TypeError."""
+    args = {**TOY, **kw}
+    with pytest.raises(ValueError, match=re.escape(message)):
+        pck(TRUE, TRUE, [True] * 4, **args)
+    with pytest.raises(ValueError, match=re.escape(message)):
+        left_right_swaps(TRUE, TRUE, [True] * 4, pairs=[(2, 3)], **args)
+    with pytest.raises(ValueError, match=re.escape("pairs: a joint index must be an int, got True")):
+        left_right_swaps(TRUE, TRUE, [True] * 4, pairs=[(2, True)], **TOY)
+    with pytest.raises(ShapeError, match="torso_joints: joint index 7 out of range for 4 joints"):
+        pck(TRUE, TRUE, [True] * 4, torso_joints=(0, 7), box_joints=(0, 1))
+    numpy_args = {"torso_joints": (np.int64(0), 1), "box_joints": (0, 1), "alpha": np.float32(0.2)}
+    assert pck(TRUE, TRUE, [True] * 4, **numpy_args).value == 1.0
