@@ -233,16 +233,94 @@ def _joints_pair(pred, true, valid, pred_valid, dim: int, kind: str):
     return pred, true, valid_b, pred_ok & np.all(np.isfinite(pred), axis=-1)
 
 
-def _check_pck_args(num_joints: int, joints, alpha: float) -> None:
+def _is_int(value) -> bool:
+    """An int or NumPy integer, not a bool (an int to Python: True was taken as 1)."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+_FLOAT64_MAX = float(np.finfo(np.float64).max)
+
+
+def _positive_number(name: str, value, hint: str = ""):
+    """``value`` if it is a finite number > 0, else ValueError naming ``name`` and ``value``: a bool is an int to
+    Python (True was taken as 1), text reached numpy's bare TypeError, an int past float64 overflowed later."""
+    # an int is compared with float64's largest, a float with inf (a float32 against 1.8e308 warned of a cast)
+    whole = _is_int(value) and 0 < value <= _FLOAT64_MAX
+    if not (whole or isinstance(value, (float, np.floating)) and 0 < value < np.inf):
+        raise ValueError(f"{name} must be a positive number{hint}, got {value!r}")
+    return value
+
+
+def _check_joint_indices(name: str, joints, num_joints: int) -> None:
+    """Each of ``joints`` an int in ``[0, num_joints)``: ``int()`` took True as joint 1 and "3" as joint 3."""
     for j in joints:
-        if not 0 <= int(j) < num_joints:
-            raise ShapeError(f"joint index {j} out of range for {num_joints} joints")
-    if not (np.isfinite(alpha) and alpha > 0):
-        raise ValueError(f"alpha must be a positive number, got {alpha}")
+        if not _is_int(j):
+            raise ValueError(f"{name}: a joint index must be an int, got {j!r}")
+        if not 0 <= j < num_joints:
+            raise ShapeError(f"{name}: joint index {j} out of range for {num_joints} joints")
+
+
+def _check_pck_args(num_joints: int, torso_joints, box_joints, alpha: float) -> None:
+    _check_joint_indices("torso_joints", torso_joints, num_joints)
+    _check_joint_indices("box_joints", box_joints, num_joints)
+    _positive_number("alpha", alpha)
 
 
 def _mean_or_nan(total: float, count: int) -> float:
     return float(total / count) if count > 0 else float("nan")
+
+
+#: Below this a Euclidean norm's squares may have lost bits to underflow (float64's least normal number is 2.2e-308)
+#: and it is recomputed scaled; above about 1.3e154 they overflowed (an infinite norm), recomputed likewise.
+_NORM_PLAIN_MIN = 1e-145
+
+
+def _scaled_norms(v: np.ndarray) -> np.ndarray:
+    """Norms over the last axis of ``(N, D)`` vectors, each divided by its largest component before squaring: no
+    square over- or underflows. A norm past float64 is ``inf`` (no warning); NaN stays NaN."""
+    top = np.abs(v).max(axis=-1)
+    scalable = (top > 0) & np.isfinite(top)
+    unit = v / np.where(scalable, top, 1.0)[:, None]
+    with np.errstate(over="ignore"):  # top * sqrt(3) past float64: the norm is, too
+        return np.where(scalable, top * np.sqrt((unit * unit).sum(axis=-1)), top)
+
+
+def _norms(v: np.ndarray) -> np.ndarray:
+    """Euclidean norms over the last axis: ``np.linalg.norm``'s (bit for bit) where its squares stay inside float64,
+    else :func:`_scaled_norms`' (squares of components past 1e154 overflowed to inf with a RuntimeWarning, squares
+    below 1e-154 underflowed to 0)."""
+    with np.errstate(over="ignore"):
+        plain = np.sqrt(np.add.reduce(v * v, axis=-1))  # np.linalg.norm's sum, without its argument checks
+    if _NORM_PLAIN_MIN <= plain.min(initial=np.inf) and plain.max(initial=0.0) < np.inf:  # the usual case, quickly
+        return plain
+    # a zero vector (a masked-out joint) is plainly 0; NaN stays NaN
+    redo = (~(plain >= _NORM_PLAIN_MIN) & np.any(v != 0, axis=-1) | np.isinf(plain)) & ~np.isnan(plain)
+    if not redo.any():
+        return plain
+    out = np.array(plain, dtype=np.float64)
+    out[redo] = _scaled_norms(v[redo])
+    return out
+
+
+def _differences(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a - b``; one past float64 (finite values of opposite signs near 1e308) is +-inf without a warning: its
+    norm is past float64 too. inf - inf (a non-finite joint, masked out by the caller) is NaN without one."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return a - b
+
+
+def _pooled_mean(values: np.ndarray, count: int) -> float:
+    """Sum of the non-negative ``values`` over ``count`` (``nan`` for none) without the sum overflowing where the
+    mean does not: divided by the largest value first where the plain sum reached inf."""
+    with np.errstate(over="ignore"):
+        total = float(values.sum())
+    if count == 0 or np.isfinite(total):
+        return _mean_or_nan(total, count)
+    top = float(values.max())
+    if not np.isfinite(top):  # a value past float64 (or NaN): so is the mean
+        return _mean_or_nan(total, count)
+    with np.errstate(over="ignore"):
+        return float(top * ((values / top).sum() / count))
 
 
 # ---------------------------------------------------------------------- PCK
@@ -251,14 +329,16 @@ def _reference_lengths(true_2d: np.ndarray, valid: np.ndarray, torso_joints: tup
     """Per-sample reference length ``(...)``: neck--mid-hip, else torso-box diagonal, else 0."""
     a, b = torso_joints
     both = valid[..., a] & valid[..., b]
-    direct = np.linalg.norm(true_2d[..., a, :] - true_2d[..., b, :], axis=-1)
+    direct = _norms(_differences(true_2d[..., a, :], true_2d[..., b, :]))
 
     box = list(box_joints)
     pts, ok = true_2d[..., box, :], valid[..., box]
     lo = np.where(ok[..., None], pts, np.inf).min(axis=-2)
     hi = np.where(ok[..., None], pts, -np.inf).max(axis=-2)
-    # A box needs two valid joints; fewer gives -inf/inf extents that are zeroed below.
-    diag = np.where(ok.sum(axis=-1) >= 2, np.linalg.norm(np.nan_to_num(hi - lo, posinf=0, neginf=0), axis=-1), 0.0)
+    # A box needs two valid joints; fewer gives -inf/inf extents, zeroed here. An extent past float64 (joints
+    # near +-1e308) stays inf, a reference length of none below (nan_to_num made it 0: a diagonal of the rest).
+    enough = ok.sum(axis=-1) >= 2
+    diag = np.where(enough, _norms(np.where(enough[..., None], _differences(hi, lo), 0.0)), 0.0)
 
     ref = np.where(both, direct, diag)
     return np.where(np.isfinite(ref) & (ref > 0), ref, 0.0)
@@ -290,8 +370,8 @@ def pck(pred_2d, true_2d, valid, torso_joints: tuple[int, int] = (NECK, MID_HIP)
         pred_2d: ``(..., J, 2)`` predicted pixels.
         true_2d: ``(..., J, 2)`` true pixels (same image space as ``pred_2d``).
         valid: ``(..., J)`` bool, truth is visible and labelled.
-        torso_joints: the two joints whose distance is the reference length.
-        alpha: threshold as a fraction of the reference length.
+        torso_joints: the two joints whose distance is the reference length (int indices, as ``box_joints``).
+        alpha: threshold as a fraction of the reference length (a number > 0, else ValueError).
         pred_valid: optional ``(..., J)`` bool, the predictor produced the joint.
         box_joints: joints whose bounding-box diagonal is the fallback reference.
 
@@ -306,11 +386,12 @@ def pck(pred_2d, true_2d, valid, torso_joints: tuple[int, int] = (NECK, MID_HIP)
         (0.6666666666666666, [True, False, True])
     """
     pred, true, valid_b, pred_ok = _joints_pair(pred_2d, true_2d, valid, pred_valid, 2, "2d")
-    _check_pck_args(true.shape[-2], (*torso_joints, *box_joints), alpha)
+    _check_pck_args(true.shape[-2], torso_joints, box_joints, alpha)
     ref = _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
     evaluated = valid_b & (ref > 0)[..., None]
-    dist = np.linalg.norm(np.where(pred_ok[..., None], pred - true, 0.0), axis=-1)
-    correct = evaluated & pred_ok & (dist <= alpha * ref[..., None])
+    dist = _norms(np.where(pred_ok[..., None], _differences(pred, true), 0.0))
+    with np.errstate(over="ignore"):  # alpha * ref past float64: every finite distance is within it
+        correct = evaluated & pred_ok & (dist <= alpha * ref[..., None])
 
     n_eval = int(evaluated.sum())
     n_ok = int(correct.sum())
@@ -353,18 +434,21 @@ def left_right_swaps(pred_2d, true_2d, valid, *, pred_valid=None,
         (1.0, 1)
     """
     pred, true, valid_b, pred_ok = _joints_pair(pred_2d, true_2d, valid, pred_valid, 2, "2d")
-    pairs = [(int(a), int(b)) for a, b in pairs]
-    _check_pck_args(true.shape[-2], (*(j for p in pairs for j in p), *torso_joints, *box_joints), alpha)
-    radius = alpha * _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
+    pairs = [tuple(p) for p in pairs]
+    _check_joint_indices("pairs", [j for p in pairs for j in p], true.shape[-2])
+    _check_pck_args(true.shape[-2], torso_joints, box_joints, alpha)
+    with np.errstate(over="ignore"):  # as in pck
+        radius = alpha * _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
     shape = true.shape[:-2] + (len(pairs),)
     swapped, evaluated = np.zeros(shape, bool), np.zeros(shape, bool)
     for k, (a, b) in enumerate(pairs):
         ev = valid_b[..., a] & valid_b[..., b] & pred_ok[..., a] & pred_ok[..., b] & (radius > 0)
         pa, pb = np.where(ev[..., None], pred[..., a, :], 0.0), np.where(ev[..., None], pred[..., b, :], 0.0)
         ta, tb = true[..., a, :], true[..., b, :]
-        near = [[np.linalg.norm(p - t, axis=-1) <= radius for t in (ta, tb)] for p in (pa, pb)]
-        as_labelled = near[0][0] & near[1][1]
-        exchanged = near[0][1] & near[1][0]
+        # a-a, a-b, b-a, b-b in one call: _norms' checks cost more than its sums on 4 x 2 values
+        near = _norms(_differences(np.stack([pa, pa, pb, pb]), np.stack([ta, tb, ta, tb]))) <= radius
+        as_labelled = near[0] & near[3]
+        exchanged = near[1] & near[2]
         evaluated[..., k] = ev
         swapped[..., k] = ev & ~as_labelled & exchanged
     n_eval, n_swap = int(evaluated.sum()), int(swapped.sum())
@@ -396,10 +480,11 @@ def mpjpe(pred_3d, true_3d, valid, *, pred_valid=None) -> MpjpeResult:
     """
     pred, true, valid_b, pred_ok = _joints_pair(pred_3d, true_3d, valid, pred_valid, 3, "3d")
     evaluated = valid_b & pred_ok
-    errors = np.where(evaluated, np.linalg.norm(np.where(evaluated[..., None], pred - true, 0.0), axis=-1), 0.0)
-    errors_mm = 1000.0 * errors
+    errors = np.where(evaluated, _norms(np.where(evaluated[..., None], _differences(pred, true), 0.0)), 0.0)
+    with np.errstate(over="ignore"):  # an error past 1.8e305 m is past float64 in mm: inf
+        errors_mm = 1000.0 * errors
     n = int(evaluated.sum())
-    return MpjpeResult(value=_mean_or_nan(float(errors_mm.sum()), n), errors=errors_mm, evaluated=evaluated,
+    return MpjpeResult(value=_pooled_mean(errors_mm, n), errors=errors_mm, evaluated=evaluated,
                        num_evaluated=n, num_missing=int((~valid_b).sum()),
                        num_pred_missing=int((valid_b & ~pred_ok).sum()))
 
@@ -440,11 +525,35 @@ def acceleration_error(pred_3d, true_3d, valid, *, pred_valid=None, consecutive=
         return AccelerationResult(float("nan"), empty.astype(np.float64), empty, 0)
     ok = valid_b & pred_ok
     evaluated = ok[:-2] & ok[1:-1] & ok[2:] & (chained[1:-1] & chained[2:])[:, None]
-    e = np.where(ok[..., None], pred - true, 0.0)
-    accel = np.linalg.norm(e[2:] - 2.0 * e[1:-1] + e[:-2], axis=-1)
-    errors = np.where(evaluated, 1000.0 * accel, 0.0)
+    accel = _second_difference_norms(pred, true, ok)
+    with np.errstate(over="ignore"):  # past float64 in mm: inf
+        errors = np.where(evaluated, 1000.0 * accel, 0.0)
     n = int(evaluated.sum())
-    return AccelerationResult(_mean_or_nan(float(errors.sum()), n), errors, evaluated, n)
+    return AccelerationResult(_pooled_mean(errors, n), errors, evaluated, n)
+
+
+#: The fallback scale of :func:`_second_difference_norms`: with ``pred`` and ``true`` divided by it neither their
+#: difference nor its second difference (at most 8 times the largest value) leaves float64.
+_SECOND_DIFFERENCE_SCALE = 16.0
+
+
+def _second_difference_norms(pred: np.ndarray, true: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """``(F - 2, J)`` norms of the second difference of the error ``pred - true`` (``(F, J, 3)``; 0 where not
+    ``ok``). Where that overflowed (values near 1e308: a difference or ``2 e`` past float64 although the result
+    need not be) it is recomputed from the values divided by :data:`_SECOND_DIFFERENCE_SCALE`, a power of two."""
+    def second(p: np.ndarray, t: np.ndarray) -> np.ndarray:
+        e = np.where(ok[..., None], _differences(p, t), 0.0)
+        with np.errstate(over="ignore", invalid="ignore"):
+            return e[2:] - 2.0 * e[1:-1] + e[:-2]
+
+    plain = _norms(second(pred, true))
+    redo = ~np.isfinite(plain)
+    if not redo.any():
+        return plain
+    k = _SECOND_DIFFERENCE_SCALE
+    scaled = second(np.where(ok[..., None], pred / k, 0.0), np.where(ok[..., None], true / k, 0.0))
+    with np.errstate(over="ignore"):  # a norm past float64 is inf
+        return np.where(redo, k * _norms(scaled), plain)
 
 
 #: A 3D joint's visibility class: seen (in the image, unoccluded) by every source view, by some, by none.
@@ -556,10 +665,7 @@ def _check_image_range(pred, target, p: np.ndarray, t: np.ndarray, m: np.ndarray
 
 def _check_data_range(data_range) -> None:
     """A peak value of -1 scored as 1 (it is squared) and 0 gave -inf dB and a NaN SSIM: refuse them by name."""
-    # a bool is an int to Python: True scored as a peak of 1
-    if isinstance(data_range, bool) or not (isinstance(data_range, (int, float, np.number)) and 0 < data_range < np.inf):
-        raise ValueError(f"data_range must be a positive number (1.0 for [0, 1] images, 255 for 8-bit), "
-                         f"got {data_range!r}")
+    _positive_number("data_range", data_range, " (1.0 for [0, 1] images, 255 for 8-bit)")
 
 
 def _per_image_result(values: np.ndarray, counts: np.ndarray, batch_shape: tuple[int, ...]) -> ImageMetricResult:
@@ -601,12 +707,26 @@ def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
     batch_shape = np.asarray(mask).shape[:-2]
     counts = m.sum(axis=(1, 2))
     # in units of data_range: data_range ** 2 under- or overflowed (1e-200: 0 / 0, a NaN and a warning; 1e200: inf)
-    sq = (((p - t) / data_range) ** 2).sum(axis=-1)  # (N, H, W), summed over channels
-    sq = np.where(m, sq, 0.0)  # not sq * m: a NaN outside the mask would poison the sum (0 * NaN is NaN)
-    mse = np.where(counts > 0, sq.sum(axis=(1, 2)) / np.maximum(counts * p.shape[-1], 1), np.nan)
+    with np.errstate(over="ignore"):  # a difference past 1e154 data ranges: redone below
+        sq = (((p - t) / data_range) ** 2).sum(axis=-1)  # (N, H, W), summed over channels
+        sq = np.where(m, sq, 0.0)  # not sq * m: a NaN outside the mask would poison the sum (0 * NaN is NaN)
+        mse = np.where(counts > 0, sq.sum(axis=(1, 2)) / np.maximum(counts * p.shape[-1], 1), np.nan)
     with np.errstate(divide="ignore"):
         values = 10.0 * np.log10(1.0 / mse)
+    for i in np.flatnonzero(np.isinf(mse)):
+        values[i] = _wild_psnr(p[i][m[i]] / data_range - t[i][m[i]] / data_range, values[i])
     return _per_image_result(values, counts, batch_shape)
+
+
+def _wild_psnr(d: np.ndarray, plain: float) -> float:
+    """PSNR (dB) of the differences ``d`` (in data ranges) whose mean square overflowed (a wild prediction):
+    ``-20 log10(top) - 10 log10(mean((d / top)**2))`` with ``top`` the largest difference, in range for any finite
+    ``d``. ``plain`` (-inf, or NaN from a non-finite value) where ``d`` is not finite."""
+    top = float(np.abs(d).max())
+    if not top < np.inf:
+        return plain
+    unit = d / top
+    return float(-20.0 * np.log10(top) - 10.0 * np.log10((unit * unit).mean()))
 
 
 #: A per-image PSNR of identical images (+inf) counts as this in a pooled mean (``ghnerf-eval``, the painter's
@@ -648,23 +768,74 @@ def scorable_images(images, data_range: float = 1.0) -> tuple[np.ndarray, np.nda
     return np.where(keep, np.nan, np.clip(x, 0.0, data_range)), broken
 
 
-def _ssim_map(x: np.ndarray, y: np.ndarray, m: np.ndarray, data_range: float) -> np.ndarray:
-    """SSIM map ``(H, W)`` of one channel with a mask-normalised Gaussian window."""
-    def window_sum(a: np.ndarray) -> np.ndarray:
-        # Constant (zero) border: pixels outside the image weigh like pixels outside the mask.
-        return cv2.GaussianBlur(a, (SSIM_WINDOW, SSIM_WINDOW), SSIM_SIGMA, borderType=cv2.BORDER_CONSTANT)
+def _window_sum(a: np.ndarray) -> np.ndarray:
+    # Constant (zero) border: pixels outside the image weigh like pixels outside the mask.
+    return cv2.GaussianBlur(a, (SSIM_WINDOW, SSIM_WINDOW), SSIM_SIGMA, borderType=cv2.BORDER_CONSTANT)
 
+
+def _ssim_stats(x: np.ndarray, y: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Mask-normalised window means ``mx, my``, variances ``vx, vy`` and covariance ``cxy`` of one channel."""
     inside = m > 0  # a NaN or inf outside the mask must not reach the sums: 0 * NaN is NaN
     x, y = np.where(inside, x, 0.0), np.where(inside, y, 0.0)
-    w = window_sum(m)
+    w = _window_sum(m)
     inv_w = np.where(w > 1e-12, 1.0 / np.maximum(w, 1e-12), 0.0)
-    mx, my = window_sum(m * x) * inv_w, window_sum(m * y) * inv_w
+    mx, my = _window_sum(m * x) * inv_w, _window_sum(m * y) * inv_w
     # Variances can come out a hair negative from cancellation; clamp.
-    vx = np.maximum(window_sum(m * x * x) * inv_w - mx * mx, 0.0)
-    vy = np.maximum(window_sum(m * y * y) * inv_w - my * my, 0.0)
-    cxy = window_sum(m * x * y) * inv_w - mx * my
+    vx = np.maximum(_window_sum(m * x * x) * inv_w - mx * mx, 0.0)
+    vy = np.maximum(_window_sum(m * y * y) * inv_w - my * my, 0.0)
+    cxy = _window_sum(m * x * y) * inv_w - mx * my
+    return mx, my, vx, vy, cxy
+
+
+def _ssim_map(x: np.ndarray, y: np.ndarray, m: np.ndarray, data_range: float) -> np.ndarray:
+    """SSIM map ``(H, W)`` of one channel with a mask-normalised Gaussian window."""
+    mx, my, vx, vy, cxy = _ssim_stats(x, y, m)
     c1, c2 = (SSIM_K1 * data_range) ** 2, (SSIM_K2 * data_range) ** 2
     return ((2 * mx * my + c1) * (2 * cxy + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2))
+
+
+#: Images (in units of ``data_range``) within +-2**250 take :func:`_ssim_map`: its product of two sums of squares
+#: stays inside float64 (2**1000). A window holding a larger value (a wild prediction) takes :func:`_wild_ssim_map`.
+SSIM_PLAIN_MAX = 2.0 ** 250
+
+
+def _ssim_ratio(num: np.ndarray, den: np.ndarray, c: float, s: np.ndarray) -> np.ndarray:
+    """``(num + c) / (den + c)`` with all three divided by the per-pixel scale ``s`` first (> 0)."""
+    return (num / s + c / s) / (den / s + c / s)
+
+
+def _wild_ssim_map(x: np.ndarray, y: np.ndarray, m: np.ndarray, plain_max: float = SSIM_PLAIN_MAX) -> np.ndarray:
+    """SSIM map (``data_range`` 1) of a channel holding values past :data:`SSIM_PLAIN_MAX`, where
+    :func:`_ssim_map`'s squares and products overflowed (inf - inf: NaN, with RuntimeWarnings).
+
+    A pixel whose window holds no such value keeps :func:`_ssim_map`'s value, bit for bit. The others take the
+    statistics of the images divided by a power of two that puts their largest value at 2**500 (so squares of
+    values past 2**250 stay normal numbers), and the luminance and structure terms as separate ratios, each
+    divided by its largest term first: SSIM is homogeneous in the images and ``c1``, ``c2`` together.
+    ``plain_max``: the bound, lower in tests (to compare both maps where the plain one holds)."""
+    inside = m > 0
+    big = inside & ((np.abs(x) > plain_max) | (np.abs(y) > plain_max))
+    near = cv2.dilate(big.astype(np.uint8), np.ones((SSIM_WINDOW, SSIM_WINDOW), np.uint8),
+                      borderType=cv2.BORDER_CONSTANT, borderValue=0) > 0
+    plain = _ssim_map(np.where(big, 0.0, x), np.where(big, 0.0, y), m, 1.0)  # right where no window holds one
+    top = max(float(np.abs(x[big & np.isfinite(x)]).max(initial=0.0)),
+              float(np.abs(y[big & np.isfinite(y)]).max(initial=0.0)))
+    k = np.ldexp(1.0, max(0, int(np.frexp(top)[1]) - 500))
+    mx, my, vx, vy, cxy = _ssim_stats(x / k, y / k, m)
+    k1, k2 = SSIM_K1 / k, SSIM_K2 / k  # at least 0.01 * 2**-524: c1 and c2 stay above 0 (no 0 / 0)
+    luminance = _ssim_ratio(2 * mx * my, mx * mx + my * my, k1 * k1,
+                            np.maximum(np.maximum(np.abs(mx), np.abs(my)), k1) ** 2)
+    structure = _ssim_ratio(2 * cxy, vx + vy, k2 * k2, np.maximum(np.maximum(vx, vy), k2 * k2))
+    return np.where(near, luminance * structure, plain)
+
+
+def _ssim_channel(x: np.ndarray, y: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """SSIM map of one channel in units of ``data_range``: :func:`_ssim_map`, or :func:`_wild_ssim_map` where a
+    finite value inside the mask passes :data:`SSIM_PLAIN_MAX`."""
+    wild = (np.abs(x) > SSIM_PLAIN_MAX) & np.isfinite(x) | (np.abs(y) > SSIM_PLAIN_MAX) & np.isfinite(y)
+    if np.any(wild & (m > 0)):  # (an infinite value gives a NaN map either way)
+        return _wild_ssim_map(x, y, m)
+    return _ssim_map(x, y, m, 1.0)
 
 
 def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResult:
@@ -704,7 +875,7 @@ def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
             continue
         mi = m[i].astype(np.float64)
         # in units of data_range (L = 1), as masked_psnr: squares of 1e-200 images underflowed (0 / 0, a NaN)
-        per_channel = [(_ssim_map(p[i, ..., c] / data_range, t[i, ..., c] / data_range, mi, 1.0)[m[i]]).mean()
+        per_channel = [(_ssim_channel(p[i, ..., c] / data_range, t[i, ..., c] / data_range, mi)[m[i]]).mean()
                        for c in range(p.shape[-1])]
         values[i] = float(np.mean(per_channel))
     return _per_image_result(values, counts, batch_shape)
@@ -732,10 +903,36 @@ def heatmap_mse(pred, target, valid=None) -> MseResult:
     t = np.asarray(target, dtype=np.float64)
     if p.shape != t.shape or p.ndim < 3:
         raise ShapeError(f"pred {p.shape} and target {t.shape} must have the same shape (..., J, H, W)")
-    per_joint = ((p - t) ** 2).sum(axis=(-2, -1))
     keep = np.ones(p.shape[:-2], bool) if valid is None else _mask("valid", valid, p.shape[:-2])
     count = int(keep.sum()) * p.shape[-2] * p.shape[-1]
-    return MseResult(value=_mean_or_nan(float(per_joint[keep].sum()), count), count=count)
+    return MseResult(value=_mean_square(p, t, keep, count), count=count)
+
+
+def _mean_square(p: np.ndarray, t: np.ndarray, keep: np.ndarray, count: int) -> float:
+    """Mean of ``(p - t) ** 2`` over the ``(H, W)`` maps (``..., J, H, W``) where ``keep`` (``..., J``), over
+    ``count`` values: the plain sum of squares, or where that reached inf (differences past 1e154, with a
+    RuntimeWarning) the squares of the differences divided by the largest one. Differences below 1e-154 stay
+    plain: their squares' rounding is within the last place of a mean that small. A non-finite difference (a
+    broken prediction) propagates."""
+    with np.errstate(over="ignore"):  # one expression, as before: numpy squares p - t in place (no second buffer)
+        plain = _mean_or_nan(float(((p - t) ** 2).sum(axis=(-2, -1))[keep].sum()), count)
+    if not np.isinf(plain):
+        return plain
+    kept = _differences(p[keep], t[keep])
+    top = float(np.abs(kept).max())
+    if not top < np.inf:  # a difference past float64 or NaN (a broken prediction): so is the mean
+        return plain
+    unit = kept / top
+    with np.errstate(over="ignore"):  # past float64: inf
+        return float(top * (top * ((unit * unit).sum() / count)))
+
+
+def _heatmap_size(size) -> tuple[int, int]:
+    """``(H, W)`` from one int or two: ``int()`` took True as 1, 8.7 as 8 and "8" as 8."""
+    dims = (size, size) if np.ndim(size) == 0 else tuple(size)
+    if len(dims) != 2 or not all(_is_int(d) and d >= 1 for d in dims):
+        raise ShapeError(f"heatmap size must be a positive int or (H, W) of them, got {size!r}")
+    return int(dims[0]), int(dims[1])
 
 
 def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: float) -> np.ndarray:
@@ -750,8 +947,9 @@ def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: fl
         joints_2d: ``(..., J, 2)`` joint positions **in heatmap pixels** (convert image or
             model-input pixels first, e.g. ``keypoints.model_to_heatmap_pixels``).
         visible: ``(..., J)`` bool.
-        size: heatmap ``(H, W)``, or one int for a square map.
-        sigma: Gaussian standard deviation in heatmap pixels (> 0, at least about 1e-162: ValueError).
+        size: heatmap ``(H, W)``, or one int for a square map (positive ints; else ShapeError).
+        sigma: Gaussian standard deviation in heatmap pixels: a number > 0, at least about 1e-162 (else, and for a
+            bool or text, ValueError naming it).
 
     Returns:
         ``(..., J, H, W)`` float32.
@@ -763,11 +961,10 @@ def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: fl
     """
     joints = _points("joints_2d", joints_2d, 2)
     vis = _mask("visible", visible, joints.shape[:-1]) & np.all(np.isfinite(joints), axis=-1)
-    h, w = (int(size), int(size)) if np.ndim(size) == 0 else (int(size[0]), int(size[1]))
-    if h < 1 or w < 1:
-        raise ShapeError(f"heatmap size must be positive, got {(h, w)}")
+    h, w = _heatmap_size(size)
+    _positive_number("sigma", sigma, " (heatmap pixels)")
     # below 1e-162 the 2 sigma^2 of the exponent underflows to 0: 0 / 0 on a joint's own pixel, a NaN target
-    if not (np.isfinite(sigma) and sigma > 0 and 2 * sigma * sigma > 0):
+    if not 2 * sigma * sigma > 0:
         raise ValueError(f"sigma must be a positive number whose square float64 holds, got {sigma}")
     x = np.where(vis, joints[..., 0], 0.0)[..., None]
     y = np.where(vis, joints[..., 1], 0.0)[..., None]

@@ -3,12 +3,13 @@ from __future__ import annotations
 
 import doctest
 import math
+import re
 import warnings
 
 import cv2
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
@@ -458,3 +459,146 @@ def test_scorable_images_marks_a_view_with_any_non_finite_pixel_and_keeps_a_floa
         metrics.scorable_images(np.float32(0.5))
     with pytest.raises(ValueError, match="data_range"):
         metrics.scorable_images(imgs, data_range=0)
+
+
+# ------------------------------------------------------------- ends of float64
+def _no_warnings(fn, *args, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        return fn(*args, **kwargs)
+
+
+@settings(max_examples=80, deadline=None)
+@given(k=st.integers(-990, 990), seed=st.integers(0, 2 ** 32 - 1))
+@example(k=990, seed=0)
+@example(k=-990, seed=0)
+def test_joint_metrics_scale_with_their_inputs_across_float64(k, seed):
+    """Joints scaled by 2**k (1e-298..1e298) score the unscaled score scaled alike (PCK: unchanged), with no
+    RuntimeWarning: squares past 1e154 overflowed (inf/NaN scores), squares below 1e-154 underflowed (0 mm)."""
+    rng = np.random.default_rng(seed)
+    s = math.ldexp(1.0, k)
+    true = rng.normal(size=(5, 4, 3))
+    pred = true + rng.normal(scale=0.01, size=true.shape)
+    valid = np.ones((5, 4), bool)
+    for fn in (mpjpe, acceleration_error):
+        plain, scaled = fn(pred, true, valid), _no_warnings(fn, pred * s, true * s, valid)
+        assert scaled.value == pytest.approx(plain.value * s, rel=1e-12)
+        np.testing.assert_allclose(scaled.errors, plain.errors * s, rtol=1e-12)
+    true2, pred2 = true[..., :2], true[..., :2] + rng.normal(scale=0.3, size=(5, 4, 2))
+    plain, scaled = pck(pred2, true2, valid, **TOY), _no_warnings(pck, pred2 * s, true2 * s, valid, **TOY)
+    assert scaled.correct.tolist() == plain.correct.tolist()
+    np.testing.assert_allclose(scaled.reference, plain.reference * s, rtol=1e-12)
+    swaps = _no_warnings(left_right_swaps, pred2 * s, true2 * s, valid, pairs=[(2, 3)], torso_joints=(0, 1),
+                         box_joints=(0, 1, 2))
+    assert swaps.evaluated.tolist() == left_right_swaps(pred2, true2, valid, pairs=[(2, 3)], torso_joints=(0, 1),
+                                                        box_joints=(0, 1, 2)).evaluated.tolist()
+
+
+@settings(max_examples=60, deadline=None)
+@given(k=st.integers(-500, 510), seed=st.integers(0, 2 ** 32 - 1))
+@example(k=510, seed=0)
+def test_heatmap_mse_scales_with_its_inputs_across_float64(k, seed):
+    """Heatmaps scaled by 2**k score 4**k times the MSE wherever that is a float64 (to 2**1020 here): the sum of
+    squares of 384 values reached inf from 2**509 on, the mean did not."""
+    rng = np.random.default_rng(seed)
+    s = math.ldexp(1.0, k)
+    pred, target = rng.random((2, 3, 8, 8)), rng.random((2, 3, 8, 8))
+    scaled = _no_warnings(heatmap_mse, pred * s, target * s).value
+    assert scaled == pytest.approx(heatmap_mse(pred, target).value * s * s, rel=1e-12)
+
+
+def test_joint_metrics_at_the_ends_of_float64():
+    """Hand-checked: a 1e200 m error is 1e203 mm (was inf), a 1e-200 m one 1e-197 mm (was 0); two 1e305 m errors
+    average 1e308 mm (their sum is past float64: was inf); an error past float64 is inf, without a warning."""
+    one, zero = [True], np.zeros((1, 3))
+    assert _no_warnings(mpjpe, [[0, 0, 1e200]], zero, one).value == pytest.approx(1e203, rel=1e-15)
+    assert _no_warnings(mpjpe, [[3e-200, 4e-200, 0]], zero, one).value == pytest.approx(5e-197, rel=1e-15)
+    assert _no_warnings(mpjpe, [[0, 0, 1e305]] * 2, np.zeros((2, 3)), [True] * 2).value == pytest.approx(1e308)
+    assert _no_warnings(mpjpe, [[0, 0, 1e308]], [[0, 0, -1e308]], one).value == math.inf
+    # a constant 2e308 m offset (past float64 as a difference) has no acceleration; one frame off has 4e308: inf
+    pred, true = np.full((4, 1, 3), 1e308), np.full((4, 1, 3), -1e308)
+    assert _no_warnings(acceleration_error, pred, true, np.ones((4, 1), bool)).value == 0.0
+    pred[1] = -1e308
+    assert _no_warnings(acceleration_error, pred, true, np.ones((4, 1), bool)).errors[0, 0] == math.inf
+    assert _no_warnings(heatmap_mse, np.full((2, 3, 3), 1e154), np.zeros((2, 3, 3))).value == pytest.approx(1e308)
+
+
+def test_pck_box_past_float64_is_no_reference():
+    """A torso box from x = -1e308 to 1e308 (neck missing) has a diagonal past float64: no reference length, so
+    the sample is unreferenced. nan_to_num made that extent 0, a diagonal of the y extent alone (8 px)."""
+    true = np.array([[0.0, 0.0], [-1e308, 10.0], [1e308, 2.0], [5.0, 5.0]])
+    r = _no_warnings(pck, true, true, [False, True, True, True], **TOY)
+    assert r.reference == 0.0 and r.num_unreferenced == 3 and r.num_evaluated == 0
+
+
+@pytest.mark.parametrize("spike", [1e160, 1e200, 1e300, 1.7e308, -1e300])
+def test_image_metrics_of_a_prediction_past_1e154_data_ranges(spike):
+    """One wild pixel (a broken render's overshoot): its squares overflowed, a NaN SSIM and a -inf dB PSNR with
+    RuntimeWarnings. SSIM: the windows around it score ~0 as they do for a 1e70 spike; PSNR: the mean square is
+    spike**2 / (pixels * channels), so -20 log10 |spike| + 10 log10(768)."""
+    rng = np.random.default_rng(3)
+    truth, m = rng.random((16, 16, 3)), np.ones((16, 16), bool)
+    pred, moderate = truth.copy(), truth.copy()
+    pred[8, 8, 1], moderate[8, 8, 1] = spike, 1e70
+    assert _no_warnings(masked_ssim, pred, truth, m).value == pytest.approx(masked_ssim(moderate, truth, m).value,
+                                                                            rel=1e-12)
+    expected = -20 * math.log10(abs(spike)) + 10 * math.log10(16 * 16 * 3)
+    assert _no_warnings(masked_psnr, pred, truth, m).value == pytest.approx(expected, rel=1e-12)
+
+
+def test_wild_ssim_map_agrees_with_the_plain_one_where_both_hold():
+    """The scaled luminance and structure ratios, run where the plain formula still holds (its bound lowered to
+    1e3 for a 1e60 spike, on a half mask): the same map to 1e-12."""
+    rng = np.random.default_rng(4)
+    x, y = rng.random((20, 24)), rng.random((20, 24))
+    x[9, 7], y[3, 20] = 1e60, -1e50
+    m = (rng.random((20, 24)) < 0.5).astype(np.float64)
+    m[9, 7] = m[3, 20] = 1.0
+    wild, plain = metrics._wild_ssim_map(x, y, m, plain_max=1e3), metrics._ssim_map(x, y, m, 1.0)
+    np.testing.assert_allclose(wild, plain, rtol=1e-12, atol=1e-15)
+    assert not np.array_equal(wild, metrics._wild_ssim_map(x, y, m))  # the lowered bound took the scaled path
+
+
+# ------------------------------------------------------------ scalar arguments
+@pytest.mark.parametrize("bad", [True, np.True_, "2", None, 0, -1.0, math.nan, math.inf,
+                                 pytest.param(10 ** 400, id="int-past-float64")])
+def test_gaussian_heatmaps_refuses_a_sigma_that_is_not_a_positive_number(bad):
+    """True was a sigma of 1 (a bool is an int), "2" and None raised numpy's bare TypeError."""
+    with pytest.raises(ValueError, match=r"sigma must be a positive number \(heatmap pixels\), got "
+                                         + re.escape(repr(bad)[:40])):
+        gaussian_heatmaps([[2.0, 2.0]], [True], 5, sigma=bad)
+
+
+def test_gaussian_heatmaps_takes_numpy_and_int_sigmas_and_sizes():
+    ref = gaussian_heatmaps([[2.0, 1.0]], [True], (5, 4), sigma=2.0)
+    for size, sigma in (((np.int64(5), 4), 2), (np.array([5, 4]), np.float32(2.0)), ([5, 4], np.float64(2.0))):
+        np.testing.assert_array_equal(_no_warnings(gaussian_heatmaps, [[2.0, 1.0]], [True], size, sigma), ref)
+
+
+@pytest.mark.parametrize("bad", [True, "8", 8.7, (4,), (4, 5, 6), (4, 0)])
+def test_gaussian_heatmaps_refuses_a_size_that_is_not_positive_ints(bad):
+    """int() took True as a 1x1 map, 8.7 as 8, "8" as 8, and (4, 5, 6) as (4, 5)."""
+    with pytest.raises(ShapeError, match="heatmap size must be a positive int or"):
+        gaussian_heatmaps([[2.0, 2.0]], [True], bad, sigma=1.0)
+
+
+@pytest.mark.parametrize(("kw", "message"), [
+    ({"alpha": True}, "alpha must be a positive number, got True"),
+    ({"alpha": "0.2"}, "alpha must be a positive number, got '0.2'"),
+    ({"torso_joints": (0, True)}, "torso_joints: a joint index must be an int, got True"),
+    ({"box_joints": ("0", 1)}, "box_joints: a joint index must be an int, got '0'"),
+    ({"box_joints": (0, 1.0)}, "box_joints: a joint index must be an int, got 1.0"),
+])
+def test_pck_and_swaps_refuse_bool_and_text_arguments(kw, message):
+    """int() took True as joint 1 and "0" as joint 0; alpha=True was PCK@1 and "0.2" numpy's bare TypeError."""
+    args = {**TOY, **kw}
+    with pytest.raises(ValueError, match=re.escape(message)):
+        pck(TRUE, TRUE, [True] * 4, **args)
+    with pytest.raises(ValueError, match=re.escape(message)):
+        left_right_swaps(TRUE, TRUE, [True] * 4, pairs=[(2, 3)], **args)
+    with pytest.raises(ValueError, match=re.escape("pairs: a joint index must be an int, got True")):
+        left_right_swaps(TRUE, TRUE, [True] * 4, pairs=[(2, True)], **TOY)
+    with pytest.raises(ShapeError, match="torso_joints: joint index 7 out of range for 4 joints"):
+        pck(TRUE, TRUE, [True] * 4, torso_joints=(0, 7), box_joints=(0, 1))
+    numpy_args = {"torso_joints": (np.int64(0), 1), "box_joints": (0, 1), "alpha": np.float32(0.2)}
+    assert pck(TRUE, TRUE, [True] * 4, **numpy_args).value == 1.0

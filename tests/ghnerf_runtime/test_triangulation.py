@@ -300,6 +300,23 @@ def test_dlt_and_midpoint_agree():
     np.testing.assert_allclose(dlt.ray_angle_deg, mid.ray_angle_deg, atol=1e-12)
 
 
+@pytest.mark.parametrize("target", [(0.3, -0.2, 50.0), (35.0, -20.0, 30.0), (-40.0, 5.0, -30.0)])
+def test_midpoint_is_exact_for_near_parallel_rays(target):
+    """Noise-free, a 1 mm baseline, a point 50 m away (rays 0.001 deg apart, under a min_ray_angle_deg of 0): the
+    DLT was exact and the midpoint 38 um off (I - d d^T kept float64's 1e-16 of |d| != 1 along the ray, and its
+    diagonal cancelled). Looking along z and obliquely (the mean-ray frame is not the camera's)."""
+    target = np.array([target])
+    R, t = look_at((0.0, 1.5, 0.0), target[0])
+    offset = R.T @ [0.0005, 0.0, 0.0]  # along the cameras' own x axis
+    cams = [Camera(n, 640, 480, K, R=R, t=-R @ (np.array([0.0, 1.5, 0.0]) + s * offset))
+            for n, s in (("l", 1), ("r", -1))]
+    uv = np.stack([c.project(target)[0] for c in cams])
+    mid, dlt = triangulate_midpoint(uv, cams, min_ray_angle_deg=0), triangulate_dlt(uv, cams, min_ray_angle_deg=0)
+    assert mid.valid[0] and dlt.valid[0] and mid.ray_angle_deg[0] < 0.002
+    np.testing.assert_allclose(dlt.points, target, atol=1e-8)
+    np.testing.assert_allclose(mid.points, target, atol=1e-8)
+
+
 def test_midpoint_two_views_is_midpoint_of_common_perpendicular():
     cams, _, uv = generate_scene(2, 3)
     noisy = uv + np.array([[[3.0, -2.0]], [[-4.0, 1.0]]])
