@@ -36,8 +36,10 @@ loose cable passed the bring-up's camera check). A recording that ends (``replay
 
 A ``file://`` ``--sink`` on a file the run reads (the rig URL's ``rig=``, ``bvh=`` or video files, the ``--config``
 file) or on ``OUT/sim_pair.png`` is a usage error before anything is opened, as the daemon refuses its sinks there
-(``ghnerf_runtime.cli.output_path.output_clash``); so is one on a folder or in a folder that is not there (since
-session 74: the sink, which tries again what it cannot open, failed the run only after the model load and the run).
+(``ghnerf_runtime.cli.output_path.output_clash``); so is one on a folder, in a folder that is not there, or one
+this user may not write (since session 74: the sink, which tries again what it cannot open, failed the run only
+after the model load and the run), and any ``--sink`` its parser refuses (an unknown scheme, ``udp://`` without a
+host, a bad ``baud=``, an unknown option: the daemon's config check, which opens nothing).
 
 Ctrl-C stops the reading and still prints the summary (exit 0); SIGTERM (``timeout``, ``kill``: how a
 ``record+`` take is often ended) does the same, a recorder closing its take complete, and exits 143 with one
@@ -71,12 +73,13 @@ from drivers.wrappers import innermost_url
 from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch, fixes, symptoms
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
     CALIBRATION_WINDOW
-from firmware_host.errors import FirmwareHostError
+from firmware_host.errors import FirmwareHostError, SinkConfigError
 from firmware_host.joint_frames import FrameNumbers, announced_scene_flags, capture_time_us, estimate_frame, truth_frame
 from firmware_host.protocol.constants import MAX_RIG_ID_LEN
 from firmware_host.protocol.messages import JointFrame
-from firmware_host.sinks import Sink, open_sink
+from firmware_host.sinks import Sink, check_sink_url, open_sink
 from firmware_host.sinks.file_sink import FileSink
+from firmware_host.sinks.registry import STAND_IN_CAMERAS
 from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
@@ -649,6 +652,18 @@ def _refuse_ignored_flags(parser: argparse.ArgumentParser, args: argparse.Namesp
         parser.error(f"{' and '.join(given)} with --truth-only: no model runs, so there is nothing to apply it to")
 
 
+def _refuse_bad_sink_url(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """A --sink its parser refuses (an unknown scheme, udp:// without a host, a bad baud=, an unknown option): a
+    usage error before anything is opened (since session 74; the open after the rig's and the model's load said
+    it). The daemon's config check, which opens no device: a serial port busy now may be free by the run."""
+    if args.sink is None:
+        return
+    try:
+        check_sink_url(args.sink, cameras=STAND_IN_CAMERAS)  # the rig's own names, announced in the run, win
+    except SinkConfigError as e:  # its message names the URL, without its passwords
+        parser.error(f"--sink {e}")
+
+
 def _sink_file(url: str | None) -> str | None:
     """The file a ``file://`` ``--sink`` appends to; None for another sink, or a URL the sink's open reports."""
     if url is None or not url.lower().startswith("file:"):
@@ -673,21 +688,31 @@ def _refuse_clashing_outputs(parser: argparse.ArgumentParser, args: argparse.Nam
 
 
 def _sink_file_problem(path: str) -> str | None:
-    """Why a ``file://`` sink can never write ``path``: a folder, or a file in a folder that is not there (None: it
-    may). The sink tries again what it cannot open (a daemon's USB stick mounted later), so the demo loaded the
-    model and ran its seconds against a sink that never opened, and only then failed ("sent none of the frames")."""
+    """Why a ``file://`` sink can never write ``path``: a folder, a file in a folder that is not there, or one this
+    user may not write (None: it may). The sink tries again what it cannot open (a daemon's USB stick mounted
+    later), so the demo loaded the model and ran its seconds against a sink that never opened, and only then failed
+    ("sent none of the frames")."""
     if os.path.isdir(path):
         return f"{path} is a folder, not a file; name a file in it ({Path(path, 'joints.jsonl').as_uri()})"
     folder = os.path.dirname(path)
     if os.path.isdir(folder):
-        return None
+        return _sink_access_problem(path, folder)
     what = "is a file, not a folder" if os.path.exists(folder) else "does not exist"
     return f"its folder {folder} {what} (the sink makes the file, not its folder)"
 
 
+def _sink_access_problem(path: str, folder: str) -> str | None:
+    """Why this user may not write ``path`` (a file there) or make it in ``folder`` (no file yet): the EACCES or
+    EROFS the sink's open would meet, and retry, for the whole run (None: it may)."""
+    why = "(no permission, or a read-only file system)"
+    if os.path.exists(path):  # appended to: the file's own mode
+        return None if os.access(path, os.W_OK) else f"{path} is not writable here {why}"
+    return None if os.access(folder, os.W_OK | os.X_OK) else f"its folder {folder} is not writable here {why}"
+
+
 def _refuse_unwritable_sink(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
-    """A ``file://`` --sink on a folder, or in a folder that is not there: a usage error before anything is opened
-    (since session 74), not a run that ends failed."""
+    """A ``file://`` --sink on a folder, in a folder that is not there, or one this user may not write: a usage
+    error before anything is opened (since session 74), not a run that ends failed."""
     path = _sink_file(args.sink)
     problem = _sink_file_problem(path) if path is not None else None
     if problem is not None:
@@ -699,6 +724,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser(prog)
     args = parser.parse_args(argv)
     _refuse_ignored_flags(parser, args)
+    _refuse_bad_sink_url(parser, args)
     _refuse_clashing_outputs(parser, args)
     _refuse_unwritable_sink(parser, args)
     try:

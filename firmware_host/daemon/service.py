@@ -89,7 +89,7 @@ from firmware_host.joint_frames import FrameNumbers, announced_scene_flags, capt
 from firmware_host.protocol.constants import Fault, Flags
 from firmware_host.service_unit import read_only_hint
 from firmware_host.sinks.base import Sink
-from firmware_host.sinks.registry import sink_class
+from firmware_host.sinks.registry import STAND_IN_CAMERAS, check_sink_url, sink_class
 from firmware_host.sinks.url import parse_url
 from firmware_host.sinks.usb_claims import UsbClaims
 from ghnerf_runtime.config import config_to_dict
@@ -226,7 +226,7 @@ def check_sink_urls(urls: Sequence[str], **sink_kwargs: Any) -> None:
             if "cameras" in parse_url(url).query:
                 raise DaemonConfigError("the daemon announces the rig's camera names itself; remove cameras= from "
                                         "the URL", key=f"sinks[{k}]")
-            sink_class(url).from_url(url, **{**sink_kwargs, "cameras": ("first", "second")})  # type: ignore[attr-defined]
+            check_sink_url(url, **{**sink_kwargs, "cameras": STAND_IN_CAMERAS})
         except DaemonConfigError:
             raise
         except (FirmwareHostError, ValueError) as e:

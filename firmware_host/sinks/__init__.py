@@ -8,6 +8,6 @@
 from firmware_host.sinks.backoff import BackoffPolicy
 from firmware_host.sinks.base import Sink, SinkStats
 from firmware_host.sinks.options import SinkOptions
-from firmware_host.sinks.registry import BACKENDS, open_sink, sink_class
+from firmware_host.sinks.registry import BACKENDS, check_sink_url, open_sink, sink_class
 
-__all__ = ["BACKENDS", "BackoffPolicy", "Sink", "SinkOptions", "SinkStats", "open_sink", "sink_class"]
+__all__ = ["BACKENDS", "BackoffPolicy", "Sink", "SinkOptions", "SinkStats", "check_sink_url", "open_sink", "sink_class"]

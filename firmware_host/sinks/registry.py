@@ -1,4 +1,5 @@
-"""``open_sink(url)``: choose a backend by URL scheme, importing it only when chosen.
+"""``open_sink(url)``: choose a backend by URL scheme, importing it only when chosen; ``check_sink_url(url)``:
+refuse a bad URL as ``open_sink`` would, opening nothing.
 
 Like python-can's interface table: a plain mapping of scheme to (module, class),
 so ``import firmware_host.sinks`` loads neither pyserial nor pyusb.
@@ -25,6 +26,10 @@ BACKENDS: Mapping[str, tuple[str, str]] = MappingProxyType(
     }
 )
 
+#: Camera names for :func:`check_sink_url` before the rig, and so its cameras' names, is known (the daemon and the
+#: demo announce the rig's own, a keyword that wins over a ``cameras=`` in the URL).
+STAND_IN_CAMERAS = ("first", "second")
+
 
 def sink_class(url: str, backends: Optional[Mapping[str, tuple[str, str]]] = None) -> type[Sink]:
     """The backend class for ``url``'s scheme (imports its module)."""
@@ -36,6 +41,16 @@ def sink_class(url: str, backends: Optional[Mapping[str, tuple[str, str]]] = Non
     cls = getattr(importlib.import_module(module_name), class_name)
     assert issubclass(cls, Sink)
     return cls
+
+
+def check_sink_url(url: str, *, backends: Optional[Mapping[str, tuple[str, str]]] = None, **kw: Any) -> None:
+    """Refuse what :func:`open_sink` would refuse for ``url`` and ``kw``, opening nothing: the sink is built, not
+    started (no device, socket or file is touched; a serial port busy now may be free by the run). The daemon's
+    config check and the demo's ``--sink`` check, before a rig opens or a model loads.
+
+    :raises SinkConfigError: bad scheme, parameter or value (named in the message, the URL without passwords).
+    """
+    sink_class(url, backends).from_url(url, **kw)  # type: ignore[attr-defined]
 
 
 def open_sink(url: str, *, backends: Optional[Mapping[str, tuple[str, str]]] = None, **kw: Any) -> Sink:

@@ -280,7 +280,6 @@ def test_bad_config_is_a_one_line_error(tmp_path, capsys):
 @pytest.mark.parametrize(("args", "words"), [
     (["--url", "bogus://x"], ["bogus"]),
     (["--url", "replay:///nonexistent/take"], ["/nonexistent/take"]),
-    (["--sink", "bogus://x"], ["bogus"]),
 ])
 def test_a_wrong_url_or_sink_is_a_one_line_error(tmp_path, capsys, sim_url, args, words):
     argv = ["--truth-only", "--seconds", "0.2", "--out", str(tmp_path / "out")]
@@ -425,6 +424,55 @@ def test_a_file_sink_that_can_never_be_written_is_refused_before_the_run(tmp_pat
     path = f"{tmp_path}/folder"
     assert f"error: --sink {url}: " + said.format(path=path, path_uri=Path(path).as_uri(), tmp=tmp_path) in err
     assert not (tmp_path / "out").exists()  # refused before anything is opened or written
+
+
+@pytest.mark.parametrize(("url", "said"), [
+    ("bogus://x", "bogus://x: invalid scheme='bogus': known schemes: file, memory, serial, udp, usb, vmc"),
+    ("udp://", "udp://: invalid host='': missing host"),
+    ("udp://127.0.0.1:99999", "udp://127.0.0.1:99999: invalid port='99999'"),
+    ("serial:///dev/ttyS0?baud=fast", "serial:///dev/ttyS0?baud=fast: invalid baud='fast'"),
+    ("memory://?colour=red", "memory://?colour=red: invalid colour='red': unknown parameter"),
+    ("file:///tmp/j.jsonl?queue=0", "file:///tmp/j.jsonl?queue=0: invalid queue='0'"),
+    ("udp://u:s3cret@127.0.0.1:9870", "udp://u:***@127.0.0.1:9870: invalid user info='u:***'"),
+])
+def test_a_sink_url_its_parser_refuses_is_refused_before_the_run(tmp_path, capsys, sim_url, url, said):
+    """Session 74: the sink's open said it, after the rig's open and the model's load (seconds on a small host);
+    the parse is the daemon's config check, which opens no device (a serial port busy now may be free later)."""
+    err = _refused(["--truth-only", "--url", sim_url, "--seconds", "5", "--out", str(tmp_path / "out"),
+                    "--sink", url], capsys)
+    assert f"error: --sink {said}" in err and "s3cret" not in err
+    assert not (tmp_path / "out").exists()  # refused before anything is opened or written
+
+
+def test_a_serial_sink_is_not_opened_by_the_check(tmp_path, capsys, monkeypatch):
+    """The check builds the sink without starting it: a port that is not there (or busy) passes it, and the run's
+    own open says what it meets."""
+    def no_rig(url):
+        raise drivers.RigConfigError("stop here: the sink's check is passed")
+
+    monkeypatch.setattr(drivers, "create_rig_source", no_rig)
+    rc = demo.main(["--truth-only", "--seconds", "0.2", "--out", str(tmp_path / "out"),
+                    "--sink", "serial:///dev/ghnerf-no-such-port?baud=921600"])
+    assert rc == 2 and "stop here: the sink's check is passed" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("where", "said"), [
+    ("locked/j.jsonl", "its folder {tmp}/locked is not writable here (no permission, or a read-only file system)"),
+    ("locked.jsonl", "{tmp}/locked.jsonl is not writable here (no permission, or a read-only file system)"),
+])
+def test_a_file_sink_this_user_may_not_write_is_refused_before_the_run(tmp_path, capsys, sim_url, monkeypatch,
+                                                                        where, said):
+    """EACCES (a folder of another user's) or EROFS: the sink retried its open for the whole run, which then failed
+    'sent none of the frames'. Simulated through os.access: the tests run as root, whom a mode does not stop."""
+    (tmp_path / "locked").mkdir()
+    (tmp_path / "locked.jsonl").write_text("")
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda path, mode, **kw: "locked" not in str(path) and real(path, mode, **kw))
+    url = f"file://{tmp_path}/{where}"
+    err = _refused(["--truth-only", "--url", sim_url, "--seconds", "5", "--out", str(tmp_path / "out"),
+                    "--sink", url], capsys)
+    assert f"error: --sink {url}: " + said.format(tmp=tmp_path) in err
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_camera_that_vanishes_mid_run_fails_the_run_naming_it(tmp_path, capsys, sim_url):

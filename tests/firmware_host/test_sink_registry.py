@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from firmware_host.errors import SinkConfigError
-from firmware_host.sinks import BACKENDS, open_sink, sink_class
+from firmware_host.sinks import BACKENDS, Sink, check_sink_url, open_sink, sink_class
+from firmware_host.sinks.registry import STAND_IN_CAMERAS
 
 
 def test_every_scheme_resolves_to_its_backend() -> None:
@@ -260,3 +261,23 @@ def test_every_other_control_character_is_refused_as_rig_urls_refuse_it(url: str
         open_sink(url)
     assert (info.value.field, info.value.value) == ("url", url) and said in str(info.value), str(info.value)
     assert str(info.value).startswith(repr(url) + ": invalid url=")  # escaped, on one line
+
+
+@pytest.mark.parametrize("url", ["serial:///dev/ghnerf-no-such-port?baud=921600", "udp://127.0.0.1:9870",
+                                 "file:///nonexistent-folder/j.jsonl", "usb://1209:0001?ep=0x01"])
+def test_check_sink_url_passes_a_good_url_opening_nothing(url, monkeypatch) -> None:
+    """The config check (daemon, demo) builds the sink without starting it: a port not there or busy yet passes."""
+    def never(self):
+        raise AssertionError(f"{url} was started by the check")
+
+    monkeypatch.setattr(Sink, "start", never)
+    assert check_sink_url(url, cameras=STAND_IN_CAMERAS) is None
+
+
+@pytest.mark.parametrize(("url", "field"), [("bogus://x", "scheme"), ("udp://", "host"),
+                                            ("serial:///dev/ttyS0?baud=fast", "baud"),
+                                            ("memory://?colour=red", "colour")])
+def test_check_sink_url_refuses_what_open_sink_refuses(url, field) -> None:
+    with pytest.raises(SinkConfigError) as e:
+        check_sink_url(url)
+    assert e.value.field == field and str(e.value).startswith(f"{url}: invalid {field}=")

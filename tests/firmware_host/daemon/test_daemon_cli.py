@@ -1031,3 +1031,23 @@ def test_a_second_main_in_the_process_records_sighup_after_the_first_left_it_ign
         assert signal.getsignal(signal.SIGHUP) is signal.SIG_DFL
     finally:
         signal.signal(signal.SIGHUP, before)
+
+
+@pytest.mark.parametrize(("sink", "said"), [
+    ("bogus://x", "sinks[1]: bogus://x: invalid scheme='bogus'"),
+    ("udp://", "sinks[1]: udp://: invalid host=''"),
+    ("serial:///dev/ttyS0?baud=fast", "sinks[1]: serial:///dev/ttyS0?baud=fast: invalid baud='fast'"),
+])
+def test_a_bad_sink_url_stops_the_start_at_the_config_load(tmp_path, capsys, monkeypatch, sink, said):
+    """The start reads the config as --validate-config does (check_config's sink check, which opens nothing):
+    a typo in a sink URL is exit 2 naming its key, before the daemon is built or its model loaded."""
+    def never(*args, **kwargs):
+        raise AssertionError("the daemon was built: the model would load before the sink URL was refused")
+
+    monkeypatch.setattr(cli, "Daemon", never)
+    monkeypatch.setattr(cli, "load_model", never)
+    path = _write(tmp_path, {"rig": {"url": "sim://"}, "sinks": ["memory://", sink],
+                             "estimator": {"session": {"model_dir": str(MODELS)}}})
+    assert cli.main(["--config", str(path), "--max-seconds", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and err.startswith(f"ghnerf-daemon: error: {path}: {said}"), err
