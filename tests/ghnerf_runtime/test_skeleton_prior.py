@@ -509,7 +509,8 @@ def test_looking_for_the_encoder_file_failing_is_a_load_error_naming_it_not_no_s
     with pytest.raises(ModelLoadError) as e:
         prior.check_encoder(tmp_path)
     assert not isinstance(e.value, ModelContractError) and e.value.path == str(encoder)
-    assert str(e.value).startswith(f"{encoder}: cannot look for the encoder file encoder.onnx") and reason in str(e.value)
+    assert str(e.value).startswith(f"{encoder}: cannot look for the encoder file encoder.onnx")
+    assert reason in str(e.value)
 
 
 def test_the_prior_replaces_the_single_view_fallback_and_its_graphs(model_with_prior):
