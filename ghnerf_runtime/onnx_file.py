@@ -19,8 +19,8 @@ import numpy as np
 
 from ghnerf_runtime.errors import ModelError, ModelLoadError
 
-__all__ = ["ORT_LOG_SEVERITY", "open_onnx_file", "ensure_global_pool", "global_pool_threads", "load_failure",
-           "ort_reason", "non_finite_output"]
+__all__ = ["ORT_LOG_SEVERITY", "STALE_INT8_AGE_S", "open_onnx_file", "ensure_global_pool", "global_pool_threads",
+           "load_failure", "ort_reason", "non_finite_output", "stale_int8_reason", "warn_stale_int8"]
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +61,11 @@ _ORT_ERRNO = re.compile(r"system error number (\d+)")
 #: raises as its own naming the graph and file; logged as well, each put a second, raw line in the journal
 #: (ANSI-coloured, with the C++ source location) before the daemon's own.
 ORT_LOG_SEVERITY = 4
+#: Where no recorded link (a weights id, the painter's training record) says whether an int8 file was quantized from
+#: the fp32 file beside it, it was not when it is older than that file by more than this. A margin, not "older": a
+#: copy or a git checkout resets the times in the order it writes the files (encoder.int8.onnx 0.09 s before
+#: encoder.onnx in a checkout of models/), while an export made after training comes minutes after the one before.
+STALE_INT8_AGE_S = 600.0
 
 
 def non_finite_output(outputs: Iterable[tuple[str, np.ndarray]]) -> tuple[str, int, int] | None:
@@ -116,3 +121,31 @@ def open_onnx_file(path: str | Path, threads: int, what: str):
     except Exception as e:  # onnxruntime's own exception types
         raise load_failure(e, path, what) from e
     return sess, dict(sess.get_modelmeta().custom_metadata_map)
+
+
+def stale_int8_reason(int8: Path, fp32: Path, differs: list[str] | None) -> str | None:
+    """Why the int8 file ``int8`` was not quantized from its fp32 twin ``fp32`` (for a warning), None where it may
+    have been. ``differs``: the recorded links (metadata of the fp32 file an int8 file carries over) that differ
+    between the two, ``[]`` where they agree; None where the files record none, and their times decide
+    (:data:`STALE_INT8_AGE_S`)."""
+    if differs is not None:
+        return f"its {', '.join(differs)} differ{'s' if len(differs) == 1 else ''} from {fp32.name}'s" if differs \
+            else None
+    try:
+        age = fp32.stat().st_mtime - int8.stat().st_mtime
+    except OSError:  # the load that follows names the file it cannot read
+        return None
+    if age <= STALE_INT8_AGE_S:
+        return None
+    return f"it records no link to {fp32.name} and is {age / 3600:.1f} h older"
+
+
+def warn_stale_int8(folder: Path, stale: list[tuple[Path, Path, str]], fix: str) -> None:
+    """One WARNING for the ``(int8, fp32, reason)`` files of ``folder`` whose fp32 twin runs instead, with ``fix``
+    (the command that quantizes them again): a folder exported before stale int8 files were removed (session 73)
+    keeps them, and the int8 file was taken."""
+    if not stale:
+        return
+    said = "; ".join(f"{i.name} is not quantized from {f.name} ({why})" for i, f, why in stale)
+    log.warning("%s: %s: running %s instead; quantize again (%s) or remove %s", folder, said,
+                ", ".join(f.name for _, f, _ in stale), fix, ", ".join(i.name for i, _, _ in stale))
