@@ -34,7 +34,7 @@ from ghnerf_runtime.body_proxy import BodyProxy, proxy_depth
 from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.surface import surface_mask, surface_normals
-from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason, stale_int8_reason, warn_stale_int8
+from ghnerf_runtime.onnx_file import onnx_metadata, open_onnx_file, ort_reason, stale_int8_reason, warn_stale_int8
 from ghnerf_runtime.proxy_blend import unit_rgb
 
 __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INPUTS", "OUTPUT", "PLANES", "PainterPlanes",
@@ -236,8 +236,7 @@ class NovelPainter:
         if path is None or path.name != INT8_FILE_NAME or not fp32.is_file():
             return path
         try:
-            int8_meta = open_onnx_file(path, 1, "novel-view painter")[1]
-            fp32_meta = open_onnx_file(fp32, 1, "novel-view painter")[1]
+            int8_meta, fp32_meta = (onnx_metadata(f, "novel-view painter") for f in (path, fp32))
         except ModelLoadError:  # not ours to judge here: the int8 file is loaded, as before, and names its error
             return path
         reason = stale_int8_reason(path, fp32, _record_differs(int8_meta, fp32_meta))

@@ -20,7 +20,8 @@ import numpy as np
 from ghnerf_runtime.errors import ModelError, ModelLoadError
 
 __all__ = ["ORT_LOG_SEVERITY", "STALE_INT8_AGE_S", "open_onnx_file", "ensure_global_pool", "global_pool_threads",
-           "load_failure", "ort_reason", "non_finite_output", "stale_int8_reason", "warn_stale_int8"]
+           "load_failure", "ort_reason", "non_finite_output", "onnx_metadata", "stale_int8_reason",
+           "warn_stale_int8"]
 
 log = logging.getLogger(__name__)
 
@@ -103,13 +104,25 @@ def load_failure(error: Exception, path: Path, what: str) -> ModelLoadError:
 def open_onnx_file(path: str | Path, threads: int, what: str):
     """``(onnxruntime.InferenceSession, custom metadata dict)`` of ``path``; ``what`` names the file in the
     error when it is missing (``ModelLoadError``, also when onnxruntime cannot load it)."""
+    sess = _session(Path(path), threads, what, optimise=True)
+    return sess, dict(sess.get_modelmeta().custom_metadata_map)
+
+
+def onnx_metadata(path: str | Path, what: str) -> dict[str, str]:
+    """The custom metadata of ``path``, its graph not optimised (half the time on the 11 MB encoder: the file is
+    only read to compare it with another); errors as :func:`open_onnx_file`'s."""
+    return dict(_session(Path(path), 1, what, optimise=False).get_modelmeta().custom_metadata_map)
+
+
+def _session(path: Path, threads: int, what: str, optimise: bool):
     import onnxruntime as ort
 
-    path = Path(path)
     if not path.is_file():
         raise ModelLoadError(f"no such {what} file", path=str(path))
     opts = ort.SessionOptions()
     opts.log_severity_level = ORT_LOG_SEVERITY
+    if not optimise:
+        opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_DISABLE_ALL
     if global_pool_threads() is not None:  # every session of the process must then run on it
         opts.use_per_session_threads = False
     else:
@@ -117,10 +130,9 @@ def open_onnx_file(path: str | Path, threads: int, what: str):
         opts.inter_op_num_threads = 1
         opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
     try:
-        sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+        return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
     except Exception as e:  # onnxruntime's own exception types
         raise load_failure(e, path, what) from e
-    return sess, dict(sess.get_modelmeta().custom_metadata_map)
 
 
 def stale_int8_reason(int8: Path, fp32: Path, differs: list[str] | None) -> str | None:

@@ -91,7 +91,7 @@ from ghnerf_runtime.onnx_file import (
     ensure_global_pool,
     load_failure,
     non_finite_output,
-    open_onnx_file,
+    onnx_metadata,
     ort_reason,
     stale_int8_reason,
     warn_stale_int8,
@@ -529,7 +529,7 @@ class ModelSession:
         differs = None
         if weights is not None:
             try:
-                fp32_weights = open_onnx_file(fp32, 1, "graph file")[1].get(WEIGHTS_ID_KEY)
+                fp32_weights = onnx_metadata(fp32, "graph file").get(WEIGHTS_ID_KEY)
             except ModelLoadError:  # the int8 file is loaded, as before
                 return None
             differs = None if fp32_weights is None else [] if fp32_weights == weights else ["weights id"]
