@@ -38,6 +38,10 @@ What is checked at load (each failure names the file and what is wrong):
   two files and their ids. Files without one (exported before) are taken as before, beside stamped ones too
   (a warning names them); the painter and the skeleton prior are other networks, checked by their own
   metadata, not by this id;
+* a ``<graph>.int8.onnx`` not quantized from the ``<graph>.onnx`` beside it (their weights ids differ; without ids,
+  it is older by over ``onnx_file.STALE_INT8_AGE_S``) is not run: a folder exported before session 73 keeps the
+  int8 file of a graph an export replaced. The fp32 file runs, with one warning naming both and the command that
+  quantizes again; the painter's int8 file likewise (``NovelPainter.choose``);
 * the resolution and variant match :class:`SessionConfig` when it pins them;
 * the folder can be read by the user running this (:class:`ModelLoadError` naming it, not a bare
   PermissionError);
