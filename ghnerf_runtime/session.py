@@ -38,10 +38,10 @@ What is checked at load (each failure names the file and what is wrong):
   two files and their ids. Files without one (exported before) are taken as before, beside stamped ones too
   (a warning names them); the painter and the skeleton prior are other networks, checked by their own
   metadata, not by this id;
-* a ``<graph>.int8.onnx`` not quantized from the ``<graph>.onnx`` beside it (their weights ids differ; without ids,
-  it is older by over ``onnx_file.STALE_INT8_AGE_S``) is not run: a folder exported before session 73 keeps the
-  int8 file of a graph an export replaced. The fp32 file runs, with one warning naming both and the command that
-  quantizes again; the painter's int8 file likewise (``NovelPainter.choose``);
+* a ``<graph>.int8.onnx`` not quantized from the ``<graph>.onnx`` beside it (it lacks that file's weights id or has
+  another; where the fp32 file has none, it is older by over ``onnx_file.STALE_INT8_AGE_S``) is not run: a folder
+  exported before session 73 keeps the int8 file of a graph an export replaced. The fp32 file runs, with one warning
+  naming both and the command that quantizes again; the painter's int8 file likewise (``NovelPainter.choose``);
 * the resolution and variant match :class:`SessionConfig` when it pins them;
 * the folder can be read by the user running this (:class:`ModelLoadError` naming it, not a bare
   PermissionError);
@@ -523,20 +523,20 @@ class ModelSession:
     @staticmethod
     def _stale_int8(folder: Path, graph: str, path: Path, sess: ort.InferenceSession) -> tuple[Path, Path, str] | None:
         """``(path, fp32 file, why)`` where ``path`` (opened as ``sess``) is ``graph``'s int8 file by name and was not
-        quantized from the fp32 file beside it (:func:`~ghnerf_runtime.onnx_file.stale_int8_reason`): their weights
-        ids decide (the quantizer stamps the fp32 file's), their times where either has none. A folder exported
-        before session 73 keeps the int8 files of graphs an export replaced, and ``auto`` took them."""
+        quantized from the fp32 file beside it (:func:`~ghnerf_runtime.onnx_file.stale_int8_reason`): the fp32
+        file's weights id decides (the quantizer stamps it in the int8 file), their times where it has none. A folder
+        exported before session 73 keeps the int8 files of graphs an export replaced, and ``auto`` took them."""
         fp32 = folder / _file_name(graph, "fp32")
         if path.name != _file_name(graph, "int8") or not fp32.is_file():
             return None
         weights = dict(sess.get_modelmeta().custom_metadata_map).get(WEIGHTS_ID_KEY)
-        differs = None
-        if weights is not None:
-            try:
-                fp32_weights = onnx_metadata(fp32, "graph file").get(WEIGHTS_ID_KEY)
-            except ModelLoadError:  # the int8 file is loaded, as before
-                return None
-            differs = None if fp32_weights is None else [] if fp32_weights == weights else ["weights id"]
+        try:
+            fp32_weights = onnx_metadata(fp32, "fp32 graph").get(WEIGHTS_ID_KEY)
+        except ModelLoadError:  # the int8 file is loaded, as before
+            return None
+        # an fp32 file with an id and an int8 one without: quantized before ids, so from another fp32 file (the
+        # quantizer copies the id since ids exist); an int8 file with one beside an fp32 file without: the times say
+        differs = None if fp32_weights is None else [] if fp32_weights == weights else ["weights id"]
         why = stale_int8_reason(path, fp32, differs)
         return None if why is None else (path, fp32, why)
 

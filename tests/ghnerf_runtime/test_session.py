@@ -208,14 +208,14 @@ def test_int8_file_is_preferred_when_present(tiny_model_dir, tmp_path):
 
 
 def _int8_twin(folder: Path, graph: str, weights_id: str | None, age_s: float) -> Path:
-    """``graph``'s fp32 file copied as its int8 file with ``weights_id`` (None: none in either file), ``age_s``
-    seconds older than the fp32 file (negative: newer)."""
+    """``graph``'s fp32 file copied as its int8 file with ``weights_id`` (``""``: none; None: none in either file),
+    ``age_s`` seconds older than the fp32 file (negative: newer)."""
     fp32, int8 = folder / f"{graph}.onnx", folder / f"{graph}.int8.onnx"
     if weights_id is None:
         _edit_metadata(fp32, lambda p: {k: v for k, v in p.items() if k != "ghnerf.weights_id"})
     shutil.copy(fp32, int8)
     _edit_metadata(int8, lambda p: {**{k: v for k, v in p.items() if k != "ghnerf.weights_id"}, "ghnerf.precision":
-                                    "int8", **({} if weights_id is None else {"ghnerf.weights_id": weights_id})})
+                                    "int8", **({"ghnerf.weights_id": weights_id} if weights_id else {})})
     now = fp32.stat().st_mtime
     os.utime(int8, (now - age_s, now - age_s))
     return int8
@@ -247,10 +247,35 @@ def test_an_int8_file_of_other_weights_than_the_fp32_beside_it_is_not_run(tiny_m
     assert f"python -m training.export --checkpoint CHECKPOINT.pt --out {folder} --int8" in said
     assert "int8 was asked for" not in caplog.text  # the stale file is the reason, said once
     caplog.clear()
+    _int8_twin(folder, "encoder", "", age_s=-3600.0)  # no id beside an fp32 file with one: quantized before ids
+    with caplog.at_level(logging.WARNING):
+        assert _load_encoder(folder, precision=precision).files["encoder"].path.name == "encoder.onnx"
+    assert "(its weights id differs from encoder.onnx's)" in _stale_warnings(caplog)[0]
+    caplog.clear()
     _int8_twin(folder, "encoder", own, age_s=30 * 86400.0)  # its own weights, however old its time
     with caplog.at_level(logging.WARNING):
         assert _load_encoder(folder, precision=precision).files["encoder"].path.name == "encoder.int8.onnx"
     assert not _stale_warnings(caplog)
+
+
+def test_onnx_metadata_reads_what_onnxruntime_reads_and_names_a_cut_file(tiny_model_dir, tmp_path):
+    """The stale-int8 check reads the fp32 file's metadata from its protobuf fields, not through an onnxruntime
+    session (milliseconds, not a second of a daemon's start for the two encoders): the same keys and values."""
+    import onnxruntime as ort
+
+    from ghnerf_runtime.onnx_file import onnx_metadata
+
+    files = sorted(tiny_model_dir.glob("*.onnx")) + sorted((REPO / "models" / "ghnerf").glob("*.onnx"))[:4]
+    for path in files:
+        want = dict(ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta()
+                    .custom_metadata_map)
+        assert want and onnx_metadata(path, "graph") == want, path
+    cut = tmp_path / "cut.onnx"
+    cut.write_bytes(files[0].read_bytes()[:-7])
+    with pytest.raises(ModelLoadError, match=r"cut\.onnx: the graph file is no ONNX model \(truncated"):
+        onnx_metadata(cut, "graph")
+    with pytest.raises(ModelLoadError, match=r"none\.onnx: cannot read the graph file: No such file"):
+        onnx_metadata(tmp_path / "none.onnx", "graph")
 
 
 def test_an_int8_file_without_a_weights_id_is_judged_by_its_time(tiny_model_dir, tmp_path, caplog):
