@@ -31,10 +31,10 @@ import numpy as np
 
 from ghnerf_runtime.body25 import NUM_JOINTS
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_depth
-from ghnerf_runtime.errors import ModelContractError, ModelRunError, ShapeError
+from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.surface import surface_mask, surface_normals
-from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
+from ghnerf_runtime.onnx_file import onnx_metadata, open_onnx_file, ort_reason, stale_int8_reason, warn_stale_int8
 from ghnerf_runtime.proxy_blend import unit_rgb
 
 __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INPUTS", "OUTPUT", "PLANES", "PainterPlanes",
@@ -55,6 +55,11 @@ INPUTS = ("planes", "joints")
 OUTPUT = "rgb"
 #: The largest finite float16: the depth plane is held as float16, as the caches hold it.
 F16_MAX = float(np.finfo(np.float16).max)
+#: What ``training.learnt_fill.quantize_painter`` adds to the fp32 file's metadata in the int8 one; the rest is carried
+#: over, so an int8 file whose rest differs from the fp32 painter's was quantized from another painter.
+_INT8_ONLY_KEYS = frozenset({META_PREFIX + "precision", META_PREFIX + "calibration_views"})
+#: The training record ``export_painter`` writes (with the net's shape): without it the metadata link nothing.
+_RECORD_KEY = META_PREFIX + "steps"
 
 
 def float16_depth(rel: np.ndarray) -> np.ndarray:
@@ -193,6 +198,15 @@ def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sou
     return PainterPlanes(np.ascontiguousarray(planes.transpose(2, 0, 1), np.float32), j.astype(np.float32), mask)
 
 
+def _record_differs(int8_meta: dict[str, str], fp32_meta: dict[str, str]) -> list[str] | None:
+    """The metadata keys (without the prefix) in which an int8 painter's record differs from the fp32 painter's;
+    None where the fp32 file records no training (a hand-made file): the metadata then link nothing."""
+    if _RECORD_KEY not in fp32_meta:
+        return None
+    keys = sorted((set(int8_meta) | set(fp32_meta)) - _INT8_ONLY_KEYS)
+    return [k.removeprefix(META_PREFIX) for k in keys if int8_meta.get(k) != fp32_meta.get(k)]
+
+
 class NovelPainter:
     """A loaded ``novel_painter.onnx``: :meth:`paint` returns the repainted picture."""
 
@@ -210,6 +224,28 @@ class NovelPainter:
         folder = Path(folder)
         names = (INT8_FILE_NAME, FILE_NAME) if precision in ("auto", "int8") else (FILE_NAME,)
         return next((folder / n for n in names if (folder / n).is_file()), None)
+
+    @staticmethod
+    def choose(folder: str | Path, precision: str = "auto") -> Path | None:
+        """The painter file to load: :meth:`find`'s, or the fp32 one where the int8 file beside it was not
+        quantized from it (a folder exported before session 73 keeps the int8 file of the painter an export
+        replaced), with one warning naming both and the command that quantizes it again. Their metadata decide
+        (``quantize_painter`` carries the fp32 file's over), their times where the files record no training."""
+        folder = Path(folder)
+        path, fp32 = NovelPainter.find(folder, precision), folder / FILE_NAME
+        if path is None or path.name != INT8_FILE_NAME or not fp32.is_file():
+            return path
+        try:
+            int8_meta, fp32_meta = (onnx_metadata(f, "novel-view painter") for f in (path, fp32))
+        except ModelLoadError:  # not ours to judge here: the int8 file is loaded, as before, and names its error
+            return path
+        reason = stale_int8_reason(path, fp32, _record_differs(int8_meta, fp32_meta))
+        if reason is None:
+            return path
+        net = fp32_meta.get(META_PREFIX + "trained_on") or "NET.pt"
+        warn_stale_int8(folder, [(path, fp32, reason)], f"python -m training.learnt_fill export --net {net} "
+                        f"--out {fp32} --calib-cache TRAINING_CACHE.npz")
+        return fp32
 
     @classmethod
     def load(cls, path: str | Path, threads: int = 1) -> "NovelPainter":

@@ -38,6 +38,10 @@ What is checked at load (each failure names the file and what is wrong):
   two files and their ids. Files without one (exported before) are taken as before, beside stamped ones too
   (a warning names them); the painter and the skeleton prior are other networks, checked by their own
   metadata, not by this id;
+* a ``<graph>.int8.onnx`` not quantized from the ``<graph>.onnx`` beside it (it lacks that file's weights id or has
+  another; where the fp32 file has none, it is older by over ``onnx_file.STALE_INT8_AGE_S``) is not run: a folder
+  exported before session 73 keeps the int8 file of a graph an export replaced. The fp32 file runs, with one warning
+  naming both and the command that quantizes again; the painter's int8 file likewise (``NovelPainter.choose``);
 * the resolution and variant match :class:`SessionConfig` when it pins them;
 * the folder can be read by the user running this (:class:`ModelLoadError` naming it, not a bare
   PermissionError);
@@ -86,7 +90,16 @@ from ghnerf_runtime.contract import (
 from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, ModelRunError
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
 from ghnerf_runtime.novel_painter import NovelPainter
-from ghnerf_runtime.onnx_file import ORT_LOG_SEVERITY, ensure_global_pool, load_failure, non_finite_output, ort_reason
+from ghnerf_runtime.onnx_file import (
+    ORT_LOG_SEVERITY,
+    ensure_global_pool,
+    load_failure,
+    non_finite_output,
+    onnx_metadata,
+    ort_reason,
+    stale_int8_reason,
+    warn_stale_int8,
+)
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import SkeletonPrior
 
@@ -375,11 +388,16 @@ class ModelSession:
         stamped: tuple[Path, str] | None = None  # the first file loaded that has a weights id, and the id
         by_meta: dict[tuple[str, str], Path] = {}
         fell_back: list[str] = []  # graphs asked for int8 by name that run an fp32 file
+        stale: list[tuple[Path, Path, str]] = []  # (int8, fp32, why): int8 files not quantized from the fp32 beside
         for graph in dict.fromkeys(graphs):
             only_fp32 = _wanted_precision(graph, config)[1]
             path = cls._locate(folder, graph, config, by_meta)
             t0 = time.perf_counter()
             sess = _open(path, config)
+            if (stale_twin := cls._stale_int8(folder, graph, path, sess)) is not None:
+                stale.append(stale_twin)
+                path = stale_twin[1]
+                sess = _open(path, config)
             load_ms = 1e3 * (time.perf_counter() - t0)
             file_contract, file_graph, precision = _contract_of(sess, path)
             if file_graph != graph:
@@ -412,8 +430,10 @@ class ModelSession:
             sessions[graph] = sess
             files[graph] = GraphFile(graph, path, precision, load_ms, weights)
             log.info("loaded %s (%s, %.0f ms)", path, precision, load_ms)
-            if _int8_by_name(graph, config) and precision != "int8" and path.name != _file_name(graph, "int8"):
+            if (_int8_by_name(graph, config) and precision != "int8" and path.name != _file_name(graph, "int8")
+                    and stale_twin is None):  # (said below, with why)
                 fell_back.append(path.name)
+        warn_stale_int8(folder, stale, f"python -m training.export --checkpoint CHECKPOINT.pt --out {folder} --int8")
         if fell_back:
             # documented (int8 falls back to fp32), but a user who named int8 (ghnerf-run --precision int8) and
             # timed the run took it for int8's figures: said once, naming the files
@@ -430,8 +450,8 @@ class ModelSession:
         if skeleton_prior and (folder / PRIOR_FILE).is_file():
             session.skeleton_prior = SkeletonPrior.load(folder / PRIOR_FILE, threads=1)  # one small MLP row: no pool
             session.skeleton_prior.check_encoder(folder)
-        painter_file = NovelPainter.find(folder, config.precision)
-        if novel_painter and painter_file is not None:
+        painter_file = NovelPainter.choose(folder, config.precision) if novel_painter else None
+        if painter_file is not None:
             session.novel_painter = NovelPainter.load(painter_file, threads=config.threads)
         if config.warmup:
             session.warm_up()
@@ -499,6 +519,26 @@ class ModelSession:
                                  "loaded from it", path=str(odd))
         raise ModelLoadError(f"no file for graph {graph!r} (looked for {', '.join(names)} and "
                              "ghnerf.graph metadata)", path=str(folder))
+
+    @staticmethod
+    def _stale_int8(folder: Path, graph: str, path: Path, sess: ort.InferenceSession) -> tuple[Path, Path, str] | None:
+        """``(path, fp32 file, why)`` where ``path`` (opened as ``sess``) is ``graph``'s int8 file by name and was not
+        quantized from the fp32 file beside it (:func:`~ghnerf_runtime.onnx_file.stale_int8_reason`): the fp32
+        file's weights id decides (the quantizer stamps it in the int8 file), their times where it has none. A folder
+        exported before session 73 keeps the int8 files of graphs an export replaced, and ``auto`` took them."""
+        fp32 = folder / _file_name(graph, "fp32")
+        if path.name != _file_name(graph, "int8") or not fp32.is_file():
+            return None
+        weights = dict(sess.get_modelmeta().custom_metadata_map).get(WEIGHTS_ID_KEY)
+        try:
+            fp32_weights = onnx_metadata(fp32, "fp32 graph").get(WEIGHTS_ID_KEY)
+        except ModelLoadError:  # the int8 file is loaded, as before
+            return None
+        # an fp32 file with an id and an int8 one without: quantized before ids, so from another fp32 file (the
+        # quantizer copies the id since ids exist); an int8 file with one beside an fp32 file without: the times say
+        differs = None if fp32_weights is None else [] if fp32_weights == weights else ["weights id"]
+        why = stale_int8_reason(path, fp32, differs)
+        return None if why is None else (path, fp32, why)
 
     @staticmethod
     def _find(folder: Path, graph: str, precision: str) -> Path | None:

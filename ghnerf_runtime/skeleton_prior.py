@@ -19,6 +19,7 @@ onnxruntime and numpy only; never torch.
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import time
 from dataclasses import dataclass
@@ -357,6 +358,13 @@ class SkeletonEstimate:
     triangulated: np.ndarray
 
 
+#: What ``Path.is_file`` may raise for a missing file (no such file, a file where a folder should be): "not there"
+_MISSING = frozenset({errno.ENOENT, errno.ENOTDIR})
+#: ... and for a name no file can have (longer than the file system takes, a link loop): "no such name". Any other
+#: error (permission, I/O) is the file system's, said as it is.
+_NO_SUCH_NAME = frozenset({errno.ENAMETOOLONG, errno.EINVAL, errno.ELOOP})
+
+
 class SkeletonPrior:
     """A loaded ``skeleton_prior.onnx``: :meth:`estimate` runs it on decoded 2D peaks.
 
@@ -400,7 +408,7 @@ class SkeletonPrior:
 
         Raises:
             ModelContractError: the recorded encoder file is missing or has other bytes.
-            ModelLoadError: it cannot be read.
+            ModelLoadError: it cannot be looked for (a folder this user may not search, an I/O error) or read.
         """
         name = self.metadata.get(META_PREFIX + "encoder_file")
         digest = self.metadata.get(META_PREFIX + "encoder_sha256")
@@ -409,13 +417,7 @@ class SkeletonPrior:
         encoder = Path(folder) / name
         fix = (f"retrain it on this encoder (python -m training.skeleton_prior --model-dir {folder} ...) or run "
                f"without it (joints3d.skeleton_prior: off)")
-        try:
-            present = encoder.is_file()
-        except OSError as e:  # a name no file can have (longer than the file system takes): was a bare OSError
-            raise ModelContractError(f"names the encoder file {name[:60]!r}{'...' if len(name) > 60 else ''}, "
-                                     f"which no file in {folder} can be ({e.strerror or e})", path=str(self.path),
-                                     key=META_PREFIX + "encoder_file") from None
-        if not present:
+        if not self._encoder_present(encoder, name, folder):
             raise ModelContractError(f"was trained on the 2D joints of {name}, which {folder} does not have: {fix}",
                                      path=str(self.path), key=META_PREFIX + "encoder_file")
         try:
@@ -427,6 +429,26 @@ class SkeletonPrior:
             raise ModelContractError(f"was trained on the 2D joints of {name} with sha256 {digest[:12]}..., and "
                                      f"{encoder} is another file (sha256 {actual[:12]}...): {fix}",
                                      path=str(self.path), key=META_PREFIX + "encoder_sha256")
+
+    def _encoder_present(self, encoder: Path, name: str, folder: Path) -> bool:
+        """Whether ``encoder`` (the file ``name`` recorded in this prior) is a file in ``folder``.
+
+        Raises:
+            ModelContractError: ``name`` is one no file can have (was a bare OSError).
+            ModelLoadError: naming ``encoder`` and the operating system's reason, where looking for it failed
+                otherwise (a folder this user may not search, an I/O error): it was read as "no such name".
+        """
+        try:
+            return encoder.is_file()
+        except OSError as e:
+            if e.errno in _MISSING:
+                return False
+            if e.errno in _NO_SUCH_NAME:
+                raise ModelContractError(f"names the encoder file {name[:60]!r}{'...' if len(name) > 60 else ''}, "
+                                         f"which no file in {folder} can be ({e.strerror or e})",
+                                         path=str(self.path), key=META_PREFIX + "encoder_file") from None
+            raise ModelLoadError(f"cannot look for the encoder file {name} this prior was trained on, to check it: "
+                                 f"{e.strerror or e}", path=str(encoder)) from None
 
     def estimate(self, uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray,
                  P: Sequence | np.ndarray, flip_test: bool = True, *, cameras: PriorCameras | None = None,

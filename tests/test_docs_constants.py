@@ -70,6 +70,7 @@ from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M
 from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_BLOCK_VOLUME, MIN_RAY_ANGLE_FLOOR_DEG, \
     MIN_ROW_SHARE
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
+from ghnerf_runtime.onnx_file import STALE_INT8_AGE_S
 from ghnerf_runtime.others_scan import SUBJECT_MARGIN_M
 from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, MAX_DISTORTION, MAX_RIG_FILE_BYTES, MAX_SKEW_SHARE,
                                      MAX_VOLUME_FLOOR_GAP_M, MIN_PAIR_ANGLE_DEG, MIN_PERSON_IN_VIEW_SHARE,
@@ -213,6 +214,7 @@ def _doc(name: str) -> str:
                         f"{-_PRIOR_CONFIDENCE_SCALE_M * math.log(TRACK_CONF):.2f} m"),
     ("docs/runtime.md", f"(`{WEIGHTS_ID_KEY}`, the same in every graph"),
     ("docs/runtime.md", f"`weights_id` (the loaded graphs' shared `{WEIGHTS_ID_KEY}`"),
+    ("docs/runtime.md", f"over {STALE_INT8_AGE_S:g} s (`onnx_file.STALE_INT8_AGE_S`"),
     ("docs/training.md", f"carries the same `{WEIGHTS_ID_KEY}` in its metadata"),
     ("docs/training.md", f"with its `{WEIGHTS_ID_KEY}` left out"),
     ("docs/model.md", f"with `{WEIGHTS_ID_KEY}` beside it"),

@@ -6,7 +6,9 @@ which is enough to check what the runtime feeds it and what it keeps of the answ
 painter is fed what it was trained on is ``tests/training/test_novel_painter_export.py``."""
 from __future__ import annotations
 
+import os
 import re
+import time
 from pathlib import Path
 
 import numpy as np
@@ -155,6 +157,47 @@ def test_the_folder_gives_the_int8_painter_where_the_precision_allows(tmp_path):
     assert NovelPainter.find(tmp_path, "auto").name == "novel_painter.int8.onnx"
     assert NovelPainter.find(tmp_path, "int8").name == "novel_painter.int8.onnx"
     assert NovelPainter.find(tmp_path, "fp32").name == "novel_painter.onnx"
+
+
+def _recorded(path: Path, age_s: float = 0.0, **record: str) -> Path:
+    """``path`` with ``record`` added to its metadata (``ghnerf_painter.`` keys), ``age_s`` seconds in the past."""
+    model = onnx.load(str(path))
+    for k, v in record.items():
+        entry = model.metadata_props.add()
+        entry.key, entry.value = META_PREFIX + k, v
+    onnx.save(model, str(path))
+    os.utime(path, (time.time() - age_s, time.time() - age_s))
+    return path
+
+
+def test_an_int8_painter_not_quantized_from_the_fp32_one_beside_it_is_not_run(tmp_path, caplog):
+    """A folder exported before session 73 keeps the int8 file of the painter an export replaced, and ``auto`` ran
+    it. ``quantize_painter`` carries the fp32 file's training record over: one that differs gives the fp32 file,
+    said once naming both and the command that quantizes it again; the same record gives the int8 file, however old
+    its time. Without a record (a hand-made painter) the times decide."""
+    import logging
+
+    fp32 = _recorded(blend_painter(tmp_path / "novel_painter.onnx"), steps="4704", trained_on="out/new/fill_net.pt")
+    int8 = _recorded(blend_painter(tmp_path / "novel_painter.int8.onnx"), age_s=-60.0, steps="1000",
+                     trained_on="out/old/fill_net.pt", precision="int8", calibration_views="64")
+    for precision in ("auto", "int8"):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING):
+            assert NovelPainter.choose(tmp_path, precision) == fp32
+        [said] = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+        assert "novel_painter.int8.onnx is not quantized from novel_painter.onnx (its steps, trained_on differ" in said
+        assert f"python -m training.learnt_fill export --net out/new/fill_net.pt --out {fp32} --calib-cache" in said
+    assert NovelPainter.find(tmp_path, "auto") == int8  # (find says which files the folder has)
+    _recorded(blend_painter(int8), age_s=30 * 86400.0, steps="4704", trained_on="out/new/fill_net.pt",
+              precision="int8", calibration_views="64")
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        assert NovelPainter.choose(tmp_path) == int8
+    assert not caplog.records
+    for age_s, chosen in ((2 * 86400.0, fp32), (5.0, int8)):  # no record: a copy's seconds apart is no stale file
+        blend_painter(fp32)
+        _recorded(blend_painter(int8), age_s=age_s)
+        assert NovelPainter.choose(tmp_path) == chosen
 
 
 def test_the_views_angle_from_the_sources_is_ghnerf_evals(shot):

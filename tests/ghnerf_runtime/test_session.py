@@ -207,6 +207,107 @@ def test_int8_file_is_preferred_when_present(tiny_model_dir, tmp_path):
         "encoder"].path.name == "encoder.int8.onnx"
 
 
+def _int8_twin(folder: Path, graph: str, weights_id: str | None, age_s: float) -> Path:
+    """``graph``'s fp32 file copied as its int8 file with ``weights_id`` (``""``: none; None: none in either file),
+    ``age_s`` seconds older than the fp32 file (negative: newer)."""
+    fp32, int8 = folder / f"{graph}.onnx", folder / f"{graph}.int8.onnx"
+    if weights_id is None:
+        _edit_metadata(fp32, lambda p: {k: v for k, v in p.items() if k != "ghnerf.weights_id"})
+    shutil.copy(fp32, int8)
+    _edit_metadata(int8, lambda p: {**{k: v for k, v in p.items() if k != "ghnerf.weights_id"}, "ghnerf.precision":
+                                    "int8", **({"ghnerf.weights_id": weights_id} if weights_id else {})})
+    now = fp32.stat().st_mtime
+    os.utime(int8, (now - age_s, now - age_s))
+    return int8
+
+
+def _stale_warnings(caplog) -> list[str]:
+    said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    return [m for m in said if "not quantized from" in m]
+
+
+@pytest.mark.parametrize("precision", ["auto", "int8"])
+def test_an_int8_file_of_other_weights_than_the_fp32_beside_it_is_not_run(tiny_model_dir, tmp_path, caplog,
+                                                                          precision):
+    """A folder exported before session 73 keeps the int8 file of a graph an export replaced, and the runtime ran it
+    (the stale weights, or a load refused for two weights ids): its weights id, which the quantizer copies from the
+    fp32 file, differs from the fp32 file's. The fp32 file runs, said once naming both and the fix; the times do
+    not count where the ids say (the stale file here is the newer)."""
+    import logging
+
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    own = ModelSession.load(SessionConfig(model_dir=str(folder), warmup=False), ("encoder",)).weights_id
+    assert own is not None  # the export stamps one
+    _int8_twin(folder, "encoder", "f" * 64, age_s=-3600.0)
+    with caplog.at_level(logging.WARNING):
+        s = _load_encoder(folder, precision=precision)
+    assert s.files["encoder"].path.name == "encoder.onnx" and s.files["encoder"].precision == "fp32"
+    [said] = _stale_warnings(caplog)
+    assert "encoder.int8.onnx is not quantized from encoder.onnx (its weights id differs" in said
+    assert f"python -m training.export --checkpoint CHECKPOINT.pt --out {folder} --int8" in said
+    assert "int8 was asked for" not in caplog.text  # the stale file is the reason, said once
+    caplog.clear()
+    _int8_twin(folder, "encoder", "", age_s=-3600.0)  # no id beside an fp32 file with one: quantized before ids
+    with caplog.at_level(logging.WARNING):
+        assert _load_encoder(folder, precision=precision).files["encoder"].path.name == "encoder.onnx"
+    assert "(its weights id differs from encoder.onnx's)" in _stale_warnings(caplog)[0]
+    caplog.clear()
+    _int8_twin(folder, "encoder", own, age_s=30 * 86400.0)  # its own weights, however old its time
+    with caplog.at_level(logging.WARNING):
+        assert _load_encoder(folder, precision=precision).files["encoder"].path.name == "encoder.int8.onnx"
+    assert not _stale_warnings(caplog)
+
+
+def test_onnx_metadata_reads_what_onnxruntime_reads_and_names_a_cut_file(tiny_model_dir, tmp_path):
+    """The stale-int8 check reads the fp32 file's metadata from its protobuf fields, not through an onnxruntime
+    session (milliseconds, not a second of a daemon's start for the two encoders): the same keys and values."""
+    import onnxruntime as ort
+
+    from ghnerf_runtime.onnx_file import onnx_metadata
+
+    files = sorted(tiny_model_dir.glob("*.onnx")) + sorted((REPO / "models" / "ghnerf").glob("*.onnx"))[:4]
+    for path in files:
+        want = dict(ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta()
+                    .custom_metadata_map)
+        assert want and onnx_metadata(path, "graph") == want, path
+    cut = tmp_path / "cut.onnx"
+    cut.write_bytes(files[0].read_bytes()[:-7])
+    with pytest.raises(ModelLoadError, match=r"cut\.onnx: the graph file is no ONNX model \(truncated"):
+        onnx_metadata(cut, "graph")
+    with pytest.raises(ModelLoadError, match=r"none\.onnx: cannot read the graph file: No such file"):
+        onnx_metadata(tmp_path / "none.onnx", "graph")
+
+
+def test_an_int8_file_without_a_weights_id_is_judged_by_its_time(tiny_model_dir, tmp_path, caplog):
+    """Files exported before weights ids: an int8 file older than the fp32 one by more than STALE_INT8_AGE_S was
+    quantized from an earlier one; older by the seconds a copy or a git checkout puts between them, it is taken."""
+    import logging
+
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _int8_twin(folder, "encoder", None, age_s=2 * 86400.0)  # an export two days before the fp32 file's
+    with caplog.at_level(logging.WARNING):
+        assert _load_encoder(folder).files["encoder"].path.name == "encoder.onnx"
+    [said] = _stale_warnings(caplog)
+    assert "encoder.int8.onnx is not quantized from encoder.onnx (it records no link to encoder.onnx and is 48.0 h " \
+           "older)" in said
+    caplog.clear()
+    _int8_twin(folder, "encoder", None, age_s=5.0)
+    with caplog.at_level(logging.WARNING):
+        assert _load_encoder(folder).files["encoder"].path.name == "encoder.int8.onnx"
+    assert not _stale_warnings(caplog)
+
+
+def test_the_session_loads_the_fp32_painter_beside_a_stale_int8_one(tiny_model_dir, tmp_path):
+    """``ModelSession.load(novel_painter=True)`` takes the painter ``NovelPainter.choose`` gives: the fp32 file where
+    the int8 one records another training (tests/ghnerf_runtime/test_novel_painter.py has the rule)."""
+    painters = pytest.importorskip("tests.ghnerf_runtime.test_novel_painter")
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    fp32 = painters._recorded(painters.blend_painter(folder / "novel_painter.onnx"), steps="2")
+    painters._recorded(painters.blend_painter(folder / "novel_painter.int8.onnx"), steps="1", precision="int8")
+    s = ModelSession.load(SessionConfig(model_dir=str(folder), warmup=False), ("encoder",), novel_painter=True)
+    assert s.novel_painter.path == fp32
+
+
 def test_files_found_by_metadata_when_renamed(tiny_model_dir, tmp_path):
     folder = _copy(tiny_model_dir, tmp_path / "m")
     (folder / "encoder.onnx").rename(folder / "ghnerf-enc-v1.onnx")

@@ -486,6 +486,33 @@ def test_a_prior_whose_encoder_file_this_user_may_not_read_is_a_load_error_namin
     assert "Permission denied" in message
 
 
+@pytest.mark.parametrize("errno_, reason", [(13, "Permission denied"), (5, "Input/output error")])
+def test_looking_for_the_encoder_file_failing_is_a_load_error_naming_it_not_no_such_name(tmp_path, monkeypatch,
+                                                                                          errno_, reason):
+    """Any OSError from looking for the recorded encoder read as "no file can have that name" (the key's fault);
+    a folder this user may not search (EACCES: the host runs as root, so is_file is made to raise) or a bad disk
+    is the file system's, said naming the file and the reason. A missing file is still the prior's mismatch."""
+    encoder = tmp_path / "encoder.onnx"
+    prior = SkeletonPrior(None, tmp_path / FILE_NAME, {"ghnerf_skeleton.encoder_file": "encoder.onnx",
+                                                       "ghnerf_skeleton.encoder_sha256": "0" * 64})
+    real_is_file = Path.is_file
+
+    def is_file(path: Path) -> bool:
+        if path == encoder:
+            raise OSError(errno_, os.strerror(errno_), str(path))
+        return real_is_file(path)
+
+    with pytest.raises(ModelContractError, match="which .* does not have") as e:  # no such file: the prior's fault
+        prior.check_encoder(tmp_path)
+    assert e.value.key == "ghnerf_skeleton.encoder_file"
+    monkeypatch.setattr(Path, "is_file", is_file)
+    with pytest.raises(ModelLoadError) as e:
+        prior.check_encoder(tmp_path)
+    assert not isinstance(e.value, ModelContractError) and e.value.path == str(encoder)
+    assert str(e.value).startswith(f"{encoder}: cannot look for the encoder file encoder.onnx")
+    assert reason in str(e.value)
+
+
 def test_the_prior_replaces_the_single_view_fallback_and_its_graphs(model_with_prior):
     """single_view_fallback beside the prior: the prior places those joints, so the fallback's volume and
     render_heat graphs are neither loaded nor run (they once ran every pair and were never read)."""

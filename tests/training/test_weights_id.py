@@ -87,8 +87,12 @@ def test_an_int8_graph_carries_the_id_of_the_fp32_graph_it_was_quantized_from(tw
     assert _props(folder / "encoder.int8.onnx")[WEIGHTS_ID_KEY] == weights_id(model)
     s = _load(folder, precision="int8")  # int8 encoder beside the fp32 volume and render_heat: one export
     assert s.precision("encoder") == "int8" and s.weights_id == weights_id(model)
-    # quantized from the other export's encoder: refused beside this one's fp32 graphs
+    # quantized from the other export's encoder: not run beside this one's encoder.onnx, which runs instead (session
+    # 74: a folder exported before session 73 keeps such files), and refused beside its other graphs without it
     quantize_graph(second / "encoder.onnx", folder / "encoder.int8.onnx", feeds, POLICIES["encoder"], "encoder")
+    s = _load(folder, precision="int8")
+    assert s.files["encoder"].path.name == "encoder.onnx" and s.weights_id == weights_id(model)
+    (folder / "encoder.onnx").unlink()
     with pytest.raises(ModelContractError, match=r"volume\.onnx has weights id .* and encoder\.int8\.onnx "):
         _load(folder, precision="int8")
 
