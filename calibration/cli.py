@@ -644,7 +644,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     out = _output_path(args.out, "--out", "rig file")  # found now, not after the detection and the solve
     report_path = _output_path(args.report or out.with_name(out.stem + ".report.json"),
                                "--report" if args.report else "report", "report file")
-    if report_path.resolve() == out.resolve():  # the report written over the rig it describes
+    if same_file(report_path, out):  # the report written over the rig it describes
         raise UsageError(f"--report {report_path} is the rig file (--out {out}): give the report another path")
     previous = {out: _previous_path(out, "--out"), report_path: _previous_path(report_path, "--report")}
     _check_kept_apart(previous, {"--out": out, "--report": report_path})
@@ -884,8 +884,9 @@ def _previous_path(out: Path, flag: str) -> Path:
 
 
 def _refuse_out_among_inputs(outputs: Mapping[str, Path], inputs: Mapping[str, Path]) -> None:
-    """Refuse an output path that is one of the run's input files (``same_file``: ``./b.json`` is ``b.json``), before
-    anything is written: ``import a.yml --extrinsics b.json --out b.json`` replaced the extrinsics it read.
+    """Refuse an output path that is one of the run's input files (``same_file``: ``./b.json`` is ``b.json``, and so is
+    a hard link to it), before anything is written: ``import a.yml --extrinsics b.json --out b.json`` replaced the
+    extrinsics it read.
     ``outputs``: flag -> path; ``inputs``: what the input is ("the file being imported") -> path."""
     for flag, out in outputs.items():
         for what, path in inputs.items():
@@ -895,10 +896,11 @@ def _refuse_out_among_inputs(outputs: Mapping[str, Path], inputs: Mapping[str, P
 
 def _check_kept_apart(previous: dict[Path, Path], others: dict[str, Path]) -> None:
     """Refuse a run where a previous file would be kept on top of another file it reads or writes
-    (``--report rig.prev.json``; ``import calib.prev.yml --out calib.yml`` copied the old rig over its input)."""
+    (``--report rig.prev.json``; ``import calib.prev.yml --out calib.yml`` copied the old rig over its input), however
+    named (``same_file``: through links, a hard link included)."""
     for out, prev in previous.items():
         for flag, path in others.items():
-            if path.exists() and path.resolve() == prev.resolve() or path.absolute() == prev.absolute():
+            if same_file(path, prev):
                 raise UsageError(f"{flag} {path} is where the previous {out} is kept ({prev}): give another path")
 
 
@@ -1028,7 +1030,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     rig = load_rig(args.rig)
     out = _output_path(args.out, "--out", "export")
-    if out.exists() and out.resolve() == Path(args.rig).resolve():
+    if same_file(out, args.rig):
         raise UsageError(f"--out {out} is the rig file (--rig): give the export another path")
     # kept as import and solve keep theirs: an export over the anipose or OpenCV file a rig was imported from
     # replaced the other tool's own calibration, in its own frame, without a copy

@@ -2,6 +2,8 @@
 is read, a ``board.json`` that does not load named with why, and ``--out`` refused where it is one of the inputs."""
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from calibration import cli
@@ -82,3 +84,44 @@ def test_board_names_an_unreadable_board_file(tmp_path, capsys):
     assert cli.main(["board", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert f"{tmp_path / 'board.json'}: cannot read the board file" in err, err
+
+
+def _cap_with_board(tmp_path):
+    images = tmp_path / "cap"
+    for cam in ("left", "right"):
+        (images / cam).mkdir(parents=True)
+    (images / "board.json").write_text('{"squares_x": 9}\n')  # never read: the refusal comes first
+    return images
+
+
+@pytest.mark.parametrize("case", ["import-out", "import-kept", "export-out", "solve-out", "solve-report"])
+def test_an_output_that_is_a_hard_link_to_an_input_is_refused(tmp_path, capsys, monkeypatch, case):
+    # session 74: outputs were compared with inputs by resolved path, and a hard link has a path of its own
+    from calibration.render import example_rig
+    from ghnerf_runtime.rig_file import save_rig
+
+    monkeypatch.setattr(cli, "detect_folder", _no_detection)
+    rig = tmp_path / "rig.json"
+    save_rig(example_rig(), rig)
+    toml = tmp_path / "calibration.toml"
+    assert cli.main(["export", "--rig", str(rig), "--out", str(toml), "--units-to-metres", "0.001"]) == 0
+    board = _cap_with_board(tmp_path) / "board.json"
+    hard = tmp_path / "hard.json"
+    target, argv, words = {
+        "import-out": (toml, ["import", str(toml), "--out", str(hard)], f"--out {hard} is the file being imported"),
+        "import-kept": (toml, ["import", str(toml), "--out", str(tmp_path / "hard.json")],
+                        f"FILE {toml} is where the previous {hard} is kept"),
+        "export-out": (rig, ["export", "--rig", str(rig), "--out", str(hard)], f"--out {hard} is the rig file (--rig)"),
+        "solve-out": (board, ["solve", "--images", str(tmp_path / "cap"), "--out",
+                      str(hard), "--camera-height", "1.4"], f"--out {hard} is the board file read (--board)"),
+        "solve-report": (rig, ["solve", "--images", str(tmp_path / "cap"), "--out", str(rig), "--report", str(hard),
+                               "--camera-height", "1.4"], f"--report {hard} is the rig file (--out {rig})"),
+    }[case]
+    os.link(target, tmp_path / "hard.prev.json" if case == "import-kept" else hard)
+    before = target.read_bytes()
+    capsys.readouterr()
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert words in err, err
+    assert target.read_bytes() == before
+    assert not (tmp_path / "hard.prev.json").exists() or case == "import-kept"  # (there, the link itself)
