@@ -54,7 +54,7 @@ from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, checked_rig_text,
-                                     lens_fold_warning, load_rig, log_warnings_and_notes, save_rig,
+                                     lens_fold_warning, load_rig, log_warnings_and_notes,
                                      volume_reach_problem_from, write_bytes_atomic, write_text_atomic)
 from ghnerf_runtime.path_check import user_path
 
@@ -83,6 +83,8 @@ MAX_RIG_ID_LEN = 32
 MAX_CAMERA_NAME_LEN = 16
 #: The board definition ``ghcal synth`` writes beside its views, and ``solve`` / ``check`` look for there.
 BOARD_FILE = "board.json"
+#: The rig ``ghcal synth`` rendered its views of, written beside them.
+TRUTH_RIG_FILE = "truth_rig.json"
 #: ``board``: a square must be this many pixels for its marker to be drawn (``BoardSpec.image``), and the print
 #: at most this many megapixels (a mistyped --dpi 100000 asked for terabytes).
 MIN_PX_PER_SQUARE = 20
@@ -315,6 +317,10 @@ def cmd_synth(args: argparse.Namespace) -> int:
     for camera in (cam.name for cam in rig.pair):  # a camera's folder taken by a file, found before rendering too
         if (out / camera).exists() and not (out / camera).is_dir():
             raise UsageError(f"--out {out}: {out / camera} is a file, where the views of camera {camera!r} go")
+    # made before the rendering: the rig's text is checked, and an input among them found (_unchanged_inputs)
+    texts = {out / TRUTH_RIG_FILE: checked_rig_text(rig, out / TRUTH_RIG_FILE),
+             out / BOARD_FILE: json.dumps(board.to_dict(), indent=2) + "\n"}
+    unchanged = _unchanged_inputs(texts, {"--rig": args.rig, "--board": args.board})
     t0 = time.monotonic()
     views = calibration_views(rig, board, count=args.count, edge_count=args.edge_count, seed=args.seed)
     for camera, images in views.items():
@@ -322,15 +328,38 @@ def cmd_synth(args: argparse.Namespace) -> int:
         for name, image in images.items():
             if not cv2.imwrite(str(out / camera / f"{name}.png"), image):
                 raise UsageError(f"{out / camera / name}.png: cannot write the image")
-    save_rig(rig, out / "truth_rig.json")
+    for path, text in texts.items():
+        if path not in unchanged:
+            write_text_atomic(path, text)
     if not args.rig:  # (a --rig file's warnings and notes were said as it loaded)
-        log_warnings_and_notes(rig, out / "truth_rig.json")
-    write_text_atomic(out / BOARD_FILE, json.dumps(board.to_dict(), indent=2) + "\n")
+        log_warnings_and_notes(rig, out / TRUTH_RIG_FILE)
     write_camera_order(out, [cam.name for cam in rig.pair], replace=True)
     total = len(next(iter(views.values())))
     print(f"rendered {total} image pairs (a floor view among them) of rig {rig.rig_id!r} into {out} in "
-          f"{time.monotonic() - t0:.1f} s; its rig: {out / 'truth_rig.json'}, board: {out / 'board.json'}")
+          f"{time.monotonic() - t0:.1f} s; its rig: {out / TRUTH_RIG_FILE}, board: {out / BOARD_FILE}")
     return 0
+
+
+def _unchanged_inputs(texts: Mapping[Path, str], inputs: Mapping[str, str | None]) -> set[Path]:
+    """The files of ``texts`` (path -> the text ``synth`` writes there) that are one of ``inputs`` (flag -> path;
+    ``None`` for one not given) and hold that text already: left as they are, the write a no-op.
+
+    ``synth --rig synth/truth_rig.json --out synth --force`` wrote back the rig it read: re-rendering in place is fine,
+    but a rig or board file in other words (edited by hand, or by an older version) was replaced by synth's own.
+
+    :raises UsageError: an input whose text would change, naming the flag, the file and the clash.
+    """
+    unchanged = set()
+    for flag, given in inputs.items():
+        for path, text in texts.items():
+            if given is None or not same_file(path, given):
+                continue
+            if Path(given).read_bytes() != text.encode("utf-8"):
+                raise UsageError(f"{flag} {given} is {path}, which synth writes, and written back its text would "
+                                 f"change (synth writes its own layout of what it read): give --out another folder, "
+                                 f"or copy {flag}'s file elsewhere and give the copy")
+            unchanged.add(path)
+    return unchanged
 
 
 # ------------------------------------------------------------------ capture

@@ -125,3 +125,52 @@ def test_an_output_that_is_a_hard_link_to_an_input_is_refused(tmp_path, capsys, 
     assert words in err, err
     assert target.read_bytes() == before
     assert not (tmp_path / "hard.prev.json").exists() or case == "import-kept"  # (there, the link itself)
+
+
+def _tiny_views(rig, board, **kwargs):
+    """``calibration_views`` stood in for: one dark view and the floor view per camera, no rendering."""
+    import numpy as np
+
+    return {cam.name: {"000": np.zeros((8, 8), np.uint8), "floor": np.zeros((8, 8), np.uint8)} for cam in rig.pair}
+
+
+def _not_rendered(*args, **kwargs):
+    raise AssertionError("rendered before the clash was found")
+
+
+@pytest.mark.parametrize("flag", ["--rig", "--board"])
+def test_synth_refuses_to_rewrite_an_input_in_other_words(tmp_path, capsys, monkeypatch, flag):
+    # session 74: synth --rig OUT/truth_rig.json --out OUT --force replaced the file it read with its own layout
+    import json
+
+    from calibration.render import SYNTH_BOARD, synth_rig
+    from ghnerf_runtime.rig_file import save_rig
+
+    monkeypatch.setattr(cli, "calibration_views", _not_rendered)
+    out = tmp_path / "synth"
+    out.mkdir()
+    save_rig(synth_rig(), out / "truth_rig.json")
+    (out / "board.json").write_text(json.dumps(SYNTH_BOARD.to_dict()))  # one line: not synth's layout
+    if flag == "--rig":  # the same rig, as a hand or an older version wrote it
+        (out / "truth_rig.json").write_text(json.dumps(json.loads((out / "truth_rig.json").read_text())))
+    given = out / ("truth_rig.json" if flag == "--rig" else "board.json")
+    before = given.read_bytes()
+    assert cli.main(["synth", "--out", str(out), "--force", flag, str(given)]) == 2
+    err = capsys.readouterr().err
+    assert f"{flag} {given} is {given}, which synth writes, and written back its text would change" in err, err
+    assert given.read_bytes() == before
+
+
+def test_synth_rerenders_in_place_leaving_an_input_it_would_write_alike(tmp_path, capsys, monkeypatch):
+    # the rig and board synth wrote, given back to it: their text is what it writes, and the files are left alone
+    from calibration.render import SYNTH_BOARD
+
+    monkeypatch.setattr(cli, "calibration_views", _tiny_views)
+    out = tmp_path / "synth"
+    assert cli.main(["synth", "--out", str(out)]) == 0
+    rig, board = out / "truth_rig.json", out / "board.json"
+    before = {path: (path.read_bytes(), path.stat().st_ino) for path in (rig, board)}
+    assert cli.main(["synth", "--out", str(out), "--force", "--rig", str(rig), "--board", str(board),
+                     "--seed", "1"]) == 0
+    assert {path: (path.read_bytes(), path.stat().st_ino) for path in (rig, board)} == before  # not even replaced
+    assert cli.load_board(board) == SYNTH_BOARD
