@@ -36,8 +36,8 @@ import cv2
 import numpy as np
 
 from calibration.board import BoardSpec, load_board, png_with_dpi
-from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
-                                 earlier_size, earlier_views, list_images, next_view_number, read_camera_order,
+from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, earlier_size,
+                                 earlier_views, list_images, next_view_number, read_camera_order, read_folder,
                                  write_camera_order)
 from calibration.check import (FLOOR_VIEW, CheckLimits, check_failures, check_rig, exchanged_fit, exchanged_report,
                                floor_unmeasured, sized_as_exchanged)
@@ -690,14 +690,19 @@ def cmd_solve(args: argparse.Namespace) -> int:
     for name in cameras:  # before the detection, which takes a while
         _stream_name(name, MAX_CAMERA_NAME_LEN, "camera name (its folder)")
     print(f"board: {where}: {_describe(board)}")
-    views, missed = detect_folder(board, args.images, cameras)
+    found = read_folder(board, args.images, cameras)
+    views, missed = found.views, found.missed
     names = tuple(views)
+    _say_unread(found.unread, sys.stdout)
+    if args.floor_view is not None:
+        _refuse_unread_floor(found.unread, args.floor_view, "level with --camera-height M --pitch DEG --roll DEG")
     if not ordered:
         print(f"note: no {Path(args.images) / CAMERAS_FILE} (written by 'ghcal capture'): the pair's order is the "
               f"folder names sorted, {names[0]!r} first; the first must be the camera the rig source opens first "
               "(opencv://?first=): if it is not, pass --cameras FIRST,SECOND")
     for cam in names:
-        extra = f"; no board in {', '.join(missed[cam])}" if missed[cam] else ""
+        extra = (f"; no board in {', '.join(missed[cam])}" if missed[cam] else "") + (
+            f"; {len(found.unread[cam])} unreadable, passed over" if found.unread[cam] else "")
         print(f"{cam}: the board found in {len(views[cam])} of {len(views[cam]) + len(missed[cam])} images{extra}")
     _refuse_mixed_sizes(camera_image_sizes(Path(args.images), names, views),
                         "Solved as they are, a camera's views at two sizes cannot share one lens")
@@ -708,7 +713,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          f"({Path(args.images) / blind[0]}): does {where} describe the print ({_describe(board)}; "
                          "squares_x counts them along board.png's width)? Is the board in "
                          "view, sharp, and without glare?")
-    _check_pairing(args.images, names, views, missed, args.floor_view)
+    # an unreadable image is a view taken: its namesake is no lonely image
+    _check_pairing(args.images, names, views, {c: missed[c] + list(found.unread[c]) for c in names}, args.floor_view)
     repeats = _drop_repeated_images(args.images, views, args.floor_view)  # after the pairing: a copy is no lonely image
     if args.floor_view is not None and not any(args.floor_view in views[c] for c in names):
         if any(args.floor_view in missed[c] for c in names):  # taken, and the board not found in it
@@ -749,6 +755,23 @@ def cmd_solve(args: argparse.Namespace) -> int:
     _say_kept(kept)
     print(f"wrote {out} and {report_path}")
     return 0
+
+
+def _say_unread(unread: Mapping[str, Mapping[str, str]], stream) -> None:
+    """A warning for each image ``solve`` or ``check`` passes over as unreadable (:func:`read_folder`), as they say
+    the images without the board: the run goes on with the others, and its own checks refuse too few."""
+    for reasons in unread.values():
+        for reason in reasons.values():
+            print(f"warning: {reason}; passed over", file=stream)
+
+
+def _refuse_unread_floor(unread: Mapping[str, Mapping[str, str]], floor_view: str, other: str) -> None:
+    """Refuse a floor view that does not read in a camera: the levelling (or its check) rests on that one view, so
+    it is not passed over as another view is; ``other`` is the command's other way."""
+    for reasons in unread.values():
+        if floor_view in reasons:
+            raise UsageError(f"floor view {floor_view!r}: {reasons[floor_view]}: take it again (ghcal capture --floor "
+                             f"--force), or {other}")
 
 
 def _replaced_rig(out: Path):
@@ -1102,7 +1125,10 @@ def cmd_check(args: argparse.Namespace) -> int:
             p.name for p in Path(args.images).iterdir() if p.is_dir() and not p.name.startswith("."))
         raise UsageError(f"{args.images} holds views of the cameras {held}, but {args.rig} is the rig of the cameras "
                          f"{names} (no folder {missing[0]!r}): views of another rig? check them with its rig file")
-    views, missed = detect_folder(board, args.images, names)
+    found = read_folder(board, args.images, names)
+    views, missed = found.views, found.missed
+    _say_unread(found.unread, sys.stderr if args.json else sys.stdout)
+    _refuse_unread_floor(found.unread, floor_view, "pass --floor-view NAME for another")
     limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
     sizes = camera_image_sizes(Path(args.images), names, views)
     rig_sizes = ", ".join(f"{cam.name!r} {cam.width}x{cam.height}" for cam in rig.pair)

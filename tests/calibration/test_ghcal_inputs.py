@@ -19,7 +19,7 @@ def _no_detection(*args, **kwargs):
 ])
 def test_solve_refuses_a_volume_the_rig_file_refuses_before_reading_images(tmp_path, capsys, monkeypatch, volume,
                                                                            words):
-    monkeypatch.setattr(cli, "detect_folder", _no_detection)
+    monkeypatch.setattr(cli, "read_folder", _no_detection)
     monkeypatch.setattr(cli, "read_camera_order", _no_detection)
     images = tmp_path / "cap"
     for cam in ("left", "right"):
@@ -50,7 +50,7 @@ def test_import_refuses_an_out_that_is_the_extrinsics_file(tmp_path, capsys, mon
 @pytest.mark.parametrize("flag", ["--out", "--report"])
 @pytest.mark.parametrize("board_given", [True, False])
 def test_solve_refuses_an_output_that_is_the_board_file(tmp_path, capsys, monkeypatch, flag, board_given):
-    monkeypatch.setattr(cli, "detect_folder", _no_detection)
+    monkeypatch.setattr(cli, "read_folder", _no_detection)
     images = tmp_path / "cap"
     for cam in ("left", "right"):
         (images / cam).mkdir(parents=True)
@@ -100,7 +100,7 @@ def test_an_output_that_is_a_hard_link_to_an_input_is_refused(tmp_path, capsys, 
     from calibration.render import example_rig
     from ghnerf_runtime.rig_file import save_rig
 
-    monkeypatch.setattr(cli, "detect_folder", _no_detection)
+    monkeypatch.setattr(cli, "read_folder", _no_detection)
     rig = tmp_path / "rig.json"
     save_rig(example_rig(), rig)
     toml = tmp_path / "calibration.toml"
