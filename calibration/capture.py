@@ -7,7 +7,8 @@ Layout (what ``ghcal capture`` writes and ``ghcal solve`` reads)::
     DIR/left/floor.png DIR/right/floor.png  # optional: the board lying on the floor
     DIR/cameras.json                        # {"cameras": ["left", "right"]}: the stream's order
 
-Images may be PNG, JPEG, BMP or TIFF, grey or colour, 8 or 16 bits; a name present in one folder only is still used for that
+Images may be PNG, JPEG, BMP or TIFF, grey or colour, 8 or 16 bits (a 16-bit one scaled by its 99.9th percentile:
+:func:`~calibration.detect.white_level16`); a name present in one folder only is still used for that
 camera's intrinsics. ``cameras.json`` keeps the order the rig source gave the cameras in: the first
 is the one a driver opens as its first device (``opencv://?first=``), so the solved rig must list it
 first too, whatever the names sort as (``names=right,left``).
@@ -17,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
@@ -29,7 +31,8 @@ from ghnerf_runtime.image_files import read_image_or_none, unread_because
 from ghnerf_runtime.json_keys import first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import write_text_atomic
 
-__all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
+__all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "FolderViews", "camera_folders", "list_images", "detect_folder",
+           "read_folder", "check_camera_name",
            "earlier_views", "earlier_size", "next_view_number", "read_camera_order", "stored_size",
            "write_camera_order"]
 
@@ -195,39 +198,69 @@ def list_images(folder: Path) -> dict[str, Path]:
 READ_GREY = cv2.IMREAD_ANYDEPTH
 
 
-def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[str] | None = None) \
-        -> tuple[dict[str, dict[str, BoardView]], dict[str, list[str]]]:
-    """Detect the board in every image: (camera -> view name -> view, camera -> names without the board).
-    Images are read as grey at their own depth (8 or 16 bits; 16-bit ones scaled by :func:`~calibration.detect.grey8`).
+@dataclass(frozen=True)
+class FolderViews:
+    """What :func:`read_folder` found in a capture: ``views`` (camera -> view name -> the board's corners),
+    ``missed`` (camera -> names of images without the board) and ``unread`` (camera -> view name -> why its image
+    does not read: the path and the reason, as said to the user)."""
 
-    :raises CaptureError: an unreadable image (named), a camera folder without images, an image of the board
-        printed with the other chessboard pattern (named, with the ``legacy_pattern`` to set).
+    views: dict[str, dict[str, BoardView]]
+    missed: dict[str, list[str]]
+    unread: dict[str, dict[str, str]]
+
+
+def read_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[str] | None = None) -> FolderViews:
+    """Detect the board in every image that reads, passing over (and recording) one that does not: ``ghcal solve``
+    and ``check`` say each and go on, as they go on past an image without the board (since session 74: one cut-off
+    copy stopped them). Images are read as grey at their own depth (8 or 16 bits; 16-bit ones scaled by
+    :func:`~calibration.detect.grey8`).
+
+    :raises CaptureError: a camera folder without images, or of which no image reads (the first named, with why:
+        a format or compression OpenCV does not decode is every image's); an image of the board printed with the
+        other chessboard pattern (named, with the ``legacy_pattern`` to set).
     """
     detector = BoardDetector(board)
-    views: dict[str, dict[str, BoardView]] = {}
-    missed: dict[str, list[str]] = {}
+    found = FolderViews({}, {}, {})
     for camera, folder in camera_folders(root, cameras).items():
         images = list_images(folder)
         if not images:
             raise CaptureError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)})")
-        views[camera], missed[camera] = {}, []
+        views, missed, unread = found.views.setdefault(camera, {}), found.missed.setdefault(camera, []), \
+            found.unread.setdefault(camera, {})
         for name, path in images.items():
             # grey at the file's own depth: IMREAD_GRAYSCALE cut a 16-bit file to its top 8 bits, all but
             # black for a 10- or 12-bit camera's frame (the detector scales it: detect.grey8)
             image = read_image_or_none(path, READ_GREY)
             if image is None:
-                raise CaptureError(f"{path}: not a readable image{_why_unreadable(path)}")
+                unread[name] = f"{path}: not a readable image{_why_unreadable(path)}"
+                continue
             try:
                 view = detector.detect(image)
             except (BoardError, CaptureError) as e:
                 raise CaptureError(f"{path}: {e}") from e
             if view is None:
-                missed[camera].append(name)
+                missed.append(name)
             else:
-                views[camera][name] = view
-        if not views[camera]:
-            _name_board_mismatch(board, [images[n] for n in missed[camera]])
-    return views, missed
+                views[name] = view
+        if len(unread) == len(images):
+            raise CaptureError(f"camera {camera!r}: none of its {len(images)} image(s) reads: "
+                               f"{next(iter(unread.values()))}")
+        if not views:
+            _name_board_mismatch(board, [images[n] for n in missed])
+    return found
+
+
+def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[str] | None = None) \
+        -> tuple[dict[str, dict[str, BoardView]], dict[str, list[str]]]:
+    """:func:`read_folder`, strict: (camera -> view name -> view, camera -> names without the board).
+
+    :raises CaptureError: as :func:`read_folder`, and for an unreadable image (the first, named).
+    """
+    found = read_folder(board, root, cameras)
+    for unread in found.unread.values():
+        if unread:
+            raise CaptureError(next(iter(unread.values())))
+    return found.views, found.missed
 
 
 def _why_unreadable(path: Path) -> str:

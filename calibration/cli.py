@@ -36,8 +36,8 @@ import cv2
 import numpy as np
 
 from calibration.board import BoardSpec, load_board, png_with_dpi
-from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
-                                 earlier_size, earlier_views, list_images, next_view_number, read_camera_order,
+from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, earlier_size,
+                                 earlier_views, list_images, next_view_number, read_camera_order, read_folder,
                                  write_camera_order)
 from calibration.check import (FLOOR_VIEW, CheckLimits, check_failures, check_rig, exchanged_fit, exchanged_report,
                                floor_unmeasured, sized_as_exchanged)
@@ -54,7 +54,7 @@ from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, camera_height_warning, checked_rig_text,
-                                     lens_fold_warning, load_rig, log_warnings_and_notes, save_rig,
+                                     lens_fold_warning, load_rig, log_warnings_and_notes,
                                      volume_reach_problem_from, write_bytes_atomic, write_text_atomic)
 from ghnerf_runtime.path_check import user_path
 
@@ -83,6 +83,8 @@ MAX_RIG_ID_LEN = 32
 MAX_CAMERA_NAME_LEN = 16
 #: The board definition ``ghcal synth`` writes beside its views, and ``solve`` / ``check`` look for there.
 BOARD_FILE = "board.json"
+#: The rig ``ghcal synth`` rendered its views of, written beside them.
+TRUTH_RIG_FILE = "truth_rig.json"
 #: ``board``: a square must be this many pixels for its marker to be drawn (``BoardSpec.image``), and the print
 #: at most this many megapixels (a mistyped --dpi 100000 asked for terabytes).
 MIN_PX_PER_SQUARE = 20
@@ -315,6 +317,10 @@ def cmd_synth(args: argparse.Namespace) -> int:
     for camera in (cam.name for cam in rig.pair):  # a camera's folder taken by a file, found before rendering too
         if (out / camera).exists() and not (out / camera).is_dir():
             raise UsageError(f"--out {out}: {out / camera} is a file, where the views of camera {camera!r} go")
+    # made before the rendering: the rig's text is checked, and an input among them found (_unchanged_inputs)
+    texts = {out / TRUTH_RIG_FILE: checked_rig_text(rig, out / TRUTH_RIG_FILE),
+             out / BOARD_FILE: json.dumps(board.to_dict(), indent=2) + "\n"}
+    unchanged = _unchanged_inputs(texts, {"--rig": args.rig, "--board": args.board})
     t0 = time.monotonic()
     views = calibration_views(rig, board, count=args.count, edge_count=args.edge_count, seed=args.seed)
     for camera, images in views.items():
@@ -322,15 +328,38 @@ def cmd_synth(args: argparse.Namespace) -> int:
         for name, image in images.items():
             if not cv2.imwrite(str(out / camera / f"{name}.png"), image):
                 raise UsageError(f"{out / camera / name}.png: cannot write the image")
-    save_rig(rig, out / "truth_rig.json")
+    for path, text in texts.items():
+        if path not in unchanged:
+            write_text_atomic(path, text)
     if not args.rig:  # (a --rig file's warnings and notes were said as it loaded)
-        log_warnings_and_notes(rig, out / "truth_rig.json")
-    write_text_atomic(out / BOARD_FILE, json.dumps(board.to_dict(), indent=2) + "\n")
+        log_warnings_and_notes(rig, out / TRUTH_RIG_FILE)
     write_camera_order(out, [cam.name for cam in rig.pair], replace=True)
     total = len(next(iter(views.values())))
     print(f"rendered {total} image pairs (a floor view among them) of rig {rig.rig_id!r} into {out} in "
-          f"{time.monotonic() - t0:.1f} s; its rig: {out / 'truth_rig.json'}, board: {out / 'board.json'}")
+          f"{time.monotonic() - t0:.1f} s; its rig: {out / TRUTH_RIG_FILE}, board: {out / BOARD_FILE}")
     return 0
+
+
+def _unchanged_inputs(texts: Mapping[Path, str], inputs: Mapping[str, str | None]) -> set[Path]:
+    """The files of ``texts`` (path -> the text ``synth`` writes there) that are one of ``inputs`` (flag -> path;
+    ``None`` for one not given) and hold that text already: left as they are, the write a no-op.
+
+    ``synth --rig synth/truth_rig.json --out synth --force`` wrote back the rig it read: re-rendering in place is fine,
+    but a rig or board file in other words (edited by hand, or by an older version) was replaced by synth's own.
+
+    :raises UsageError: an input whose text would change, naming the flag, the file and the clash.
+    """
+    unchanged = set()
+    for flag, given in inputs.items():
+        for path, text in texts.items():
+            if given is None or not same_file(path, given):
+                continue
+            if Path(given).read_bytes() != text.encode("utf-8"):
+                raise UsageError(f"{flag} {given} is {path}, which synth writes, and written back its text would "
+                                 f"change (synth writes its own layout of what it read): give --out another folder, "
+                                 f"or copy {flag}'s file elsewhere and give the copy")
+            unchanged.add(path)
+    return unchanged
 
 
 # ------------------------------------------------------------------ capture
@@ -644,7 +673,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     out = _output_path(args.out, "--out", "rig file")  # found now, not after the detection and the solve
     report_path = _output_path(args.report or out.with_name(out.stem + ".report.json"),
                                "--report" if args.report else "report", "report file")
-    if report_path.resolve() == out.resolve():  # the report written over the rig it describes
+    if same_file(report_path, out):  # the report written over the rig it describes
         raise UsageError(f"--report {report_path} is the rig file (--out {out}): give the report another path")
     previous = {out: _previous_path(out, "--out"), report_path: _previous_path(report_path, "--report")}
     _check_kept_apart(previous, {"--out": out, "--report": report_path})
@@ -661,14 +690,19 @@ def cmd_solve(args: argparse.Namespace) -> int:
     for name in cameras:  # before the detection, which takes a while
         _stream_name(name, MAX_CAMERA_NAME_LEN, "camera name (its folder)")
     print(f"board: {where}: {_describe(board)}")
-    views, missed = detect_folder(board, args.images, cameras)
+    found = read_folder(board, args.images, cameras)
+    views, missed = found.views, found.missed
     names = tuple(views)
+    _say_unread(found.unread, sys.stdout)
+    if args.floor_view is not None:
+        _refuse_unread_floor(found.unread, args.floor_view, "level with --camera-height M --pitch DEG --roll DEG")
     if not ordered:
         print(f"note: no {Path(args.images) / CAMERAS_FILE} (written by 'ghcal capture'): the pair's order is the "
               f"folder names sorted, {names[0]!r} first; the first must be the camera the rig source opens first "
               "(opencv://?first=): if it is not, pass --cameras FIRST,SECOND")
     for cam in names:
-        extra = f"; no board in {', '.join(missed[cam])}" if missed[cam] else ""
+        extra = (f"; no board in {', '.join(missed[cam])}" if missed[cam] else "") + (
+            f"; {len(found.unread[cam])} unreadable, passed over" if found.unread[cam] else "")
         print(f"{cam}: the board found in {len(views[cam])} of {len(views[cam]) + len(missed[cam])} images{extra}")
     _refuse_mixed_sizes(camera_image_sizes(Path(args.images), names, views),
                         "Solved as they are, a camera's views at two sizes cannot share one lens")
@@ -679,7 +713,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          f"({Path(args.images) / blind[0]}): does {where} describe the print ({_describe(board)}; "
                          "squares_x counts them along board.png's width)? Is the board in "
                          "view, sharp, and without glare?")
-    _check_pairing(args.images, names, views, missed, args.floor_view)
+    # an unreadable image is a view taken: its namesake is no lonely image
+    _check_pairing(args.images, names, views, {c: missed[c] + list(found.unread[c]) for c in names}, args.floor_view)
     repeats = _drop_repeated_images(args.images, views, args.floor_view)  # after the pairing: a copy is no lonely image
     if args.floor_view is not None and not any(args.floor_view in views[c] for c in names):
         if any(args.floor_view in missed[c] for c in names):  # taken, and the board not found in it
@@ -720,6 +755,23 @@ def cmd_solve(args: argparse.Namespace) -> int:
     _say_kept(kept)
     print(f"wrote {out} and {report_path}")
     return 0
+
+
+def _say_unread(unread: Mapping[str, Mapping[str, str]], stream) -> None:
+    """A warning for each image ``solve`` or ``check`` passes over as unreadable (:func:`read_folder`), as they say
+    the images without the board: the run goes on with the others, and its own checks refuse too few."""
+    for reasons in unread.values():
+        for reason in reasons.values():
+            print(f"warning: {reason}; passed over", file=stream)
+
+
+def _refuse_unread_floor(unread: Mapping[str, Mapping[str, str]], floor_view: str, other: str) -> None:
+    """Refuse a floor view that does not read in a camera: the levelling (or its check) rests on that one view, so
+    it is not passed over as another view is; ``other`` is the command's other way."""
+    for reasons in unread.values():
+        if floor_view in reasons:
+            raise UsageError(f"floor view {floor_view!r}: {reasons[floor_view]}: take it again (ghcal capture --floor "
+                             f"--force), or {other}")
 
 
 def _replaced_rig(out: Path):
@@ -884,8 +936,9 @@ def _previous_path(out: Path, flag: str) -> Path:
 
 
 def _refuse_out_among_inputs(outputs: Mapping[str, Path], inputs: Mapping[str, Path]) -> None:
-    """Refuse an output path that is one of the run's input files (``same_file``: ``./b.json`` is ``b.json``), before
-    anything is written: ``import a.yml --extrinsics b.json --out b.json`` replaced the extrinsics it read.
+    """Refuse an output path that is one of the run's input files (``same_file``: ``./b.json`` is ``b.json``, and so is
+    a hard link to it), before anything is written: ``import a.yml --extrinsics b.json --out b.json`` replaced the
+    extrinsics it read.
     ``outputs``: flag -> path; ``inputs``: what the input is ("the file being imported") -> path."""
     for flag, out in outputs.items():
         for what, path in inputs.items():
@@ -895,10 +948,11 @@ def _refuse_out_among_inputs(outputs: Mapping[str, Path], inputs: Mapping[str, P
 
 def _check_kept_apart(previous: dict[Path, Path], others: dict[str, Path]) -> None:
     """Refuse a run where a previous file would be kept on top of another file it reads or writes
-    (``--report rig.prev.json``; ``import calib.prev.yml --out calib.yml`` copied the old rig over its input)."""
+    (``--report rig.prev.json``; ``import calib.prev.yml --out calib.yml`` copied the old rig over its input), however
+    named (``same_file``: through links, a hard link included)."""
     for out, prev in previous.items():
         for flag, path in others.items():
-            if path.exists() and path.resolve() == prev.resolve() or path.absolute() == prev.absolute():
+            if same_file(path, prev):
                 raise UsageError(f"{flag} {path} is where the previous {out} is kept ({prev}): give another path")
 
 
@@ -1028,7 +1082,7 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     rig = load_rig(args.rig)
     out = _output_path(args.out, "--out", "export")
-    if out.exists() and out.resolve() == Path(args.rig).resolve():
+    if same_file(out, args.rig):
         raise UsageError(f"--out {out} is the rig file (--rig): give the export another path")
     # kept as import and solve keep theirs: an export over the anipose or OpenCV file a rig was imported from
     # replaced the other tool's own calibration, in its own frame, without a copy
@@ -1071,7 +1125,10 @@ def cmd_check(args: argparse.Namespace) -> int:
             p.name for p in Path(args.images).iterdir() if p.is_dir() and not p.name.startswith("."))
         raise UsageError(f"{args.images} holds views of the cameras {held}, but {args.rig} is the rig of the cameras "
                          f"{names} (no folder {missing[0]!r}): views of another rig? check them with its rig file")
-    views, missed = detect_folder(board, args.images, names)
+    found = read_folder(board, args.images, names)
+    views, missed = found.views, found.missed
+    _say_unread(found.unread, sys.stderr if args.json else sys.stdout)
+    _refuse_unread_floor(found.unread, floor_view, "pass --floor-view NAME for another")
     limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
     sizes = camera_image_sizes(Path(args.images), names, views)
     rig_sizes = ", ".join(f"{cam.name!r} {cam.width}x{cam.height}" for cam in rig.pair)

@@ -113,8 +113,15 @@ def existing_ancestor(path: Path) -> Path:
 
 
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
-    """``a`` and ``b`` name one file (through links, ``..`` and the current directory), whether or not it exists."""
-    return os.path.realpath(a) == os.path.realpath(b)
+    """``a`` and ``b`` name one file (through links, ``..`` and the current directory), whether or not it exists;
+    two existing names of one file (``st_dev``, ``st_ino``) are one too: a hard link has a path of its own, and until
+    session 74 an output given as a hard link to an input was not caught."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):  # either one missing (or a path the system refuses): no file shared yet
+        return False
 
 
 @dataclass(frozen=True)

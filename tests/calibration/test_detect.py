@@ -12,7 +12,7 @@ import pytest
 from calibration import capture
 from calibration.board import BoardSpec
 from calibration.capture import detect_folder, earlier_size
-from calibration.detect import BoardDetector, fixes_a_pose, grey8
+from calibration.detect import BoardDetector, fixes_a_pose, grey8, white_level16
 from calibration.errors import BoardError, CaptureError
 from calibration.render import board_pose_facing, example_rig, render_board
 from drivers.backends import recording_format
@@ -112,6 +112,34 @@ def test_a_view_of_a_compression_opencv_does_not_decode_is_named_not_a_black_ima
                                            r"\(JPEG 2000\), which OpenCV"):
         detect_folder(BOARD, tmp_path)
     assert earlier_size(tmp_path / "left") is None  # ghcal capture --append: the solve names it
+
+
+def test_a_hot_pixel_does_not_darken_a_dim_16_bit_frame(camera, tmp_path):
+    # session 74: a 16-bit frame was scaled by its brightest pixel, so one hot pixel at a 12-bit camera's top
+    # (4095) left a dim frame (white at 3 % of the range) 8 grey levels, and the board was not found in it
+    image, truth = _render(BOARD, camera)
+    rng = np.random.default_rng(1)
+    dim = np.clip(np.rint(image * (0.03 * 4095 / 255) + rng.normal(0, 1, image.shape)), 0, 4095).astype(np.uint16)
+    dim[5, 7] = 4095
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+        assert cv2.imwrite(str(tmp_path / cam / "000.png"), dim)
+    views, missed = detect_folder(BOARD, tmp_path)
+    assert missed == {"left": [], "right": []}
+    assert len(views["left"]["000"]) == BOARD.corner_count and _rms(views["left"]["000"], truth) < 0.2
+
+
+def test_a_16_bit_frame_s_white_is_a_high_percentile_of_it():
+    frame = np.full((100, 100), 1000, np.uint16)
+    frame[:50] = 100
+    frame[0, :9] = 65535  # 0.09 % of the pixels: clipped
+    assert white_level16(frame) == 1000
+    frame[0, :11] = 65535  # 0.11 %: the top 0.1 % is theirs
+    assert white_level16(frame) == 65535
+    sparse = np.zeros((100, 100), np.uint16)
+    sparse[3, 4] = 700  # black but for a pixel: its maximum, not 0
+    assert white_level16(sparse) == 700 and grey8(sparse)[3, 4] == 255
+    assert white_level16(np.zeros((4, 5), np.uint16)) == 0
 
 
 @pytest.mark.parametrize("convert", [

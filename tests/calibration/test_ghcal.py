@@ -846,10 +846,9 @@ def test_a_solved_principal_point_far_off_centre_is_refused(views, monkeypatch):
 
 def test_the_report_is_written_first_and_atomically(capture, tmp_path, monkeypatch):
     written = []
-    real_atomic, real_save = cli.write_text_atomic, cli.save_rig
+    real_atomic = cli.write_text_atomic  # (every file ghcal writes goes through it; save_rig is not imported)
     monkeypatch.setattr(cli, "write_text_atomic", lambda path, text: (written.append(Path(path).name),
                                                                         real_atomic(path, text)))
-    monkeypatch.setattr(cli, "save_rig", lambda rig, path: (written.append(Path(path).name), real_save(rig, path)))
     assert cli.main(["solve", "--images", str(capture), "--board", str(capture / "board.json"), "--camera-height",
                      "1.4", "--out", str(tmp_path / "rig.json")]) == 0
     assert written == ["rig.report.json", "rig.json"]
@@ -948,7 +947,7 @@ def test_a_camera_name_the_stream_cannot_carry_is_refused_before_the_detection(c
     def no_detection(*args, **kwargs):
         raise AssertionError("detected before refusing the name")
 
-    monkeypatch.setattr(cli, "detect_folder", no_detection)
+    monkeypatch.setattr(cli, "read_folder", no_detection)
     assert cli.main(["solve", "--images", str(copy), "--out", str(tmp_path / "r.json"), "--camera-height", "1.4",
                      "--cameras", f"{long},right"]) == 2
     assert f"camera name (its folder) '{long}' must be printable ASCII of 1-16" in capsys.readouterr().err
@@ -1259,7 +1258,7 @@ def test_solve_refuses_to_keep_the_previous_rig_on_its_report_or_in_a_folder(tmp
     for cam in ("left", "right"):
         (images / cam).mkdir(parents=True)
     (images / "board.json").write_text(json.dumps(BOARD.to_dict()))
-    monkeypatch.setattr(cli, "detect_folder", no_detection)
+    monkeypatch.setattr(cli, "read_folder", no_detection)
     rig_path = tmp_path / "rig.json"
     rig_path.write_text("{}")
     base = ["solve", "--images", str(images), "--floor-view", "floor", "--out", str(rig_path)]
@@ -1366,3 +1365,37 @@ def test_volume_help_example_is_accepted(command):
     args = parser.parse_args([command, *required, example])
     volume = cli._volume(args.volume)
     assert np.allclose(volume.min_corner, [-1.5, 0, 2]) and np.allclose(volume.max_corner, [1.5, 2, 5])
+
+
+def test_solve_and_check_pass_over_an_unreadable_image_saying_so(capture, tmp_path, capsys):
+    # session 74: one cut-off copy (003.png of 'left') stopped both; now it is passed over with a warning, as an
+    # image without the board is, and its namesake in 'right' still counts as a pair's image, not a lonely one
+    images = _copy_capture(capture, tmp_path / "capture")
+    cut = images / "left" / "003.png"
+    cut.write_bytes(cut.read_bytes()[:100])
+    rig_path = tmp_path / "rig.json"
+    board = ["--board", str(images / "board.json")]
+    assert cli.main(["solve", *board, "--images", str(images), "--floor-view", "floor", "--out", str(rig_path)]) == 0
+    out = capsys.readouterr().out
+    assert f"warning: {cut}: not a readable image; passed over" in out, out
+    assert "1 unreadable, passed over" in out and "no namesake" not in out, out
+    assert json.loads((tmp_path / "rig.report.json").read_text())["cameras"]["left"]["views"] >= 10
+    assert cli.main(["check", "--rig", str(rig_path), *board, "--images", str(images)]) == 0
+    assert f"warning: {cut}: not a readable image; passed over" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("cut_names, words", [
+    (["floor"], "floor view 'floor': {cut}: not a readable image: take it again (ghcal capture --floor --force)"),
+    (None, "camera 'left': none of its 15 image(s) reads: {cut}: not a readable image"),
+])
+def test_solve_refuses_an_unreadable_floor_view_or_camera(capture, tmp_path, capsys, cut_names, words):
+    images = _copy_capture(capture, tmp_path / "capture")
+    names = cut_names or sorted(p.stem for p in (images / "left").glob("*.png"))
+    for name in names:
+        (images / "left" / f"{name}.png").write_bytes(b"cut")
+    argv = ["solve", "--board", str(images / "board.json"), "--images", str(images), "--floor-view", "floor",
+            "--out", str(tmp_path / "rig.json")]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert words.format(cut=images / "left" / f"{names[0]}.png") in err, err
+    assert not (tmp_path / "rig.json").exists()

@@ -2,6 +2,8 @@
 is read, a ``board.json`` that does not load named with why, and ``--out`` refused where it is one of the inputs."""
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from calibration import cli
@@ -17,7 +19,7 @@ def _no_detection(*args, **kwargs):
 ])
 def test_solve_refuses_a_volume_the_rig_file_refuses_before_reading_images(tmp_path, capsys, monkeypatch, volume,
                                                                            words):
-    monkeypatch.setattr(cli, "detect_folder", _no_detection)
+    monkeypatch.setattr(cli, "read_folder", _no_detection)
     monkeypatch.setattr(cli, "read_camera_order", _no_detection)
     images = tmp_path / "cap"
     for cam in ("left", "right"):
@@ -48,7 +50,7 @@ def test_import_refuses_an_out_that_is_the_extrinsics_file(tmp_path, capsys, mon
 @pytest.mark.parametrize("flag", ["--out", "--report"])
 @pytest.mark.parametrize("board_given", [True, False])
 def test_solve_refuses_an_output_that_is_the_board_file(tmp_path, capsys, monkeypatch, flag, board_given):
-    monkeypatch.setattr(cli, "detect_folder", _no_detection)
+    monkeypatch.setattr(cli, "read_folder", _no_detection)
     images = tmp_path / "cap"
     for cam in ("left", "right"):
         (images / cam).mkdir(parents=True)
@@ -82,3 +84,93 @@ def test_board_names_an_unreadable_board_file(tmp_path, capsys):
     assert cli.main(["board", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert f"{tmp_path / 'board.json'}: cannot read the board file" in err, err
+
+
+def _cap_with_board(tmp_path):
+    images = tmp_path / "cap"
+    for cam in ("left", "right"):
+        (images / cam).mkdir(parents=True)
+    (images / "board.json").write_text('{"squares_x": 9}\n')  # never read: the refusal comes first
+    return images
+
+
+@pytest.mark.parametrize("case", ["import-out", "import-kept", "export-out", "solve-out", "solve-report"])
+def test_an_output_that_is_a_hard_link_to_an_input_is_refused(tmp_path, capsys, monkeypatch, case):
+    # session 74: outputs were compared with inputs by resolved path, and a hard link has a path of its own
+    from calibration.render import example_rig
+    from ghnerf_runtime.rig_file import save_rig
+
+    monkeypatch.setattr(cli, "read_folder", _no_detection)
+    rig = tmp_path / "rig.json"
+    save_rig(example_rig(), rig)
+    toml = tmp_path / "calibration.toml"
+    assert cli.main(["export", "--rig", str(rig), "--out", str(toml), "--units-to-metres", "0.001"]) == 0
+    board = _cap_with_board(tmp_path) / "board.json"
+    hard = tmp_path / "hard.json"
+    target, argv, words = {
+        "import-out": (toml, ["import", str(toml), "--out", str(hard)], f"--out {hard} is the file being imported"),
+        "import-kept": (toml, ["import", str(toml), "--out", str(tmp_path / "hard.json")],
+                        f"FILE {toml} is where the previous {hard} is kept"),
+        "export-out": (rig, ["export", "--rig", str(rig), "--out", str(hard)], f"--out {hard} is the rig file (--rig)"),
+        "solve-out": (board, ["solve", "--images", str(tmp_path / "cap"), "--out",
+                      str(hard), "--camera-height", "1.4"], f"--out {hard} is the board file read (--board)"),
+        "solve-report": (rig, ["solve", "--images", str(tmp_path / "cap"), "--out", str(rig), "--report", str(hard),
+                               "--camera-height", "1.4"], f"--report {hard} is the rig file (--out {rig})"),
+    }[case]
+    os.link(target, tmp_path / "hard.prev.json" if case == "import-kept" else hard)
+    before = target.read_bytes()
+    capsys.readouterr()
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert words in err, err
+    assert target.read_bytes() == before
+    assert not (tmp_path / "hard.prev.json").exists() or case == "import-kept"  # (there, the link itself)
+
+
+def _tiny_views(rig, board, **kwargs):
+    """``calibration_views`` stood in for: one dark view and the floor view per camera, no rendering."""
+    import numpy as np
+
+    return {cam.name: {"000": np.zeros((8, 8), np.uint8), "floor": np.zeros((8, 8), np.uint8)} for cam in rig.pair}
+
+
+def _not_rendered(*args, **kwargs):
+    raise AssertionError("rendered before the clash was found")
+
+
+@pytest.mark.parametrize("flag", ["--rig", "--board"])
+def test_synth_refuses_to_rewrite_an_input_in_other_words(tmp_path, capsys, monkeypatch, flag):
+    # session 74: synth --rig OUT/truth_rig.json --out OUT --force replaced the file it read with its own layout
+    import json
+
+    from calibration.render import SYNTH_BOARD, synth_rig
+    from ghnerf_runtime.rig_file import save_rig
+
+    monkeypatch.setattr(cli, "calibration_views", _not_rendered)
+    out = tmp_path / "synth"
+    out.mkdir()
+    save_rig(synth_rig(), out / "truth_rig.json")
+    (out / "board.json").write_text(json.dumps(SYNTH_BOARD.to_dict()))  # one line: not synth's layout
+    if flag == "--rig":  # the same rig, as a hand or an older version wrote it
+        (out / "truth_rig.json").write_text(json.dumps(json.loads((out / "truth_rig.json").read_text())))
+    given = out / ("truth_rig.json" if flag == "--rig" else "board.json")
+    before = given.read_bytes()
+    assert cli.main(["synth", "--out", str(out), "--force", flag, str(given)]) == 2
+    err = capsys.readouterr().err
+    assert f"{flag} {given} is {given}, which synth writes, and written back its text would change" in err, err
+    assert given.read_bytes() == before
+
+
+def test_synth_rerenders_in_place_leaving_an_input_it_would_write_alike(tmp_path, capsys, monkeypatch):
+    # the rig and board synth wrote, given back to it: their text is what it writes, and the files are left alone
+    from calibration.render import SYNTH_BOARD
+
+    monkeypatch.setattr(cli, "calibration_views", _tiny_views)
+    out = tmp_path / "synth"
+    assert cli.main(["synth", "--out", str(out)]) == 0
+    rig, board = out / "truth_rig.json", out / "board.json"
+    before = {path: (path.read_bytes(), path.stat().st_ino) for path in (rig, board)}
+    assert cli.main(["synth", "--out", str(out), "--force", "--rig", str(rig), "--board", str(board),
+                     "--seed", "1"]) == 0
+    assert {path: (path.read_bytes(), path.stat().st_ino) for path in (rig, board)} == before  # not even replaced
+    assert cli.load_board(board) == SYNTH_BOARD

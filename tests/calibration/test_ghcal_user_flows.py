@@ -70,7 +70,7 @@ def test_solve_refuses_an_output_it_cannot_write_before_the_detection(tmp_path, 
     for cam in ("left", "right"):
         (images / cam).mkdir(parents=True)
     _board_file(images)
-    monkeypatch.setattr(cli, "detect_folder", _no_detection)
+    monkeypatch.setattr(cli, "read_folder", _no_detection)
     base = ["solve", "--images", str(images), "--floor-view", "floor"]
     assert cli.main(base + ["--out", str(refusing / "rig.json")]) == 2
     err = capsys.readouterr().err

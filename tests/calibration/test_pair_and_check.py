@@ -15,6 +15,7 @@ import pytest
 
 from calibration import cli
 from calibration.board import BoardSpec, load_board
+from calibration.capture import FolderViews
 from calibration.check import CheckLimits, check_failures, check_rig, exchanged_fit, floor_unmeasured
 from calibration.detect import BoardView
 from calibration.render import board_poses_both_see, example_rig
@@ -447,11 +448,16 @@ def _listed_views(views: dict, tmp_path) -> Path:
     return images
 
 
+def _found(views: dict, missed: dict) -> FolderViews:
+    """What ``ghcal``'s detection finds, every image read."""
+    return FolderViews(views, missed, {cam: {} for cam in views})
+
+
 def _detection_stood_in_for(views: dict, monkeypatch, missed: dict | None = None) -> None:
     """``ghcal``'s detection answering ``views`` whatever the folder, and ``missed`` (camera -> the images it did
     not find the board in; none by default)."""
     missed = {cam: [] for cam in views} if missed is None else missed
-    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, missed))
+    monkeypatch.setattr(cli, "read_folder", lambda *args: _found(views, missed))
 
 
 def _check_cli(rig: Rig, views: dict, tmp_path, monkeypatch, *options: str,
@@ -648,7 +654,7 @@ def test_check_names_a_folder_all_of_another_size_than_the_rig(sized_rig, tmp_pa
     for name in views["left"]:
         assert cv2.imwrite(str(images / "left" / f"{name}.png"), np.zeros((400, 640), np.uint8))
     missed = {"left": sorted(views["left"]), "right": []}
-    monkeypatch.setattr(cli, "detect_folder", lambda *args: ({"left": {}, "right": views["right"]}, missed))
+    monkeypatch.setattr(cli, "read_folder", lambda *args: _found({"left": {}, "right": views["right"]}, missed))
     rc = cli.main(["check", "--rig", str(tmp_path / "rig.json"), "--board", str(tmp_path / "board.json"),
                    "--images", str(images)])
     err = capsys.readouterr().err
@@ -741,7 +747,7 @@ def test_an_image_given_twice_is_counted_once(level_rig, tmp_path, capsys, monke
         for name in named:
             (images / cam / f"{name}.png").touch()  # listed by name; the detection is stood in for
     (tmp_path / "board.json").write_text(json.dumps(BOARD.to_dict()))
-    monkeypatch.setattr(cli, "detect_folder", lambda *args: (views, {"left": [], "right": []}))
+    monkeypatch.setattr(cli, "read_folder", lambda *args: _found(views, {"left": [], "right": []}))
     rc = cli.main(["solve", "--board", str(tmp_path / "board.json"), "--images", str(images), "--cameras", "left,right",
                    "--camera-height", "1.4", "--pitch", "9", "--roll", "0", "--out", str(tmp_path / "rig.json")])
     out = capsys.readouterr().out

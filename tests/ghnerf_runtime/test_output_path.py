@@ -1,9 +1,11 @@
 """``ready_output``: an output path is settled before the work that fills it."""
 from __future__ import annotations
 
+import os
+
 import pytest
 
-from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output
+from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output, same_file
 
 
 def test_a_missing_folder_is_made_and_the_path_returned(tmp_path):
@@ -60,3 +62,18 @@ def test_output_clash_sees_one_file_however_it_is_spelled(tmp_path):
                          "--novel-view": str(tmp_path / "a.json")}, inputs).startswith(
         f"--novel-view {tmp_path / 'a.json'} is where --out writes too")
     assert output_clash({"--out": str(tmp_path / "a.json"), "--overlay": str(tmp_path / "a.png")}, inputs) is None
+
+
+def test_output_clash_sees_a_hard_link_to_an_input(tmp_path):
+    # a hard link is a path of its own (realpath keeps it): until session 74 it passed, and a tool that writes its
+    # output in place (ghnerf-run's --out) truncated the input it reads
+    (tmp_path / "rig.json").write_text("{}")
+    os.link(tmp_path / "rig.json", tmp_path / "hard.json")
+    inputs = {"--rig": str(tmp_path / "rig.json")}
+    assert output_clash({"--out": str(tmp_path / "hard.json")}, inputs).startswith(
+        f"--out {tmp_path / 'hard.json'} is the file --rig reads")
+    assert same_file(tmp_path / "hard.json", tmp_path / "rig.json")
+    # a copy is another file, and a path not there yet is no file's
+    (tmp_path / "copy.json").write_text("{}")
+    assert not same_file(tmp_path / "copy.json", tmp_path / "rig.json")
+    assert not same_file(tmp_path / "new.json", tmp_path / "rig.json")
