@@ -247,8 +247,16 @@ def _positive_number(name: str, value, hint: str = ""):
     # an int is compared with float64's largest, a float with inf (a float32 against 1.8e308 warned of a cast)
     whole = _is_int(value) and 0 < value <= _FLOAT64_MAX
     if not (whole or isinstance(value, (float, np.floating)) and 0 < value < np.inf):
-        raise ValueError(f"{name} must be a positive number{hint}, got {value!r}")
+        raise ValueError(f"{name} must be a positive number{hint}, got {_shown(value)}")
     return value
+
+
+def _shown(value) -> str:
+    """``repr(value)``, but an int past float64 by its size: its hundreds of digits said nothing, and past 4300
+    of them ``repr`` raises ValueError itself."""
+    if _is_int(value) and abs(value) > _FLOAT64_MAX:
+        return f"an int of {int(value).bit_length()} bits (past float64)"
+    return repr(value)
 
 
 def _check_joint_indices(name: str, joints, num_joints: int) -> None:
@@ -257,7 +265,7 @@ def _check_joint_indices(name: str, joints, num_joints: int) -> None:
         if not _is_int(j):
             raise ValueError(f"{name}: a joint index must be an int, got {j!r}")
         if not 0 <= j < num_joints:
-            raise ShapeError(f"{name}: joint index {j} out of range for {num_joints} joints")
+            raise ShapeError(f"{name}: joint index {_shown(j)} out of range for {num_joints} joints")
 
 
 def _check_pck_args(num_joints: int, torso_joints, box_joints, alpha: float) -> None:
@@ -321,6 +329,19 @@ def _pooled_mean(values: np.ndarray, count: int) -> float:
         return _mean_or_nan(total, count)
     with np.errstate(over="ignore"):
         return float(top * ((values / top).sum() / count))
+
+
+def _within(pred: np.ndarray, true: np.ndarray, dist: np.ndarray, alpha: float, ref: np.ndarray) -> np.ndarray:
+    """``dist <= alpha * ref`` (``dist`` the norms of ``pred - true``, ``ref`` broadcast to it), exact where both
+    sides passed float64: inf <= inf counted a prediction past float64 as correct. Those are compared at a quarter
+    (powers of two: no rounding), in range for a distance between finite points (under 4 times float64's largest)."""
+    with np.errstate(over="ignore"):  # alpha * ref past float64: every finite distance is within it
+        near = dist <= alpha * ref
+        redo = np.isinf(dist) & np.isinf(alpha * ref)
+        if redo.any():
+            quarter = np.broadcast_to(ref, dist.shape)[redo] / 4
+            near[redo] = _norms(pred[redo] / 4 - true[redo] / 4) <= alpha * quarter
+    return near
 
 
 # ---------------------------------------------------------------------- PCK
@@ -390,8 +411,7 @@ def pck(pred_2d, true_2d, valid, torso_joints: tuple[int, int] = (NECK, MID_HIP)
     ref = _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
     evaluated = valid_b & (ref > 0)[..., None]
     dist = _norms(np.where(pred_ok[..., None], _differences(pred, true), 0.0))
-    with np.errstate(over="ignore"):  # alpha * ref past float64: every finite distance is within it
-        correct = evaluated & pred_ok & (dist <= alpha * ref[..., None])
+    correct = evaluated & pred_ok & _within(pred, true, dist, alpha, ref[..., None])
 
     n_eval = int(evaluated.sum())
     n_ok = int(correct.sum())
@@ -437,8 +457,9 @@ def left_right_swaps(pred_2d, true_2d, valid, *, pred_valid=None,
     pairs = [tuple(p) for p in pairs]
     _check_joint_indices("pairs", [j for p in pairs for j in p], true.shape[-2])
     _check_pck_args(true.shape[-2], torso_joints, box_joints, alpha)
-    with np.errstate(over="ignore"):  # as in pck
-        radius = alpha * _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
+    ref = _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
+    with np.errstate(over="ignore"):  # past float64: _within compares it exactly
+        radius = alpha * ref
     shape = true.shape[:-2] + (len(pairs),)
     swapped, evaluated = np.zeros(shape, bool), np.zeros(shape, bool)
     for k, (a, b) in enumerate(pairs):
@@ -446,7 +467,8 @@ def left_right_swaps(pred_2d, true_2d, valid, *, pred_valid=None,
         pa, pb = np.where(ev[..., None], pred[..., a, :], 0.0), np.where(ev[..., None], pred[..., b, :], 0.0)
         ta, tb = true[..., a, :], true[..., b, :]
         # a-a, a-b, b-a, b-b in one call: _norms' checks cost more than its sums on 4 x 2 values
-        near = _norms(_differences(np.stack([pa, pa, pb, pb]), np.stack([ta, tb, ta, tb]))) <= radius
+        p, t = np.stack([pa, pa, pb, pb]), np.stack([ta, tb, ta, tb])
+        near = _within(p, t, _norms(_differences(p, t)), alpha, ref)
         as_labelled = near[0] & near[3]
         exchanged = near[1] & near[2]
         evaluated[..., k] = ev

@@ -565,7 +565,7 @@ def test_wild_ssim_map_agrees_with_the_plain_one_where_both_hold():
 def test_gaussian_heatmaps_refuses_a_sigma_that_is_not_a_positive_number(bad):
     """True was a sigma of 1 (a bool is an int), "2" and None raised numpy's bare TypeError."""
     with pytest.raises(ValueError, match=r"sigma must be a positive number \(heatmap pixels\), got "
-                                         + re.escape(repr(bad)[:40])):
+                                         + re.escape(metrics._shown(bad))):
         gaussian_heatmaps([[2.0, 2.0]], [True], 5, sigma=bad)
 
 
@@ -602,3 +602,30 @@ def test_pck_and_swaps_refuse_bool_and_text_arguments(kw, message):
         pck(TRUE, TRUE, [True] * 4, torso_joints=(0, 7), box_joints=(0, 1))
     numpy_args = {"torso_joints": (np.int64(0), 1), "box_joints": (0, 1), "alpha": np.float32(0.2)}
     assert pck(TRUE, TRUE, [True] * 4, **numpy_args).value == 1.0
+
+
+@pytest.mark.parametrize(("alpha", "correct"), [(2.0, False), (6.0, True)])
+def test_pck_and_swaps_compare_a_distance_and_radius_both_past_float64(alpha, correct):
+    """A reference of 1e308 px with alpha 2 or 6 is a radius past float64, and a joint 4.8e308 px off a distance
+    past float64: inf <= inf counted it correct for any alpha. Exactly, 4.8e308 > 2e308 and 4.8e308 < 6e308."""
+    true = np.array([[-0.5e308, 0.0], [0.5e308, 0.0], [1.7e308, 1.7e308], [0.0, 0.0]])
+    pred = true.copy()
+    pred[2] = -1.7e308
+    r = _no_warnings(pck, pred, true, [True] * 4, alpha=alpha, **TOY)
+    assert r.reference == 1e308 and r.correct.tolist() == [True, True, correct, True]
+    # joints 2 and 3 predicted exchanged, 4.8e308 px from their own truths: a swap unless that is within the radius
+    true[3], pred[3] = [-1.7e308, -1.7e308], [1.7e308, 1.7e308]
+    swaps = _no_warnings(left_right_swaps, pred, true, [True] * 4, pairs=[(2, 3)], alpha=alpha, **TOY)
+    assert swaps.num_evaluated == 1 and swaps.swapped.tolist() == [not correct]
+
+
+@pytest.mark.parametrize("bad", [10 ** 400, -10 ** 5000], ids=["1e400", "-1e5000"])
+def test_an_int_past_float64_is_refused_by_its_size_not_its_digits(bad):
+    """The message held all 400 digits; past 4300 digits repr() itself raised (Python's int-to-text limit)."""
+    bits = abs(bad).bit_length()
+    with pytest.raises(ValueError, match=re.escape(f"data_range must be a positive number (1.0 for [0, 1] images, "
+                                                   f"255 for 8-bit), got an int of {bits} bits (past float64)")):
+        masked_psnr(np.zeros((2, 2)), np.zeros((2, 2)), np.ones((2, 2), bool), data_range=bad)
+    with pytest.raises(ShapeError, match=re.escape(f"box_joints: joint index an int of {bits} bits (past float64) "
+                                                   f"out of range for 4 joints")):
+        pck(TRUE, TRUE, [True] * 4, torso_joints=(0, 1), box_joints=(0, bad))
