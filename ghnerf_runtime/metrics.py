@@ -735,20 +735,31 @@ def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
         mse = np.where(counts > 0, sq.sum(axis=(1, 2)) / np.maximum(counts * p.shape[-1], 1), np.nan)
     with np.errstate(divide="ignore"):
         values = 10.0 * np.log10(1.0 / mse)
-    for i in np.flatnonzero(np.isinf(mse)):
-        values[i] = _wild_psnr(p[i][m[i]] / data_range - t[i][m[i]] / data_range, values[i])
+    # past float64 (a wild prediction, or a tiny data_range) or below its normal numbers (1 / mse: inf dB)
+    for i in np.flatnonzero(np.isinf(mse) | (mse < _FLOAT64_TINY)):
+        values[i] = _wild_psnr(p[i][m[i]], t[i][m[i]], data_range, values[i])
     return _per_image_result(values, counts, batch_shape)
 
 
-def _wild_psnr(d: np.ndarray, plain: float) -> float:
-    """PSNR (dB) of the differences ``d`` (in data ranges) whose mean square overflowed (a wild prediction):
-    ``-20 log10(top) - 10 log10(mean((d / top)**2))`` with ``top`` the largest difference, in range for any finite
-    ``d``. ``plain`` (-inf, or NaN from a non-finite value) where ``d`` is not finite."""
+_FLOAT64_TINY = float(np.finfo(np.float64).tiny)
+
+
+def _wild_psnr(p: np.ndarray, t: np.ndarray, data_range: float, plain: float) -> float:
+    """PSNR (dB) of the values ``p`` against ``t`` whose mean square in data ranges left float64's normal numbers:
+    ``20 log10(data_range / top) - 10 log10(mean((d / top)**2))``, ``d = p - t`` (both halved first where that
+    passes float64) and ``top`` its largest magnitude. ``plain`` (+-inf, or NaN) where ``d`` is all 0 or not finite."""
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(t))):
+        return plain
+    with np.errstate(over="ignore"):
+        d, halved = p - t, 1.0
+    if np.any(np.isinf(d)):  # opposite signs near 1e308
+        d, halved = p / 2 - t / 2, 2.0
     top = float(np.abs(d).max())
-    if not top < np.inf:
+    if top == 0:
         return plain
     unit = d / top
-    return float(-20.0 * np.log10(top) - 10.0 * np.log10((unit * unit).mean()))
+    peak = np.log10(data_range) - np.log10(top) - np.log10(halved)
+    return float(20.0 * peak - 10.0 * np.log10((unit * unit).mean()))
 
 
 #: A per-image PSNR of identical images (+inf) counts as this in a pooled mean (``ghnerf-eval``, the painter's
@@ -860,6 +871,14 @@ def _ssim_channel(x: np.ndarray, y: np.ndarray, m: np.ndarray) -> np.ndarray:
     return _ssim_map(x, y, m, 1.0)
 
 
+def _in_data_ranges(a: np.ndarray, data_range: float) -> np.ndarray:
+    """``a / data_range``; a finite value past float64 so (a wild prediction, a tiny ``data_range``: an inf, a NaN
+    SSIM map) is held at float64's largest. Its windows score under 1e-300 either way."""
+    with np.errstate(over="ignore"):
+        x = a / data_range
+    return np.where(np.isinf(x) & np.isfinite(a), np.copysign(_FLOAT64_MAX, x), x)
+
+
 def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResult:
     """Structural similarity (Wang et al. 2004) averaged over the mask pixels, per image.
 
@@ -897,8 +916,8 @@ def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
             continue
         mi = m[i].astype(np.float64)
         # in units of data_range (L = 1), as masked_psnr: squares of 1e-200 images underflowed (0 / 0, a NaN)
-        per_channel = [(_ssim_channel(p[i, ..., c] / data_range, t[i, ..., c] / data_range, mi)[m[i]]).mean()
-                       for c in range(p.shape[-1])]
+        per_channel = [(_ssim_channel(_in_data_ranges(p[i, ..., c], data_range), t[i, ..., c] / data_range,
+                                      mi)[m[i]]).mean() for c in range(p.shape[-1])]
         values[i] = float(np.mean(per_channel))
     return _per_image_result(values, counts, batch_shape)
 

@@ -629,3 +629,26 @@ def test_an_int_past_float64_is_refused_by_its_size_not_its_digits(bad):
     with pytest.raises(ShapeError, match=re.escape(f"box_joints: joint index an int of {bits} bits (past float64) "
                                                    f"out of range for 4 joints")):
         pck(TRUE, TRUE, [True] * 4, torso_joints=(0, 1), box_joints=(0, bad))
+
+
+def test_image_metrics_of_a_prediction_past_float64_in_data_ranges():
+    """A 1e300 pixel against 1e-10 data ranges is 1e310 of them, past float64: PSNR was -inf, SSIM NaN (with
+    RuntimeWarnings). PSNR: -20 log10(1e310) + 10 log10(768); SSIM: its windows score ~0, as a 1e60 one's do."""
+    rng = np.random.default_rng(5)
+    truth, m = rng.random((16, 16, 3)) * 1e-10, np.ones((16, 16), bool)
+    pred, moderate = truth.copy(), truth.copy()
+    pred[8, 8, 1], moderate[8, 8, 1] = 1e300, 1e50
+    r = _no_warnings(masked_psnr, pred, truth, m, data_range=1e-10)
+    assert r.value == pytest.approx(-3100 * 2 + 10 * math.log10(16 * 16 * 3), rel=1e-12)
+    assert _no_warnings(masked_ssim, pred, truth, m, data_range=1e-10).value == pytest.approx(
+        masked_ssim(moderate, truth, m, data_range=1e-10).value, rel=1e-12)
+
+
+@pytest.mark.parametrize("offset", [1e-170, 1e-300])
+def test_psnr_of_differences_below_1e154_data_ranges_is_finite(offset):
+    """Every pixel off by 1e-170 data ranges: the squares underflowed to 0, +inf dB (identical images), where it
+    is 20 * 170 = 3400 dB. 1 / mse of a subnormal mse (1e-300: its square 1e-600 is 0 too) overflowed alike."""
+    truth, m = np.zeros((4, 4)), np.ones((4, 4), bool)
+    assert _no_warnings(masked_psnr, truth + offset, truth, m).value == pytest.approx(-20 * math.log10(offset),
+                                                                                      rel=1e-12)
+    assert masked_psnr(truth, truth, m).value == math.inf  # identical: still +inf
