@@ -758,7 +758,7 @@ def _wild_psnr(p: np.ndarray, t: np.ndarray, data_range: float, plain: float) ->
     if top == 0:
         return plain
     unit = d / top
-    peak = np.log10(data_range) - np.log10(top) - np.log10(halved)
+    peak = np.log10(float(data_range)) - np.log10(top) - np.log10(halved)  # an int past int64: no ufunc loop
     return float(20.0 * peak - 10.0 * np.log10((unit * unit).mean()))
 
 
@@ -1003,7 +1003,8 @@ def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: fl
     joints = _points("joints_2d", joints_2d, 2)
     vis = _mask("visible", visible, joints.shape[:-1]) & np.all(np.isfinite(joints), axis=-1)
     h, w = _heatmap_size(size)
-    _positive_number("sigma", sigma, " (heatmap pixels)")
+    if _is_int(_positive_number("sigma", sigma, " (heatmap pixels)")):
+        sigma = float(sigma)  # an int's 2 sigma^2 wrapped in int64 (2**40: 0) or left float64 (10**300: OverflowError)
     # below 1e-162 the 2 sigma^2 of the exponent underflows to 0: 0 / 0 on a joint's own pixel, a NaN target
     if not 2 * sigma * sigma > 0:
         raise ValueError(f"sigma must be a positive number whose square float64 holds, got {sigma}")

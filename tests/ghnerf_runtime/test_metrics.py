@@ -652,3 +652,22 @@ def test_psnr_of_differences_below_1e154_data_ranges_is_finite(offset):
     assert _no_warnings(masked_psnr, truth + offset, truth, m).value == pytest.approx(-20 * math.log10(offset),
                                                                                       rel=1e-12)
     assert masked_psnr(truth, truth, m).value == math.inf  # identical: still +inf
+
+
+@pytest.mark.parametrize("sigma", [np.int64(2 ** 40), 2 ** 70, 10 ** 300], ids=["int64-2e40", "2e70", "1e300"])
+def test_gaussian_heatmaps_takes_a_large_int_sigma_as_its_float(sigma):
+    """An int sigma is a number like any: 2 sigma^2 wrapped in int64 (2**40: 0, refused as underflowing) or was a
+    Python int past float64 (10**300: OverflowError)."""
+    ref = gaussian_heatmaps([[2.0, 1.0]], [True], (5, 4), sigma=float(sigma))
+    np.testing.assert_array_equal(_no_warnings(gaussian_heatmaps, [[2.0, 1.0]], [True], (5, 4), sigma), ref)
+
+
+@pytest.mark.parametrize(("data_range", "spike"), [(2 ** 70, 1e200), (10 ** 300, 1.0)], ids=["2e70", "1e300"])
+def test_psnr_takes_an_int_data_range_past_int64(data_range, spike):
+    """A wild prediction's PSNR (1e179 data ranges: a mean square past float64; 1e-300 of them: below its normal
+    numbers) took log10 of the int itself: numpy has no log10 for an int past int64 (TypeError)."""
+    truth, m = np.zeros((4, 4)), np.ones((4, 4), bool)
+    pred = truth.copy()
+    pred[0, 0] = spike
+    expected = 20 * (math.log10(data_range) - math.log10(spike)) + 10 * math.log10(16)
+    assert _no_warnings(masked_psnr, pred, truth, m, data_range=data_range).value == pytest.approx(expected, rel=1e-12)
