@@ -336,8 +336,9 @@ def _within(pred: np.ndarray, true: np.ndarray, dist: np.ndarray, alpha: float, 
     sides passed float64: inf <= inf counted a prediction past float64 as correct. Those are compared at a quarter
     (powers of two: no rounding), in range for a distance between finite points (under 4 times float64's largest)."""
     with np.errstate(over="ignore"):  # alpha * ref past float64: every finite distance is within it
-        near = dist <= alpha * ref
-        redo = np.isinf(dist) & np.isinf(alpha * ref)
+        radius = alpha * ref
+        near = dist <= radius
+        redo = np.isinf(dist) & np.isinf(radius)
         if redo.any():
             quarter = np.broadcast_to(ref, dist.shape)[redo] / 4
             near[redo] = _norms(pred[redo] / 4 - true[redo] / 4) <= alpha * quarter
@@ -872,8 +873,8 @@ def _ssim_channel(x: np.ndarray, y: np.ndarray, m: np.ndarray) -> np.ndarray:
 
 
 def _in_data_ranges(a: np.ndarray, data_range: float) -> np.ndarray:
-    """``a / data_range``; a finite value past float64 so (a wild prediction, a tiny ``data_range``: an inf, a NaN
-    SSIM map) is held at float64's largest. Its windows score under 1e-300 either way."""
+    """``a / data_range``, a finite value of ``a`` whose quotient passes float64 (a wild prediction, a tiny
+    ``data_range``: an inf, a NaN SSIM map) held at float64's largest. Its windows score under 1e-300 either way."""
     with np.errstate(over="ignore"):
         x = a / data_range
     return np.where(np.isinf(x) & np.isfinite(a), np.copysign(_FLOAT64_MAX, x), x)
