@@ -247,8 +247,16 @@ def _positive_number(name: str, value, hint: str = ""):
     # an int is compared with float64's largest, a float with inf (a float32 against 1.8e308 warned of a cast)
     whole = _is_int(value) and 0 < value <= _FLOAT64_MAX
     if not (whole or isinstance(value, (float, np.floating)) and 0 < value < np.inf):
-        raise ValueError(f"{name} must be a positive number{hint}, got {value!r}")
+        raise ValueError(f"{name} must be a positive number{hint}, got {_shown(value)}")
     return value
+
+
+def _shown(value) -> str:
+    """``repr(value)``, but an int past float64 by its size: its hundreds of digits said nothing, and past 4300
+    of them ``repr`` raises ValueError itself."""
+    if _is_int(value) and abs(value) > _FLOAT64_MAX:
+        return f"an int of {int(value).bit_length()} bits (past float64)"
+    return repr(value)
 
 
 def _check_joint_indices(name: str, joints, num_joints: int) -> None:
@@ -257,7 +265,7 @@ def _check_joint_indices(name: str, joints, num_joints: int) -> None:
         if not _is_int(j):
             raise ValueError(f"{name}: a joint index must be an int, got {j!r}")
         if not 0 <= j < num_joints:
-            raise ShapeError(f"{name}: joint index {j} out of range for {num_joints} joints")
+            raise ShapeError(f"{name}: joint index {_shown(j)} out of range for {num_joints} joints")
 
 
 def _check_pck_args(num_joints: int, torso_joints, box_joints, alpha: float) -> None:
@@ -321,6 +329,20 @@ def _pooled_mean(values: np.ndarray, count: int) -> float:
         return _mean_or_nan(total, count)
     with np.errstate(over="ignore"):
         return float(top * ((values / top).sum() / count))
+
+
+def _within(pred: np.ndarray, true: np.ndarray, dist: np.ndarray, alpha: float, ref: np.ndarray) -> np.ndarray:
+    """``dist <= alpha * ref`` (``dist`` the norms of ``pred - true``, ``ref`` broadcast to it), exact where both
+    sides passed float64: inf <= inf counted a prediction past float64 as correct. Those are compared at a quarter
+    (powers of two: no rounding), in range for a distance between finite points (under 4 times float64's largest)."""
+    with np.errstate(over="ignore"):  # alpha * ref past float64: every finite distance is within it
+        radius = alpha * ref
+        near = dist <= radius
+        redo = np.isinf(dist) & np.isinf(radius)
+        if redo.any():
+            quarter = np.broadcast_to(ref, dist.shape)[redo] / 4
+            near[redo] = _norms(pred[redo] / 4 - true[redo] / 4) <= alpha * quarter
+    return near
 
 
 # ---------------------------------------------------------------------- PCK
@@ -390,8 +412,7 @@ def pck(pred_2d, true_2d, valid, torso_joints: tuple[int, int] = (NECK, MID_HIP)
     ref = _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
     evaluated = valid_b & (ref > 0)[..., None]
     dist = _norms(np.where(pred_ok[..., None], _differences(pred, true), 0.0))
-    with np.errstate(over="ignore"):  # alpha * ref past float64: every finite distance is within it
-        correct = evaluated & pred_ok & (dist <= alpha * ref[..., None])
+    correct = evaluated & pred_ok & _within(pred, true, dist, alpha, ref[..., None])
 
     n_eval = int(evaluated.sum())
     n_ok = int(correct.sum())
@@ -437,8 +458,9 @@ def left_right_swaps(pred_2d, true_2d, valid, *, pred_valid=None,
     pairs = [tuple(p) for p in pairs]
     _check_joint_indices("pairs", [j for p in pairs for j in p], true.shape[-2])
     _check_pck_args(true.shape[-2], torso_joints, box_joints, alpha)
-    with np.errstate(over="ignore"):  # as in pck
-        radius = alpha * _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
+    ref = _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
+    with np.errstate(over="ignore"):  # past float64: _within compares it exactly
+        radius = alpha * ref
     shape = true.shape[:-2] + (len(pairs),)
     swapped, evaluated = np.zeros(shape, bool), np.zeros(shape, bool)
     for k, (a, b) in enumerate(pairs):
@@ -446,7 +468,8 @@ def left_right_swaps(pred_2d, true_2d, valid, *, pred_valid=None,
         pa, pb = np.where(ev[..., None], pred[..., a, :], 0.0), np.where(ev[..., None], pred[..., b, :], 0.0)
         ta, tb = true[..., a, :], true[..., b, :]
         # a-a, a-b, b-a, b-b in one call: _norms' checks cost more than its sums on 4 x 2 values
-        near = _norms(_differences(np.stack([pa, pa, pb, pb]), np.stack([ta, tb, ta, tb]))) <= radius
+        p, t = np.stack([pa, pa, pb, pb]), np.stack([ta, tb, ta, tb])
+        near = _within(p, t, _norms(_differences(p, t)), alpha, ref)
         as_labelled = near[0] & near[3]
         exchanged = near[1] & near[2]
         evaluated[..., k] = ev
@@ -713,20 +736,31 @@ def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
         mse = np.where(counts > 0, sq.sum(axis=(1, 2)) / np.maximum(counts * p.shape[-1], 1), np.nan)
     with np.errstate(divide="ignore"):
         values = 10.0 * np.log10(1.0 / mse)
-    for i in np.flatnonzero(np.isinf(mse)):
-        values[i] = _wild_psnr(p[i][m[i]] / data_range - t[i][m[i]] / data_range, values[i])
+    # past float64 (a wild prediction, or a tiny data_range) or below its normal numbers (1 / mse: inf dB)
+    for i in np.flatnonzero(np.isinf(mse) | (mse < _FLOAT64_TINY)):
+        values[i] = _wild_psnr(p[i][m[i]], t[i][m[i]], data_range, values[i])
     return _per_image_result(values, counts, batch_shape)
 
 
-def _wild_psnr(d: np.ndarray, plain: float) -> float:
-    """PSNR (dB) of the differences ``d`` (in data ranges) whose mean square overflowed (a wild prediction):
-    ``-20 log10(top) - 10 log10(mean((d / top)**2))`` with ``top`` the largest difference, in range for any finite
-    ``d``. ``plain`` (-inf, or NaN from a non-finite value) where ``d`` is not finite."""
+_FLOAT64_TINY = float(np.finfo(np.float64).tiny)
+
+
+def _wild_psnr(p: np.ndarray, t: np.ndarray, data_range: float, plain: float) -> float:
+    """PSNR (dB) of the values ``p`` against ``t`` whose mean square in data ranges left float64's normal numbers:
+    ``20 log10(data_range / top) - 10 log10(mean((d / top)**2))``, ``d = p - t`` (both halved first where that
+    passes float64) and ``top`` its largest magnitude. ``plain`` (+-inf, or NaN) where ``d`` is all 0 or not finite."""
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(t))):
+        return plain
+    with np.errstate(over="ignore"):
+        d, halved = p - t, 1.0
+    if np.any(np.isinf(d)):  # opposite signs near 1e308
+        d, halved = p / 2 - t / 2, 2.0
     top = float(np.abs(d).max())
-    if not top < np.inf:
+    if top == 0:
         return plain
     unit = d / top
-    return float(-20.0 * np.log10(top) - 10.0 * np.log10((unit * unit).mean()))
+    peak = np.log10(float(data_range)) - np.log10(top) - np.log10(halved)  # an int past int64: no ufunc loop
+    return float(20.0 * peak - 10.0 * np.log10((unit * unit).mean()))
 
 
 #: A per-image PSNR of identical images (+inf) counts as this in a pooled mean (``ghnerf-eval``, the painter's
@@ -838,6 +872,14 @@ def _ssim_channel(x: np.ndarray, y: np.ndarray, m: np.ndarray) -> np.ndarray:
     return _ssim_map(x, y, m, 1.0)
 
 
+def _in_data_ranges(a: np.ndarray, data_range: float) -> np.ndarray:
+    """``a / data_range``, a finite value of ``a`` whose quotient passes float64 (a wild prediction, a tiny
+    ``data_range``: an inf, a NaN SSIM map) held at float64's largest. Its windows score under 1e-300 either way."""
+    with np.errstate(over="ignore"):
+        x = a / data_range
+    return np.where(np.isinf(x) & np.isfinite(a), np.copysign(_FLOAT64_MAX, x), x)
+
+
 def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResult:
     """Structural similarity (Wang et al. 2004) averaged over the mask pixels, per image.
 
@@ -875,8 +917,8 @@ def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
             continue
         mi = m[i].astype(np.float64)
         # in units of data_range (L = 1), as masked_psnr: squares of 1e-200 images underflowed (0 / 0, a NaN)
-        per_channel = [(_ssim_channel(p[i, ..., c] / data_range, t[i, ..., c] / data_range, mi)[m[i]]).mean()
-                       for c in range(p.shape[-1])]
+        per_channel = [(_ssim_channel(_in_data_ranges(p[i, ..., c], data_range), t[i, ..., c] / data_range,
+                                      mi)[m[i]]).mean() for c in range(p.shape[-1])]
         values[i] = float(np.mean(per_channel))
     return _per_image_result(values, counts, batch_shape)
 
@@ -962,7 +1004,8 @@ def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: fl
     joints = _points("joints_2d", joints_2d, 2)
     vis = _mask("visible", visible, joints.shape[:-1]) & np.all(np.isfinite(joints), axis=-1)
     h, w = _heatmap_size(size)
-    _positive_number("sigma", sigma, " (heatmap pixels)")
+    if _is_int(_positive_number("sigma", sigma, " (heatmap pixels)")):
+        sigma = float(sigma)  # an int's 2 sigma^2 wrapped in int64 (2**40: 0) or left float64 (10**300: OverflowError)
     # below 1e-162 the 2 sigma^2 of the exponent underflows to 0: 0 / 0 on a joint's own pixel, a NaN target
     if not 2 * sigma * sigma > 0:
         raise ValueError(f"sigma must be a positive number whose square float64 holds, got {sigma}")

@@ -565,7 +565,7 @@ def test_wild_ssim_map_agrees_with_the_plain_one_where_both_hold():
 def test_gaussian_heatmaps_refuses_a_sigma_that_is_not_a_positive_number(bad):
     """True was a sigma of 1 (a bool is an int), "2" and None raised numpy's bare TypeError."""
     with pytest.raises(ValueError, match=r"sigma must be a positive number \(heatmap pixels\), got "
-                                         + re.escape(repr(bad)[:40])):
+                                         + re.escape(metrics._shown(bad))):
         gaussian_heatmaps([[2.0, 2.0]], [True], 5, sigma=bad)
 
 
@@ -602,3 +602,72 @@ def test_pck_and_swaps_refuse_bool_and_text_arguments(kw, message):
         pck(TRUE, TRUE, [True] * 4, torso_joints=(0, 7), box_joints=(0, 1))
     numpy_args = {"torso_joints": (np.int64(0), 1), "box_joints": (0, 1), "alpha": np.float32(0.2)}
     assert pck(TRUE, TRUE, [True] * 4, **numpy_args).value == 1.0
+
+
+@pytest.mark.parametrize(("alpha", "correct"), [(2.0, False), (6.0, True)])
+def test_pck_and_swaps_compare_a_distance_and_radius_both_past_float64(alpha, correct):
+    """A reference of 1e308 px with alpha 2 or 6 is a radius past float64, and a joint 4.8e308 px off a distance
+    past float64: inf <= inf counted it correct for any alpha. Exactly, 4.8e308 > 2e308 and 4.8e308 < 6e308."""
+    true = np.array([[-0.5e308, 0.0], [0.5e308, 0.0], [1.7e308, 1.7e308], [0.0, 0.0]])
+    pred = true.copy()
+    pred[2] = -1.7e308
+    r = _no_warnings(pck, pred, true, [True] * 4, alpha=alpha, **TOY)
+    assert r.reference == 1e308 and r.correct.tolist() == [True, True, correct, True]
+    # joints 2 and 3 predicted exchanged, 4.8e308 px from their own truths: a swap unless that is within the radius
+    true[3], pred[3] = [-1.7e308, -1.7e308], [1.7e308, 1.7e308]
+    swaps = _no_warnings(left_right_swaps, pred, true, [True] * 4, pairs=[(2, 3)], alpha=alpha, **TOY)
+    assert swaps.num_evaluated == 1 and swaps.swapped.tolist() == [not correct]
+
+
+@pytest.mark.parametrize("bad", [10 ** 400, -10 ** 5000], ids=["1e400", "-1e5000"])
+def test_an_int_past_float64_is_refused_by_its_size_not_its_digits(bad):
+    """The message held all 400 digits; past 4300 digits repr() itself raised (Python's int-to-text limit)."""
+    bits = abs(bad).bit_length()
+    with pytest.raises(ValueError, match=re.escape(f"data_range must be a positive number (1.0 for [0, 1] images, "
+                                                   f"255 for 8-bit), got an int of {bits} bits (past float64)")):
+        masked_psnr(np.zeros((2, 2)), np.zeros((2, 2)), np.ones((2, 2), bool), data_range=bad)
+    with pytest.raises(ShapeError, match=re.escape(f"box_joints: joint index an int of {bits} bits (past float64) "
+                                                   f"out of range for 4 joints")):
+        pck(TRUE, TRUE, [True] * 4, torso_joints=(0, 1), box_joints=(0, bad))
+
+
+def test_image_metrics_of_a_prediction_past_float64_in_data_ranges():
+    """A 1e300 pixel against 1e-10 data ranges is 1e310 of them, past float64: PSNR was -inf, SSIM NaN (with
+    RuntimeWarnings). PSNR: -20 log10(1e310) + 10 log10(768); SSIM: its windows score ~0, as a 1e60 one's do."""
+    rng = np.random.default_rng(5)
+    truth, m = rng.random((16, 16, 3)) * 1e-10, np.ones((16, 16), bool)
+    pred, moderate = truth.copy(), truth.copy()
+    pred[8, 8, 1], moderate[8, 8, 1] = 1e300, 1e50
+    r = _no_warnings(masked_psnr, pred, truth, m, data_range=1e-10)
+    assert r.value == pytest.approx(-3100 * 2 + 10 * math.log10(16 * 16 * 3), rel=1e-12)
+    assert _no_warnings(masked_ssim, pred, truth, m, data_range=1e-10).value == pytest.approx(
+        masked_ssim(moderate, truth, m, data_range=1e-10).value, rel=1e-12)
+
+
+@pytest.mark.parametrize("offset", [1e-170, 1e-300])
+def test_psnr_of_differences_below_1e154_data_ranges_is_finite(offset):
+    """Every pixel off by 1e-170 data ranges: the squares underflowed to 0, +inf dB (identical images), where it
+    is 20 * 170 = 3400 dB. 1 / mse of a subnormal mse (1e-300: its square 1e-600 is 0 too) overflowed alike."""
+    truth, m = np.zeros((4, 4)), np.ones((4, 4), bool)
+    assert _no_warnings(masked_psnr, truth + offset, truth, m).value == pytest.approx(-20 * math.log10(offset),
+                                                                                      rel=1e-12)
+    assert masked_psnr(truth, truth, m).value == math.inf  # identical: still +inf
+
+
+@pytest.mark.parametrize("sigma", [np.int64(2 ** 40), 2 ** 70, 10 ** 300], ids=["int64-2e40", "2e70", "1e300"])
+def test_gaussian_heatmaps_takes_a_large_int_sigma_as_its_float(sigma):
+    """An int sigma is a number like any: 2 sigma^2 wrapped in int64 (2**40: 0, refused as underflowing) or was a
+    Python int past float64 (10**300: OverflowError)."""
+    ref = gaussian_heatmaps([[2.0, 1.0]], [True], (5, 4), sigma=float(sigma))
+    np.testing.assert_array_equal(_no_warnings(gaussian_heatmaps, [[2.0, 1.0]], [True], (5, 4), sigma), ref)
+
+
+@pytest.mark.parametrize(("data_range", "spike"), [(2 ** 70, 1e200), (10 ** 300, 1.0)], ids=["2e70", "1e300"])
+def test_psnr_takes_an_int_data_range_past_int64(data_range, spike):
+    """A wild prediction's PSNR (1e179 data ranges: a mean square past float64; 1e-300 of them: below its normal
+    numbers) took log10 of the int itself: numpy has no log10 for an int past int64 (TypeError)."""
+    truth, m = np.zeros((4, 4)), np.ones((4, 4), bool)
+    pred = truth.copy()
+    pred[0, 0] = spike
+    expected = 20 * (math.log10(data_range) - math.log10(spike)) + 10 * math.log10(16)
+    assert _no_warnings(masked_psnr, pred, truth, m, data_range=data_range).value == pytest.approx(expected, rel=1e-12)
