@@ -599,6 +599,10 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     if rig_failed is not None:
         print(f"{prog}: error: the rig failed after {delivered} pairs: {rig_failed}", file=sys.stderr)
         failed = True
+    take_failure = getattr(source, "unreported_failure", lambda: None)()  # a record+ take: exit 0 said it was whole
+    if take_failure is not None:
+        print(f"{prog}: error: {take_failure}", file=sys.stderr)
+        failed = True
     if sink_stats.submitted and not sink_stats.sent:  # a sink that never connected: say so in the status too
         print(f"{prog}: error: the sink {redact_url(sink_url)} sent none of the {sink_stats.submitted} frames "
               f"({sink_stats.connect_failures} failed connects; last error: {sink_stats.last_error})",

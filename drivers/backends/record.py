@@ -419,6 +419,16 @@ class RecordingRigSource(RigSource):
             writer.submit(frame)
         return frame
 
+    def unreported_failure(self) -> str | None:
+        """The take's write error that no ``read()`` raised (a frame still queued at close, the take's last fsync),
+        for a caller to report once the source is closed: the take's manifest says ``complete: false``. ``None``
+        where the take has no error, or a read raised it as :class:`RecordingError`."""
+        writer = self._writer
+        if writer is None or writer.error is None or self._reported_error:
+            return None
+        return (f"recording to {writer.directory} failed as it closed: {writer.error}; its manifest says "
+                f"complete: false")
+
     def _frame_available(self) -> bool:
         return self.inner._frame_available()  # drained frames pass through _read_frame, so they are recorded
 

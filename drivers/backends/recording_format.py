@@ -19,6 +19,7 @@ import json
 import math
 import re
 import struct
+import tokenize
 import zipfile
 import zlib
 from collections.abc import Callable, Mapping
@@ -1043,7 +1044,10 @@ def load_truth(path: Path) -> tuple[CameraTruth | None, np.ndarray | None]:
             arrays = {name: archive[name] for name in archive.files}
     except FileNotFoundError as e:
         raise RigOperationError(f"recording truth file {path} is missing") from e
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError,
+            tokenize.TokenError) as e:
+        # zlib.error: a member's deflate data damaged; NotImplementedError: zipfile's word for a damaged member's
+        # compression method; TokenError: numpy's parse of a damaged .npy header (each a traceback from a read)
         raise RigOperationError(f"recording truth file {path} is corrupt: {e}") from e
     joints_3d = arrays.pop("joints_3d", None)
     if not arrays:

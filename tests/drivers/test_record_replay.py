@@ -1144,6 +1144,42 @@ def test_corrupt_image_or_truth_file_is_named_when_read(copy_of_take, key, garba
     assert str(copy_of_take / row[key]) in str(info.value) and "corrupt" in str(info.value)
 
 
+
+def _npz_member(name: str, data: bytes, method: int) -> bytes:
+    """A one-member zip holding ``data`` as stored, its CRC right, its compression method field set to ``method``
+    in both headers (8: the stored bytes are inflated, as deflate data damaged on the disk)."""
+    import io
+    import zipfile
+
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_STORED) as archive:
+        archive.writestr(name, data)
+    raw = bytearray(buffer.getvalue())
+    for signature, offset in ((b"PK\x03\x04", 8), (b"PK\x01\x02", 10)):
+        at = raw.find(signature)
+        raw[at + offset:at + offset + 2] = struct.pack("<H", method)
+    return bytes(raw)
+
+
+#: An .npy header whose dict is cut off mid-tuple: numpy's header parse raises tokenize's TokenError.
+_NPY_HEADER_CUT = b"\x93NUMPY\x01\x00" + struct.pack("<H", 38) + b"{'descr': '<f8', 'shape': (25,".ljust(37) + b"\n"
+
+
+@pytest.mark.parametrize("damage", [
+    pytest.param(_npz_member("joints_2d.npy", b"\xff" * 64, 8), id="deflate-data"),  # zlib.error
+    pytest.param(_npz_member("joints_2d.npy", b"\0" * 64, 99), id="compression-method"),  # NotImplementedError
+    pytest.param(_npz_member("joints_2d.npy", _NPY_HEADER_CUT, 0), id="npy-header"),  # tokenize.TokenError
+])
+def test_a_damaged_truth_file_is_a_corrupt_frame_named_when_read(copy_of_take, damage):
+    """Damage inside a truth file's zip (not its end record) escaped load_truth as zlib's, zipfile's or tokenize's
+    own error: a traceback from the read (ghnerf-demo exit 1), not a corrupt frame naming the file."""
+    row = first_row(copy_of_take)
+    (copy_of_take / row["truth"]).write_bytes(damage)
+    with open_rig(f"replay://{copy_of_take}?speed=free") as source:
+        with pytest.raises(RigOperationError, match="is corrupt") as info:
+            source.read(timeout_s=1.0)
+    assert str(copy_of_take / row["truth"]) in str(info.value)
+
 def test_an_image_of_the_wrong_size_is_named_at_open(copy_of_take):
     import cv2
 

@@ -381,6 +381,19 @@ def test_a_tiff_of_samples_that_do_not_decode_to_8_bits_is_named_by_its_sample_t
     assert "Sorry" not in captured.err + captured.out
 
 
+
+def test_a_jpeg_cut_short_is_corrupt_not_a_layout_this_opencv_refuses(tmp_path):
+    """imdecode refuses a JPEG cut short mid-scan, which the file reader fills in grey: the cause read from the
+    file said "it has uint8 samples (...): only 8- or 16-bit images decode to 8 bits", a RefusedLayoutError."""
+    image = np.random.default_rng(0).integers(0, 255, (120, 160, 3), np.uint8)
+    whole = cv2.imencode(".jpg", image)[1].tobytes()
+    path = tmp_path / "image.jpg"
+    path.write_bytes(whole[:len(whole) // 2])
+    assert image_files.samples_not_8_bit(path) is None
+    with pytest.raises(RigOperationError, match=f"^recording image {re.escape(str(path))} is corrupt") as info:
+        load_image(path)
+    assert not isinstance(info.value, recording_format.RefusedLayoutError)
+
 def test_another_format_is_decoded(tmp_path):
     path = tmp_path / "image.ppm"
     assert cv2.imwrite(str(path), np.zeros((30, 40, 3), np.uint8))

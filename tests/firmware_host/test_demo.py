@@ -846,6 +846,27 @@ def test_a_take_that_cannot_be_written_ends_the_run_and_is_not_counted_as_a_skip
     assert len(lines) == 1 and f"error: recording to {take} failed: [Errno 28] No space left on device" in lines[0]
 
 
+
+def test_a_take_that_cannot_be_made_durable_at_close_ends_the_run_with_status_2(tmp_path, capsys, monkeypatch):
+    """A write error no read raised (the take's last fsync at close, a frame still queued then) left the take
+    complete: false, said in a log line only: the run ended with status 0, as for a whole take."""
+    import json
+
+    import drivers.backends.record as record_module
+
+    def full_disk(path):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(record_module, "_fsync", full_disk)  # a short take: only the close's fsync runs
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc = demo.main(["--truth-only", "--url", url, "--seconds", "0.3", "--out", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert rc == 2, captured.err
+    assert (f"error: recording to {take} failed as it closed: [Errno 28] No space left on device; its manifest "
+            "says complete: false") in captured.err
+    assert json.loads((take / "manifest.json").read_text())["complete"] is False
+
 # A recorder slower than the rig (frames still queued when the signal comes), then the demo itself, as its console
 # script runs it: the test's own process cannot take a real SIGTERM without ending pytest.
 _SLOW_RECORDER_DEMO = """

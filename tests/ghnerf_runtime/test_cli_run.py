@@ -1000,13 +1000,57 @@ def test_a_jsonl_output_that_cannot_be_written_names_out(monkeypatch, capsys):
     assert rc == 2 and "--out /dev/full: cannot write pair 0's line (No space left on device)" in err
 
 
+def _disk_full(monkeypatch) -> None:
+    """A disk that fills up under the image: OpenCV's imwrite truncates the file, writes part of it and returns
+    False (libpng's "Write Error"); a file written from Python fails its fsync with ENOSPC."""
+    import errno
+    import os
+
+    def imwrite(path, image):
+        Path(path).write_bytes(cv2.imencode(".png", image)[1].tobytes()[:20])
+        return False
+
+    def fsync(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(cli_run.cv2, "imwrite", imwrite)
+    monkeypatch.setattr(os, "fsync", fsync)
+
+
 def test_an_image_output_that_cannot_be_written_names_its_option(monkeypatch, tmp_path):
-    """A full disk made OpenCV's imwrite return False: the error named the file only, and guessed a permission."""
+    """A full disk: the error named the file only, and guessed a permission."""
     sink = cli_run._Sink(str(tmp_path / "novel.png"), flag="--novel-view")
     sink.add(np.zeros((4, 4, 3), np.uint8))
-    monkeypatch.setattr(cli_run.cv2, "imwrite", lambda path, image: False)
-    with pytest.raises(cli_run.UsageError, match=r"^--novel-view .*novel\.png: cannot write the image \(.*no room left"):
+    _disk_full(monkeypatch)
+    with pytest.raises(cli_run.UsageError,
+                       match=r"^--novel-view .*novel\.png: cannot write the image \(No space left on device\)"):
         sink.close()
+
+
+def test_an_image_output_that_cannot_be_written_leaves_the_earlier_one_whole(monkeypatch, tmp_path):
+    """imwrite truncated the file before writing it: a full disk left the last run's novel.png cut short."""
+    path = tmp_path / "novel.png"
+    earlier = cv2.imencode(".png", np.full((4, 4, 3), 200, np.uint8))[1].tobytes()
+    path.write_bytes(earlier)
+    sink = cli_run._Sink(str(path), flag="--novel-view")
+    sink.add(np.zeros((4, 4, 3), np.uint8))
+    _disk_full(monkeypatch)
+    with pytest.raises(cli_run.UsageError, match=r"cannot write the image"):
+        sink.close()
+    assert path.read_bytes() == earlier
+    assert [p.name for p in tmp_path.iterdir()] == ["novel.png"]  # no temporary file left beside it
+
+
+@pytest.mark.parametrize("name", ["novel.png", "novel.JPG"])
+def test_an_image_output_is_written_in_the_format_its_suffix_names(tmp_path, name):
+    image = np.random.default_rng(0).integers(0, 255, (8, 8, 3), np.uint8)
+    sink = cli_run._Sink(str(tmp_path / name), flag="--novel-view")
+    sink.add(image)
+    sink.close()
+    read = cv2.imread(str(tmp_path / name))
+    assert read.shape == image.shape
+    if name.endswith(".png"):
+        assert np.array_equal(read, image)  # lossless
 
 
 def test_a_closed_pipe_ends_the_run_quietly(monkeypatch, tmp_path):
