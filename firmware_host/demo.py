@@ -90,7 +90,7 @@ from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
 from ghnerf_runtime.errors import ConfigError, ModelError, ModelLoadError
 from ghnerf_runtime.estimator import Estimator, PairResult, check_model_files
-from ghnerf_runtime.path_check import user_path, user_path_as_path
+from ghnerf_runtime.path_check import shown, user_path, user_path_as_path
 
 DEFAULT_URL = "sim://?fps=30&seed=0&motion=wave"
 #: How long the first pair is waited for, and each one after it: an OAK streams a second or two after its
@@ -697,12 +697,15 @@ def _sink_file_problem(path: str) -> str | None:
     later), so the demo loaded the model and ran its seconds against a sink that never opened, and only then failed
     ("sent none of the frames")."""
     if os.path.isdir(path):
-        return f"{path} is a folder, not a file; name a file in it ({Path(path, 'joints.jsonl').as_uri()})"
-    folder = os.path.dirname(path)
+        return f"{shown(path)} is a folder, not a file; name a file in it ({Path(path, 'joints.jsonl').as_uri()})"
+    # the open (O_CREAT) makes a dangling link's target: that file's folder is the one it needs
+    target = os.path.realpath(path) if os.path.islink(path) else path
+    folder = os.path.dirname(target)
     if os.path.isdir(folder):
         return _sink_access_problem(path, folder)
     what = "is a file, not a folder" if os.path.exists(folder) else "does not exist"
-    return f"its folder {folder} {what} (the sink makes the file, not its folder)"
+    link = f"; {shown(path)} is a link to {shown(target)}" if target != path else ""
+    return f"its folder {shown(folder)} {what} (the sink makes the file, not its folder{link})"
 
 
 def _sink_access_problem(path: str, folder: str) -> str | None:
@@ -710,8 +713,8 @@ def _sink_access_problem(path: str, folder: str) -> str | None:
     EROFS the sink's open would meet, and retry, for the whole run (None: it may)."""
     why = "(no permission, or a read-only file system)"
     if os.path.exists(path):  # appended to: the file's own mode
-        return None if os.access(path, os.W_OK) else f"{path} is not writable here {why}"
-    return None if os.access(folder, os.W_OK | os.X_OK) else f"its folder {folder} is not writable here {why}"
+        return None if os.access(path, os.W_OK) else f"{shown(path)} is not writable here {why}"
+    return None if os.access(folder, os.W_OK | os.X_OK) else f"its folder {shown(folder)} is not writable here {why}"
 
 
 def _refuse_unwritable_sink(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:

@@ -6,6 +6,7 @@ with ``raise ... from e`` so callers only need to catch these.
 from __future__ import annotations
 
 from drivers.url import REDACTED, is_secret_key, redact_location, redact_url, shown_url
+from ghnerf_runtime.path_check import shown
 
 
 class FirmwareHostError(Exception):
@@ -50,8 +51,9 @@ class SinkUnavailableError(SinkError):
 
     def __init__(self, url: str, reason: str) -> None:
         self.url = url
-        self.reason = reason
-        super().__init__(f"{shown_url(url)}: unavailable: {reason}")
+        # on one line: a path the URL's %1B decoded into (or pyserial's words quoting it) reached the log raw
+        self.reason = shown(reason)
+        super().__init__(f"{shown_url(url)}: unavailable: {self.reason}")
 
 
 class SinkWriteError(SinkError):
@@ -60,7 +62,7 @@ class SinkWriteError(SinkError):
 
     def __init__(self, url: str, reason: str) -> None:
         self.url = url
-        super().__init__(f"{shown_url(url)}: write failed: {reason}")
+        super().__init__(f"{shown_url(url)}: write failed: {shown(reason)}")  # on one line, as the link's reason
 
 
 class SinkClosedError(SinkError):

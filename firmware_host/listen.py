@@ -142,7 +142,8 @@ class _SerialPort:
         try:
             self.port = serial.Serial(device, baud, timeout=0)
         except (serial.SerialException, OSError, ValueError) as e:
-            raise ListenError(f"serial://{device}: cannot open: {e}") from e
+            # the device decoded from the URL (a %1B: an ESC), and pyserial's words quoting it: escaped
+            raise ListenError(f"serial://{shown_path(device)}: cannot open: {shown_path(str(e))}") from e
 
     def read(self, timeout_s: float) -> bytes:
         import serial

@@ -277,8 +277,9 @@ class _LostRun:
     failed_grabs: int = 0
     undecodable: int = 0
 
-    def words(self, next_index: int) -> str | None:
-        """What was lost before frame ``next_index`` and why; None: nothing."""
+    def words(self, next_index: int, *, last: bool = False) -> str | None:
+        """What was lost before frame ``next_index`` and why; None: nothing. ``last``: no frame follows (the camera
+        or video ended), so no index gap shows them in ``stats.camera_gaps``."""
         lost = self.failed_grabs + self.undecodable
         if not lost:
             return None
@@ -286,6 +287,8 @@ class _LostRun:
         frames = f"frame {first}" if lost == 1 else f"frames {first} to {next_index - 1}"
         why = [f"{n} {what}" for n, what in ((self.failed_grabs, "failed grab(s), tried again"),
                                             (self.undecodable, "grabbed frame(s) that did not decode, skipped")) if n]
+        if last:
+            return f"{frames} ({'; '.join(why)}), its last: no frame followed"
         return f"{frames} ({'; '.join(why)}): a gap in its frame index, counted in stats.camera_gaps"
 
 
@@ -401,6 +404,7 @@ class _Camera:
                     self.capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
                     since_rewind = 0
                     continue
+                self._end_lost_run(last=True)  # a run that ends the camera or video is said too
                 if self.video:
                     src._end(self, EndOfStream(f"video {self.shown} (camera {self.name!r}) ended after {self.index} "
                                                f"frames"))
@@ -424,6 +428,7 @@ class _Camera:
                     self.lost.undecodable += 1
                     self.index += 1
                     continue
+                self._end_lost_run(last=True)
                 src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.shown}): {undecodable} grabbed frames "
                                                f"in a row could not be decoded"))
                 return
@@ -450,9 +455,9 @@ class _Camera:
                 return
             self.index += 1
 
-    def _end_lost_run(self) -> None:
-        """A frame came: the run of frames lost before it (if any) is logged, once."""
-        words = self.lost.words(self.index)
+    def _end_lost_run(self, *, last: bool = False) -> None:
+        """A frame came (or, ``last``, none will): the run of frames lost before it (if any) is logged, once."""
+        words = self.lost.words(self.index, last=last)
         if words is not None:
             log.warning("camera %r (%s) lost %s", self.name, self.shown, words)
         self.lost = _LostRun()

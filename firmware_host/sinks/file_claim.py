@@ -31,8 +31,8 @@ class FileTaken(FirmwareHostError):
     """Another open file (another sink, in this process or another) holds the claim on ``path``."""
 
     def __init__(self, path: str, pid: Optional[int]) -> None:
-        super().__init__(f"{path} is being written by {holder_text(pid)}: two writers would interleave their lines "
-                         "in it; stop that one, or give this sink another file (retried until that one lets go)")
+        super().__init__(f"{shown(path)} is being written by {holder_text(pid)}: two writers would interleave their "
+                         "lines in it; stop that one, or give this sink another file (retried until that one lets go)")
         self.path, self.pid = path, pid
 
 

@@ -43,7 +43,7 @@ from firmware_host.sinks.file_claim import FileTaken, claim_file
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink, frame_messages
 from firmware_host.sinks.url import SinkUrl, int_in, parse_url, unquote_part
-from ghnerf_runtime.path_check import path_problem
+from ghnerf_runtime.path_check import path_problem, shown
 
 #: Longest wait for room in a pipe whose reader stopped reading, as for serial:// (a joint line a minute late is
 #: of no use).
@@ -98,7 +98,7 @@ class FileSink(ProtocolSink):
             raise SinkUnavailableError(self.url, str(e)) from None
         except OSError as e:
             self._disconnect()
-            raise SinkUnavailableError(self.url, f"cannot open {self.path}: {e}{read_only_hint(e)}"
+            raise SinkUnavailableError(self.url, f"cannot open {shown(self.path)}: {e}{read_only_hint(e)}"
                                                  f"{_no_reader_hint(e)}") from e
 
     def _end_cut_line(self) -> None:
@@ -155,7 +155,7 @@ class FileSink(ProtocolSink):
         except OSError:
             now_there = None
         if now_there != self._opened:
-            raise SinkUnavailableError(self.url, f"{self.path} was removed or replaced while open; reopening it")
+            raise SinkUnavailableError(self.url, f"{shown(self.path)} was removed or replaced while open; reopening it")
 
     def _write_bytes(self, data: bytes) -> None:
         raise NotImplementedError("the file sink writes JSON lines, not frames")
@@ -168,7 +168,7 @@ class FileSink(ProtocolSink):
         try:
             return write_within(self._fd, data, self.write_timeout_s)
         except OSError as e:
-            raise SinkUnavailableError(self.url, f"write to {self.path} failed: {e}") from e
+            raise SinkUnavailableError(self.url, f"write to {shown(self.path)} failed: {e}") from e
 
 
 def _regular_file_id(fd: int) -> Optional[tuple[int, int]]:

@@ -980,6 +980,25 @@ def test_a_run_of_lost_frames_is_logged_once_as_it_ends_and_counted_as_the_camer
     assert 5 <= stats.camera_gaps["right"] <= 5 + stats.overruns["right"], stats
 
 
+def test_a_run_of_lost_frames_that_ends_the_camera_is_still_logged(webcam, caplog):
+    """A run of lost frames ended by a disconnect was never logged (only a decoded frame ended a run): two frames
+    that did not decode before an unplug vanished without a word, where each was a warning before session 74."""
+    caplog.set_level(logging.WARNING, logger="drivers.backends.opencv")
+    # frames 0-4, frames 5 and 6 not decoded (grabs 6, 7), then every grab fails: 9 tried again, the 10th ends it
+    _Flaky.failing, _Flaky.garbled = set(range(8, 1000)), {6, 7}
+    try:
+        with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_Flaky) as source:
+            with pytest.raises(RigDisconnectedError, match=r"camera 'right' \(1\) stopped delivering frames"):
+                for _ in range(100):
+                    source.read(timeout_s=2.0)
+    finally:
+        _Flaky.failing, _Flaky.garbled = set(), set()
+    assert _camera_logs(caplog) == [
+        "camera 'right' (1) lost frames 5 to 15 (9 failed grab(s), tried again; 2 grabbed frame(s) that did not "
+        "decode, skipped), its last: no frame followed",
+    ]
+
+
 def test_a_camera_that_delivers_every_frame_logs_nothing(webcam, caplog):
     caplog.set_level(logging.DEBUG, logger="drivers.backends.opencv")
     with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_Flaky) as source:

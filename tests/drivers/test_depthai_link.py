@@ -185,6 +185,10 @@ def test_a_device_or_sensor_name_holding_a_control_character_is_escaped():
     with pytest.raises(RigInitializationError) as caught:
         check_cameras(req, ID_A, odd)
     assert "its cameras: CAM_B ('OV\\x1b9282', 1280x800), CAM_C (OV9282, 1280x800)" in str(caught.value)
+    # the device's id too, as describe_devices and _in_use_error show it (check_cameras named it raw)
+    with pytest.raises(RigInitializationError) as caught:
+        check_cameras(request(fps=200.0), "14442C\x1b[2J", odd)
+    assert str(caught.value).startswith("depthai device '14442C\\x1b[2J': option fps=200"), str(caught.value)
 
 
 def test_a_stream_the_sensors_can_give_passes():

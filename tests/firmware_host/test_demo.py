@@ -475,6 +475,44 @@ def test_a_file_sink_this_user_may_not_write_is_refused_before_the_run(tmp_path,
     assert not (tmp_path / "out").exists()
 
 
+def test_a_file_sink_folder_holding_a_control_character_is_named_escaped(tmp_path, capsys, sim_url):
+    """The URL's %1B decoded: the folder was named raw, an ESC sequence reaching the terminal (the URL itself
+    refuses a raw one)."""
+    url = f"file://{tmp_path}/x%1B%5B31m/j.jsonl"
+    err = _refused(["--truth-only", "--url", sim_url, "--out", str(tmp_path / "out"), "--sink", url], capsys)
+    assert f"its folder '{tmp_path}/x\\x1b[31m' does not exist" in err and "\x1b" not in err, err
+
+
+def _sink_check_passed(argv: list[str], capsys, monkeypatch) -> bool:
+    """Whether the demo's up-front --sink checks let ``argv`` through (to the rig's open, stopped there)."""
+    def no_rig(url):
+        raise drivers.RigConfigError("stop here: the sink's check is passed")
+
+    monkeypatch.setattr(drivers, "create_rig_source", no_rig)
+    try:
+        demo.main(argv)
+    except SystemExit:
+        pass
+    return "stop here: the sink's check is passed" in capsys.readouterr().err
+
+
+def test_a_file_sink_through_a_symbolic_link_is_checked_where_the_link_leads(tmp_path, capsys, monkeypatch):
+    """The sink's open (O_CREAT) makes a dangling link's target: the link's own folder was checked instead, so a
+    link in a folder this user may not write, to a file one may make, was refused, and one to a folder that is not
+    there passed (the run then failed, 'sent none of the frames')."""
+    (tmp_path / "locked").mkdir()
+    (tmp_path / "free").mkdir()
+    (tmp_path / "locked" / "j.jsonl").symlink_to(tmp_path / "free" / "j.jsonl")
+    (tmp_path / "free" / "gone.jsonl").symlink_to(tmp_path / "gone" / "j.jsonl")
+    real = os.access  # the tests run as root, whom a mode does not stop
+    monkeypatch.setattr(os, "access", lambda path, mode, **kw: "locked" not in str(path) and real(path, mode, **kw))
+    argv = ["--truth-only", "--seconds", "0.2", "--out", str(tmp_path / "out"), "--sink"]
+    assert _sink_check_passed(argv + [(tmp_path / "locked" / "j.jsonl").as_uri()], capsys, monkeypatch)
+    err = _refused(argv + [(tmp_path / "free" / "gone.jsonl").as_uri()], capsys)
+    assert (f"its folder {tmp_path}/gone does not exist (the sink makes the file, not its folder; "
+            f"{tmp_path}/free/gone.jsonl is a link to {tmp_path}/gone/j.jsonl)") in err, err
+
+
 def test_a_camera_that_vanishes_mid_run_fails_the_run_naming_it(tmp_path, capsys, sim_url):
     # a loose cable in the bring-up's camera check: 'stopping: ...' among the summary's lines and exit status 0
     rc = demo.main(["--truth-only", "--url", f"{sim_url}&unplug_after_s=0.3", "--seconds", "3",

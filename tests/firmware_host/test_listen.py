@@ -118,6 +118,8 @@ def test_serial_json_lines_over_a_pty():
     ("udp://127.0.0.1:98\x1b[2J70", "'udp://127.0.0.1:98\\x1b[2J70': holds a control character (U+001B) at "
                                     "character 19, which logs and terminals would act on or hide"),
     ("serial:///dev/null\x85?baud=9600", "'serial:///dev/null\\x85?baud=9600': holds a control character (U+0085)"),
+    # written as %1B: decoded, the device (and pyserial's words quoting it) reached the terminal raw at the open
+    ("serial:///dev/ghnerf-none%1B%5B2J?baud=9600", "serial://'/dev/ghnerf-none\\x1b[2J': cannot open: "),
 ])
 def test_bad_urls_are_one_line_exit_2(url, message, capsys):
     assert listen.main([url, "--seconds", "0.1"]) == 2

@@ -175,3 +175,22 @@ def test_a_sink_url_refused_for_a_dropped_character_hides_the_secret_url_parsing
     with pytest.raises(SinkConfigError) as refused:
         open_sink(url).close()
     assert SECRET not in str(refused.value) and "***" in str(refused.value), str(refused.value)
+
+
+def test_a_down_file_sink_names_its_decoded_path_escaped(tmp_path):
+    """The URL's %1B, decoded into the path, reached the log's "link lost (...)" and the status line raw through the
+    open's reason ("cannot open <path>"): an ESC sequence rewrote the terminal (the URL itself refuses a raw one)."""
+    from firmware_host.sinks.file_sink import FileSink
+
+    sink = FileSink.from_url(f"file://{tmp_path}/x%1B%5B2J/j.jsonl")
+    with pytest.raises(SinkUnavailableError) as down:
+        sink._connect()
+    assert f"cannot open '{tmp_path}/x\\x1b[2J/j.jsonl': [Errno 2]" in down.value.reason, down.value.reason
+    assert "\x1b" not in down.value.reason and "\x1b" not in str(down.value), str(down.value)
+
+
+@pytest.mark.parametrize("error", [SinkUnavailableError, SinkWriteError])
+def test_a_link_error_s_reason_holding_a_control_character_is_escaped(error):
+    # a device's or pyserial's words may quote a decoded path: "could not open port /dev/x<ESC>..."
+    e = error("serial:///dev/x%1B", "could not open port /dev/x\x1b[2J: [Errno 2]")
+    assert str(e).endswith(": 'could not open port /dev/x\\x1b[2J: [Errno 2]'"), str(e)

@@ -203,26 +203,27 @@ def check_cameras(request: StereoRequest, device_id: str, features: list[dai.Cam
         RigInitializationError: naming the option, its value and what the device has.
     """
     by_socket = {f.socket.name: f for f in features}
+    device = shown(device_id)  # as describe_devices shows it
     # a sensor's name is the device's text (its EEPROM): escaped where it holds a control character
     have = ", ".join(f"{f.socket.name} ({shown(f.sensorName)}, {f.width}x{f.height})" for f in features) or "none"
     for option, socket in (("left", request.left), ("right", request.right)):
         feature = by_socket.get(socket)
         if feature is None:
             raise RigInitializationError(
-                f"depthai device {device_id} has no camera on socket {socket} (option {option}={socket}); "
+                f"depthai device {device} has no camera on socket {socket} (option {option}={socket}); "
                 f"its cameras: {have}"
             )
         sensor = f"the {socket} sensor's ({shown(feature.sensorName)})"
         known = feature.width > 0 and feature.height > 0  # CameraFeatures' default is -1: not reported
         if known and (request.width > feature.width or request.height > feature.height):
             raise RigInitializationError(
-                f"depthai device {device_id}: options width={request.width} height={request.height} exceed "
+                f"depthai device {device}: options width={request.width} height={request.height} exceed "
                 f"{sensor} {feature.width}x{feature.height}; ask for at most that"
             )
         fastest = max((config.maxFps for config in feature.configs), default=None)
         if fastest is not None and request.fps > fastest:
             raise RigInitializationError(
-                f"depthai device {device_id}: option fps={request.fps:g} exceeds {sensor} fastest mode, {fastest:g} fps"
+                f"depthai device {device}: option fps={request.fps:g} exceeds {sensor} fastest mode, {fastest:g} fps"
             )
 
 
@@ -267,7 +268,8 @@ class DaiDeviceLink:
             pipeline, outputs[0], outputs[1], tolerance_ms=request.tolerance_ms, queue_size=request.queue_size
         )
         pipeline.start()
-        log.info("depthai device %s streaming %s+%s at %.0f fps", self.device_id(), request.left, request.right, request.fps)
+        log.info("depthai device %s streaming %s+%s at %.0f fps", shown(self.device_id()), request.left, request.right,
+                 request.fps)
 
     def device_id(self) -> str:
         return self._device.getDeviceId() if self._device is not None else ""
