@@ -276,6 +276,14 @@ def test_onnx_metadata_reads_what_onnxruntime_reads_and_names_a_cut_file(tiny_mo
         onnx_metadata(cut, "graph")
     with pytest.raises(ModelLoadError, match=r"none\.onnx: cannot read the graph file: No such file"):
         onnx_metadata(tmp_path / "none.onnx", "graph")
+    text = tmp_path / "text.onnx"
+    text.write_text("not a model at all\n")
+    with pytest.raises(ModelLoadError, match=r"text\.onnx: the graph file is no ONNX model \(truncated"):
+        onnx_metadata(text, "graph")
+    bad_key = tmp_path / "bad_key.onnx"  # field 14, an entry whose key (1) is the bytes ff fe: no UTF-8 string
+    bad_key.write_bytes(bytes([14 << 3 | 2, 6, 1 << 3 | 2, 2, 0xFF, 0xFE, 2 << 3 | 2, 0]))
+    with pytest.raises(ModelLoadError, match=r"bad_key\.onnx: the graph file is no ONNX model \(truncated"):
+        onnx_metadata(bad_key, "graph")
 
 
 def test_an_int8_file_without_a_weights_id_is_judged_by_its_time(tiny_model_dir, tmp_path, caplog):
