@@ -258,6 +258,20 @@ def test_an_int8_file_of_other_weights_than_the_fp32_beside_it_is_not_run(tiny_m
     assert not _stale_warnings(caplog)
 
 
+def test_a_stale_int8_file_is_judged_before_onnxruntime_opens_it(tiny_model_dir, tmp_path, monkeypatch):
+    """The stale-int8 check reads both files' metadata, so onnxruntime opens only the file that runs: it opened the
+    int8 file too, for its weights id, and threw the session away (an encoder's load, counted in ``load_ms``)."""
+    import ghnerf_runtime.session as session_module
+
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _int8_twin(folder, "encoder", "f" * 64, age_s=-3600.0)
+    opened, real_open = [], session_module._open
+    monkeypatch.setattr(session_module, "_open", lambda path, config: opened.append(path.name) or real_open(path,
+                                                                                                           config))
+    assert _load_encoder(folder).files["encoder"].path.name == "encoder.onnx"
+    assert opened == ["encoder.onnx"]
+
+
 def test_onnx_metadata_reads_what_onnxruntime_reads_and_names_a_cut_file(tiny_model_dir, tmp_path):
     """The stale-int8 check reads the fp32 file's metadata from its protobuf fields, not through an onnxruntime
     session (milliseconds, not a second of a daemon's start for the two encoders): the same keys and values."""
