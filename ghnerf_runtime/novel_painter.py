@@ -34,13 +34,7 @@ from ghnerf_runtime.body_proxy import BodyProxy, proxy_depth
 from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.surface import surface_mask, surface_normals
-from ghnerf_runtime.onnx_file import (
-    onnx_metadata,
-    open_onnx_file,
-    ort_reason,
-    stale_int8_reason,
-    warn_stale_int8,
-)
+from ghnerf_runtime.onnx_file import onnx_metadata, open_onnx_file, ort_reason, stale_int8_reason, warn_stale_int8
 from ghnerf_runtime.proxy_blend import unit_rgb
 
 __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INPUTS", "OUTPUT", "PLANES", "PainterPlanes",
