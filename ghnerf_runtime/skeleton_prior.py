@@ -360,7 +360,7 @@ class SkeletonEstimate:
 
 
 #: What ``stat`` raises for a missing file (no such file, a file where a folder should be): "not there". Not
-#: ``Path.is_file``, which answers False for these and for a link loop itself (and, from Python 3.14, for any error)
+#: ``Path.is_file``, which answers False for these and for a link loop itself (ELOOP, below, was never reached)
 _MISSING = frozenset({errno.ENOENT, errno.ENOTDIR})
 #: ... and for a name no file can have (longer than the file system takes, a link loop): "no such name". Any other
 #: error (permission, I/O) is the file system's, said as it is.
