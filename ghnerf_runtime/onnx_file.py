@@ -8,6 +8,7 @@ their own whose workers do not spin, or on the global pool once one is installed
 """
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import re
@@ -109,9 +110,10 @@ def open_onnx_file(path: str | Path, threads: int, what: str):
 
 
 def onnx_metadata(path: str | Path, what: str) -> dict[str, str]:
-    """The custom metadata (``metadata_props``) of the ONNX file ``path``, read from the file's top-level protobuf
-    fields, its graph skipped unparsed: milliseconds, where an onnxruntime session of the 11 MB encoder takes 165 ms
-    even unoptimised, for a file only read to compare it with another. ``what`` names it in the error.
+    """The custom metadata (``metadata_props``) of the ONNX file ``path``, parsed by the protobuf library with
+    only that field declared, its graph skipped unparsed: milliseconds, where an onnxruntime session of the 11 MB
+    encoder takes 165 ms even unoptimised, for a file only read to compare it with another. ``what`` names it in
+    the error.
 
     Raises:
         ModelLoadError: naming the file, where it cannot be read or is no protobuf message (truncated, not ONNX).
@@ -121,55 +123,41 @@ def onnx_metadata(path: str | Path, what: str) -> dict[str, str]:
         data = path.read_bytes()
     except OSError as e:
         raise ModelLoadError(f"cannot read the {what} file: {e.strerror or e}", path=str(path)) from None
+    from google.protobuf.message import DecodeError
+
     try:
-        return {k: v for field, value in _fields(data) if field == _METADATA_FIELD
-                for k, v in [_entry(value)]}
-    except (IndexError, ValueError) as e:  # cut short, or not a protobuf message
-        raise ModelLoadError(f"the {what} file is no ONNX model (truncated or corrupt?): {e}", path=str(path)) from None
+        model = _model_metadata_class().FromString(data)
+    except DecodeError as e:  # cut short, or not a protobuf message
+        raise ModelLoadError(f"the {what} file is no ONNX model (truncated or corrupt?): {e}",
+                             path=str(path)) from None
+    return {entry.key: entry.value for entry in model.metadata_props}
 
 
-#: ``ModelProto.metadata_props`` (onnx.proto), each a ``StringStringEntryProto`` of ``key`` (1) and ``value`` (2).
+@functools.cache
+def _model_metadata_class():
+    """A message class of ``onnx.proto``'s ``ModelProto`` with only ``metadata_props`` (field 14, each a
+    ``StringStringEntryProto`` of ``key`` 1 and ``value`` 2): the graph and the other fields parse as unknown
+    fields, unread. Declared here, as the ``onnx`` package (its generated classes) is training-only; built once,
+    in a pool of its own (not the default pool, where an imported ``onnx`` declares the real ``onnx.ModelProto``).
+    proto3, where onnx.proto is proto2: the same wire format, and a key or value that is not UTF-8 is a DecodeError
+    (proto2 strings parse as bytes)."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    desc = descriptor_pb2.FieldDescriptorProto
+    entry = descriptor_pb2.DescriptorProto(name="StringStringEntryProto", field=[
+        desc(name=name, number=number, type=desc.TYPE_STRING, label=desc.LABEL_OPTIONAL)
+        for number, name in ((1, "key"), (2, "value"))])
+    model = descriptor_pb2.DescriptorProto(name="ModelProto", field=[
+        desc(name="metadata_props", number=_METADATA_FIELD, type=desc.TYPE_MESSAGE, label=desc.LABEL_REPEATED,
+             type_name=".ghnerf_onnx_lite.StringStringEntryProto")])
+    pool = descriptor_pool.DescriptorPool()
+    pool.Add(descriptor_pb2.FileDescriptorProto(name="ghnerf_onnx_lite.proto", package="ghnerf_onnx_lite",
+                                                syntax="proto3", message_type=[entry, model]))
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName("ghnerf_onnx_lite.ModelProto"))
+
+
+#: ``ModelProto.metadata_props`` (onnx.proto).
 _METADATA_FIELD = 14
-
-
-def _varint(data: bytes, pos: int) -> tuple[int, int]:
-    """The protobuf varint at ``pos`` and the position after it."""
-    value, shift = 0, 0
-    while True:
-        byte = data[pos]
-        value |= (byte & 0x7F) << shift
-        pos, shift = pos + 1, shift + 7
-        if not byte & 0x80:
-            return value, pos
-        if shift > 63:
-            raise ValueError(f"a varint longer than 10 bytes at byte {pos}")
-
-
-def _fields(data: bytes):
-    """``(field number, bytes)`` of each length-delimited top-level field of the message ``data``; the others
-    (numbers) are skipped."""
-    pos = 0
-    while pos < len(data):
-        key, pos = _varint(data, pos)
-        wire = key & 7
-        if wire == 0:
-            pos = _varint(data, pos)[1]
-        elif wire in (1, 5):
-            pos += 8 if wire == 1 else 4
-        elif wire == 2:
-            size, pos = _varint(data, pos)
-            if pos + size > len(data):
-                raise ValueError(f"field {key >> 3} runs past the end of the file")
-            yield key >> 3, data[pos:pos + size]
-            pos += size
-        else:
-            raise ValueError(f"wire type {wire} at byte {pos}")
-
-
-def _entry(data: bytes) -> tuple[str, str]:
-    """``(key, value)`` of a ``StringStringEntryProto``."""
-    got = {field: value.decode("utf-8") for field, value in _fields(data)}
-    return got.get(1, ""), got.get(2, "")
 
 
 def _session(path: Path, threads: int, what: str):

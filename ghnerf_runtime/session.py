@@ -392,12 +392,11 @@ class ModelSession:
         for graph in dict.fromkeys(graphs):
             only_fp32 = _wanted_precision(graph, config)[1]
             path = cls._locate(folder, graph, config, by_meta)
-            t0 = time.perf_counter()
-            sess = _open(path, config)
-            if (stale_twin := cls._stale_int8(folder, graph, path, sess)) is not None:
+            if (stale_twin := cls._stale_int8(folder, graph, path)) is not None:
                 stale.append(stale_twin)
                 path = stale_twin[1]
-                sess = _open(path, config)
+            t0 = time.perf_counter()
+            sess = _open(path, config)
             load_ms = 1e3 * (time.perf_counter() - t0)
             file_contract, file_graph, precision = _contract_of(sess, path)
             if file_graph != graph:
@@ -521,18 +520,19 @@ class ModelSession:
                              "ghnerf.graph metadata)", path=str(folder))
 
     @staticmethod
-    def _stale_int8(folder: Path, graph: str, path: Path, sess: ort.InferenceSession) -> tuple[Path, Path, str] | None:
-        """``(path, fp32 file, why)`` where ``path`` (opened as ``sess``) is ``graph``'s int8 file by name and was not
-        quantized from the fp32 file beside it (:func:`~ghnerf_runtime.onnx_file.stale_int8_reason`): the fp32
-        file's weights id decides (the quantizer stamps it in the int8 file), their times where it has none. A folder
-        exported before session 73 keeps the int8 files of graphs an export replaced, and ``auto`` took them."""
+    def _stale_int8(folder: Path, graph: str, path: Path) -> tuple[Path, Path, str] | None:
+        """``(path, fp32 file, why)`` where ``path`` is ``graph``'s int8 file by name and was not quantized from the
+        fp32 file beside it (:func:`~ghnerf_runtime.onnx_file.stale_int8_reason`): the fp32 file's weights id decides
+        (the quantizer stamps it in the int8 file), their times where it has none. A folder exported before session
+        73 keeps the int8 files of graphs an export replaced, and ``auto`` took them. Judged from the files'
+        metadata before either is opened: onnxruntime loads only the file that runs."""
         fp32 = folder / _file_name(graph, "fp32")
         if path.name != _file_name(graph, "int8") or not fp32.is_file():
             return None
-        weights = dict(sess.get_modelmeta().custom_metadata_map).get(WEIGHTS_ID_KEY)
         try:
             fp32_weights = onnx_metadata(fp32, "fp32 graph").get(WEIGHTS_ID_KEY)
-        except ModelLoadError:  # the int8 file is loaded, as before
+            weights = None if fp32_weights is None else onnx_metadata(path, "graph").get(WEIGHTS_ID_KEY)
+        except ModelLoadError:  # the int8 file is loaded, as before (and names its own error)
             return None
         # an fp32 file with an id and an int8 one without: quantized before ids, so from another fp32 file (the
         # quantizer copies the id since ids exist); an int8 file with one beside an fp32 file without: the times say

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import errno
 import hashlib
+import stat
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -358,7 +359,8 @@ class SkeletonEstimate:
     triangulated: np.ndarray
 
 
-#: What ``Path.is_file`` may raise for a missing file (no such file, a file where a folder should be): "not there"
+#: What ``stat`` raises for a missing file (no such file, a file where a folder should be): "not there". Not
+#: ``Path.is_file``, which answers False for these and for a link loop itself (ELOOP, below, was never reached)
 _MISSING = frozenset({errno.ENOENT, errno.ENOTDIR})
 #: ... and for a name no file can have (longer than the file system takes, a link loop): "no such name". Any other
 #: error (permission, I/O) is the file system's, said as it is.
@@ -439,7 +441,7 @@ class SkeletonPrior:
                 otherwise (a folder this user may not search, an I/O error): it was read as "no such name".
         """
         try:
-            return encoder.is_file()
+            return stat.S_ISREG(encoder.stat().st_mode)
         except OSError as e:
             if e.errno in _MISSING:
                 return False

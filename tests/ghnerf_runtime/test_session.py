@@ -258,6 +258,20 @@ def test_an_int8_file_of_other_weights_than_the_fp32_beside_it_is_not_run(tiny_m
     assert not _stale_warnings(caplog)
 
 
+def test_a_stale_int8_file_is_judged_before_onnxruntime_opens_it(tiny_model_dir, tmp_path, monkeypatch):
+    """The stale-int8 check reads both files' metadata, so onnxruntime opens only the file that runs: it opened the
+    int8 file too, for its weights id, and threw the session away (an encoder's load, counted in ``load_ms``)."""
+    import ghnerf_runtime.session as session_module
+
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _int8_twin(folder, "encoder", "f" * 64, age_s=-3600.0)
+    opened, real_open = [], session_module._open
+    monkeypatch.setattr(session_module, "_open", lambda path, config: opened.append(path.name) or real_open(path,
+                                                                                                           config))
+    assert _load_encoder(folder).files["encoder"].path.name == "encoder.onnx"
+    assert opened == ["encoder.onnx"]
+
+
 def test_onnx_metadata_reads_what_onnxruntime_reads_and_names_a_cut_file(tiny_model_dir, tmp_path):
     """The stale-int8 check reads the fp32 file's metadata from its protobuf fields, not through an onnxruntime
     session (milliseconds, not a second of a daemon's start for the two encoders): the same keys and values."""
@@ -276,6 +290,14 @@ def test_onnx_metadata_reads_what_onnxruntime_reads_and_names_a_cut_file(tiny_mo
         onnx_metadata(cut, "graph")
     with pytest.raises(ModelLoadError, match=r"none\.onnx: cannot read the graph file: No such file"):
         onnx_metadata(tmp_path / "none.onnx", "graph")
+    text = tmp_path / "text.onnx"
+    text.write_text("not a model at all\n")
+    with pytest.raises(ModelLoadError, match=r"text\.onnx: the graph file is no ONNX model \(truncated"):
+        onnx_metadata(text, "graph")
+    bad_key = tmp_path / "bad_key.onnx"  # field 14, an entry whose key (1) is the bytes ff fe: no UTF-8 string
+    bad_key.write_bytes(bytes([14 << 3 | 2, 6, 1 << 3 | 2, 2, 0xFF, 0xFE, 2 << 3 | 2, 0]))
+    with pytest.raises(ModelLoadError, match=r"bad_key\.onnx: the graph file is no ONNX model \(truncated"):
+        onnx_metadata(bad_key, "graph")
 
 
 def test_an_int8_file_without_a_weights_id_is_judged_by_its_time(tiny_model_dir, tmp_path, caplog):

@@ -490,27 +490,39 @@ def test_a_prior_whose_encoder_file_this_user_may_not_read_is_a_load_error_namin
 def test_looking_for_the_encoder_file_failing_is_a_load_error_naming_it_not_no_such_name(tmp_path, monkeypatch,
                                                                                           errno_, reason):
     """Any OSError from looking for the recorded encoder read as "no file can have that name" (the key's fault);
-    a folder this user may not search (EACCES: the host runs as root, so is_file is made to raise) or a bad disk
+    a folder this user may not search (EACCES: the host runs as root, so stat is made to raise) or a bad disk
     is the file system's, said naming the file and the reason. A missing file is still the prior's mismatch."""
     encoder = tmp_path / "encoder.onnx"
     prior = SkeletonPrior(None, tmp_path / FILE_NAME, {"ghnerf_skeleton.encoder_file": "encoder.onnx",
                                                        "ghnerf_skeleton.encoder_sha256": "0" * 64})
-    real_is_file = Path.is_file
+    real_stat = Path.stat
 
-    def is_file(path: Path) -> bool:
+    def failing_stat(path: Path, **kw):
         if path == encoder:
             raise OSError(errno_, os.strerror(errno_), str(path))
-        return real_is_file(path)
+        return real_stat(path, **kw)
 
     with pytest.raises(ModelContractError, match="which .* does not have") as e:  # no such file: the prior's fault
         prior.check_encoder(tmp_path)
     assert e.value.key == "ghnerf_skeleton.encoder_file"
-    monkeypatch.setattr(Path, "is_file", is_file)
+    monkeypatch.setattr(Path, "stat", failing_stat)
     with pytest.raises(ModelLoadError) as e:
         prior.check_encoder(tmp_path)
     assert not isinstance(e.value, ModelContractError) and e.value.path == str(encoder)
     assert str(e.value).startswith(f"{encoder}: cannot look for the encoder file encoder.onnx")
     assert reason in str(e.value)
+
+
+def test_an_encoder_name_that_is_a_link_loop_is_no_name_a_file_can_have(tmp_path):
+    """A link loop is among the names no file can have (``_NO_SUCH_NAME``), but ``Path.is_file`` answered False for
+    it, so the check said the folder "does not have" the encoder; ``stat`` says why (too many levels of links)."""
+    (tmp_path / "encoder.onnx").symlink_to("encoder.onnx")
+    prior = SkeletonPrior(None, tmp_path / FILE_NAME, {"ghnerf_skeleton.encoder_file": "encoder.onnx",
+                                                       "ghnerf_skeleton.encoder_sha256": "0" * 64})
+    with pytest.raises(ModelContractError, match=r"names the encoder file 'encoder\.onnx', which no file in .* can be "
+                                                 r"\(Too many levels of symbolic links\)") as e:
+        prior.check_encoder(tmp_path)
+    assert e.value.key == "ghnerf_skeleton.encoder_file"
 
 
 def test_the_prior_replaces_the_single_view_fallback_and_its_graphs(model_with_prior):
