@@ -15,7 +15,8 @@ their headers carry), the sender's latency
 (``send_us - capture_us`` of the JOINTS headers: capture to the wire), sequence gaps (frames the
 sender numbered but dropped or decimated, or the link lost; camera pairs the sender never made a
 frame of take no number), late JOINTS (reordered: a seq up to :data:`LATE_WINDOW` behind the newest; one
-that fills a gap takes it back out of the gaps) and duplicates, the latest STATUS (its fault code,
+that fills a gap takes it back out of the gaps) and duplicates, the newest STATUS by the sender's clock (one that
+UDP delivers after a newer one is not shown; its fault code,
 docs/protocol.md, and CALIBRATION SUSPECT when its flag says so) and HELLO (with what of its joint set, units and
 frame is not BODY_25 millimetres in the rig frame), the JOINTS flagged with each scene
 flag (``3 several people``: two people seen, one person's joints sent; not a presence detector, docs/protocol.md;
@@ -272,6 +273,10 @@ _SEQ_MOD = 1 << 32  # sequence numbers wrap (docs/protocol.md)
 #: about LATE_WINDOW frames at 30 fps. Kept short, so that a device that rebooted (its monotonic clock restarted) is
 #: hardly ever mistaken for it.
 STALE_HELLO_US = 1_000_000
+#: A STATUS written at most this long before the one shown is an older datagram of the same sender (reordered or
+#: duplicated on UDP) and is not shown; one written longer before comes from a device whose clock started again (a
+#: reboot) and is. The same 1 s as :data:`STALE_HELLO_US`.
+STALE_STATUS_US = STALE_HELLO_US
 
 
 #: The scene flags (docs/protocol.md section 3) as the summary counts them: JOINTS of that kind per interval.
@@ -362,6 +367,9 @@ class Tally:
     # newest) is this numbering's own, come late.
     _begun_us: Optional[int] = field(default=None, repr=False)
     _newest_us: Optional[int] = field(default=None, repr=False)
+    # send_us of the STATUS shown (None: none yet, or a new numbering began since, whose sender's clock may be
+    # another): a STATUS written before it is an older one that UDP delivered late.
+    _status_us: Optional[int] = field(default=None, repr=False)
 
     def add(self, message: Message) -> None:
         if isinstance(message, Joints):
@@ -375,7 +383,9 @@ class Tally:
                     self.scene[word] = self.scene.get(word, 0) + 1
             self._sequence(h.seq, h.send_us)
         elif isinstance(message, Status):
-            self.status, self.status_at = message, time.monotonic()
+            if self._newer_status(message.header.send_us):
+                self.status, self.status_at = message, time.monotonic()
+                self._status_us = message.header.send_us
         elif isinstance(message, Hello):
             self.hello, self.hello_at = message, time.monotonic()
             if message.header.seq == NO_FRAME_SEQ and not self._written_in_this_numbering(message.header.send_us):
@@ -406,9 +416,20 @@ class Tally:
             return send_us < self._newest_us and self._newest_us - send_us <= STALE_HELLO_US
         return self._begun_us <= send_us <= self._newest_us and self._newest_us - send_us <= STALE_HELLO_US
 
+    def _newer_status(self, send_us: int) -> bool:
+        """Whether a STATUS written at ``send_us`` replaces the one shown: written later on the sender's clock (which,
+        unlike seq, orders the STATUS of a sender that sends no frame, and does not wrap: u64 µs), or over
+        :data:`STALE_STATUS_US` before it (a rebooted device), or the first since a new numbering began (a HELLO or
+        JOINTS of a restarted sender). Shown as it arrived, a STATUS reordered behind a newer one on UDP read as the
+        sender's state until the next (until session 74)."""
+        shown = self._status_us
+        return shown is None or send_us > shown or shown - send_us > STALE_STATUS_US
+
     def _begin_at_hello(self, send_us: int) -> None:
         if self._newest_us is None and self._begun_us is not None:  # another HELLO before any JOINTS: same start
             send_us = min(send_us, self._begun_us)
+        else:  # a new sender: its clock may be another (rebooted), its next STATUS is shown whatever its time
+            self._status_us = None
         self.last_seq, self._arrived, self._missing = NO_FRAME_SEQ, set(), {}
         self._begun_us, self._newest_us = send_us, None
 
@@ -442,8 +463,9 @@ class Tally:
                 self.total_gaps -= 1
                 if counted_in == self._interval:
                     self.gaps -= 1
-        else:
+        else:  # a restarted sender: as after its HELLO, its next STATUS is shown whatever its time
             self._restart(seq, send_us)
+            self._status_us = None
 
     def _restart(self, seq: int, send_us: int) -> None:
         """A new numbering (the first JOINTS heard, or a restarted sender): the old one's window is forgotten."""
@@ -526,7 +548,8 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"{', '.join(repr(f'N {word}') for _, word in SCENE_WORDS)} (docs/protocol.md, section 3); "
               "'N JOINTS of joint_set K (unknown: left out of joints present)' for JOINTS of a joint set other than "
               "BODY_25 (the totals add 'N of joint_set K (unknown)'); "
-              "the sender's last STATUS fault (', CALIBRATION SUSPECT' when flagged) and HELLO ('(sends no scene "
+              "the fault of the sender's newest STATUS by its send_us (', CALIBRATION SUSPECT' when flagged) "
+              "and HELLO ('(sends no scene "
               "flags)' from a sender too old to set them; '(scans for someone else)' from one whose estimator scans "
               "for others, the only sender whose frames without 'someone else' say nobody else was seen; '(not "
               "BODY_25 in mm in the rig frame: ...)' when it announces other joints, units or frame); decode errors "

@@ -86,7 +86,7 @@ from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides
 from ghnerf_runtime.novel_painter import FILE_NAME as PAINTER_FILE
 from ghnerf_runtime.novel_painter import NovelPainter, angle_from_sources_deg
 from ghnerf_runtime.others_scan import ScanClock, box_cells, someone_else, subject_box
-from ghnerf_runtime.plain_values import is_true_false, plain_scalar, whole_number_or_none
+from ghnerf_runtime.plain_values import converts_to_finite_float, is_true_false, plain_scalar, whole_number_or_none
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
 from ghnerf_runtime.proxy_matte import proxy_matte
 from ghnerf_runtime.preprocess import (
@@ -498,12 +498,7 @@ def _finite_time(value) -> bool:
     daemon's loop (it skips a pair on a FrameError) did not expect. True/False is no time (it was read as 1 s), nor
     is a 0-d array holding one (``math.isfinite`` takes it; the rest of the runtime reads a 0-d array as its value,
     :func:`~ghnerf_runtime.plain_values.plain_scalar`)."""
-    if is_true_false(plain_scalar(value)):
-        return False
-    try:
-        return math.isfinite(value)
-    except (OverflowError, TypeError):
-        return False
+    return not is_true_false(plain_scalar(value)) and converts_to_finite_float(value)
 
 
 def _whole_sequence(value) -> int:

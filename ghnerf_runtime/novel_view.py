@@ -21,7 +21,6 @@ numpy, OpenCV; the session is passed in (never created here).
 """
 from __future__ import annotations
 
-import math
 import numbers
 import time
 from dataclasses import dataclass
@@ -36,6 +35,7 @@ from ghnerf_runtime.contract import near_far_from_box, target_inputs
 from ghnerf_runtime.errors import ConfigError, DepthRangeError, GeometryError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.orbit import axes_angle_deg, axes_pivot, in_front, orbit_centre, orbit_pivot
+from ghnerf_runtime.plain_values import converts_to_finite_float
 from ghnerf_runtime.preprocess import crop_camera, roi_from_volume
 from ghnerf_runtime.rays import (
     block_ray_uv,
@@ -161,15 +161,6 @@ def _half_turn_sign(qa: np.ndarray, qb: np.ndarray) -> float:
     return 1.0 if along[int(np.argmax(np.abs(along)))] >= 0.0 else -1.0
 
 
-def _finite_alpha(alpha) -> bool:
-    """Whether ``alpha`` is a finite number, by ``math.isfinite`` (None or text: TypeError; an int past float64:
-    OverflowError): ``plain_values``' checks added 11 % to :func:`slerp_rotation` (session 73's host)."""
-    try:
-        return math.isfinite(alpha)
-    except (TypeError, OverflowError):
-        return False
-
-
 def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray:
     """Spherical linear interpolation of two rotation matrices (rig -> camera; shortest arc).
 
@@ -191,7 +182,7 @@ def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray
         >>> np.round(slerp_rotation(Ra, Rb, 0.5)[2], 6).tolist()  # halfway: looking forward (+z), from z < 3
         [0.0, 0.0, 1.0]
     """
-    if not _finite_alpha(alpha):  # a NaN gave a NaN rotation without a word
+    if not converts_to_finite_float(alpha):  # a NaN gave a NaN rotation without a word
         raise GeometryError(f"slerp_rotation: alpha must be a finite number, got {alpha!r}")
     qa, qb = _quat(R_a), _quat(R_b)
     dot = float(np.dot(qa, qb))

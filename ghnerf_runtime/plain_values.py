@@ -8,13 +8,14 @@ A NumPy scalar (np.int64, np.float32, np.bool_) comes from arrays and comparison
 """
 from __future__ import annotations
 
+import math
 import numbers
 import operator
 
 import numpy as np
 
-__all__ = ["is_finite_number", "is_real_number", "is_true_false", "numpy_for_json", "plain_scalar",
-           "whole_number_or_none", "whole_valued_or_none"]
+__all__ = ["converts_to_finite_float", "is_finite_number", "is_real_number", "is_true_false", "numpy_for_json",
+           "plain_scalar", "whole_number_or_none", "whole_valued_or_none"]
 
 
 def plain_scalar(value: object) -> object:
@@ -38,6 +39,17 @@ def is_finite_number(value: object) -> bool:
     """A real number (:func:`is_real_number`) that is neither NaN nor infinite. Not ``math.isfinite`` or
     ``np.isfinite``: an integer beyond float64 (10**400, from a JSON config) made them raise; it is finite."""
     return is_real_number(value) and value == value and abs(value) != float("inf")  # type: ignore[operator, arg-type]
+
+
+def converts_to_finite_float(value: object) -> bool:
+    """Whether ``math.isfinite`` finds ``value`` finite; False where it raises (None, text: TypeError; an int past
+    float64: OverflowError). Narrower and cheaper than :func:`is_finite_number`, for checks on every call (that one
+    added 11 % to ``slerp_rotation``, session 73): 10**400 is not finite here, and True/False and a 0-d array pass
+    as the float they convert to (a caller that refuses them checks first)."""
+    try:
+        return math.isfinite(value)  # type: ignore[arg-type]
+    except (TypeError, OverflowError):
+        return False
 
 
 def whole_number_or_none(value: object) -> int | None:

@@ -13,8 +13,9 @@ Behaviour written once here:
 A link that cannot be (re)opened is retried forever; the journal hears of it
 once per outage (a WARNING, again only when the error changes, repeats at
 DEBUG) and ``stats().state`` says ``down`` with the error in ``last_error``. So is a link that opens but is lost
-again before a frame gets through (its HELLO went out, every transfer after it fails): after one "link lost" and one
-"connected again" the rest are DEBUG, it is reopened at the backoff's pace, and an INFO says when frames get through.
+again before a frame gets through (its HELLO went out, every transfer after it fails): after one "link lost", one
+"connected again" and one "lost again ...: it flaps" (the journal's last word must not say it is up) the rest are DEBUG,
+it is reopened at the backoff's pace, and an INFO says when frames get through.
 An outage ends when a write gets through, not when the link opens: a board that resets at every transfer (opens,
 takes HELLO, is lost, is absent while it boots) logs its failed open once. A link whose stall was logged is no flap:
 its loss is a WARNING, and so is its failed open.
@@ -128,8 +129,9 @@ class Sink(ABC):
         self._writing_since: Optional[float] = None
         self._stall_logged = False  # the WARNING for this stall was written: its end gets an INFO
         # A link that opens (its HELLO goes out) but is lost again before a frame or idle write gets through is one
-        # outage: a "link lost" WARNING and a "connected again" INFO once, then DEBUG until a write gets through
-        # (an INFO says so). Before, such a link logged both lines, and was reopened, for every frame. Guarded by _cond.
+        # outage: a "link lost" WARNING, a "connected again" INFO and an "it flaps" WARNING once, then DEBUG until a
+        # write gets through (an INFO says so). Before, such a link logged both lines, and was reopened, for every
+        # frame. Guarded by _cond.
         self._carried = False  # a frame or idle write got through since the last connect
         self._said_again = False  # "connected again" was logged, and no write got through since
         self._flapping = False  # lost again before a write got through: the journal waits for one that does
@@ -457,16 +459,23 @@ class Sink(ABC):
             self._last_error = refusing[1]
 
     def _log_link_lost(self, e: SinkUnavailableError) -> None:
-        """A WARNING, or DEBUG when the link was lost again before a write got through since it was said to be
-        connected again (it flaps: the journal heard of this outage). A link whose stall was logged meanwhile is no
-        flap: the journal's last word was the stall, so its loss, and its failed opens, are a new outage's."""
+        """A WARNING; when the link was lost again before a write got through since it was said to be connected
+        again (it flaps: the journal heard of this outage), a WARNING that it flaps the first time, then DEBUG. A link
+        whose stall was logged meanwhile is no flap: the journal's last word was the stall, so its loss, and its
+        failed opens, are a new outage's."""
         with self._cond:
             quiet = not self._carried and self._said_again and not self._stall_logged
+            # the journal's last word was "connected again": the first loss after it is told, or the link read as up
+            first_flap = quiet and not self._flapping
             self._flapping = quiet  # (a flapping link is quiet, unless it stalled: then it is told anew)
             if not quiet:  # told anew: a failed open after it is too, even with the error of the outage before
                 self._down_error = None
         self._reopen_waits = quiet
-        if quiet:
+        if first_flap:
+            _log.warning("%s: link lost again before a frame got through (%s): it flaps; reopened at the backoff's "
+                         "pace, its losses, failed opens of the same error and reopens logged at DEBUG until frames "
+                         "get through", self.shown, e.reason)
+        elif quiet:
             _log.debug("%s: link lost again before a frame got through (%s); reconnecting", self.shown, e.reason)
         else:  # the error's own text starts with the URL too: the line named it twice
             _log.warning("%s: link lost (%s); reconnecting", self.shown, e.reason)

@@ -838,3 +838,76 @@ def test_a_new_sender_s_hello_reordered_behind_its_first_frames_counts_none_of_t
                         _at(NO_FRAME_SEQ, "HELLO", start), _at(2, "JOINTS", start + 3 * period)):
             tally.add(message)
         assert (tally.total_gaps, tally.total_late, tally.last_seq) == (0, 0, 2), old_seqs
+
+
+def _status(seq: int, send_us: int, fault: int, dropped: int):
+    """A STATUS of ``seq`` written at ``send_us`` on the sender's clock, saying ``fault`` and ``dropped`` frames."""
+    from firmware_host.protocol.constants import MsgType
+    from firmware_host.protocol.messages import Status, make_header
+
+    return Status(make_header(MsgType.STATUS, seq, send_us, send_us), 3000, 0, dropped, 0, fault)
+
+
+def _shown_status(tally: "listen.Tally") -> tuple[int, int]:
+    assert tally.status is not None
+    return tally.status.fault, tally.status.dropped
+
+
+def test_a_status_reordered_behind_a_newer_one_is_not_shown():
+    """Over UDP an older STATUS can arrive after a newer one; shown as it arrived, the line said the sender's state
+    of a second before (QUEUE_OVERFLOW, 4 dropped) after it had reported OK with 9. By the sender's clock, across a
+    seq wrap and for a stalled sender whose STATUS all carry one seq, the newest written is shown."""
+    from firmware_host.protocol.constants import Fault
+
+    for old_seq, new_seq in ((40, 70), (2**32 - 2, 1), (70, 70)):  # frames sent between; across the wrap; none
+        tally = listen.Tally()
+        tally.add(_status(new_seq, 61_000_000, int(Fault.OK), 9))
+        tally.add(_status(old_seq, 60_000_000, int(Fault.QUEUE_OVERFLOW), 4))  # written first, arrived last
+        assert _shown_status(tally) == (int(Fault.OK), 9), (old_seq, new_seq)
+        assert "sender fault OK, dropped 9" in tally.line(1.0, {})
+        tally.add(_status(new_seq, 61_000_000, int(Fault.OK), 9))  # a duplicate changes nothing either
+        tally.add(_status(new_seq + 1, 62_000_000, int(Fault.LINK_ERRORS), 12))  # a newer one is shown
+        assert _shown_status(tally) == (int(Fault.LINK_ERRORS), 12), (old_seq, new_seq)
+
+
+def test_a_restarted_sender_s_status_is_shown_whatever_its_time():
+    """A rebooted device's clock starts again: its STATUS, written "before" the old one's, is the newest. Over 1 s
+    before (STALE_STATUS_US), it is taken for a reboot; nearer, after a HELLO or JOINTS that begins a new numbering
+    (the restart listen counts frames by). A stale HELLO of the old sender begins none, and keeps the order."""
+    from firmware_host.protocol.constants import NO_FRAME_SEQ, Fault
+
+    period = 33_333
+    start = 100_000_000
+
+    def old_sender() -> "listen.Tally":
+        tally = listen.Tally()
+        tally.add(_at(NO_FRAME_SEQ, "HELLO", start))
+        for seq in range(100, 130):
+            tally.add(_at(seq, "JOINTS", start + (seq - 99) * period))
+        tally.add(_status(129, start + 31 * period, int(Fault.CAMERA_FAULT), 3))
+        return tally
+
+    rebooted = old_sender()  # its HELLO lost: the STATUS alone, from a clock at 20 s
+    rebooted.add(_status(NO_FRAME_SEQ, 20_000_000, int(Fault.OK), 0))
+    assert _shown_status(rebooted) == (int(Fault.OK), 0)
+    near = start + 31 * period - 500_000  # rebooted, its clock by chance half a second behind the old STATUS
+    for begin in (_at(NO_FRAME_SEQ, "HELLO", start + 31 * period + 1), _at(0, "JOINTS", near - period)):
+        restarted = old_sender()
+        restarted.add(begin)  # a HELLO written after the old frames; a JOINTS far behind the old seq
+        restarted.add(_status(0, near, int(Fault.OK), 0))
+        assert _shown_status(restarted) == (int(Fault.OK), 0), begin
+    stale = old_sender()  # the old sender's HELLO, duplicated, arrives late: the same numbering, the same order
+    stale.add(_at(NO_FRAME_SEQ, "HELLO", start))
+    stale.add(_status(129, start + 31 * period - 1, int(Fault.OK), 2))
+    assert _shown_status(stale) == (int(Fault.CAMERA_FAULT), 3)
+
+
+def test_the_listener_shows_the_newest_of_reordered_status_datagrams(monkeypatch, capsys):
+    """End to end: the datagrams a udp:// port hands over, the newer STATUS first, then the older."""
+    from firmware_host.protocol.constants import Fault
+    from firmware_host.protocol.encoder import encode
+
+    data = encode(_status(80, 5_000_000, int(Fault.OK), 7)) + encode(_status(50, 4_000_000, int(Fault.RATE_LIMITED), 6))
+    out = io.StringIO()
+    listen.listen(_port_reading(data, then=KeyboardInterrupt()), seconds=None, as_json=False, out=out, every_s=0.0)
+    assert "sender fault OK, dropped 7" in out.getvalue(), out.getvalue()

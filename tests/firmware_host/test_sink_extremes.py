@@ -234,8 +234,9 @@ def test_a_link_lost_at_every_frame_is_logged_once_and_reopened_at_the_backoff_s
     with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
         sink.start()
         _feed(sink, lambda: sink.stats().disconnects >= 6, what="six losses")
-        assert len(_lines(caplog, logging.WARNING, "link lost")) == 1
+        assert len(_lines(caplog, logging.WARNING, "link lost (")) == 1
         assert len(_lines(caplog, logging.INFO, "connected again")) == 1
+        assert len(_lines(caplog, logging.WARNING, "it flaps")) == 1  # since session 74: the journal's last word
         # reopened at the backoff's pace (initial_s 0.05 and up) from the third open on, not for each frame queued
         # (a bound on the opens in a time a loaded host stretched could not tell the two apart)
         gaps = [b - a for a, b in zip(sink.opened_at[1:], sink.opened_at[2:])]
@@ -363,3 +364,42 @@ def test_a_link_lost_after_a_stall_is_an_outage_the_journal_hears_of(caplog: pyt
         assert len(_lines(caplog, logging.WARNING, "link lost")) == 1
         assert len(_lines(caplog, logging.WARNING, "no such device")) == 2
     assert sink.close().state == "closed"
+
+
+class ResetsThenDies(ResetAtEveryFrame):
+    """A board that resets at every transfer until it dies (``dead``): then absent for good."""
+
+    dead = False
+
+    def _connect(self) -> None:
+        if self.dead:
+            raise SinkUnavailableError(self.url, "no such device")
+        super()._connect()
+
+
+def _told(caplog: pytest.LogCaptureFixture) -> list[str]:
+    """What the journal hears of the sink (INFO and up), in order."""
+    return [r.getMessage() for r in caplog.records
+            if r.name == "firmware_host.sinks.base" and r.levelno >= logging.INFO]
+
+
+def test_a_link_that_flaps_or_stays_down_after_connected_again_is_last_said_to_be_lost(
+        caplog: pytest.LogCaptureFixture) -> None:
+    # before: the loss after "connected again" was DEBUG, and so was all that followed: the journal's last word was
+    # "connected again" while the link flapped, or, a board that reset and then stayed absent, was down for good
+    for dies in (False, True):
+        caplog.clear()
+        sink = LostAtEveryFrame() if not dies else ResetsThenDies()
+        sink.absent = dies  # the board: the first open finds it
+        with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+            sink.start()
+            _feed(sink, lambda: sink.stats().disconnects >= 4, what="four losses")
+            if isinstance(sink, ResetsThenDies):
+                sink.dead = True  # every open fails now, with the outage's error
+                failures = sink.stats().connect_failures
+                _feed(sink, lambda: sink.stats().connect_failures >= failures + 3, what="failed opens")
+            told = _told(caplog)
+            assert any("connected again" in line for line in told), told
+            assert "lost again before a frame got through (EIO): it flaps" in told[-1], told
+            assert sum("it flaps" in line for line in told) == 1, told  # once: the rest DEBUG
+        assert sink.close().state == "closed"

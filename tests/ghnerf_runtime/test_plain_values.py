@@ -7,8 +7,8 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from ghnerf_runtime.plain_values import is_finite_number, is_real_number, is_true_false, numpy_for_json, \
-    plain_scalar, whole_number_or_none, whole_valued_or_none
+from ghnerf_runtime.plain_values import converts_to_finite_float, is_finite_number, is_real_number, is_true_false, \
+    numpy_for_json, plain_scalar, whole_number_or_none, whole_valued_or_none
 
 
 @pytest.mark.parametrize("value, plain", [(np.int64(7), 7), (np.float32(2.5), 2.5), (np.True_, True),
@@ -98,3 +98,14 @@ def test_numpy_values_are_written_to_json_as_python_values(value, plain):
 def test_what_is_not_numpy_is_left_to_json_to_refuse():
     with pytest.raises(TypeError, match="not JSON serialisable: object"):
         numpy_for_json(object())
+
+
+@pytest.mark.parametrize("value, finite", [
+    (0.5, True), (np.float32(2.5), True), (np.int64(-3), True), (np.array(0.25), True), (Fraction(1, 3), True),
+    (True, True), (np.True_, True),  # as the float they convert to: a caller that refuses them checks first
+    (math.nan, False), (-math.inf, False), (np.float64("nan"), False),
+    (10**400, False), (None, False), ("0.5", False), (1j, False),  # math.isfinite's OverflowError, TypeError
+])
+def test_converts_to_finite_float_is_math_isfinite_without_its_errors(value, finite):
+    # the one check slerp_rotation's alpha and the estimator's capture time share (session 74: two copies before)
+    assert converts_to_finite_float(value) is finite
