@@ -745,8 +745,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
     # the rig file's text made (and checked) first; then the previous rig and report kept (copies: rig.prev.json,
     # rig.report.prev.json), then the report, so the rig file is never newer than its report; if the rig file's
     # write then fails, the new report is left beside the old rig
-    for cam in names:
+    for cam in names:  # the views passed over, recorded as the report's reader cannot see the run's warnings
         solution.report["cameras"][cam]["repeated_views"] = repeats[cam]
+        solution.report["cameras"][cam]["unreadable_views"] = sorted(found.unread[cam])
     text = checked_rig_text(solution.rig, out)
     kept = {path: _keep_previous(path, prev) for path, prev in previous.items()}
     write_text_atomic(report_path, json.dumps(solution.report, indent=1) + "\n")
