@@ -283,7 +283,8 @@ def cmd_board(args: argparse.Namespace) -> int:
     w_cm, h_cm = (100 * image.shape[1] / args.dpi * 0.0254, 100 * image.shape[0] / args.dpi * 0.0254)
     # a square is a whole number of pixels: at a low dpi the print's squares differ from square_m
     printed_mm = 1000 * px / args.dpi * 0.0254
-    print(f"wrote {png} ({image.shape[1]}x{image.shape[0]} px at {args.dpi} dpi) and {spec}")
+    print(f"wrote {png} ({image.shape[1]}x{image.shape[0]} px at {args.dpi} dpi) and "
+          + (f"left {spec} as it is (it defines this board)" if kept else f"{spec}"))
     print(f"print it at {args.dpi} dpi, 100 % scale (no 'fit to page'): {w_cm:.1f} x {h_cm:.1f} cm with its margin; "
           f"{board.squares_x}x{board.squares_y} squares of {printed_mm:.2f} mm"
           + (f" ({px} px each; the board file says {1000 * board.square_m:g} mm)"

@@ -192,6 +192,7 @@ def test_board_leaves_a_board_file_of_the_same_board_as_it_is(tmp_path, capsys, 
     assert cli.main(argv) == 0
     assert (spec.read_bytes(), spec.stat().st_ino) == before
     assert (tmp_path / "board.png").is_file() and load_board(spec).square_m == 0.0787
+    assert f"and left {spec} as it is (it defines this board)" in capsys.readouterr().out
     assert cli.main(["board", "--out", str(tmp_path), "--dpi", "72", "--force"]) == 0  # another board: replaced
     assert load_board(spec) == BoardSpec()
 
