@@ -271,28 +271,20 @@ def cmd_board(args: argparse.Namespace) -> int:
                          f"{MAX_BOARD_MEGAPIXELS}); 300 dpi is plenty for a board")
     image = board.image(px_per_square=px, margin_px=px // 2)
     png, spec = out / "board.png", out / "board.json"
-    if spec.exists() and not args.force:
-        # it may hold the square size measured on the print: overwritten with the defaults, every
-        # later solve would be scaled wrong
-        try:
-            same = load_board(spec) == board
-        except CalibrationError as e:  # said why: it was called "another board", its fault not named
-            raise UsageError(f"{e} (the board.json in --out, not loaded: it may hold the square size measured on "
-                             "the print): fix it, or pass --force to replace it") from e
-        if not same:
-            raise UsageError(f"{spec} exists and defines another board (measured on the print?): give it as "
-                             f"--board {spec} to print it again, or --force to replace it")
+    kept = _board_file_kept(spec, board, args.force)
     ok, encoded = cv2.imencode(".png", image)
     if not ok:
         raise UsageError(f"{png}: cannot encode the image")
     # the PNG says its dpi (printed at 100 %, to scale); written aside and renamed, so a Ctrl-C while the print's
     # megabytes are written leaves the earlier board.png, not a cut-off one
     write_bytes_atomic(png, png_with_dpi(encoded.tobytes(), args.dpi))
-    write_text_atomic(spec, json.dumps(board.to_dict(), indent=2) + "\n")
+    if not kept:
+        write_text_atomic(spec, json.dumps(board.to_dict(), indent=2) + "\n")
     w_cm, h_cm = (100 * image.shape[1] / args.dpi * 0.0254, 100 * image.shape[0] / args.dpi * 0.0254)
     # a square is a whole number of pixels: at a low dpi the print's squares differ from square_m
     printed_mm = 1000 * px / args.dpi * 0.0254
-    print(f"wrote {png} ({image.shape[1]}x{image.shape[0]} px at {args.dpi} dpi) and {spec}")
+    print(f"wrote {png} ({image.shape[1]}x{image.shape[0]} px at {args.dpi} dpi) and "
+          + (f"left {spec} as it is (it defines this board)" if kept else f"{spec}"))
     print(f"print it at {args.dpi} dpi, 100 % scale (no 'fit to page'): {w_cm:.1f} x {h_cm:.1f} cm with its margin; "
           f"{board.squares_x}x{board.squares_y} squares of {printed_mm:.2f} mm"
           + (f" ({px} px each; the board file says {1000 * board.square_m:g} mm)"
@@ -300,6 +292,30 @@ def cmd_board(args: argparse.Namespace) -> int:
     print(f"then measure a square with a ruler and put the measured size in {spec} (square_m, and marker_m "
           "scaled alike); glue the print to something flat and rigid")
     return 0
+
+
+def _board_file_kept(spec: Path, board: BoardSpec, force: bool) -> bool:
+    """Whether ``board`` leaves the ``board.json`` at ``spec`` as it is: it defines ``board`` already. Written back,
+    ``board --board OUT/board.json --out OUT`` replaced the file the user measured and typed in with its own layout
+    (until session 74).
+
+    :raises UsageError: without ``force``, a file there that does not load or defines another board.
+    """
+    if not spec.exists():
+        return False
+    try:
+        same = load_board(spec) == board
+    except CalibrationError as e:  # said why: it was called "another board", its fault not named
+        if force:
+            return False
+        raise UsageError(f"{e} (the board.json in --out, not loaded: it may hold the square size measured on "
+                         "the print): fix it, or pass --force to replace it") from e
+    if not same and not force:
+        # it may hold the square size measured on the print: overwritten with the defaults, every
+        # later solve would be scaled wrong
+        raise UsageError(f"{spec} exists and defines another board (measured on the print?): give it as "
+                         f"--board {spec} to print it again, or --force to replace it")
+    return same
 
 
 # ------------------------------------------------------------------ synth
@@ -730,8 +746,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
     # the rig file's text made (and checked) first; then the previous rig and report kept (copies: rig.prev.json,
     # rig.report.prev.json), then the report, so the rig file is never newer than its report; if the rig file's
     # write then fails, the new report is left beside the old rig
-    for cam in names:
+    for cam in names:  # the views passed over, recorded as the report's reader cannot see the run's warnings
         solution.report["cameras"][cam]["repeated_views"] = repeats[cam]
+        solution.report["cameras"][cam]["unreadable_views"] = sorted(found.unread[cam])
     text = checked_rig_text(solution.rig, out)
     kept = {path: _keep_previous(path, prev) for path, prev in previous.items()}
     write_text_atomic(report_path, json.dumps(solution.report, indent=1) + "\n")

@@ -5,13 +5,15 @@ corner's true pixel is known.
 """
 from __future__ import annotations
 
+import re
+
 import cv2
 import numpy as np
 import pytest
 
 from calibration import capture
 from calibration.board import BoardSpec
-from calibration.capture import detect_folder, earlier_size
+from calibration.capture import FolderViews, detect_folder, earlier_size, read_folder
 from calibration.detect import BoardDetector, fixes_a_pose, grey8, white_level16
 from calibration.errors import BoardError, CaptureError
 from calibration.render import board_pose_facing, example_rig, render_board
@@ -112,6 +114,31 @@ def test_a_view_of_a_compression_opencv_does_not_decode_is_named_not_a_black_ima
                                            r"\(JPEG 2000\), which OpenCV"):
         detect_folder(BOARD, tmp_path)
     assert earlier_size(tmp_path / "left") is None  # ghcal capture --append: the solve names it
+
+
+def test_read_folder_passes_over_an_unreadable_image_and_says_why(camera, tmp_path):
+    # session 74: solve and check go on past an image that does not read; detect_folder stays strict
+    image, _ = _render(BOARD, camera)
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+        for name in ("000", "002"):
+            assert cv2.imwrite(str(tmp_path / cam / f"{name}.png"), image)
+    assert cv2.imwrite(str(tmp_path / "right" / "001.png"), np.full((400, 640), 128, np.uint8))  # no board
+    cut = tmp_path / "left" / "001.png"
+    cut.write_bytes(cv2.imencode(".png", image)[1].tobytes()[:60])  # a cut-off copy
+    found = read_folder(BOARD, tmp_path)
+    assert isinstance(found, FolderViews)
+    assert {cam: sorted(named) for cam, named in found.views.items()} == {"left": ["000", "002"],
+                                                                         "right": ["000", "002"]}
+    assert found.missed == {"left": [], "right": ["001"]}
+    assert found.unread == {"left": {"001": f"{cut}: not a readable image"}, "right": {}}
+    assert found.views["left"]["002"].ids.tolist() == found.views["right"]["002"].ids.tolist()
+    with pytest.raises(CaptureError, match=f"^{re.escape(str(cut))}: not a readable image$"):
+        detect_folder(BOARD, tmp_path)
+    for name in ("000", "002"):  # none of a camera's images reads: stopped, the first named
+        (tmp_path / "left" / f"{name}.png").write_bytes(b"cut")
+    with pytest.raises(CaptureError, match=r"camera 'left': none of its 3 image\(s\) reads: .*000.png: not a"):
+        read_folder(BOARD, tmp_path)
 
 
 def test_a_hot_pixel_does_not_darken_a_dim_16_bit_frame(camera, tmp_path):

@@ -1379,7 +1379,9 @@ def test_solve_and_check_pass_over_an_unreadable_image_saying_so(capture, tmp_pa
     out = capsys.readouterr().out
     assert f"warning: {cut}: not a readable image; passed over" in out, out
     assert "1 unreadable, passed over" in out and "no namesake" not in out, out
-    assert json.loads((tmp_path / "rig.report.json").read_text())["cameras"]["left"]["views"] >= 10
+    report = json.loads((tmp_path / "rig.report.json").read_text())["cameras"]
+    assert report["left"]["views"] >= 10
+    assert (report["left"]["unreadable_views"], report["right"]["unreadable_views"]) == (["003"], [])  # recorded
     assert cli.main(["check", "--rig", str(rig_path), *board, "--images", str(images)]) == 0
     assert f"warning: {cut}: not a readable image; passed over" in capsys.readouterr().out
 

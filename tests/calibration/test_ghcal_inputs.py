@@ -174,3 +174,31 @@ def test_synth_rerenders_in_place_leaving_an_input_it_would_write_alike(tmp_path
                      "--seed", "1"]) == 0
     assert {path: (path.read_bytes(), path.stat().st_ino) for path in (rig, board)} == before  # not even replaced
     assert cli.load_board(board) == SYNTH_BOARD
+
+
+@pytest.mark.parametrize("given", [True, False])
+def test_board_leaves_a_board_file_of_the_same_board_as_it_is(tmp_path, capsys, given):
+    # session 74: board --board OUT/board.json --out OUT (what its refusal tells the user to run) wrote the file it
+    # read back in its own layout: the measured size typed in on one line, a byte-order mark, all rewritten
+    import json
+
+    from calibration.board import BoardSpec, load_board
+
+    spec = tmp_path / "board.json"
+    measured = {**BoardSpec().to_dict(), "square_m": 0.0787, "marker_m": 0.059}
+    spec.write_bytes(b"\xef\xbb\xbf" + json.dumps(measured).encode())  # as a Windows editor saves it
+    before = (spec.read_bytes(), spec.stat().st_ino)
+    argv = ["board", "--out", str(tmp_path), "--dpi", "72", "--board", str(spec if given else _copy(spec, tmp_path))]
+    assert cli.main(argv) == 0
+    assert (spec.read_bytes(), spec.stat().st_ino) == before
+    assert (tmp_path / "board.png").is_file() and load_board(spec).square_m == 0.0787
+    assert f"and left {spec} as it is (it defines this board)" in capsys.readouterr().out
+    assert cli.main(["board", "--out", str(tmp_path), "--dpi", "72", "--force"]) == 0  # another board: replaced
+    assert load_board(spec) == BoardSpec()
+
+
+def _copy(path, tmp_path):
+    copy = tmp_path / "elsewhere" / path.name
+    copy.parent.mkdir()
+    copy.write_bytes(path.read_bytes())
+    return copy
