@@ -2,6 +2,7 @@
 import json
 import logging
 import os
+import re
 import struct
 import time
 import zlib
@@ -1836,3 +1837,14 @@ def test_record_names_an_out_directory_holding_a_control_character_escaped(tmp_p
     with pytest.raises(RigInitializationError, match="not empty") as e:
         open_rig(f"record+sim://?width=32&height=24&cache={sim_cache}&out={tmp_path}/z%1B[31m", clock=ManualClock())
     assert "\x1b" not in str(e.value) and f"recording directory {str(odd)!r} is not empty" in str(e.value)
+
+
+def test_a_recorded_jpeg_cut_short_is_named_cut_short(tmp_path):
+    """imdecode refused it already; the error said only 'corrupt (OpenCV cannot decode it)', where ghnerf-run's and
+    ghcal's reads (image_files.unread_cause, the chain they share) now name the cut."""
+    data = encode_image(np.random.default_rng(2).integers(0, 256, (24, 32, 3), dtype=np.uint8), "jpg", 90)
+    path = tmp_path / "00000000.jpg"
+    path.write_bytes(data[:len(data) // 3])
+    said = f"recording image {path} is corrupt: it is a JPEG cut short"
+    with pytest.raises(RigOperationError, match=re.escape(said)):
+        load_image(path)
