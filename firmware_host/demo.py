@@ -88,8 +88,9 @@ from ghnerf_runtime.cli.seconds import positive_seconds
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
-from ghnerf_runtime.errors import ConfigError, ModelError, ModelLoadError
+from ghnerf_runtime.errors import ConfigError, ImageWriteError, ModelError, ModelLoadError
 from ghnerf_runtime.estimator import Estimator, PairResult, check_model_files
+from ghnerf_runtime.image_write import write_image_atomic
 from ghnerf_runtime.path_check import shown, user_path, user_path_as_path
 
 DEFAULT_URL = "sim://?fps=30&seed=0&motion=wave"
@@ -588,13 +589,13 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     print(f"sink {redact_url(sink_url)}: {sink_stats}")
     png = args.out / "sim_pair.png"
     suspect = calibration.band() if estimator is not None else ()  # as the check stood at the last estimate
-    picture_lost = False
+    picture_problem: str | None = None
     if last_pair is not None:
-        picture_lost = not _write_picture(png, last_pair, last_result, suspect)
+        picture_problem = _write_picture(png, last_pair, last_result, suspect)
         _print_joints(last_pair, last_result)
     failed = False
-    if picture_lost:  # OpenCV says no more than False (libpng's "Write Error" on a full disk): was not a word
-        print(f"{prog}: error: could not write {png} (no permission, or no room left on its disk)", file=sys.stderr)
+    if picture_problem is not None:  # a full disk (libpng's "Write Error") was once not a word
+        print(f"{prog}: error: could not write {picture_problem}", file=sys.stderr)
         failed = True
     if rig_failed is not None:
         print(f"{prog}: error: the rig failed after {delivered} pairs: {rig_failed}", file=sys.stderr)
@@ -634,16 +635,20 @@ def _counted_estimate(pair: drivers.FramePair, result: PairResult, tally: _Tally
     return estimate_frame(pair, result, sequence=numbers.take(), calibration_suspect=calibration.suspect)
 
 
-def _write_picture(png: Path, pair: drivers.FramePair, result: PairResult | None, suspect: tuple[str, ...]) -> bool:
-    """The last pair drawn into ``png``, said on stdout; False where it could not be written."""
-    if not cv2.imwrite(str(png), _annotated(pair, result, suspect)):
-        return False
+def _write_picture(png: Path, pair: drivers.FramePair, result: PairResult | None,
+                   suspect: tuple[str, ...]) -> str | None:
+    """The last pair drawn into ``png``, said on stdout, written whole or not at all (imwrite truncated an earlier
+    picture first); where it could not be, why (``png`` named), else None."""
+    try:
+        write_image_atomic(png, _annotated(pair, result, suspect))
+    except ImageWriteError as e:
+        return f"{shown(e.path)}: {e.reason}"
     what = ("estimated 2D joints (magenta) over the ground truth (dots)" if result is not None
             else "its ground-truth 2D joints")
     if suspect:
         what += ", marked CALIBRATION SUSPECT"
     print(f"wrote {png} (pair {pair.sequence} with {what})")
-    return True
+    return None
 
 
 def _refuse_ignored_flags(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:

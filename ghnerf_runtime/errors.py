@@ -37,6 +37,16 @@ class RigFileError(RuntimeErrorBase, ValueError):
         self.field = field
 
 
+class ImageWriteError(RuntimeErrorBase):
+    """An image that could not be encoded or written (``ghnerf_runtime.image_write``); ``reason`` is the message
+    without the path, for a tool that names the file its own way."""
+
+    def __init__(self, path: str, reason: str):
+        super().__init__(f"{path}: {reason}")
+        self.path = path
+        self.reason = reason
+
+
 class ConfigError(RuntimeErrorBase, ValueError):
     """A runtime configuration value or key is invalid.
 

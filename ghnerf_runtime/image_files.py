@@ -30,6 +30,10 @@ several strips or tiles, one holding fewer bytes than its rows need (OpenCV deli
 warning). Garbage inside compressed data (LZW, deflate, PackBits) gives no such sign: OpenCV decodes it partly
 black or scrambled, cv2.imread and cv2.imdecode alike, libtiff's errors only logged (measured in session 66), and
 nothing short of decoding the data again could tell.
+
+A JPEG is decoded from a copy of its bytes (``cv2.imdecode``), as replay decodes a take's: OpenCV's file reader
+filled one cut short with grey (libjpeg's "Premature end of JPEG file" only logged), where imdecode refuses it;
+:func:`jpeg_cut_short` names the cause (session 74).
 """
 from __future__ import annotations
 
@@ -46,7 +50,7 @@ from ghnerf_runtime import avif_header, tiff_compression, tiff_header
 from ghnerf_runtime.path_check import is_utf8
 
 __all__ = ["AS_STORED", "UnreadCause", "UnreadKind", "decode_image_or_none", "decoded_from_memory_because",
-           "read_image_or_none", "samples_not_8_bit", "tiff_compression_refusal", "tiff_data_refusal",
+           "jpeg_cut_short", "read_image_or_none", "samples_not_8_bit", "tiff_compression_refusal", "tiff_data_refusal",
            "unread_because", "unread_cause"]
 
 #: The decode flag that keeps an image's pixels as stored (IMREAD_UNCHANGED never turns them anyway), a JPEG's,
@@ -65,7 +69,7 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
             resets = _resets_unless_refused(f, flags)
             if resets is None:
                 return None
-            if _memory_decode_because(path, resets) is not None:
+            if _memory_decode_because(path, resets) is not None or _is_jpeg(f):
                 f.seek(0)
                 return _decoded_with(np.fromfile(f, dtype=np.uint8), resets, flags)
     except (OSError, ValueError):  # ValueError: a NUL byte in the path
@@ -74,6 +78,35 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
         return cv2.imread(os.fspath(path), flags | AS_STORED)  # (IMREAD_UNCHANGED is -1: it stays itself)
     except cv2.error:
         return None
+
+
+#: A JPEG's first bytes: its start-of-image marker and the next marker's 0xFF.
+_JPEG_START = b"\xff\xd8\xff"
+#: A JPEG's end-of-image marker, and the bytes a writer may pad a file with after it (zeros, 0xFF fill).
+_JPEG_END, _JPEG_PADDING = b"\xff\xd9", b"\x00\xff"
+
+
+def _is_jpeg(f: BinaryIO) -> bool:
+    """Whether ``f`` holds a JPEG, which is decoded from memory: OpenCV's file reader fills a JPEG cut short with
+    grey (and only logs libjpeg's "Premature end"), where ``cv2.imdecode`` refuses it, as replay's read does."""
+    f.seek(0)
+    return f.read(len(_JPEG_START)) == _JPEG_START
+
+
+def jpeg_cut_short(path: str | os.PathLike) -> str | None:
+    """Why a JPEG that did not decode is cut short: its bytes, but for trailing padding, do not end at its
+    end-of-image marker (FFD9); None for another image, one that ends so, or a file that cannot be opened. Called
+    once the decode failed, so a JPEG with bytes after its end (a trailer, which decodes) is never asked."""
+    try:
+        with open(path, "rb") as f:
+            if not _is_jpeg(f):
+                return None
+            data = f.read()
+    except (OSError, ValueError):  # ValueError: a NUL byte in the path
+        return None
+    if data.rstrip(_JPEG_PADDING).endswith(_JPEG_END):
+        return None
+    return f"it is a JPEG cut short ({len(_JPEG_START) + len(data)} bytes, not ending at its end-of-image marker FFD9)"
 
 
 def _decodes_to_8_bits(flags: int) -> bool:
@@ -264,6 +297,9 @@ def unread_cause(path: str | os.PathLike, flags: int) -> UnreadCause | None:
     data = tiff_data_refusal(path)
     if data is not None:
         return UnreadCause(data, UnreadKind.DAMAGED)
+    cut = jpeg_cut_short(path)
+    if cut is not None:
+        return UnreadCause(cut, UnreadKind.DAMAGED)
     samples = samples_not_8_bit(path) if _decodes_to_8_bits(flags) else None
     return None if samples is None else UnreadCause(f"it has {samples}", UnreadKind.NOT_WITH_THESE_FLAGS)
 

@@ -35,7 +35,7 @@ from ghnerf_runtime.contract import near_far_from_box, target_inputs
 from ghnerf_runtime.errors import ConfigError, DepthRangeError, GeometryError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.orbit import axes_angle_deg, axes_pivot, in_front, orbit_centre, orbit_pivot
-from ghnerf_runtime.plain_values import converts_to_finite_float
+from ghnerf_runtime.plain_values import converts_to_finite_float, is_true_false
 from ghnerf_runtime.preprocess import crop_camera, roi_from_volume
 from ghnerf_runtime.rays import (
     block_ray_uv,
@@ -161,6 +161,12 @@ def _half_turn_sign(qa: np.ndarray, qb: np.ndarray) -> float:
     return 1.0 if along[int(np.argmax(np.abs(along)))] >= 0.0 else -1.0
 
 
+def _true_false(alpha: object) -> bool:
+    """Whether ``alpha`` is True/False, or a 0-d array of one: ``math.isfinite`` reads them as 1.0 or 0.0 (session
+    73 to 74), which ``estimate``'s capture time refuses too; two isinstance checks for a float."""
+    return is_true_false(alpha) or (isinstance(alpha, np.ndarray) and alpha.dtype.kind == "b")
+
+
 def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray:
     """Spherical linear interpolation of two rotation matrices (rig -> camera; shortest arc).
 
@@ -170,7 +176,7 @@ def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray
     other, counterclockwise seen from above (the view leaves the first camera to its right).
 
     Raises:
-        GeometryError: ``alpha`` is not a finite number.
+        GeometryError: ``alpha`` is not a finite number (True/False is none: it was read as 1 or 0).
 
     Example:
         >>> from ghnerf_runtime.geometry import look_at
@@ -182,7 +188,7 @@ def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray
         >>> np.round(slerp_rotation(Ra, Rb, 0.5)[2], 6).tolist()  # halfway: looking forward (+z), from z < 3
         [0.0, 0.0, 1.0]
     """
-    if not converts_to_finite_float(alpha):  # a NaN gave a NaN rotation without a word
+    if _true_false(alpha) or not converts_to_finite_float(alpha):  # a NaN gave a NaN rotation without a word
         raise GeometryError(f"slerp_rotation: alpha must be a finite number, got {alpha!r}")
     qa, qb = _quat(R_a), _quat(R_b)
     dot = float(np.dot(qa, qb))

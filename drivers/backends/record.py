@@ -67,6 +67,7 @@ from drivers.errors import RecordingError, RigConfigError, RigInitializationErro
 from drivers.frames import Frame
 from drivers.pairing import PairingStats
 from drivers.url import RigUrl, redact_url
+from ghnerf_runtime.path_check import shown
 from ghnerf_runtime.rig_file import principal_point_problem
 
 log = logging.getLogger(__name__)
@@ -149,7 +150,8 @@ class RecordingWriter:
             problem = principal_point_problem(cam.K, cam.width, cam.height)
             if problem:
                 raise RigInitializationError(
-                    f"cannot record to {self.directory}: the take could not be replayed: camera {cam.name!r}: {problem}"
+                    f"cannot record to {shown(str(self.directory))}: the take could not be replayed: "
+                    f"camera {cam.name!r}: {problem}"
                 )
         created: list[Path] = []  # what this start made, in order: undone if it fails
         try:
@@ -158,7 +160,7 @@ class RecordingWriter:
             created.extend(reversed(missing))
             if any(self.directory.iterdir()):
                 raise RigInitializationError(
-                    f"recording directory {self.directory} is not empty; choose a new out= directory"
+                    f"recording directory {shown(str(self.directory))} is not empty; choose a new out= directory"
                 )
             # Claim the folder first, exclusively: of two recorders started on it at once (both found it
             # empty) only one goes on; the other, with other camera names, would mix its frames into the take.
@@ -166,7 +168,7 @@ class RecordingWriter:
                 self._journal = open(self.directory / FRAMES, "x", encoding="utf-8")
             except FileExistsError:
                 raise RigInitializationError(
-                    f"recording directory {self.directory} is being written by another recorder "
+                    f"recording directory {shown(str(self.directory))} is being written by another recorder "
                     f"({FRAMES} appeared after it was found empty); choose a new out= directory"
                 ) from None
             created.append(self.directory / FRAMES)
@@ -180,7 +182,7 @@ class RecordingWriter:
             write_manifest(self.directory, self.manifest)
         except (OSError, RigOperationError) as e:  # RigOperationError: the manifest (a full disk)
             self._undo_start(created)
-            raise RigInitializationError(f"cannot start recording in {self.directory}: {e}") from e
+            raise RigInitializationError(f"cannot start recording in {shown(str(self.directory))}: {e}") from e
         except BaseException:
             self._undo_start(created)
             raise
@@ -413,7 +415,8 @@ class RecordingRigSource(RigSource):
         assert writer is not None
         if writer.error is not None and not self._reported_error:
             self._reported_error = True
-            raise RecordingError(f"recording to {writer.directory} failed: {writer.error}") from writer.error
+            raise RecordingError(f"recording to {shown(str(writer.directory))} failed: "
+                                 f"{writer.error}") from writer.error
         frame = self.inner._read_frame(timeout_s)
         if frame is not None:
             writer.submit(frame)
@@ -426,7 +429,7 @@ class RecordingRigSource(RigSource):
         writer = self._writer
         if writer is None or writer.error is None or self._reported_error:
             return None
-        return (f"recording to {writer.directory} failed as it closed: {writer.error}; its manifest says "
+        return (f"recording to {shown(str(writer.directory))} failed as it closed: {writer.error}; its manifest says "
                 f"complete: false")
 
     def _frame_available(self) -> bool:

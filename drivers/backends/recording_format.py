@@ -43,6 +43,7 @@ from ghnerf_runtime.image_files import (
     read_image_or_none,
     unread_cause,
 )
+from ghnerf_runtime.path_check import shown
 from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
 
@@ -130,11 +131,11 @@ def write_manifest(directory: Path, manifest: Manifest) -> None:
     try:
         write_text_atomic(directory / MANIFEST, json.dumps(manifest.to_dict(), indent=1, allow_nan=False) + "\n")
     except RigFileError as e:
-        raise RigOperationError(f"cannot write recording manifest {directory / MANIFEST}: {e}") from e
+        raise RigOperationError(f"cannot write recording manifest {shown(str(directory / MANIFEST))}: {e}") from e
 
 
 def _fail(path: Path, field_name: str | None, message: str) -> RigInitializationError:
-    where = f"recording file {path}" + (f", field {field_name!r}" if field_name else "")
+    where = f"recording file {shown(str(path))}" + (f", field {field_name!r}" if field_name else "")
     return RigInitializationError(f"{where}: {message}")
 
 
@@ -148,10 +149,10 @@ def read_manifest(directory: Path, *, warn: bool = True) -> Manifest:
     """
     path = directory / MANIFEST
     if directory.exists() and not directory.is_dir():  # said "does not exist" of a file that does
-        raise RigInitializationError(f"recording directory {directory} is a file, not a folder: replay:// takes "
-                                     f"the folder holding {MANIFEST}")
+        raise RigInitializationError(f"recording directory {shown(str(directory))} is a file, not a folder: "
+                                     f"replay:// takes the folder holding {MANIFEST}")
     if not directory.is_dir():
-        raise RigInitializationError(f"recording directory {directory} does not exist")
+        raise RigInitializationError(f"recording directory {shown(str(directory))} does not exist")
     try:
         data = _json_value(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
@@ -645,7 +646,7 @@ def load_image(path: Path) -> np.ndarray:
     try:
         data = np.fromfile(path, dtype=np.uint8)
     except OSError as e:
-        raise RigOperationError(f"recording image {path} cannot be read: {e.strerror or e}") from e
+        raise RigOperationError(f"recording image {shown(str(path))} cannot be read: {e.strerror or e}") from e
     image = decode_image_or_none(data, _DECODE_FLAGS) if data.size else None
     if image is None:
         refusal = tiff_decoding_refusal(path)  # read only for one that failed
@@ -661,9 +662,9 @@ def _unread_error(path: Path) -> RigOperationError:
     (:data:`_UNREAD_ERRORS`), else "corrupt"."""
     cause = unread_cause(path, _DECODE_FLAGS)
     if cause is None:
-        return RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it)")
+        return RigOperationError(f"recording image {shown(str(path))} is corrupt (OpenCV cannot decode it)")
     error_type, verb = _UNREAD_ERRORS[cause.kind]
-    return error_type(f"recording image {path} {verb}: {cause.text}")
+    return error_type(f"recording image {shown(str(path))} {verb}: {cause.text}")
 
 
 #: A recorded image's error and verb for each kind of :class:`UnreadCause`: a valid image of a layout this OpenCV
@@ -689,10 +690,10 @@ def _read_from_the_file(path: Path, refusal: str) -> np.ndarray:
         return image
     memory_only = decoded_from_memory_because(path)
     if memory_only is not None:
-        raise RefusedLayoutError(f"recording image {path} does not decode: it is {refusal}; OpenCV's file reader, "
-                                 f"which decodes such tiles, is not used for it: {memory_only}")
-    raise RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it, from memory nor through "
-                            f"its file reader)")
+        raise RefusedLayoutError(f"recording image {shown(str(path))} does not decode: it is {refusal}; OpenCV's "
+                                 f"file reader, which decodes such tiles, is not used for it: {memory_only}")
+    raise RigOperationError(f"recording image {shown(str(path))} is corrupt (OpenCV cannot decode it, from memory nor "
+                            f"through its file reader)")
 
 
 #: The first bytes of the formats :func:`header_size` reads: the two the recorder writes (IMAGE_FORMATS), and BMP.
@@ -1043,18 +1044,18 @@ def load_truth(path: Path) -> tuple[CameraTruth | None, np.ndarray | None]:
         with np.load(path, allow_pickle=False) as archive:
             arrays = {name: archive[name] for name in archive.files}
     except FileNotFoundError as e:
-        raise RigOperationError(f"recording truth file {path} is missing") from e
+        raise RigOperationError(f"recording truth file {shown(str(path))} is missing") from e
     except (OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError,
             tokenize.TokenError) as e:
         # zlib.error: a member's deflate data damaged; NotImplementedError: zipfile's word for a damaged member's
         # compression method; TokenError: numpy's parse of a damaged .npy header (each a traceback from a read)
-        raise RigOperationError(f"recording truth file {path} is corrupt: {e}") from e
+        raise RigOperationError(f"recording truth file {shown(str(path))} is corrupt: {e}") from e
     joints_3d = arrays.pop("joints_3d", None)
     if not arrays:
         return None, joints_3d
     missing = [name for name in _TRUTH_FIELDS if name not in arrays]
     if missing:
-        raise RigOperationError(f"recording truth file {path}: array(s) {missing} missing")
+        raise RigOperationError(f"recording truth file {shown(str(path))}: array(s) {missing} missing")
     return CameraTruth(**{name: arrays[name] for name in _TRUTH_FIELDS}), joints_3d
 
 

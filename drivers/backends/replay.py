@@ -84,6 +84,7 @@ from drivers.frames import CameraTruth, Frame
 from drivers.pairing import DropPolicy, FramePairer, PairingConfig
 from drivers.pairing_options import take_pairing_options
 from drivers.url import RigUrl, decimal_number
+from ghnerf_runtime.path_check import shown
 
 log = logging.getLogger(__name__)
 
@@ -563,8 +564,9 @@ class ReplayRigSource(RigSource):
         if broken:
             row, rel = min(broken, key=lambda b: b[0].line)
             raise RigInitializationError(
-                f"recording {self.directory}: {len(broken)} file(s) listed in {FRAMES} are missing or empty, "
-                f"first: {self.directory / rel} ({self.directory / FRAMES} line {row.line})"
+                f"recording {shown(str(self.directory))}: {len(broken)} file(s) listed in {FRAMES} are missing or "
+                f"empty, first: {shown(str(self.directory / rel))} "
+                f"({shown(str(self.directory / FRAMES))} line {row.line})"
             )
         size_error = self.size_error()
         if size_error is not None:
@@ -607,13 +609,13 @@ class ReplayRigSource(RigSource):
         :class:`UndecodableImageError` where one is valid but of a layout this OpenCV refuses (the remedy named),
         else a RigInitializationError naming the first file as corrupt."""
         refused = [error for _, error in sizes if isinstance(error, RefusedLayoutError)]
-        head = (f"recording {self.directory}: camera {camera!r}: none of its {len(sizes)} images decode, "
+        head = (f"recording {shown(str(self.directory))}: camera {camera!r}: none of its {len(sizes)} images decode, "
                 f"nothing of it would play")
         if refused:
             return UndecodableImageError(f"{head} ({len(refused)} of a layout this OpenCV refuses; first: "
                                          f"{refused[0]})")
-        return RigInitializationError(f"{head} (first: {self.directory / sizes[0][0]} is corrupt: OpenCV cannot "
-                                      f"decode it)")
+        return RigInitializationError(f"{head} (first: {shown(str(self.directory / sizes[0][0]))} is corrupt: "
+                                      f"OpenCV cannot decode it)")
 
     def _size_refusal(self, camera: str, expected: tuple[int, int], count: int,
                       wrong: list[tuple[str, tuple[int, int]]]) -> FrameSizeError:
@@ -624,8 +626,9 @@ class ReplayRigSource(RigSource):
         names = ", ".join(rel for rel, _ in wrong[:SIZE_NAMES_SHOWN]) + (", ..." * (len(wrong) > SIZE_NAMES_SHOWN))
         verb = "is" if len(wrong) == 1 else "are"
         message = (
-            f"recording {self.directory}: camera {camera!r}: {len(wrong)} of its {count} images {verb} {sizes} "
-            f"({names}; read from each image's header at open), but its rig camera in {self.directory / MANIFEST} is "
+            f"recording {shown(str(self.directory))}: camera {camera!r}: {len(wrong)} of its {count} images {verb} "
+            f"{sizes} ({names}; read from each image's header at open), but its rig camera in "
+            f"{shown(str(self.directory / MANIFEST))} is "
             f"{expected[0]}x{expected[1]}: the take was recorded at another size than the rig it carries, its images "
             f"(all or some) were resized after, or its manifest's rig was replaced; play it with the images and "
             f"manifest.json it was recorded with (docs/recording-format.md, 'Image sizes')"
@@ -649,7 +652,7 @@ class ReplayRigSource(RigSource):
     def _read_frame(self, timeout_s: float) -> Frame | None:
         upcoming = self._next()
         if upcoming is None:
-            raise EndOfStream(f"recording {self.directory} ended after {len(self._rows)} frames")
+            raise EndOfStream(f"recording {shown(str(self.directory))} ended after {len(self._rows)} frames")
         row, shift_ns = upcoming
         if self._anchor_ns is None:
             self._start_playing()
@@ -753,7 +756,7 @@ class ReplayRigSource(RigSource):
             # file changed since, a corrupt frame the next read goes past. Typed as a size, it would read to a
             # daemon as a rig that does not fit: the take reopened from its start, then a stop.
             raise RigOperationError(
-                f"recording image {path} is {image.shape[1]}x{image.shape[0]}, but the rig's camera "
+                f"recording image {shown(str(path))} is {image.shape[1]}x{image.shape[0]}, but the rig's camera "
                 f"{row.camera!r} is {cam.width}x{cam.height} as the take's images were at open: this file was "
                 f"corrupted or edited since, a corrupt frame (the next read goes on)"
             )

@@ -40,14 +40,15 @@ from ghnerf_runtime.cli.rig_messages import rig_notes_let_through
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
     load_config
-from ghnerf_runtime.errors import FrameError, GeometryError, ModelError, ModelLoadError, RigFileError, \
+from ghnerf_runtime.errors import FrameError, GeometryError, ImageWriteError, ModelError, ModelLoadError, \
     RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult, check_model_files
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.image_files import read_image_or_none, unread_because
+from ghnerf_runtime.image_write import write_image_atomic
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
-from ghnerf_runtime.rig_file import load_rig, write_bytes_atomic, write_text_atomic
+from ghnerf_runtime.rig_file import load_rig, write_text_atomic
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.video_files import is_still_image, read_as_stored
 from ghnerf_runtime.path_check import user_path
@@ -431,17 +432,9 @@ class _Sink:
         """The last frame encoded in memory, then put in place atomically: imwrite truncated the file first, so a
         full disk left an earlier run's image cut short (and OpenCV said no more than False)."""
         try:
-            encoded, data = cv2.imencode(Path(self.path).suffix, self.last)
-        except cv2.error as e:
-            raise UsageError(f"{self.flag} {self.path}: cannot encode the image: {e}") from None
-        if not encoded:
-            raise UsageError(f"{self.flag} {self.path}: cannot encode the image")
-        try:
-            write_bytes_atomic(self.path, data.tobytes())
-        except RigFileError as e:
-            cause = getattr(e.__cause__, "strerror", None) or e
-            raise UsageError(f"{self.flag} {self.path}: cannot write the image ({cause}); an earlier file there "
-                             "is left as it was") from None
+            write_image_atomic(self.path, self.last)
+        except ImageWriteError as e:
+            raise UsageError(f"{self.flag} {self.path}: {e.reason}") from None
 
 
 def _write_all(fd: int, data: bytes) -> None:

@@ -104,6 +104,17 @@ def test_a_view_whose_header_is_beyond_opencv_s_size_limits_is_named_as_unreadab
     assert earlier_size(tmp_path / "left") is None  # ghcal capture --append: an unreadable one is the solve's to name
 
 
+def test_a_view_that_is_a_jpeg_cut_short_is_named_not_read_grey(tmp_path):
+    # OpenCV's file reader filled the missing part with grey, and the board was looked for in it
+    image = np.random.default_rng(0).integers(0, 256, (30, 40), dtype=np.uint8)
+    data = cv2.imencode(".jpg", image)[1].tobytes()
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+        (tmp_path / cam / "000.jpg").write_bytes(data[:len(data) // 3])
+    with pytest.raises(CaptureError, match=r"000.jpg: not a readable image: it is a JPEG cut short"):
+        detect_folder(BOARD, tmp_path)
+
+
 def test_a_view_of_a_compression_opencv_does_not_decode_is_named_not_a_black_image(tmp_path):
     # a JPEG 2000 TIFF (Compression 34712) was read as an image of zeros: the board "not found" in it
     data = cv2.imencode(".tiff", np.full((30, 40), 200, np.uint8), [cv2.IMWRITE_TIFF_COMPRESSION, 1])[1].tobytes()

@@ -2,6 +2,7 @@
 import json
 import logging
 import os
+import re
 import struct
 import time
 import zlib
@@ -30,6 +31,7 @@ from drivers.backends.recording_format import (
     encode_image,
     image_is_whole,
     load_image,
+    load_truth,
     payload_is_whole,
     read_manifest,
 )
@@ -1801,3 +1803,48 @@ def test_a_bad_first_stamp_among_the_stamps_before_a_later_reset_is_still_mended
     played, warned = _played_ms(left_ms, right_ms, caplog)
     assert [t - _HOUR_MS for cam, _, t in played if cam == "left"][:4] == [0, 33, 66, 100]
     assert any("bad stamp" in message and "images/left/00000000.png" in message for message in warned), warned
+
+
+def test_replay_names_a_recording_path_holding_a_control_character_escaped(tmp_path):
+    """A decoded %1B reached the terminal raw ('recording directory /tmp/x<ESC>[31m/take does not exist')."""
+    with pytest.raises(RigInitializationError) as e:
+        create_rig_source(f"replay://{tmp_path}/x%1B[31m/take")
+    assert "\x1b" not in str(e.value) and repr(f"{tmp_path}/x\x1b[31m/take") in str(e.value)
+    odd = tmp_path / "y\x1b[31m"
+    odd.mkdir()
+    (odd / "manifest.json").write_text("[]")
+    with pytest.raises(RigInitializationError, match="must be a JSON object") as e:
+        read_manifest(odd)
+    assert "\x1b" not in str(e.value) and repr(str(odd / "manifest.json")) in str(e.value)
+    (odd / "0.png").write_bytes(b"not a png")
+    (odd / "0.npz").write_bytes(b"not a zip")
+    for read, path, what in ((load_image, odd / "0.png", "recording image"),
+                             (load_truth, odd / "0.npz", "recording truth file")):
+        with pytest.raises(RigOperationError) as e:
+            read(path)
+        assert "\x1b" not in str(e.value) and str(e.value).startswith(f"{what} {str(path)!r} is corrupt")
+
+
+def test_replay_names_a_printable_recording_path_as_before(tmp_path):
+    with pytest.raises(RigInitializationError, match=f"recording directory {tmp_path}/take does not exist"):
+        create_rig_source(f"replay://{tmp_path}/take")
+
+
+def test_record_names_an_out_directory_holding_a_control_character_escaped(tmp_path, sim_cache):
+    odd = tmp_path / "z\x1b[31m"
+    odd.mkdir()
+    (odd / "other").write_text("")
+    with pytest.raises(RigInitializationError, match="not empty") as e:
+        open_rig(f"record+sim://?width=32&height=24&cache={sim_cache}&out={tmp_path}/z%1B[31m", clock=ManualClock())
+    assert "\x1b" not in str(e.value) and f"recording directory {str(odd)!r} is not empty" in str(e.value)
+
+
+def test_a_recorded_jpeg_cut_short_is_named_cut_short(tmp_path):
+    """imdecode refused it already; the error said only 'corrupt (OpenCV cannot decode it)', where ghnerf-run's and
+    ghcal's reads (image_files.unread_cause, the chain they share) now name the cut."""
+    data = encode_image(np.random.default_rng(2).integers(0, 256, (24, 32, 3), dtype=np.uint8), "jpg", 90)
+    path = tmp_path / "00000000.jpg"
+    path.write_bytes(data[:len(data) // 3])
+    said = f"recording image {path} is corrupt: it is a JPEG cut short"
+    with pytest.raises(RigOperationError, match=re.escape(said)):
+        load_image(path)

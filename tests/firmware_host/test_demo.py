@@ -6,6 +6,7 @@ The estimate tests use the shipped model (models/) and skip until it exists
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import os
 import re
@@ -19,6 +20,7 @@ import pytest
 
 import drivers
 from firmware_host import demo
+from ghnerf_runtime import rig_file
 from ghnerf_runtime.cli.sigterm import Terminated
 from ghnerf_runtime.estimator import Estimator
 from tests.firmware_host.joint_stream_helpers import record_take
@@ -603,14 +605,24 @@ def test_a_run_that_found_no_joint_says_its_mpjpe_is_not_measured(tmp_path, caps
     assert "MPJPE not measured: no joint found" in out and "nan" not in out
 
 
-def test_a_picture_that_cannot_be_written_fails_the_run_naming_it(tmp_path, capsys, sim_url, monkeypatch):
+def test_a_picture_that_cannot_be_written_fails_the_run_naming_it_and_keeps_the_earlier_one(tmp_path, capsys,
+                                                                                           sim_url, monkeypatch):
     """On a full disk OpenCV's imwrite returned False (libpng printed "Write Error"): the "wrote" line was left out
-    and the run exited 0 without a word that OUT/sim_pair.png was not written."""
-    monkeypatch.setattr(demo.cv2, "imwrite", lambda path, image: False)
+    and the run exited 0 without a word that OUT/sim_pair.png was not written. imwrite truncated the file first, so
+    an earlier run's picture was left cut short: it is now written whole or not at all."""
+    (tmp_path / "sim_pair.png").write_bytes(b"an earlier picture")
+
+    def disk_full(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(rig_file.os, "fsync", disk_full)  # the disk filled as the new picture was written
     rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.3", "--out", str(tmp_path)])
     out, err = capsys.readouterr()
     assert rc == 2 and "BODY_25 joints of that pair" in out  # the rest of the summary still printed
-    assert f"error: could not write {tmp_path / 'sim_pair.png'} (no permission, or no room left" in err
+    assert (f"error: could not write {tmp_path / 'sim_pair.png'}: cannot write the image (No space left on device); "
+            "an earlier file there is left as it was") in err
+    assert (tmp_path / "sim_pair.png").read_bytes() == b"an earlier picture"
+    assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")] == []
 
 
 def test_an_empty_sink_is_refused_by_name(tmp_path, capsys):

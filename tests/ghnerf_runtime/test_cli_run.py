@@ -193,6 +193,22 @@ def test_a_tiff_of_a_compression_opencv_does_not_decode_is_named_not_estimated_a
     _refused_without_opencv_s_words(str(path), said, capfd, "TIFF")
 
 
+def _jpeg_cut_to_a_third() -> bytes:
+    """A real encoded JPEG (noise: its scan is most of the file) cut to a third of its length."""
+    image = np.random.default_rng(0).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    data = cv2.imencode(".jpg", image)[1].tobytes()
+    return data[:len(data) // 3]
+
+
+def test_a_jpeg_cut_short_is_refused_naming_the_file_not_estimated_on_grey(tmp_path):
+    # OpenCV's file reader filled the missing two thirds with grey, and the joints were estimated from it (exit 0)
+    path = tmp_path / "left.jpg"
+    path.write_bytes(_jpeg_cut_to_a_third())
+    said = f"{path}: cannot take the image: it is a JPEG cut short ({path.stat().st_size} bytes, not ending at"
+    with pytest.raises(cli_run.UsageError, match=re.escape(said)):
+        cli_run._read_image(str(path))
+
+
 def test_a_missing_or_unreadable_image_is_named_without_opencv_s_warning(tmp_path, capfd):
     """A mistyped image path gave OpenCV's own "[ WARN:0@0.5] global loadsave.cpp ... findDecoder imread_" line
     above ghnerf-run's error, and the error said "missing file or unknown format" without saying which: a missing

@@ -723,3 +723,12 @@ def test_slerp_rotation_names_an_alpha_that_is_no_finite_number(alpha):
     a, b = _cams()
     with pytest.raises(GeometryError, match=r"slerp_rotation: alpha must be a finite number, got (nan|inf|None)"):
         slerp_rotation(a.R, b.R, alpha)
+
+
+@pytest.mark.parametrize("alpha", [True, False, np.True_, np.array(True)])
+def test_slerp_rotation_refuses_true_false_as_alpha(alpha):
+    """True was read as alpha 1.0 (sessions 73-74), as the estimator's capture time refuses it."""
+    a, b = _cams()
+    with pytest.raises(GeometryError, match=r"slerp_rotation: alpha must be a finite number, got (np\.)?"
+                                            r"(array\()?(True|False)"):
+        slerp_rotation(a.R, b.R, alpha)

@@ -463,3 +463,29 @@ def test_each_cause_of_an_unread_image_says_what_it_makes_of_the_file(tmp_path):
         assert image_files.unread_because(path, cv2.IMREAD_COLOR) == cause.text
     assert image_files.unread_cause(floats, cv2.IMREAD_UNCHANGED) is None
     assert image_files.unread_cause(corrupt, cv2.IMREAD_COLOR) is None
+
+
+def _noise_jpeg() -> bytes:
+    return cv2.imencode(".jpg", np.random.default_rng(1).integers(0, 256, (24, 32, 3), dtype=np.uint8))[1].tobytes()
+
+
+@pytest.mark.parametrize("cut", [lambda d: d[:len(d) // 3], lambda d: d[:-2], lambda d: d[:len(d) // 3] + bytes(40)])
+def test_a_jpeg_cut_short_does_not_read_and_says_so(tmp_path, cut):
+    """OpenCV's file reader filled a JPEG cut short with grey (libjpeg's "Premature end" only logged); imdecode,
+    replay's read, refuses it. Cut to a third, missing only its end-of-image marker, or cut and padded."""
+    path = tmp_path / "cut.jpg"
+    path.write_bytes(cut(_noise_jpeg()))
+    assert read_image_or_none(path, cv2.IMREAD_COLOR) is None
+    cause = image_files.unread_cause(path, cv2.IMREAD_COLOR)
+    assert cause == image_files.UnreadCause(
+        f"it is a JPEG cut short ({path.stat().st_size} bytes, not ending at its end-of-image marker FFD9)",
+        image_files.UnreadKind.DAMAGED)
+
+
+@pytest.mark.parametrize("tail", [b"", bytes(100), b"\xff" * 3, b"another tool's trailer"])
+def test_a_whole_jpeg_reads_as_imdecode_reads_it_whatever_follows_its_end(tmp_path, tail):
+    data = _noise_jpeg()
+    path = tmp_path / "whole.jpg"
+    path.write_bytes(data + tail)
+    expected = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    assert np.array_equal(read_image_or_none(path, cv2.IMREAD_COLOR), expected)
