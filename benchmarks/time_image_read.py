@@ -33,6 +33,8 @@ def load_reader(checkout: Path):
     spec = importlib.util.spec_from_file_location("baseline_image_files",
                                                   checkout / "ghnerf_runtime" / "image_files.py")
     module = importlib.util.module_from_spec(spec)
+    # registered first: a dataclass in it looks its module up in sys.modules while the class is made
+    sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module.read_image_or_none
 

@@ -92,6 +92,14 @@ def test_time_triangulation(capsys, monkeypatch):
     assert rows == ["two_views", "dlt", "dlt", "midpoint", "robust"], out
 
 
+def test_time_image_read_against_this_tree(capsys, monkeypatch):
+    """Its baseline reader is another checkout's image_files.py, loaded by path (this tree's stands in for it)."""
+    out = run_script("time_image_read", "--baseline", str(BENCH.parent), "--rounds", "2", "--size", "32x24",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    rows = re.findall(r"^ *(jpg|tiff) 32x24: baseline [\d.]+ ms, this tree [\d.]+ ms", out, re.M)
+    assert rows == ["jpg", "tiff"], out
+
+
 def test_bench_sim_render(capsys, monkeypatch):
     out = run_script("bench_sim_render", "--repeats", "1", capsys=capsys, monkeypatch=monkeypatch)
     assert re.search(r"^pair 2x640x480 \(default rig\) +\d+\.\d+ +\d+\.\d+$", out, re.M), out
