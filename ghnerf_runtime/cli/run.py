@@ -26,6 +26,7 @@ import json
 import logging
 import math
 import os
+import stat
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -436,12 +437,34 @@ class _Sink:
             raise UsageError(f"{self.flag} {self.path}: cannot encode the image: {e}") from None
         if not encoded:
             raise UsageError(f"{self.flag} {self.path}: cannot encode the image")
+        if _not_a_regular_file(self.path):
+            self._write_into(data.tobytes())
+            return
         try:
             write_bytes_atomic(self.path, data.tobytes())
         except RigFileError as e:
             cause = getattr(e.__cause__, "strerror", None) or e
             raise UsageError(f"{self.flag} {self.path}: cannot write the image ({cause}); an earlier file there "
                              "is left as it was") from None
+
+    def _write_into(self, data: bytes) -> None:
+        """``data`` written into the FIFO (or device) at the path: a file renamed over it left its reader waiting."""
+        try:
+            fd = os.open(self.path, os.O_WRONLY)
+            try:
+                _write_all(fd, data)
+            finally:
+                os.close(fd)
+        except OSError as e:
+            raise UsageError(f"{self.flag} {self.path}: cannot write the image ({e.strerror or e})") from None
+
+
+def _not_a_regular_file(path: str) -> bool:
+    """``path`` (through links) is there and is no regular file: a FIFO a viewer reads, a device."""
+    try:
+        return not stat.S_ISREG(os.stat(path).st_mode)
+    except OSError:  # not there (made by the write), or said by the write
+        return False
 
 
 def _write_all(fd: int, data: bytes) -> None:
