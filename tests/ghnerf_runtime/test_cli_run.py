@@ -1384,3 +1384,11 @@ def test_an_image_output_on_a_fifo_is_written_into_it(tmp_path):
         os.close(reader)
     assert stat.S_ISFIFO(path.lstat().st_mode)
     assert data == cv2.imencode(".png", image)[1].tobytes()
+
+
+@pytest.mark.parametrize("flag", ["--novel-view", "--overlay"])
+@pytest.mark.parametrize("name", ["novel.txt", "novel"])
+def test_an_image_output_of_unknown_kind_names_its_option(tmp_path, flag, name):
+    """The refusal named the path only: which of --novel-view and --overlay it was, the user had to guess."""
+    with pytest.raises(cli_run.UsageError, match=rf"^{flag} .*{name}: cannot write an image of this kind"):
+        cli_run._Sink(str(tmp_path / name), flag=flag)
