@@ -43,7 +43,9 @@ host, a bad ``baud=``, an unknown option: the daemon's config check, which opens
 
 Ctrl-C stops the reading and still prints the summary (exit 0); SIGTERM (``timeout``, ``kill``: how a
 ``record+`` take is often ended) does the same, a recorder closing its take complete, and exits 143 with one
-line. Either before the first pair (the motion loop's first render, the model load) exits 130 or 143.
+line. Either before the first pair (the motion loop's first render, the model load) exits 130 or 143. A ``record+``
+take that fails as it closes (its last fsync: ``complete: false``) ends any run with exit 2 and one error line,
+a stopped one included.
 
 Without a model in the model folder the demo stops with a one-line error naming the
 folder and the command that builds it. ``--truth-only`` skips the model: the simulator's

@@ -252,9 +252,9 @@ def samples_not_8_bit(path: str | os.PathLike) -> str | None:
     read it at all, or reads 8- or 16-bit samples. It decodes the file a second time: call it only once the first
     decode failed."""
     image = read_image_or_none(path, cv2.IMREAD_UNCHANGED)
-    if image is None or image.size == 0 or image.dtype in (np.uint8, np.uint16):
-        # 8- or 16-bit samples decode: the first decode failed otherwise (a JPEG cut short, which imdecode refuses
-        # and the file reader fills in grey, was "uint8 samples: only 8- or 16-bit images decode")
+    if image is None or image.size == 0 or (image.dtype.kind in "iu" and image.dtype.itemsize <= 2):
+        # 8- or 16-bit samples decode, signed too: the first decode failed otherwise (a JPEG cut short, which
+        # imdecode refuses and the file reader fills in grey, was "uint8 samples: only 8- or 16-bit images decode")
         return None
     channels = 1 if image.ndim == 2 else image.shape[2]
     return (f"{image.dtype.name} samples ({image.shape[1]}x{image.shape[0]}, {channels} channel"

@@ -391,7 +391,7 @@ class _Sink:
         self.flag = flag  # named in a later error: which of --novel-view and --overlay could not be written
         self.video = Path(path).suffix.lower() in (".mp4", ".avi", ".mkv")
         if not self.video and not cv2.haveImageWriter(path):  # said now, not after the whole run
-            raise UsageError(f"{path}: cannot write an image of this kind; give .png, .jpg or .mp4")
+            raise UsageError(f"{flag} {path}: cannot write an image of this kind; give .png, .jpg or .mp4")
         self.writer = None
         self.fps = 30.0  # the input's rate, set by _run once the inputs are open (before the first frame)
         self.last = None

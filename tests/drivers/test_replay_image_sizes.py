@@ -959,3 +959,13 @@ def test_a_take_of_jpeg_2000_tiffs_is_refused_at_open_naming_the_file_and_the_co
                              rf"{re.escape(str(tiffs[0]))} does not decode: it is a TIFF of Compression 34712 "
                              rf"\(JPEG 2000\)"):
         source.open()
+
+
+@pytest.mark.parametrize("dtype", [np.int8, np.int16])
+def test_signed_8_or_16_bit_samples_are_not_named_as_the_cause(tmp_path, dtype):
+    """OpenCV decodes int8 and int16 TIFF samples to 8 bits, as it does uint8 and uint16: a file of them that failed
+    its first decode for another reason was said to have "int16 samples (...): only 8- or 16-bit images decode"."""
+    path = tmp_path / "image.tiff"
+    assert cv2.imwrite(str(path), np.full((6, 8, 3), 5, dtype))
+    assert cv2.imread(str(path), cv2.IMREAD_COLOR) is not None  # they decode: no cause of a failed one
+    assert image_files.samples_not_8_bit(path) is None

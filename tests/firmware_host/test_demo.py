@@ -1189,3 +1189,33 @@ def test_a_second_person_on_the_simulated_rig_reaches_the_stream_flagged(tmp_pat
     count, estimated, out = runs["two"]
     assert count > 0, out
     assert f"{count} of the {estimated} pairs estimated were flagged several_people" in out
+
+
+@pytest.mark.parametrize("first", sorted(_FIRST_STOPS))
+def test_a_take_that_fails_as_a_stopped_run_closes_it_ends_with_status_2_said_once(tmp_path, capsys, monkeypatch,
+                                                                                   first):
+    """A Ctrl-C (0) or SIGTERM (143) stop: the take's failed last fsync still ends the run with 2, one error line,
+    as a run that read to its end does; a stop is no reason to call an incomplete take whole."""
+    import drivers.backends.record as record_module
+
+    def full_disk(path):
+        raise OSError(28, "No space left on device")
+
+    raise_first = _FIRST_STOPS[first][0]
+    real_frame, frames = demo.truth_frame, []
+
+    def stopped_at_the_third_pair(*args, **kwargs):
+        frames.append(1)
+        if len(frames) == 3:
+            raise raise_first()
+        return real_frame(*args, **kwargs)
+
+    monkeypatch.setattr(record_module, "_fsync", full_disk)
+    monkeypatch.setattr(demo, "truth_frame", stopped_at_the_third_pair)
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert rc == 2, captured.err
+    said = [line for line in captured.err.splitlines() if "failed as it closed" in line]
+    assert len(said) == 1 and f"recording to {take} failed as it closed" in said[0], captured.err

@@ -403,3 +403,24 @@ def test_a_link_that_flaps_or_stays_down_after_connected_again_is_last_said_to_b
             assert "lost again before a frame got through (EIO): it flaps" in told[-1], told
             assert sum("it flaps" in line for line in told) == 1, told  # once: the rest DEBUG
         assert sink.close().state == "closed"
+
+
+def test_a_link_that_flaps_again_after_frames_got_through_says_so_again(caplog: pytest.LogCaptureFixture) -> None:
+    """The "it flaps" WARNING is once per flapping episode: after frames got through (the INFO), a link that flaps
+    anew is a new outage, told as the first was (lost, connected again, it flaps), not left at DEBUG."""
+    sink = LostAtEveryFrame()
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink.start()
+        for episode in (1, 2):
+            sink.broken = True
+            base = sink.stats().disconnects
+            _feed(sink, lambda: sink.stats().disconnects >= base + 4, what=f"episode {episode}'s losses")
+            sink.broken = False
+            sent = sink.stats().sent
+            _feed(sink, lambda: sink.stats().sent > sent, what="a frame through")
+            wait_until(lambda: len(_lines(caplog, logging.INFO, "frames get through again")) == episode,
+                       what="the INFO that says so")
+            assert len(_lines(caplog, logging.WARNING, "link lost (")) == episode
+            assert len(_lines(caplog, logging.INFO, "connected again")) == episode
+            assert len(_lines(caplog, logging.WARNING, "it flaps")) == episode
+    assert sink.close().state == "closed"

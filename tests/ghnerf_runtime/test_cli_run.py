@@ -1377,3 +1377,34 @@ def test_the_rig_file_s_note_is_shown_without_verbose_once(tmp_path, verbose):
     assert proc.returncode == 2 and "a.png: no such file" in proc.stderr, proc.stderr
     noted = framing_notes(proc.stderr)
     assert len(noted) == 1 and noted[0].startswith(f"INFO ghnerf_runtime.rig_file: {rig}: a 1.8 m person"), noted
+
+
+def test_an_image_output_on_a_fifo_is_written_into_it(tmp_path):
+    """`mkfifo novel.png` read by a viewer: the atomic write renamed a regular file over the FIFO, its reader never
+    got the image (it waited on a FIFO no longer in the folder)."""
+    import os
+    import stat
+
+    path = tmp_path / "novel.png"
+    os.mkfifo(path)
+    reader = os.open(path, os.O_RDONLY | os.O_NONBLOCK)  # a reader there, so the writer's open does not block
+    try:
+        image = np.full((4, 4, 3), 200, np.uint8)
+        sink = cli_run._Sink(str(path), flag="--novel-view")
+        sink.add(image)
+        sink.close()
+        data = os.read(reader, 1 << 16)
+    except BlockingIOError:  # nothing came through the FIFO
+        data = b""
+    finally:
+        os.close(reader)
+    assert stat.S_ISFIFO(path.lstat().st_mode)
+    assert data == cv2.imencode(".png", image)[1].tobytes()
+
+
+@pytest.mark.parametrize("flag", ["--novel-view", "--overlay"])
+@pytest.mark.parametrize("name", ["novel.txt", "novel"])
+def test_an_image_output_of_unknown_kind_names_its_option(tmp_path, flag, name):
+    """The refusal named the path only: which of --novel-view and --overlay it was, the user had to guess."""
+    with pytest.raises(cli_run.UsageError, match=rf"^{flag} .*{name}: cannot write an image of this kind"):
+        cli_run._Sink(str(tmp_path / name), flag=flag)
