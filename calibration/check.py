@@ -195,7 +195,7 @@ def floor_unmeasured(report: Mapping[str, Any], views: Mapping[str, Mapping[str,
     or where no camera found the board in it (the caller knows whether it was taken at all).
 
     ``missed`` (camera -> names of images without the board, from
-    :func:`~calibration.capture.detect_folder`) tells a camera whose floor image is missing from one that did
+    :func:`~calibration.capture.read_folder`) tells a camera whose floor image is missing from one that did
     not find the board in it; ``root``, the images' folder, names the missing file.
 
     ``ghcal check`` said "the board was not found in both cameras' floor view" whatever the reason, also

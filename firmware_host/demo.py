@@ -32,7 +32,8 @@ rig delivers:
 A camera that vanishes or falls silent (no pair within a second; five for the first pair) mid-run ends the
 reading too: the summary of the pairs before it, then one line, ``error: the rig failed after N pairs: ...``
 naming the camera, exit status 2 (until session 62 only ``stopping: ...`` among the summary's lines, exit 0: a
-loose cable passed the bring-up's camera check). A recording that ends (``replay://``) is no failure.
+loose cable passed the bring-up's camera check). A recording that ends (``replay://``) is no failure; a
+``record+`` take whose write failed as it closed is (one line after the summary, exit 2; since session 74).
 
 A ``file://`` ``--sink`` on a file the run reads (the rig URL's ``rig=``, ``bvh=`` or video files, the ``--config``
 file) or on ``OUT/sim_pair.png`` is a usage error before anything is opened, as the daemon refuses its sinks there

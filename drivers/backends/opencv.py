@@ -458,9 +458,9 @@ class _Camera:
     def _end_lost_run(self, *, last: bool = False) -> None:
         """A frame came (or, ``last``, none will): the run of frames lost before it (if any) is logged, once."""
         words = self.lost.words(self.index, last=last)
-        if words is not None:
+        if words is not None:  # (none lost, the usual frame: nothing to reset, no new _LostRun per frame)
             log.warning("camera %r (%s) lost %s", self.name, self.shown, words)
-        self.lost = _LostRun()
+            self.lost = _LostRun()
 
     def _size_error(self, delivered: tuple[int, int]) -> FrameSizeError:
         """A frame of ``delivered`` (width, height), not this camera's size; worded by where that size came from."""

@@ -896,7 +896,6 @@ def test_a_take_that_cannot_be_written_ends_the_run_and_is_not_counted_as_a_skip
     assert len(lines) == 1 and f"error: recording to {take} failed: [Errno 28] No space left on device" in lines[0]
 
 
-
 def test_a_take_that_cannot_be_made_durable_at_close_ends_the_run_with_status_2(tmp_path, capsys, monkeypatch):
     """A write error no read raised (the take's last fsync at close, a frame still queued then) left the take
     complete: false, said in a log line only: the run ended with status 0, as for a whole take."""
@@ -916,6 +915,7 @@ def test_a_take_that_cannot_be_made_durable_at_close_ends_the_run_with_status_2(
     assert (f"error: recording to {take} failed as it closed: [Errno 28] No space left on device; its manifest "
             "says complete: false") in captured.err
     assert json.loads((take / "manifest.json").read_text())["complete"] is False
+
 
 # A recorder slower than the rig (frames still queued when the signal comes), then the demo itself, as its console
 # script runs it: the test's own process cannot take a real SIGTERM without ending pytest.
