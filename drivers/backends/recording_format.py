@@ -1038,15 +1038,21 @@ def load_truth(path: Path) -> tuple[CameraTruth | None, np.ndarray | None]:
     """Read what :func:`write_truth` stored.
 
     Raises:
-        RigOperationError: naming the file (and the array) when it is missing or corrupt.
+        RigOperationError: naming the file (and the array) when it is missing, a folder, unreadable or corrupt.
     """
     try:
         with np.load(path, allow_pickle=False) as archive:
             arrays = {name: archive[name] for name in archive.files}
     except FileNotFoundError as e:
         raise RigOperationError(f"recording truth file {shown(str(path))} is missing") from e
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError,
-            tokenize.TokenError) as e:
+    except IsADirectoryError as e:
+        raise RigOperationError(f"recording truth file {shown(str(path))} is a folder, not a file") from e
+    except OSError as e:
+        if e.errno is None:  # no OS reason: a format complaint raised as OSError, a damaged file
+            raise RigOperationError(f"recording truth file {shown(str(path))} is corrupt: {e}") from e
+        # permission, I/O error: the OS's reason, not "corrupt" (the file may be whole)
+        raise RigOperationError(f"recording truth file {shown(str(path))} cannot be read: {e.strerror or e}") from e
+    except (ValueError, zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError, tokenize.TokenError) as e:
         # zlib.error: a member's deflate data damaged; NotImplementedError: zipfile's word for a damaged member's
         # compression method; TokenError: numpy's parse of a damaged .npy header (each a traceback from a read)
         raise RigOperationError(f"recording truth file {shown(str(path))} is corrupt: {e}") from e

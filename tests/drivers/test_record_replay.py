@@ -1,4 +1,5 @@
 """``record+<url>`` and ``replay://``: exact round trips, the file format, and every way a take can be broken."""
+import errno
 import json
 import logging
 import os
@@ -1181,6 +1182,27 @@ def test_a_damaged_truth_file_is_a_corrupt_frame_named_when_read(copy_of_take, d
         with pytest.raises(RigOperationError, match="is corrupt") as info:
             source.read(timeout_s=1.0)
     assert str(copy_of_take / row["truth"]) in str(info.value)
+
+
+def test_a_truth_file_it_may_not_read_is_told_with_the_os_reason_not_as_corrupt(tmp_path, monkeypatch):
+    """A PermissionError (or any OS-level read failure) was reported "is corrupt": the file may be whole."""
+    def refused(path, **kwargs):
+        raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+
+    monkeypatch.setattr(np, "load", refused)  # the host runs as root: a chmod would not refuse the read
+    path = tmp_path / "0.npz"
+    with pytest.raises(RigOperationError) as info:
+        load_truth(path)
+    assert str(info.value) == f"recording truth file {path} cannot be read: {os.strerror(errno.EACCES)}"
+
+
+def test_a_folder_where_the_truth_file_goes_is_told_as_a_folder_not_as_corrupt(tmp_path):
+    path = tmp_path / "0.npz"
+    path.mkdir()
+    with pytest.raises(RigOperationError) as info:
+        load_truth(path)
+    assert str(info.value) == f"recording truth file {path} is a folder, not a file"
+
 
 def test_an_image_of_the_wrong_size_is_named_at_open(copy_of_take):
     import cv2
