@@ -623,7 +623,9 @@ class ReplayRigSource(RigSource):
         sizes, the first few files) and its rig camera's size in the manifest."""
         found = Counter(size for _, size in wrong)  # in order of first appearance
         sizes = " and ".join(f"{w}x{h}" + (f" ({n})" if len(found) > 1 else "") for (w, h), n in found.items())
-        names = ", ".join(rel for rel, _ in wrong[:SIZE_NAMES_SHOWN]) + (", ..." * (len(wrong) > SIZE_NAMES_SHOWN))
+        # frames.jsonl's names as written, escaped where one holds a control character (the take's may be anyone's)
+        names = (", ".join(shown(rel) for rel, _ in wrong[:SIZE_NAMES_SHOWN])
+                 + (", ..." * (len(wrong) > SIZE_NAMES_SHOWN)))
         verb = "is" if len(wrong) == 1 else "are"
         message = (
             f"recording {shown(str(self.directory))}: camera {camera!r}: {len(wrong)} of its {count} images {verb} "

@@ -1213,6 +1213,22 @@ def test_an_image_of_the_wrong_size_is_named_at_open(copy_of_take):
         create_rig_source(f"replay://{copy_of_take}?speed=free").open()
 
 
+def test_an_image_of_the_wrong_size_whose_name_holds_a_control_character_is_named_escaped(copy_of_take):
+    """The size refusal listed frames.jsonl's image names raw: an escape sequence in one reached the terminal."""
+    import cv2
+
+    row = first_row(copy_of_take)
+    odd = str(Path(row["image"]).with_name("odd\x1b[31m.png"))
+    cv2.imwrite(str(copy_of_take / odd), np.zeros((10, 10, 3), np.uint8))
+    rows = [json.loads(line) for line in (copy_of_take / FRAMES).read_text().splitlines()]
+    (copy_of_take / FRAMES).write_text("".join(json.dumps(dict(r, image=odd) if r == row else r) + "\n"
+                                               for r in rows))
+    with pytest.raises(FrameSizeError) as info:
+        create_rig_source(f"replay://{copy_of_take}?speed=free").open()
+    assert "\x1b" not in str(info.value) and "1 of its " in str(info.value)
+    assert f"is 10x10 ({odd!r};" in str(info.value)
+
+
 def resize_images(take, camera, size):
     """Every image of ``camera`` in ``take`` rescaled to ``size`` (width, height), as an image tool would."""
     import cv2
