@@ -894,27 +894,17 @@ def test_a_stream_that_stalls_at_open_or_later_is_named_without_its_password(web
     time.sleep(2.6)  # the stalled grabs return and their threads end
 
 
-def test_a_live_camera_s_grab_that_fails_a_few_times_is_tried_again_and_a_run_of_failures_is_a_disconnect(webcam):
+def test_a_live_camera_s_grab_that_fails_a_few_times_is_tried_again_and_a_run_of_failures_is_a_disconnect(
+        webcam, monkeypatch):
     # a stream's hiccup or a USB frame error fails one grab; one such grab took the whole rig down (a reopen)
-    class Hiccups(_Webcam):
-        failing: set[int] = set()
-
-        def __init__(self, target, api) -> None:
-            super().__init__(target, api)
-            self.left, self.grabs = 200, 0
-
-        def grab(self) -> bool:
-            self.grabs += 1
-            ok = super().grab()
-            return ok and not (self.target == 1 and self.grabs in self.failing)
-
-    Hiccups.failing = {4, 6, 7, 8}
-    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=Hiccups) as source:
+    monkeypatch.setattr(_Flaky, "failing", {4, 6, 7, 8})
+    monkeypatch.setattr(_Flaky, "garbled", set())
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_Flaky) as source:
         pairs = [source.read(timeout_s=2.0) for _ in range(10)]
     assert pairs[-1].frames[1].index >= 9  # it delivered on after the failed grabs
-    Hiccups.failing = set(range(4, 1000))
+    _Flaky.failing = set(range(4, 1000))
     t0 = time.monotonic()
-    with open_rig("opencv://?first=0&second=1&tolerance_ms=30", capture_factory=Hiccups) as source:
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30", capture_factory=_Flaky) as source:
         said = r"camera 'right' \(1\) stopped delivering frames \(unplugged\?\): 10 grabs in a row failed"
         with pytest.raises(RigDisconnectedError, match=said):
             for _ in range(100):

@@ -1051,6 +1051,19 @@ _FIRST_STOPS = {  # the stop that ended the reading: (exception, exit status, st
 }
 
 
+def _stopping_at_the_third_pair(raise_first):
+    """``demo.truth_frame`` as it is, but for the third pair's, which raises ``raise_first()`` (the stop)."""
+    real_frame, frames = demo.truth_frame, []
+
+    def stopped_at_the_third_pair(*args, **kwargs):
+        frames.append(1)
+        if len(frames) == 3:
+            raise raise_first()
+        return real_frame(*args, **kwargs)
+
+    return stopped_at_the_third_pair
+
+
 @pytest.mark.parametrize("first", sorted(_FIRST_STOPS))
 @pytest.mark.parametrize("closing", ["the recorder", "the sink"])
 def test_a_second_ctrl_c_while_a_stopped_run_closes_leaves_the_take_whole_and_the_first_stop_reported(
@@ -1066,13 +1079,7 @@ def test_a_second_ctrl_c_while_a_stopped_run_closes_leaves_the_take_whole_and_th
     from firmware_host.sinks import base
 
     raise_first, status, err = _FIRST_STOPS[first]
-    real_frame, frames = demo.truth_frame, []
-
-    def stopped_at_the_third_pair(*args, **kwargs):
-        frames.append(1)
-        if len(frames) == 3:
-            raise raise_first()
-        return real_frame(*args, **kwargs)
+    stopped_at_the_third_pair = _stopping_at_the_third_pair(raise_first)
 
     pressed = []
 
@@ -1202,13 +1209,7 @@ def test_a_take_that_fails_as_a_stopped_run_closes_it_ends_with_status_2_said_on
         raise OSError(28, "No space left on device")
 
     raise_first = _FIRST_STOPS[first][0]
-    real_frame, frames = demo.truth_frame, []
-
-    def stopped_at_the_third_pair(*args, **kwargs):
-        frames.append(1)
-        if len(frames) == 3:
-            raise raise_first()
-        return real_frame(*args, **kwargs)
+    stopped_at_the_third_pair = _stopping_at_the_third_pair(raise_first)
 
     monkeypatch.setattr(record_module, "_fsync", full_disk)
     monkeypatch.setattr(demo, "truth_frame", stopped_at_the_third_pair)
