@@ -889,7 +889,8 @@ def test_a_stream_that_stalls_at_open_or_later_is_named_without_its_password(web
             while True:
                 source.read(timeout_s=5.0)
     said.append(str(stalled.value))
-    assert "rtsp://admin:***@cam1/s" in said[-1]
+    # either camera may be the one found stalled first: both stall at their fourth grab
+    assert "rtsp://admin:***@cam1/s" in said[-1] or "rtsp://admin:***@cam2/s" in said[-1]
     assert not [text for text in said if "hunter2" in text], said
     time.sleep(2.6)  # the stalled grabs return and their threads end
 
