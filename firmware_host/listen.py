@@ -318,6 +318,15 @@ def _unknown_set_words(counts: dict[int, int], form: str) -> list[str]:
     return [form.format(n=n, joint_set=joint_set) for joint_set, n in sorted(counts.items())]
 
 
+def _newer(send_us: int, shown_us: Optional[int]) -> bool:
+    """Whether a STATUS or HELLO written at ``send_us`` replaces the one of its type shown (written at ``shown_us``;
+    None: none, or a new numbering began since): written later on the sender's clock (which, unlike seq, orders the
+    STATUS and HELLO of a sender that sends no frame, and does not wrap: u64 µs), or over :data:`STALE_STATUS_US`
+    before it (a rebooted device). Shown as it arrived, one reordered behind a newer one on UDP read as the sender's
+    state until the next (until session 74 for STATUS, 75 for HELLO: a reload's new rig id was undone by the old)."""
+    return shown_us is None or send_us > shown_us or shown_us - send_us > STALE_STATUS_US
+
+
 def _fault_name(code: int) -> str:
     try:
         return Fault(code).name
@@ -367,9 +376,10 @@ class Tally:
     # newest) is this numbering's own, come late.
     _begun_us: Optional[int] = field(default=None, repr=False)
     _newest_us: Optional[int] = field(default=None, repr=False)
-    # send_us of the STATUS shown (None: none yet, or a new numbering began since, whose sender's clock may be
-    # another): a STATUS written before it is an older one that UDP delivered late.
+    # send_us of the STATUS and of the HELLO shown (None: none yet, or a new numbering began since, whose sender's
+    # clock may be another): one written before it is an older one that UDP delivered late.
     _status_us: Optional[int] = field(default=None, repr=False)
+    _hello_us: Optional[int] = field(default=None, repr=False)
 
     def add(self, message: Message) -> None:
         if isinstance(message, Joints):
@@ -383,16 +393,18 @@ class Tally:
                     self.scene[word] = self.scene.get(word, 0) + 1
             self._sequence(h.seq, h.send_us)
         elif isinstance(message, Status):
-            if self._newer_status(message.header.send_us):
+            if _newer(message.header.send_us, self._status_us):
                 self.status, self.status_at = message, time.monotonic()
                 self._status_us = message.header.send_us
         elif isinstance(message, Hello):
-            self.hello, self.hello_at = message, time.monotonic()
             if message.header.seq == NO_FRAME_SEQ and not self._written_in_this_numbering(message.header.send_us):
                 # a sender that has numbered no frame yet: a new process, whose JOINTS start again at 0, counted
                 # from the seq its HELLO carries (frames lost before its first JOINTS arrives are gaps). Without
                 # this, one that restarted within LATE_WINDOW of its old seq had its first frames read as late.
                 self._begin_at_hello(message.header.send_us)
+            if _newer(message.header.send_us, self._hello_us):  # after the numbering: a new sender's is shown
+                self.hello, self.hello_at = message, time.monotonic()
+                self._hello_us = message.header.send_us
 
     def _count_joints(self, message: Joints) -> None:
         """The joints present of a BODY_25 JOINTS; one of another joint set is only counted, by its set: a receiver
@@ -416,20 +428,11 @@ class Tally:
             return send_us < self._newest_us and self._newest_us - send_us <= STALE_HELLO_US
         return self._begun_us <= send_us <= self._newest_us and self._newest_us - send_us <= STALE_HELLO_US
 
-    def _newer_status(self, send_us: int) -> bool:
-        """Whether a STATUS written at ``send_us`` replaces the one shown: written later on the sender's clock (which,
-        unlike seq, orders the STATUS of a sender that sends no frame, and does not wrap: u64 µs), or over
-        :data:`STALE_STATUS_US` before it (a rebooted device), or the first since a new numbering began (a HELLO or
-        JOINTS of a restarted sender). Shown as it arrived, a STATUS reordered behind a newer one on UDP read as the
-        sender's state until the next (until session 74)."""
-        shown = self._status_us
-        return shown is None or send_us > shown or shown - send_us > STALE_STATUS_US
-
     def _begin_at_hello(self, send_us: int) -> None:
         if self._newest_us is None and self._begun_us is not None:  # another HELLO before any JOINTS: same start
             send_us = min(send_us, self._begun_us)
-        else:  # a new sender: its clock may be another (rebooted), its next STATUS is shown whatever its time
-            self._status_us = None
+        else:  # a new sender: its clock may be another (rebooted), its next STATUS and HELLO are shown whatever
+            self._status_us = self._hello_us = None
         self.last_seq, self._arrived, self._missing = NO_FRAME_SEQ, set(), {}
         self._begun_us, self._newest_us = send_us, None
 
@@ -463,9 +466,9 @@ class Tally:
                 self.total_gaps -= 1
                 if counted_in == self._interval:
                     self.gaps -= 1
-        else:  # a restarted sender: as after its HELLO, its next STATUS is shown whatever its time
+        else:  # a restarted sender: as after its HELLO, its next STATUS and HELLO are shown whatever their time
             self._restart(seq, send_us)
-            self._status_us = None
+            self._status_us = self._hello_us = None
 
     def _restart(self, seq: int, send_us: int) -> None:
         """A new numbering (the first JOINTS heard, or a restarted sender): the old one's window is forgotten."""

@@ -911,3 +911,44 @@ def test_the_listener_shows_the_newest_of_reordered_status_datagrams(monkeypatch
     out = io.StringIO()
     listen.listen(_port_reading(data, then=KeyboardInterrupt()), seconds=None, as_json=False, out=out, every_s=0.0)
     assert "sender fault OK, dropped 7" in out.getvalue(), out.getvalue()
+
+
+def _hello_of(rig_id: str, seq: int, send_us: int):
+    """A HELLO of ``rig_id`` and ``seq`` written at ``send_us`` on the sender's clock."""
+    from dataclasses import replace
+
+    hello = _at(seq, "HELLO", send_us)
+    return replace(hello, rig_id=rig_id)
+
+
+def test_a_hello_reordered_behind_a_newer_one_is_not_shown():
+    """A reload that opens another rig sends a HELLO with the new rig id; over UDP the old rig's HELLO written just
+    before can arrive after it, and the line said the old rig until the next HELLO. As for STATUS, the newest by the
+    sender's clock is shown; a rebooted or restarted sender's HELLO is shown whatever its time."""
+    from firmware_host.protocol.constants import NO_FRAME_SEQ
+
+    start = 100_000_000
+    tally = listen.Tally()
+    for seq in range(10, 20):
+        tally.add(_at(seq, "JOINTS", start + seq * 33_333))
+    tally.add(_hello_of("new", 19, start + 700_000))
+    tally.add(_hello_of("old", 19, start + 600_000))  # written first, arrived last
+    assert tally.hello is not None and tally.hello.rig_id == "new"
+    assert "rig 'new'" in tally.line(1.0, {})
+    tally.add(_hello_of("later", 19, start + 800_000))
+    assert tally.hello.rig_id == "later"
+    rebooted = listen.Tally()  # its clock started again: over 1 s before, it is not the old sender's
+    rebooted.add(_hello_of("old", 19, start))
+    rebooted.add(_hello_of("rebooted", 19, 20_000_000))
+    assert rebooted.hello is not None and rebooted.hello.rig_id == "rebooted"
+    restarted = listen.Tally()  # a new process (seq 2**32 - 1) of a device rebooted, its clock 0.5 s behind
+    restarted.add(_hello_of("old", 19, start + 700_000))
+    restarted.add(_hello_of("new", NO_FRAME_SEQ, start + 200_000))
+    assert restarted.hello is not None and restarted.hello.rig_id == "new"
+    followed = listen.Tally()  # a restart followed from its frames (its first HELLO lost): its next HELLO is shown
+    for seq in range(100, 110):
+        followed.add(_at(seq, "JOINTS", start + seq * 33_333))
+    followed.add(_hello_of("old", 109, start + 110 * 33_333))
+    followed.add(_at(0, "JOINTS", start + 500_000))  # far behind the old seq, on a clock 3.2 s behind the HELLO
+    followed.add(_hello_of("new", 0, start + 3_000_000))  # ... 0.7 s behind
+    assert followed.hello is not None and followed.hello.rig_id == "new"
