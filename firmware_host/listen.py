@@ -55,7 +55,7 @@ from ghnerf_runtime.cli.seconds import positive_seconds
 from ghnerf_runtime.cli.sigterm import sigterm_as_interrupt
 from ghnerf_runtime.path_check import path_problem, shown as shown_path
 
-__all__ = ["main", "open_port", "Tally", "ListenError"]
+__all__ = ["main", "open_port", "Tally", "Heard", "ListenError"]
 
 PROG = "ghnerf-listen"
 
@@ -74,16 +74,30 @@ class _UdpPort:
         self.address = self.sock.getsockname()
 
     def read(self, timeout_s: float) -> bytes:
+        return self.read_from(timeout_s)[0]
+
+    def read_from(self, timeout_s: float) -> tuple[bytes, Optional[str]]:
+        """A datagram and its sender's address (``192.0.2.7:40123``, ``[2001:db8::7]:40123``); ``b""`` and None
+        when none came within ``timeout_s``."""
         ready, _, _ = select.select([self.sock], [], [], timeout_s)
         if not ready:
-            return b""
-        datagram = self.sock.recv(65536)
+            return b"", None
+        datagram, source = self.sock.recvfrom(65536)
         # A datagram is one whole frame (docs/protocol.md): one from a stray sender without the closing 0x00
         # is ended here, or the decoder glued it to the next datagram and lost that frame too.
-        return datagram if datagram.endswith(b"\x00") else datagram + b"\x00"
+        return (datagram if datagram.endswith(b"\x00") else datagram + b"\x00"), source_name(source)
 
     def close(self) -> None:
         self.sock.close()
+
+
+def source_name(address: Any) -> str:
+    """A datagram's sender as a user writes it: an IPv4 sender heard on the dual-stack socket (``::ffff:10.0.0.7``)
+    as its IPv4 address, an IPv6 one in brackets."""
+    ip = ipaddress.ip_address(address[0].partition("%")[0])
+    if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
+        return f"{ip.ipv4_mapped}:{address[1]}"
+    return f"[{address[0]}]:{address[1]}" if ip.version == 6 else f"{address[0]}:{address[1]}"
 
 
 def _cannot_listen(host: str, port: int, e: Exception) -> ListenError:
@@ -517,30 +531,119 @@ class Tally:
         return "; ".join(parts)
 
 
+#: A sender not heard for this long while another is gets no line of its own any more: a udp:// sink that reopened
+#: its socket (a reconnect, a reload) sends from another port, and its old address falls quiet for good.
+QUIET_S = 10.0
+
+
+@dataclass
+class Producer:
+    """One sender heard on the port: its own decoder (a datagram is a whole frame, so its decode errors are its
+    own) and tally, and when it was last heard (``time.monotonic()``; 0.0: not yet)."""
+
+    decoder: StreamDecoder = field(default_factory=StreamDecoder)
+    tally: Tally = field(default_factory=Tally)
+    heard_at: float = 0.0
+
+
+def _waiting() -> dict[Optional[str], Producer]:
+    return {None: Producer()}
+
+
+@dataclass
+class Heard:
+    """The senders heard on one port by address, first heard first: each its own seq tally, STATUS and HELLO, which
+    one tally mixed (one sender's frames read as the other's gaps and restarts; a STATUS hidden by another's newer
+    clock). Key None: a serial link's one sender, or the first before its first datagram came (which takes it)."""
+
+    producers: dict[Optional[str], Producer] = field(default_factory=_waiting)
+
+    @property
+    def first(self) -> Tally:
+        return next(iter(self.producers.values())).tally
+
+    def producer(self, source: Optional[str], now: float, notes: TextIO) -> Producer:
+        """The sender at ``source`` (a new one when first heard, said on ``notes`` while another is heard too)."""
+        if source not in self.producers:
+            if list(self.producers) == [None]:
+                self.producers = {source: self.producers[None]}
+            else:
+                self._note_another(source, now, notes)
+                self.producers[source] = Producer()
+        producer = self.producers[source]
+        producer.heard_at = now
+        return producer
+
+    def _note_another(self, source: Optional[str], now: float, notes: TextIO) -> None:
+        current = [f"{name} (heard {now - p.heard_at:.1f} s ago)" for name, p in self.producers.items()
+                   if now - p.heard_at <= QUIET_S]
+        if current:  # else the one before fell quiet long ago: a sender restarted elsewhere, its line replaced
+            notes.write(f"{PROG}: another sender on this port: {source}, besides {', '.join(current)}: two senders "
+                        "(a receiver here mixes their frames) or one that reopened its socket; each summary line "
+                        "names its sender while both are heard\n")
+            notes.flush()
+
+    def _current(self, now: float) -> list[tuple[Optional[str], Producer]]:
+        """The senders heard within :data:`QUIET_S`, and the last heard whenever (a lone sender gone quiet keeps
+        its line, as before there were several)."""
+        last = max(p.heard_at for p in self.producers.values())
+        return [(name, p) for name, p in self.producers.items() if p.heard_at >= min(last, now - QUIET_S)]
+
+    def lines(self, seconds: float, now: float) -> list[str]:
+        """Each current sender's summary line, named when there are several; every tally starts a new interval."""
+        current = {name for name, _ in self._current(now)}
+        lines = [(name, p.tally.line(seconds, p.decoder.stats.errors)) for name, p in self.producers.items()]
+        if len(current) == 1:
+            return [line for name, line in lines if name in current]
+        return [f"{name}: {line}" for name, line in lines if name in current]
+
+    def totals(self) -> list[str]:
+        """The totals line, one per sender (named) when several were heard."""
+        if len(self.producers) == 1:
+            return [_totals(self.first)]
+        return [f"{name}: {_totals(p.tally)}" for name, p in self.producers.items()]
+
+
+def _totals(tally: Tally) -> str:
+    unknown = "".join(f", {words}" for words in _unknown_set_words(tally.total_unknown_sets, UNKNOWN_SET_TOTAL))
+    return (f"{tally.total_joints} JOINTS messages, {tally.total_gaps} sequence gaps (lost), {tally.total_late} late "
+            f"(reordered), {tally.total_duplicates} duplicate{unknown}")
+
+
+def _read(port: Any, timeout_s: float) -> tuple[bytes, Optional[str]]:
+    """What ``port`` read and from whom: a UDP port names each datagram's sender, a serial one has one sender."""
+    read_from = getattr(port, "read_from", None)
+    return read_from(timeout_s) if read_from is not None else (port.read(timeout_s), None)
+
+
 def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, every_s: float = 1.0,
-           tally: Optional[Tally] = None) -> Tally:
-    """Read until ``seconds`` pass (None: until interrupted), writing summaries or JSON lines to ``out``; counts into
-    ``tally`` (a new one when None), which keeps what arrived if the port fails (:class:`ListenError`)."""
-    decoder = StreamDecoder()
-    tally = Tally() if tally is None else tally
+           heard: Optional[Heard] = None, notes: Optional[TextIO] = None) -> Tally:
+    """Read until ``seconds`` pass (None: until interrupted), writing summaries or JSON lines to ``out`` and a
+    second sender's arrival to ``notes`` (stderr when None); counts into ``heard`` (a new one when None), which keeps
+    what arrived if the port fails (:class:`ListenError`). Returns the first sender's tally."""
+    heard = Heard() if heard is None else heard
+    notes = sys.stderr if notes is None else notes
     start = last = time.monotonic()
     try:
         while seconds is None or time.monotonic() - start < seconds:
-            data = port.read(0.1)
-            for event in decoder.feed(data) if data else ():
+            data, source = _read(port, 0.1)
+            now = time.monotonic()
+            producer = heard.producer(source, now, notes) if data else None
+            for event in producer.decoder.feed(data) if producer is not None else ():
                 if event.message is not None:
-                    tally.add(event.message)
+                    producer.tally.add(event.message)
                 if as_json:
                     out.write(json.dumps(event.to_json()) + "\n")
                     out.flush()  # a reader at the end of a pipe sees each message as it comes
             now = time.monotonic()
             if not as_json and now - last >= every_s:
-                out.write(tally.line(now - last, decoder.stats.errors) + "\n")
-                out.flush()
+                for line in heard.lines(now - last, now):
+                    out.write(line + "\n")
+                    out.flush()  # each line alone: shorter than PIPE_BUF, a pipe takes it whole (docs/daemon.md)
                 last = now
     except KeyboardInterrupt:  # Ctrl-C is how a listening session usually ends: keep the totals
         pass
-    return tally
+    return heard.first
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -574,12 +677,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ListenError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
-    tally, status = Tally(), 0
+    heard, status = Heard(), 0
     # SIGTERM (`timeout`, systemd, a supervisor on the robot) ends it as Ctrl-C does, with the totals (listen()
     # reads either as the end of the session): its default action killed the process with nothing said
     try:
         with sigterm_as_interrupt():
-            listen(port, seconds=args.seconds, as_json=args.json, out=sys.stdout, tally=tally)
+            listen(port, seconds=args.seconds, as_json=args.json, out=sys.stdout, heard=heard)
     except BrokenPipeError:  # `ghnerf-listen ... | head`: the reader has what it wanted
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
@@ -588,9 +691,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         status = 2
     finally:
         port.close()
-    unknown = "".join(f", {words}" for words in _unknown_set_words(tally.total_unknown_sets, UNKNOWN_SET_TOTAL))
-    print(f"{tally.total_joints} JOINTS messages, {tally.total_gaps} sequence gaps (lost), {tally.total_late} late "
-          f"(reordered), {tally.total_duplicates} duplicate{unknown}", file=sys.stderr)
+    for line in heard.totals():
+        print(line, file=sys.stderr)
     return status
 
 

@@ -6,6 +6,7 @@ import io
 import os
 import socket
 import threading
+import time
 
 import pytest
 
@@ -952,3 +953,113 @@ def test_a_hello_reordered_behind_a_newer_one_is_not_shown():
     followed.add(_at(0, "JOINTS", start + 500_000))  # far behind the old seq, on a clock 3.2 s behind the HELLO
     followed.add(_hello_of("new", 0, start + 3_000_000))  # ... 0.7 s behind
     assert followed.hello is not None and followed.hello.rig_id == "new"
+
+
+class _Senders:
+    """A udp:// port for :func:`listen.listen`: scripted datagrams, each with its sender's address, then a Ctrl-C.
+    ``read`` hands over the same datagrams without the address, as a listener that did not ask for it saw them."""
+
+    def __init__(self, datagrams) -> None:
+        self.datagrams = list(datagrams)
+
+    def read_from(self, timeout_s: float):
+        from firmware_host.protocol.encoder import encode
+
+        if not self.datagrams:
+            raise KeyboardInterrupt
+        source, message = self.datagrams.pop(0)
+        return encode(message), source
+
+    def read(self, timeout_s: float) -> bytes:
+        return self.read_from(timeout_s)[0]
+
+    def close(self) -> None:
+        pass
+
+
+_A, _B = "127.0.0.1:40000", "127.0.0.2:40001"
+
+
+def _two_rigs():
+    """Two senders on one port, interleaved: A's frames 0-5 and OK STATUS; B's, on a clock 0.4 s behind A's, with 4
+    lost and 3 ahead of 2 (reordered), and a CAMERA_FAULT STATUS; each a HELLO of its rig first."""
+    from dataclasses import replace
+
+    from firmware_host.protocol.constants import NO_FRAME_SEQ, Fault
+
+    period, a_start, b_start = 33_333, 50_000_000, 49_600_000
+    a = [replace(_at(NO_FRAME_SEQ, "HELLO", a_start), rig_id="rig-a")]
+    a += [_at(seq, "JOINTS", a_start + (seq + 1) * period) for seq in range(6)]
+    a.append(_status(5, a_start + 7 * period, int(Fault.OK), 0))
+    b = [replace(_at(NO_FRAME_SEQ, "HELLO", b_start), rig_id="rig-b")]
+    b += [_at(seq, "JOINTS", b_start + (seq + 1) * period) for seq in (0, 1, 3, 2, 5)]
+    b.append(_status(5, b_start + 7 * period, int(Fault.CAMERA_FAULT), 2))
+    datagrams = []
+    for k in range(max(len(a), len(b))):
+        datagrams += [(_A, a[k])] if k < len(a) else []
+        datagrams += [(_B, b[k])] if k < len(b) else []
+    return datagrams
+
+
+def test_two_senders_on_one_port_are_counted_apart():
+    """Until session 75 one tally took both: B's frames read as A's duplicates (5; the totals said 11 JOINTS, 0 lost),
+    B's loss and reordering went unseen, and B's STATUS, written on a clock 0.4 s behind A's, was never shown."""
+    heard, notes = listen.Heard(), io.StringIO()
+    listen.listen(_Senders(_two_rigs()), seconds=None, as_json=True, out=io.StringIO(), heard=heard, notes=notes)
+    a, b = heard.producers[_A].tally, heard.producers[_B].tally
+    assert list(heard.producers) == [_A, _B]
+    assert (a.total_joints, a.total_gaps, a.total_late, a.last_seq) == (6, 0, 0, 5)
+    assert (b.total_joints, b.total_gaps, b.total_late, b.last_seq) == (5, 1, 1, 5)
+    assert _shown_status(a) == (0, 0) and _shown_status(b) == (5, 2)
+    assert a.hello is not None and a.hello.rig_id == "rig-a" and b.hello is not None and b.hello.rig_id == "rig-b"
+    lines = heard.lines(1.0, time.monotonic())
+    assert len(lines) == 2 and lines[0].startswith(f"{_A}: 6.0 JOINTS/s;") and "rig 'rig-a'" in lines[0], lines
+    assert lines[1].startswith(f"{_B}: 5.0 JOINTS/s;") and "1 seq gaps; 1 late (reordered)" in lines[1], lines
+    assert "sender fault CAMERA_FAULT, dropped 2" in lines[1] and "rig 'rig-b'" in lines[1], lines
+    said = notes.getvalue()
+    assert said.startswith(f"ghnerf-listen: another sender on this port: {_B}, besides {_A} (heard ") and (
+        said.count("\n") == 1), said
+
+
+def test_the_totals_name_each_sender_and_the_second_is_announced(monkeypatch, capsys):
+    monkeypatch.setattr(listen, "open_port", lambda url: _Senders(_two_rigs()))
+    assert listen.main(["udp://:9870"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith(f"ghnerf-listen: another sender on this port: {_B}, besides {_A}"), err
+    assert err[1:] == [f"{_A}: 6 JOINTS messages, 0 sequence gaps (lost), 0 late (reordered), 0 duplicate",
+                       f"{_B}: 5 JOINTS messages, 1 sequence gaps (lost), 1 late (reordered), 0 duplicate"], err
+
+
+def test_one_sender_or_one_that_reopened_its_socket_reads_as_before(monkeypatch, capsys):
+    """One address: the line and totals as before there were several. A sender heard from a new address after its
+    old one fell quiet (QUIET_S; a udp:// sink that reconnected sends from another port) replaces it unannounced."""
+    alone = [(source, message) for source, message in _two_rigs() if source == _A]
+    monkeypatch.setattr(listen, "open_port", lambda url: _Senders(alone))
+    assert listen.main(["udp://:9870"]) == 0
+    assert capsys.readouterr().err.splitlines() == ["6 JOINTS messages, 0 sequence gaps (lost), 0 late (reordered), "
+                                                    "0 duplicate"]
+    monkeypatch.setattr(listen, "QUIET_S", 0.0)  # A quiet since its last datagram
+    reopened = [(_B if k >= 4 else _A, message) for k, (_, message) in enumerate(alone)]
+    heard, notes = listen.Heard(), io.StringIO()
+    listen.listen(_Senders(reopened), seconds=None, as_json=True, out=io.StringIO(), heard=heard, notes=notes)
+    lines = heard.lines(1.0, time.monotonic())
+    assert notes.getvalue() == "" and len(lines) == 1 and lines[0].startswith("3.0 JOINTS/s;"), lines
+
+
+def test_a_udp_port_names_each_datagram_s_sender():
+    from firmware_host.protocol.encoder import encode
+
+    port = listen.open_port("udp://127.0.0.1:0", ephemeral=True)
+    try:
+        names = []
+        for host in ("127.0.0.1", "127.0.0.2"):  # two senders on this machine: the loopback is all of 127/8
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+                tx.bind((host, 0))
+                tx.sendto(encode(_joints(1)), port.address)
+                names.append(f"{host}:{tx.getsockname()[1]}")
+        assert [port.read_from(2.0)[1] for _ in names] == names
+    finally:
+        port.close()
+    assert listen.source_name(("::ffff:192.0.2.7", 40123, 0, 0)) == "192.0.2.7:40123"  # on the dual-stack socket
+    assert listen.source_name(("2001:db8::7", 40123, 0, 0)) == "[2001:db8::7]:40123"
+    assert listen.source_name(("fe80::1%eth0", 40123, 0, 2)) == "[fe80::1%eth0]:40123"
