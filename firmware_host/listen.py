@@ -17,12 +17,14 @@ sender numbered but dropped or decimated, or the link lost; camera pairs the sen
 frame of take no number), late JOINTS (reordered: a seq up to :data:`LATE_WINDOW` behind the newest; one
 that fills a gap takes it back out of the gaps) and duplicates, the newest STATUS by the sender's clock (one that
 UDP delivers after a newer one is not shown; its fault code,
-docs/protocol.md, and CALIBRATION SUSPECT when its flag says so) and HELLO (with what of its joint set, units and
-frame is not BODY_25 millimetres in the rig frame), the JOINTS flagged with each scene
+docs/protocol.md, and CALIBRATION SUSPECT when its flag says so) and HELLO, also the newest so written (with what
+of its joint set, units and frame is not BODY_25 millimetres in the rig frame), the JOINTS flagged with each scene
 flag (``3 several people``: two people seen, one person's joints sent; not a presence detector, docs/protocol.md;
 ``2 someone else``: the sender's scan for others, whose HELLO then reads ``(scans for someone else)``), and the
 decoder's error counts (a noisy
-serial line shows as ``crc``/``cobs`` errors). A seq further back is a restarted sender, not a gap. Ctrl-C,
+serial line shows as ``crc``/``cobs`` errors). Each address sending to a udp:// port is a sender of its own,
+counted apart; with several, each line and total starts with the sender's address (``10.0.0.7:40123: 30.0
+JOINTS/s; ...``) and stderr says when another is heard. A seq further back is a restarted sender, not a gap. Ctrl-C,
 SIGTERM or ``--seconds`` ends it with the totals on stderr (``, N of joint_set K (unknown)`` added when any came).
 Exit status: 0; 2 for a bad URL or a port that cannot be opened (named), or one that fails while read (an
 unplugged serial port: the totals of what arrived until then are still printed).
@@ -579,8 +581,8 @@ class Heard:
                    if now - p.heard_at <= QUIET_S]
         if current:  # else the one before fell quiet long ago: a sender restarted elsewhere, its line replaced
             notes.write(f"{PROG}: another sender on this port: {source}, besides {', '.join(current)}: two senders "
-                        "(a receiver here mixes their frames) or one that reopened its socket; each summary line "
-                        "names its sender while both are heard\n")
+                        "(a receiver here mixes their frames) or one that reopened its socket; the summary lines "
+                        "and totals name each sender\n")
             notes.flush()
 
     def _current(self, now: float) -> list[tuple[Optional[str], Producer]]:
@@ -655,11 +657,13 @@ def main(argv: Sequence[str] | None = None) -> int:
               "'N JOINTS of joint_set K (unknown: left out of joints present)' for JOINTS of a joint set other than "
               "BODY_25 (the totals add 'N of joint_set K (unknown)'); "
               "the fault of the sender's newest STATUS by its send_us (', CALIBRATION SUSPECT' when flagged) "
-              "and HELLO ('(sends no scene "
+              "and of its newest HELLO ('(sends no scene "
               "flags)' from a sender too old to set them; '(scans for someone else)' from one whose estimator scans "
               "for others, the only sender whose frames without 'someone else' say nobody else was seen; '(not "
               "BODY_25 in mm in the rig frame: ...)' when it announces other joints, units or frame); decode errors "
-              "('version': a sender of a newer protocol). Ctrl-C, SIGTERM or --seconds ends it with the totals. "
+              "('version': a sender of a newer protocol). Several senders on a udp:// port: each counted apart, a "
+              "line and a total each that start with its address, and a note on stderr when another is heard. "
+              "Ctrl-C, SIGTERM or --seconds ends it with the totals. "
               "Counters: docs/daemon.md; protocol: docs/protocol.md")
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0], epilog=epilog)
     ap.add_argument("url", help="udp://[HOST]:PORT (no HOST: every interface, IPv4 and IPv6; a multicast HOST, "
