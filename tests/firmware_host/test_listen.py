@@ -1060,6 +1060,13 @@ def test_a_udp_port_names_each_datagram_s_sender():
         assert [port.read_from(2.0)[1] for _ in names] == names
     finally:
         port.close()
+    both = listen.open_port("udp://:0", ephemeral=True)  # dual-stack where the machine has IPv6
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            tx.sendto(encode(_joints(1)), ("127.0.0.1", both.address[1]))
+            assert both.read_from(2.0)[1] == f"127.0.0.1:{tx.getsockname()[1]}"  # not ::ffff:127.0.0.1
+    finally:
+        both.close()
     assert listen.source_name(("::ffff:192.0.2.7", 40123, 0, 0)) == "192.0.2.7:40123"  # on the dual-stack socket
     assert listen.source_name(("2001:db8::7", 40123, 0, 0)) == "[2001:db8::7]:40123"
     assert listen.source_name(("fe80::1%eth0", 40123, 0, 2)) == "[fe80::1%eth0]:40123"
