@@ -49,7 +49,8 @@ from urllib.parse import parse_qs, urlsplit
 from drivers.url import UrlPartError, decode_url_part, dropped_characters, redact_location, shown_url
 from firmware_host.addresses import ipv4_first
 from firmware_host.errors import shown_value
-from firmware_host.protocol.constants import NO_FRAME_SEQ, PROTOCOL_VERSION, SCENE_FLAGS, CoordFrame, Fault, Flags, JointSet, Units
+from firmware_host.protocol.constants import (NO_FRAME_SEQ, PROTOCOL_VERSION, SCENE_FLAGS, CoordFrame, Fault, Flags,
+                                              JointSet, Units)
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
 from firmware_host.sinks.url import host_name_problem, integer, ipv6_hint, location_host
@@ -319,7 +320,8 @@ def _unexpected_layout(hello: Hello) -> str:
     return f" (not BODY_25 in mm in the rig frame: {', '.join(odd)})"
 
 
-#: A ``version`` error passed its CRC: a sender of another protocol version, not line noise (docs/protocol.md, section 4).
+#: A ``version`` error passed its CRC: a sender of another protocol version, not line noise (docs/protocol.md,
+#: section 4).
 _VERSION_HINT = (f" (version: whole frames of a protocol version other than {PROTOCOL_VERSION}, which this listener "
                  "does not read: a newer sender needs a newer ghnerf-listen)")
 
