@@ -114,7 +114,30 @@ def _open(path) -> cv2.FileStorage:
         raise fail(path, None, f"cannot parse OpenCV YAML: {msg}") from e
     if not fs.isOpened():
         raise fail(path, None, "cannot open as an OpenCV FileStorage file")
+    try:
+        _refuse_duplicate_keys(fs.root(), path)
+    except RigFileError:
+        fs.release()
+        raise
     return fs
+
+
+def _refuse_duplicate_keys(root, path) -> None:
+    """A key given twice in one map, named (``cameras[0].image_width``). OpenCV reads the first and JSON and YAML
+    readers the last: a corrected value typed in below the old line was dropped without a word."""
+    stack = [(root, "")]
+    while stack:  # not recursive: a file nested thousands deep would hit Python's recursion limit
+        node, field = stack.pop()
+        if node.isMap():
+            keys, seen = _keys(node), set()
+            for key in keys:
+                if key in seen:
+                    raise fail(path, join(field, key), f"is given {keys.count(key)} times in one map: OpenCV reads "
+                                                       "the first, other readers the last; keep one")
+                seen.add(key)
+            stack.extend((node.getNode(key), join(field, key)) for key in keys)
+        elif node.isSeq():
+            stack.extend((node.at(i), f"{field}[{i}]") for i in range(node.size()))
 
 
 def _keys(node) -> tuple[str, ...]:

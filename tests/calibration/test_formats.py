@@ -672,6 +672,23 @@ def test_a_byte_order_mark_is_skipped(rig, tmp_path, suffix):
     assert_cameras_close(read(plain), read(marked), atol=0)
 
 
+@pytest.mark.parametrize("suffix", [".yml", ".json", ".xml"])
+@pytest.mark.parametrize("key, field", [("units_to_metres", "units_to_metres"),
+                                        ("image_width", "cameras[0].image_width")])
+def test_a_key_given_twice_in_an_opencv_file_is_refused_naming_it(rig, tmp_path, suffix, key, field):
+    """OpenCV reads a key's first value and other readers its last: a value typed in below the old line was
+    dropped without a word (a unit corrected to millimetres read as metres)."""
+    path = tmp_path / f"rig{suffix}"
+    write_opencv_rig(rig, path)
+    lines = path.read_text().splitlines(keepends=True)
+    k = next(i for i, line in enumerate(lines) if key in line)
+    lines.insert(k + 1, lines[k])  # the same line twice: the value matters not, the repetition does
+    path.write_text("".join(lines))
+    with pytest.raises(RigFileError, match="is given 2 times in one map: OpenCV reads the first") as info:
+        read_opencv_rig(path)
+    assert info.value.field == field and info.value.path == str(path)
+
+
 def test_an_empty_foreign_file_says_so(tmp_path):
     path = tmp_path / "calibration.toml"
     path.write_text("\n")
