@@ -513,7 +513,14 @@ def _memory_writer(path) -> cv2.FileStorage:
 def _check_strings_read_back(text: str, path, expected: dict[str, tuple[Any, str]]) -> None:
     """OpenCV writes strings unquoted: ``true``, ``null`` or a trailing space come back as a number, nothing or
     another name. Refuse to write a file whose strings (field -> (node, value)) would not read back as given."""
-    fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    try:
+        fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    except (cv2.error, SystemError):  # a name '"' left OpenCV's own text unreadable: a traceback from ghcal export
+        field = next((f for f, (_, value) in expected.items() if not _reads_back(value, path)), None)
+        if field is None:  # pragma: no cover - each string alone reads back, the file does not
+            raise fail(path, None, "OpenCV cannot read back the text it wrote for this rig") from None
+        raise fail(path, field, f"{expected[field][1]!r} would not read back from OpenCV FileStorage as written "
+                                "(OpenCV cannot read the text it wrote): choose another") from None
     try:
         for field, (where, value) in expected.items():
             node = where(fs.root())
@@ -522,6 +529,21 @@ def _check_strings_read_back(text: str, path, expected: dict[str, tuple[Any, str
                                         "does not quote it): choose another")
     finally:
         fs.release()
+
+
+def _reads_back(value: str, path) -> bool:
+    """Whether ``value`` alone, written as a string in the format of ``path``, reads back as itself."""
+    fs = _memory_writer(path)
+    fs.write("value", value)
+    try:
+        back = cv2.FileStorage(fs.releaseAndGetString(), cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    except (cv2.error, SystemError):
+        return False
+    try:
+        node = back.getNode("value")
+        return node.isString() and node.string() == value
+    finally:
+        back.release()
 
 
 def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> None:

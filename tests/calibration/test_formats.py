@@ -101,6 +101,23 @@ def test_a_calibration_of_a_smaller_image_size_is_refused(tmp_path):
     assert read_opencv_rig(tmp_path / "intrinsics.yml", image_size=(640, 480), **files).pair[0].size == (640, 480)
 
 
+@pytest.mark.parametrize("suffix", [".yml", ".json", ".xml"])
+def test_a_name_that_leaves_opencv_s_text_unreadable_is_refused_naming_it(rig, tmp_path, suffix):
+    # a camera or rig called '"': OpenCV could not read back the text it wrote, and ghcal export died of a
+    # SystemError traceback
+    renamed = Rig((rig.cameras[0], dataclasses.replace(rig.cameras[1], name='"')) + rig.cameras[2:], rig.volume,
+                  rig_id=rig.rig_id)
+    with pytest.raises(RigFileError, match="would not read back from OpenCV FileStorage") as info:
+        write_opencv_rig(renamed, tmp_path / f"rig{suffix}")
+    assert info.value.field == "cameras[1].name" and not (tmp_path / f"rig{suffix}").exists()
+    with pytest.raises(RigFileError, match="would not read back") as info:
+        write_opencv_rig(Rig(rig.cameras, rig.volume, rig_id='"'), tmp_path / f"rig{suffix}")
+    assert info.value.field == "rig_id"
+    with pytest.raises(RigFileError, match="would not read back") as info:
+        write_opencv_camera(renamed.cameras[1], tmp_path / f"one{suffix}")
+    assert info.value.field == "name"
+
+
 @pytest.mark.parametrize("name", ["true", "null", "a b "])
 def test_a_name_opencv_would_not_read_back_is_refused_before_writing(rig, tmp_path, name):
     # OpenCV writes strings unquoted: a camera called "true" came back as 1.0, a rig id "null" as nothing
