@@ -361,6 +361,14 @@ def test_opencv_stereo_calib_layout(tmp_path):
     assert rig.metadata["source"]["format"] == "opencv-stereo-calib"
 
 
+def test_an_extrinsics_file_given_with_the_multi_camera_layout_is_refused(rig, tmp_path):
+    # the cameras' poses are in the file: the extrinsics file was ignored, a missing one included, and the rig written
+    write_opencv_rig(rig, tmp_path / "rig.yml")
+    with pytest.raises(RigFileError, match="extrinsics_path .*nope.yml.* goes with stereo_calib") as info:
+        read_opencv_rig(tmp_path / "rig.yml", extrinsics_path=tmp_path / "nope.yml")
+    assert info.value.path == str(tmp_path / "rig.yml") and info.value.field == "cameras"
+
+
 def test_stereo_calib_errors_name_the_right_file(tmp_path):
     _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
     mm = {"units_to_metres": 0.001}
