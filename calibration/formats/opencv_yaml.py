@@ -431,8 +431,8 @@ def read_opencv_rig(
             layout = "opencv-yaml"
             if extrinsics_path is not None:  # ignored, a mistyped or wrong file passed unseen ("wrote rig.json")
                 raise fail(path, "cameras", f"holds each camera's R and T (the multi-camera layout): extrinsics_path "
-                                            f"(--extrinsics) {str(extrinsics_path)!r} goes with stereo_calib's intrinsics.yml only; "
-                                            "leave it out")
+                                            f"(--extrinsics) {str(extrinsics_path)!r} goes with stereo_calib's "
+                                            "intrinsics.yml only; leave it out")
             units = _units(root, path, units_to_metres, needed=False)  # our layout: metres unless it says
             if volume is None:
                 volume = _volume(root, path)

@@ -177,9 +177,9 @@ def test_a_unit_our_anipose_file_records_wrongly_is_named(rig_file, tmp_path, ca
     assert not (tmp_path / "back.json").exists()
 
 
-@pytest.mark.parametrize("make, said", [("missing", "cannot read: No such file"), ("folder", "cannot read: Is a directory"),
-                                        ("empty", "the file is empty"), ("cut", "invalid TOML: "),
-                                        ("utf16", "UTF-16 text")])
+@pytest.mark.parametrize("make, said", [("missing", "cannot read: No such file"),
+                                        ("folder", "cannot read: Is a directory"), ("empty", "the file is empty"),
+                                        ("cut", "invalid TOML: "), ("utf16", "UTF-16 text")])
 def test_an_anipose_file_that_cannot_be_read_is_named_before_any_unit_is_asked_for(tmp_path, capsys, make, said):
     # a mistyped name, a folder, an empty file or one cut off mid-edit was told "anipose files do not record the
     # unit ...: pass --units-to-metres", and named only once a unit was given
