@@ -114,7 +114,30 @@ def _open(path) -> cv2.FileStorage:
         raise fail(path, None, f"cannot parse OpenCV YAML: {msg}") from e
     if not fs.isOpened():
         raise fail(path, None, "cannot open as an OpenCV FileStorage file")
+    try:
+        _refuse_duplicate_keys(fs.root(), path)
+    except RigFileError:
+        fs.release()
+        raise
     return fs
+
+
+def _refuse_duplicate_keys(root, path) -> None:
+    """A key given twice in one map, named (``cameras[0].image_width``). OpenCV reads the first and JSON and YAML
+    readers the last: a corrected value typed in below the old line was dropped without a word."""
+    stack = [(root, "")]
+    while stack:  # not recursive: a file nested thousands deep would hit Python's recursion limit
+        node, field = stack.pop()
+        if node.isMap():
+            keys, seen = _keys(node), set()
+            for key in keys:
+                if key in seen:
+                    raise fail(path, join(field, key), f"is given {keys.count(key)} times in one map: OpenCV reads "
+                                                       "the first, other readers the last; keep one")
+                seen.add(key)
+            stack.extend((node.getNode(key), join(field, key)) for key in keys)
+        elif node.isSeq():
+            stack.extend((node.at(i), f"{field}[{i}]") for i in range(node.size()))
 
 
 def _keys(node) -> tuple[str, ...]:
@@ -406,6 +429,10 @@ def read_opencv_rig(
         keys = _keys(root)
         if "cameras" in keys:
             layout = "opencv-yaml"
+            if extrinsics_path is not None:  # ignored, a mistyped or wrong file passed unseen ("wrote rig.json")
+                raise fail(path, "cameras", f"holds each camera's R and T (the multi-camera layout): extrinsics_path "
+                                            f"(--extrinsics) {str(extrinsics_path)!r} goes with stereo_calib's "
+                                            "intrinsics.yml only; leave it out")
             units = _units(root, path, units_to_metres, needed=False)  # our layout: metres unless it says
             if volume is None:
                 volume = _volume(root, path)
@@ -490,7 +517,14 @@ def _memory_writer(path) -> cv2.FileStorage:
 def _check_strings_read_back(text: str, path, expected: dict[str, tuple[Any, str]]) -> None:
     """OpenCV writes strings unquoted: ``true``, ``null`` or a trailing space come back as a number, nothing or
     another name. Refuse to write a file whose strings (field -> (node, value)) would not read back as given."""
-    fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    try:
+        fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    except (cv2.error, SystemError):  # a name '"' left OpenCV's own text unreadable: a traceback from ghcal export
+        field = next((f for f, (_, value) in expected.items() if not _reads_back(value, path)), None)
+        if field is None:  # pragma: no cover - each string alone reads back, the file does not
+            raise fail(path, None, "OpenCV cannot read back the text it wrote for this rig") from None
+        raise fail(path, field, f"{expected[field][1]!r} would not read back from OpenCV FileStorage as written "
+                                "(OpenCV cannot read the text it wrote): choose another") from None
     try:
         for field, (where, value) in expected.items():
             node = where(fs.root())
@@ -499,6 +533,21 @@ def _check_strings_read_back(text: str, path, expected: dict[str, tuple[Any, str
                                         "does not quote it): choose another")
     finally:
         fs.release()
+
+
+def _reads_back(value: str, path) -> bool:
+    """Whether ``value`` alone, written as a string in the format of ``path``, reads back as itself."""
+    fs = _memory_writer(path)
+    fs.write("value", value)
+    try:
+        back = cv2.FileStorage(fs.releaseAndGetString(), cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    except (cv2.error, SystemError):
+        return False
+    try:
+        node = back.getNode("value")
+        return node.isString() and node.string() == value
+    finally:
+        back.release()
 
 
 def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> None:

@@ -101,6 +101,23 @@ def test_a_calibration_of_a_smaller_image_size_is_refused(tmp_path):
     assert read_opencv_rig(tmp_path / "intrinsics.yml", image_size=(640, 480), **files).pair[0].size == (640, 480)
 
 
+@pytest.mark.parametrize("suffix", [".yml", ".json", ".xml"])
+def test_a_name_that_leaves_opencv_s_text_unreadable_is_refused_naming_it(rig, tmp_path, suffix):
+    # a camera or rig called '"': OpenCV could not read back the text it wrote, and ghcal export died of a
+    # SystemError traceback
+    renamed = Rig((rig.cameras[0], dataclasses.replace(rig.cameras[1], name='"')) + rig.cameras[2:], rig.volume,
+                  rig_id=rig.rig_id)
+    with pytest.raises(RigFileError, match="would not read back from OpenCV FileStorage") as info:
+        write_opencv_rig(renamed, tmp_path / f"rig{suffix}")
+    assert info.value.field == "cameras[1].name" and not (tmp_path / f"rig{suffix}").exists()
+    with pytest.raises(RigFileError, match="would not read back") as info:
+        write_opencv_rig(Rig(rig.cameras, rig.volume, rig_id='"'), tmp_path / f"rig{suffix}")
+    assert info.value.field == "rig_id"
+    with pytest.raises(RigFileError, match="would not read back") as info:
+        write_opencv_camera(renamed.cameras[1], tmp_path / f"one{suffix}")
+    assert info.value.field == "name"
+
+
 @pytest.mark.parametrize("name", ["true", "null", "a b "])
 def test_a_name_opencv_would_not_read_back_is_refused_before_writing(rig, tmp_path, name):
     # OpenCV writes strings unquoted: a camera called "true" came back as 1.0, a rig id "null" as nothing
@@ -342,6 +359,14 @@ def test_opencv_stereo_calib_layout(tmp_path):
     expected, _ = cv2.projectPoints(X * 1000, cv2.Rodrigues(R)[0], np.array([-60.0, 0.5, 1.0]), K2, D2)
     np.testing.assert_allclose(right.project(X)[0], expected.reshape(-1, 2), atol=1e-9)
     assert rig.metadata["source"]["format"] == "opencv-stereo-calib"
+
+
+def test_an_extrinsics_file_given_with_the_multi_camera_layout_is_refused(rig, tmp_path):
+    # the cameras' poses are in the file: the extrinsics file was ignored, a missing one included, and the rig written
+    write_opencv_rig(rig, tmp_path / "rig.yml")
+    with pytest.raises(RigFileError, match="extrinsics_path .*nope.yml.* goes with stereo_calib") as info:
+        read_opencv_rig(tmp_path / "rig.yml", extrinsics_path=tmp_path / "nope.yml")
+    assert info.value.path == str(tmp_path / "rig.yml") and info.value.field == "cameras"
 
 
 def test_stereo_calib_errors_name_the_right_file(tmp_path):
@@ -670,6 +695,23 @@ def test_a_byte_order_mark_is_skipped(rig, tmp_path, suffix):
     marked.write_bytes(b"\xef\xbb\xbf" + crlf.read_bytes())
     assert_cameras_close(read(plain), read(crlf), atol=0)
     assert_cameras_close(read(plain), read(marked), atol=0)
+
+
+@pytest.mark.parametrize("suffix", [".yml", ".json", ".xml"])
+@pytest.mark.parametrize("key, field", [("units_to_metres", "units_to_metres"),
+                                        ("image_width", "cameras[0].image_width")])
+def test_a_key_given_twice_in_an_opencv_file_is_refused_naming_it(rig, tmp_path, suffix, key, field):
+    """OpenCV reads a key's first value and other readers its last: a value typed in below the old line was
+    dropped without a word (a unit corrected to millimetres read as metres)."""
+    path = tmp_path / f"rig{suffix}"
+    write_opencv_rig(rig, path)
+    lines = path.read_text().splitlines(keepends=True)
+    k = next(i for i, line in enumerate(lines) if key in line)
+    lines.insert(k + 1, lines[k])  # the same line twice: the value matters not, the repetition does
+    path.write_text("".join(lines))
+    with pytest.raises(RigFileError, match="is given 2 times in one map: OpenCV reads the first") as info:
+        read_opencv_rig(path)
+    assert info.value.field == field and info.value.path == str(path)
 
 
 def test_an_empty_foreign_file_says_so(tmp_path):

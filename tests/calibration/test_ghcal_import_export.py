@@ -177,6 +177,23 @@ def test_a_unit_our_anipose_file_records_wrongly_is_named(rig_file, tmp_path, ca
     assert not (tmp_path / "back.json").exists()
 
 
+@pytest.mark.parametrize("make, said", [("missing", "cannot read: No such file"),
+                                        ("folder", "cannot read: Is a directory"), ("empty", "the file is empty"),
+                                        ("cut", "invalid TOML: "), ("utf16", "UTF-16 text")])
+def test_an_anipose_file_that_cannot_be_read_is_named_before_any_unit_is_asked_for(tmp_path, capsys, make, said):
+    # a mistyped name, a folder, an empty file or one cut off mid-edit was told "anipose files do not record the
+    # unit ...: pass --units-to-metres", and named only once a unit was given
+    toml = tmp_path / "calibration.toml"
+    if make == "folder":
+        toml.mkdir()
+    elif make != "missing":
+        text = {"empty": "\n", "cut": '[cam_0]\nname = "left\n', "utf16": '[cam_0]\nname = "left"\n'}[make]
+        toml.write_bytes(text.encode("utf-16") if make == "utf16" else text.encode())
+    assert cli.main(["import", str(toml), "--out", str(tmp_path / "back.json")]) == 2
+    err = capsys.readouterr().err
+    assert str(toml) in err and said in err and "--units-to-metres" not in err, err
+
+
 def test_our_own_anipose_export_needs_no_units_and_a_rig_file_needs_no_import(rig_file, tmp_path, capsys):
     """The unit our anipose writer records is used when none is given; a rig file given to import is named."""
     toml = tmp_path / "calibration.toml"
