@@ -744,10 +744,9 @@ def _link_to_a_folder(path: str) -> str | None:
     for _ in range(MAX_LINKS_FOLLOWED):
         if not os.path.islink(path):
             return None
-        text = os.readlink(path)
-        if os.path.basename(text) in ("", ".", ".."):
-            return text
-        path = os.path.join(os.path.dirname(path), text)
+        path = os.path.join(os.path.dirname(path), os.readlink(path))  # (an absolute text stays as it is)
+        if os.path.basename(path) in ("", ".", ".."):
+            return path
     return None  # a longer chain: the open's own ELOOP (_link_loop) says it
 
 

@@ -525,6 +525,8 @@ def test_a_file_sink_through_a_symbolic_link_is_checked_where_the_link_leads(tmp
                          "a file's"),
     ("a.txt/sub/j.jsonl", "its folder {tmp}/a.txt/sub cannot exist: {tmp}/a.txt is a file (the sink makes the file, "
                           "not its folder)"),
+    ("to-a.txt-slash", "{tmp}/to-a.txt-slash is a link to {tmp}/a.txt/, a folder's path (it ends in '/'), not a "
+                       "file's"),
 ])
 def test_a_file_sink_path_no_open_can_pass_is_refused_before_the_run_naming_where(tmp_path, capsys, sim_url, where,
                                                                                    said):
@@ -536,6 +538,7 @@ def test_a_file_sink_path_no_open_can_pass_is_refused_before_the_run_naming_wher
     (tmp_path / "to-nowhere").symlink_to(tmp_path / "nowhere")
     (tmp_path / "to-nowhere-slash").symlink_to(f"{tmp_path}/nowhere/")
     (tmp_path / "a.txt").write_text("")
+    (tmp_path / "to-a.txt-slash").symlink_to("a.txt/")  # relative: said from the link's folder
     url = f"file://{tmp_path}/{where}"
     err = _refused(["--truth-only", "--url", sim_url, "--seconds", "5", "--out", str(tmp_path / "out"),
                     "--sink", url], capsys)
