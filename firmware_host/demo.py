@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import os
 import signal
 import statistics
@@ -110,6 +111,8 @@ ESTIMATE_BGR = (255, 0, 255)
 SUSPECT_BGR = (0, 0, 255)
 #: Height in pixels of that band (two lines of words).
 SUSPECT_BAND_PX = 46
+#: Links followed in a chain before the OS gives up (ELOOP): Linux's MAXSYMLINKS.
+MAX_LINKS_FOLLOWED = 40
 #: The console script (pyproject.toml [project.scripts]) and the module run (``make demo``): usage lines and
 #: errors name the one the user ran, so the command they show can be typed again as it is.
 SCRIPT = "ghnerf-demo"
@@ -700,20 +703,68 @@ def _refuse_clashing_outputs(parser: argparse.ArgumentParser, args: argparse.Nam
 
 
 def _sink_file_problem(path: str) -> str | None:
-    """Why a ``file://`` sink can never write ``path``: a folder, a file in a folder that is not there, or one this
-    user may not write (None: it may). The sink tries again what it cannot open (a daemon's USB stick mounted
-    later), so the demo loaded the model and ran its seconds against a sink that never opened, and only then failed
-    ("sent none of the frames")."""
+    """Why a ``file://`` sink can never write ``path``: a folder, a file in a folder that is not there (a file or a
+    link to nothing further up said as such), a loop of symbolic links or a link naming a folder (since session 75),
+    or one this user may not write (None: it may). The sink tries again what it cannot open (a daemon's USB stick
+    mounted later), so the demo loaded the model and ran its seconds against a sink that never opened, and only then
+    failed ("sent none of the frames")."""
     if os.path.isdir(path):
         return f"{shown(path)} is a folder, not a file; name a file in it ({Path(path, 'joints.jsonl').as_uri()})"
+    looping = _link_loop(path)
+    if looping is not None:  # ELOOP at every open, which the sink retried for the whole run
+        return f"{shown(looping)} is a loop of symbolic links (ELOOP): no file can be opened there"
+    folder_link = _link_to_a_folder(path)
+    if folder_link is not None:  # EISDIR (or ENOTDIR) at every open: the link names a folder, never a file
+        return f"{shown(path)} is a link to {shown(folder_link)}, a folder's path (it ends in '/'), not a file's"
     # the open (O_CREAT) makes a dangling link's target: that file's folder is the one it needs
     target = os.path.realpath(path) if os.path.islink(path) else path
     folder = os.path.dirname(target)
     if os.path.isdir(folder):
         return _sink_access_problem(path, folder)
-    what = "is a file, not a folder" if os.path.exists(folder) else "does not exist"
     link = f"; {shown(path)} is a link to {shown(target)}" if target != path else ""
-    return f"its folder {shown(folder)} {what} (the sink makes the file, not its folder{link})"
+    return f"its folder {shown(folder)} {_missing_folder_words(folder)} (the sink makes the file, not its folder{link})"
+
+
+def _link_loop(path: str) -> str | None:
+    """The first of ``path``'s components (``path`` itself last) that is a loop of symbolic links (None: none)."""
+    parts = Path(path).parts
+    for end in range(1, len(parts) + 1):
+        component = os.path.join(*parts[:end])
+        try:
+            os.stat(component)
+        except OSError as e:
+            if e.errno == errno.ELOOP:
+                return component
+    return None
+
+
+def _link_to_a_folder(path: str) -> str | None:
+    """What a link in ``path``'s chain of links names where it ends in ``/`` (a folder's path: opening it for a file
+    fails, EISDIR or ENOTDIR, whether or not that folder exists); None: no such link."""
+    for _ in range(MAX_LINKS_FOLLOWED):
+        if not os.path.islink(path):
+            return None
+        path = os.path.join(os.path.dirname(path), os.readlink(path))  # (an absolute text stays as it is)
+        if os.path.basename(path) in ("", ".", ".."):
+            return path
+    return None  # a longer chain: the open's own ELOOP (_link_loop) says it
+
+
+def _missing_folder_words(folder: str) -> str:
+    """Why ``folder`` (not a folder) is none, said of its first component that is not one: a file, a link to
+    nothing, or not there."""
+    parts = Path(folder).parts
+    for end in range(1, len(parts) + 1):
+        component = os.path.join(*parts[:end])
+        if os.path.isdir(component):
+            continue
+        if os.path.islink(component) and not os.path.exists(component):
+            target = os.path.join(os.path.dirname(component), os.readlink(component))
+            return f"does not exist: {shown(component)} is a link to {shown(target)}, which is not there"
+        if os.path.exists(component):
+            return "is a file, not a folder" if component == folder else f"cannot exist: {shown(component)} is a file"
+        break
+    return "does not exist"
 
 
 def _sink_access_problem(path: str, folder: str) -> str | None:

@@ -85,7 +85,8 @@ pipeline) for ``open_timeout_s``, naming it, and one whose grabbed frames do not
 times in a row (fewer are skipped). Each frame lost to a failed grab tried again or to a frame skipped is a gap in
 the camera's frame index (``stats.camera_gaps``), and a run of them is one warning as it ends, naming the frames
 and why (since session 74: a failed grab tried again was neither logged nor counted, and each skipped frame was a
-warning of its own, a flood at 30 fps). When a video ends, the stream ends
+warning of its own, a flood at 30 fps); one still going when the source is closed is said as the camera's thread
+ends, "still going at close" (since session 75), not counted: no frame follows it. When a video ends, the stream ends
 (:class:`EndOfStream`) once the other camera has delivered past the ended one's last frame: no pair
 can follow, so a longer video is not played out to its end.
 """
@@ -268,18 +269,24 @@ def is_video_file(spec: str) -> bool:
     return not is_device_index(spec) and "://" not in spec and not spec.startswith("/dev/") and "!" not in spec
 
 
+#: Why a run of lost frames has no frame after it: the camera or video ended (or failed), or the source was closed.
+RUN_ENDED, RUN_CLOSED = "its last", "still going at close"
+
+
 @dataclass
 class _LostRun:
     """A camera's frames lost in a row, each a gap in its frame index (``stats.camera_gaps``): failed grabs
     tried again and grabbed frames that did not decode. Logged once as the run ends, not once per frame: every
-    undecodable frame logged was a flood at 30 fps, and a failed grab tried again was not logged at all."""
+    undecodable frame logged was a flood at 30 fps, and a failed grab tried again was not logged at all. A run
+    still going when the source is closed is logged as the camera's thread ends (it was not logged before session
+    75: frames lost just before a stop left no trace)."""
 
     failed_grabs: int = 0
     undecodable: int = 0
 
-    def words(self, next_index: int, *, last: bool = False) -> str | None:
-        """What was lost before frame ``next_index`` and why; None: nothing. ``last``: no frame follows (the camera
-        or video ended), so no index gap shows them in ``stats.camera_gaps``."""
+    def words(self, next_index: int, *, end: str = "") -> str | None:
+        """What was lost before frame ``next_index`` and why; None: nothing. ``end`` (:data:`RUN_ENDED`,
+        :data:`RUN_CLOSED`): no frame follows, so no index gap shows them in ``stats.camera_gaps``."""
         lost = self.failed_grabs + self.undecodable
         if not lost:
             return None
@@ -287,8 +294,8 @@ class _LostRun:
         frames = f"frame {first}" if lost == 1 else f"frames {first} to {next_index - 1}"
         why = [f"{n} {what}" for n, what in ((self.failed_grabs, "failed grab(s), tried again"),
                                             (self.undecodable, "grabbed frame(s) that did not decode, skipped")) if n]
-        if last:
-            return f"{frames} ({'; '.join(why)}), its last: no frame followed"
+        if end:
+            return f"{frames} ({'; '.join(why)}), {end}: no frame followed"
         return f"{frames} ({'; '.join(why)}): a gap in its frame index, counted in stats.camera_gaps"
 
 
@@ -379,6 +386,8 @@ class _Camera:
             src._fail(RigOperationError(f"camera {self.name!r} ({self.shown}): {type(e).__name__}: {e}"))
         finally:
             self.release()
+            # a run still open as the thread ends (the source closed, or the stream failed) is said too, once
+            self._end_lost_run(end=RUN_CLOSED if src._stop.is_set() else RUN_ENDED)
 
     def _grab_loop(self) -> None:
         src = self.source
@@ -404,7 +413,7 @@ class _Camera:
                     self.capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
                     since_rewind = 0
                     continue
-                self._end_lost_run(last=True)  # a run that ends the camera or video is said too
+                self._end_lost_run(end=RUN_ENDED)  # a run that ends the camera or video is said too
                 if self.video:
                     src._end(self, EndOfStream(f"video {self.shown} (camera {self.name!r}) ended after {self.index} "
                                                f"frames"))
@@ -428,12 +437,11 @@ class _Camera:
                     self.lost.undecodable += 1
                     self.index += 1
                     continue
-                self._end_lost_run(last=True)
+                self._end_lost_run(end=RUN_ENDED)
                 src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.shown}): {undecodable} grabbed frames "
                                                f"in a row could not be decoded"))
                 return
             undecodable = 0
-            self._end_lost_run()
             raw, image = image, _bgr(image)
             if image is None:
                 src._fail(RigOperationError(f"camera {self.name!r} ({self.shown}) delivered an image that is not "
@@ -453,11 +461,14 @@ class _Camera:
             if not src._put(Frame(camera=self.name, image=image, timestamp_ns=stamp, index=self.index),
                             wait_room=self.video and src.pairing.policy is DropPolicy.ALL):
                 return
+            # said once the frame is queued: one refused (closed, failed) or failing its checks never shows the run
+            # in stats.camera_gaps, and the thread's end says the run as such
+            self._end_lost_run()
             self.index += 1
 
-    def _end_lost_run(self, *, last: bool = False) -> None:
-        """A frame came (or, ``last``, none will): the run of frames lost before it (if any) is logged, once."""
-        words = self.lost.words(self.index, last=last)
+    def _end_lost_run(self, *, end: str = "") -> None:
+        """A frame came (or, ``end``, none will: why): the run of frames lost before it (if any) is logged, once."""
+        words = self.lost.words(self.index, end=end)
         if words is not None:  # (none lost, the usual frame: nothing to reset, no new _LostRun per frame)
             log.warning("camera %r (%s) lost %s", self.name, self.shown, words)
             self.lost = _LostRun()

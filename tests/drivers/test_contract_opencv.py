@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import time
 from pathlib import Path
 from urllib.parse import quote
@@ -31,6 +32,7 @@ from drivers import (
     open_rig,
 )
 from ghnerf_runtime.geometry.rig import Rig
+from drivers.backends import opencv as opencv_backend
 from drivers.backends.opencv import video_size
 from ghnerf_runtime.rig_file import load_rig, save_rig
 from tests.drivers.contract import RigSourceContract
@@ -956,7 +958,10 @@ def test_a_run_of_lost_frames_is_logged_once_as_it_ends_and_counted_as_the_camer
     # frames 0-2, frame 3 lost (grab 4), 4-7, frames 8 and 9 lost (grabs 9, 10), 10 and 11 not decoded, then 12 on
     _Flaky.failing, _Flaky.garbled = {4, 9, 10}, {11, 12}
     try:
-        with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_Flaky) as source:
+        # queue=64: a reader slow to start on a loaded host let the full queue drop frames 0-2 before the pairer saw
+        # one, and frame 3's gap, before its first frame, was never counted (camera_gaps 4)
+        with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all&queue=64",
+                      capture_factory=_Flaky) as source:
             _read_until_index(source, 13)
             stats = source.stats
     finally:
@@ -987,6 +992,68 @@ def test_a_run_of_lost_frames_that_ends_the_camera_is_still_logged(webcam, caplo
     assert _camera_logs(caplog) == [
         "camera 'right' (1) lost frames 5 to 15 (9 failed grab(s), tried again; 2 grabbed frame(s) that did not "
         "decode, skipped), its last: no frame followed",
+    ]
+
+
+def test_a_run_of_lost_frames_still_going_at_close_is_logged_once_and_not_counted(webcam, caplog, monkeypatch):
+    """Session 75: a run still open when the source was closed was never logged (only a decoded frame, or the
+    camera's end, ended a run): frames lost just before a stop left no trace. No frame follows it, so no index gap
+    counts it in stats.camera_gaps."""
+    caplog.set_level(logging.WARNING, logger="drivers.backends.opencv")
+    monkeypatch.setattr(opencv_backend, "MAX_UNDECODABLE", 10_000)  # the failed grabs never end the camera
+    # frames 0-3, then every grab fails, tried again, until the close
+    monkeypatch.setattr(_Flaky, "failing", set(range(5, 10_000)))
+    monkeypatch.setattr(_Flaky, "garbled", set())
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_Flaky) as source:
+        _read_until_index(source, 3)  # the right camera's frames 0-3 reach the pairer
+        right = [cam for cam in webcam.made if cam.target == 1][-1]
+        deadline = time.monotonic() + 5.0
+        while right.grabs < 8 and time.monotonic() < deadline:  # three of them lost
+            time.sleep(0.01)
+        assert right.grabs >= 8
+    stats = source.stats  # after the close, as a summary reads them
+    logged = _camera_logs(caplog)
+    assert len(logged) == 1, logged
+    said = re.fullmatch(r"camera 'right' \(1\) lost frames 4 to (\d+) \((\d+) failed grab\(s\), tried again\), "
+                        r"still going at close: no frame followed", logged[0])
+    assert said and int(said[2]) == int(said[1]) - 3 >= 3, logged
+    assert stats.camera_gaps["right"] <= stats.overruns["right"], stats
+
+
+class _HeldAtTheClose(_Flaky):
+    """The second camera's grab ``held`` decodes only once the source in ``closing`` is closing: the frame that
+    ends a run of lost frames comes too late to be queued."""
+
+    held = 0
+    closing: list = []
+
+    def retrieve(self):
+        if self.target == 1 and self.grabs == self.held:
+            deadline = time.monotonic() + 5.0
+            while not (self.closing and self.closing[0]._stop.is_set()) and time.monotonic() < deadline:
+                time.sleep(0.005)
+        return super().retrieve()
+
+
+def test_a_run_whose_next_frame_the_close_refuses_is_said_still_going_at_close(webcam, caplog, monkeypatch):
+    """A frame decoded after a run, then refused by the close, said the run 'counted in stats.camera_gaps', which
+    no frame that reached the pairer did."""
+    caplog.set_level(logging.WARNING, logger="drivers.backends.opencv")
+    # frames 0-2, frames 3 and 4 lost (grabs 4, 5), frame 5 (grab 6) decoded as the source closes
+    monkeypatch.setattr(_HeldAtTheClose, "failing", {4, 5})
+    monkeypatch.setattr(_HeldAtTheClose, "garbled", set())
+    monkeypatch.setattr(_HeldAtTheClose, "held", 6)
+    monkeypatch.setattr(_HeldAtTheClose, "closing", [])
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30", capture_factory=_HeldAtTheClose) as source:
+        _HeldAtTheClose.closing.append(source)
+        right = [cam for cam in webcam.made if cam.target == 1][-1]
+        deadline = time.monotonic() + 5.0
+        while right.grabs < 6 and time.monotonic() < deadline:  # in the held retrieve
+            time.sleep(0.01)
+        assert right.grabs == 6
+    assert _camera_logs(caplog) == [
+        "camera 'right' (1) lost frames 3 to 4 (2 failed grab(s), tried again), still going at close: no frame "
+        "followed",
     ]
 
 

@@ -515,6 +515,45 @@ def test_a_file_sink_through_a_symbolic_link_is_checked_where_the_link_leads(tmp
             f"{tmp_path}/free/gone.jsonl is a link to {tmp_path}/gone/j.jsonl)") in err, err
 
 
+@pytest.mark.parametrize(("where", "said"), [
+    ("loop", "{tmp}/loop is a loop of symbolic links (ELOOP): no file can be opened there"),
+    ("loop/j.jsonl", "{tmp}/loop is a loop of symbolic links (ELOOP): no file can be opened there"),
+    ("loop/sub/j.jsonl", "{tmp}/loop is a loop of symbolic links (ELOOP): no file can be opened there"),
+    ("to-nowhere/j.jsonl", "its folder {tmp}/to-nowhere does not exist: {tmp}/to-nowhere is a link to {tmp}/nowhere, "
+                           "which is not there (the sink makes the file, not its folder)"),
+    ("to-nowhere-slash", "{tmp}/to-nowhere-slash is a link to {tmp}/nowhere/, a folder's path (it ends in '/'), not "
+                         "a file's"),
+    ("a.txt/sub/j.jsonl", "its folder {tmp}/a.txt/sub cannot exist: {tmp}/a.txt is a file (the sink makes the file, "
+                          "not its folder)"),
+    ("to-a.txt-slash", "{tmp}/to-a.txt-slash is a link to {tmp}/a.txt/, a folder's path (it ends in '/'), not a "
+                       "file's"),
+])
+def test_a_file_sink_path_no_open_can_pass_is_refused_before_the_run_naming_where(tmp_path, capsys, sim_url, where,
+                                                                                   said):
+    """Session 75: a loop of symbolic links (ELOOP) and a link naming a folder that is not there (EISDIR) passed the
+    check, the sink then retrying its open for the whole run; a link to nothing, or a file, further up the folder
+    was said 'does not exist' of a folder the user saw there, or could not make."""
+    (tmp_path / "loop").symlink_to(tmp_path / "loop-back")
+    (tmp_path / "loop-back").symlink_to(tmp_path / "loop")
+    (tmp_path / "to-nowhere").symlink_to(tmp_path / "nowhere")
+    (tmp_path / "to-nowhere-slash").symlink_to(f"{tmp_path}/nowhere/")
+    (tmp_path / "a.txt").write_text("")
+    (tmp_path / "to-a.txt-slash").symlink_to("a.txt/")  # relative: said from the link's folder
+    url = f"file://{tmp_path}/{where}"
+    err = _refused(["--truth-only", "--url", sim_url, "--seconds", "5", "--out", str(tmp_path / "out"),
+                    "--sink", url], capsys)
+    assert f"error: --sink {url}: " + said.format(tmp=tmp_path) in err, err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "nowhere").exists()
+
+
+def test_a_file_sink_through_a_link_to_a_file_yet_to_be_made_still_passes_the_check(tmp_path, capsys, monkeypatch):
+    """The open (O_CREAT) makes a dangling link's target where its folder is there: not refused as a link to
+    nothing (only a link that names a folder, ending in '/', is)."""
+    (tmp_path / "j.jsonl").symlink_to(tmp_path / "made-by-the-sink.jsonl")
+    argv = ["--truth-only", "--seconds", "0.2", "--out", str(tmp_path / "out"), "--sink", f"file://{tmp_path}/j.jsonl"]
+    assert _sink_check_passed(argv, capsys, monkeypatch)
+
+
 def test_a_camera_that_vanishes_mid_run_fails_the_run_naming_it(tmp_path, capsys, sim_url):
     # a loose cable in the bring-up's camera check: 'stopping: ...' among the summary's lines and exit status 0
     rc = demo.main(["--truth-only", "--url", f"{sim_url}&unplug_after_s=0.3", "--seconds", "3",
