@@ -1145,7 +1145,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     found = read_folder(board, args.images, names)
     views, missed = found.views, found.missed
     _say_unread(found.unread, sys.stderr if args.json else sys.stdout)
-    _refuse_unread_floor(found.unread, floor_view, "pass --floor-view NAME for another")
+    if args.floor_view is not None:  # asked for by name: an error, as a name with no image is; else a note below
+        _refuse_unread_floor(found.unread, floor_view, "pass --floor-view NAME for another")
     limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
     sizes = camera_image_sizes(Path(args.images), names, views)
     rig_sizes = ", ".join(f"{cam.name!r} {cam.width}x{cam.height}" for cam in rig.pair)
@@ -1159,7 +1160,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     def taken(name: str) -> bool:
         return any(name in views[c] or name in missed[c] for c in views)
 
-    floor_taken = taken(floor_view)
+    # an image that does not read is a floor view taken (warned of above): the note below says why it went unmeasured
+    floor_taken = taken(floor_view) or any(floor_view in found.unread[c] for c in names)
     if args.floor_view is not None and not floor_taken:
         # a mistyped name passed silently, and with it a rig tilted on its mount, which only the floor shows
         raise UsageError(f"--floor-view {args.floor_view!r}: neither camera's folder in {args.images} has an image "
@@ -1172,9 +1174,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     report = check_rig(rig, board, views, board_thickness_m=thickness, floor_view=floor_view)
     if not report["pairs"]:
         raise UsageError(f"{args.images}: no image pair in which both cameras found the board")
+    report["unreadable_views"] = {cam: sorted(found.unread[cam]) for cam in names}  # --json's reader sees no warning
     if "floor" not in report:
         print(f"note: the levelling is not checked (a rig tilted on its mount passes): "
-              + ((floor_unmeasured(report, views, floor_view, missed=missed, root=args.images)
+              + ((floor_unmeasured(report, views, floor_view, missed=missed, root=args.images, unread=found.unread)
                   or f"neither camera found the board in floor view {floor_view!r}") if floor_taken else
                  f"no floor view {floor_view!r} in {args.images} ("
                  + (f"{recorded_where}; " if record_floor is not None else "") + "--floor-view NAME names another)"),
