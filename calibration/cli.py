@@ -725,7 +725,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     _refuse_exchanged_sizes(out, views, Path(args.images))
     blind = [cam for cam in names if not views[cam]]
     if blind:  # said as such: it was blamed on the floor view, or on too few views ("15-30 is usual")
-        raise UsageError(f"camera {blind[0]!r} found the board in none of its {len(missed[blind[0]])} images "
+        raise UsageError(f"camera {blind[0]!r} found the board in none of its "
+                         f"{_images_counted(len(missed[blind[0]]), len(found.unread[blind[0]]))} "
                          f"({Path(args.images) / blind[0]}): does {where} describe the print ({_describe(board)}; "
                          "squares_x counts them along board.png's width)? Is the board in "
                          "view, sharp, and without glare?")
@@ -772,6 +773,12 @@ def cmd_solve(args: argparse.Namespace) -> int:
     _say_kept(kept)
     print(f"wrote {out} and {report_path}")
     return 0
+
+
+def _images_counted(readable: int, unreadable: int) -> str:
+    """A camera's images as counted in words: "5 images", or "5 readable images (2 more unreadable)" where some
+    were passed over (:func:`_say_unread`); the count said only the readable ones before session 75."""
+    return f"{readable} images" if not unreadable else f"{readable} readable images ({unreadable} more unreadable)"
 
 
 def _say_unread(unread: Mapping[str, Mapping[str, str]], stream) -> None:
