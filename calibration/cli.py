@@ -790,8 +790,9 @@ def _say_unread(unread: Mapping[str, Mapping[str, str]], stream) -> None:
 
 
 def _refuse_unread_floor(unread: Mapping[str, Mapping[str, str]], floor_view: str, other: str) -> None:
-    """Refuse a floor view that does not read in a camera: the levelling (or its check) rests on that one view, so
-    it is not passed over as another view is; ``other`` is the command's other way."""
+    """Refuse a floor view that does not read in a camera: the levelling rests on that one view, so ``solve`` does
+    not pass it over as another view; ``check`` refuses it only where ``--floor-view`` names it (else a note says
+    the floor went unchecked, as for a missing one). ``other`` is the command's other way."""
     for reasons in unread.values():
         if floor_view in reasons:
             raise UsageError(f"floor view {floor_view!r}: {reasons[floor_view]}: take it again (ghcal capture --floor "
