@@ -190,13 +190,16 @@ def _expected_image(root: str | os.PathLike | None, camera: str, other: str, nam
 
 def floor_unmeasured(report: Mapping[str, Any], views: Mapping[str, Mapping[str, BoardView]],
                      floor_view: str = FLOOR_VIEW, *, missed: Mapping[str, Sequence[str]] | None = None,
-                     root: str | os.PathLike | None = None) -> str | None:
+                     root: str | os.PathLike | None = None,
+                     unread: Mapping[str, Mapping[str, str]] | None = None) -> str | None:
     """Why the floor view in ``views`` gave ``report`` (from :func:`check_rig`) no height; None where it gave one
     or where no camera found the board in it (the caller knows whether it was taken at all).
 
     ``missed`` (camera -> names of images without the board, from
     :func:`~calibration.capture.read_folder`) tells a camera whose floor image is missing from one that did
-    not find the board in it; ``root``, the images' folder, names the missing file.
+    not find the board in it; ``root``, the images' folder, names the missing file. ``unread`` (camera -> view
+    name -> why its image does not read, :attr:`~calibration.capture.FolderViews.unread`) tells a floor image that
+    is there but does not read (before session 75 ``check`` stopped at it, or called it missing).
 
     ``ghcal check`` said "the board was not found in both cameras' floor view" whatever the reason, also
     where both found it and its corners did not triangulate (a camera turned far: the fix is to calibrate
@@ -205,6 +208,10 @@ def floor_unmeasured(report: Mapping[str, Any], views: Mapping[str, Mapping[str,
     """
     if "floor" in report:
         return None
+    unreadable = [reasons[floor_view] for reasons in (unread or {}).values() if floor_view in reasons]
+    if unreadable:
+        return (f"the floor view's image does not read ({'; '.join(unreadable)}): take the floor view again "
+                "(ghcal capture --floor --force)")
     seen = [camera for camera, named in views.items() if floor_view in named]
     if missed is not None:
         imaged = [c for c in views if floor_view in views[c] or floor_view in missed.get(c, ())]

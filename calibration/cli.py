@@ -725,7 +725,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     _refuse_exchanged_sizes(out, views, Path(args.images))
     blind = [cam for cam in names if not views[cam]]
     if blind:  # said as such: it was blamed on the floor view, or on too few views ("15-30 is usual")
-        raise UsageError(f"camera {blind[0]!r} found the board in none of its {len(missed[blind[0]])} images "
+        raise UsageError(f"camera {blind[0]!r} found the board in none of its "
+                         f"{_images_counted(len(missed[blind[0]]), len(found.unread[blind[0]]))} "
                          f"({Path(args.images) / blind[0]}): does {where} describe the print ({_describe(board)}; "
                          "squares_x counts them along board.png's width)? Is the board in "
                          "view, sharp, and without glare?")
@@ -774,6 +775,12 @@ def cmd_solve(args: argparse.Namespace) -> int:
     return 0
 
 
+def _images_counted(readable: int, unreadable: int) -> str:
+    """A camera's images as counted in words: "5 images", or "5 readable images (2 more unreadable)" where some
+    were passed over (:func:`_say_unread`); the count said only the readable ones before session 75."""
+    return f"{readable} images" if not unreadable else f"{readable} readable images ({unreadable} more unreadable)"
+
+
 def _say_unread(unread: Mapping[str, Mapping[str, str]], stream) -> None:
     """A warning for each image ``solve`` or ``check`` passes over as unreadable (:func:`read_folder`), as they say
     the images without the board: the run goes on with the others, and its own checks refuse too few."""
@@ -783,8 +790,9 @@ def _say_unread(unread: Mapping[str, Mapping[str, str]], stream) -> None:
 
 
 def _refuse_unread_floor(unread: Mapping[str, Mapping[str, str]], floor_view: str, other: str) -> None:
-    """Refuse a floor view that does not read in a camera: the levelling (or its check) rests on that one view, so
-    it is not passed over as another view is; ``other`` is the command's other way."""
+    """Refuse a floor view that does not read in a camera: the levelling rests on that one view, so ``solve`` does
+    not pass it over as another view; ``check`` refuses it only where ``--floor-view`` names it (else a note says
+    the floor went unchecked, as for a missing one). ``other`` is the command's other way."""
     for reasons in unread.values():
         if floor_view in reasons:
             raise UsageError(f"floor view {floor_view!r}: {reasons[floor_view]}: take it again (ghcal capture --floor "
@@ -1163,7 +1171,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     found = read_folder(board, args.images, names)
     views, missed = found.views, found.missed
     _say_unread(found.unread, sys.stderr if args.json else sys.stdout)
-    _refuse_unread_floor(found.unread, floor_view, "pass --floor-view NAME for another")
+    if args.floor_view is not None:  # asked for by name: an error, as a name with no image is; else a note below
+        _refuse_unread_floor(found.unread, floor_view, "pass --floor-view NAME for another")
     limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
     sizes = camera_image_sizes(Path(args.images), names, views)
     rig_sizes = ", ".join(f"{cam.name!r} {cam.width}x{cam.height}" for cam in rig.pair)
@@ -1177,7 +1186,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     def taken(name: str) -> bool:
         return any(name in views[c] or name in missed[c] for c in views)
 
-    floor_taken = taken(floor_view)
+    # an image that does not read is a floor view taken (warned of above): the note below says why it went unmeasured
+    floor_taken = taken(floor_view) or any(floor_view in found.unread[c] for c in names)
     if args.floor_view is not None and not floor_taken:
         # a mistyped name passed silently, and with it a rig tilted on its mount, which only the floor shows
         raise UsageError(f"--floor-view {args.floor_view!r}: neither camera's folder in {args.images} has an image "
@@ -1190,9 +1200,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     report = check_rig(rig, board, views, board_thickness_m=thickness, floor_view=floor_view)
     if not report["pairs"]:
         raise UsageError(f"{args.images}: no image pair in which both cameras found the board")
+    report["unreadable_views"] = {cam: sorted(found.unread[cam]) for cam in names}  # --json's reader sees no warning
     if "floor" not in report:
         print(f"note: the levelling is not checked (a rig tilted on its mount passes): "
-              + ((floor_unmeasured(report, views, floor_view, missed=missed, root=args.images)
+              + ((floor_unmeasured(report, views, floor_view, missed=missed, root=args.images, unread=found.unread)
                   or f"neither camera found the board in floor view {floor_view!r}") if floor_taken else
                  f"no floor view {floor_view!r} in {args.images} ("
                  + (f"{recorded_where}; " if record_floor is not None else "") + "--floor-view NAME names another)"),

@@ -1386,6 +1386,42 @@ def test_solve_and_check_pass_over_an_unreadable_image_saying_so(capture, tmp_pa
     assert f"warning: {cut}: not a readable image; passed over" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("recorded", [None, "floor"])
+def test_check_passes_over_an_unreadable_floor_view_unless_named(truth, capture, tmp_path, capsys, recorded):
+    # session 75: a floor.png cut off stopped check (exit 2) where a missing one was a note; now it is passed over
+    # as the other unreadable images are, the floor left unchecked with a note; --floor-view floor still stops it
+    images = _copy_capture(capture, tmp_path / "capture")
+    cut = images / "left" / "floor.png"
+    cut.write_bytes(b"cut")
+    rig_path = tmp_path / "rig.json"
+    metadata = {} if recorded is None else {"calibration": {"board": BOARD.to_dict(), "floor_view": recorded}}
+    save_rig(Rig(truth.cameras, truth.volume, metadata=metadata), rig_path)
+    argv = ["check", "--rig", str(rig_path), "--board", str(images / "board.json"), "--images", str(images)]
+    assert cli.main(argv) == 0
+    out = capsys.readouterr().out
+    assert f"warning: {cut}: not a readable image; passed over" in out, out
+    assert (f"note: the levelling is not checked (a rig tilted on its mount passes): the floor view's image does "
+            f"not read ({cut}: not a readable image): take the floor view again (ghcal capture --floor --force)") \
+        in out, out
+    assert cli.main(argv + ["--json"]) == 0
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)
+    assert report["unreadable_views"] == {"left": ["floor"], "right": []} and "floor" not in report
+    assert f"{cut}: not a readable image; passed over" in captured.err
+    assert cli.main(argv + ["--floor-view", "floor"]) == 2  # asked for by name: the file named
+    assert (f"floor view 'floor': {cut}: not a readable image: take it again (ghcal capture --floor --force), or "
+            "pass --floor-view NAME for another") in capsys.readouterr().err
+
+
+def test_check_s_report_lists_no_unreadable_view_where_all_read(truth, capture, tmp_path, capsys):
+    rig_path = tmp_path / "rig.json"
+    save_rig(truth, rig_path)
+    assert cli.main(["check", "--rig", str(rig_path), "--board", str(capture / "board.json"), "--images",
+                     str(capture), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["unreadable_views"] == {"left": [], "right": []} and "floor" in report
+
+
 @pytest.mark.parametrize("cut_names, words", [
     (["floor"], "floor view 'floor': {cut}: not a readable image: take it again (ghcal capture --floor --force)"),
     (None, "camera 'left': none of its 15 image(s) reads: {cut}: not a readable image"),

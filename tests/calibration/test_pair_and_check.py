@@ -394,6 +394,11 @@ def test_why_the_floor_view_was_not_measured_is_said(level_rig, level_views):
     assert floor_unmeasured(check_rig(level_rig, BOARD, none), none, missed={"left": ["floor"], "right": []}) == (
         "camera 'right' has no floor image (right/floor.png is missing; camera 'left' has one, without the board "
         "found): take the floor view again (ghcal capture --floor --force)")
+    # session 75: the right camera's floor image there but unreadable was called missing
+    cut = {"left": {}, "right": {"floor": "cap/right/floor.png: not a readable image"}}
+    assert floor_unmeasured(report, one, missed={"left": [], "right": []}, root="cap", unread=cut) == (
+        "the floor view's image does not read (cap/right/floor.png: not a readable image): take the floor view "
+        "again (ghcal capture --floor --force)")
 
 
 def test_the_board_file_measured_on_the_print_is_not_overwritten(tmp_path, capsys):

@@ -115,6 +115,19 @@ def test_a_camera_that_never_found_the_board_is_said_so(image, tmp_path, capsys)
     assert not (tmp_path / "rig.json").exists()
 
 
+def test_a_blind_camera_s_count_says_its_unreadable_images_apart(image, tmp_path, capsys):
+    # session 75: with two of its images cut off, the right camera "found the board in none of its 5 images" of 7
+    blank = np.full_like(image, 40)
+    images = _folders(tmp_path / "views", {"left": {f"{k:03d}": image for k in range(6)} | {"floor": image},
+                                           "right": {f"{k:03d}": blank for k in range(6)} | {"floor": blank}})
+    for name in ("004", "005"):
+        (images / "right" / f"{name}.png").write_bytes(b"cut")
+    rc = cli.main(["solve", "--board", _board_file(tmp_path), "--images", str(images), "--cameras", "left,right",
+                   "--floor-view", "floor", "--out", str(tmp_path / "rig.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "camera 'right' found the board in none of its 5 readable images (2 more unreadable)" in err
+
+
 def test_folders_whose_images_do_not_pair_by_name_are_named(image, tmp_path, capsys):
     # another tool's naming, left/000.png beside right/right_000.png: no pair at all, and the solve said
     # "hold it where both cameras see it"
