@@ -18,7 +18,8 @@ out) through ``ghcal import`` / ``ghcal export`` (OpenCV FileStorage YAML/XML/JS
 
 Exit status: 0 on success (warnings are printed, not fatal), 2 for an error the user fixes (the
 message names the file, folder, camera or key); 130 after Ctrl-C, 143 after SIGTERM, each with one line
-(``capture``: 0 when it kept views, as its normal end).
+(``capture``: 0 when it kept views, as its normal end; 2 when a ``record+`` take recorded with it failed as it
+closed, since session 75).
 """
 from __future__ import annotations
 
@@ -506,6 +507,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
     source = drivers.create_rig_source(url)
     shown_url = redact_url(args.url)  # a camera URL may carry a password (rtsp://user:pass@..., token=)
     read_to_its_end = False  # the capture ended without a stop (caught below) or an error on its way out
+    stopped: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM: the capture's normal end, said after the close
     try:
         # what the open warns and notes of the rig (a take's, a device's calibration, sim://'s) is logged by the
         # source, not the rig file: shown as main shows a loaded rig's, its notes too (Python showed the warnings)
@@ -648,13 +650,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
             last_kept_at = now
             print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
         read_to_its_end = True
-    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (main): the cameras are closed below either way
-        how = "" if stop_signal(e) == signal.SIGINT else f" ({stop_words(e)})"
-        if kept == 0:  # stopping a capture is its normal end, but one that kept nothing did not succeed
-            print(f"{PROG}: stopped{how} before any view was kept in {out}{_skipped_note(skipped)}", file=sys.stderr)
-            return exit_status(e)
-        print(f"stopped{how}: kept {kept} view(s) in {out}{_skipped_note(skipped)}")
-        return 0
+    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (main): said below, once the cameras are closed
+        stopped = e
     finally:
         # a Ctrl-C or SIGTERM that lands in the close waits for it, as ghnerf-demo's does: raised there it tore the
         # close, a depthai device or a record+ take's manifest left half-closed (timeout's SIGTERM as --max-seconds
@@ -663,12 +660,33 @@ def cmd_capture(args: argparse.Namespace) -> int:
         # is the one reported
         with stop_signals_deferred(then_raise=read_to_its_end):
             source.close()
-    if kept < count:
+        take_failure = getattr(source, "unreported_failure", lambda: None)()  # a record+ take: complete: false
+        if take_failure is not None and not read_to_its_end and stopped is None:  # said before main says the error
+            print(f"{PROG}: error: {take_failure}", file=sys.stderr)
+    if stopped is not None:
+        status = _say_stopped(stopped, kept, out, skipped)
+    elif kept < count:
         why = ("the stream ended" if ended else "--max-seconds ran out") + ("" if board_seen else
                                                                           ", and the board was in no image")
         print(f"{PROG}: kept {kept} of {count} views: {why}{_skipped_note(skipped)}", file=sys.stderr)
-        return 2 if kept == 0 else 0
-    print(f"kept {kept} view(s) in {out}{_skipped_note(skipped)}")
+        status = 2 if kept == 0 else 0
+    else:
+        print(f"kept {kept} view(s) in {out}{_skipped_note(skipped)}")
+        status = 0
+    if take_failure is not None:  # the views are whole, the take recorded with them is not: 0 said both were
+        print(f"{PROG}: error: {take_failure}", file=sys.stderr)
+        return 2
+    return status
+
+
+def _say_stopped(stop: KeyboardInterrupt, kept: int, out: Path, skipped: int) -> int:
+    """A capture ended by Ctrl-C or SIGTERM said, as its exit status: 0 with views kept (its normal end), else the
+    shell's figure for the signal."""
+    how = "" if stop_signal(stop) == signal.SIGINT else f" ({stop_words(stop)})"
+    if kept == 0:  # stopping a capture is its normal end, but one that kept nothing did not succeed
+        print(f"{PROG}: stopped{how} before any view was kept in {out}{_skipped_note(skipped)}", file=sys.stderr)
+        return exit_status(stop)
+    print(f"stopped{how}: kept {kept} view(s) in {out}{_skipped_note(skipped)}")
     return 0
 
 

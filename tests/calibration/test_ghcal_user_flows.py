@@ -463,3 +463,36 @@ def test_the_tangential_fold_warning_suggests_holding_p1_p2_at_zero():
     radial = Camera("left", 800, 500, np.array([[300.0, 0, 400], [0, 300, 250], [0, 0, 1]]),
                     np.array([-0.2, 0, 0, 0, 0]))
     assert "--no-tangential" not in fold_warning(radial)  # a radial fold: p1, p2 are not at fault
+
+
+@pytest.mark.parametrize("end", ["count", "ctrl-c", "unplugged"])
+def test_a_take_recorded_with_the_capture_that_fails_as_it_closes_is_said_exit_2(truth, one_view, tmp_path, capsys,
+                                                                                  monkeypatch, end):
+    """A capture recorded as it is taken (record+...) whose take failed as it closed (its last fsync, a frame still
+    queued: no read raised it) was a log line at most: exit 0 with the views kept, the take complete: false. Now
+    one error line names the take and why, after the views kept are said, and the exit status is 2 however the
+    capture ended (all its views, Ctrl-C, a camera gone: both errors said)."""
+    import drivers
+    import drivers.backends.record as record_module
+
+    def full_disk(path):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(record_module, "_fsync", full_disk)  # a short take: only the close's fsync runs
+    if end != "count":
+        error = KeyboardInterrupt() if end == "ctrl-c" else drivers.RigDisconnectedError("camera 'right' vanished")
+        monkeypatch.setattr(drivers, "create_rig_source", _failing_after(drivers.create_rig_source, 2, error))
+    take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
+    rc = cli.main(["capture", "--url", f"record+replay://{take}?speed=free&out={recorded}", "--board",
+                   str(_board_file(tmp_path)), "--out", str(out), "--count", "1" if end == "count" else "5",
+                   "--interval-s", "0", "--still-s", "0"])
+    captured = capsys.readouterr()
+    assert rc == 2, captured
+    err = but_the_framing_notes(captured.err).splitlines()
+    said = [line for line in err if "failed as it closed" in line]
+    assert said == [f"ghcal: error: recording to {recorded} failed as it closed: [Errno 28] No space left on device; "
+                    "its manifest says complete: false"], err
+    assert len(err) == (2 if end == "unplugged" else 1), err  # the camera's error, said by main after the take's
+    assert ("kept 1 view(s) in" if end != "unplugged" else "") in captured.out
+    assert json.loads((recorded / "manifest.json").read_text())["complete"] is False
+    assert (out / truth.pair[0].name / "000.png").exists()  # the views are whole: kept
