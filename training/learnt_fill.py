@@ -615,8 +615,7 @@ def _export_cli(args) -> int:
     # net's (another run's may sit in the folder a net was copied into).
     trained = dict(net.trained)
     score_json = args.net.parent / "score.json"
-    if score_json.is_file():
-        scored = json.loads(score_json.read_text())
+    if score_json.is_file() and (scored := _score_record(score_json)) is not None:  # (an unreadable one is named)
         if scored.get("steps") == net.steps_trained and scored.get("config") == net.trained.get("config"):
             trained["rows"] = scored.get("rows")
         else:
@@ -656,6 +655,21 @@ def _export_cli(args) -> int:
 
         print(add_painter_to_card(args.card_dir, out, outs[1:], dropped))
     return 0
+
+
+def _score_record(path: Path) -> dict | None:
+    """The ``score.json`` beside a net as an object, or None with a line saying why it is not used: a cut or
+    hand-edited file was a JSONDecodeError or AttributeError traceback before the export began."""
+    try:
+        scored = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        print(f"{path}: cannot be read as JSON ({type(e).__name__}: {e}): its figures are not used", file=sys.stderr)
+        return None
+    if not isinstance(scored, dict):
+        print(f"{path}: holds a JSON {type(scored).__name__}, not the train command's record: its figures are not "
+              "used", file=sys.stderr)
+        return None
+    return scored
 
 
 def painter_parity(net: FillNet, path: Path, arrays: dict[str, np.ndarray], views: int = 8) -> dict:

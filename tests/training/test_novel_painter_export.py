@@ -296,3 +296,20 @@ def test_an_export_stopped_in_its_calibration_leaves_no_int8_file_of_the_previou
               str(tmp_path / "cache.npz")])
     assert not out.with_suffix(".int8.onnx").exists()
     assert NovelPainter.load(NovelPainter.find(out.parent)).meta["ghnerf_painter.steps"] == "9"
+
+
+@pytest.mark.parametrize(("score", "said"), [
+    ('{"rows": {"novel, all"', "cannot be read as JSON (JSONDecodeError"),  # cut short
+    ("[]", "holds a JSON list, not the train command's record"),
+])
+def test_an_unreadable_score_file_beside_the_net_is_named_and_the_export_goes_on(tmp_path, data64, capsys, score,
+                                                                                 said):
+    """A cut or hand-edited score.json beside the net was a JSONDecodeError or AttributeError traceback: it is read
+    only for the held-out figures, which the export does without (as for another run's file)."""
+    card_dir, out = _export_setup(tmp_path, data64)
+    (tmp_path / "score.json").write_text(score)
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out)]) == 0
+    assert f"{tmp_path / 'score.json'}: {said}" in capsys.readouterr().err
+    report = json.loads(out.with_suffix(".json").read_text())
+    assert report["held_out"] is None and report["steps"] == 7
+    assert NovelPainter.load(out).meta["ghnerf_painter.steps"] == "7"
