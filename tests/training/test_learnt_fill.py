@@ -247,6 +247,9 @@ def test_a_broken_cache_is_named_with_what_is_wrong(truth_cache, tmp_path):
     np.savez(tmp_path / "ragged.npz", **{**a, "angle": a["angle"][:1]})
     with pytest.raises(ValueError, match="disagree"):
         load_cache(tmp_path / "ragged.npz")
+    np.savez(tmp_path / "none.npz", **{k: v[:0] for k, v in a.items()})  # train failed in torch.randint
+    with pytest.raises(ValueError, match="none.npz: fill-feature cache holds no views"):
+        load_cache(tmp_path / "none.npz")
 
 
 def test_the_net_starts_as_its_base_and_paints_only_the_subject(truth_cache):

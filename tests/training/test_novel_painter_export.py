@@ -313,3 +313,24 @@ def test_an_unreadable_score_file_beside_the_net_is_named_and_the_export_goes_on
     report = json.loads(out.with_suffix(".json").read_text())
     assert report["held_out"] is None and report["steps"] == 7
     assert NovelPainter.load(out).meta["ghnerf_painter.steps"] == "7"
+
+
+@pytest.mark.parametrize("flag", ["--calib-cache", "--val-cache"])
+def test_a_cache_of_no_views_is_named_before_the_export_and_the_previous_painter_stays(tmp_path, data64, capsys,
+                                                                                      flag):
+    """A cache of no views (an empty int8 calibration set, or held-out set) was onnxruntime's 'calibration needs at
+    least one feed dict' or numpy's 'need at least one array to concatenate', tracebacks after the new fp32
+    painter had replaced the previous one, its card record not written."""
+    card_dir, out = _export_setup(tmp_path, data64)
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 "--calib-cache", str(tmp_path / "cache.npz")]) == 0
+    before = {p: p.read_bytes() for p in (out, out.with_suffix(".int8.onnx"))}
+    with np.load(tmp_path / "cache.npz") as z:
+        np.savez(tmp_path / "empty.npz", **{k: z[k][:0] for k in z.files})
+    net = _net(1)
+    save_net(net, FillTrainConfig(net=net.cfg), tmp_path / "next.pt", steps=9, seconds=1.0, hardware="cpu")
+    capsys.readouterr()
+    assert main(["export", "--net", str(tmp_path / "next.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 flag, str(tmp_path / "empty.npz")]) == 2
+    assert f"{tmp_path / 'empty.npz'}: fill-feature cache holds no views" in capsys.readouterr().err
+    assert {p: p.read_bytes() for p in before} == before
