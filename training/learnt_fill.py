@@ -605,7 +605,7 @@ def _export_cli(args) -> int:
 
     try:  # every input read before anything is written: a bad --net or cache was a traceback (the caches' after
         # the painter was written)
-        net = load_net(args.net)
+        net = _exportable(load_net(args.net), args.net)
         calib = load_cache(args.calib_cache) if args.calib_cache is not None else None
         val = load_cache(args.val_cache) if args.val_cache is not None else None
     except ValueError as e:  # load_net's or a FillCacheError: the message names the file
@@ -655,6 +655,16 @@ def _export_cli(args) -> int:
 
         print(add_painter_to_card(args.card_dir, out, outs[1:], dropped))
     return 0
+
+
+def _exportable(net: FillNet, path: Path) -> FillNet:
+    """``net`` when the runtime can run it as its painter (:class:`PainterGraph`), else a ValueError naming ``path``:
+    refused before anything is written (the refusal was a traceback after the previous int8 painter was removed)."""
+    try:
+        PainterGraph(net)
+    except ValueError as e:
+        raise ValueError(f"--net {path}: {e}") from None
+    return net
 
 
 def _score_record(path: Path) -> dict | None:

@@ -334,3 +334,21 @@ def test_a_cache_of_no_views_is_named_before_the_export_and_the_previous_painter
                  flag, str(tmp_path / "empty.npz")]) == 2
     assert f"{tmp_path / 'empty.npz'}: fill-feature cache holds no views" in capsys.readouterr().err
     assert {p: p.read_bytes() for p in before} == before
+
+
+def test_a_net_the_device_cannot_run_is_refused_before_the_previous_painter_is_touched(tmp_path, data64, capsys):
+    """A net trained with the relit fill (FillNetConfig's default) was refused by PainterGraph only after the
+    previous painter's int8 file had been removed ('removed, the int8 file of the painter this export replaces'):
+    a ValueError traceback, and the model folder left with the previous fp32 painter alone."""
+    card_dir, out = _export_setup(tmp_path, data64)
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 "--calib-cache", str(tmp_path / "cache.npz")]) == 0
+    before = {p: p.read_bytes() for p in (out, out.with_suffix(".int8.onnx"), card_dir / "model_card.json")}
+    relit = FillNet(FillNetConfig(width=8))
+    save_net(relit, FillTrainConfig(net=relit.cfg), tmp_path / "relit.pt", steps=9)
+    capsys.readouterr()
+    assert main(["export", "--net", str(tmp_path / "relit.pt"), "--out", str(out), "--card-dir", str(card_dir)]) == 2
+    err = capsys.readouterr().err
+    assert f"error: --net {tmp_path / 'relit.pt'}: the runtime's painter is trained with net.relit_input=false" in err
+    assert "removed" not in err
+    assert {p: p.read_bytes() for p in before} == before
