@@ -551,13 +551,24 @@ def _parse_sets(cfg: FillTrainConfig, sets: list[str]) -> FillTrainConfig:
             raise ValueError(f"--set {s}: expected key=value with key one of {sorted(top)} or net.{sorted(net)}")
         kind = type(target[name])
         try:
-            target[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
+            target[name] = _bool_of(value) if kind is bool else kind(value)
         except ValueError:
-            raise ValueError(f"--set {s}: {key} takes a {kind.__name__}, got {value!r}") from None
+            what = "true or false (1/0, yes/no)" if kind is bool else f"a {kind.__name__}"
+            raise ValueError(f"--set {s}: {key} takes {what}, got {value!r}") from None
     cfg = replace(FillTrainConfig(**top), net=FillNetConfig(**net))
     if problem := _config_problem(cfg):
         raise ValueError(f"--set {problem}")
     return cfg
+
+
+def _bool_of(text: str) -> bool:
+    """A ``--set`` truth value; a ValueError for any other word (``flip=on``, ``flip=ture`` were False)."""
+    word = text.strip().lower()
+    if word in ("1", "true", "yes"):
+        return True
+    if word in ("0", "false", "no"):
+        return False
+    raise ValueError(text)
 
 
 def _config_problem(cfg: FillTrainConfig) -> str | None:

@@ -487,6 +487,16 @@ def test_train_refuses_a_cache_without_the_relit_fill_the_net_reads(train_cache,
     assert f"--val-cache {lightless}: made without the light fit" in capsys.readouterr().err
 
 
+def test_a_truth_value_override_is_one_of_its_words_or_refused():
+    # any other word was False without a word: --set flip=on trained without the mirrored batches
+    sets = ["flip=No", "net.shown_input=YES", "net.relit_input=0", "around_weight=0"]
+    cfg = _parse_sets(FillTrainConfig(), sets)
+    assert (cfg.flip, cfg.net.shown_input, cfg.net.relit_input) == (False, True, False)
+    for word in ("on", "ture", ""):
+        with pytest.raises(ValueError, match=f"--set flip={word}: flip takes true or false .*, got '{word}'"):
+            _parse_sets(FillTrainConfig(), [f"flip={word}"])
+
+
 def test_bad_training_values_are_usage_errors(train_cache, truth_cache, tmp_path, capsys):
     for sets, words in ((["batch=0"], "batch: must be at least 1, got 0"), (["lr=0"], "lr: must be a positive number"),
                         (["log_every=0"], "log_every: must be at least 1"), (["net.width=12"], "multiple of 8"),
