@@ -307,6 +307,8 @@ def load_cache(path: str | Path) -> dict[str, np.ndarray]:
     n = {k: len(arrays[k]) for k in FIELDS}
     if len(set(n.values())) != 1:
         raise FillCacheError(f"{path}: fill-feature fields disagree on the number of views: {n}")
+    if not n[FIELDS[0]]:  # train, score and export each failed on it in numpy or onnxruntime, a traceback
+        raise FillCacheError(f"{path}: fill-feature cache holds no views: nothing to train, score or calibrate on")
     return arrays
 
 

@@ -551,13 +551,24 @@ def _parse_sets(cfg: FillTrainConfig, sets: list[str]) -> FillTrainConfig:
             raise ValueError(f"--set {s}: expected key=value with key one of {sorted(top)} or net.{sorted(net)}")
         kind = type(target[name])
         try:
-            target[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
+            target[name] = _bool_of(value) if kind is bool else kind(value)
         except ValueError:
-            raise ValueError(f"--set {s}: {key} takes a {kind.__name__}, got {value!r}") from None
+            what = "true or false (1/0, yes/no)" if kind is bool else f"a {kind.__name__}"
+            raise ValueError(f"--set {s}: {key} takes {what}, got {value!r}") from None
     cfg = replace(FillTrainConfig(**top), net=FillNetConfig(**net))
     if problem := _config_problem(cfg):
         raise ValueError(f"--set {problem}")
     return cfg
+
+
+def _bool_of(text: str) -> bool:
+    """A ``--set`` truth value; a ValueError for any other word (``flip=on``, ``flip=ture`` were False)."""
+    word = text.strip().lower()
+    if word in ("1", "true", "yes"):
+        return True
+    if word in ("0", "false", "no"):
+        return False
+    raise ValueError(text)
 
 
 def _config_problem(cfg: FillTrainConfig) -> str | None:
@@ -605,7 +616,7 @@ def _export_cli(args) -> int:
 
     try:  # every input read before anything is written: a bad --net or cache was a traceback (the caches' after
         # the painter was written)
-        net = load_net(args.net)
+        net = _exportable(load_net(args.net), args.net)
         calib = load_cache(args.calib_cache) if args.calib_cache is not None else None
         val = load_cache(args.val_cache) if args.val_cache is not None else None
     except ValueError as e:  # load_net's or a FillCacheError: the message names the file
@@ -615,8 +626,7 @@ def _export_cli(args) -> int:
     # net's (another run's may sit in the folder a net was copied into).
     trained = dict(net.trained)
     score_json = args.net.parent / "score.json"
-    if score_json.is_file():
-        scored = json.loads(score_json.read_text())
+    if score_json.is_file() and (scored := _score_record(score_json)) is not None:  # (an unreadable one is named)
         if scored.get("steps") == net.steps_trained and scored.get("config") == net.trained.get("config"):
             trained["rows"] = scored.get("rows")
         else:
@@ -656,6 +666,31 @@ def _export_cli(args) -> int:
 
         print(add_painter_to_card(args.card_dir, out, outs[1:], dropped))
     return 0
+
+
+def _exportable(net: FillNet, path: Path) -> FillNet:
+    """``net`` when the runtime can run it as its painter (:class:`PainterGraph`), else a ValueError naming ``path``:
+    refused before anything is written (the refusal was a traceback after the previous int8 painter was removed)."""
+    try:
+        PainterGraph(net)
+    except ValueError as e:
+        raise ValueError(f"--net {path}: {e}") from None
+    return net
+
+
+def _score_record(path: Path) -> dict | None:
+    """The ``score.json`` beside a net as an object, or None with a line saying why it is not used: a cut or
+    hand-edited file was a JSONDecodeError or AttributeError traceback before the export began."""
+    try:
+        scored = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        print(f"{path}: cannot be read as JSON ({type(e).__name__}: {e}): its figures are not used", file=sys.stderr)
+        return None
+    if not isinstance(scored, dict):
+        print(f"{path}: holds a JSON {type(scored).__name__}, not the train command's record: its figures are not "
+              "used", file=sys.stderr)
+        return None
+    return scored
 
 
 def painter_parity(net: FillNet, path: Path, arrays: dict[str, np.ndarray], views: int = 8) -> dict:

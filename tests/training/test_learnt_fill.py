@@ -247,6 +247,9 @@ def test_a_broken_cache_is_named_with_what_is_wrong(truth_cache, tmp_path):
     np.savez(tmp_path / "ragged.npz", **{**a, "angle": a["angle"][:1]})
     with pytest.raises(ValueError, match="disagree"):
         load_cache(tmp_path / "ragged.npz")
+    np.savez(tmp_path / "none.npz", **{k: v[:0] for k, v in a.items()})  # train failed in torch.randint
+    with pytest.raises(ValueError, match="none.npz: fill-feature cache holds no views"):
+        load_cache(tmp_path / "none.npz")
 
 
 def test_the_net_starts_as_its_base_and_paints_only_the_subject(truth_cache):
@@ -482,6 +485,16 @@ def test_train_refuses_a_cache_without_the_relit_fill_the_net_reads(train_cache,
                             log=lambda *_: None)
     assert _train(train_cache, lightless, tmp_path / "run") == 2  # the net read its picture as the relit fill
     assert f"--val-cache {lightless}: made without the light fit" in capsys.readouterr().err
+
+
+def test_a_truth_value_override_is_one_of_its_words_or_refused():
+    # any other word was False without a word: --set flip=on trained without the mirrored batches
+    sets = ["flip=No", "net.shown_input=YES", "net.relit_input=0", "around_weight=0"]
+    cfg = _parse_sets(FillTrainConfig(), sets)
+    assert (cfg.flip, cfg.net.shown_input, cfg.net.relit_input) == (False, True, False)
+    for word in ("on", "ture", ""):
+        with pytest.raises(ValueError, match=f"--set flip={word}: flip takes true or false .*, got '{word}'"):
+            _parse_sets(FillTrainConfig(), [f"flip={word}"])
 
 
 def test_bad_training_values_are_usage_errors(train_cache, truth_cache, tmp_path, capsys):

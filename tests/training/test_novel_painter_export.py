@@ -296,3 +296,59 @@ def test_an_export_stopped_in_its_calibration_leaves_no_int8_file_of_the_previou
               str(tmp_path / "cache.npz")])
     assert not out.with_suffix(".int8.onnx").exists()
     assert NovelPainter.load(NovelPainter.find(out.parent)).meta["ghnerf_painter.steps"] == "9"
+
+
+@pytest.mark.parametrize(("score", "said"), [
+    ('{"rows": {"novel, all"', "cannot be read as JSON (JSONDecodeError"),  # cut short
+    ("[]", "holds a JSON list, not the train command's record"),
+])
+def test_an_unreadable_score_file_beside_the_net_is_named_and_the_export_goes_on(tmp_path, data64, capsys, score,
+                                                                                 said):
+    """A cut or hand-edited score.json beside the net was a JSONDecodeError or AttributeError traceback: it is read
+    only for the held-out figures, which the export does without (as for another run's file)."""
+    card_dir, out = _export_setup(tmp_path, data64)
+    (tmp_path / "score.json").write_text(score)
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out)]) == 0
+    assert f"{tmp_path / 'score.json'}: {said}" in capsys.readouterr().err
+    report = json.loads(out.with_suffix(".json").read_text())
+    assert report["held_out"] is None and report["steps"] == 7
+    assert NovelPainter.load(out).meta["ghnerf_painter.steps"] == "7"
+
+
+@pytest.mark.parametrize("flag", ["--calib-cache", "--val-cache"])
+def test_a_cache_of_no_views_is_named_before_the_export_and_the_previous_painter_stays(tmp_path, data64, capsys,
+                                                                                      flag):
+    """A cache of no views (an empty int8 calibration set, or held-out set) was onnxruntime's 'calibration needs at
+    least one feed dict' or numpy's 'need at least one array to concatenate', tracebacks after the new fp32
+    painter had replaced the previous one, its card record not written."""
+    card_dir, out = _export_setup(tmp_path, data64)
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 "--calib-cache", str(tmp_path / "cache.npz")]) == 0
+    before = {p: p.read_bytes() for p in (out, out.with_suffix(".int8.onnx"))}
+    with np.load(tmp_path / "cache.npz") as z:
+        np.savez(tmp_path / "empty.npz", **{k: z[k][:0] for k in z.files})
+    net = _net(1)
+    save_net(net, FillTrainConfig(net=net.cfg), tmp_path / "next.pt", steps=9, seconds=1.0, hardware="cpu")
+    capsys.readouterr()
+    assert main(["export", "--net", str(tmp_path / "next.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 flag, str(tmp_path / "empty.npz")]) == 2
+    assert f"{tmp_path / 'empty.npz'}: fill-feature cache holds no views" in capsys.readouterr().err
+    assert {p: p.read_bytes() for p in before} == before
+
+
+def test_a_net_the_device_cannot_run_is_refused_before_the_previous_painter_is_touched(tmp_path, data64, capsys):
+    """A net trained with the relit fill (FillNetConfig's default) was refused by PainterGraph only after the
+    previous painter's int8 file had been removed ('removed, the int8 file of the painter this export replaces'):
+    a ValueError traceback, and the model folder left with the previous fp32 painter alone."""
+    card_dir, out = _export_setup(tmp_path, data64)
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 "--calib-cache", str(tmp_path / "cache.npz")]) == 0
+    before = {p: p.read_bytes() for p in (out, out.with_suffix(".int8.onnx"), card_dir / "model_card.json")}
+    relit = FillNet(FillNetConfig(width=8))
+    save_net(relit, FillTrainConfig(net=relit.cfg), tmp_path / "relit.pt", steps=9)
+    capsys.readouterr()
+    assert main(["export", "--net", str(tmp_path / "relit.pt"), "--out", str(out), "--card-dir", str(card_dir)]) == 2
+    err = capsys.readouterr().err
+    assert f"error: --net {tmp_path / 'relit.pt'}: the runtime's painter is trained with net.relit_input=false" in err
+    assert "removed" not in err
+    assert {p: p.read_bytes() for p in before} == before
