@@ -303,6 +303,7 @@ class _Webcam:
         self.target, self.api, self.left = target, api, self.frames
         self.props = {cv2.CAP_PROP_FRAME_WIDTH: SIZE[0], cv2.CAP_PROP_FRAME_HEIGHT: SIZE[1]}
         self.grabbing = self.released_while_grabbing = False
+        self.due_s = time.monotonic()  # when its next frame is due, a period on from the last one's due time
         _Webcam.made.append(self)
 
     def isOpened(self) -> bool:  # noqa: N802 - OpenCV's name
@@ -321,7 +322,10 @@ class _Webcam:
             if self.left <= 0 and self.hang is not None:
                 self.hang.wait(60)
             else:
-                time.sleep(1 / 30)
+                # on the sensor's schedule, as a webcam's frames come: slept a period after each return, the two
+                # cameras drifted apart on a loaded host (three frames in 60 at load 9), pairing across frames
+                self.due_s += 1 / 30
+                time.sleep(max(0.0, self.due_s - time.monotonic()))
             self.left -= 1
             return self.left >= 0
         finally:
