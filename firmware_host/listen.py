@@ -24,7 +24,8 @@ flag (``3 several people``: two people seen, one person's joints sent; not a pre
 decoder's error counts (a noisy
 serial line shows as ``crc``/``cobs`` errors). Each address sending to a udp:// port is a sender of its own,
 counted apart; with several, each line and total starts with the sender's address (``10.0.0.7:40123: 30.0
-JOINTS/s; ...``) and stderr says when another is heard. A seq further back is a restarted sender, not a gap. Ctrl-C,
+JOINTS/s; ...``) and stderr says when another is heard; past :data:`MAX_PRODUCERS` the longest quiet is forgotten
+(counted in the totals). A seq further back is a restarted sender, not a gap. Ctrl-C,
 SIGTERM or ``--seconds`` ends it with the totals on stderr (``, N of joint_set K (unknown)`` added when any came).
 Exit status: 0; 2 for a bad URL or a port that cannot be opened (named), or one that fails while read (an
 unplugged serial port: the totals of what arrived until then are still printed).
@@ -538,6 +539,10 @@ class Tally:
 #: A sender not heard for this long while another is gets no line of its own any more: a udp:// sink that reopened
 #: its socket (a reconnect, a reload) sends from another port, and its old address falls quiet for good.
 QUIET_S = 10.0
+#: The most senders kept apart on one port: past it the longest quiet is forgotten (counted in the totals). A sink
+#: that reconnects often (a new source port each time) or stray datagrams from random ports grew the table, its
+#: lines and totals without limit in a long session.
+MAX_PRODUCERS = 64
 
 
 @dataclass
@@ -561,6 +566,8 @@ class Heard:
     clock). Key None: a serial link's one sender, or the first before its first datagram came (which takes it)."""
 
     producers: dict[Optional[str], Producer] = field(default_factory=_waiting)
+    forgotten: int = 0  # senders forgotten past MAX_PRODUCERS, and the JOINTS they had sent
+    forgotten_joints: int = 0
 
     @property
     def first(self) -> Tally:
@@ -573,6 +580,7 @@ class Heard:
                 self.producers = {source: self.producers[None]}
             else:
                 self._note_another(source, now, notes)
+                self._make_room()
                 self.producers[source] = Producer()
         producer = self.producers[source]
         producer.heard_at = now
@@ -586,6 +594,13 @@ class Heard:
                         "(a receiver here mixes their frames) or one that reopened its socket; the summary lines "
                         "and totals name each sender\n")
             notes.flush()
+
+    def _make_room(self) -> None:
+        """Forget the longest quiet senders until a new one fits within :data:`MAX_PRODUCERS`."""
+        while len(self.producers) >= max(MAX_PRODUCERS, 1):
+            name = min(self.producers, key=lambda k: self.producers[k].heard_at)
+            self.forgotten += 1
+            self.forgotten_joints += self.producers.pop(name).tally.total_joints
 
     def _current(self, now: float) -> list[tuple[Optional[str], Producer]]:
         """The senders heard within :data:`QUIET_S`, and the last heard whenever (a lone sender gone quiet keeps
@@ -603,9 +618,13 @@ class Heard:
 
     def totals(self) -> list[str]:
         """The totals line, one per sender (named) when several were heard."""
-        if len(self.producers) == 1:
+        if len(self.producers) == 1 and not self.forgotten:
             return [_totals(self.first)]
-        return [f"{name}: {_totals(p.tally)}" for name, p in self.producers.items()]
+        lines = [f"{name}: {_totals(p.tally)}" for name, p in self.producers.items()]
+        if self.forgotten:
+            lines.append(f"{self.forgotten} more senders forgotten (the longest quiet, past {MAX_PRODUCERS} kept): "
+                         f"{self.forgotten_joints} JOINTS messages from them")
+        return lines
 
 
 def _totals(tally: Tally) -> str:

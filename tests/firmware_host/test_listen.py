@@ -1077,3 +1077,30 @@ def test_the_help_says_several_senders_are_counted_apart(capsys):
         listen.main(["--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "Several senders on a udp:// port: each counted apart" in text and "newest HELLO" in text, text
+
+
+def test_the_senders_kept_are_bounded_the_longest_quiet_forgotten_and_counted(monkeypatch, capsys):
+    """A sink that reconnects often sends from a new port each time, and stray datagrams come from random ports:
+    until session 75 each address was kept for good, the table (and its lines and totals) growing without limit."""
+    heard, notes = listen.Heard(), io.StringIO()
+    heard.producer(_A, 0.0, notes).tally.add(_joints(1))
+    for k in range(3 * listen.MAX_PRODUCERS):  # A heard again after each newcomer: never the longest quiet
+        heard.producer(f"192.0.2.1:{1024 + k}", 1.0 + k, notes).tally.add(_joints(1))
+        heard.producer(_A, 1.5 + k, notes)
+    assert len(heard.producers) == listen.MAX_PRODUCERS and _A in heard.producers
+    assert f"192.0.2.1:{1024 + 3 * listen.MAX_PRODUCERS - 1}" in heard.producers  # the newest kept
+    assert "192.0.2.1:1024" not in heard.producers  # the oldest forgotten
+    forgotten = 3 * listen.MAX_PRODUCERS + 1 - listen.MAX_PRODUCERS
+    totals = heard.totals()
+    assert len(totals) == listen.MAX_PRODUCERS + 1 and totals[0].startswith(f"{_A}: 1 JOINTS messages"), totals
+    assert totals[-1] == (f"{forgotten} more senders forgotten (the longest quiet, past {listen.MAX_PRODUCERS} "
+                          f"kept): {forgotten} JOINTS messages from them"), totals[-1]
+    # through the command: the one sender left after another was forgotten is still named, the forgotten said
+    monkeypatch.setattr(listen, "MAX_PRODUCERS", 1)
+    rigs = _two_rigs()
+    monkeypatch.setattr(listen, "open_port", lambda url: _Senders([d for d in rigs if d[0] == _A] +
+                                                                  [d for d in rigs if d[0] == _B]))
+    assert listen.main(["udp://:9870"]) == 0
+    assert capsys.readouterr().err.splitlines()[-2:] == [
+        f"{_B}: 5 JOINTS messages, 1 sequence gaps (lost), 1 late (reordered), 0 duplicate",
+        "1 more senders forgotten (the longest quiet, past 1 kept): 6 JOINTS messages from them"]
