@@ -6,8 +6,8 @@ Three layouts are read; the keys are exactly these (anything else in the file, s
 Single camera (OpenCV's calibration sample, ``out_camera_data.yml``), top-level keys:
     ``camera_matrix`` or ``K``              3x3 matrix (required)
     ``distortion_coefficients`` or ``D``    Nx1 / 1xN matrix or sequence, N in 0/4/5/8/12/14 (required)
-    ``image_width`` + ``image_height``      integers, or ``image_size`` [w, h]; else the
-                                            ``image_size`` argument (required one way)
+    ``image_width`` + ``image_height``      integers, or ``image_size`` [w, h] (both: they must agree); else
+                                            the ``image_size`` argument (required one way)
     ``R``                                   3x3 matrix or 3-vector Rodrigues (optional, default I)
     ``T``                                   3-vector, file units (optional, default 0)
     ``name``                                string (optional; default the file's stem)
@@ -239,29 +239,49 @@ def _pick(node, keys: Sequence[str], path, field: str, required: bool = True) ->
 
 def _image_size(node, path, field: str, image_size) -> tuple[Any, Any, tuple[str, str]]:
     """Width, height and the keys they came from (for error messages)."""
-    keys = _keys(node)
-    if "image_width" in keys or "image_height" in keys:
-        w = _numeric(node.getNode("image_width"), path, join(field, "image_width"))
-        h = _numeric(node.getNode("image_height"), path, join(field, "image_height"))
-        if w is None or h is None:
-            raise fail(path, join(field, "image_width" if w is None else "image_height"), "missing (both image_width and image_height are needed)")
-        if w.size != 1 or h.size != 1:
-            raise fail(path, join(field, "image_width"), f"image_width and image_height must be numbers, got {show(w)}, {show(h)}")
-        return float(w.reshape(-1)[0]), float(h.reshape(-1)[0]), ("image_width", "image_height")
-    if "image_size" in keys:
-        size = _numeric(node.getNode("image_size"), path, join(field, "image_size"))
-        if size is None or size.size != 2:
-            raise fail(path, join(field, "image_size"), f"must be [width, height], got {show(size)}")
-        w, h = (float(v) for v in size.reshape(-1))
-        return w, h, ("image_size", "image_size")
+    pair, size = _width_height(node, path, field), _size_key(node, path, field)
+    if pair is not None and size is not None and pair != size:  # image_width won without a word
+        raise fail(path, join(field, "image_size"), f"is [{size[0]:.10g}, {size[1]:.10g}], but image_width and "
+                                                    f"image_height are {pair[0]:.10g} and {pair[1]:.10g}: keep one")
+    if pair is not None:
+        return pair[0], pair[1], ("image_width", "image_height")
+    if size is not None:
+        return size[0], size[1], ("image_size", "image_size")
     if image_size is not None:
         try:  # a frame's shape (h, w, 3) or "640x480" raised a bare ValueError / TypeError when unpacked
             w, h = image_size
         except (TypeError, ValueError):
             raise fail(path, "image_size argument", f"must be (width, height), got {show(image_size)}") from None
         return w, h, ("image_size argument", "image_size argument")
-    raise fail(path, join(field, "image_width"),
-               "missing image size: give image_width + image_height or image_size in the file, or the image_size argument")
+    raise fail(path, join(field, "image_width"), "missing image size: give image_width + image_height or image_size "
+                                                 "in the file, or the image_size argument")
+
+
+def _width_height(node, path, field: str) -> tuple[float, float] | None:
+    """``image_width`` and ``image_height``; None when neither is given."""
+    keys = _keys(node)
+    if "image_width" not in keys and "image_height" not in keys:
+        return None
+    w = _numeric(node.getNode("image_width"), path, join(field, "image_width"))
+    h = _numeric(node.getNode("image_height"), path, join(field, "image_height"))
+    if w is None or h is None:
+        raise fail(path, join(field, "image_width" if w is None else "image_height"),
+                   "missing (both image_width and image_height are needed)")
+    if w.size != 1 or h.size != 1:
+        raise fail(path, join(field, "image_width"),
+                   f"image_width and image_height must be numbers, got {show(w)}, {show(h)}")
+    return float(w.reshape(-1)[0]), float(h.reshape(-1)[0])
+
+
+def _size_key(node, path, field: str) -> tuple[float, float] | None:
+    """``image_size`` as (width, height); None when not given."""
+    if "image_size" not in _keys(node):
+        return None
+    size = _numeric(node.getNode("image_size"), path, join(field, "image_size"))
+    if size is None or size.size != 2:
+        raise fail(path, join(field, "image_size"), f"must be [width, height], got {show(size)}")
+    w, h = (float(v) for v in size.reshape(-1))
+    return w, h
 
 
 def _string(node, path, field: str) -> str | None:

@@ -329,6 +329,23 @@ def test_opencv_aliases_and_plain_sequences(tmp_path):
     np.testing.assert_allclose(cam.t, [0.1, 0.0, 0.0])
 
 
+def test_an_image_size_that_disagrees_with_image_width_and_height_is_refused_naming_both(tmp_path):
+    # image_width won without a word: a camera calibrated at 1280x720 was read as 640x480
+    path = tmp_path / "cam.yml"
+    head = "%YAML:1.0\n---\nK: [[600, 0, 319.5], [0, 600, 239.5], [0, 0, 1]]\nD: [0, 0, 0, 0]\n"
+    path.write_text(head + "image_width: 640\nimage_height: 480\nimage_size: [1280, 720]\n")
+    with pytest.raises(RigFileError, match=r"is \[1280, 720\], but image_width and image_height are 640 and 480") as info:
+        read_opencv_camera(path)
+    assert info.value.path == str(path) and info.value.field == "image_size"
+    path.write_text(head + "image_width: 640\nimage_height: 480\nimage_size: [640, 480]\n")  # agreeing: fine
+    assert read_opencv_camera(path).size == (640, 480)
+    multi = tmp_path / "rig.yml"
+    multi.write_text(_multi_yaml(_cams(image_size="[480, 640]")))
+    with pytest.raises(RigFileError, match="480, 640") as info:
+        read_opencv_rig(multi)
+    assert info.value.field == "cameras[1].image_size"
+
+
 def _write_stereo_calib(tmp_path, T_mm):
     """intrinsics.yml + extrinsics.yml exactly as OpenCV's stereo_calib sample writes them."""
     K1 = np.array([[700.0, 0, 322.0], [0, 701.0, 241.0], [0, 0, 1]])
