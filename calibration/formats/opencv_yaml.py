@@ -473,8 +473,10 @@ def read_opencv_rig(
             list_field, pair_t = "cameras", (path, "cameras[1].T")
         elif "M1" in keys:
             layout = "opencv-stereo-calib"
+            # the pose first: a mistyped --extrinsics was named only after a unit was asked for and given
+            pose = _stereo_pose(root, path, extrinsics_path)
             units = _units(root, path, units_to_metres, needed=True)
-            cameras, fields = _stereo_calib(fs, path, extrinsics_path, image_size, units)
+            cameras, fields = _stereo_calib(root, path, pose, image_size, units)
             file_rig_id, list_field, levelling = None, "M1", None
             pair_t = (path if extrinsics_path is None else extrinsics_path, "T")
         else:
@@ -488,21 +490,30 @@ def read_opencv_rig(
                     metadata=metadata, list_field=list_field, pair_t=pair_t)
 
 
-def _stereo_calib(fs, path, extrinsics_path, image_size, units) -> tuple[list[Camera], list[str]]:
-    root = fs.root()
+def _stereo_pose(root, path, extrinsics_path) -> tuple[np.ndarray, np.ndarray]:
+    """stereo_calib's ``R`` and ``T`` (camera 1 -> camera 2, file units): ``path``'s own (``root``) without
+    ``extrinsics_path``, else that file's."""
+    if extrinsics_path is None:
+        return _pose(root, path)
+    ext_fs = _open(extrinsics_path)
+    try:
+        R, T = _pose(ext_fs.root(), extrinsics_path)
+    finally:
+        ext_fs.release()
+    return R, T
+
+
+def _pose(root, path) -> tuple[np.ndarray, np.ndarray]:
+    """``R`` (a matrix) and ``T`` of map ``root``, checked here so that their errors name the file they came from."""
+    _, R = _pick(root, ("R",), path, "")
+    _, T = _pick(root, ("T",), path, "")
+    return rotation(path, "R", R), as_array(path, "T", T, [(3,)], "a 3-vector")
+
+
+def _stereo_calib(root, path, pose, image_size, units) -> tuple[list[Camera], list[str]]:
     _refuse_fisheye(root, path, "")
     *size, size_keys = _image_size(root, path, "", image_size)
-    ext_fs, ext_path = (None, path) if extrinsics_path is None else (_open(extrinsics_path), extrinsics_path)
-    try:
-        ext_root = root if ext_fs is None else ext_fs.root()
-        _, R = _pick(ext_root, ("R",), ext_path, "")
-        _, T = _pick(ext_root, ("T",), ext_path, "")
-    finally:
-        if ext_fs is not None:
-            ext_fs.release()
-    # Validate R/T here so that their errors name the file they came from.
-    R = rotation(ext_path, "R", R)
-    T = as_array(ext_path, "T", T, [(3,)], "a 3-vector") * units
+    R, T = pose[0], pose[1] * units  # pose: T in file units
     cams = []
     for i, (name, rot, trans) in enumerate((("left", np.eye(3), np.zeros(3)), ("right", R, T)), start=1):
         _, K = _pick(root, (f"M{i}",), path, "")

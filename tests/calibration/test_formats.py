@@ -412,6 +412,14 @@ def test_stereo_calib_errors_name_the_right_file(tmp_path):
     assert info.value.path == str(tmp_path / "bad_ext.yml") and info.value.field == "R"
 
 
+def test_a_missing_extrinsics_file_is_named_before_the_unit_is_asked_for(tmp_path):
+    # named only once units_to_metres was given: the first error asked for a unit
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    with pytest.raises(RigFileError, match="no such file") as info:
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsic.yml", image_size=(640, 480))
+    assert info.value.path == str(tmp_path / "extrinsic.yml")
+
+
 # ----------------------------------------------------------------------------- errors
 def _multi_yaml(cameras: list[dict]) -> str:
     lines = ["%YAML:1.0", "---", "cameras:"]
