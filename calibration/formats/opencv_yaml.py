@@ -27,7 +27,8 @@ Multi-camera (our export; one map per camera, in rig order):
 Stereo pair (OpenCV's ``stereo_calib`` sample: ``intrinsics.yml`` + ``extrinsics.yml``):
     ``M1``, ``D1``, ``M2``, ``D2``   intrinsics of cameras 1 and 2 (required)
     ``R``, ``T``                     camera 1 -> camera 2 (required; from this file or
-                                     ``extrinsics_path``); ``R1 R2 P1 P2 Q`` are ignored
+                                     ``extrinsics_path``, where this file's, if any, must agree);
+                                     ``R1 R2 P1 P2 Q`` are ignored
     ``image_width`` + ``image_height`` or ``image_size``: optional (stereo_calib writes
                                      neither, so pass ``image_size``)
     The rig frame is camera 1's frame; cameras are named ``left`` and ``right``.
@@ -83,6 +84,11 @@ __all__ = ["read_opencv_camera", "read_opencv_rig", "write_opencv_camera", "writ
 
 #: How much of a file is looked at for the marks of one that is not FileStorage text (NULs, UTF-16).
 _SNIFF_BYTES = 4096
+#: How far (radians; share of the longer T) an intrinsics file's R or T may be from its extrinsics file's and be the
+#: same pose: past the rounding of 6 printed digits, not a change any calibration would make.
+_SAME_POSE_TOLERANCE = 1e-5
+_ONE_POSE_HINT = ("two poses for the pair; leave out extrinsics_path (--extrinsics) to use this file's, or delete "
+                  "R and T from this file to use the other's")
 
 
 # --------------------------------------------------------------------------- reading helpers
@@ -500,14 +506,36 @@ def _stereo_pose(root, path, extrinsics_path) -> tuple[np.ndarray, np.ndarray]:
         R, T = _pose(ext_fs.root(), extrinsics_path)
     finally:
         ext_fs.release()
+    _refuse_another_pose(root, path, extrinsics_path, R, T)
     return R, T
 
 
 def _pose(root, path) -> tuple[np.ndarray, np.ndarray]:
-    """``R`` (a matrix) and ``T`` of map ``root``, checked here so that their errors name the file they came from."""
-    _, R = _pick(root, ("R",), path, "")
-    _, T = _pick(root, ("T",), path, "")
-    return rotation(path, "R", R), as_array(path, "T", T, [(3,)], "a 3-vector")
+    """``R`` (a matrix) and ``T`` of map ``root``."""
+    return _pose_part(root, path, "R"), _pose_part(root, path, "T")
+
+
+def _pose_part(root, path, key: str) -> np.ndarray:
+    """``R`` (as a matrix) or ``T`` of map ``root``, checked here so that their errors name the file they came from."""
+    _, value = _pick(root, (key,), path, "")
+    return rotation(path, key, value) if key == "R" else as_array(path, key, value, [(3,)], "a 3-vector")
+
+
+def _refuse_another_pose(root, path, extrinsics_path, R: np.ndarray, T: np.ndarray) -> None:
+    """Refuse an ``R`` or ``T`` in the intrinsics file (``root``) that is not the extrinsics file's: the extrinsics
+    file won without a word, though one of the two is another calibration's pose (stereo_calib writes them to the
+    extrinsics file only). Agreeing values (a merged file) are fine."""
+    keys = _keys(root)
+    if "R" in keys:
+        mine = _pose_part(root, path, "R")
+        angle = float(np.linalg.norm(cv2.Rodrigues(mine.T @ R)[0]))
+        if angle > _SAME_POSE_TOLERANCE:
+            raise fail(path, "R", f"is {math.degrees(angle):.3g} deg from the R of {extrinsics_path}: "
+                                  f"{_ONE_POSE_HINT}")
+    if "T" in keys:
+        mine = _pose_part(root, path, "T")
+        if np.abs(mine - T).max() > _SAME_POSE_TOLERANCE * max(np.abs(mine).max(), np.abs(T).max()):
+            raise fail(path, "T", f"is {show(mine)}, the T of {extrinsics_path} {show(T)}: {_ONE_POSE_HINT}")
 
 
 def _stereo_calib(root, path, pose, image_size, units) -> tuple[list[Camera], list[str]]:

@@ -334,7 +334,8 @@ def test_an_image_size_that_disagrees_with_image_width_and_height_is_refused_nam
     path = tmp_path / "cam.yml"
     head = "%YAML:1.0\n---\nK: [[600, 0, 319.5], [0, 600, 239.5], [0, 0, 1]]\nD: [0, 0, 0, 0]\n"
     path.write_text(head + "image_width: 640\nimage_height: 480\nimage_size: [1280, 720]\n")
-    with pytest.raises(RigFileError, match=r"is \[1280, 720\], but image_width and image_height are 640 and 480") as info:
+    said = r"is \[1280, 720\], but image_width and image_height are 640 and 480"
+    with pytest.raises(RigFileError, match=said) as info:
         read_opencv_camera(path)
     assert info.value.path == str(path) and info.value.field == "image_size"
     path.write_text(head + "image_width: 640\nimage_height: 480\nimage_size: [640, 480]\n")  # agreeing: fine
@@ -418,6 +419,37 @@ def test_a_missing_extrinsics_file_is_named_before_the_unit_is_asked_for(tmp_pat
     with pytest.raises(RigFileError, match="no such file") as info:
         read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsic.yml", image_size=(640, 480))
     assert info.value.path == str(tmp_path / "extrinsic.yml")
+
+
+def _add_pose_to_intrinsics(tmp_path, R, T):
+    """stereo_calib's intrinsics.yml with an ``R`` and a ``T`` of its own (a file merged or edited by hand)."""
+    fs = cv2.FileStorage(str(tmp_path / "intrinsics.yml"), cv2.FILE_STORAGE_READ)
+    values = {key: fs.getNode(key).mat() for key in ("M1", "D1", "M2", "D2")}
+    fs.release()
+    fs = cv2.FileStorage(str(tmp_path / "intrinsics.yml"), cv2.FILE_STORAGE_WRITE)
+    for key, value in (*values.items(), ("R", np.asarray(R)), ("T", np.asarray(T).reshape(3, 1))):
+        fs.write(key, value)
+    fs.release()
+
+
+def test_a_pose_in_the_intrinsics_file_that_is_not_the_extrinsics_file_s_is_refused_naming_both(tmp_path):
+    # the extrinsics file's won without a word: one of the two is another calibration's pose
+    _, _, R = _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    intrinsics, extrinsics, mm = tmp_path / "intrinsics.yml", tmp_path / "extrinsics.yml", {"units_to_metres": 0.001}
+    _add_pose_to_intrinsics(tmp_path, R.astype(np.float32), np.float32([-60.0, 0.5, 1.0]))  # the same, float32
+    assert read_opencv_rig(intrinsics, extrinsics_path=extrinsics, image_size=(640, 480), **mm).baseline > 0
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    _add_pose_to_intrinsics(tmp_path, R, [-65.0, 0.5, 1.0])
+    said = r"T.*-65.*the T of .*extrinsics\.yml.*-60.*leave out extrinsics_path"
+    with pytest.raises(RigFileError, match=said) as info:
+        read_opencv_rig(intrinsics, extrinsics_path=extrinsics, image_size=(640, 480), **mm)
+    assert info.value.path == str(intrinsics) and info.value.field == "T"
+    assert read_opencv_rig(intrinsics, image_size=(640, 480), **mm).pair[1].t[0] == pytest.approx(-0.065)  # its own
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    _add_pose_to_intrinsics(tmp_path, cv2.Rodrigues(np.array([0.01, -0.04, 0.002]))[0], [-60.0, 0.5, 1.0])
+    with pytest.raises(RigFileError, match=r"is 0\.573 deg from the R of .*extrinsics\.yml") as info:
+        read_opencv_rig(intrinsics, extrinsics_path=extrinsics, image_size=(640, 480), **mm)
+    assert info.value.path == str(intrinsics) and info.value.field == "R"
 
 
 # ----------------------------------------------------------------------------- errors
