@@ -565,11 +565,17 @@ def _write_camera(fs: cv2.FileStorage, cam: Camera, units: float, with_name: boo
 
 #: The FileStorage format written for a destination's suffix (YAML for any other): a ``rig.xml`` used to
 #: hold YAML text, which OpenCV reads by content but a tool that parses the XML itself does not.
-_FORMATS = {".xml": cv2.FILE_STORAGE_FORMAT_XML, ".json": cv2.FILE_STORAGE_FORMAT_JSON}
+_FORMATS = {".xml": (cv2.FILE_STORAGE_FORMAT_XML, "XML"), ".json": (cv2.FILE_STORAGE_FORMAT_JSON, "JSON")}
+_YAML = (cv2.FILE_STORAGE_FORMAT_YAML, "YAML")
+
+
+def _format_name(path) -> str:
+    """The FileStorage format written to ``path``, as messages name it (a .json export was said to be YAML)."""
+    return _FORMATS.get(Path(path).suffix.lower(), _YAML)[1]
 
 
 def _memory_writer(path) -> cv2.FileStorage:
-    fmt = _FORMATS.get(Path(path).suffix.lower(), cv2.FILE_STORAGE_FORMAT_YAML)
+    fmt = _FORMATS.get(Path(path).suffix.lower(), _YAML)[0]
     return cv2.FileStorage("", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY | fmt)
 
 
@@ -588,10 +594,21 @@ def _check_strings_read_back(text: str, path, expected: dict[str, tuple[Any, str
         for field, (where, value) in expected.items():
             node = where(fs.root())
             if not (node.isString() and node.string() == value):
-                raise fail(path, field, f"{value!r} would not read back from OpenCV YAML as written (OpenCV "
-                                        "does not quote it): choose another")
+                fmt = _format_name(path)
+                why = f"it comes back as {_as_read(node)}" + ("; OpenCV does not quote it" if fmt == "YAML" else "")
+                raise fail(path, field, f"{value!r} would not read back from OpenCV {fmt} as written ({why}): "
+                                        "choose another")
     finally:
         fs.release()
+
+
+def _as_read(node) -> str:
+    """What a string written to ``node`` came back as, for a message: a string, a number or nothing."""
+    if node.isString():
+        return repr(node.string())
+    if node.isInt() or node.isReal():
+        return f"the number {node.real():g}"
+    return "nothing"
 
 
 def _reads_back(value: str, path) -> bool:
@@ -624,7 +641,7 @@ def dumps_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
     """The text :func:`write_opencv_rig` writes to ``path`` (its suffix picks YAML or JSON; errors name it), checked
     as it is, nothing written: ``ghcal export`` keeps the file it replaces only once the export can be made."""
     units = check_units(units_to_metres)
-    refuse_skew(rig.cameras, "an OpenCV YAML file")
+    refuse_skew(rig.cameras, f"an OpenCV {_format_name(path)} file")
     fs = _memory_writer(path)
     if Path(path).suffix.lower() != ".json":  # OpenCV writes comments into JSON as //, which JSON has not
         fs.writeComment(" ghnerf rig exported for OpenCV FileStorage; R, T map rig -> camera (X_cam = R X + T)")
@@ -656,7 +673,7 @@ def dumps_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
 def write_opencv_camera(camera: Camera, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> None:
     """Write the single-camera layout, plus ``name``, ``R`` and ``T`` (readers that do not know them ignore them)."""
     units = check_units(units_to_metres)
-    refuse_skew([camera], "an OpenCV YAML file")
+    refuse_skew([camera], f"an OpenCV {_format_name(path)} file")
     fs = _memory_writer(path)
     _write_camera(fs, camera, units, with_name=True)
     fs.write("units_to_metres", float(units))

@@ -131,6 +131,22 @@ def test_a_name_opencv_would_not_read_back_is_refused_before_writing(rig, tmp_pa
         write_opencv_camera(renamed.cameras[0], tmp_path / "one.yml")
 
 
+@pytest.mark.parametrize("suffix, fmt, name, back", [(".yml", "YAML", "true", "the number 1"),
+                                                     (".json", "JSON", "a\x00b", "'a'"),
+                                                     (".xml", "XML", "a\x00b", "'a'")])
+def test_a_name_that_would_not_read_back_is_said_in_the_format_written(rig, tmp_path, suffix, fmt, name, back):
+    # a .json or .xml export was said to be "OpenCV YAML", which it is not
+    renamed = Rig((dataclasses.replace(rig.cameras[0], name=name),) + rig.cameras[1:], rig.volume, rig_id=rig.rig_id)
+    said = f"would not read back from OpenCV {fmt} as written \\(it comes back as {back}"
+    with pytest.raises(RigFileError, match=said):
+        write_opencv_rig(renamed, tmp_path / f"rig{suffix}")
+    skewed = Camera("s", 640, 480, [[600.0, 5.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])
+    with pytest.raises(GeometryError, match=f"; an OpenCV {fmt} file cannot hold it"):
+        write_opencv_camera(skewed, tmp_path / f"one{suffix}")
+    with pytest.raises(GeometryError, match=f"; an OpenCV {fmt} file cannot hold it"):
+        write_opencv_rig(Rig((skewed, rig.cameras[1]), rig.volume), tmp_path / f"rig{suffix}")
+
+
 def test_an_argument_that_contradicts_the_files_units_is_refused(rig, tmp_path):
     # the argument won silently: a rig written in millimetres and read "in metres" had a 75 m baseline
     write_opencv_rig(rig, tmp_path / "rig.yaml", units_to_metres=0.001)
