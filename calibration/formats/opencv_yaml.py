@@ -6,8 +6,8 @@ Three layouts are read; the keys are exactly these (anything else in the file, s
 Single camera (OpenCV's calibration sample, ``out_camera_data.yml``), top-level keys:
     ``camera_matrix`` or ``K``              3x3 matrix (required)
     ``distortion_coefficients`` or ``D``    Nx1 / 1xN matrix or sequence, N in 0/4/5/8/12/14 (required)
-    ``image_width`` + ``image_height``      integers, or ``image_size`` [w, h]; else the
-                                            ``image_size`` argument (required one way)
+    ``image_width`` + ``image_height``      integers, or ``image_size`` [w, h] (both: they must agree); else
+                                            the ``image_size`` argument (required one way)
     ``R``                                   3x3 matrix or 3-vector Rodrigues (optional, default I)
     ``T``                                   3-vector, file units (optional, default 0)
     ``name``                                string (optional; default the file's stem)
@@ -27,7 +27,8 @@ Multi-camera (our export; one map per camera, in rig order):
 Stereo pair (OpenCV's ``stereo_calib`` sample: ``intrinsics.yml`` + ``extrinsics.yml``):
     ``M1``, ``D1``, ``M2``, ``D2``   intrinsics of cameras 1 and 2 (required)
     ``R``, ``T``                     camera 1 -> camera 2 (required; from this file or
-                                     ``extrinsics_path``); ``R1 R2 P1 P2 Q`` are ignored
+                                     ``extrinsics_path``, where this file's, if any, must agree);
+                                     ``R1 R2 P1 P2 Q`` are ignored
     ``image_width`` + ``image_height`` or ``image_size``: optional (stereo_calib writes
                                      neither, so pass ``image_size``)
     The rig frame is camera 1's frame; cameras are named ``left`` and ``right``.
@@ -83,6 +84,11 @@ __all__ = ["read_opencv_camera", "read_opencv_rig", "write_opencv_camera", "writ
 
 #: How much of a file is looked at for the marks of one that is not FileStorage text (NULs, UTF-16).
 _SNIFF_BYTES = 4096
+#: How far (radians; share of the longer T) an intrinsics file's R or T may be from its extrinsics file's and be the
+#: same pose: past the rounding of 6 printed digits, not a change any calibration would make.
+_SAME_POSE_TOLERANCE = 1e-5
+_ONE_POSE_HINT = ("two poses for the pair; leave out extrinsics_path (--extrinsics) to use this file's, or delete "
+                  "R and T from this file to use the other's")
 
 
 # --------------------------------------------------------------------------- reading helpers
@@ -239,29 +245,49 @@ def _pick(node, keys: Sequence[str], path, field: str, required: bool = True) ->
 
 def _image_size(node, path, field: str, image_size) -> tuple[Any, Any, tuple[str, str]]:
     """Width, height and the keys they came from (for error messages)."""
-    keys = _keys(node)
-    if "image_width" in keys or "image_height" in keys:
-        w = _numeric(node.getNode("image_width"), path, join(field, "image_width"))
-        h = _numeric(node.getNode("image_height"), path, join(field, "image_height"))
-        if w is None or h is None:
-            raise fail(path, join(field, "image_width" if w is None else "image_height"), "missing (both image_width and image_height are needed)")
-        if w.size != 1 or h.size != 1:
-            raise fail(path, join(field, "image_width"), f"image_width and image_height must be numbers, got {show(w)}, {show(h)}")
-        return float(w.reshape(-1)[0]), float(h.reshape(-1)[0]), ("image_width", "image_height")
-    if "image_size" in keys:
-        size = _numeric(node.getNode("image_size"), path, join(field, "image_size"))
-        if size is None or size.size != 2:
-            raise fail(path, join(field, "image_size"), f"must be [width, height], got {show(size)}")
-        w, h = (float(v) for v in size.reshape(-1))
-        return w, h, ("image_size", "image_size")
+    pair, size = _width_height(node, path, field), _size_key(node, path, field)
+    if pair is not None and size is not None and pair != size:  # image_width won without a word
+        raise fail(path, join(field, "image_size"), f"is [{size[0]:.10g}, {size[1]:.10g}], but image_width and "
+                                                    f"image_height are {pair[0]:.10g} and {pair[1]:.10g}: keep one")
+    if pair is not None:
+        return pair[0], pair[1], ("image_width", "image_height")
+    if size is not None:
+        return size[0], size[1], ("image_size", "image_size")
     if image_size is not None:
         try:  # a frame's shape (h, w, 3) or "640x480" raised a bare ValueError / TypeError when unpacked
             w, h = image_size
         except (TypeError, ValueError):
             raise fail(path, "image_size argument", f"must be (width, height), got {show(image_size)}") from None
         return w, h, ("image_size argument", "image_size argument")
-    raise fail(path, join(field, "image_width"),
-               "missing image size: give image_width + image_height or image_size in the file, or the image_size argument")
+    raise fail(path, join(field, "image_width"), "missing image size: give image_width + image_height or image_size "
+                                                 "in the file, or the image_size argument")
+
+
+def _width_height(node, path, field: str) -> tuple[float, float] | None:
+    """``image_width`` and ``image_height``; None when neither is given."""
+    keys = _keys(node)
+    if "image_width" not in keys and "image_height" not in keys:
+        return None
+    w = _numeric(node.getNode("image_width"), path, join(field, "image_width"))
+    h = _numeric(node.getNode("image_height"), path, join(field, "image_height"))
+    if w is None or h is None:
+        raise fail(path, join(field, "image_width" if w is None else "image_height"),
+                   "missing (both image_width and image_height are needed)")
+    if w.size != 1 or h.size != 1:
+        raise fail(path, join(field, "image_width"),
+                   f"image_width and image_height must be numbers, got {show(w)}, {show(h)}")
+    return float(w.reshape(-1)[0]), float(h.reshape(-1)[0])
+
+
+def _size_key(node, path, field: str) -> tuple[float, float] | None:
+    """``image_size`` as (width, height); None when not given."""
+    if "image_size" not in _keys(node):
+        return None
+    size = _numeric(node.getNode("image_size"), path, join(field, "image_size"))
+    if size is None or size.size != 2:
+        raise fail(path, join(field, "image_size"), f"must be [width, height], got {show(size)}")
+    w, h = (float(v) for v in size.reshape(-1))
+    return w, h
 
 
 def _string(node, path, field: str) -> str | None:
@@ -453,8 +479,10 @@ def read_opencv_rig(
             list_field, pair_t = "cameras", (path, "cameras[1].T")
         elif "M1" in keys:
             layout = "opencv-stereo-calib"
+            # the pose first: a mistyped --extrinsics was named only after a unit was asked for and given
+            pose = _stereo_pose(root, path, extrinsics_path)
             units = _units(root, path, units_to_metres, needed=True)
-            cameras, fields = _stereo_calib(fs, path, extrinsics_path, image_size, units)
+            cameras, fields = _stereo_calib(root, path, pose, image_size, units)
             file_rig_id, list_field, levelling = None, "M1", None
             pair_t = (path if extrinsics_path is None else extrinsics_path, "T")
         else:
@@ -468,21 +496,52 @@ def read_opencv_rig(
                     metadata=metadata, list_field=list_field, pair_t=pair_t)
 
 
-def _stereo_calib(fs, path, extrinsics_path, image_size, units) -> tuple[list[Camera], list[str]]:
-    root = fs.root()
+def _stereo_pose(root, path, extrinsics_path) -> tuple[np.ndarray, np.ndarray]:
+    """stereo_calib's ``R`` and ``T`` (camera 1 -> camera 2, file units): ``path``'s own (``root``) without
+    ``extrinsics_path``, else that file's."""
+    if extrinsics_path is None:
+        return _pose(root, path)
+    ext_fs = _open(extrinsics_path)
+    try:
+        R, T = _pose(ext_fs.root(), extrinsics_path)
+    finally:
+        ext_fs.release()
+    _refuse_another_pose(root, path, extrinsics_path, R, T)
+    return R, T
+
+
+def _pose(root, path) -> tuple[np.ndarray, np.ndarray]:
+    """``R`` (a matrix) and ``T`` of map ``root``."""
+    return _pose_part(root, path, "R"), _pose_part(root, path, "T")
+
+
+def _pose_part(root, path, key: str) -> np.ndarray:
+    """``R`` (as a matrix) or ``T`` of map ``root``, checked here so that their errors name the file they came from."""
+    _, value = _pick(root, (key,), path, "")
+    return rotation(path, key, value) if key == "R" else as_array(path, key, value, [(3,)], "a 3-vector")
+
+
+def _refuse_another_pose(root, path, extrinsics_path, R: np.ndarray, T: np.ndarray) -> None:
+    """Refuse an ``R`` or ``T`` in the intrinsics file (``root``) that is not the extrinsics file's: the extrinsics
+    file won without a word, though one of the two is another calibration's pose (stereo_calib writes them to the
+    extrinsics file only). Agreeing values (a merged file) are fine."""
+    keys = _keys(root)
+    if "R" in keys:
+        mine = _pose_part(root, path, "R")
+        angle = float(np.linalg.norm(cv2.Rodrigues(mine.T @ R)[0]))
+        if angle > _SAME_POSE_TOLERANCE:
+            raise fail(path, "R", f"is {math.degrees(angle):.3g} deg from the R of {extrinsics_path}: "
+                                  f"{_ONE_POSE_HINT}")
+    if "T" in keys:
+        mine = _pose_part(root, path, "T")
+        if np.abs(mine - T).max() > _SAME_POSE_TOLERANCE * max(np.abs(mine).max(), np.abs(T).max()):
+            raise fail(path, "T", f"is {show(mine)}, the T of {extrinsics_path} {show(T)}: {_ONE_POSE_HINT}")
+
+
+def _stereo_calib(root, path, pose, image_size, units) -> tuple[list[Camera], list[str]]:
     _refuse_fisheye(root, path, "")
     *size, size_keys = _image_size(root, path, "", image_size)
-    ext_fs, ext_path = (None, path) if extrinsics_path is None else (_open(extrinsics_path), extrinsics_path)
-    try:
-        ext_root = root if ext_fs is None else ext_fs.root()
-        _, R = _pick(ext_root, ("R",), ext_path, "")
-        _, T = _pick(ext_root, ("T",), ext_path, "")
-    finally:
-        if ext_fs is not None:
-            ext_fs.release()
-    # Validate R/T here so that their errors name the file they came from.
-    R = rotation(ext_path, "R", R)
-    T = as_array(ext_path, "T", T, [(3,)], "a 3-vector") * units
+    R, T = pose[0], pose[1] * units  # pose: T in file units
     cams = []
     for i, (name, rot, trans) in enumerate((("left", np.eye(3), np.zeros(3)), ("right", R, T)), start=1):
         _, K = _pick(root, (f"M{i}",), path, "")
@@ -506,11 +565,17 @@ def _write_camera(fs: cv2.FileStorage, cam: Camera, units: float, with_name: boo
 
 #: The FileStorage format written for a destination's suffix (YAML for any other): a ``rig.xml`` used to
 #: hold YAML text, which OpenCV reads by content but a tool that parses the XML itself does not.
-_FORMATS = {".xml": cv2.FILE_STORAGE_FORMAT_XML, ".json": cv2.FILE_STORAGE_FORMAT_JSON}
+_FORMATS = {".xml": (cv2.FILE_STORAGE_FORMAT_XML, "XML"), ".json": (cv2.FILE_STORAGE_FORMAT_JSON, "JSON")}
+_YAML = (cv2.FILE_STORAGE_FORMAT_YAML, "YAML")
+
+
+def _format_name(path) -> str:
+    """The FileStorage format written to ``path``, as messages name it (a .json export was said to be YAML)."""
+    return _FORMATS.get(Path(path).suffix.lower(), _YAML)[1]
 
 
 def _memory_writer(path) -> cv2.FileStorage:
-    fmt = _FORMATS.get(Path(path).suffix.lower(), cv2.FILE_STORAGE_FORMAT_YAML)
+    fmt = _FORMATS.get(Path(path).suffix.lower(), _YAML)[0]
     return cv2.FileStorage("", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY | fmt)
 
 
@@ -529,10 +594,21 @@ def _check_strings_read_back(text: str, path, expected: dict[str, tuple[Any, str
         for field, (where, value) in expected.items():
             node = where(fs.root())
             if not (node.isString() and node.string() == value):
-                raise fail(path, field, f"{value!r} would not read back from OpenCV YAML as written (OpenCV "
-                                        "does not quote it): choose another")
+                fmt = _format_name(path)
+                why = f"it comes back as {_as_read(node)}" + ("; OpenCV does not quote it" if fmt == "YAML" else "")
+                raise fail(path, field, f"{value!r} would not read back from OpenCV {fmt} as written ({why}): "
+                                        "choose another")
     finally:
         fs.release()
+
+
+def _as_read(node) -> str:
+    """What a string written to ``node`` came back as, for a message: a string, a number or nothing."""
+    if node.isString():
+        return repr(node.string())
+    if node.isInt() or node.isReal():
+        return f"the number {node.real():g}"
+    return "nothing"
 
 
 def _reads_back(value: str, path) -> bool:
@@ -565,7 +641,7 @@ def dumps_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
     """The text :func:`write_opencv_rig` writes to ``path`` (its suffix picks YAML or JSON; errors name it), checked
     as it is, nothing written: ``ghcal export`` keeps the file it replaces only once the export can be made."""
     units = check_units(units_to_metres)
-    refuse_skew(rig.cameras, "an OpenCV YAML file")
+    refuse_skew(rig.cameras, f"an OpenCV {_format_name(path)} file")
     fs = _memory_writer(path)
     if Path(path).suffix.lower() != ".json":  # OpenCV writes comments into JSON as //, which JSON has not
         fs.writeComment(" ghnerf rig exported for OpenCV FileStorage; R, T map rig -> camera (X_cam = R X + T)")
@@ -597,7 +673,7 @@ def dumps_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
 def write_opencv_camera(camera: Camera, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> None:
     """Write the single-camera layout, plus ``name``, ``R`` and ``T`` (readers that do not know them ignore them)."""
     units = check_units(units_to_metres)
-    refuse_skew([camera], "an OpenCV YAML file")
+    refuse_skew([camera], f"an OpenCV {_format_name(path)} file")
     fs = _memory_writer(path)
     _write_camera(fs, camera, units, with_name=True)
     fs.write("units_to_metres", float(units))

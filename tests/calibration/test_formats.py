@@ -131,6 +131,22 @@ def test_a_name_opencv_would_not_read_back_is_refused_before_writing(rig, tmp_pa
         write_opencv_camera(renamed.cameras[0], tmp_path / "one.yml")
 
 
+@pytest.mark.parametrize("suffix, fmt, name, back", [(".yml", "YAML", "true", "the number 1"),
+                                                     (".json", "JSON", "a\x00b", "'a'"),
+                                                     (".xml", "XML", "a\x00b", "'a'")])
+def test_a_name_that_would_not_read_back_is_said_in_the_format_written(rig, tmp_path, suffix, fmt, name, back):
+    # a .json or .xml export was said to be "OpenCV YAML", which it is not
+    renamed = Rig((dataclasses.replace(rig.cameras[0], name=name),) + rig.cameras[1:], rig.volume, rig_id=rig.rig_id)
+    said = f"would not read back from OpenCV {fmt} as written \\(it comes back as {back}"
+    with pytest.raises(RigFileError, match=said):
+        write_opencv_rig(renamed, tmp_path / f"rig{suffix}")
+    skewed = Camera("s", 640, 480, [[600.0, 5.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])
+    with pytest.raises(GeometryError, match=f"; an OpenCV {fmt} file cannot hold it"):
+        write_opencv_camera(skewed, tmp_path / f"one{suffix}")
+    with pytest.raises(GeometryError, match=f"; an OpenCV {fmt} file cannot hold it"):
+        write_opencv_rig(Rig((skewed, rig.cameras[1]), rig.volume), tmp_path / f"rig{suffix}")
+
+
 def test_an_argument_that_contradicts_the_files_units_is_refused(rig, tmp_path):
     # the argument won silently: a rig written in millimetres and read "in metres" had a 75 m baseline
     write_opencv_rig(rig, tmp_path / "rig.yaml", units_to_metres=0.001)
@@ -329,6 +345,24 @@ def test_opencv_aliases_and_plain_sequences(tmp_path):
     np.testing.assert_allclose(cam.t, [0.1, 0.0, 0.0])
 
 
+def test_an_image_size_that_disagrees_with_image_width_and_height_is_refused_naming_both(tmp_path):
+    # image_width won without a word: a camera calibrated at 1280x720 was read as 640x480
+    path = tmp_path / "cam.yml"
+    head = "%YAML:1.0\n---\nK: [[600, 0, 319.5], [0, 600, 239.5], [0, 0, 1]]\nD: [0, 0, 0, 0]\n"
+    path.write_text(head + "image_width: 640\nimage_height: 480\nimage_size: [1280, 720]\n")
+    said = r"is \[1280, 720\], but image_width and image_height are 640 and 480"
+    with pytest.raises(RigFileError, match=said) as info:
+        read_opencv_camera(path)
+    assert info.value.path == str(path) and info.value.field == "image_size"
+    path.write_text(head + "image_width: 640\nimage_height: 480\nimage_size: [640, 480]\n")  # agreeing: fine
+    assert read_opencv_camera(path).size == (640, 480)
+    multi = tmp_path / "rig.yml"
+    multi.write_text(_multi_yaml(_cams(image_size="[480, 640]")))
+    with pytest.raises(RigFileError, match="480, 640") as info:
+        read_opencv_rig(multi)
+    assert info.value.field == "cameras[1].image_size"
+
+
 def _write_stereo_calib(tmp_path, T_mm):
     """intrinsics.yml + extrinsics.yml exactly as OpenCV's stereo_calib sample writes them."""
     K1 = np.array([[700.0, 0, 322.0], [0, 701.0, 241.0], [0, 0, 1]])
@@ -393,6 +427,45 @@ def test_stereo_calib_errors_name_the_right_file(tmp_path):
         read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "bad_ext.yml", image_size=(640, 480),
                         **mm)
     assert info.value.path == str(tmp_path / "bad_ext.yml") and info.value.field == "R"
+
+
+def test_a_missing_extrinsics_file_is_named_before_the_unit_is_asked_for(tmp_path):
+    # named only once units_to_metres was given: the first error asked for a unit
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    with pytest.raises(RigFileError, match="no such file") as info:
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsic.yml", image_size=(640, 480))
+    assert info.value.path == str(tmp_path / "extrinsic.yml")
+
+
+def _add_pose_to_intrinsics(tmp_path, R, T):
+    """stereo_calib's intrinsics.yml with an ``R`` and a ``T`` of its own (a file merged or edited by hand)."""
+    fs = cv2.FileStorage(str(tmp_path / "intrinsics.yml"), cv2.FILE_STORAGE_READ)
+    values = {key: fs.getNode(key).mat() for key in ("M1", "D1", "M2", "D2")}
+    fs.release()
+    fs = cv2.FileStorage(str(tmp_path / "intrinsics.yml"), cv2.FILE_STORAGE_WRITE)
+    for key, value in (*values.items(), ("R", np.asarray(R)), ("T", np.asarray(T).reshape(3, 1))):
+        fs.write(key, value)
+    fs.release()
+
+
+def test_a_pose_in_the_intrinsics_file_that_is_not_the_extrinsics_file_s_is_refused_naming_both(tmp_path):
+    # the extrinsics file's won without a word: one of the two is another calibration's pose
+    _, _, R = _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    intrinsics, extrinsics, mm = tmp_path / "intrinsics.yml", tmp_path / "extrinsics.yml", {"units_to_metres": 0.001}
+    _add_pose_to_intrinsics(tmp_path, R.astype(np.float32), np.float32([-60.0, 0.5, 1.0]))  # the same, float32
+    assert read_opencv_rig(intrinsics, extrinsics_path=extrinsics, image_size=(640, 480), **mm).baseline > 0
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    _add_pose_to_intrinsics(tmp_path, R, [-65.0, 0.5, 1.0])
+    said = r"T.*-65.*the T of .*extrinsics\.yml.*-60.*leave out extrinsics_path"
+    with pytest.raises(RigFileError, match=said) as info:
+        read_opencv_rig(intrinsics, extrinsics_path=extrinsics, image_size=(640, 480), **mm)
+    assert info.value.path == str(intrinsics) and info.value.field == "T"
+    assert read_opencv_rig(intrinsics, image_size=(640, 480), **mm).pair[1].t[0] == pytest.approx(-0.065)  # its own
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    _add_pose_to_intrinsics(tmp_path, cv2.Rodrigues(np.array([0.01, -0.04, 0.002]))[0], [-60.0, 0.5, 1.0])
+    with pytest.raises(RigFileError, match=r"is 0\.573 deg from the R of .*extrinsics\.yml") as info:
+        read_opencv_rig(intrinsics, extrinsics_path=extrinsics, image_size=(640, 480), **mm)
+    assert info.value.path == str(intrinsics) and info.value.field == "R"
 
 
 # ----------------------------------------------------------------------------- errors

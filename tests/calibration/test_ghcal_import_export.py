@@ -375,6 +375,36 @@ def test_a_stereo_calib_pair_in_board_squares_read_as_metres_is_warned_about(tmp
     assert "baseline 600.0 mm" in out and "% of the working volume" not in out
 
 
+@pytest.mark.parametrize("make, said", [("missing", "no such file"), ("folder", "not a regular file"),
+                                        ("empty", "the file is empty")])
+def test_a_stereo_calib_extrinsics_file_that_cannot_be_read_is_named_before_any_unit_is_asked_for(tmp_path, capsys,
+                                                                                                  make, said):
+    # a mistyped --extrinsics was told "pass units_to_metres", and named only once a unit was given
+    intrinsics, _ = _write_stereo_calib_of(example_rig(), tmp_path, square_m=0.08)
+    extrinsics = tmp_path / "extrinsic.yml"
+    if make == "folder":
+        extrinsics.mkdir()
+    elif make == "empty":
+        extrinsics.write_text("\n")
+    assert cli.main(["import", str(intrinsics), "--extrinsics", str(extrinsics), "--image-size", "960x600",
+                     "--out", str(tmp_path / "rig.json")]) == 2
+    err = capsys.readouterr().err
+    assert str(extrinsics) in err and said in err and "units_to_metres" not in err, err
+
+
+def test_an_intrinsics_file_with_another_pose_than_its_extrinsics_file_is_refused_naming_both(tmp_path, capsys):
+    # the extrinsics file's pose was taken without a word
+    from tests.calibration.test_formats import _add_pose_to_intrinsics
+
+    intrinsics, extrinsics = _write_stereo_calib_of(example_rig(), tmp_path, square_m=0.08)
+    _add_pose_to_intrinsics(tmp_path, np.eye(3), [-7.0, 0.0, 0.0])
+    assert cli.main(["import", str(intrinsics), "--extrinsics", str(extrinsics), "--image-size", "960x600",
+                     "--units-to-metres", "0.08", "--out", str(tmp_path / "rig.json")]) == 2
+    err = capsys.readouterr().err
+    assert str(intrinsics) in err and str(extrinsics) in err and "--extrinsics" in err, err
+    assert not (tmp_path / "rig.json").exists()
+
+
 def test_a_volume_the_pair_does_not_face_is_warned_about_as_such(tmp_path, capsys):
     """A pair in the right unit given a working volume off to its side: the same warning, the cause the volume."""
     intrinsics, extrinsics = _write_stereo_calib_of(example_rig(), tmp_path, square_m=0.08)
