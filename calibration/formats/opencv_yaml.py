@@ -222,8 +222,9 @@ def _matrix_as_written(node, mat: np.ndarray, path, field: str) -> np.ndarray:
     if np.any(changed):
         k = int(np.argmax(changed))
         dt = node.getNode("dt").string() if node.getNode("dt").isString() else "?"
-        raise fail(path, field, f"dt: {dt} cannot hold data[{k}] = {float(written[k])!r}: OpenCV reads it as {float(read[k])!r} "
-                                f"({int(changed.sum())} of {changed.size} values change); write the matrix with dt: d")
+        raise fail(path, field, f"dt: {dt} cannot hold data[{k}] = {float(written[k])!r}: OpenCV reads it as "
+                                f"{float(read[k])!r} ({int(changed.sum())} of {changed.size} values change); "
+                                "write the matrix with dt: d")
     return written.reshape(mat.shape)
 
 
