@@ -508,6 +508,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
     shown_url = redact_url(args.url)  # a camera URL may carry a password (rtsp://user:pass@..., token=)
     read_to_its_end = False  # the capture ended without a stop (caught below) or an error on its way out
     stopped: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM: the capture's normal end, said after the close
+    late_stop: KeyboardInterrupt | None = None  # one that landed in the close of a capture that read to its end
     try:
         # what the open warns and notes of the rig (a take's, a device's calibration, sim://'s) is logged by the
         # source, not the rig file: shown as main shows a loaded rig's, its notes too (Python showed the warnings)
@@ -658,11 +659,16 @@ def cmd_capture(args: argparse.Namespace) -> int:
         # ran out, a second Ctrl-C pressed after the one that stopped the capture). It is raised once the close is
         # done only when it is the first stop: one caught above (the views kept said, 0) or an error on its way
         # is the one reported
-        with stop_signals_deferred(then_raise=read_to_its_end):
-            source.close()
+        try:
+            with stop_signals_deferred(then_raise=read_to_its_end):
+                source.close()
+        except KeyboardInterrupt as e:  # raised once the close is done: the take is checked first, below
+            late_stop = e
         take_failure = getattr(source, "unreported_failure", lambda: None)()  # a record+ take: complete: false
         if take_failure is not None and not read_to_its_end and stopped is None:  # said before main says the error
             print(f"{PROG}: error: {take_failure}", file=sys.stderr)
+    if late_stop is not None and take_failure is None:  # main says it (130, 143); a failed take is said below, 2
+        raise late_stop
     if stopped is not None:
         status = _say_stopped(stopped, kept, out, skipped)
     elif kept < count:
