@@ -1031,30 +1031,11 @@ def _is_rig_file(path: Path) -> bool:
 def _declared_units(path: Path) -> float | None:
     """``[metadata] units_to_metres`` of an anipose file our exporter wrote (others do not say); the reader checks
     an argument against it, but requires one."""
-    import tomllib
-
-    from calibration.formats._common import not_text_problem
+    from calibration.formats.anipose_toml import load_toml
 
     # A file that is no TOML to read is named as the reader names it: a mistyped name, a folder, an empty file or
     # one cut off mid-edit was told to pass --units-to-metres, and named only once a unit was given.
-    try:
-        raw = path.read_bytes()
-    except OSError as e:
-        raise RigFileError(f"cannot read: {e.strerror or e}", path=str(path)) from None
-    if problem := not_text_problem(raw[:4096], "TOML"):
-        raise RigFileError(problem, path=str(path))
-    try:
-        text = raw.decode("utf-8-sig")  # as the reader: a BOM is skipped
-    except UnicodeDecodeError:
-        return None  # the reader names the byte
-    if not text.strip():
-        raise RigFileError("the file is empty", path=str(path))
-    try:
-        meta = tomllib.loads(text).get("metadata")
-    except tomllib.TOMLDecodeError as e:
-        raise RigFileError(f"invalid TOML: {e}", path=str(path)) from None
-    except RecursionError:  # nested thousands deep
-        return None  # the reader names it
+    meta = load_toml(path).get("metadata")
     if meta is not None and not isinstance(meta, dict):  # metadata = 5 was passed over as no unit recorded
         raise RigFileError(f"must be a table ([metadata]), got {meta!r}", path=str(path), field="metadata")
     if meta is None or "units_to_metres" not in meta:
