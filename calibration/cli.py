@@ -508,6 +508,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
     shown_url = redact_url(args.url)  # a camera URL may carry a password (rtsp://user:pass@..., token=)
     read_to_its_end = False  # the capture ended without a stop (caught below) or an error on its way out
     stopped: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM: the capture's normal end, said after the close
+    late_stop: KeyboardInterrupt | None = None  # one that landed in the close of a capture that read to its end
     try:
         # what the open warns and notes of the rig (a take's, a device's calibration, sim://'s) is logged by the
         # source, not the rig file: shown as main shows a loaded rig's, its notes too (Python showed the warnings)
@@ -658,11 +659,16 @@ def cmd_capture(args: argparse.Namespace) -> int:
         # ran out, a second Ctrl-C pressed after the one that stopped the capture). It is raised once the close is
         # done only when it is the first stop: one caught above (the views kept said, 0) or an error on its way
         # is the one reported
-        with stop_signals_deferred(then_raise=read_to_its_end):
-            source.close()
+        try:
+            with stop_signals_deferred(then_raise=read_to_its_end):
+                source.close()
+        except KeyboardInterrupt as e:  # raised once the close is done: the take is checked first, below
+            late_stop = e
         take_failure = getattr(source, "unreported_failure", lambda: None)()  # a record+ take: complete: false
         if take_failure is not None and not read_to_its_end and stopped is None:  # said before main says the error
             print(f"{PROG}: error: {take_failure}", file=sys.stderr)
+    if late_stop is not None and take_failure is None:  # main says it (130, 143); a failed take is said below, 2
+        raise late_stop
     if stopped is not None:
         status = _say_stopped(stopped, kept, out, skipped)
     elif kept < count:
@@ -1025,30 +1031,11 @@ def _is_rig_file(path: Path) -> bool:
 def _declared_units(path: Path) -> float | None:
     """``[metadata] units_to_metres`` of an anipose file our exporter wrote (others do not say); the reader checks
     an argument against it, but requires one."""
-    import tomllib
-
-    from calibration.formats._common import not_text_problem
+    from calibration.formats.anipose_toml import load_toml
 
     # A file that is no TOML to read is named as the reader names it: a mistyped name, a folder, an empty file or
     # one cut off mid-edit was told to pass --units-to-metres, and named only once a unit was given.
-    try:
-        raw = path.read_bytes()
-    except OSError as e:
-        raise RigFileError(f"cannot read: {e.strerror or e}", path=str(path)) from None
-    if problem := not_text_problem(raw[:4096], "TOML"):
-        raise RigFileError(problem, path=str(path))
-    try:
-        text = raw.decode("utf-8-sig")  # as the reader: a BOM is skipped
-    except UnicodeDecodeError:
-        return None  # the reader names the byte
-    if not text.strip():
-        raise RigFileError("the file is empty", path=str(path))
-    try:
-        meta = tomllib.loads(text).get("metadata")
-    except tomllib.TOMLDecodeError as e:
-        raise RigFileError(f"invalid TOML: {e}", path=str(path)) from None
-    except RecursionError:  # nested thousands deep
-        return None  # the reader names it
+    meta = load_toml(path).get("metadata")
     if meta is not None and not isinstance(meta, dict):  # metadata = 5 was passed over as no unit recorded
         raise RigFileError(f"must be a table ([metadata]), got {meta!r}", path=str(path), field="metadata")
     if meta is None or "units_to_metres" not in meta:

@@ -454,6 +454,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     source = drivers.create_rig_source(args.url)
     stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
     read_to_its_end = False  # the reading ended without an error or a stop on its way out (the close's raise)
+    late_stop: KeyboardInterrupt | None = None  # one that landed in the close of a run that read to its end
     try:
         estimator = None
         if cfg is not None:
@@ -567,8 +568,13 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         # ran out, a second Ctrl-C pressed after the one that stopped the run). A stop that lands there is raised
         # once the take is whole only when it is the first: a stop caught above, or an error on its way, is the one
         # reported (its summary and exit status)
-        with stop_signals_deferred(then_raise=read_to_its_end and stopped is None):
-            source.close()
+        try:
+            with stop_signals_deferred(then_raise=read_to_its_end and stopped is None):
+                source.close()
+        except KeyboardInterrupt as e:  # raised once the close is done: the take is checked first, below
+            late_stop = e
+    if late_stop is not None and getattr(source, "unreported_failure", lambda: None)() is None:
+        raise late_stop  # main says it (130, 143); a failed take is said after the summary, 2
 
     rate = delivered / elapsed
     skew = f"median skew {statistics.median(skews):.2f} ms" if skews else "no pairs"

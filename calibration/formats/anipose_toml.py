@@ -61,6 +61,29 @@ _CAMERA_KEYS = ("size", "matrix", "distortions", "rotation", "translation")
 __all__ = ["read_anipose_toml", "write_anipose_toml", "dumps_anipose_toml"]
 
 
+def load_toml(path: str | os.PathLike) -> dict[str, Any]:
+    """The TOML document in ``path``, or a :class:`RigFileError` naming the file and why it does not read: one
+    reading for :func:`read_anipose_toml` and ``ghcal import``'s look for a recorded unit, which passed over a
+    file not UTF-8 or nested too deeply and asked for --units-to-metres instead (session 75)."""
+    try:
+        raw = Path(path).read_bytes()
+        if problem := not_text_problem(raw[:4096], "TOML"):
+            raise fail(path, None, problem)
+        text = raw.decode("utf-8-sig")  # a byte-order mark (Windows editors): tomllib refused line 1
+    except OSError as e:
+        raise fail(path, None, f"cannot read: {e.strerror or e}") from e
+    except UnicodeDecodeError as e:
+        raise fail(path, None, f"not UTF-8 text (byte {e.start}): {e.reason}") from e
+    if not text.strip():  # read as a rig of no cameras, named as one
+        raise fail(path, None, "the file is empty")
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise fail(path, None, f"invalid TOML: {e}") from e
+    except RecursionError as e:  # tomllib parses arrays and inline tables recursively: a traceback before
+        raise fail(path, None, "invalid TOML: nested too deeply") from e
+
+
 def read_anipose_toml(
     path: str | os.PathLike,
     *,
@@ -88,23 +111,7 @@ def read_anipose_toml(
     """
     units = check_units(units_to_metres)
     p = Path(path)
-    try:
-        raw = p.read_bytes()
-        if problem := not_text_problem(raw[:4096], "TOML"):
-            raise fail(path, None, problem)
-        text = raw.decode("utf-8-sig")  # a byte-order mark (Windows editors): tomllib refused line 1
-    except OSError as e:
-        raise fail(path, None, f"cannot read: {e.strerror or e}") from e
-    except UnicodeDecodeError as e:
-        raise fail(path, None, f"not UTF-8 text (byte {e.start}): {e.reason}") from e
-    if not text.strip():  # read as a rig of no cameras, named as one
-        raise fail(path, None, "the file is empty")
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise fail(path, None, f"invalid TOML: {e}") from e
-    except RecursionError as e:  # tomllib parses arrays and inline tables recursively: a traceback before
-        raise fail(path, None, "invalid TOML: nested too deeply") from e
+    doc = load_toml(path)
 
     declared = doc.get("metadata", {}).get("units_to_metres") if isinstance(doc.get("metadata"), dict) else None
     if declared is not None:  # ours: the unit the writer was given; aniposelib files say nothing

@@ -179,16 +179,20 @@ def test_a_unit_our_anipose_file_records_wrongly_is_named(rig_file, tmp_path, ca
 
 @pytest.mark.parametrize("make, said", [("missing", "cannot read: No such file"),
                                         ("folder", "cannot read: Is a directory"), ("empty", "the file is empty"),
-                                        ("cut", "invalid TOML: "), ("utf16", "UTF-16 text")])
+                                        ("cut", "invalid TOML: "), ("utf16", "UTF-16 text"),
+                                        ("latin1", "not UTF-8 text (byte 19)"), ("deep", "nested too deeply")])
 def test_an_anipose_file_that_cannot_be_read_is_named_before_any_unit_is_asked_for(tmp_path, capsys, make, said):
     # a mistyped name, a folder, an empty file or one cut off mid-edit was told "anipose files do not record the
-    # unit ...: pass --units-to-metres", and named only once a unit was given
+    # unit ...: pass --units-to-metres", and named only once a unit was given; a file not UTF-8 (an editor's
+    # Latin-1) or nested too deeply still was until session 75's second look
     toml = tmp_path / "calibration.toml"
     if make == "folder":
         toml.mkdir()
     elif make != "missing":
-        text = {"empty": "\n", "cut": '[cam_0]\nname = "left\n', "utf16": '[cam_0]\nname = "left"\n'}[make]
-        toml.write_bytes(text.encode("utf-16") if make == "utf16" else text.encode())
+        text = {"empty": "\n", "cut": '[cam_0]\nname = "left\n', "utf16": '[cam_0]\nname = "left"\n',
+                "latin1": '[cam_0]\nname = "caf\xe9"\n', "deep": "a = " + "[" * 5000 + "]" * 5000 + "\n"}[make]
+        codec = {"utf16": "utf-16", "latin1": "latin-1"}.get(make, "utf-8")
+        toml.write_bytes(text.encode(codec))
     assert cli.main(["import", str(toml), "--out", str(tmp_path / "back.json")]) == 2
     err = capsys.readouterr().err
     assert str(toml) in err and said in err and "--units-to-metres" not in err, err

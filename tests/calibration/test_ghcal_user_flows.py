@@ -496,3 +496,57 @@ def test_a_take_recorded_with_the_capture_that_fails_as_it_closes_is_said_exit_2
     assert ("kept 1 view(s) in" if end != "unplugged" else "") in captured.out
     assert json.loads((recorded / "manifest.json").read_text())["complete"] is False
     assert (out / truth.pair[0].name / "000.png").exists()  # the views are whole: kept
+
+
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+def test_a_failed_take_is_said_when_a_stop_lands_in_the_close_of_a_capture_that_read_to_its_end(
+        truth, one_view, tmp_path, capsys, monkeypatch, stop):
+    """A Ctrl-C or SIGTERM (timeout's, as --count is reached) landing in the close of a capture that had kept all
+    its views was raised once the close was done, past the take's check: the failed take went unsaid, exit 143
+    (130). Now it is said, exit 2, as for any other end (the stop came after the views were whole)."""
+    import signal
+    import time
+
+    import drivers
+    import drivers.backends.record as record_module
+
+    def full_disk(path):
+        raise OSError(28, "No space left on device")
+
+    def create(url, **kwargs):
+        source = real(url, **kwargs)
+        close = source.close
+
+        def close_under_a_stop():
+            os.kill(os.getpid(), signal.Signals[stop])
+            time.sleep(0.3)  # the signal's Python handler runs here, in the main thread, before the close's work
+            close()
+        source.close = close_under_a_stop
+        return source
+
+    class Escaped(Exception):
+        pass
+
+    def outer(signum, frame):  # stands for SIGTERM's default action, which would end the test run
+        raise Escaped
+
+    real = drivers.create_rig_source
+    monkeypatch.setattr(record_module, "_fsync", full_disk)  # a short take: only the close's fsync runs
+    monkeypatch.setattr(drivers, "create_rig_source", create)
+    take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
+    previous = signal.signal(signal.SIGTERM, outer)
+    try:
+        rc = cli.main(["capture", "--url", f"record+replay://{take}?speed=free&out={recorded}", "--board",
+                       str(_board_file(tmp_path)), "--out", str(out), "--count", "1", "--interval-s", "0",
+                       "--still-s", "0"])
+    except (Escaped, KeyboardInterrupt):
+        pytest.fail("the stop escaped ghcal")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    captured = capsys.readouterr()
+    assert rc == 2, captured
+    assert but_the_framing_notes(captured.err).splitlines() == [
+        f"ghcal: error: recording to {recorded} failed as it closed: [Errno 28] No space left on device; "
+        "its manifest says complete: false"]
+    assert "kept 1 view(s) in" in captured.out
+    assert (out / truth.pair[0].name / "000.png").exists()  # the views are whole: kept

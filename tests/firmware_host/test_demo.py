@@ -1083,6 +1083,41 @@ def test_a_sigterm_in_the_recorder_s_close_waits_for_the_take_to_be_complete(tmp
     assert manifest["counters"]["frames_written"] == len((take / "frames.jsonl").read_text().splitlines()) > 0
 
 
+
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+def test_a_take_that_fails_as_it_closes_is_said_when_a_stop_lands_in_the_close_of_a_run_that_read_to_its_end(
+        tmp_path, capsys, monkeypatch, stop):
+    """A Ctrl-C or SIGTERM (timeout's, as --seconds ran out) landing in the recorder's close of a run that read to
+    its end was raised once the take was closed, past its check: a failed take went unsaid, 130 or 143 without the
+    summary. Now the summary and the failure are said, exit 2, as for a run that ended any other way."""
+    import signal
+
+    from drivers.backends import record
+
+    def full_disk(path):
+        raise OSError(28, "No space left on device")
+
+    real_close = record.RecordingWriter.close
+
+    def close(self, counters):
+        os.kill(os.getpid(), signal.Signals[stop])
+        time.sleep(0.5)  # the signal's Python handler runs here, in the main thread, before the take is closed
+        real_close(self, counters)
+
+    monkeypatch.setattr(record, "_fsync", full_disk)  # a short take: only the close's fsync runs
+    monkeypatch.setattr(record.RecordingWriter, "close", close)
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
+                                       str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert rc == 2, captured.err
+    said = [line for line in captured.err.splitlines() if "failed as it closed" in line]
+    assert said == [f"{demo.prog_name()}: error: recording to {take} failed as it closed: [Errno 28] No space left "
+                    "on device; its manifest says complete: false"], captured.err
+    assert "stopped" not in captured.err and "the rig delivered" in captured.out
+
+
 _FIRST_STOPS = {  # the stop that ended the reading: (exception, exit status, stderr)
     "Ctrl-C": (KeyboardInterrupt, 0, []),
     "SIGTERM": (lambda: Terminated("SIGTERM"), 143,
