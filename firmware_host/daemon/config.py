@@ -196,6 +196,7 @@ class HealthConfig:
         if self.status_file is not None and (not isinstance(self.status_file, str) or not self.status_file):
             _fail("status_file", "must be a file path or null", self.status_file)
         _refuse_impossible("status_file", self.status_file)
+        _refuse_folder("status_file", self.status_file, "/run/ghnerf/status.json")
         _seconds(self, "status_every_s", 0.05, 3600.0)
         _seconds(self, "open_allowance_s", 1.0, 3600.0)
         _seconds(self, "loop_allowance_s", 1.0, 3600.0)
@@ -243,6 +244,8 @@ class DaemonConfig:
             place = _destination(url)
             if place is not None and place[0] == "file":  # before the outputs-apart check reads it (realpath)
                 _refuse_impossible(f"sinks[{k}]", place[2])
+                if place[1] in ("", "localhost"):  # another host: the sink's own check refuses it
+                    _refuse_folder(f"sinks[{k}]", place[2], "/var/lib/ghnerf/joints.jsonl")
         if len(set(sinks)) != len(sinks):
             _fail("sinks", "lists a URL twice", [redact_url(url) for url in sinks])  # the journal keeps no password
         _one_sink_per_destination(sinks)
@@ -266,6 +269,14 @@ def _refuse_impossible(key: str, path: str | None) -> None:
     problem = path_problem(path) if path else None
     if problem is not None:  # a byte that is not UTF-8 shown as the %XX escape the URL gave it
         raise DaemonConfigError(f"{shown(with_kept_bytes_escaped(path))}: {problem}", key=key)
+
+
+def _refuse_folder(key: str, path: str | None, example: str) -> None:
+    """:class:`DaemonConfigError` keyed ``key`` for a ``path`` that is a folder now: it was accepted and every write
+    failed (a warning at each start and reload). A folder does not become a file later, a mount point included, so
+    the sinks' leniency for a folder not there yet (a USB stick mounted later) does not cover it."""
+    if path and os.path.isdir(path):
+        _fail(key, f"is a folder, not a file; name the file to write in it, such as {example}", path)
 
 
 def _destination(url: str) -> tuple[str, str, str] | None:
