@@ -1323,6 +1323,23 @@ def test_a_sink_that_does_not_fit_the_rig_is_refused_before_anything_changes(tmp
         daemon._close_sinks()
 
 
+def test_a_reload_onto_a_status_file_that_is_a_folder_is_refused_and_removes_nothing(tmp_path):
+    """Until session 75 the reload was accepted: the old status file was removed (a monitor must not read it frozen),
+    then every write to the folder failed, leaving no report at all. Refused with the file read, nothing changes."""
+    status, folder = tmp_path / "status.json", tmp_path / "run"
+    folder.mkdir()
+    data = {"rig": {"url": "sim://"}, "sinks": ["memory://?status_s=0.05"], "health": {"status_file": str(status)}}
+    daemon = Daemon(daemon_config_from_dict(data), notifier=SystemdNotifier({}),
+                    reload_config=lambda: daemon_config_from_dict(data))  # read at the reload, as the CLI's
+    daemon._tick(force=True, tell_systemd=False)
+    written, cfg = status.read_text(), daemon.config
+    data["health"]["status_file"] = str(folder)
+    daemon.request_reload()
+    assert daemon._maybe_reload(None) == []
+    assert daemon.health.reload_failures == 1 and "health.status_file: is a folder" in daemon.health.reload_error
+    assert daemon.config is cfg and status.read_text() == written and list(folder.iterdir()) == []
+
+
 def test_a_sink_removed_while_the_rig_is_away_is_closed_at_once(tmp_path):
     from drivers.sim.placement import RigPlacement
 
