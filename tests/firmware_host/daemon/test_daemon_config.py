@@ -339,6 +339,17 @@ def test_a_status_file_or_file_sink_that_is_a_folder_is_refused_naming_the_key(t
     assert load_daemon_config(path).health.status_file == str(tmp_path / "run" / "status.json")
 
 
+@pytest.mark.parametrize("change, said", [
+    # opened sim:// (URL parsing drops it), but a relative replay:// take was not read from the file's folder
+    ({"rig": {"url": " sim://"}}, "rig.url: starts with a space"),
+    ({"rig": {"url": "sim://?fps=30\u00a0"}}, "rig.url: ends with a space"),
+    ({"sinks": [" udp://127.0.0.1:9870"]}, "sinks[0]: starts with a space"),
+    ({"sinks": [SINK, "file:///tmp/j.jsonl "]}, "sinks[1]: ends with a space"),  # wrote another file
+])
+def test_a_url_with_a_space_before_or_after_it_is_refused_naming_the_key(change, said):
+    assert said + ", which is no part of the URL; remove it" in _error({"sinks": [SINK], **change})
+
+
 def test_round_trip_and_example_is_valid():
     cfg = daemon_config_from_dict(EXAMPLE_CONFIG)
     assert daemon_config_from_dict(json.loads(json.dumps(config_to_dict(cfg)))) == cfg
