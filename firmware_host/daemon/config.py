@@ -133,6 +133,7 @@ class RigConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.url, str) or "://" not in self.url:
             _fail("url", "must be a rig URL such as 'depthai://' or 'sim://?fps=30'", redact_url(self.url))
+        _refuse_edge_space("url", self.url)
         if RECORD_PREFIX in wrapper_prefixes(self.url):  # outermost or inside another wrapper
             # A recorder needs an empty out= folder, and the daemon reopens the rig after every unplug.
             _fail("url", f"{RECORD_PREFIX} is not supported by the daemon (each reopen would need a new out= folder); "
@@ -196,6 +197,7 @@ class HealthConfig:
         if self.status_file is not None and (not isinstance(self.status_file, str) or not self.status_file):
             _fail("status_file", "must be a file path or null", self.status_file)
         _refuse_impossible("status_file", self.status_file)
+        _refuse_folder("status_file", self.status_file, "/run/ghnerf/status.json")
         _seconds(self, "status_every_s", 0.05, 3600.0)
         _seconds(self, "open_allowance_s", 1.0, 3600.0)
         _seconds(self, "loop_allowance_s", 1.0, 3600.0)
@@ -240,9 +242,12 @@ class DaemonConfig:
         for k, url in enumerate(sinks):
             if not isinstance(url, str) or "://" not in url:
                 _fail(f"sinks[{k}]", "must be a sink URL such as 'serial:///dev/ttyACM0'", url)
+            _refuse_edge_space(f"sinks[{k}]", url)
             place = _destination(url)
             if place is not None and place[0] == "file":  # before the outputs-apart check reads it (realpath)
                 _refuse_impossible(f"sinks[{k}]", place[2])
+                if place[1] in ("", "localhost"):  # another host: the sink's own check refuses it
+                    _refuse_folder(f"sinks[{k}]", place[2], "/var/lib/ghnerf/joints.jsonl")
         if len(set(sinks)) != len(sinks):
             _fail("sinks", "lists a URL twice", [redact_url(url) for url in sinks])  # the journal keeps no password
         _one_sink_per_destination(sinks)
@@ -266,6 +271,25 @@ def _refuse_impossible(key: str, path: str | None) -> None:
     problem = path_problem(path) if path else None
     if problem is not None:  # a byte that is not UTF-8 shown as the %XX escape the URL gave it
         raise DaemonConfigError(f"{shown(with_kept_bytes_escaped(path))}: {problem}", key=key)
+
+
+def _refuse_edge_space(key: str, url: str) -> None:
+    """:class:`DaemonConfigError` keyed ``key`` for a URL that starts or ends with a space (a value pasted with one):
+    not read as written. A leading one is dropped by URL parsing, but not by the check that reads a relative path
+    from the config file's folder (`` replay://takes/walk`` played ``takes/walk`` of the current directory); a
+    trailing one became part of the last value (``file:///j.jsonl `` wrote another file, ``fps=30 `` was refused
+    as no number). Tabs and line feeds are ``drivers.url.dropped_characters``'."""
+    for edge, char in (("starts", url[:1]), ("ends", url[-1:])):
+        if char.isspace() and not (char < " " or "\x7f" <= char <= "\x9f"):  # controls: dropped_characters'
+            _fail(key, f"{edge} with a space, which is no part of the URL; remove it", redact_url(url))
+
+
+def _refuse_folder(key: str, path: str | None, example: str) -> None:
+    """:class:`DaemonConfigError` keyed ``key`` for a ``path`` that is a folder now: it was accepted and every write
+    failed (a warning at each start and reload). A folder does not become a file later, a mount point included, so
+    the sinks' leniency for a folder not there yet (a USB stick mounted later) does not cover it."""
+    if path and os.path.isdir(path):
+        _fail(key, f"is a folder, not a file; name the file to write in it, such as {example}", path)
 
 
 def _destination(url: str) -> tuple[str, str, str] | None:

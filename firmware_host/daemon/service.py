@@ -342,6 +342,7 @@ class Daemon:
         # A plain flag, not an Event: set from a signal handler, which must never wait on a lock the
         # interrupted main thread may hold.
         self._reload_requested = False
+        self._reload_loaded_model = False  # the reload under way loaded a model (freed again if it is refused)
         self._reopen_rig = False  # a reload changed rig.url: close the open rig and open the new one
         # Closed rigs still inside a device call (RigSource.lingering), with when they were closed; the
         # watchdog's thread checks them, the main loop adds them.
@@ -790,6 +791,7 @@ class Daemon:
         self._reload_requested = False
         _log.info("reloading the config")
         self.notifier.notify(reloading=1, monotonic_usec=time.monotonic_ns() // 1000, status="reloading the config")
+        self._reload_loaded_model = False
         try:
             with self.watchdog.allow(self.config.health.open_allowance_s, "reloading the config"):
                 changed = self._reload(rig)
@@ -799,6 +801,11 @@ class Daemon:
             _log.error("%s; running on with the config loaded before", self.health.reload_error,
                        exc_info=not isinstance(e, DaemonConfigError))  # a bug's traceback, not a bad file's
             self.notifier.notify(ready=1, status=self.health.status_line(self.sink_stats()))
+            changed = None
+        if changed is None:
+            # Here, not in the except: its traceback's frames held the refused model's session until it ended.
+            if self._reload_loaded_model:  # as an accepted reload that replaced the model hands the old one's back
+                return_freed_memory()
             return []
         self.health.reloads += 1
         self.health.reload_error = None
@@ -856,20 +863,19 @@ class Daemon:
                 with self.watchdog.allow(allowance, "loading the model for a reload"):
                     if _session_key(new) != _session_key(old):
                         session = load_session(new.estimator)
+                        self._reload_loaded_model = True  # a refusal from here on frees it: _maybe_reload trims
                     estimator = Estimator(session, fit if keep else _stand_in_rig(), new.estimator)
             except (RuntimeErrorBase, ValueError) as e:  # ModelError, a rig the new settings cannot use
                 raise DaemonConfigError(f"does not load: {e}", key="estimator") from None
             if not keep:
                 estimator.close()
                 estimator = None  # built for the rig when it opens
-        added: dict[str, Sink] = {}
-        if self._sinks_for is not None and "rig.url" not in changed:  # else: opened with the next rig
-            for url in new.sinks:
-                if url not in self._sinks:
-                    try:
-                        added[url] = self._build_sink(url, self._sinks_for, new)
-                    except FirmwareHostError as e:  # the real rig id or camera names do not fit this sink
-                        raise DaemonConfigError(str(e), key=f"sinks[{new.sinks.index(url)}]") from None
+        try:
+            added = self._added_sinks(new, changed)
+        except BaseException:
+            if estimator is not None and estimator is not self._estimator:  # the new one's worker thread, stopped
+                estimator.close()
+            raise
         # Accepted: swap, touching only what changed (nothing below raises).
         old_status_file = self.config.health.status_file
         self.config = new
@@ -925,6 +931,22 @@ class Daemon:
             except Exception:  # noqa: BLE001 - the reload is applied; a failing hook must not undo or hide it
                 _log.exception("after the reload")
         return changed
+
+    def _added_sinks(self, new: DaemonConfig, changed: list[str]) -> dict[str, Sink]:
+        """The sinks ``new`` adds, built (not started) for the rig they were last opened for; none when the rig URL
+        changed (opened with the next rig) or no rig has been open.
+
+        :raises DaemonConfigError: keyed ``sinks[k]``: the real rig id or camera names do not fit that sink.
+        """
+        added: dict[str, Sink] = {}
+        if self._sinks_for is not None and "rig.url" not in changed:
+            for url in new.sinks:
+                if url not in self._sinks:
+                    try:
+                        added[url] = self._build_sink(url, self._sinks_for, new)
+                    except FirmwareHostError as e:
+                        raise DaemonConfigError(str(e), key=f"sinks[{new.sinks.index(url)}]") from None
+        return added
 
     def _set_fault(self, fault: Fault) -> None:
         with self._fault_lock:

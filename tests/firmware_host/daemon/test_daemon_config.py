@@ -321,6 +321,35 @@ def test_the_status_file_or_a_file_sink_is_not_the_config_file(tmp_path):
     assert load_daemon_config(path).health.status_file == str(tmp_path / "status.json")  # beside it: fine
 
 
+def test_a_status_file_or_file_sink_that_is_a_folder_is_refused_naming_the_key(tmp_path):
+    """Accepted before session 75, every write failed (a warning at each start and reload). A file sink's folder
+    not there yet is still fine (a USB stick mounted later); a path that is a folder now is a mistake."""
+    (tmp_path / "run").mkdir()
+    path = tmp_path / "ghnerf.json"
+    for change, key in (({"health": {"status_file": "run"}}, "health.status_file"),
+                        ({"sinks": [SINK, f"file://{tmp_path}/run/"]}, "sinks[1]"),
+                        ({"sinks": [f"file://localhost{tmp_path}/run"]}, "sinks[0]")):
+        path.write_text(json.dumps({"rig": {"url": "sim://"}, "sinks": [SINK], **change}))
+        with pytest.raises(DaemonConfigError) as e:
+            load_daemon_config(path)
+        assert f"{path}: {key}: is a folder, not a file; name the file to write in it" in str(e.value)
+        assert f"{tmp_path}/run" in str(e.value)
+    path.write_text(json.dumps({"rig": {"url": "sim://"}, "health": {"status_file": "run/status.json"},
+                                "sinks": [f"file://{tmp_path}/usb/joints.jsonl"]}))  # a folder not there yet
+    assert load_daemon_config(path).health.status_file == str(tmp_path / "run" / "status.json")
+
+
+@pytest.mark.parametrize("change, said", [
+    # opened sim:// (URL parsing drops it), but a relative replay:// take was not read from the file's folder
+    ({"rig": {"url": " sim://"}}, "rig.url: starts with a space"),
+    ({"rig": {"url": "sim://?fps=30\u00a0"}}, "rig.url: ends with a space"),
+    ({"sinks": [" udp://127.0.0.1:9870"]}, "sinks[0]: starts with a space"),
+    ({"sinks": [SINK, "file:///tmp/j.jsonl "]}, "sinks[1]: ends with a space"),  # wrote another file
+])
+def test_a_url_with_a_space_before_or_after_it_is_refused_naming_the_key(change, said):
+    assert said + ", which is no part of the URL; remove it" in _error({"sinks": [SINK], **change})
+
+
 def test_round_trip_and_example_is_valid():
     cfg = daemon_config_from_dict(EXAMPLE_CONFIG)
     assert daemon_config_from_dict(json.loads(json.dumps(config_to_dict(cfg)))) == cfg

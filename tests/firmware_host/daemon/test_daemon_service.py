@@ -1323,6 +1323,78 @@ def test_a_sink_that_does_not_fit_the_rig_is_refused_before_anything_changes(tmp
         daemon._close_sinks()
 
 
+def test_a_reload_onto_a_status_file_that_is_a_folder_is_refused_and_removes_nothing(tmp_path):
+    """Until session 75 the reload was accepted: the old status file was removed (a monitor must not read it frozen),
+    then every write to the folder failed, leaving no report at all. Refused with the file read, nothing changes."""
+    status, folder = tmp_path / "status.json", tmp_path / "run"
+    folder.mkdir()
+    data = {"rig": {"url": "sim://"}, "sinks": ["memory://?status_s=0.05"], "health": {"status_file": str(status)}}
+    daemon = Daemon(daemon_config_from_dict(data), notifier=SystemdNotifier({}),
+                    reload_config=lambda: daemon_config_from_dict(data))  # read at the reload, as the CLI's
+    daemon._tick(force=True, tell_systemd=False)
+    written, cfg = status.read_text(), daemon.config
+    data["health"]["status_file"] = str(folder)
+    daemon.request_reload()
+    assert daemon._maybe_reload(None) == []
+    assert daemon.health.reload_failures == 1 and "health.status_file: is a folder" in daemon.health.reload_error
+    assert daemon.config is cfg and status.read_text() == written and list(folder.iterdir()) == []
+
+
+class _LoadedSession:
+    """A stand-in for the model a reload loads (weakly referable, unlike ``object()``)."""
+
+
+@pytest.mark.parametrize("refused_by", ["estimator", "sink"])
+def test_a_refused_reload_that_loaded_a_model_hands_its_pages_back(tmp_path, monkeypatch, refused_by):
+    """Until session 75 only an accepted reload trimmed the heap after a model load: a refused one (settings the new
+    model cannot serve, a sink that does not fit the rig) left the new model's freed pages to the next accepted one,
+    and the estimator built before a sink's refusal was never closed. Trimmed once the new session is garbage."""
+    import firmware_host.daemon.service as service
+    from drivers.sim.placement import RigPlacement
+
+    loaded: list[weakref.ref] = []
+    built: list[_StubEstimator] = []
+    freed_at_trim = []
+
+    def load(config) -> _LoadedSession:
+        session = _LoadedSession()
+        loaded.append(weakref.ref(session))
+        return session
+
+    def estimator(session, rig, config) -> _StubEstimator:
+        if refused_by == "estimator":
+            raise ValueError("settings this model cannot serve")
+        built.append(_StubEstimator(rig))
+        return built[-1]
+
+    def trim() -> bool:
+        gc.collect()  # as return_freed_memory does first
+        freed_at_trim.append([ref() is None for ref in loaded])
+        return True
+
+    monkeypatch.setattr(service, "load_session", load)
+    monkeypatch.setattr(service, "Estimator", estimator)
+    monkeypatch.setattr(service, "return_freed_memory", trim)
+    first = "memory://?rig_id=short"
+    configs = _Configs()
+    rig = RigPlacement().build(rig_id="a-rig-id-too-long-for-the-hello-message")  # the added sink does not fit it
+    daemon = _idle_daemon(tmp_path, [first], configs, rig)
+    session, cfg = daemon._session, daemon.config
+    try:
+        data = _config({"url": "sim://"}, tmp_path, sinks=[first, "memory://?status_s=0.06"])
+        configs.next = dataclasses.replace(data, estimator=dataclasses.replace(
+            data.estimator, session=dataclasses.replace(data.estimator.session, threads=1)))  # the model loaded again
+        daemon.request_reload()
+        assert daemon._maybe_reload(None) == []
+        assert daemon.health.reload_failures == 1
+        assert ("estimator" if refused_by == "estimator" else "sinks[1]") in daemon.health.reload_error
+        assert daemon.config is cfg and daemon._session is session
+        assert len(loaded) == 1 and freed_at_trim == [[True]]
+        assert all(each.closed for each in built) and len(built) == (refused_by == "sink")
+    finally:
+        daemon._close_sinks()
+
+
 def test_a_sink_removed_while_the_rig_is_away_is_closed_at_once(tmp_path):
     from drivers.sim.placement import RigPlacement
 
