@@ -71,6 +71,7 @@ from training.evaluate import angle_bins
 from training.fill_features import (MASK_BIT, SEEN_BIT, TRUTH_BIT, FillCacheError, check_held_out, load_cache,
                                     relit_in)
 from training.model_card import strict_json, write_atomic
+from training.run_limits import seed_problem
 from training.step_guard import TrainingDiverged, finite_step
 
 #: blend 3, relit 3, mask 1, seen 1, normals 3, depth 1, light 4 (constant planes), 25 joint maps;
@@ -592,6 +593,8 @@ def _config_problem(cfg: FillTrainConfig) -> str | None:
         if not ok:
             value = getattr(cfg.net, key[4:]) if key.startswith("net.") else getattr(cfg, key)
             return f"{key}: {why}, got {value}"
+    if problem := seed_problem(cfg.seed):  # past 2**64 was torch's 'Overflow when unpacking long long' traceback
+        return f"seed: {problem}"  # (after the caches loaded); the trainers' bound
     return None
 
 

@@ -51,6 +51,7 @@ from ghnerf_runtime.skeleton_prior import (
 )
 from training.cli import at_least
 from training.model_card import strict_json, write_atomic
+from training.run_limits import seed_problem
 
 #: What a tilted training copy turns (``PriorTrainConfig.tilt_mode``).
 TILT_MODES = ("scene", "body")
@@ -586,6 +587,10 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out) if args.out else model_dir / FILE_NAME
     if args.members < 1:
         ap.error(f"--members must be at least 1, not {args.members}")
+    if problem := seed_problem(args.seed):  # torch's or numpy's traceback once the scenes were collected
+        ap.error(f"--seed: {problem}")
+    if problem := seed_problem(args.seed + args.members - 1):  # the members train from seed .. seed + members - 1
+        ap.error(f"--seed {args.seed} with --members {args.members}: the last member's seed {problem}")
     if args.limit < 0:
         ap.error(f"--limit must be 0 (all scenes) or more, not {args.limit}")
     # the held-out figures must be of scenes the prior did not learn from

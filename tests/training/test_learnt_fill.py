@@ -497,6 +497,22 @@ def test_a_truth_value_override_is_one_of_its_words_or_refused():
             _parse_sets(FillTrainConfig(), [f"flip={word}"])
 
 
+def test_a_seed_torch_cannot_take_is_refused_before_the_caches_load(tmp_path, capsys):
+    """--set seed=2**64 was torch's 'Overflow when unpacking long long' traceback after the caches loaded; the
+    bound is training.run_limits' (the trainers'), so a negative seed is refused too."""
+    from training.run_limits import MAX_SEED
+
+    assert _parse_sets(FillTrainConfig(), [f"seed={MAX_SEED}"]).seed == MAX_SEED
+    for seed in (2 ** 64, MAX_SEED + 1, -1):
+        with pytest.raises(ValueError, match=rf"--set seed: must be an integer in \[0, {MAX_SEED}\], got {seed}$"):
+            _parse_sets(FillTrainConfig(), [f"seed={seed}"])
+    with pytest.raises(SystemExit) as e:  # no cache read: these do not exist
+        main(["train", "--train-cache", str(tmp_path / "t.npz"), "--val-cache", str(tmp_path / "v.npz"), "--out",
+              str(tmp_path / "run"), "--set", f"seed={2 ** 64}"])
+    assert e.value.code == 2 and f"--set seed: must be an integer in [0, {MAX_SEED}], got {2 ** 64}" in \
+        capsys.readouterr().err
+
+
 def test_bad_training_values_are_usage_errors(train_cache, truth_cache, tmp_path, capsys):
     for sets, words in ((["batch=0"], "batch: must be at least 1, got 0"), (["lr=0"], "lr: must be a positive number"),
                         (["log_every=0"], "log_every: must be at least 1"), (["net.width=12"], "multiple of 8"),

@@ -303,6 +303,13 @@ def test_the_models_folder_is_read_as_the_runtime_reads_it_and_a_stopped_run_lea
     (["--tilt-share", "1.5"], "--tilt-share must be a share from 0 to 1, not 1.5"),
     (["--tilt-share", "nan"], "--tilt-share must be a share from 0 to 1, not nan"),
     (["--tilt-mode", "rig"], "argument --tilt-mode: invalid choice: 'rig'"),
+    # torch's 'Overflow when unpacking long long' (numpy's 'expected non-negative integer' with --tilt-share)
+    # after collecting: the trainers' bound (training.run_limits)
+    (["--seed", str(2 ** 64)], f"--seed: must be an integer in [0, {2 ** 32 - 1}], got {2 ** 64}"),
+    (["--seed", "-1", "--tilt-share", "0.5"], f"--seed: must be an integer in [0, {2 ** 32 - 1}], got -1"),
+    (["--seed", str(2 ** 32 - 1), "--members", "2"],
+     f"--seed {2 ** 32 - 1} with --members 2: the last member's seed must be an integer in [0, {2 ** 32 - 1}], "
+     f"got {2 ** 32}"),
     # a split or dataset that cannot be read: named before collecting (the val split was read only after)
     (["--val-split", "val_seen_motions"], "dataset.json: has no split 'val_seen_motions'"),
     (["--extra-data", "{models}"], "dataset.json: no dataset manifest here"),
