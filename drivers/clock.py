@@ -13,6 +13,11 @@ class Clock(Protocol):
 
     def sleep_until(self, deadline_ns: int) -> None: ...
 
+    def wait_until(self, deadline_ns: int, wake: threading.Event) -> bool:
+        """As :meth:`sleep_until`, but returns early once ``wake`` is set (a close from another thread); True:
+        woken."""
+        ...
+
 
 class MonotonicClock:
     """The real clock: ``time.monotonic_ns`` and real sleeping."""
@@ -24,6 +29,16 @@ class MonotonicClock:
         delay = (deadline_ns - time.monotonic_ns()) / 1e9
         if delay > 0:
             time.sleep(delay)
+
+    def wait_until(self, deadline_ns: int, wake: threading.Event) -> bool:
+        # Looped on the clock, so that it never returns before the deadline (as time.sleep does not) and a wait
+        # longer than Event.wait takes (threading.TIMEOUT_MAX) is waited in parts.
+        while not wake.is_set():
+            delay = (deadline_ns - time.monotonic_ns()) / 1e9
+            if delay <= 0:
+                return False
+            wake.wait(min(delay, threading.TIMEOUT_MAX))
+        return True
 
 
 class ManualClock:
@@ -47,3 +62,9 @@ class ManualClock:
     def sleep_until(self, deadline_ns: int) -> None:
         with self._lock:
             self._now = max(self._now, int(deadline_ns))
+
+    def wait_until(self, deadline_ns: int, wake: threading.Event) -> bool:
+        if wake.is_set():
+            return True  # woken before it slept: no time passes
+        self.sleep_until(deadline_ns)
+        return False

@@ -4,7 +4,8 @@ URL options:
 
 * ``speed``: ``recorded`` (default) honours the recorded inter-frame timing on the
   injected clock; ``free`` delivers frames as fast as they decode; a number
-  (``speed=2``, at least 0.001) plays at that multiple of real time.
+  (``speed=2``, at least 0.001) plays at that multiple of real time. A read waiting for its frame's time
+  is woken at once by a ``close()`` from another thread (:class:`~drivers.errors.RigOperationError`).
 * ``loop``: ``1`` starts over at the end instead of raising :class:`EndOfStream`.
 * ``tolerance_ms``, ``policy``, ``max_pending``: pairing, as every rig URL takes them
   (:mod:`drivers.pairing_options`; default policy ``all``: a recording is
@@ -50,6 +51,7 @@ from __future__ import annotations
 import bisect
 import logging
 import statistics
+import threading
 from collections import Counter, deque
 from dataclasses import replace
 from pathlib import Path, PurePosixPath
@@ -516,6 +518,7 @@ class ReplayRigSource(RigSource):
         self._anchor_ns: int | None = None  # clock time at which the first frame is due (set by the first read)
         self._time_span_ns, self._index_span = self._loop_spans()
         self._unloaded: dict[Frame, tuple[FrameRow, int]] = {}  # frames pushed by _catch_up, image not read yet
+        self._closing = threading.Event()  # set by _close: wakes a read waiting for its frame in another thread
 
     @classmethod
     def from_url(cls, url: RigUrl, *, clock: Clock | None = None,
@@ -663,11 +666,17 @@ class ReplayRigSource(RigSource):
             due = self._due_ns(row, shift_ns, self._anchor_ns, self.speed)
             deadline = self.clock.now_ns() + int(timeout_s * 1e9)
             if due > deadline:
-                self.clock.sleep_until(deadline)
+                self._wait_until(deadline)
                 return None
-            self.clock.sleep_until(due)
+            self._wait_until(due)
         self._advance()
         return self._load(row, shift_ns)
+
+    def _wait_until(self, when_ns: int) -> None:
+        """Sleeps on the clock until ``when_ns``; a close from another thread meanwhile ends the wait at once."""
+        self.clock.wait_until(when_ns, self._closing)
+        if self._closing.is_set():
+            raise RigOperationError(f"replay of {shown(str(self.directory))} closed while a read waited for its frame")
 
     def _start_playing(self) -> None:
         """Anchor playback (pacing and re-stamping) at the clock's now: the first frame plays now."""
@@ -781,4 +790,4 @@ class ReplayRigSource(RigSource):
         )
 
     def _close(self) -> None:
-        pass  # files are opened per frame; nothing held
+        self._closing.set()  # files are opened per frame: nothing else is held

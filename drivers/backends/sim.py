@@ -70,7 +70,8 @@ and memory: about 2.8 MB per camera frame at 640x480 (image plus truth maps),
 Timing model (:mod:`drivers.backends.sim_timing`): each camera captures frame
 ``k`` at ``open + k/fps + offset + jitter``, and it reaches the host then (the
 second camera's ``latency_ms`` later); ``read`` sleeps on the clock until the
-next frame arrives and returns frames in order of arrival, so with a
+next frame arrives (a ``close()`` from another thread wakes it at once, raising
+:class:`RigOperationError`) and returns frames in order of arrival, so with a
 :class:`~drivers.clock.ManualClock` tests run at full speed with exact
 timestamps. With ``policy=latest`` each ``read`` first takes in every capture
 already due, so a slow reader gets the newest pair and the older ones count in
@@ -339,6 +340,7 @@ class SimRigSource(RigSource):
         self._unplug_ns: int | None = None
         self._second_joins_ns: int | None = None
         self._unplugged = False
+        self._closing = threading.Event()  # set by _close: wakes a read waiting for its frame in another thread
         names = rig.names[:2]
         self._drops = {n: 0 for n in names}
         self._overruns = {n: 0 for n in names}
@@ -474,11 +476,9 @@ class SimRigSource(RigSource):
             if self._unplug_ns is not None and due >= self._unplug_ns:
                 due = self._unplug_ns  # nothing more arrives: the next event is the unplug
             if due > deadline:
-                self.clock.sleep_until(deadline)
+                self._wait_until(deadline, schedule)
                 return None
-            self.clock.sleep_until(due)
-            if self._schedule is not schedule or self._loop is None:  # closed by another thread meanwhile
-                raise RigOperationError("sim source closed while a read waited for its frame")
+            self._wait_until(due, schedule)
             if due == self._unplug_ns:
                 self._unplugged = True
                 raise RigDisconnectedError(
@@ -492,6 +492,12 @@ class SimRigSource(RigSource):
                 self._overruns[name] += 1
             else:
                 return self._frame(capture)
+
+    def _wait_until(self, when_ns: int, schedule: CaptureSchedule) -> None:
+        """Sleeps on the clock until ``when_ns``; a close from another thread meanwhile ends the wait at once."""
+        self.clock.wait_until(when_ns, self._closing)
+        if self._closing.is_set() or self._schedule is not schedule or self._loop is None:
+            raise RigOperationError("sim source closed while a read waited for its frame")
 
     def _frame_available(self) -> bool:
         schedule = self._schedule
@@ -520,6 +526,7 @@ class SimRigSource(RigSource):
         )
 
     def _close(self) -> None:
+        self._closing.set()
         for loop in (self._loop, self._loop_alone):
             if loop is not None:
                 loop.close()

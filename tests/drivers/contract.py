@@ -16,6 +16,7 @@ bounds every backend meets.
 """
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -127,6 +128,35 @@ class RigSourceContract:
         else:
             assert waited == pytest.approx(self.stall_timeout_s, abs=1e-6)
             assert wall < 1.0  # the manual clock never really sleeps
+
+    def test_close_from_another_thread_wakes_a_read_waiting_for_frames(self):
+        """A daemon's stop and a Ctrl-C close the source while its reader waits: the read must end then, not at
+        the next frame's time (sim:// and replay:// slept until it before session 75)."""
+        if not self.realtime:
+            pytest.skip("on a ManualClock a read never really waits")
+        source = self.make_stalling_source().open()
+        ended: list[tuple[object, float]] = []  # (what the read returned or raised, when)
+
+        def reader():
+            try:
+                got: object = source.read(timeout_s=30.0)
+            except Exception as e:  # noqa: BLE001 - the test looks at what it was
+                got = e
+            ended.append((got, time.monotonic()))
+
+        try:
+            source.read(timeout_s=self.first_timeout_s)
+            thread = threading.Thread(target=reader, daemon=True)
+            thread.start()
+            time.sleep(0.2)  # the reader waits for the next pair, still a stall away
+            t0 = time.monotonic()
+        finally:
+            source.close()
+        thread.join(timeout=30.0)
+        assert len(ended) == 1, "the read did not return"
+        got, at = ended[0]
+        assert isinstance(got, RigOperationError) and "closed" in str(got), got
+        assert at - t0 <= self.slack_s + 0.25, f"the read returned {at - t0:.2f} s after the close"
 
     def test_a_timeout_that_is_not_a_finite_number_of_seconds_is_refused(self):
         with self.make_source() as source:

@@ -1,7 +1,7 @@
 """Edges of the sources a reviewer found: a pairing tolerance too large to count in nanoseconds, a close that
 fails, a journal row of a camera outside the pair, a rig file of another size than a depthai stream, an
-unreadable rig file (named alike by opencv:// and depthai://), a close from another thread while a sim read
-waits, a read timeout too long to count in nanoseconds, a recorder that cannot start."""
+unreadable rig file (named alike by opencv:// and depthai://), a close from another thread while a sim (or
+replay) read waits, a read timeout too long to count in nanoseconds, a recorder that cannot start."""
 from __future__ import annotations
 
 import json
@@ -122,24 +122,41 @@ def test_naming_the_rig_option_converts_rig_errors_only():
             raise KeyError("other")
 
 
-def test_a_sim_read_waiting_when_another_thread_closes_says_so(sim_cache):
-    source = open_rig(f"sim://?width=40&height=30&fps=1&cache={sim_cache}")
-    source.read(timeout_s=5.0)
-    result: list[object] = []
+def _closed_while_reading(source, read_timeout_s: float) -> tuple[object, float]:
+    """What a read blocked in another thread returned or raised when this thread closed ``source``, and how many
+    seconds after the close it did."""
+    ended: list[tuple[object, float]] = []
 
     def reader():
         try:
-            result.append(source.read(timeout_s=5.0))
+            got: object = source.read(timeout_s=read_timeout_s)
         except Exception as e:  # noqa: BLE001 - the test looks at what it was
-            result.append(e)
+            got = e
+        ended.append((got, time.monotonic()))
 
-    thread = threading.Thread(target=reader)
+    thread = threading.Thread(target=reader, daemon=True)
     thread.start()
-    time.sleep(0.3)
+    time.sleep(0.3)  # the reader waits for the next pair, seconds away
+    t0 = time.monotonic()
     source.close()
-    thread.join(6.0)
-    assert len(result) == 1 and isinstance(result[0], RigOperationError), result
-    assert "closed" in str(result[0])
+    thread.join(30.0)
+    assert len(ended) == 1, "the read did not return"
+    got, at = ended[0]
+    return got, at - t0
+
+
+# A read waits for the next frame's time (30 s timeout) or for its timeout (3 s), both seconds after the close; it
+# slept until then (sim://, and replay:// which then returned the frame) before session 75.
+@pytest.mark.parametrize("read_timeout_s", [30.0, 3.0])
+@pytest.mark.parametrize("url", ["sim://?width=40&height=30&fps=0.2&cache={cache}",
+                                 "record+sim://?width=40&height=30&fps=0.2&cache={cache}&out={out}",
+                                 "replay://{take}?speed=0.01"])
+def test_a_sim_read_waiting_when_another_thread_closes_says_so(sim_cache, take, tmp_path, url, read_timeout_s):
+    source = open_rig(url.format(cache=sim_cache, out=tmp_path / "out", take=take))
+    source.read(timeout_s=5.0)
+    got, after_s = _closed_while_reading(source, read_timeout_s)
+    assert isinstance(got, RigOperationError) and "closed while a read waited" in str(got), got
+    assert after_s < 0.5, f"the read returned {after_s:.2f} s after the close"
 
 
 @pytest.mark.parametrize("timeout_s", [1e300, float("inf")])
