@@ -23,6 +23,7 @@ from calibration.check import CheckLimits
 from calibration.cli import STALL_NOTE_S
 from calibration.capture import MISMATCH_TRIES
 from calibration.consensus import CONSENSUS_DEG, CONSENSUS_MM
+from calibration.formats.opencv_yaml import _SAME_POSE_TOLERANCE, _SAME_T_TOLERANCE
 from calibration.solve import COVERAGE_GRID, MIN_VIEWS, REPEAT_PX, USUAL_PITCH_DEG
 from calibration.detect import PATTERN_CHECK_MARKERS
 from calibration.render import SYNTH_BOARD, SYNTH_CAMERA_HEIGHT_M, SYNTH_PITCH_DEG, SYNTH_VOLUME_NEAR_M
@@ -143,6 +144,8 @@ def _doc(name: str) -> str:
     # the largest skew a rig file holds, and the block volume it gives (fx / hypot(fx, s))
     ("docs/geometry.md", f"{MAX_SKEW_SHARE:g} `fx` (`MAX_SKEW_SHARE`), gives {1 / math.hypot(1, MAX_SKEW_SHARE):.3f}"),
     ("docs/rig-file.md", f"at most {MAX_SKEW_SHARE:g} `fx` (`MAX_SKEW_SHARE`;"),
+    ("docs/rig-file.md", f"R agree to {_SAME_POSE_TOLERANCE:g} rad (`_SAME_POSE_TOLERANCE`"),
+    ("docs/rig-file.md", f"T agree to {_SAME_T_TOLERANCE:g} of the baseline (`_SAME_T_TOLERANCE`"),
     ("docs/rig-file.md", f"{MAX_SKEW_SHARE:g} is axes {90 - math.degrees(math.atan2(1, MAX_SKEW_SHARE)):.1f} degrees off"),
     ("docs/protocol.md", f"`REFUSAL_QUIET_S` ({REFUSAL_QUIET_S:g} s)"),
     ("docs/protocol.md", f"no datagram refused for {REFUSAL_QUIET_S:g} s: a receiver"),

@@ -84,9 +84,13 @@ __all__ = ["read_opencv_camera", "read_opencv_rig", "write_opencv_camera", "writ
 
 #: How much of a file is looked at for the marks of one that is not FileStorage text (NULs, UTF-16).
 _SNIFF_BYTES = 4096
-#: How far (radians; share of the longer T) an intrinsics file's R or T may be from its extrinsics file's and be the
-#: same pose: past the rounding of 6 printed digits, not a change any calibration would make.
+#: How far (radians) an intrinsics file's R may be from its extrinsics file's and be the same pose: past the rounding
+#: of 6 printed digits, not a change any calibration would make.
 _SAME_POSE_TOLERANCE = 1e-5
+#: How far (share of the baseline |T|) an intrinsics file's T may be from its extrinsics file's and be the same: a T
+#: in metres written with 6 decimals (0.5 um steps) is up to 5e-5 of the shortest baseline a rig may have (10 mm,
+#: MIN_BASELINE_M). 1e-5 of the largest component refused such a copy of a 30 mm baseline, showing the two equal.
+_SAME_T_TOLERANCE = 1e-4
 _ONE_POSE_HINT = ("two poses for the pair; leave out extrinsics_path (--extrinsics) to use this file's, or delete "
                   "R and T from this file to use the other's")
 
@@ -535,8 +539,11 @@ def _refuse_another_pose(root, path, extrinsics_path, R: np.ndarray, T: np.ndarr
                                   f"{_ONE_POSE_HINT}")
     if "T" in keys:
         mine = _pose_part(root, path, "T")
-        if np.abs(mine - T).max() > _SAME_POSE_TOLERANCE * max(np.abs(mine).max(), np.abs(T).max()):
-            raise fail(path, "T", f"is {show(mine)}, the T of {extrinsics_path} {show(T)}: {_ONE_POSE_HINT}")
+        apart = float(np.abs(mine - T).max())
+        if apart > _SAME_T_TOLERANCE * max(np.linalg.norm(mine), np.linalg.norm(T)):
+            # how far apart said too: shown to 6 digits, two T past the tolerance may print the same
+            raise fail(path, "T", f"is {show(mine)}, {apart:.2g} from the T of {extrinsics_path} {show(T)}: "
+                                  f"{_ONE_POSE_HINT}")
 
 
 def _stereo_calib(root, path, pose, image_size, units) -> tuple[list[Camera], list[str]]:

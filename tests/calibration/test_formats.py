@@ -468,6 +468,22 @@ def test_a_pose_in_the_intrinsics_file_that_is_not_the_extrinsics_file_s_is_refu
     assert info.value.path == str(intrinsics) and info.value.field == "R"
 
 
+
+def test_a_pose_copied_into_the_intrinsics_file_with_6_decimals_in_metres_is_read(tmp_path):
+    # 1e-5 of the largest component refused a 30 mm baseline's T written with "%.6f" (0.5 um steps), and the message
+    # showed the two T equal; a T 10 um off (3e-4 of that baseline) is still another calibration's
+    _, _, R = _write_stereo_calib(tmp_path, [-0.0301234567, 0.000234567, 0.00134567])
+    intrinsics, extrinsics = tmp_path / "intrinsics.yml", tmp_path / "extrinsics.yml"
+    printed = np.array([float(f"{v:.6f}") for v in (-0.0301234567, 0.000234567, 0.00134567)])
+    _add_pose_to_intrinsics(tmp_path, R, printed)
+    rig = read_opencv_rig(intrinsics, extrinsics_path=extrinsics, image_size=(640, 480), units_to_metres=1.0)
+    assert rig.pair[1].t[0] == -0.0301234567  # the extrinsics file's
+    _add_pose_to_intrinsics(tmp_path, R, printed + [1e-5, 0.0, 0.0])
+    with pytest.raises(RigFileError, match=r"T.* 1e-05 from the T of .*extrinsics\.yml") as info:
+        read_opencv_rig(intrinsics, extrinsics_path=extrinsics, image_size=(640, 480), units_to_metres=1.0)
+    assert info.value.field == "T"
+
+
 # ----------------------------------------------------------------------------- errors
 def _multi_yaml(cameras: list[dict]) -> str:
     lines = ["%YAML:1.0", "---", "cameras:"]
