@@ -294,8 +294,16 @@ def _why(url: str, error: Optional[str], unknown: str = "not connected") -> str:
 
 
 def write_status_file(path: str | os.PathLike, report: dict[str, Any]) -> None:
-    """Replace ``path`` with the report in one step (a reader never sees half a file)."""
-    target = Path(path)
+    """Replace ``path`` with the report in one step (a reader never sees half a file).
+
+    A symbolic link is written through (its target replaced, the link kept: a rename over the link cut it, and
+    its target was never written again). A path that is there and is no regular file (``/dev/null``, a FIFO a
+    monitor reads) is written into: a rename would replace the device node itself when the daemon runs as root.
+    """
+    target = Path(os.path.realpath(path))
+    if target.exists() and not target.is_file():
+        _write_into(target, (json.dumps(report, indent=1, allow_nan=False) + "\n").encode("utf-8"))
+        return
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
     try:
         os.fchmod(fd, 0o644)  # mkstemp makes it private; operators read it without being the service user
@@ -306,3 +314,15 @@ def write_status_file(path: str | os.PathLike, report: dict[str, Any]) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _write_into(target: Path, data: bytes) -> None:
+    """``data`` written into the device or FIFO at ``target``; a FIFO with no reader is an OSError (ENXIO), not a
+    daemon blocked in its open."""
+    fd = os.open(target, os.O_WRONLY | os.O_NONBLOCK)
+    try:
+        view = memoryview(data)
+        while view:  # os.write may write part of it
+            view = view[os.write(fd, view):]
+    finally:
+        os.close(fd)

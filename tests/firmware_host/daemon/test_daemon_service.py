@@ -1340,6 +1340,30 @@ def test_a_reload_onto_a_status_file_that_is_a_folder_is_refused_and_removes_not
     assert daemon.config is cfg and status.read_text() == written and list(folder.iterdir()) == []
 
 
+def test_a_status_file_behind_a_link_or_on_a_fifo_is_written_there_and_stays_what_it_was(tmp_path):
+    """Until session 75 the status file was renamed over its path whatever that was: a symbolic link became a plain
+    file (its target never written again), a FIFO a monitor read was replaced (and /dev/null would have been, for a
+    daemon run as root outside the unit)."""
+    from firmware_host.daemon.health import write_status_file
+
+    real, link = tmp_path / "real.json", tmp_path / "status.json"
+    link.symlink_to(real)
+    write_status_file(link, {"state": "running"})
+    assert link.is_symlink() and json.loads(real.read_text()) == {"state": "running"}
+    fifo = tmp_path / "status.fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(OSError):  # no reader: said (the daemon warns once), not a daemon blocked in the open
+        write_status_file(fifo, {"state": "running"})
+    reader = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        write_status_file(fifo, {"state": "degraded"})
+        assert json.loads(os.read(reader, 65536)) == {"state": "degraded"}
+    finally:
+        os.close(reader)
+    assert stat.S_ISFIFO(fifo.lstat().st_mode) and sorted(p.name for p in tmp_path.iterdir()) == [
+        "real.json", "status.fifo", "status.json"]  # no temporary file left beside them
+
+
 class _LoadedSession:
     """A stand-in for the model a reload loads (weakly referable, unlike ``object()``)."""
 
