@@ -552,9 +552,13 @@ def _run(args: argparse.Namespace, prog: str) -> int:
             elapsed = max(time.monotonic() - start, 1e-9)
             # the sink delivers what it holds queued as it closes (up to a second: a file:// sink's last lines, a
             # slow serial link): a second Ctrl-C pressed there cut it short and ended the run without its summary,
-            # 130 for a run the first Ctrl-C ended with 0. Raised after the close only when it is the first stop
-            with stop_signals_deferred(then_raise=stopped is None):
-                sink.close()  # (_closed_on_the_way_out's close then has nothing left to do)
+            # 130 for a run the first Ctrl-C ended with 0. Raised after the close only when it is the first stop,
+            # and only once the take is closed and checked (below): raised here, it went past both
+            try:
+                with stop_signals_deferred(then_raise=stopped is None):
+                    sink.close()  # (_closed_on_the_way_out's close then has nothing left to do)
+            except KeyboardInterrupt as e:
+                late_stop = e
         sink_stats = sink.stats()
         stats = source.stats
         # under LATEST the rig hands out the newest pair and drops (counts) the older ones; an OAK's count
@@ -569,7 +573,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         # once the take is whole only when it is the first: a stop caught above, or an error on its way, is the one
         # reported (its summary and exit status)
         try:
-            with stop_signals_deferred(then_raise=read_to_its_end and stopped is None):
+            with stop_signals_deferred(then_raise=read_to_its_end and stopped is None and late_stop is None):
                 source.close()
         except KeyboardInterrupt as e:  # raised once the close is done: the take is checked first, below
             late_stop = e

@@ -1118,6 +1118,51 @@ def test_a_take_that_fails_as_it_closes_is_said_when_a_stop_lands_in_the_close_o
     assert "stopped" not in captured.err and "the rig delivered" in captured.out
 
 
+@pytest.mark.parametrize("take_fails", [False, True])
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+def test_when_a_stop_lands_in_the_sink_s_close_of_a_run_that_read_to_its_end_the_take_is_checked_first(
+        tmp_path, capsys, monkeypatch, stop, take_fails):
+    """Review 75: a Ctrl-C or SIGTERM (timeout's, as --seconds ran out) landing in the sink's close, the first stop
+    of a run that read to its end, was raised there, past the summary and the take's check: a failed take went
+    unsaid, 130 or 143. Now it is raised once the take is closed and found whole (130, 143, one line); a failed
+    take is said after the summary, exit 2."""
+    import signal
+
+    import drivers.backends.record as record_module
+    from firmware_host.sinks import base
+
+    def full_disk(path):
+        raise OSError(28, "No space left on device")
+
+    real_close, closed = base.Sink.close, []
+
+    def close(self, *args, **kwargs):
+        if not closed:  # the handler runs in the main thread at once, inside the close's deferral
+            os.kill(os.getpid(), signal.Signals[stop])
+        closed.append(1)
+        return real_close(self, *args, **kwargs)
+
+    if take_fails:
+        monkeypatch.setattr(record_module, "_fsync", full_disk)  # a short take: only the close's fsync runs
+    monkeypatch.setattr(base.Sink, "close", close)
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
+                                       str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert closed, "the sink was never closed"
+    if take_fails:
+        assert rc == 2 and captured.err.splitlines() == [
+            f"{demo.prog_name()}: error: recording to {take} failed as it closed: [Errno 28] No space left on device; "
+            "its manifest says complete: false"], captured.err
+        assert "the rig delivered" in captured.out
+    else:  # not swallowed: the stop is the run's end
+        words = "SIGTERM" if stop == "SIGTERM" else "Ctrl-C"
+        assert (rc, captured.err.splitlines()) == (128 + signal.Signals[stop],
+                                                   [f"{demo.prog_name()}: stopped ({words})"]), captured.err
+    assert json.loads((take / "manifest.json").read_text())["complete"] is not take_fails
+
+
 _FIRST_STOPS = {  # the stop that ended the reading: (exception, exit status, stderr)
     "Ctrl-C": (KeyboardInterrupt, 0, []),
     "SIGTERM": (lambda: Terminated("SIGTERM"), 143,
