@@ -95,13 +95,20 @@ class _UdpPort:
         self.sock.close()
 
 
+#: The first 12 bytes of an IPv4-mapped IPv6 address (``::ffff:10.0.0.7``): an IPv4 sender on the dual-stack socket.
+_V4_MAPPED = bytes(10) + b"\xff\xff"
+
+
 def source_name(address: Any) -> str:
     """A datagram's sender as a user writes it: an IPv4 sender heard on the dual-stack socket (``::ffff:10.0.0.7``)
-    as its IPv4 address, an IPv6 one in brackets."""
-    ip = ipaddress.ip_address(address[0].partition("%")[0])
-    if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
-        return f"{ip.ipv4_mapped}:{address[1]}"
-    return f"[{address[0]}]:{address[1]}" if ip.version == 6 else f"{address[0]}:{address[1]}"
+    as its IPv4 address, an IPv6 one in brackets. Read per datagram: inet_pton, not ipaddress (30 us a call)."""
+    host, port = address[0], address[1]
+    if ":" not in host:  # an IPv4 socket's sender
+        return f"{host}:{port}"
+    packed = socket.inet_pton(socket.AF_INET6, host.partition("%")[0])
+    if packed[:12] == _V4_MAPPED:
+        return f"{socket.inet_ntop(socket.AF_INET, packed[12:])}:{port}"
+    return f"[{host}]:{port}"
 
 
 def _cannot_listen(host: str, port: int, e: Exception) -> ListenError:

@@ -1070,6 +1070,8 @@ def test_a_udp_port_names_each_datagram_s_sender():
     assert listen.source_name(("::ffff:192.0.2.7", 40123, 0, 0)) == "192.0.2.7:40123"  # on the dual-stack socket
     assert listen.source_name(("2001:db8::7", 40123, 0, 0)) == "[2001:db8::7]:40123"
     assert listen.source_name(("fe80::1%eth0", 40123, 0, 2)) == "[fe80::1%eth0]:40123"
+    assert listen.source_name(("::ffff:0:192.0.2.7", 40123, 0, 0)) == "[::ffff:0:192.0.2.7]:40123"  # not mapped
+    assert listen.source_name(("192.0.2.7", 40123)) == "192.0.2.7:40123"  # an IPv4 socket's
 
 
 def test_the_help_says_several_senders_are_counted_apart(capsys):
