@@ -733,15 +733,19 @@ def _sink_file_problem(path: str) -> str | None:
 
 def _link_loop(path: str) -> str | None:
     """The first of ``path``'s components (``path`` itself last) that is a loop of symbolic links (None: none)."""
-    parts = Path(path).parts
-    for end in range(1, len(parts) + 1):
-        component = os.path.join(*parts[:end])
+    for component in _leading_paths(path):
         try:
             os.stat(component)
         except OSError as e:
             if e.errno == errno.ELOOP:
                 return component
     return None
+
+
+def _leading_paths(path: str) -> list[str]:
+    """``path``'s leading components as paths, ``path`` itself last (``/a/b``: ``/``, ``/a``, ``/a/b``)."""
+    parts = Path(path).parts
+    return [os.path.join(*parts[:end]) for end in range(1, len(parts) + 1)]
 
 
 def _link_to_a_folder(path: str) -> str | None:
@@ -759,9 +763,7 @@ def _link_to_a_folder(path: str) -> str | None:
 def _missing_folder_words(folder: str) -> str:
     """Why ``folder`` (not a folder) is none, said of its first component that is not one: a file, a link to
     nothing, or not there."""
-    parts = Path(folder).parts
-    for end in range(1, len(parts) + 1):
-        component = os.path.join(*parts[:end])
+    for component in _leading_paths(folder):
         if os.path.isdir(component):
             continue
         if os.path.islink(component) and not os.path.exists(component):
