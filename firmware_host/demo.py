@@ -89,7 +89,8 @@ from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
 from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output
 from ghnerf_runtime.cli.seconds import positive_seconds
-from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
+from ghnerf_runtime.cli.sigterm import (closed_with_stops_deferred, exit_status, sigterm_as_interrupt, stop_signal,
+                                      stop_signals_deferred, stop_words)
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
 from ghnerf_runtime.errors import ConfigError, ImageWriteError, ModelError, ModelLoadError
@@ -454,7 +455,6 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     source = drivers.create_rig_source(args.url)
     stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
     read_to_its_end = False  # the reading ended without an error or a stop on its way out (the close's raise)
-    late_stop: KeyboardInterrupt | None = None  # one that landed in the close of a run that read to its end
     try:
         estimator = None
         if cfg is not None:
@@ -568,11 +568,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         # ran out, a second Ctrl-C pressed after the one that stopped the run). A stop that lands there is raised
         # once the take is whole only when it is the first: a stop caught above, or an error on its way, is the one
         # reported (its summary and exit status)
-        try:
-            with stop_signals_deferred(then_raise=read_to_its_end and stopped is None):
-                source.close()
-        except KeyboardInterrupt as e:  # raised once the close is done: the take is checked first, below
-            late_stop = e
+        late_stop = closed_with_stops_deferred(source.close, then_raise=read_to_its_end and stopped is None)
     if late_stop is not None and getattr(source, "unreported_failure", lambda: None)() is None:
         raise late_stop  # main says it (130, 143); a failed take is said after the summary, 2
 
