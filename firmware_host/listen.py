@@ -42,7 +42,7 @@ import statistics
 import struct
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Optional, TextIO
 from urllib.parse import parse_qs, urlsplit
@@ -640,10 +640,11 @@ def _totals(tally: Tally) -> str:
             f"(reordered), {tally.total_duplicates} duplicate{unknown}")
 
 
-def _read(port: Any, timeout_s: float) -> tuple[bytes, Optional[str]]:
-    """What ``port`` read and from whom: a UDP port names each datagram's sender, a serial one has one sender."""
+def _reader(port: Any) -> Callable[[float], tuple[bytes, Optional[str]]]:
+    """``port``'s read of what came and from whom: a UDP port names each datagram's sender, a serial one has one
+    sender (looked up once, not per read)."""
     read_from = getattr(port, "read_from", None)
-    return read_from(timeout_s) if read_from is not None else (port.read(timeout_s), None)
+    return read_from if read_from is not None else lambda timeout_s: (port.read(timeout_s), None)
 
 
 def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, every_s: float = 1.0,
@@ -653,10 +654,11 @@ def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, e
     what arrived if the port fails (:class:`ListenError`). Returns the first sender's tally."""
     heard = Heard() if heard is None else heard
     notes = sys.stderr if notes is None else notes
+    read = _reader(port)
     start = last = time.monotonic()
     try:
         while seconds is None or time.monotonic() - start < seconds:
-            data, source = _read(port, 0.1)
+            data, source = read(0.1)
             now = time.monotonic()
             producer = heard.producer(source, now, notes) if data else None
             for event in producer.decoder.feed(data) if producer is not None else ():
