@@ -1181,22 +1181,12 @@ def test_an_error_on_its_way_is_reported_when_a_sigterm_lands_in_the_recorder_s_
                                                                                       monkeypatch):
     """A run that failed closes its take on the way out; a SIGTERM landing in that close (timeout's) was raised
     after it in place of the error: "stopped (SIGTERM)", 143, for a run that failed (2, the error said)."""
-    import os
     import signal
-
-    from drivers.backends import record
-
-    real_close = record.RecordingWriter.close
-
-    def close(self, counters):
-        os.kill(os.getpid(), signal.SIGTERM)
-        time.sleep(0.3)  # the handler runs here, in the main thread, before the take is closed
-        real_close(self, counters)
 
     def failed(*args, **kwargs):
         raise OSError(5, "Input/output error")
 
-    monkeypatch.setattr(record.RecordingWriter, "close", close)
+    _stop_in_the_recorder_s_close(monkeypatch, signal.SIGTERM)
     monkeypatch.setattr(demo, "truth_frame", failed)
     take = tmp_path / "take"
     url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
