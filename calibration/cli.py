@@ -50,7 +50,8 @@ from calibration.render import SYNTH_BOARD, calibration_views, synth_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, same_file, unwritable_reason
 from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stderr
-from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
+from ghnerf_runtime.cli.sigterm import (closed_with_stops_deferred, exit_status, sigterm_as_interrupt, stop_signal,
+                                      stop_signals_deferred, stop_words)
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
@@ -508,7 +509,6 @@ def cmd_capture(args: argparse.Namespace) -> int:
     shown_url = redact_url(args.url)  # a camera URL may carry a password (rtsp://user:pass@..., token=)
     read_to_its_end = False  # the capture ended without a stop (caught below) or an error on its way out
     stopped: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM: the capture's normal end, said after the close
-    late_stop: KeyboardInterrupt | None = None  # one that landed in the close of a capture that read to its end
     try:
         # what the open warns and notes of the rig (a take's, a device's calibration, sim://'s) is logged by the
         # source, not the rig file: shown as main shows a loaded rig's, its notes too (Python showed the warnings)
@@ -659,11 +659,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
         # ran out, a second Ctrl-C pressed after the one that stopped the capture). It is raised once the close is
         # done only when it is the first stop: one caught above (the views kept said, 0) or an error on its way
         # is the one reported
-        try:
-            with stop_signals_deferred(then_raise=read_to_its_end):
-                source.close()
-        except KeyboardInterrupt as e:  # raised once the close is done: the take is checked first, below
-            late_stop = e
+        late_stop = closed_with_stops_deferred(source.close, then_raise=read_to_its_end)  # the take checked first
         take_failure = getattr(source, "unreported_failure", lambda: None)()  # a record+ take: complete: false
         if take_failure is not None and not read_to_its_end and stopped is None:  # said before main says the error
             print(f"{PROG}: error: {take_failure}", file=sys.stderr)

@@ -89,7 +89,8 @@ from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
 from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output
 from ghnerf_runtime.cli.seconds import positive_seconds
-from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_signals_deferred, stop_words
+from ghnerf_runtime.cli.sigterm import (closed_with_stops_deferred, exit_status, sigterm_as_interrupt, stop_signal,
+                                      stop_signals_deferred, stop_words)
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
 from ghnerf_runtime.errors import ConfigError, ImageWriteError, ModelError, ModelLoadError
@@ -554,11 +555,8 @@ def _run(args: argparse.Namespace, prog: str) -> int:
             # slow serial link): a second Ctrl-C pressed there cut it short and ended the run without its summary,
             # 130 for a run the first Ctrl-C ended with 0. Raised after the close only when it is the first stop,
             # and only once the take is closed and checked (below): raised here, it went past both
-            try:
-                with stop_signals_deferred(then_raise=stopped is None):
-                    sink.close()  # (_closed_on_the_way_out's close then has nothing left to do)
-            except KeyboardInterrupt as e:
-                late_stop = e
+            # (_closed_on_the_way_out's close then has nothing left to do)
+            late_stop = closed_with_stops_deferred(sink.close, then_raise=stopped is None)
         sink_stats = sink.stats()
         stats = source.stats
         # under LATEST the rig hands out the newest pair and drops (counts) the older ones; an OAK's count
@@ -572,11 +570,8 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         # ran out, a second Ctrl-C pressed after the one that stopped the run). A stop that lands there is raised
         # once the take is whole only when it is the first: a stop caught above, or an error on its way, is the one
         # reported (its summary and exit status)
-        try:
-            with stop_signals_deferred(then_raise=read_to_its_end and stopped is None and late_stop is None):
-                source.close()
-        except KeyboardInterrupt as e:  # raised once the close is done: the take is checked first, below
-            late_stop = e
+        late_stop = closed_with_stops_deferred(
+            source.close, then_raise=read_to_its_end and stopped is None and late_stop is None) or late_stop
     if late_stop is not None and getattr(source, "unreported_failure", lambda: None)() is None:
         raise late_stop  # main says it (130, 143); a failed take is said after the summary, 2
 
@@ -737,15 +732,19 @@ def _sink_file_problem(path: str) -> str | None:
 
 def _link_loop(path: str) -> str | None:
     """The first of ``path``'s components (``path`` itself last) that is a loop of symbolic links (None: none)."""
-    parts = Path(path).parts
-    for end in range(1, len(parts) + 1):
-        component = os.path.join(*parts[:end])
+    for component in _leading_paths(path):
         try:
             os.stat(component)
         except OSError as e:
             if e.errno == errno.ELOOP:
                 return component
     return None
+
+
+def _leading_paths(path: str) -> list[str]:
+    """``path``'s leading components as paths, ``path`` itself last (``/a/b``: ``/``, ``/a``, ``/a/b``)."""
+    parts = Path(path).parts
+    return [os.path.join(*parts[:end]) for end in range(1, len(parts) + 1)]
 
 
 def _link_to_a_folder(path: str) -> str | None:
@@ -763,9 +762,7 @@ def _link_to_a_folder(path: str) -> str | None:
 def _missing_folder_words(folder: str) -> str:
     """Why ``folder`` (not a folder) is none, said of its first component that is not one: a file, a link to
     nothing, or not there."""
-    parts = Path(folder).parts
-    for end in range(1, len(parts) + 1):
-        component = os.path.join(*parts[:end])
+    for component in _leading_paths(folder):
         if os.path.isdir(component):
             continue
         if os.path.islink(component) and not os.path.exists(component):

@@ -42,7 +42,7 @@ import statistics
 import struct
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Optional, TextIO
 from urllib.parse import parse_qs, urlsplit
@@ -95,13 +95,20 @@ class _UdpPort:
         self.sock.close()
 
 
+#: The first 12 bytes of an IPv4-mapped IPv6 address (``::ffff:10.0.0.7``): an IPv4 sender on the dual-stack socket.
+_V4_MAPPED = bytes(10) + b"\xff\xff"
+
+
 def source_name(address: Any) -> str:
     """A datagram's sender as a user writes it: an IPv4 sender heard on the dual-stack socket (``::ffff:10.0.0.7``)
-    as its IPv4 address, an IPv6 one in brackets."""
-    ip = ipaddress.ip_address(address[0].partition("%")[0])
-    if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
-        return f"{ip.ipv4_mapped}:{address[1]}"
-    return f"[{address[0]}]:{address[1]}" if ip.version == 6 else f"{address[0]}:{address[1]}"
+    as its IPv4 address, an IPv6 one in brackets. Read per datagram: inet_pton, not ipaddress (30 us a call)."""
+    host, port = address[0], address[1]
+    if ":" not in host:  # an IPv4 socket's sender
+        return f"{host}:{port}"
+    packed = socket.inet_pton(socket.AF_INET6, host.partition("%")[0])
+    if packed[:12] == _V4_MAPPED:
+        return f"{socket.inet_ntop(socket.AF_INET, packed[12:])}:{port}"
+    return f"[{host}]:{port}"
 
 
 def _cannot_listen(host: str, port: int, e: Exception) -> ListenError:
@@ -633,10 +640,11 @@ def _totals(tally: Tally) -> str:
             f"(reordered), {tally.total_duplicates} duplicate{unknown}")
 
 
-def _read(port: Any, timeout_s: float) -> tuple[bytes, Optional[str]]:
-    """What ``port`` read and from whom: a UDP port names each datagram's sender, a serial one has one sender."""
+def _reader(port: Any) -> Callable[[float], tuple[bytes, Optional[str]]]:
+    """``port``'s read of what came and from whom: a UDP port names each datagram's sender, a serial one has one
+    sender (looked up once, not per read)."""
     read_from = getattr(port, "read_from", None)
-    return read_from(timeout_s) if read_from is not None else (port.read(timeout_s), None)
+    return read_from if read_from is not None else lambda timeout_s: (port.read(timeout_s), None)
 
 
 def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, every_s: float = 1.0,
@@ -646,10 +654,11 @@ def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, e
     what arrived if the port fails (:class:`ListenError`). Returns the first sender's tally."""
     heard = Heard() if heard is None else heard
     notes = sys.stderr if notes is None else notes
+    read = _reader(port)
     start = last = time.monotonic()
     try:
         while seconds is None or time.monotonic() - start < seconds:
-            data, source = _read(port, 0.1)
+            data, source = read(0.1)
             now = time.monotonic()
             producer = heard.producer(source, now, notes) if data else None
             for event in producer.decoder.feed(data) if producer is not None else ():

@@ -21,7 +21,7 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 
 class Terminated(KeyboardInterrupt):
@@ -94,6 +94,18 @@ def stop_signals_deferred(*, then_raise: bool = True, only_raising: bool = False
         signums = tuple(signum for signum in signums if _raises_now(signum))
     with _signals_held(signums, then_raise=then_raise):
         yield
+
+
+def closed_with_stops_deferred(close: Callable[[], None], *, then_raise: bool) -> KeyboardInterrupt | None:
+    """``close()`` inside :func:`stop_signals_deferred`; the stop it raises once the close is done (``then_raise``)
+    is returned, not raised, so that the caller checks what the close left first (a ``record+`` take that failed
+    as it closed is said, exit 2, rather than the stop's 130 or 143: ``ghnerf-demo``, ``ghcal capture``)."""
+    try:
+        with stop_signals_deferred(then_raise=then_raise):
+            close()
+    except KeyboardInterrupt as e:
+        return e
+    return None
 
 
 def _raises_now(signum: signal.Signals) -> bool:

@@ -465,6 +465,16 @@ def test_the_tangential_fold_warning_suggests_holding_p1_p2_at_zero():
     assert "--no-tangential" not in fold_warning(radial)  # a radial fold: p1, p2 are not at fault
 
 
+def _fsync_fails(monkeypatch) -> None:
+    """A record+ take's fsyncs fail as on a full disk."""
+    import drivers.backends.record as record_module
+
+    def full_disk(path):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(record_module, "_fsync", full_disk)
+
+
 @pytest.mark.parametrize("end", ["count", "ctrl-c", "unplugged"])
 def test_a_take_recorded_with_the_capture_that_fails_as_it_closes_is_said_exit_2(truth, one_view, tmp_path, capsys,
                                                                                   monkeypatch, end):
@@ -473,12 +483,8 @@ def test_a_take_recorded_with_the_capture_that_fails_as_it_closes_is_said_exit_2
     one error line names the take and why, after the views kept are said, and the exit status is 2 however the
     capture ended (all its views, Ctrl-C, a camera gone: both errors said)."""
     import drivers
-    import drivers.backends.record as record_module
 
-    def full_disk(path):
-        raise OSError(28, "No space left on device")
-
-    monkeypatch.setattr(record_module, "_fsync", full_disk)  # a short take: only the close's fsync runs
+    _fsync_fails(monkeypatch)  # a short take: only the close's fsync runs
     if end != "count":
         error = KeyboardInterrupt() if end == "ctrl-c" else drivers.RigDisconnectedError("camera 'right' vanished")
         monkeypatch.setattr(drivers, "create_rig_source", _failing_after(drivers.create_rig_source, 2, error))
@@ -508,10 +514,6 @@ def test_a_failed_take_is_said_when_a_stop_lands_in_the_close_of_a_capture_that_
     import time
 
     import drivers
-    import drivers.backends.record as record_module
-
-    def full_disk(path):
-        raise OSError(28, "No space left on device")
 
     def create(url, **kwargs):
         source = real(url, **kwargs)
@@ -531,7 +533,7 @@ def test_a_failed_take_is_said_when_a_stop_lands_in_the_close_of_a_capture_that_
         raise Escaped
 
     real = drivers.create_rig_source
-    monkeypatch.setattr(record_module, "_fsync", full_disk)  # a short take: only the close's fsync runs
+    _fsync_fails(monkeypatch)  # a short take: only the close's fsync runs
     monkeypatch.setattr(drivers, "create_rig_source", create)
     take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
     previous = signal.signal(signal.SIGTERM, outer)

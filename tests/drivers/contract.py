@@ -134,29 +134,11 @@ class RigSourceContract:
         the next frame's time (sim:// and replay:// slept until it before session 75)."""
         if not self.realtime:
             pytest.skip("on a ManualClock a read never really waits")
-        source = self.make_stalling_source().open()
-        ended: list[tuple[object, float]] = []  # (what the read returned or raised, when)
-
-        def reader():
-            try:
-                got: object = source.read(timeout_s=30.0)
-            except Exception as e:  # noqa: BLE001 - the test looks at what it was
-                got = e
-            ended.append((got, time.monotonic()))
-
-        try:
+        with self.make_stalling_source() as source:
             source.read(timeout_s=self.first_timeout_s)
-            thread = threading.Thread(target=reader, daemon=True)
-            thread.start()
-            time.sleep(0.2)  # the reader waits for the next pair, still a stall away
-            t0 = time.monotonic()
-        finally:
-            source.close()
-        thread.join(timeout=30.0)
-        assert len(ended) == 1, "the read did not return"
-        got, at = ended[0]
+            got, after_s = closed_while_reading(source, 30.0)  # the next pair is still a stall away
         assert isinstance(got, RigOperationError) and "closed" in str(got), got
-        assert at - t0 <= self.slack_s + 0.25, f"the read returned {at - t0:.2f} s after the close"
+        assert after_s <= self.slack_s + 0.25, f"the read returned {after_s:.2f} s after the close"
 
     def test_a_timeout_that_is_not_a_finite_number_of_seconds_is_refused(self):
         with self.make_source() as source:
@@ -193,3 +175,26 @@ class RigSourceContract:
                 source.read(timeout_s=0.1)
         finally:
             source.close()
+
+
+def closed_while_reading(source, read_timeout_s: float) -> tuple[object, float]:
+    """What a read blocked in another thread returned or raised when this thread closed ``source``, and how many
+    seconds after the close it did."""
+    ended: list[tuple[object, float]] = []
+
+    def reader():
+        try:
+            got: object = source.read(timeout_s=read_timeout_s)
+        except Exception as e:  # noqa: BLE001 - the test looks at what it was
+            got = e
+        ended.append((got, time.monotonic()))
+
+    thread = threading.Thread(target=reader, daemon=True)
+    thread.start()
+    time.sleep(0.3)  # the reader waits for the next pair, seconds away
+    t0 = time.monotonic()
+    source.close()
+    thread.join(30.0)
+    assert len(ended) == 1, "the read did not return"
+    got, at = ended[0]
+    return got, at - t0

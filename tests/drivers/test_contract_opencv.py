@@ -962,6 +962,16 @@ def _read_until_index(source, index: int) -> list:
     return pairs
 
 
+def _right_camera_after_grabs(webcam, grabs: int) -> _Flaky:
+    """The second camera's stand-in once it has tried ``grabs`` grabs (waited for, 5 s at most)."""
+    right = [cam for cam in webcam.made if cam.target == 1][-1]
+    deadline = time.monotonic() + 5.0
+    while right.grabs < grabs and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert right.grabs >= grabs, right.grabs
+    return right
+
+
 def test_a_run_of_lost_frames_is_logged_once_as_it_ends_and_counted_as_the_camera_s_gap(webcam, caplog):
     """Session 74: a failed grab that was tried again left no log line and no count (a flaky USB webcam lost frames
     unseen), and each undecodable frame was a warning of its own (a flood at 30 fps)."""
@@ -1017,11 +1027,7 @@ def test_a_run_of_lost_frames_still_going_at_close_is_logged_once_and_not_counte
     monkeypatch.setattr(_Flaky, "garbled", set())
     with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_Flaky) as source:
         _read_until_index(source, 3)  # the right camera's frames 0-3 reach the pairer
-        right = [cam for cam in webcam.made if cam.target == 1][-1]
-        deadline = time.monotonic() + 5.0
-        while right.grabs < 8 and time.monotonic() < deadline:  # three of them lost
-            time.sleep(0.01)
-        assert right.grabs >= 8
+        _right_camera_after_grabs(webcam, 8)  # three of them lost
     stats = source.stats  # after the close, as a summary reads them
     logged = _camera_logs(caplog)
     assert len(logged) == 1, logged
@@ -1057,11 +1063,7 @@ def test_a_run_whose_next_frame_the_close_refuses_is_said_still_going_at_close(w
     monkeypatch.setattr(_HeldAtTheClose, "closing", [])
     with open_rig("opencv://?first=0&second=1&tolerance_ms=30", capture_factory=_HeldAtTheClose) as source:
         _HeldAtTheClose.closing.append(source)
-        right = [cam for cam in webcam.made if cam.target == 1][-1]
-        deadline = time.monotonic() + 5.0
-        while right.grabs < 6 and time.monotonic() < deadline:  # in the held retrieve
-            time.sleep(0.01)
-        assert right.grabs == 6
+        assert _right_camera_after_grabs(webcam, 6).grabs == 6  # in the held retrieve
     assert _camera_logs(caplog) == [
         "camera 'right' (1) lost frames 3 to 4 (2 failed grab(s), tried again), still going at close: no frame "
         "followed",

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import threading
-import time
 
 import pytest
 
@@ -22,6 +20,7 @@ from drivers import (
     open_rig,
 )
 from drivers.backends.recording_format import FRAMES, MANIFEST
+from tests.drivers.contract import closed_while_reading
 from tests.drivers.depthai_host import ScriptedLink
 
 
@@ -122,29 +121,6 @@ def test_naming_the_rig_option_converts_rig_errors_only():
             raise KeyError("other")
 
 
-def _closed_while_reading(source, read_timeout_s: float) -> tuple[object, float]:
-    """What a read blocked in another thread returned or raised when this thread closed ``source``, and how many
-    seconds after the close it did."""
-    ended: list[tuple[object, float]] = []
-
-    def reader():
-        try:
-            got: object = source.read(timeout_s=read_timeout_s)
-        except Exception as e:  # noqa: BLE001 - the test looks at what it was
-            got = e
-        ended.append((got, time.monotonic()))
-
-    thread = threading.Thread(target=reader, daemon=True)
-    thread.start()
-    time.sleep(0.3)  # the reader waits for the next pair, seconds away
-    t0 = time.monotonic()
-    source.close()
-    thread.join(30.0)
-    assert len(ended) == 1, "the read did not return"
-    got, at = ended[0]
-    return got, at - t0
-
-
 # A read waits for the next frame's time (30 s timeout) or for its timeout (3 s), both seconds after the close; it
 # slept until then (sim://, and replay:// which then returned the frame) before session 75.
 @pytest.mark.parametrize("read_timeout_s", [30.0, 3.0])
@@ -154,7 +130,7 @@ def _closed_while_reading(source, read_timeout_s: float) -> tuple[object, float]
 def test_a_sim_read_waiting_when_another_thread_closes_says_so(sim_cache, take, tmp_path, url, read_timeout_s):
     source = open_rig(url.format(cache=sim_cache, out=tmp_path / "out", take=take))
     source.read(timeout_s=5.0)
-    got, after_s = _closed_while_reading(source, read_timeout_s)
+    got, after_s = closed_while_reading(source, read_timeout_s)
     assert isinstance(got, RigOperationError) and "closed while a read waited" in str(got), got
     assert after_s < 0.5, f"the read returned {after_s:.2f} s after the close"
 

@@ -921,10 +921,7 @@ def test_a_take_that_cannot_be_written_ends_the_run_and_is_not_counted_as_a_skip
     It ends the run again, one error line, exit 2."""
     import drivers.backends.record as record_module
 
-    def full_disk(*args, **kwargs):
-        raise OSError(28, "No space left on device")
-
-    monkeypatch.setattr(record_module, "encode_image", full_disk)
+    monkeypatch.setattr(record_module, "encode_image", _full_disk)
     take = tmp_path / "take"
     url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
     rc = demo.main(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
@@ -942,10 +939,7 @@ def test_a_take_that_cannot_be_made_durable_at_close_ends_the_run_with_status_2(
 
     import drivers.backends.record as record_module
 
-    def full_disk(path):
-        raise OSError(28, "No space left on device")
-
-    monkeypatch.setattr(record_module, "_fsync", full_disk)  # a short take: only the close's fsync runs
+    monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
     take = tmp_path / "take"
     url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
     rc = demo.main(["--truth-only", "--url", url, "--seconds", "0.3", "--out", str(tmp_path / "out")])
@@ -1038,6 +1032,25 @@ def _main_under_outer_sigterm(argv: list[str]) -> tuple[int, object]:
         signal.signal(signal.SIGTERM, previous)
 
 
+def _full_disk(*args, **kwargs):
+    """Stands for the recorder's write or fsync on a full disk."""
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+
+def _stop_in_the_recorder_s_close(monkeypatch, signum: int) -> None:
+    """The recorder's close sends ``signum`` to this process before it closes the take (a stop landing there)."""
+    from drivers.backends import record
+
+    real_close = record.RecordingWriter.close
+
+    def close(self, counters):
+        os.kill(os.getpid(), signum)
+        time.sleep(0.5)  # the signal's Python handler runs here, in the main thread, before the take is closed
+        real_close(self, counters)
+
+    monkeypatch.setattr(record.RecordingWriter, "close", close)
+
+
 def test_sigterm_before_the_first_pair_exits_143_with_one_line_and_restores_the_handler(tmp_path, capsys,
                                                                                       sim_url, monkeypatch):
     # the handler installed here stands for SIGTERM's default action, which would end the test run itself
@@ -1060,19 +1073,9 @@ def test_sigterm_before_the_first_pair_exits_143_with_one_line_and_restores_the_
 def test_a_sigterm_in_the_recorder_s_close_waits_for_the_take_to_be_complete(tmp_path, capsys, monkeypatch):
     """``timeout`` sends its SIGTERM when the run's own --seconds end at about the same time: one that landed in the
     recorder's close (fsyncing the take, rewriting its manifest) tore it, the take left ``complete: false``."""
-    import os
     import signal
 
-    from drivers.backends import record
-
-    real_close = record.RecordingWriter.close
-
-    def close(self, counters):
-        os.kill(os.getpid(), signal.SIGTERM)
-        time.sleep(0.5)  # the signal's Python handler runs here, in the main thread, before the take is closed
-        real_close(self, counters)
-
-    monkeypatch.setattr(record.RecordingWriter, "close", close)
+    _stop_in_the_recorder_s_close(monkeypatch, signal.SIGTERM)
     take = tmp_path / "take"
     url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
     rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
@@ -1081,7 +1084,6 @@ def test_a_sigterm_in_the_recorder_s_close_waits_for_the_take_to_be_complete(tmp
     manifest = json.loads((take / "manifest.json").read_text())
     assert manifest["complete"] is True
     assert manifest["counters"]["frames_written"] == len((take / "frames.jsonl").read_text().splitlines()) > 0
-
 
 
 @pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
@@ -1094,18 +1096,8 @@ def test_a_take_that_fails_as_it_closes_is_said_when_a_stop_lands_in_the_close_o
 
     from drivers.backends import record
 
-    def full_disk(path):
-        raise OSError(28, "No space left on device")
-
-    real_close = record.RecordingWriter.close
-
-    def close(self, counters):
-        os.kill(os.getpid(), signal.Signals[stop])
-        time.sleep(0.5)  # the signal's Python handler runs here, in the main thread, before the take is closed
-        real_close(self, counters)
-
-    monkeypatch.setattr(record, "_fsync", full_disk)  # a short take: only the close's fsync runs
-    monkeypatch.setattr(record.RecordingWriter, "close", close)
+    monkeypatch.setattr(record, "_fsync", _full_disk)  # a short take: only the close's fsync runs
+    _stop_in_the_recorder_s_close(monkeypatch, signal.Signals[stop])
     take = tmp_path / "take"
     url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
     rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
@@ -1234,22 +1226,12 @@ def test_an_error_on_its_way_is_reported_when_a_sigterm_lands_in_the_recorder_s_
                                                                                       monkeypatch):
     """A run that failed closes its take on the way out; a SIGTERM landing in that close (timeout's) was raised
     after it in place of the error: "stopped (SIGTERM)", 143, for a run that failed (2, the error said)."""
-    import os
     import signal
-
-    from drivers.backends import record
-
-    real_close = record.RecordingWriter.close
-
-    def close(self, counters):
-        os.kill(os.getpid(), signal.SIGTERM)
-        time.sleep(0.3)  # the handler runs here, in the main thread, before the take is closed
-        real_close(self, counters)
 
     def failed(*args, **kwargs):
         raise OSError(5, "Input/output error")
 
-    monkeypatch.setattr(record.RecordingWriter, "close", close)
+    _stop_in_the_recorder_s_close(monkeypatch, signal.SIGTERM)
     monkeypatch.setattr(demo, "truth_frame", failed)
     take = tmp_path / "take"
     url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
@@ -1324,13 +1306,10 @@ def test_a_take_that_fails_as_a_stopped_run_closes_it_ends_with_status_2_said_on
     as a run that read to its end does; a stop is no reason to call an incomplete take whole."""
     import drivers.backends.record as record_module
 
-    def full_disk(path):
-        raise OSError(28, "No space left on device")
-
     raise_first = _FIRST_STOPS[first][0]
     stopped_at_the_third_pair = _stopping_at_the_third_pair(raise_first)
 
-    monkeypatch.setattr(record_module, "_fsync", full_disk)
+    monkeypatch.setattr(record_module, "_fsync", _full_disk)
     monkeypatch.setattr(demo, "truth_frame", stopped_at_the_third_pair)
     take = tmp_path / "take"
     url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"

@@ -956,8 +956,7 @@ def test_a_hello_reordered_behind_a_newer_one_is_not_shown():
 
 
 class _Senders:
-    """A udp:// port for :func:`listen.listen`: scripted datagrams, each with its sender's address, then a Ctrl-C.
-    ``read`` hands over the same datagrams without the address, as a listener that did not ask for it saw them."""
+    """A udp:// port for :func:`listen.listen`: scripted datagrams, each with its sender's address, then a Ctrl-C."""
 
     def __init__(self, datagrams) -> None:
         self.datagrams = list(datagrams)
@@ -970,9 +969,6 @@ class _Senders:
         source, message = self.datagrams.pop(0)
         return encode(message), source
 
-    def read(self, timeout_s: float) -> bytes:
-        return self.read_from(timeout_s)[0]
-
     def close(self) -> None:
         pass
 
@@ -983,15 +979,13 @@ _A, _B = "127.0.0.1:40000", "127.0.0.2:40001"
 def _two_rigs():
     """Two senders on one port, interleaved: A's frames 0-5 and OK STATUS; B's, on a clock 0.4 s behind A's, with 4
     lost and 3 ahead of 2 (reordered), and a CAMERA_FAULT STATUS; each a HELLO of its rig first."""
-    from dataclasses import replace
-
     from firmware_host.protocol.constants import NO_FRAME_SEQ, Fault
 
     period, a_start, b_start = 33_333, 50_000_000, 49_600_000
-    a = [replace(_at(NO_FRAME_SEQ, "HELLO", a_start), rig_id="rig-a")]
+    a = [_hello_of("rig-a", NO_FRAME_SEQ, a_start)]
     a += [_at(seq, "JOINTS", a_start + (seq + 1) * period) for seq in range(6)]
     a.append(_status(5, a_start + 7 * period, int(Fault.OK), 0))
-    b = [replace(_at(NO_FRAME_SEQ, "HELLO", b_start), rig_id="rig-b")]
+    b = [_hello_of("rig-b", NO_FRAME_SEQ, b_start)]
     b += [_at(seq, "JOINTS", b_start + (seq + 1) * period) for seq in (0, 1, 3, 2, 5)]
     b.append(_status(5, b_start + 7 * period, int(Fault.CAMERA_FAULT), 2))
     datagrams = []
@@ -1070,6 +1064,8 @@ def test_a_udp_port_names_each_datagram_s_sender():
     assert listen.source_name(("::ffff:192.0.2.7", 40123, 0, 0)) == "192.0.2.7:40123"  # on the dual-stack socket
     assert listen.source_name(("2001:db8::7", 40123, 0, 0)) == "[2001:db8::7]:40123"
     assert listen.source_name(("fe80::1%eth0", 40123, 0, 2)) == "[fe80::1%eth0]:40123"
+    assert listen.source_name(("::ffff:0:192.0.2.7", 40123, 0, 0)) == "[::ffff:0:192.0.2.7]:40123"  # not mapped
+    assert listen.source_name(("192.0.2.7", 40123)) == "192.0.2.7:40123"  # an IPv4 socket's
 
 
 def test_the_help_says_several_senders_are_counted_apart(capsys):

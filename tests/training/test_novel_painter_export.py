@@ -306,7 +306,7 @@ def test_an_unreadable_score_file_beside_the_net_is_named_and_the_export_goes_on
                                                                                  said):
     """A cut or hand-edited score.json beside the net was a JSONDecodeError or AttributeError traceback: it is read
     only for the held-out figures, which the export does without (as for another run's file)."""
-    card_dir, out = _export_setup(tmp_path, data64)
+    _, out = _export_setup(tmp_path, data64)
     (tmp_path / "score.json").write_text(score)
     assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out)]) == 0
     assert f"{tmp_path / 'score.json'}: {said}" in capsys.readouterr().err
