@@ -575,6 +575,8 @@ class Heard:
     producers: dict[Optional[str], Producer] = field(default_factory=_waiting)
     forgotten: int = 0  # senders forgotten past MAX_PRODUCERS, and the JOINTS they had sent
     forgotten_joints: int = 0
+    noted_at: float = -QUIET_S  # when a new sender was last said on ``notes``, and how many came unsaid since
+    unnoted: int = 0
 
     @property
     def first(self) -> Tally:
@@ -596,11 +598,17 @@ class Heard:
     def _note_another(self, source: Optional[str], now: float, notes: TextIO) -> None:
         current = [f"{name} (heard {now - p.heard_at:.1f} s ago)" for name, p in self.producers.items()
                    if now - p.heard_at <= QUIET_S]
-        if current:  # else the one before fell quiet long ago: a sender restarted elsewhere, its line replaced
-            notes.write(f"{PROG}: another sender on this port: {source}, besides {', '.join(current)}: two senders "
-                        "(a receiver here mixes their frames) or one that reopened its socket; the summary lines "
-                        "and totals name each sender\n")
-            notes.flush()
+        if not current:  # the one before fell quiet long ago: a sender restarted elsewhere, its line replaced
+            return
+        if now - self.noted_at < QUIET_S:  # at most one note per QUIET_S: stray datagrams from random ports
+            self.unnoted += 1
+            return
+        since = f" ({self.unnoted} more new senders since the last such note)" if self.unnoted else ""
+        notes.write(f"{PROG}: another sender on this port: {source}, besides {', '.join(current)}{since}: two "
+                    "senders (a receiver here mixes their frames) or one that reopened its socket; the summary "
+                    "lines and totals name each sender\n")
+        notes.flush()
+        self.noted_at, self.unnoted = now, 0
 
     def _make_room(self) -> None:
         """Forget the longest quiet senders until a new one fits within :data:`MAX_PRODUCERS`."""

@@ -1100,3 +1100,19 @@ def test_the_senders_kept_are_bounded_the_longest_quiet_forgotten_and_counted(mo
     assert capsys.readouterr().err.splitlines()[-2:] == [
         f"{_B}: 5 JOINTS messages, 1 sequence gaps (lost), 1 late (reordered), 0 duplicate",
         "1 more senders forgotten (the longest quiet, past 1 kept): 6 JOINTS messages from them"]
+
+
+def test_new_senders_are_said_at_most_once_per_quiet_spell_the_unsaid_counted_in_the_next_note():
+    """Until session 75 every stray datagram from a new port printed its own "another sender" line while a real
+    sender streamed: a port scan or a sink reconnecting in a loop filled the terminal."""
+    heard, notes = listen.Heard(), io.StringIO()
+    heard.producer(_A, 0.0, notes)
+    for k in range(5):
+        heard.producer(f"192.0.2.1:{2000 + k}", 1.0 + 0.1 * k, notes)
+        heard.producer(_A, 1.05 + 0.1 * k, notes)
+    said = notes.getvalue().splitlines()
+    assert len(said) == 1 and said[0].startswith(
+        f"ghnerf-listen: another sender on this port: 192.0.2.1:2000, besides {_A} (heard "), said
+    heard.producer(f"192.0.2.1:{3000}", 1.0 + listen.QUIET_S, notes)
+    said = notes.getvalue().splitlines()
+    assert len(said) == 2 and "192.0.2.1:3000" in said[1] and "(4 more new senders since the last such note)" in said[1]
