@@ -468,8 +468,8 @@ class SimRigSource(RigSource):
 
     def _read_frame(self, timeout_s: float) -> Frame | None:
         schedule = self._schedule
-        if schedule is None:
-            raise RigOperationError("sim rig is not open")
+        if schedule is None:  # read() refuses a source not open: closed by another thread since the read began
+            raise _closed_while_reading()
         second = self.rig.pair[1].name
         if self._unplugged:
             raise RigDisconnectedError(f"sim camera {second!r} was unplugged (unplug_after_s)")

@@ -241,3 +241,18 @@ def test_a_sim_close_landing_just_after_a_reads_wait_says_closed(sim_cache):
     with pytest.raises(RigOperationError, match="sim source closed while a read waited for its frame"):
         source.read(timeout_s=1.0)
 
+
+def test_a_sim_close_between_a_pairs_two_frames_says_closed(sim_cache, monkeypatch):
+    # the read's next frame found the source closed and said "sim rig is not open", of a source it had found open
+    source = open_rig(f"sim://?width=40&height=30&cache={sim_cache}", clock=ManualClock())
+    source.read(timeout_s=1.0)
+    make = source._frame
+
+    def make_then_close(capture):
+        frame = make(capture)
+        source.close()  # as another thread's close would, once the pair's first frame is made
+        return frame
+
+    monkeypatch.setattr(source, "_frame", make_then_close)
+    with pytest.raises(RigOperationError, match="sim source closed while a read waited for its frame"):
+        source.read(timeout_s=1.0)
