@@ -305,6 +305,11 @@ def _loop_length(period_s: float, fps: float) -> tuple[int, int]:
     return (best[1], best[2]) if best is not None else (1, max(1, round(per_period)))
 
 
+def _closed_while_reading() -> RigOperationError:
+    """What a read raises when another thread closes the source under it."""
+    return RigOperationError("sim source closed while a read waited for its frame")
+
+
 class SimRigSource(RigSource):
     """The simulated rig (see the module docstring for options and what it does not model).
 
@@ -463,8 +468,8 @@ class SimRigSource(RigSource):
 
     def _read_frame(self, timeout_s: float) -> Frame | None:
         schedule = self._schedule
-        if schedule is None:
-            raise RigOperationError("sim rig is not open")
+        if schedule is None:  # read() refuses a source not open: closed by another thread since the read began
+            raise _closed_while_reading()
         second = self.rig.pair[1].name
         if self._unplugged:
             raise RigDisconnectedError(f"sim camera {second!r} was unplugged (unplug_after_s)")
@@ -497,7 +502,7 @@ class SimRigSource(RigSource):
         """Sleeps on the clock until ``when_ns``; a close from another thread meanwhile ends the wait at once."""
         self.clock.wait_until(when_ns, self._closing)
         if self._closing.is_set() or self._schedule is not schedule or self._loop is None:
-            raise RigOperationError("sim source closed while a read waited for its frame")
+            raise _closed_while_reading()
 
     def _frame_available(self) -> bool:
         schedule = self._schedule
@@ -509,11 +514,13 @@ class SimRigSource(RigSource):
         return due <= self.clock.now_ns()
 
     def _frame(self, capture: Capture) -> Frame:
-        assert self._loop is not None
-        loop = self._loop
+        # Read once each: a close from another thread since the read's wait ended drops them (it asserted)
+        loop, alone = self._loop, self._loop_alone
+        if loop is None:
+            raise _closed_while_reading()
         joins_ns = self._second_joins_ns
-        if self._loop_alone is not None and joins_ns is not None and capture.time_ns < joins_ns:
-            loop = self._loop_alone  # captured before the second person joins (second_after_s)
+        if alone is not None and joins_ns is not None and capture.time_ns < joins_ns:
+            loop = alone  # captured before the second person joins (second_after_s)
         shown = loop.frame(capture.camera, capture.index % self.loop_frames)
         return Frame(
             camera=self.rig.pair[capture.camera].name,

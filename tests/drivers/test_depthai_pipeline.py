@@ -562,4 +562,18 @@ def test_a_read_waiting_when_another_thread_closes_says_the_source_closed_not_th
     source.close()
     reader.join(timeout=8.0)
     assert not reader.is_alive() and len(errors) == 1
-    assert type(errors[0]) is RigOperationError and "source closed while a read waited" in str(errors[0])
+    # the read in flight says so; one the loop began just after the close (a loaded host) says it was closed
+    said = str(errors[0])
+    assert type(errors[0]) is RigOperationError, errors[0]
+    assert "source closed while a read waited" in said or said.endswith("was closed; open a new source"), said
+
+
+def test_a_read_in_flight_finding_the_link_closed_says_the_source_closed():
+    # the read's next group, after another thread's close dropped the link, said "depthai link is not open" (a
+    # read of a source it had found open); the reader's loop above saw it on a loaded host
+    link = HostPipelineLink()
+    source = open_rig(f"{URL}&policy=all", link_factory=lambda: link)
+    source.read(timeout_s=3.0)
+    source.close()
+    with pytest.raises(RigOperationError, match=r"\): source closed while a read waited for its frames$"):
+        source._read_frame(1.0)  # where read() was, inside its loop, when the close came

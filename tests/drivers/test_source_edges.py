@@ -184,3 +184,51 @@ def test_a_read_or_an_iteration_after_close_says_the_source_was_closed(sim_cache
     for use in (lambda: source.read(timeout_s=0.1), lambda: next(iter(source)), source.open):
         with pytest.raises(RigOperationError, match=r"SimRigSource was closed; open a new source"):
             use()
+
+
+class _ClosingClock(ManualClock):
+    """A ManualClock that closes ``source`` at its first reading after a wait: a close from another thread landing
+    just after a read's wait ended, before the frame is made (a race, here at a fixed point)."""
+
+    source = None
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._armed = False
+
+    def wait_until(self, deadline_ns, wake) -> bool:
+        woken = super().wait_until(deadline_ns, wake)
+        self._armed = not woken and self.source is not None
+        return woken
+
+    def now_ns(self) -> int:
+        if self._armed:
+            self._armed = False
+            self.source.close()
+        return super().now_ns()
+
+
+def test_a_sim_close_landing_just_after_a_reads_wait_says_closed(sim_cache):
+    # the read went on to make the frame from the loop the close had dropped: an AssertionError, not a DriverError
+    clock = _ClosingClock()
+    source = open_rig(f"sim://?width=40&height=30&cache={sim_cache}", clock=clock)
+    source.read(timeout_s=1.0)
+    clock.source = source
+    with pytest.raises(RigOperationError, match="sim source closed while a read waited for its frame"):
+        source.read(timeout_s=1.0)
+
+
+def test_a_sim_close_between_a_pairs_two_frames_says_closed(sim_cache, monkeypatch):
+    # the read's next frame found the source closed and said "sim rig is not open", of a source it had found open
+    source = open_rig(f"sim://?width=40&height=30&cache={sim_cache}", clock=ManualClock())
+    source.read(timeout_s=1.0)
+    make = source._frame
+
+    def make_then_close(capture):
+        frame = make(capture)
+        source.close()  # as another thread's close would, once the pair's first frame is made
+        return frame
+
+    monkeypatch.setattr(source, "_frame", make_then_close)
+    with pytest.raises(RigOperationError, match="sim source closed while a read waited for its frame"):
+        source.read(timeout_s=1.0)

@@ -185,8 +185,8 @@ class DepthaiRigSource(RigSource):
         if self._pending:
             return self._served(self._pending.popleft())
         link = self._link
-        if link is None:
-            raise RigOperationError("depthai link is not open")
+        if link is None:  # read() refuses a source not open: closed by another thread since the read began
+            raise RigOperationError(f"{self._where()}: source closed while a read waited for its frames")
         deadline = self.clock.now_ns() + int(timeout_s * 1e9)
         try:
             with depthai_errors(f"reading from {self._where()}", RigDisconnectedError):
