@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.errors import ImageWriteError, RigFileError
-from ghnerf_runtime.rig_file import write_bytes_atomic
+from ghnerf_runtime.rig_file import write_bytes_atomic, write_bytes_into
 
 __all__ = ["write_image_atomic"]
 
@@ -49,13 +49,7 @@ def _not_a_regular_file(path: str | os.PathLike) -> bool:
 def _write_into(path: str | os.PathLike, data: bytes) -> None:
     """``data`` written whole into the FIFO or device at ``path``."""
     try:
-        fd = os.open(path, os.O_WRONLY)
-        try:
-            view = memoryview(data)
-            while view:  # os.write may write part of it
-                view = view[os.write(fd, view):]
-        finally:
-            os.close(fd)
+        write_bytes_into(path, data)
     except OSError as e:
         raise ImageWriteError(os.fspath(path), f"cannot write the image ({e.strerror or e})") from None
 

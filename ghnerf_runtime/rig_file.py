@@ -165,6 +165,7 @@ __all__ = [
     "loads_rig",
     "write_text_atomic",
     "write_bytes_atomic",
+    "write_bytes_into",
     "principal_point_problem",
     "focal_length_problem",
     "skew_problem",
@@ -1018,3 +1019,20 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
             os.close(dir_fd)
     except OSError as e:
         raise RigFileError(f"cannot write file: {e.strerror or e}", path=str(path)) from e
+
+
+def write_bytes_into(path: str | os.PathLike, data: bytes, *, wait_for_reader: bool = True) -> None:
+    """``data`` written whole into the FIFO or device at ``path`` (renamed over, a FIFO leaves its reader waiting
+    and a device node is replaced). ``wait_for_reader=False``: a FIFO with no reader is an OSError (ENXIO) rather
+    than an open that blocks until one comes.
+
+    Raises:
+        OSError: it cannot be opened or written.
+    """
+    fd = os.open(path, os.O_WRONLY | (0 if wait_for_reader else os.O_NONBLOCK))
+    try:
+        view = memoryview(data)
+        while view:  # os.write may write part of it
+            view = view[os.write(fd, view):]
+    finally:
+        os.close(fd)

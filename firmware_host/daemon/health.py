@@ -25,6 +25,7 @@ from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch,
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR, CALIBRATION_MAX_PX, \
     CALIBRATION_WINDOW
 from ghnerf_runtime.frame_reasons import REASONS
+from ghnerf_runtime.rig_file import write_bytes_into
 
 __all__ = ["SCENE_FLAGS", "State", "Health", "scene_flags_of", "write_status_file", "sink_keys"]
 
@@ -302,7 +303,9 @@ def write_status_file(path: str | os.PathLike, report: dict[str, Any]) -> None:
     """
     target = Path(os.path.realpath(path))
     if target.exists() and not target.is_file():
-        _write_into(target, (json.dumps(report, indent=1, allow_nan=False) + "\n").encode("utf-8"))
+        # a FIFO with no reader: an OSError (warned once), not a daemon blocked in its open
+        write_bytes_into(target, (json.dumps(report, indent=1, allow_nan=False) + "\n").encode("utf-8"),
+                         wait_for_reader=False)
         return
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
     try:
@@ -314,15 +317,3 @@ def write_status_file(path: str | os.PathLike, report: dict[str, Any]) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-
-
-def _write_into(target: Path, data: bytes) -> None:
-    """``data`` written into the device or FIFO at ``target``; a FIFO with no reader is an OSError (ENXIO), not a
-    daemon blocked in its open."""
-    fd = os.open(target, os.O_WRONLY | os.O_NONBLOCK)
-    try:
-        view = memoryview(data)
-        while view:  # os.write may write part of it
-            view = view[os.write(fd, view):]
-    finally:
-        os.close(fd)
