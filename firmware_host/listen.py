@@ -25,8 +25,12 @@ decoder's error counts (a noisy
 serial line shows as ``crc``/``cobs`` errors). Each address sending to a udp:// port is a sender of its own,
 counted apart; with several, each line and total starts with the sender's address (``10.0.0.7:40123: 30.0
 JOINTS/s; ...``) and stderr says when another is heard; past :data:`MAX_PRODUCERS` the longest quiet is forgotten
-(counted in the totals). A seq further back is a restarted sender, not a gap. Ctrl-C,
-SIGTERM or ``--seconds`` ends it with the totals on stderr (``, N of joint_set K (unknown)`` added when any came).
+(counted in the totals). A ``udp://`` sink that reopens its socket sends from a new port, a sender of its own whose
+count starts afresh: the protocol names no producer to join the two by (docs/protocol.md, STATUS). ``--json`` lines
+read from a udp:// port carry their sender's address first (``{"sender": "10.0.0.7:40123", "type": ...}``, one
+sender or several); a serial link's are the canonical JSON alone. A seq further back is a restarted sender, not a
+gap. Ctrl-C, SIGTERM or ``--seconds`` ends it with the totals on stderr (``, N of joint_set K (unknown)`` added
+when any came).
 Exit status: 0; 2 for a bad URL or a port that cannot be opened (named), or one that fails while read (an
 unplugged serial port: the totals of what arrived until then are still printed).
 """
@@ -52,14 +56,14 @@ from firmware_host.addresses import ipv4_first
 from firmware_host.errors import shown_value
 from firmware_host.protocol.constants import (NO_FRAME_SEQ, PROTOCOL_VERSION, SCENE_FLAGS, CoordFrame, Fault, Flags,
                                               JointSet, Units)
-from firmware_host.protocol.decoder import StreamDecoder
+from firmware_host.protocol.decoder import DecodeEvent, StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
 from firmware_host.sinks.url import host_name_problem, integer, ipv6_hint, location_host
 from ghnerf_runtime.cli.seconds import positive_seconds
 from ghnerf_runtime.cli.sigterm import sigterm_as_interrupt
 from ghnerf_runtime.path_check import path_problem, shown as shown_path
 
-__all__ = ["main", "open_port", "Tally", "Heard", "ListenError"]
+__all__ = ["main", "open_port", "Tally", "Heard", "ListenError", "json_line", "SENDER_KEY"]
 
 PROG = "ghnerf-listen"
 
@@ -648,6 +652,18 @@ def _totals(tally: Tally) -> str:
             f"(reordered), {tally.total_duplicates} duplicate{unknown}")
 
 
+#: The key ``--json`` adds to each line read from a udp:// port: its sender's address, as the summary lines name it.
+#: On every such line, one sender or several, so that a reader can keep one sender's lines apart from the first
+#: line on; a serial link has one sender, and its lines are the canonical JSON alone.
+SENDER_KEY = "sender"
+
+
+def json_line(event: DecodeEvent, sender: Optional[str]) -> str:
+    """``event``'s canonical JSON (docs/protocol.md, section 9), its ``sender`` (None: a serial link) added first."""
+    record = event.to_json()
+    return json.dumps(record if sender is None else {SENDER_KEY: sender, **record})
+
+
 def _reader(port: Any) -> Callable[[float], tuple[bytes, Optional[str]]]:
     """``port``'s read of what came and from whom: a UDP port names each datagram's sender, a serial one has one
     sender (looked up once, not per read)."""
@@ -673,7 +689,7 @@ def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, e
                 if event.message is not None:
                     producer.tally.add(event.message)
                 if as_json:
-                    out.write(json.dumps(event.to_json()) + "\n")
+                    out.write(json_line(event, source) + "\n")
                     out.flush()  # a reader at the end of a pipe sees each message as it comes
             now = time.monotonic()
             if not as_json and now - last >= every_s:
@@ -710,7 +726,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true",
                     help="every message (and decode error) as a JSON line, the wire's integers: a JOINTS row is "
                          "[x, y, z in mm (rig frame: x right, y down, z away from the cameras), confidence 0-255, "
-                         "missing 0/1] (docs/protocol.md, sections 4 and 9)")
+                         "missing 0/1] (docs/protocol.md, sections 4 and 9); from a udp:// port each line starts "
+                         f"with its sender's address, \"{SENDER_KEY}\": \"HOST:PORT\"")
     ap.add_argument("--seconds", type=positive_seconds, default=None,
                     help="stop after this long (default: Ctrl-C)")
     args = ap.parse_args(argv)

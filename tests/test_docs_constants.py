@@ -43,7 +43,7 @@ from firmware_host.daemon.notify import STATE_RETRY_S
 from firmware_host.daemon.rig_open import POLL_S
 from firmware_host.daemon.sandbox import HOME_FOLDERS, PRIVATE_TMP_FOLDERS
 from firmware_host.daemon.service import MAX_FAILED_RUNS, SIZE_MISMATCH_OPENS
-from firmware_host.listen import LATE_WINDOW, MAX_PRODUCERS, QUIET_S
+from firmware_host.listen import LATE_WINDOW, MAX_PRODUCERS, QUIET_S, SENDER_KEY
 from firmware_host.protocol.constants import MAX_JOINTS, NO_FRAME_SEQ
 from firmware_host.protocol.quantize import _I16_MAX, _I16_MIN, _MM_PER_M
 from firmware_host.sinks.options import MAX_QUEUE, MAX_STALL_S, MAX_STATUS_S, MIN_STALL_S, MIN_STATUS_S, SinkOptions
@@ -156,6 +156,8 @@ def _doc(name: str) -> str:
     ("docs/daemon.md", f"at most {LATE_WINDOW} behind the newest (`LATE_WINDOW`)"),
     ("docs/protocol.md", f"once quiet for {QUIET_S:g} s (`QUIET_S`)"),
     ("docs/protocol.md", f"It keeps at most {MAX_PRODUCERS} addresses (`MAX_PRODUCERS`"),
+    ("docs/protocol.md", f'`"{SENDER_KEY}": "10.0.0.7:40123"`, with one producer as with several'),
+    ("docs/daemon.md", f'`{{"{SENDER_KEY}": "10.0.0.7:40123", "type": "JOINTS", ...}}`'),
     # the STATUS= line's share-out (health._fit_status)
     ("docs/daemon.md", f"The line stays within systemd's {STATUS_MAX} characters"),
     ("docs/daemon.md", f"the state keeps {STATUS_KEEP} characters where they leave it that"),

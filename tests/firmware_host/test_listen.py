@@ -956,7 +956,8 @@ def test_a_hello_reordered_behind_a_newer_one_is_not_shown():
 
 
 class _Senders:
-    """A udp:// port for :func:`listen.listen`: scripted datagrams, each with its sender's address, then a Ctrl-C."""
+    """A udp:// port for :func:`listen.listen`: scripted datagrams, each with its sender's address, then a Ctrl-C.
+    A datagram is a message, encoded here, or bytes sent as they are."""
 
     def __init__(self, datagrams) -> None:
         self.datagrams = list(datagrams)
@@ -967,7 +968,7 @@ class _Senders:
         if not self.datagrams:
             raise KeyboardInterrupt
         source, message = self.datagrams.pop(0)
-        return encode(message), source
+        return (message if isinstance(message, bytes) else encode(message)), source
 
     def close(self) -> None:
         pass
@@ -1013,6 +1014,78 @@ def test_two_senders_on_one_port_are_counted_apart():
     said = notes.getvalue()
     assert said.startswith(f"ghnerf-listen: another sender on this port: {_B}, besides {_A} (heard ") and (
         said.count("\n") == 1), said
+
+
+def _json_lines(port) -> list[dict]:
+    import json
+
+    out = io.StringIO()
+    listen.listen(port, seconds=None, as_json=True, out=out, notes=io.StringIO())
+    return [json.loads(line) for line in out.getvalue().splitlines()]
+
+
+def test_json_lines_from_a_udp_port_name_their_sender_first():
+    """Before, --json lines from two senders on one port were the canonical JSON alone: a reader could not tell whose
+    frame, STATUS or decode error each was (A's and B's seqs interleaved read as duplicates and gaps). Each line from
+    a udp:// port now carries its sender's address first, from the first line and with one sender too; past it, the
+    line is the message's canonical JSON, unchanged."""
+    lines = _json_lines(_Senders(_two_rigs() + [("192.0.2.9:5353", b"\x07stray\x00")]))
+    assert [line[listen.SENDER_KEY] for line in lines] == [source for source, _ in _two_rigs()] + ["192.0.2.9:5353"]
+    assert all(next(iter(line)) == listen.SENDER_KEY for line in lines)  # first: seen at the start of a long JOINTS
+    for sender in (_A, _B):
+        canonical = [{k: v for k, v in line.items() if k != listen.SENDER_KEY} for line in lines
+                     if line[listen.SENDER_KEY] == sender]
+        assert canonical == [message.to_json() for source, message in _two_rigs() if source == sender]
+    assert set(lines[-1]) == {listen.SENDER_KEY, "error"}  # a stray datagram's decode error says where it came from
+    alone = _json_lines(_Senders([(_A, message) for source, message in _two_rigs() if source == _A]))
+    assert len(alone) == 8 and all(line[listen.SENDER_KEY] == _A for line in alone)
+
+
+def test_json_lines_of_a_real_udp_port_name_the_socket_that_sent_them():
+    from firmware_host.protocol.encoder import encode
+
+    port = listen.open_port("udp://127.0.0.1:0", ephemeral=True)
+
+    class FirstTwo:  # the real port, ended as Ctrl-C ends it once its two datagrams were read
+        left = 2
+
+        def read_from(self, timeout_s: float):
+            if self.left == 0:
+                raise KeyboardInterrupt
+            data, source = port.read_from(5.0)
+            assert data, "a datagram sent over loopback did not arrive"
+            self.left -= 1
+            return data, source
+
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            tx.bind(("127.0.0.1", 0))
+            for message in (_hello(0), _joints(1)):
+                tx.sendto(encode(message), port.address)
+            lines = _json_lines(FirstTwo())
+            sender = f"127.0.0.1:{tx.getsockname()[1]}"
+    finally:
+        port.close()
+    assert [(line[listen.SENDER_KEY], line["type"]) for line in lines] == [(sender, "HELLO"), (sender, "JOINTS")]
+
+
+def test_json_lines_of_a_serial_link_are_the_canonical_json_alone():
+    """A serial link has one sender and no address: its lines stay what the file:// sink writes and the test vectors
+    list (docs/protocol.md, section 9)."""
+    from firmware_host.protocol.encoder import encode
+
+    messages = [_hello(0), _joints(1)]
+    lines = _json_lines(_port_reading(b"".join(encode(m) for m in messages) + b"\x07noise\x00",
+                                      then=KeyboardInterrupt()))
+    assert lines == [m.to_json() for m in messages] + [{"error": lines[-1]["error"]}]
+
+
+def test_the_help_says_json_lines_name_their_sender(capsys):
+    with pytest.raises(SystemExit):
+        listen.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert f'from a udp:// port each line starts with its sender\'s address, "{listen.SENDER_KEY}": "HOST:PORT"' \
+        in text, text
 
 
 def test_the_totals_name_each_sender_and_the_second_is_announced(monkeypatch, capsys):
