@@ -49,7 +49,7 @@ from firmware_host.protocol.quantize import _I16_MAX, _I16_MIN, _MM_PER_M
 from firmware_host.sinks.options import MAX_QUEUE, MAX_STALL_S, MAX_STATUS_S, MIN_STALL_S, MIN_STATUS_S, SinkOptions
 from firmware_host.sinks.rate import MIN_MAX_FPS
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
-from firmware_host.sinks.udp_sink import MIN_RESOLVE_S, REFUSAL_QUIET_S, RESOLVE_S
+from firmware_host.sinks.udp_sink import MIN_RESOLVE_S, REFUSAL_ANSWER_S, REFUSAL_QUIET_S, RESOLVE_S
 from firmware_host.sinks.url import MAX_HOST_NAME
 from firmware_host.sinks.vmc_time import DEFAULT_FPS, JUMP_FRAMES, NEW_TIMELINE_FRAMES, STEPS_KEPT
 from firmware_host.sinks.vmc_view import FACINGS
@@ -149,6 +149,7 @@ def _doc(name: str) -> str:
     ("docs/rig-file.md", f"{MAX_SKEW_SHARE:g} is axes {90 - math.degrees(math.atan2(1, MAX_SKEW_SHARE)):.1f} degrees off"),
     ("docs/protocol.md", f"`REFUSAL_QUIET_S` ({REFUSAL_QUIET_S:g} s)"),
     ("docs/protocol.md", f"no datagram refused for {REFUSAL_QUIET_S:g} s: a receiver"),
+    ("docs/protocol.md", f"`REFUSAL_ANSWER_S` ({REFUSAL_ANSWER_S:g} s)"),
     ("docs/geometry.md", f"`MIN_ROW_SHARE` = {_exp(MIN_ROW_SHARE)} of the terms"),
     ("docs/geometry.md", f"`UNDISTORT_POLISH` = {_exp(UNDISTORT_POLISH)}, so"),
     ("docs/geometry.md", f"in {REACH_RIM_POINTS} points (`REACH_RIM_POINTS`)"),

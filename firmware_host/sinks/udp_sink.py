@@ -12,7 +12,9 @@ host) unreachable for an earlier datagram, comes back as the error of the next s
 so the datagram is sent again at once: frames keep going out, and a receiver that starts gets the next one.
 The refusals are kept as the link's state: a WARNING once, the sink ``stalled`` (after its ``stall_s``) with
 the refusal as ``last_error``, and an INFO once a datagram sent ``REFUSAL_QUIET_S`` after the last refusal
-drew none (counted in datagrams, not in time: a sink sending every few seconds, its rig down, is no quieter). Before,
+drew none (counted in datagrams, not in time: a sink sending every few seconds, its rig down, is no quieter), as
+a send ``REFUSAL_ANSWER_S`` or more after it finds (an answer sent back takes a while: a send just after it, such
+as the second of a vmc:// frame's two bundles, cannot tell). Before,
 the socket was unconnected and such a sink read ``up``, every frame ``sent``, with nobody receiving.
 
 A host name is resolved to its IPv4 address when it has one (a receiver bound to
@@ -60,6 +62,11 @@ REFUSAL_QUIET_S = 3.0
 _ICMP_ERRNOS = frozenset({errno.ECONNREFUSED, errno.EHOSTUNREACH, errno.EHOSTDOWN, errno.ENETUNREACH})
 #: Those of ``_ICMP_ERRNOS`` a send may meet on its own (no route now); a port refusal is always an answer.
 _ROUTE_ERRNOS = _ICMP_ERRNOS - {errno.ECONNREFUSED}
+#: Seconds a datagram's ICMP answer is given to come back (a round trip, a VPN's included) before a send that finds
+#: none waiting shows the datagram drew none. The send right after it cannot: vmc:// sends a frame as two bundles
+#: back to back, and after a pause past REFUSAL_QUIET_S the second ended the refusals while the first one's answer
+#: was on its way (an INFO "a receiver is at ... again" with nobody there, then a new WARNING at the next frame).
+REFUSAL_ANSWER_S = 1.0
 
 
 def take_resolve_s(u: SinkUrl, kw: dict) -> float:
@@ -128,7 +135,10 @@ class DatagramLink:
         # (first, last, why) of the current stretch of refused datagrams, monotonic seconds; replaced whole, as
         # stats() reads it from another thread. None: none refused within REFUSAL_QUIET_S.
         self._refusal: Optional[tuple[float, float, str]] = None
-        self._last_sent: Optional[float] = None  # when the last datagram went out (monotonic), on this socket
+        # When the first datagram sent REFUSAL_QUIET_S or more after the stretch's last refusal went out (monotonic),
+        # on this socket: the one whose answer, or none, ends the stretch (_end_refusal_if_answered). None: no such
+        # datagram yet.
+        self._quiet_probe: Optional[float] = None
 
     def open(self) -> None:
         family, addr = resolve(self.url, self.host, self.port)
@@ -167,13 +177,14 @@ class DatagramLink:
 
     def close(self) -> None:
         sock, self._sock = self._sock, None
-        self._refusal, self._last_sent = None, None
+        self._refusal, self._quiet_probe = None, None
         if sock is not None:
             sock.close()
 
     def refusing(self) -> Optional[tuple[float, str]]:
         """``(since, why)`` from the first refusal of the receiver's side until a datagram sent ``REFUSAL_QUIET_S``
-        after the last one draws none (:meth:`_end_refusal_if_answered`); None otherwise. Safe from any thread."""
+        after the last one draws none within ``REFUSAL_ANSWER_S`` (:meth:`_end_refusal_if_answered`); None otherwise.
+        Safe from any thread."""
         refusal = self._refusal
         return None if refusal is None else (refusal[0], refusal[2])
 
@@ -187,18 +198,26 @@ class DatagramLink:
             why = f"{self.host}:{self.port} is unreachable: {error.strerror} (an ICMP answer to a datagram)"
         refusal = self._refusal
         first = now if refusal is None else refusal[0]
-        self._refusal = (first, now, why)
+        self._refusal, self._quiet_probe = (first, now, why), None  # a datagram after this one must draw none
         if refusal is None:  # (not first == now: one send may note twice within a clock tick)
             _log.warning("%s: %s; still sending, so a receiver that starts gets the next frame", self.shown, why)
 
-    def _end_refusal_if_answered(self, previous_sent: Optional[float]) -> None:
-        """End the refusals once the datagram sent at ``previous_sent``, ``REFUSAL_QUIET_S`` or more after the last
-        refusal, drew none (the send after it found none pending). Judged by a datagram, not by the time passed:
-        the idle STATUS of a sink whose rig is down goes out every ``status_s``, and at ``status_s=5`` each gap
-        ended the stretch, a WARNING and an INFO at every datagram, and the sink never read ``stalled``."""
+    def _note_sent(self, now: float) -> None:
+        """Keep the datagram that went out at ``now`` as the stretch's quiet probe if it is the first one sent
+        ``REFUSAL_QUIET_S`` or more after the last refusal."""
         refusal = self._refusal
-        if refusal is not None and previous_sent is not None and previous_sent - refusal[1] >= REFUSAL_QUIET_S:
-            self._refusal = None
+        if refusal is not None and self._quiet_probe is None and now - refusal[1] >= REFUSAL_QUIET_S:
+            self._quiet_probe = now
+
+    def _end_refusal_if_answered(self, now: float) -> None:
+        """End the refusals once the quiet probe (:meth:`_note_sent`) drew none: a send at ``now``,
+        ``REFUSAL_ANSWER_S`` or more after it, found none pending. Judged by a datagram, not by the time passed:
+        the idle STATUS of a sink whose rig is down goes out every ``status_s``, and at ``status_s=5`` each gap
+        ended the stretch, a WARNING and an INFO at every datagram, and the sink never read ``stalled``. Nor by
+        a send just after the probe, before its answer could come back (vmc://'s second bundle of a frame)."""
+        refusal, probe = self._refusal, self._quiet_probe
+        if refusal is not None and probe is not None and now - probe >= REFUSAL_ANSWER_S:
+            self._refusal, self._quiet_probe = None, None
             _log.info("%s: no datagram refused for %g s: a receiver is at %s:%s again", self.shown,
                       REFUSAL_QUIET_S, self.host, self.port)
 
@@ -275,9 +294,10 @@ class DatagramLink:
             raise SinkWriteError(self.url, self._refusal[2] if self._refusal else str(e)) from e
         except OSError as e:  # network down, route gone: recreate the socket after backoff
             raise SinkUnavailableError(self.url, f"send to {self.host}:{self.port} failed: {e}") from e
+        now = time.monotonic()
         if not refused:
-            self._end_refusal_if_answered(self._last_sent)
-        self._last_sent = time.monotonic()
+            self._end_refusal_if_answered(now)
+        self._note_sent(now)
 
 
 class UdpSink(ProtocolSink):

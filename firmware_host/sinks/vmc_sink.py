@@ -15,6 +15,10 @@ carries ``/ghnerf/calibration_suspect 1`` after /VMC/Ext/OK, whose calibration s
 why); ``calibration_flag=0`` leaves it out, for a receiver that refuses addresses it does not know (EVMC4U's
 StrictMode stops receiving at the first one).
 
+A frame of another joint set than BODY_25, or of fewer than its 25 joints, has no bones here: it goes out as one
+whose hips are not seen (/VMC/Ext/OK tracking 0 and T), with one WARNING per sink. Before, one of fewer joints
+was dropped with a logged traceback per frame, and one of another set with 25 or more was solved as BODY_25.
+
 The binary protocol's options (``send_2d``, ``status_s``, ``joint_count``, ``rig_id``, ``cameras``)
 mean nothing to VMC: in the URL they are errors, so no one expects them to work. As keywords they are
 accepted and unused, because the daemon hands every sink the rig's id and camera names.
@@ -23,10 +27,12 @@ from __future__ import annotations
 
 from typing import Any, Optional
 
+import logging
+
 import numpy as np
 
 from firmware_host.errors import SinkConfigError
-from firmware_host.protocol.constants import Flags
+from firmware_host.protocol.constants import Flags, JointSet
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
@@ -36,6 +42,9 @@ from firmware_host.sinks.vmc_osc import build_datagrams
 from firmware_host.sinks.vmc_pose import keep_hemisphere, solve_pose
 from firmware_host.sinks.vmc_time import VmcClock, nominal_step_us
 from firmware_host.sinks.vmc_view import FACINGS, AvatarView
+from ghnerf_runtime.body25 import NUM_JOINTS
+
+_log = logging.getLogger(__name__)
 
 VMC_DEFAULT_PORT = 39539  # the Marionette (receiver) port
 
@@ -64,6 +73,7 @@ class VmcSink(Sink):
         # until the stamps show one
         self._clock = VmcClock(self.shown, nominal_step_us(options.fps, options.max_fps))
         self._last_rotations: dict[str, np.ndarray] = {}  # by bone name: the sign sent last (keep_hemisphere)
+        self._warned_not_body25 = False  # a frame without BODY_25 joints is said once per sink
 
     @classmethod
     def from_url(cls, url: str, **kw: Any) -> "VmcSink":
@@ -90,7 +100,21 @@ class VmcSink(Sink):
 
     def _deliver(self, frame: JointFrame, flags: int) -> None:
         t = self._clock.seconds(frame.capture_time_us)
-        pose = keep_hemisphere(solve_pose(self.view.apply(frame.joints_3d)), self._last_rotations)
+        pose = None  # no bones: tracking lost, as a frame whose hips are not seen
+        if self._has_body25_joints(frame):
+            pose = keep_hemisphere(solve_pose(self.view.apply(frame.joints_3d)), self._last_rotations)
         suspect = self.calibration_flag and bool(frame.scene_flags & Flags.CALIBRATION_SUSPECT)
         for datagram in build_datagrams(pose, t, calibration_suspect=suspect):  # two bundles: one would fragment
             self._link.send(datagram)
+
+    def _has_body25_joints(self, frame: JointFrame) -> bool:
+        """Whether ``frame`` holds the BODY_25 joints the bones are solved from; a WARNING, once, where not."""
+        count = len(frame.joints_3d)
+        if frame.joint_set == JointSet.BODY_25 and count >= NUM_JOINTS:
+            return True
+        if not self._warned_not_body25:
+            self._warned_not_body25 = True
+            _log.warning("%s: frame %d has joint_set %d with %d joints; VMC bones are solved from BODY_25's %d "
+                         "(joint_set %d): sent as tracking lost (later ones are not logged)", self.shown,
+                         frame.sequence, frame.joint_set, count, NUM_JOINTS, JointSet.BODY_25)
+        return False

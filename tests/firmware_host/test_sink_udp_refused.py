@@ -71,6 +71,7 @@ def test_a_port_nobody_listens_on_reads_stalled_naming_the_refusal_and_every_fra
 def test_a_receiver_that_starts_gets_the_next_frame_and_the_sink_reads_up_again(
         monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
     monkeypatch.setattr(udp_sink, "REFUSAL_QUIET_S", 0.3)
+    monkeypatch.setattr(udp_sink, "REFUSAL_ANSWER_S", 0.1)
     port = _closed_port()
     caplog.set_level(logging.INFO, logger="firmware_host.sinks.udp_sink")
     sink = open_sink(f"udp://127.0.0.1:{port}?stall_s={STALL_S}", backoff=FAST_BACKOFF)
@@ -89,7 +90,7 @@ def test_a_receiver_that_starts_gets_the_next_frame_and_the_sink_reads_up_again(
         while not any(isinstance(m, Joints) for m in received):
             received += [e.message for e in StreamDecoder().feed(rx.recv(2048))]
         assert [m.header.seq for m in received if isinstance(m, Joints)] == [first_after]
-        _send_for(sink, 0.5, first_after + 1)  # past REFUSAL_QUIET_S with none refused
+        _send_for(sink, 1.0, first_after + 1)  # past REFUSAL_QUIET_S + REFUSAL_ANSWER_S with none refused
         wait_until(lambda: sink.stats().state == "up", 5, "the sink up again")
     finally:
         stats = sink.close()
@@ -245,3 +246,50 @@ def test_a_sink_whose_refused_datagrams_meet_a_full_buffer_reads_stalled_naming_
     assert stats.state == "stalled" and stats.stalled_s is not None and stats.stalled_s >= STALL_S
     assert "nothing receives at 192.0.2.7:9870" in (stats.last_error or ""), stats.last_error
     assert stats.sent == 0 and stats.dropped_error == seq and stats.disconnects == 0
+
+
+def test_a_datagram_is_not_judged_unrefused_before_its_answer_could_come(monkeypatch: pytest.MonkeyPatch,
+                                                                          caplog: pytest.LogCaptureFixture) -> None:
+    # vmc:// sends a frame as two datagrams back to back and nothing while the rig is down. After a pause past
+    # REFUSAL_QUIET_S the frame's second send found no refusal waiting, as the first datagram's ICMP answer was
+    # still on its way, and ended the refusals: "a receiver is at ... again" (and the sink up) with nobody there,
+    # then a new WARNING at the next frame. A datagram draws no refusal only if none is waiting once its answer
+    # had time to come back (REFUSAL_ANSWER_S).
+    clock = [100.0]
+    monkeypatch.setattr(udp_sink.time, "monotonic", lambda: clock[0])
+    caplog.set_level(logging.INFO, logger="firmware_host.sinks.udp_sink")
+    refused, sent = errno.ECONNREFUSED, None
+    link, sock = _scripted_link([refused, sent,  # a frame's first datagram meets an earlier one's refusal
+                                 sent,  # its second
+                                 sent, sent,  # the rig down 10 s, then a frame: the refusal of its first is on its way
+                                 refused, sent])  # the next frame meets it
+    link.send(b"bundle 1\x00")
+    link.send(b"bundle 2\x00")
+    clock[0] += 10.0
+    link.send(b"bundle 1\x00")
+    clock[0] += 1e-5
+    link.send(b"bundle 2\x00")
+    refusing = link.refusing()
+    assert refusing is not None and refusing[0] == 100.0  # the stretch goes on: nothing could have answered yet
+    clock[0] += 0.033
+    link.send(b"bundle 1\x00")
+    assert link.refusing() is not None and link.refusing()[0] == 100.0
+    said = [r.getMessage() for r in caplog.records]
+    assert len(said) == 1 and "nothing receives at" in said[0], said  # one WARNING, no "receiver ... again"
+
+
+def test_a_datagram_that_drew_no_refusal_once_its_answer_could_come_ends_the_refusals(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    clock = [100.0]
+    monkeypatch.setattr(udp_sink.time, "monotonic", lambda: clock[0])
+    caplog.set_level(logging.INFO, logger="firmware_host.sinks.udp_sink")
+    link, sock = _scripted_link([errno.ECONNREFUSED, None])
+    link.send(b"refused before\x00")
+    while link.refusing() is not None and clock[0] < 110.0:  # a 30 fps stream that draws no refusal
+        clock[0] += 0.033
+        link.send(b"frame\x00")
+    assert link.refusing() is None
+    # not before a datagram sent REFUSAL_QUIET_S after the refusal had REFUSAL_ANSWER_S to draw one, nor long after
+    assert udp_sink.REFUSAL_QUIET_S + udp_sink.REFUSAL_ANSWER_S <= clock[0] - 100.0
+    assert clock[0] - 100.0 < udp_sink.REFUSAL_QUIET_S + udp_sink.REFUSAL_ANSWER_S + 0.1
+    assert any("no datagram refused" in r.getMessage() for r in caplog.records if r.levelno == logging.INFO)

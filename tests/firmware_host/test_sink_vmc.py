@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import hashlib
+import logging
 import math
 import random
 import socket
@@ -830,3 +831,19 @@ def test_glitches_stepping_alike_off_the_line_do_not_move_t_by_their_step(frame_
     assert all(b >= a for a, b in zip(times, times[1:]))
     assert times[-1] < 10, times
     assert np.allclose(np.diff(times[-5:]), frame_us / 1e6)
+
+
+def test_a_frame_without_body25_joints_goes_out_as_tracking_lost_said_once(caplog: pytest.LogCaptureFixture) -> None:
+    # A frame of 18 joints failed in the worker (ValueError, a logged traceback per frame, every frame dropped), and
+    # one of another joint set with 25 joints was solved as BODY_25. Neither has bones: OK (tracking 0) and T go
+    # out, as for a frame whose hips are not seen, and one WARNING says why.
+    caplog.set_level(logging.INFO, logger="firmware_host")
+    coco = t_pose_rig()[:18]
+    other_set = replace(make_frame(1), joint_set=7)
+    frames = [make_frame(0, joints=coco), other_set, make_frame(2, joints=coco), make_frame(3)]
+    sent, _ = _receive(frames)
+    for msgs in sent[:3]:
+        assert [a for a, _ in msgs] == ["/VMC/Ext/OK", "/VMC/Ext/T"] and msgs[0][1][3] == 0
+    assert any(a == "/VMC/Ext/Bone/Pos" for a, _ in sent[3]) and sent[3][0][1][3] == 1
+    said = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(said) == 1 and "joint_set 0 with 18 joints" in said[0].getMessage(), [r.getMessage() for r in said]
