@@ -33,12 +33,14 @@ A camera that vanishes or falls silent (no pair within a second; five for the fi
 reading too: the summary of the pairs before it, then one line, ``error: the rig failed after N pairs: ...``
 naming the camera, exit status 2 (until session 62 only ``stopping: ...`` among the summary's lines, exit 0: a
 loose cable passed the bring-up's camera check). A recording that ends (``replay://``) is no failure; a
-``record+`` take whose write failed as it closed is (one line after the summary, exit 2; since session 74).
+``record+`` take whose write failed as it closed is (one line after the summary, exit 2; since session 74), and is said
+(one line, exit 2) even where a stop lands after the sink's close: before the take's close, or in the summary.
 
 A ``file://`` ``--sink`` on a file the run reads (the rig URL's ``rig=``, ``bvh=`` or video files, the ``--config``
 file) or on ``OUT/sim_pair.png`` is a usage error before anything is opened, as the daemon refuses its sinks there
-(``ghnerf_runtime.cli.output_path.output_clash``); so is one on a folder, in a folder that is not there, or one
-this user may not write (since session 74: the sink, which tries again what it cannot open, failed the run only
+(``ghnerf_runtime.cli.output_path.output_clash``); so is one on a folder, in a folder that is not there or that this
+user cannot look up (a folder on its path it may not search: said so, with the error's words, not 'does not exist'),
+or one this user may not write (since session 74: the sink, which tries again what it cannot open, failed the run only
 after the model load and the run), and any ``--sink`` its parser refuses (an unknown scheme, ``udp://`` without a
 host, a bad ``baud=``, an unknown option: the daemon's config check, which opens nothing).
 
@@ -243,6 +245,31 @@ def _mpjpe_words(acc: dict) -> str:
         return f"MPJPE not measured: no joint found ({acc['mpjpe_pred_missing']} not found)"
     return (f"MPJPE {acc['mpjpe_mm']:.0f} mm over the {acc['mpjpe_evaluated']} joints found "
             f"({acc['mpjpe_pred_missing']} not found, not scored)")
+
+
+# ------------------------------------------------------------------ record+ take
+@dataclass
+class _Take:
+    """The ``record+`` take of the run's source, as the run closes it (another source has none: it never fails):
+    whether its write failed where no read raised it (a frame still queued at close, its last fsync), said once."""
+
+    source: drivers.RigSource
+    said: bool = False
+
+    def failure(self) -> str | None:
+        """Why the take failed as it closed (its manifest says ``complete: false``); None: it did not, or a read
+        raised it (the run's error said it)."""
+        return getattr(self.source, "unreported_failure", lambda: None)()
+
+    def say_failure(self, prog: str) -> bool:
+        """The take's failure said on stderr, one line, unless it was already; whether the take failed (exit 2)."""
+        failure = self.failure()
+        if failure is not None and not self.said:
+            # a stop landing between the line and its note would have it said twice; the run ends 2 either way
+            with stop_signals_deferred(then_raise=False):
+                print(f"{prog}: error: {failure}", file=sys.stderr)
+                self.said = True
+        return failure is not None
 
 
 # ------------------------------------------------------------------ calibration check
@@ -453,6 +480,21 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     print(f"opening {redact_url(args.url)}"
           + (" (the first open pre-renders the motion loop; later opens use the cache)" if scheme == "sim" else ""))
     source = drivers.create_rig_source(args.url)
+    take = _Take(source)
+    try:
+        return _read_and_summarise(args, prog, cfg, source, sink_url, take)
+    except KeyboardInterrupt:
+        # the source is closed by now (_read_and_summarise's finally): a stop landing after the reading, between the
+        # sink's close and the source's or in the summary, was said "stopped", 130 or 143, of a take that failed
+        if take.say_failure(prog):
+            return 2
+        raise
+
+
+def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfig | None, source: drivers.RigSource,
+                        sink_url: str, take: _Take) -> int:
+    """The run on ``source``, opened here and closed however the run ends: the pairs read, estimated and streamed
+    to ``sink_url`` for ``--seconds``, then the summary; the exit status."""
     stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
     read_to_its_end = False  # the reading ended without an error or a stop on its way out (the close's raise)
     late_stop: KeyboardInterrupt | None = None  # one that landed in the close of a run that read to its end
@@ -572,7 +614,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         # reported (its summary and exit status)
         late_stop = closed_with_stops_deferred(
             source.close, then_raise=read_to_its_end and stopped is None and late_stop is None) or late_stop
-    if late_stop is not None and getattr(source, "unreported_failure", lambda: None)() is None:
+    if late_stop is not None and take.failure() is None:
         raise late_stop  # main says it (130, 143); a failed take is said after the summary, 2
 
     rate = delivered / elapsed
@@ -611,9 +653,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     if rig_failed is not None:
         print(f"{prog}: error: the rig failed after {delivered} pairs: {rig_failed}", file=sys.stderr)
         failed = True
-    take_failure = getattr(source, "unreported_failure", lambda: None)()  # a record+ take: exit 0 said it was whole
-    if take_failure is not None:
-        print(f"{prog}: error: {take_failure}", file=sys.stderr)
+    if take.say_failure(prog):  # a record+ take: exit 0 said it was whole
         failed = True
     if sink_stats.submitted and not sink_stats.sent:  # a sink that never connected: say so in the status too
         print(f"{prog}: error: the sink {redact_url(sink_url)} sent none of the {sink_stats.submitted} frames "
@@ -710,7 +750,8 @@ def _refuse_clashing_outputs(parser: argparse.ArgumentParser, args: argparse.Nam
 def _sink_file_problem(path: str) -> str | None:
     """Why a ``file://`` sink can never write ``path``: a folder, a file in a folder that is not there (a file or a
     link to nothing further up said as such), a loop of symbolic links or a link naming a folder (since session 75),
-    or one this user may not write (None: it may). The sink tries again what it cannot open (a daemon's USB stick
+    one in a folder this user cannot look up (EACCES or EPERM on the way: it was said 'does not exist'), or one this
+    user may not write (None: it may). The sink tries again what it cannot open (a daemon's USB stick
     mounted later), so the demo loaded the model and ran its seconds against a sink that never opened, and only then
     failed ("sent none of the frames")."""
     if os.path.isdir(path):
@@ -726,6 +767,9 @@ def _sink_file_problem(path: str) -> str | None:
     folder = os.path.dirname(target)
     if os.path.isdir(folder):
         return _sink_access_problem(path, folder)
+    denied = _search_denied(folder)
+    if denied is not None:  # whether the folder is there is not known: "does not exist" sent the user to make it
+        return f"its folder {shown(folder)} cannot be looked up: {denied}"
     link = f"; {shown(path)} is a link to {shown(target)}" if target != path else ""
     return f"its folder {shown(folder)} {_missing_folder_words(folder)} (the sink makes the file, not its folder{link})"
 
@@ -745,6 +789,20 @@ def _leading_paths(path: str) -> list[str]:
     """``path``'s leading components as paths, ``path`` itself last (``/a/b``: ``/``, ``/a``, ``/a/b``)."""
     parts = Path(path).parts
     return [os.path.join(*parts[:end]) for end in range(1, len(parts) + 1)]
+
+
+def _search_denied(folder: str) -> str | None:
+    """The first of ``folder``'s components (``folder`` itself last) whose look-up this user is refused, EACCES or
+    EPERM (a folder on the way it may not search, a link into one), named with the error's words; None: none is."""
+    for component in _leading_paths(folder):
+        try:
+            os.stat(component)
+        except PermissionError as e:
+            code = errno.errorcode.get(e.errno, str(e.errno))
+            return f"{shown(component)}: {e.strerror} ({code}: this user may not search a folder on its path)"
+        except OSError:
+            return None  # not there, a file on the way: _missing_folder_words says which
+    return None
 
 
 def _link_to_a_folder(path: str) -> str | None:

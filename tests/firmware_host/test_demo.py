@@ -477,6 +477,57 @@ def test_a_file_sink_this_user_may_not_write_is_refused_before_the_run(tmp_path,
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("refused", [(errno.EACCES, "Permission denied"), (errno.EPERM, "Operation not permitted")])
+@pytest.mark.parametrize("where", ["locked/sub/j.jsonl", "locked/sub/deeper/j.jsonl"])
+def test_a_file_sink_in_a_folder_this_user_may_not_look_up_is_not_said_missing(tmp_path, capsys, sim_url,
+                                                                               monkeypatch, where, refused):
+    """A folder on the way this user may not search (EACCES from the stat of what lies in it; EPERM from a security
+    policy) was said 'does not exist' of a folder that may well be there (here it is), sending the user to make it.
+    Simulated through os.stat and os.lstat: the tests run as root, whom a mode does not stop."""
+    (tmp_path / "locked" / "sub" / "deeper").mkdir(parents=True)
+    locked = f"{tmp_path}/locked/"
+    number, words = refused
+
+    def refused_under_locked(real):
+        def look_up(path, *args, **kwargs):
+            if os.fspath(path).startswith(locked):
+                raise PermissionError(number, words, os.fspath(path))
+            return real(path, *args, **kwargs)
+        return look_up
+
+    monkeypatch.setattr(os, "stat", refused_under_locked(os.stat))
+    monkeypatch.setattr(os, "lstat", refused_under_locked(os.lstat))
+    url = f"file://{tmp_path}/{where}"
+    err = _refused(["--truth-only", "--url", sim_url, "--seconds", "5", "--out", str(tmp_path / "out"),
+                    "--sink", url], capsys)
+    folder = os.path.dirname(f"{tmp_path}/{where}")
+    assert (f"error: --sink {url}: its folder {folder} cannot be looked up: {tmp_path}/locked/sub: {words} "
+            f"({errno.errorcode[number]}: this user may not search a folder on its path)") in err, err
+    assert "does not exist" not in err and not (tmp_path / "out").exists()
+
+
+def test_a_file_sink_under_a_folder_this_user_may_not_search_is_said_so(tmp_path):
+    """The same with the permission bits binding (root without the capabilities that override them): a folder of
+    mode 0o600, listed but not searched, above the sink's."""
+    import subprocess
+    import sys
+
+    from tests.unprivileged import run_unprivileged
+
+    (tmp_path / "locked" / "sub").mkdir(parents=True)
+    (tmp_path / "locked").chmod(0o600)
+    url = f"file://{tmp_path}/locked/sub/j.jsonl"
+    try:
+        proc = run_unprivileged([sys.executable, "-m", "firmware_host.demo", "--truth-only", "--out",
+                                 str(tmp_path / "out"), "--sink", url], cwd=REPO, timeout=120,
+                                env={**os.environ, "PYTHONPATH": str(REPO)}, stdin=subprocess.DEVNULL)
+    finally:
+        (tmp_path / "locked").chmod(0o755)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert (f"--sink {url}: its folder {tmp_path}/locked/sub cannot be looked up: {tmp_path}/locked/sub: Permission "
+            "denied (EACCES: this user may not search a folder on its path)") in proc.stderr, proc.stderr[-2000:]
+
+
 def test_a_file_sink_folder_holding_a_control_character_is_named_escaped(tmp_path, capsys, sim_url):
     """The URL's %1B decoded: the folder was named raw, an ESC sequence reaching the terminal (the URL itself
     refuses a raw one)."""
@@ -1153,6 +1204,65 @@ def test_when_a_stop_lands_in_the_sink_s_close_of_a_run_that_read_to_its_end_the
         assert (rc, captured.err.splitlines()) == (128 + signal.Signals[stop],
                                                    [f"{demo.prog_name()}: stopped ({words})"]), captured.err
     assert json.loads((take / "manifest.json").read_text())["complete"] is not take_fails
+
+
+def _stop_after_the_sink_s_close(monkeypatch, signum: int) -> None:
+    """A stop lands in the lines between the sink's close (its stops held) and the source's (the take's)."""
+    real_closed, closes = demo.closed_with_stops_deferred, []
+
+    def closed_then_stopped(close, **kwargs):
+        late_stop = real_closed(close, **kwargs)
+        closes.append(1)
+        if len(closes) == 1:  # the sink's, the first: its handler runs here, in the main thread, at once
+            os.kill(os.getpid(), signum)
+        return late_stop
+
+    monkeypatch.setattr(demo, "closed_with_stops_deferred", closed_then_stopped)
+
+
+def _stop_in_the_summary(monkeypatch, signum: int) -> None:
+    """A stop lands in the summary, the take closed by then: as the last pair's picture is written."""
+    real_write = demo._write_picture
+
+    def stopped_then_written(*args, **kwargs):
+        os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
+        return real_write(*args, **kwargs)
+
+    monkeypatch.setattr(demo, "_write_picture", stopped_then_written)
+
+
+@pytest.mark.parametrize("take_fails", [False, True])
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("where", ["between the closes", "in the summary"])
+def test_a_take_that_failed_is_said_when_a_stop_lands_after_the_sink_s_close(tmp_path, capsys, monkeypatch, stop,
+                                                                           take_fails, where):
+    """A Ctrl-C or SIGTERM landing between the sink's close and the take's, or in the summary after the take was
+    closed, was raised to main past the take's check: "stopped", 130 or 143, of a take whose manifest says
+    complete: false. Now a failed take is said (one line, exit 2) wherever the stop lands; a whole one leaves the
+    stop its own exit status."""
+    import signal
+
+    import drivers.backends.record as record_module
+
+    if take_fails:
+        monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
+    stop_there = _stop_after_the_sink_s_close if where == "between the closes" else _stop_in_the_summary
+    stop_there(monkeypatch, signal.Signals[stop])
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
+                                       str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    if take_fails:
+        assert (rc, captured.err.splitlines()) == (2, [
+            f"{demo.prog_name()}: error: recording to {take} failed as it closed: [Errno 28] No space left on device; "
+            "its manifest says complete: false"]), captured.err
+    else:  # not swallowed: the stop is the run's end
+        words = "SIGTERM" if stop == "SIGTERM" else "Ctrl-C"
+        assert (rc, captured.err.splitlines()) == (128 + signal.Signals[stop],
+                                                   [f"{demo.prog_name()}: stopped ({words})"]), captured.err
+    assert json.loads((take / "manifest.json").read_text())["complete"] is not take_fails
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
 
 
 _FIRST_STOPS = {  # the stop that ended the reading: (exception, exit status, stderr)
