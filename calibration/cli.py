@@ -930,12 +930,18 @@ FORMAT_SUFFIXES = {".toml": "anipose", ".yml": "opencv", ".yaml": "opencv", ".xm
 
 
 def _format_of(path: Path, given: str | None, flag: str) -> str:
-    if given:
-        return given
-    fmt = FORMAT_SUFFIXES.get(path.suffix.lower())
+    """The format of ``path``: ``given``, else its suffix's (the one before ``.gz``: OpenCV's gzipped files)."""
+    from calibration.formats.opencv_yaml import GZIP_SUFFIX, format_suffix, gzipped
+
+    fmt = given or FORMAT_SUFFIXES.get(format_suffix(path))
     if fmt is None:
-        raise UsageError(f"{flag} {path}: cannot tell the format from the suffix {path.suffix!r} (one of "
-                         f"{', '.join(sorted(FORMAT_SUFFIXES))}): pass --format opencv or anipose")
+        suffix = format_suffix(path) + (GZIP_SUFFIX if gzipped(path) else "")
+        raise UsageError(f"{flag} {path}: cannot tell the format from the suffix {suffix!r} (one of "
+                         f"{', '.join(sorted(FORMAT_SUFFIXES))}, OpenCV's also gzipped as .yml.gz...): pass --format "
+                         "opencv or anipose")
+    if fmt == "anipose" and gzipped(path):  # an export wrote plain TOML under the name, an import read gzip as TOML
+        raise UsageError(f"{flag} {path}: anipose files are plain TOML, not gzipped ({GZIP_SUFFIX} goes with OpenCV "
+                         "FileStorage files only): give a .toml name")
     return fmt
 
 
@@ -972,8 +978,12 @@ def _previous_path(out: Path, flag: str) -> Path:
     """Where ``solve`` and ``import`` keep the file ``out`` held before they replace it: ``<stem>.prev<suffix>``
     beside it (``rig.json``: ``rig.prev.json``). A recalibration that came out worse can then be undone,
     without a --force to remember (``board`` and ``synth`` ask for one: what they replace is not theirs to
-    keep). Checked before the work, as :func:`_output_path` checks ``out``."""
-    prev = out.with_name(f"{out.stem}.prev{out.suffix}")
+    keep). Checked before the work, as :func:`_output_path` checks ``out``. A gzipped OpenCV file keeps the suffix
+    before ``.gz`` too (``rig.yml.gz``: ``rig.prev.yml.gz``, whose format import tells from its name)."""
+    from calibration.formats.opencv_yaml import gzipped
+
+    suffix = "".join(out.suffixes[-2:]) if gzipped(out) else out.suffix
+    prev = out.with_name(f"{out.name[:len(out.name) - len(suffix)]}.prev{suffix}")
     if out.exists() and (prev.is_dir() or (prev.exists() and not os.access(prev, os.W_OK))):
         raise UsageError(f"{flag} {out}: the file it holds is kept as {prev} before it is replaced, but that is "
                          f"{'a folder' if prev.is_dir() else 'read-only'}: move it away or give another path")
@@ -1122,7 +1132,8 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from calibration.formats import dumps_anipose_toml, dumps_opencv_rig
+    from calibration.formats import dumps_anipose_toml, dumps_opencv_rig, write_opencv_text
+    from calibration.formats.opencv_yaml import gzipped
 
     rig = load_rig(args.rig)
     out = _output_path(args.out, "--out", "export")
@@ -1142,9 +1153,10 @@ def cmd_export(args: argparse.Namespace) -> int:
     text = (dumps_anipose_toml(rig, units_to_metres=args.units_to_metres) if fmt == "anipose" else
             dumps_opencv_rig(rig, out, units_to_metres=1.0 if args.units_to_metres is None else args.units_to_metres))
     kept = {out: _keep_previous(out, previous[out])}
-    write_text_atomic(out, text)
+    (write_opencv_text if fmt == "opencv" else write_text_atomic)(out, text)  # opencv: gzipped for a .gz name
     _say_kept(kept)
-    print(f"wrote {out} ({fmt}, cameras {', '.join(repr(c.name) for c in rig.cameras)})")
+    packed = ", gzipped" if fmt == "opencv" and gzipped(out) else ""
+    print(f"wrote {out} ({fmt}{packed}, cameras {', '.join(repr(c.name) for c in rig.cameras)})")
     return 0
 
 
@@ -1439,15 +1451,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(run=cmd_check)
 
     p = sub.add_parser("import", help="write a rig file from another tool's calibration (OpenCV, anipose)")
-    p.add_argument("file", type=user_path, help="OpenCV FileStorage .yml/.yaml/.xml/.json (our multi-camera layout or "
-                                "stereo_calib's intrinsics.yml) or anipose calibration.toml")
+    p.add_argument("file", type=user_path, help="OpenCV FileStorage .yml/.yaml/.xml/.json, each also gzipped as "
+                                ".yml.gz... (our multi-camera layout or stereo_calib's intrinsics.yml) or anipose "
+                                "calibration.toml")
     p.add_argument("--out", type=user_path, required=True, help="rig file to write (docs/rig-file.md)")
     p.add_argument("--format", choices=("opencv", "anipose"), help="default: from FILE's suffix")
     p.add_argument("--units-to-metres", type=_finite(1e-9, 1e9),
                    help="metres per unit of the file's translations (0.001: millimetres); required for anipose "
                         "and stereo_calib files, which do not say (an anipose file ghcal export wrote records it)")
     p.add_argument("--extrinsics", type=user_path, help="stereo_calib's extrinsics.yml, when R and T are not in FILE")
-    p.add_argument("--image-size", help="WIDTHxHEIGHT for cameras whose entry states no image size")
+    p.add_argument("--image-size", help="WIDTHxHEIGHT for cameras whose entry states no image size (one that "
+                                        "states another is refused)")
     p.add_argument("--camera-height", type=_finite(*CAMERA_HEIGHT_RANGE_M),
                    help="level the rig: the first camera's height above the floor, m (without it the rig keeps "
                         "the file's frame: levelled where the file records a levelling its poses show, as ghcal "
@@ -1459,7 +1473,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("export", help="write a rig file for another tool (OpenCV FileStorage, anipose)")
     p.add_argument("--rig", type=user_path, required=True)
-    p.add_argument("--out", type=user_path, required=True, help=".yml/.yaml/.xml/.json (OpenCV FileStorage) or .toml (anipose)")
+    p.add_argument("--out", type=user_path, required=True,
+                   help=".yml/.yaml/.xml/.json (OpenCV FileStorage; gzipped with .gz after it: rig.yml.gz) or .toml "
+                        "(anipose)")
     p.add_argument("--format", choices=("opencv", "anipose"), help="default: from --out's suffix")
     p.add_argument("--units-to-metres", type=_finite(1e-9, 1e9),
                    help="metres per unit of the written translations (OpenCV: default 1, recorded in the file; "

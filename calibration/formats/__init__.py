@@ -20,6 +20,7 @@ from calibration.formats.opencv_yaml import (
     read_opencv_rig,
     write_opencv_camera,
     write_opencv_rig,
+    write_opencv_text,
 )
 
 __all__ = [
@@ -32,4 +33,5 @@ __all__ = [
     "read_opencv_rig",
     "write_opencv_camera",
     "write_opencv_rig",
+    "write_opencv_text",
 ]

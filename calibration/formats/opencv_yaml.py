@@ -7,7 +7,8 @@ Single camera (OpenCV's calibration sample, ``out_camera_data.yml``), top-level 
     ``camera_matrix`` or ``K``              3x3 matrix (required)
     ``distortion_coefficients`` or ``D``    Nx1 / 1xN matrix or sequence, N in 0/4/5/8/12/14 (required)
     ``image_width`` + ``image_height``      integers, or ``image_size`` [w, h] (both: they must agree); else
-                                            the ``image_size`` argument (required one way)
+                                            the ``image_size`` argument (required one way; given beside
+                                            the file's own size, it must agree with it)
     ``R``                                   3x3 matrix or 3-vector Rodrigues (optional, default I)
     ``T``                                   3-vector, file units (optional, default 0)
     ``name``                                string (optional; default the file's stem)
@@ -43,10 +44,13 @@ it is an error; the multi-camera layout (ours) is in metres unless its key says 
 produce the multi-camera / single-camera layouts with 17 significant digits (lossless),
 store ``units_to_metres`` and (multi-camera) the working volume in metres
 (``working_volume_min`` / ``working_volume_max``, which OpenCV ignores) and, for a rig in a
-levelled frame, the ``levelled_*`` keys, and replace the file atomically.
+levelled frame, the ``levelled_*`` keys, and replace the file atomically; a name ending in ``.gz``
+(``rig.yml.gz``) is written gzipped, as ``cv2.FileStorage`` writes and reads it, in the format of the
+suffix before it.
 """
 from __future__ import annotations
 
+import gzip
 import math
 import os
 import re
@@ -72,7 +76,7 @@ from calibration.formats._frame import KEYS as LEVELLING_KEYS, levelling_metadat
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.rig_file import write_text_atomic
+from ghnerf_runtime.rig_file import write_bytes_atomic, write_text_atomic
 
 _K_KEYS = ("camera_matrix", "K")
 _D_KEYS = ("distortion_coefficients", "D")
@@ -80,7 +84,11 @@ _D_KEYS = ("distortion_coefficients", "D")
 #: coefficients (k1..k4, equidistant) would otherwise be read as the pinhole model's k1 k2 p1 p2.
 _FISHEYE_KEYS = ("fisheye_model", "fisheye")
 
-__all__ = ["read_opencv_camera", "read_opencv_rig", "write_opencv_camera", "write_opencv_rig"]
+__all__ = ["format_suffix", "gzipped", "read_opencv_camera", "read_opencv_rig", "write_opencv_camera",
+           "write_opencv_rig", "write_opencv_text"]
+
+#: A name ending so is a gzipped file to ``cv2.FileStorage``, which reads and writes it so itself.
+GZIP_SUFFIX = ".gz"
 
 #: How much of a file is looked at for the marks of one that is not FileStorage text (NULs, UTF-16).
 _SNIFF_BYTES = 4096
@@ -249,23 +257,37 @@ def _pick(node, keys: Sequence[str], path, field: str, required: bool = True) ->
 
 
 def _image_size(node, path, field: str, image_size) -> tuple[Any, Any, tuple[str, str]]:
-    """Width, height and the keys they came from (for error messages)."""
+    """Width, height and the keys they came from (for error messages): the file's, else the ``image_size``
+    argument's; both given, they must agree."""
     pair, size = _width_height(node, path, field), _size_key(node, path, field)
     if pair is not None and size is not None and pair != size:  # image_width won without a word
         raise fail(path, join(field, "image_size"), f"is [{size[0]:.10g}, {size[1]:.10g}], but image_width and "
                                                     f"image_height are {pair[0]:.10g} and {pair[1]:.10g}: keep one")
-    if pair is not None:
-        return pair[0], pair[1], ("image_width", "image_height")
-    if size is not None:
-        return size[0], size[1], ("image_size", "image_size")
-    if image_size is not None:
-        try:  # a frame's shape (h, w, 3) or "640x480" raised a bare ValueError / TypeError when unpacked
-            w, h = image_size
-        except (TypeError, ValueError):
-            raise fail(path, "image_size argument", f"must be (width, height), got {show(image_size)}") from None
-        return w, h, ("image_size argument", "image_size argument")
-    raise fail(path, join(field, "image_width"), "missing image size: give image_width + image_height or image_size "
-                                                 "in the file, or the image_size argument")
+    given = _size_argument(path, image_size)
+    if pair is None and size is None:
+        if given is None:
+            raise fail(path, join(field, "image_width"), "missing image size: give image_width + image_height or "
+                                                         "image_size in the file, or the image_size argument")
+        return given[0], given[1], ("image_size argument", "image_size argument")
+    (w, h), keys = (pair, ("image_width", "image_height")) if pair is not None else (size, ("image_size",) * 2)
+    if given is not None and (w, h) != given:  # the file's size was taken, the argument dropped without a word
+        key = keys[0] if w != given[0] else keys[1]
+        raise fail(path, join(field, key), f"gives the image size {w:.10g}x{h:.10g}, but the image_size argument "
+                                           f"(--image-size) is {show(given[0])}x{show(given[1])}: the argument is for "
+                                           "files that give none; leave it out to take the file's, or correct the "
+                                           "file")
+    return w, h, keys
+
+
+def _size_argument(path, image_size) -> tuple[Any, Any] | None:
+    """The ``image_size`` argument as (width, height); None when not given."""
+    if image_size is None:
+        return None
+    try:  # a frame's shape (h, w, 3) or "640x480" raised a bare ValueError / TypeError when unpacked
+        w, h = image_size
+    except (TypeError, ValueError):
+        raise fail(path, "image_size argument", f"must be (width, height), got {show(image_size)}") from None
+    return w, h
 
 
 def _width_height(node, path, field: str) -> tuple[float, float] | None:
@@ -403,7 +425,7 @@ def read_opencv_camera(path: str | os.PathLike, *, name: str | None = None, imag
     Args:
         path: the YAML file.
         name: camera name; default the file's ``name`` key, else the file's stem.
-        image_size: ``(width, height)`` when the file has no image size.
+        image_size: ``(width, height)`` when the file has no image size; where it has one, they must agree.
         units_to_metres: metres per unit of ``T`` in the file; default the file's own
             ``units_to_metres``; needed when the file has a non-zero ``T`` and no such key.
 
@@ -439,7 +461,8 @@ def read_opencv_rig(
     Args:
         path: the YAML file (``intrinsics.yml`` for the stereo_calib layout).
         extrinsics_path: stereo_calib's ``extrinsics.yml`` when ``R``/``T`` are not in ``path``.
-        image_size: ``(width, height)`` for cameras whose entry has no image size.
+        image_size: ``(width, height)`` for cameras whose entry has no image size; an entry that has one must
+            agree with it (refused, naming both, where the file's was taken and the argument dropped unsaid).
         volume: the working volume; default the file's (``working_volume_min`` / ``_max``, our
             writer stores it), else :func:`default_working_volume`.
         rig_id: default the file's ``rig_id``, else the file's stem.
@@ -577,14 +600,43 @@ _FORMATS = {".xml": (cv2.FILE_STORAGE_FORMAT_XML, "XML"), ".json": (cv2.FILE_STO
 _YAML = (cv2.FILE_STORAGE_FORMAT_YAML, "YAML")
 
 
+def gzipped(path) -> bool:
+    """Whether ``path`` names a gzipped FileStorage file (``rig.yml.gz``)."""
+    return Path(path).suffix.lower() == GZIP_SUFFIX
+
+
+def format_suffix(path) -> str:
+    """The suffix, lower case, that picks the format of ``path``: the one before ``.gz`` for a gzipped file, as
+    OpenCV takes it (``rig.xml.gz``: ``.xml``)."""
+    p = Path(path)
+    return Path(p.stem).suffix.lower() if gzipped(p) else p.suffix.lower()
+
+
 def _format_name(path) -> str:
     """The FileStorage format written to ``path``, as messages name it (a .json export was said to be YAML)."""
-    return _FORMATS.get(Path(path).suffix.lower(), _YAML)[1]
+    return _FORMATS.get(format_suffix(path), _YAML)[1]
 
 
 def _memory_writer(path) -> cv2.FileStorage:
-    fmt = _FORMATS.get(Path(path).suffix.lower(), _YAML)[0]
+    fmt = _FORMATS.get(format_suffix(path), _YAML)[0]
     return cv2.FileStorage("", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY | fmt)
+
+
+def write_opencv_text(path: str | os.PathLike, text: str) -> None:
+    """Replace ``path`` atomically with ``text`` (from :func:`dumps_opencv_rig`) as OpenCV would write it there:
+    gzipped where the name ends in ``.gz`` (``rig.yml.gz`` was plain text, which a tool that gunzips it refuses).
+
+    Raises:
+        RigFileError: the file cannot be written.
+    """
+    if not gzipped(path):
+        write_text_atomic(path, text)
+        return
+    try:
+        data = text.encode("utf-8")
+    except UnicodeEncodeError as e:  # as write_text_atomic says it
+        raise fail(path, None, f"cannot write file: the text is not UTF-8 ({e.reason} at character {e.start})") from e
+    write_bytes_atomic(path, gzip.compress(data, mtime=0))  # mtime 0: the same rig exports the same bytes
 
 
 def _check_strings_read_back(text: str, path, expected: dict[str, tuple[Any, str]]) -> None:
@@ -639,19 +691,20 @@ def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
 
     Args:
         rig: the rig.
-        path: destination, replaced atomically.
+        path: destination, replaced atomically; gzipped where its name ends in ``.gz``.
         units_to_metres: metres per unit of the written ``T`` (1.0: metres).
     """
-    write_text_atomic(path, dumps_opencv_rig(rig, path, units_to_metres=units_to_metres))
+    write_opencv_text(path, dumps_opencv_rig(rig, path, units_to_metres=units_to_metres))
 
 
 def dumps_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> str:
-    """The text :func:`write_opencv_rig` writes to ``path`` (its suffix picks YAML or JSON; errors name it), checked
+    """The text :func:`write_opencv_rig` writes to ``path`` (its suffix, the one before any ``.gz``, picks YAML, XML
+    or JSON; errors name it; :func:`write_opencv_text` writes it, gzipped for ``.gz``), checked
     as it is, nothing written: ``ghcal export`` keeps the file it replaces only once the export can be made."""
     units = check_units(units_to_metres)
     refuse_skew(rig.cameras, f"an OpenCV {_format_name(path)} file")
     fs = _memory_writer(path)
-    if Path(path).suffix.lower() != ".json":  # OpenCV writes comments into JSON as //, which JSON has not
+    if format_suffix(path) != ".json":  # OpenCV writes comments into JSON as //, which JSON has not
         fs.writeComment(" ghnerf rig exported for OpenCV FileStorage; R, T map rig -> camera (X_cam = R X + T)")
     fs.write("rig_id", rig.rig_id)
     fs.write("units_to_metres", float(units))
@@ -687,4 +740,4 @@ def write_opencv_camera(camera: Camera, path: str | os.PathLike, *, units_to_met
     fs.write("units_to_metres", float(units))
     text = fs.releaseAndGetString()
     _check_strings_read_back(text, path, {"name": (lambda root: root.getNode("name"), camera.name)})
-    write_text_atomic(path, text)
+    write_opencv_text(path, text)

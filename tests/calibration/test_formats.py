@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import gzip
 from pathlib import Path
 
 import cv2
@@ -72,6 +73,30 @@ def test_our_yaml_carries_its_units_and_working_volume(rig, tmp_path, units):
     np.testing.assert_allclose(back.volume.max_corner, rig.volume.max_corner, atol=1e-12)
     write_opencv_camera(rig.cameras[1], tmp_path / "one.yml", units_to_metres=units)
     np.testing.assert_allclose(read_opencv_camera(tmp_path / "one.yml").t, rig.cameras[1].t, atol=1e-12)
+
+
+@pytest.mark.parametrize("name, starts", [("rig.yml.gz", b"%YAML"), ("rig.xml.gz", b"<?xml"), ("rig.json.gz", b"{")])
+def test_a_gz_name_is_written_gzipped_in_the_format_before_it_and_reads_back(rig, tmp_path, name, starts):
+    """OpenCV's FileStorage gzips a file whose name ends in .gz; ours wrote plain text under that name (and YAML
+    for rig.xml.gz), which gunzip and a tool's gzip reader refused."""
+    path = tmp_path / name
+    write_opencv_rig(rig, path)
+    data = path.read_bytes()
+    assert data[:2] == b"\x1f\x8b" and gzip.decompress(data).startswith(starts)
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)  # OpenCV's own reading of it
+    try:
+        assert fs.getNode("rig_id").string() == rig.rig_id and fs.getNode("cameras").size() == len(rig.cameras)
+    finally:
+        fs.release()
+    back = read_opencv_rig(path)
+    assert_cameras_close(rig, back)
+    np.testing.assert_allclose(back.volume.max_corner, rig.volume.max_corner, atol=1e-12)
+    write_opencv_rig(rig, path)
+    assert path.read_bytes() == data  # no time stamp in the gzip header: the same rig, the same bytes
+    write_opencv_camera(rig.cameras[2], tmp_path / "one.xml.gz")
+    assert gzip.decompress((tmp_path / "one.xml.gz").read_bytes()).startswith(b"<?xml")
+    assert_cameras_close(Rig(rig.cameras[1:], rig.volume), Rig((rig.cameras[1], read_opencv_camera(
+        tmp_path / "one.xml.gz", name="side cam")), rig.volume))
 
 
 def test_a_principal_point_outside_the_image_is_refused(rig, tmp_path):
@@ -361,6 +386,29 @@ def test_an_image_size_that_disagrees_with_image_width_and_height_is_refused_nam
     with pytest.raises(RigFileError, match="480, 640") as info:
         read_opencv_rig(multi)
     assert info.value.field == "cameras[1].image_size"
+
+
+@pytest.mark.parametrize("size, field", [("image_width: 640\nimage_height: 480\n", "image_height"),
+                                         ("image_size: [640, 480]\n", "image_size")])
+def test_an_image_size_argument_the_file_s_own_size_contradicts_is_refused_naming_both(tmp_path, size, field):
+    # the file's size was taken and the argument dropped without a word: a 640x360 calibration told so was read
+    # as the file's 640x480
+    path = tmp_path / "cam.yml"
+    path.write_text("%YAML:1.0\n---\nK: [[600, 0, 319.5], [0, 600, 239.5], [0, 0, 1]]\nD: [0, 0, 0, 0]\n" + size)
+    with pytest.raises(RigFileError, match=r"gives the image size 640x480, but the image_size argument "
+                                           r"\(--image-size\) is 640x360") as info:
+        read_opencv_camera(path, image_size=(640, 360))
+    assert info.value.path == str(path) and info.value.field == field
+    assert read_opencv_camera(path, image_size=(640, 480)).size == (640, 480)  # agreeing: taken without a word
+    with pytest.raises(RigFileError, match="must be \\(width, height\\)"):  # not a pair: named, not ignored
+        read_opencv_camera(path, image_size=640)
+    multi = tmp_path / "rig.yml"
+    wide = "[[900, 0, 640], [0, 900, 360], [0, 0, 1]]"
+    multi.write_text(_multi_yaml(_cams(image_width=1280, image_height=720, camera_matrix=wide)))
+    with pytest.raises(RigFileError, match="1280x720, but .* is 640x480") as info:  # the first camera agrees
+        read_opencv_rig(multi, image_size=(640, 480))
+    assert info.value.path == str(multi) and info.value.field == "cameras[1].image_width"
+    assert read_opencv_rig(multi).pair[1].size == (1280, 720)
 
 
 def _write_stereo_calib(tmp_path, T_mm):

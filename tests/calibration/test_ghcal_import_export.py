@@ -2,6 +2,7 @@
 what the user must say (units, the format of an unknown suffix) is asked for by name."""
 from __future__ import annotations
 
+import gzip
 import json
 import logging
 import math
@@ -50,6 +51,60 @@ def test_export_then_import_levelled_gives_the_rig_back(rig_file, tmp_path, caps
     out = capsys.readouterr().out
     assert "baseline 600.0 mm" in out and "levelled: left 1.4 m above the floor" in out
     _same_cameras(load_rig(rig_file), load_rig(back))
+
+
+@pytest.mark.parametrize("name, args, starts", [("rig.yml.gz", [], b"%YAML"), ("rig.xml.gz", [], b"<?xml"),
+                                                 ("rig.json.gz", [], b"{"),
+                                                 ("calibration.gz", ["--format", "opencv"], b"%YAML")])
+def test_an_export_to_a_gz_name_is_gzipped_and_imports_back(rig_file, tmp_path, capsys, name, args, starts):
+    """cv2.FileStorage gzips a file named so, and reads it so: rig.yml.gz was refused (suffix '.gz'), and with
+    --format opencv written as plain text under the name."""
+    import cv2
+
+    foreign = tmp_path / name
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign), *args]) == 0
+    assert f"wrote {foreign} (opencv, gzipped, cameras 'left', 'right')" in capsys.readouterr().out
+    data = foreign.read_bytes()
+    assert data[:2] == b"\x1f\x8b" and gzip.decompress(data).startswith(starts)
+    fs = cv2.FileStorage(str(foreign), cv2.FILE_STORAGE_READ)  # OpenCV's own reading of it
+    try:
+        assert fs.getNode("cameras").at(1).getNode("name").string() == "right"
+    finally:
+        fs.release()
+    back = tmp_path / "back.json"
+    assert cli.main(["import", str(foreign), "--out", str(back), *args]) == 0
+    assert "levelled already" in capsys.readouterr().out
+    _same_cameras(load_rig(rig_file), load_rig(back))
+
+
+def test_an_export_over_a_gz_file_keeps_it_under_a_name_import_tells_the_format_of(rig_file, tmp_path, capsys):
+    # kept as rig.yml.prev.gz (<stem>.prev<suffix>), whose format import could not tell from its name ('.prev')
+    foreign = tmp_path / "rig.yml.gz"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)]) == 0
+    first = foreign.read_bytes()
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)]) == 0
+    kept = tmp_path / "rig.prev.yml.gz"
+    assert f"kept the previous {foreign} as {kept}" in capsys.readouterr().out
+    assert kept.read_bytes() == first
+    assert cli.main(["import", str(kept), "--out", str(tmp_path / "back.json")]) == 0
+    _same_cameras(load_rig(rig_file), load_rig(tmp_path / "back.json"))
+
+
+@pytest.mark.parametrize("size", ["640x400", "960x400"])
+def test_an_image_size_the_file_s_own_contradicts_is_refused_naming_both_and_the_file(rig_file, tmp_path, capsys,
+                                                                                     size):
+    # --image-size was dropped without a word where the file gives a size: a user who gave 640x400 got 960x600
+    foreign = tmp_path / "rig.yml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "back.json"
+    assert cli.main(["import", str(foreign), "--image-size", size, "--out", str(out)]) == 2
+    err = but_the_framing_notes(capsys.readouterr().err)
+    assert err.count("\n") == 1 and str(foreign) in err, err
+    assert f"image size 960x600, but the image_size argument (--image-size) is {size}" in err, err
+    assert not out.exists()
+    assert cli.main(["import", str(foreign), "--image-size", "960x600", "--out", str(out)]) == 0  # agreeing: fine
+    assert "warning" not in but_the_framing_notes(capsys.readouterr().err) and load_rig(out).pair[0].size == (960, 600)
 
 
 def _without_levelling(path):
@@ -146,6 +201,9 @@ def test_a_levelling_recorded_in_part_is_named(rig_file, tmp_path, capsys, suffi
     (["import", "{toml}", "--out", "{toml}", "--units-to-metres", "1"], ["is the file being imported"]),
     (["import", "{toml}", "--out", "{out}", "--units-to-metres", "1", "--image-size", "640"], ["go with OpenCV"]),
     (["import", "{dir}/none.yml", "--out", "{out}"], ["none.yml", "no such file"]),
+    # gzip is OpenCV's: an anipose export to c.toml.gz was refused as of an unknown suffix '.gz'
+    (["export", "--rig", "{rig}", "--out", "{dir}/c.toml.gz", "--units-to-metres", "1"], ["plain TOML", ".toml name"]),
+    (["import", "{toml}.gz", "--out", "{out}", "--units-to-metres", "1"], ["plain TOML", "calibration.toml.gz"]),
 ])
 def test_what_the_user_must_give_is_named(rig_file, tmp_path, capsys, args, words):
     toml = tmp_path / "calibration.toml"
