@@ -83,10 +83,13 @@ apart; fewer are tried again, since session 73) raises :class:`RigDisconnectedEr
 next read, after the frames it delivered before; so does one whose grab hangs (a stalled stream or
 pipeline) for ``open_timeout_s``, naming it, and one whose grabbed frames do not decode ``MAX_UNDECODABLE``
 times in a row (fewer are skipped). Each frame lost to a failed grab tried again or to a frame skipped is a gap in
-the camera's frame index (``stats.camera_gaps``), and a run of them is one warning as it ends, naming the frames
+the camera's frame index (``stats.camera_gaps``), and a run of them is one warning, naming the frames
 and why (since session 74: a failed grab tried again was neither logged nor counted, and each skipped frame was a
-warning of its own, a flood at 30 fps); one still going when the source is closed is said as the camera's thread
-ends, "still going at close" (since session 75), not counted: no frame follows it. When a video ends, the stream ends
+warning of its own, a flood at 30 fps). The warning comes as the reader takes the frame after the run, when the
+gap is counted (:mod:`drivers.backends.opencv_lost`), and says whether it is: not where that frame is the camera's
+first the reader took, nor (said at the close) where the close came before the reader took it; a run still going
+when the source is closed is said as the camera's thread ends, "still going at close" (since session 75), not
+counted: no frame follows it. When a video ends, the stream ends
 (:class:`EndOfStream`) once the other camera has delivered past the ended one's last frame: no pair
 can follow, so a longer video is not played out to its end.
 """
@@ -105,6 +108,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from drivers.backends.opencv_lost import RUN_CLOSED, RUN_ENDED, LostRun, UnreadRuns
 from drivers.base import RigSource, load_rig_option
 from drivers.clock import Clock, MonotonicClock
 from drivers.errors import (
@@ -269,36 +273,6 @@ def is_video_file(spec: str) -> bool:
     return not is_device_index(spec) and "://" not in spec and not spec.startswith("/dev/") and "!" not in spec
 
 
-#: Why a run of lost frames has no frame after it: the camera or video ended (or failed), or the source was closed.
-RUN_ENDED, RUN_CLOSED = "its last", "still going at close"
-
-
-@dataclass
-class _LostRun:
-    """A camera's frames lost in a row, each a gap in its frame index (``stats.camera_gaps``): failed grabs
-    tried again and grabbed frames that did not decode. Logged once as the run ends, not once per frame: every
-    undecodable frame logged was a flood at 30 fps, and a failed grab tried again was not logged at all. A run
-    still going when the source is closed is logged as the camera's thread ends (it was not logged before session
-    75: frames lost just before a stop left no trace)."""
-
-    failed_grabs: int = 0
-    undecodable: int = 0
-
-    def words(self, next_index: int, *, end: str = "") -> str | None:
-        """What was lost before frame ``next_index`` and why; None: nothing. ``end`` (:data:`RUN_ENDED`,
-        :data:`RUN_CLOSED`): no frame follows, so no index gap shows them in ``stats.camera_gaps``."""
-        lost = self.failed_grabs + self.undecodable
-        if not lost:
-            return None
-        first = next_index - lost
-        frames = f"frame {first}" if lost == 1 else f"frames {first} to {next_index - 1}"
-        why = [f"{n} {what}" for n, what in ((self.failed_grabs, "failed grab(s), tried again"),
-                                            (self.undecodable, "grabbed frame(s) that did not decode, skipped")) if n]
-        if end:
-            return f"{frames} ({'; '.join(why)}), {end}: no frame followed"
-        return f"{frames} ({'; '.join(why)}): a gap in its frame index, counted in stats.camera_gaps"
-
-
 class _Camera:
     """One ``cv2.VideoCapture`` and the thread that owns it: grabs, decodes, checks and queues its frames."""
 
@@ -318,7 +292,7 @@ class _Camera:
         self.last_stamp_ns = -1  # the last queued frame's (written under the source's lock)
         self.last_frame_s = 0.0  # time.monotonic() of its last queued frame, or of its start (under the lock)
         self.v4l2 = False  # a live V4L2 device: its driver stamps frames on the host's monotonic clock
-        self.lost = _LostRun()  # the frames lost since its last decoded frame (its own thread's)
+        self.lost = LostRun()  # the frames lost since its last queued frame (its own thread's)
         self.thread = threading.Thread(target=self._run, name=f"opencv {name}", daemon=True)
 
     # The capture is opened on the caller's thread (errors are raised from open()), then only the
@@ -459,19 +433,19 @@ class _Camera:
             else:
                 stamp = max(self._live_stamp(grabbed_ns), self.last_stamp_ns + 1)
             if not src._put(Frame(camera=self.name, image=image, timestamp_ns=stamp, index=self.index),
-                            wait_room=self.video and src.pairing.policy is DropPolicy.ALL):
-                return
-            # said once the frame is queued: one refused (closed, failed) or failing its checks never shows the run
-            # in stats.camera_gaps, and the thread's end says the run as such
-            self._end_lost_run()
+                            wait_room=self.video and src.pairing.policy is DropPolicy.ALL, lost=self.lost):
+                return  # a frame refused (closed, failed): the thread's end says the run as still going
+            if self.lost.frames:  # the source holds the run now: said as the reader takes this frame
+                self.lost = LostRun()
             self.index += 1
 
-    def _end_lost_run(self, *, end: str = "") -> None:
-        """A frame came (or, ``end``, none will: why): the run of frames lost before it (if any) is logged, once."""
-        words = self.lost.words(self.index, end=end)
-        if words is not None:  # (none lost, the usual frame: nothing to reset, no new _LostRun per frame)
+    def _end_lost_run(self, *, end: str) -> None:
+        """No frame will follow the run of frames lost (if any), ``end`` says why (``RUN_ENDED``, ``RUN_CLOSED``):
+        it is logged, once."""
+        words = self.lost.words(self.index, end)
+        if words is not None:  # (none lost, the usual end: nothing to reset)
             log.warning("camera %r (%s) lost %s", self.name, self.shown, words)
-            self.lost = _LostRun()
+            self.lost = LostRun()
 
     def _size_error(self, delivered: tuple[int, int]) -> FrameSizeError:
         """A frame of ``delivered`` (width, height), not this camera's size; worded by where that size came from."""
@@ -629,6 +603,7 @@ class OpenCVRigSource(RigSource):
         self._ended: set[str] = set()  # videos that ended
         self._pass_frames: dict[str, list[int]] = {}  # loop: frames in each pass, per video
         self._overruns: dict[str, int] = {}  # per camera: frames dropped from a full queue before the reader took them
+        self._unread_runs = UnreadRuns()  # runs of lost frames whose frame after them is queued, not yet read
         self.drain_limit = 2 * options.queue  # what the queues hold: under latest a read takes all of it
         self.driver_stamps = False  # both cameras are V4L2 devices whose driver stamps are used (Timing)
 
@@ -740,8 +715,9 @@ class OpenCVRigSource(RigSource):
         return Rig(rig.cameras, rig.volume, rig.rig_id, metadata={**rig.metadata, "uncalibrated": True})
 
     # ------------------------------------------------------ from the camera threads
-    def _put(self, frame: Frame, *, wait_room: bool) -> bool:
-        """Queue a frame; False: stop grabbing (closed, or the stream has ended or failed).
+    def _put(self, frame: Frame, *, wait_room: bool, lost: LostRun | None = None) -> bool:
+        """Queue a frame, the first after the camera's run of frames ``lost`` where that has any (said as the reader
+        takes the frame); False: stop grabbing (closed, or the stream has ended or failed).
 
         A full queue (``queue`` frames of this camera) waits for room when ``wait_room`` (a video under
         ``policy=all``: every pair counts); otherwise its oldest frame goes (a live camera runs on).
@@ -766,6 +742,8 @@ class OpenCVRigSource(RigSource):
             else:
                 self._per_camera[frame.camera] += 1
             self._queue.append(frame)
+            if lost is not None and lost.frames:
+                self._unread_runs.queued(frame.camera, frame.index, lost)
             self._camera(frame.camera).index_queued = frame.index
             self._delivered.add(frame.camera)
             self._camera(frame.camera).last_stamp_ns = frame.timestamp_ns
@@ -873,7 +851,14 @@ class OpenCVRigSource(RigSource):
             self._queue.popleft()
             self._per_camera[item.camera] -= 1
             self._cond.notify_all()  # a video waiting for room
-            return item
+            # the pairer gets it (read() pushes every frame read): now the gap of a run before it counts, or not
+            runs = self._unread_runs.read(item.camera, item.index)
+        for words in runs:
+            self._log_lost(item.camera, words)
+        return item
+
+    def _log_lost(self, camera: str, words: str) -> None:
+        log.warning("camera %r (%s) lost %s", camera, self._camera(camera).shown, words)
 
     def _frame_available(self) -> bool:
         with self._cond:
@@ -899,3 +884,7 @@ class OpenCVRigSource(RigSource):
             if cam.thread.is_alive():
                 log.warning("opencv: camera %r (%s) is still in a read; it is released when that returns",
                             cam.name, cam.shown)
+        with self._cond:  # _put queues nothing once _stop is set
+            unread = self._unread_runs.closed()
+        for camera, words in unread:
+            self._log_lost(camera, words)

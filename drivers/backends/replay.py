@@ -45,6 +45,8 @@ another size than their rig file's (:meth:`ReplayRigSource.size_error`). An imag
 cut short or corrupt, or a valid layout this OpenCV refuses) is no size: it is a corrupt frame, as is an image whose
 size changed after the open: ``read()`` raises :class:`~drivers.errors.RigOperationError` naming it once, and the
 next read goes on. A camera none of whose images decode at open would play nothing: the take is refused at open.
+Those checks look at every file of the take: a :meth:`~ReplayRigSource.close` from another thread stops them at the
+next file, and ``open()`` raises :class:`~drivers.errors.RigInitializationError`.
 """
 from __future__ import annotations
 
@@ -53,8 +55,10 @@ import logging
 import statistics
 import threading
 from collections import Counter, deque
+from collections.abc import Iterable, Iterator
 from dataclasses import replace
 from pathlib import Path, PurePosixPath
+from typing import TypeVar
 
 import numpy as np
 
@@ -92,6 +96,8 @@ log = logging.getLogger(__name__)
 
 #: The slowest ``speed=`` played.
 MIN_SPEED = 0.001
+_Item = TypeVar("_Item")  # what ReplayRigSource._until_closed passes on
+
 #: How many of a camera's images of another size than its rig camera's the refusal at open names.
 SIZE_NAMES_SHOWN = 3
 #: The image of a frame pushed by :meth:`ReplayRigSource._catch_up` before its file is decoded.
@@ -562,7 +568,8 @@ class ReplayRigSource(RigSource):
         return self._rows[-1].timestamp_ns - self._rows[0].timestamp_ns + period, index_span
 
     def _open(self) -> None:
-        broken = [(row, rel) for row in self._rows for rel in (row.image, row.truth)
+        # every file of the take is looked at (thousands, on an SD card): a close from another thread stops that
+        broken = [(row, rel) for row in self._until_closed(self._rows) for rel in (row.image, row.truth)
                   if rel is not None and not file_is_whole(self.directory / rel)]
         if broken:
             row, rel = min(broken, key=lambda b: b[0].line)
@@ -574,6 +581,7 @@ class ReplayRigSource(RigSource):
         size_error = self.size_error()
         if size_error is not None:
             raise size_error
+        self._stop_if_closed()
         log.info("replaying %s: %d frames, speed %s", self.directory, len(self._rows), self.speed or "free")
 
     def size_error(self) -> FrameSizeError | RigInitializationError | None:
@@ -596,7 +604,7 @@ class ReplayRigSource(RigSource):
         order = recorded_order(self._rows)
         for cam in self.rig.cameras:
             mine = [self._rows[i].image for i in order.get(cam.name, [])]
-            sizes = [(rel, image_size(self.directory / rel)) for rel in mine]
+            sizes = [(rel, image_size(self.directory / rel)) for rel in self._until_closed(mine)]
             if mine and not any(isinstance(size, tuple) for _, size in sizes):
                 return self._undecodable_refusal(cam.name, sizes)
             wrong = [(rel, size) for rel, size in sizes
@@ -788,6 +796,23 @@ class ReplayRigSource(RigSource):
             scene_time_s=row.scene_time_s,
             joints_3d=joints_3d,
         )
+
+    def _until_closed(self, items: Iterable[_Item]) -> Iterator[_Item]:
+        """``items``, each checked first that no close from another thread cancelled the open (raising then)."""
+        for item in items:
+            self._stop_if_closed()
+            yield item
+
+    def _stop_if_closed(self) -> None:
+        if self._closing.is_set():
+            raise RigInitializationError(f"recording {shown(str(self.directory))}: closed while open() checked the "
+                                         "take's files: the open was cancelled")
+
+    def close(self) -> None:
+        """Close; from another thread while :meth:`open` checks the take's files, that open stops at its next file
+        and raises :class:`RigInitializationError` (the base class closes only a source that is open)."""
+        self._closing.set()
+        super().close()
 
     def _close(self) -> None:
         self._closing.set()  # files are opened per frame: nothing else is held

@@ -61,8 +61,9 @@ Real time: rendering a 640x480 pair can take longer than a 30 fps period on a
 2-core machine (``benchmarks/bench_sim_render.py`` prints the figure). The motion loops (``period_s`` of the scene), so frames are a
 function of (camera, frame index modulo the loop length): ``open()`` renders the
 whole loop (both cameras) with a thread pool, or loads it from the disk cache,
-logging progress, and returns only when every frame is in memory. After open a
-frame costs a memory copy, so pairs are delivered at the nominal rate however
+logging progress, and returns only when every frame is in memory (a ``close()`` from another thread meanwhile
+stops the rendering at its next frame: ``open()`` raises :class:`RigInitializationError` and keeps no loop).
+After open a frame costs a memory copy, so pairs are delivered at the nominal rate however
 slow the renderer. The price is open time (first run only, with the disk cache)
 and memory: about 2.8 MB per camera frame at 640x480 (image plus truth maps),
 ~200 MB for the 1.2 s default ``wave`` loop.
@@ -115,7 +116,7 @@ from drivers.backends.sim_second import SecondPerson, check_second_person, take_
 from drivers.backends.sim_timing import Capture, CaptureSchedule, TimingModel
 from drivers.base import RigSource
 from drivers.clock import Clock
-from drivers.errors import RigConfigError, RigDisconnectedError, RigOperationError
+from drivers.errors import RigConfigError, RigDisconnectedError, RigInitializationError, RigOperationError
 from drivers.frames import Frame
 from drivers.pairing import MAX_HELD, PairingConfig, PairingStats
 from drivers.pairing_options import take_pairing_options
@@ -310,6 +311,11 @@ def _closed_while_reading() -> RigOperationError:
     return RigOperationError("sim source closed while a read waited for its frame")
 
 
+def _closed_during_open() -> RigInitializationError:
+    """What an open() raises when another thread closes the source while it pre-renders (or loads) its loop."""
+    return RigInitializationError("sim source closed while open() pre-rendered its loop: the open was cancelled")
+
+
 class SimRigSource(RigSource):
     """The simulated rig (see the module docstring for options and what it does not model).
 
@@ -428,8 +434,14 @@ class SimRigSource(RigSource):
 
     # ----------------------------------------------------------- hooks
     def _open(self) -> None:
-        for together in self._loop_people():
-            self._fill_loop(together)
+        try:
+            for together in self._loop_people():
+                self._fill_loop(together)
+            if self._closing.is_set():  # closed after the last frame rendered (or as the cache loaded)
+                raise _closed_during_open()
+        except BaseException:
+            self._drop_loops()  # a failed open keeps no loop: hundreds of MB
+            raise
         start = self.clock.now_ns()
         self._schedule = CaptureSchedule(self.options.timing, start)
         if self.options.unplug_after_s is not None:
@@ -447,6 +459,8 @@ class SimRigSource(RigSource):
             cache_dir = self.options.cache_root / self.cache_key(together)
 
         def render(camera: int, j: int) -> LoopFrame:
+            if self._closing.is_set():  # close() from another thread: the pre-render stops between frames
+                raise _closed_during_open()
             return self._render(camera, j, together=together)
 
         loop = FrameLoop(render, self.loop_frames, workers=self.options.workers, cache_dir=cache_dir)
@@ -532,8 +546,21 @@ class SimRigSource(RigSource):
             joints_3d=shown.joints_3d,
         )
 
+    def close(self) -> None:
+        """Close; from another thread while :meth:`open` pre-renders, that open stops at its next frame and raises
+        :class:`RigInitializationError` (the base class closes only a source that is open, and the pre-render of
+        a loop of minutes ran on to its end)."""
+        self._closing.set()
+        try:
+            super().close()
+        finally:
+            self._drop_loops()  # also where an open() in another thread made them after the close began
+
     def _close(self) -> None:
         self._closing.set()
+        self._drop_loops()
+
+    def _drop_loops(self) -> None:
         for loop in (self._loop, self._loop_alone):
             if loop is not None:
                 loop.close()

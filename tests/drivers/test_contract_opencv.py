@@ -948,9 +948,10 @@ class _Flaky(_Webcam):
 
 
 def _camera_logs(caplog) -> list[str]:
-    """What the cameras' own threads logged, WARNING and up (the open's nominal-rig warning is not theirs)."""
-    return [r.getMessage() for r in caplog.records
-            if r.threadName.startswith("opencv ") and r.levelno >= logging.WARNING]
+    """What the cameras' own threads logged, WARNING and up, and the runs of lost frames said as the reader took the
+    frame after them or as the source closed (the open's nominal-rig warning is neither)."""
+    return [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING and (
+        r.threadName.startswith("opencv ") or re.match(r"camera '\w+' \(\d+\) lost ", r.getMessage()))]
 
 
 def _read_until_index(source, index: int) -> list:
@@ -1068,6 +1069,43 @@ def test_a_run_whose_next_frame_the_close_refuses_is_said_still_going_at_close(w
         "camera 'right' (1) lost frames 3 to 4 (2 failed grab(s), tried again), still going at close: no frame "
         "followed",
     ]
+
+
+def test_a_run_whose_next_frame_is_queued_but_not_read_before_the_close_is_said_not_counted(webcam, caplog,
+                                                                                            monkeypatch):
+    """A run ended by a frame the camera queued, and the reader never took before the close, was said 'counted in
+    stats.camera_gaps' as the frame was queued: the pairer never saw that frame, and no counter held the run."""
+    caplog.set_level(logging.WARNING, logger="drivers.backends.opencv")
+    # frames 0-19, frames 20 and 21 lost (grabs 21, 22), frame 22 (grab 23) queued; the reader stops at frame 1
+    monkeypatch.setattr(_Flaky, "failing", {21, 22})
+    monkeypatch.setattr(_Flaky, "garbled", set())
+    # queue=64: nothing dropped from the queue, so the reader's few reads take the camera's first frames only
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all&queue=64", capture_factory=_Flaky) as source:
+        read = _read_until_index(source, 1)
+        _right_camera_after_grabs(webcam, 24)  # grab 23's frame is queued before grab 24 begins
+    stats = source.stats
+    assert max(pair.frames[1].index for pair in read) < 20, [pair.frames[1].index for pair in read]
+    assert _camera_logs(caplog) == [
+        "camera 'right' (1) lost frames 20 to 21 (2 failed grab(s), tried again), then frame 22, not read before "
+        "the close: not counted in stats.camera_gaps",
+    ]
+    assert stats.camera_gaps["right"] == 0, stats
+
+
+def test_a_run_before_the_camera_s_first_frame_read_is_said_not_counted(webcam, caplog, monkeypatch):
+    """A run before the first frame the reader took of the camera was said 'counted in stats.camera_gaps': the
+    pairer counts a gap between two frames of the camera, and none came before it."""
+    caplog.set_level(logging.WARNING, logger="drivers.backends.opencv")
+    monkeypatch.setattr(_Flaky, "failing", {1})  # frame 0 lost, frame 1 (grab 2) the camera's first
+    monkeypatch.setattr(_Flaky, "garbled", set())
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all&queue=64", capture_factory=_Flaky) as source:
+        _read_until_index(source, 3)
+        stats = source.stats
+    assert _camera_logs(caplog) == [
+        "camera 'right' (1) lost frame 0 (1 failed grab(s), tried again), before frame 1, the camera's first frame "
+        "read: no frame before the gap, so not counted in stats.camera_gaps",
+    ]
+    assert stats.camera_gaps["right"] == 0, stats
 
 
 def test_a_camera_that_delivers_every_frame_logs_nothing(webcam, caplog):

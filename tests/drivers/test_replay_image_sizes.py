@@ -2,6 +2,7 @@
 and a header cut short is left to its read (a corrupt frame). The size reader itself, against OpenCV's decoder."""
 import re
 import struct
+import threading
 import zlib
 from pathlib import Path
 
@@ -13,6 +14,7 @@ from drivers import (
     EndOfStream, FrameSizeError, RigInitializationError, RigOperationError, create_rig_source, open_rig,
 )
 from drivers.backends import recording_format
+from drivers.backends import replay as replay_backend
 from drivers.backends.recording_format import (
     FRAMES,
     IMAGE_FORMATS,
@@ -89,6 +91,42 @@ def play(take: Path) -> tuple[int, list[RigOperationError]]:
 def test_a_take_of_the_rig_s_size_opens_and_plays_every_pair(tmp_path, image_format):
     take = write_take(tmp_path / "take", image_format)
     assert play(take) == (FRAMES_A_CAMERA, [])
+
+
+def test_a_close_from_another_thread_cancels_the_open_measuring_the_take_s_images(tmp_path, monkeypatch):
+    """A close() while open() read every image's header did nothing (the base class closes only an open source): the
+    open measured the whole take on (thousands of files, on an SD card), then returned a closed source. It stops at
+    its next file now, and raises."""
+    take = write_take(tmp_path / "take", "png")
+    measuring, closed = threading.Event(), threading.Event()
+    measured = []
+
+    def first_image_held_until_the_close(path):
+        measured.append(path)
+        measuring.set()
+        assert closed.wait(30)
+        return image_size(path)
+
+    monkeypatch.setattr(replay_backend, "image_size", first_image_held_until_the_close)
+    source = create_rig_source(f"replay://{take}")
+    failed = []
+
+    def open_it():
+        try:
+            source.open()
+        except Exception as e:  # noqa: BLE001 - what the open raised, for the test's thread
+            failed.append(e)
+
+    opener = threading.Thread(target=open_it, daemon=True)
+    opener.start()
+    assert measuring.wait(30)
+    source.close()
+    closed.set()
+    opener.join(timeout=60)
+    assert not opener.is_alive()
+    assert len(failed) == 1 and isinstance(failed[0], RigInitializationError), failed
+    assert "closed while open() checked" in str(failed[0])
+    assert len(measured) == 1 and not source.is_open, measured
 
 
 @pytest.mark.parametrize("image_format", sorted(IMAGE_FORMATS))

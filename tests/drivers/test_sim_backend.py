@@ -1,10 +1,11 @@
 """``sim://`` beyond timing: options, the pre-rendered loop and its disk cache, ground truth."""
 import logging
+import threading
 
 import numpy as np
 import pytest
 
-from drivers import ManualClock, RigConfigError, create_rig_source, open_rig
+from drivers import ManualClock, RigConfigError, RigInitializationError, create_rig_source, open_rig
 from drivers.backends.sim_loop import default_cache_root
 from drivers.sim import SAMPLE_BVH, SceneConfig, SensorModel, SimScene
 from tests.drivers.reopens import open_sources_sharing_a_logged_set
@@ -345,3 +346,41 @@ def test_sources_sharing_a_logged_set_warn_of_their_rig_once(caplog, tmp_path, p
         alone = [r for r in caplog.records if "MIN_PAIR_ANGLE_DEG" in r.getMessage()]
     assert len(shared) == 1 and len(logged) == 1, [r.getMessage() for r in shared]
     assert len(alone) == 1, caplog.text
+
+
+@pytest.mark.parametrize("second", ["", "&second=1.0,3.4&second_after_s=1"])
+def test_a_close_from_another_thread_cancels_the_pre_render_of_open(second):
+    """A close() while open() pre-rendered the loop did nothing (the base class closes only an open source): the
+    open rendered the whole loop on, then returned a closed source holding it. It stops at its next frame now, and
+    raises, keeping no loop."""
+    source = create_rig_source(f"sim://?{SMALL}&cache=off&workers=1{second}", clock=ManualClock())
+    rendering, closed = threading.Event(), threading.Event()
+    rendered = []
+    render = source._render
+
+    def first_frame_held_until_the_close(camera, j, *, together=False):
+        rendered.append((camera, j))
+        rendering.set()
+        assert closed.wait(30)
+        return render(camera, j, together=together)
+
+    source._render = first_frame_held_until_the_close
+    failed = []
+
+    def open_it():
+        try:
+            source.open()
+        except Exception as e:  # noqa: BLE001 - what the open raised, for the test's thread
+            failed.append(e)
+
+    opener = threading.Thread(target=open_it, daemon=True)
+    opener.start()
+    assert rendering.wait(30)
+    source.close()
+    closed.set()
+    opener.join(timeout=60)
+    assert not opener.is_alive()
+    assert len(failed) == 1 and isinstance(failed[0], RigInitializationError), failed
+    assert "closed" in str(failed[0]) and "pre-render" in str(failed[0]), failed
+    assert rendered == [(0, 0)], rendered  # the frame in progress, no other
+    assert (source._loop, source._loop_alone, source.is_open) == (None, None, False)
