@@ -934,18 +934,26 @@ class Daemon:
 
     def _added_sinks(self, new: DaemonConfig, changed: list[str]) -> dict[str, Sink]:
         """The sinks ``new`` adds, built (not started) for the rig they were last opened for; none when the rig URL
-        changed (opened with the next rig) or no rig has been open.
+        changed (opened with the next rig) or no rig has been open. One that fails to build closes those built
+        before it: a refused reload leaves none of its sinks behind.
 
-        :raises DaemonConfigError: keyed ``sinks[k]``: the real rig id or camera names do not fit that sink.
+        :raises DaemonConfigError: keyed ``sinks[k]``: the real rig id or camera names do not fit that sink (the
+            message names its URL, as the sink's error does).
         """
         added: dict[str, Sink] = {}
-        if self._sinks_for is not None and "rig.url" not in changed:
-            for url in new.sinks:
+        if self._sinks_for is None or "rig.url" in changed:
+            return added
+        try:
+            for k, url in enumerate(new.sinks):
                 if url not in self._sinks:
                     try:
                         added[url] = self._build_sink(url, self._sinks_for, new)
                     except FirmwareHostError as e:
-                        raise DaemonConfigError(str(e), key=f"sinks[{new.sinks.index(url)}]") from None
+                        raise DaemonConfigError(str(e), key=f"sinks[{k}]") from None
+        except BaseException:
+            for sink in added.values():
+                sink.close()  # not started, so it holds nothing yet; closed all the same, never to start later
+            raise
         return added
 
     def _set_fault(self, fault: Fault) -> None:
