@@ -1353,6 +1353,77 @@ def test_a_reload_refused_at_its_second_added_sink_closes_the_first(tmp_path, mo
         daemon._close_sinks()
 
 
+def test_a_reload_whose_second_added_sink_cannot_start_closes_the_first_and_changes_nothing(tmp_path, monkeypatch,
+                                                                                          caplog):
+    """The second added sink's worker thread will not start (a task limit): the reload was refused with the swap
+    half done, the config already the new one and the first added sink streaming. Now its sinks start (held, opening
+    nothing) before the swap: the first is closed, its worker ended before it opened a thing, nothing changed."""
+    import logging
+
+    from drivers.sim.placement import RigPlacement
+
+    rig = RigPlacement().build(rig_id="rig")
+    running, first, second = "memory://", "udp://127.0.0.1:9", "memory://?status_s=0.06"
+    configs = _Configs()
+    daemon = _idle_daemon(tmp_path, [running], configs, rig)
+    kept, cfg = daemon.sinks[running], daemon.config
+    built: list = []
+    build = daemon._build_sink
+    monkeypatch.setattr(daemon, "_build_sink", lambda *a: built.append(build(*a)) or built[-1])
+    start_thread = threading.Thread.start
+
+    def no_thread_for_the_second(thread):
+        if thread.name == f"sink {second}":
+            raise RuntimeError("can't start new thread")
+        start_thread(thread)
+
+    monkeypatch.setattr(threading.Thread, "start", no_thread_for_the_second)
+    try:
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[running, first, second])
+        daemon.request_reload()
+        with caplog.at_level(logging.ERROR, logger="ghnerf.daemon"):
+            assert daemon._maybe_reload(None) == []
+        assert daemon.config is cfg and daemon.sinks == {running: kept} and not kept._closed
+        assert [s.url for s in built] == [first, second] and built[1]._closed
+        started = built[0]
+        started._thread.join(10)
+        assert started._closed and not started._thread.is_alive() and started._link._sock is None
+        assert started.stats().connects == started.stats().connect_failures == 0
+        said = [r.getMessage() for r in caplog.records if "reload refused" in r.getMessage()]
+        assert len(said) == 1 and f"sinks[2]: {second}: cannot start its worker: can't start new thread" in said[0]
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[running, first])  # accepted: released, it opens
+        daemon.request_reload()
+        assert daemon._maybe_reload(None) == ["sinks"]
+        assert daemon.sinks[first].wait_connected(10)
+    finally:
+        daemon._close_sinks()
+
+
+def test_a_reload_that_replaces_a_file_sink_by_one_on_the_same_file_opens_it_once_the_old_let_go(tmp_path, caplog):
+    """The added sinks start before the swap, held: the new sink on the file the removed one holds (its options
+    changed) opens only after that one closed, at its first try, with no "written by another sink" warning."""
+    import logging
+
+    from drivers.sim.placement import RigPlacement
+
+    rig = RigPlacement().build(rig_id="rig")
+    old, new = f"file://{tmp_path}/joints.jsonl", f"file://{tmp_path}/joints.jsonl?queue=8"
+    configs = _Configs()
+    daemon = _idle_daemon(tmp_path, [old], configs, rig)
+    held = daemon.sinks[old]
+    try:
+        assert held.wait_connected(10)
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[new])
+        daemon.request_reload()
+        with caplog.at_level(logging.WARNING):
+            assert daemon._maybe_reload(None) == ["sinks"]
+            assert daemon.sinks[new].wait_connected(10)
+        assert held._closed and daemon.sinks[new].stats().connect_failures == 0
+        assert [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING] == []
+    finally:
+        daemon._close_sinks()
+
+
 def test_a_reload_adding_a_sink_that_cannot_connect_yet_is_accepted_and_retries_it(tmp_path, caplog):
     """Not a refusal, as at start: a serial port not plugged in (or a file:// sink whose folder is missing) is a
     sink down and retried, warned once naming it, while the sink added beside it streams."""
