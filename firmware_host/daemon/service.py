@@ -758,7 +758,7 @@ class Daemon:
 
     def _start_sink(self, url: str, sink: Sink) -> None:
         """Start a sink built by :meth:`_build_sink`: only now has the gap it carries been handed on (a build
-        thrown away, by a refused reload, leaves the gap for the next one)."""
+        thrown away, by a refused reload, leaves the gap for the next one; a reload's swap hands it on too)."""
         self._sinks[url] = sink.start()
         self._carried_gaps.pop(url, None)
 
@@ -822,7 +822,9 @@ class Daemon:
         file and its checks, the claim on a new status file (another daemon may write it), the rig URL, the model (loaded again only when the session's settings or
         graphs change) and the new estimator, built for the open rig, else the rig the estimator was
         last built for, else a stand-in; the added sinks, built for the rig's id and camera names when
-        one has been open. The swap after that cannot fail, so a refusal leaves the daemon as it was.
+        one has been open and started held (their workers running, nothing opened: the swap releases them once the
+        removed sinks have let go of their ports). The swap after that cannot fail, so a refusal leaves the daemon
+        as it was.
 
         :raises DaemonConfigError: the reload is refused.
         """
@@ -896,8 +898,10 @@ class Daemon:
                 self._close_sink(url)  # at once, rig or not: a removed serial sink frees its port now
             if "estimator" in changed:  # the scan for others turned on or off: SOMEONE_ELSE's meaning with it
                 self._announce_scene_flags(announced_scene_flags(new.estimator))
-            for url, sink in added.items():
-                self._start_sink(url, sink)
+            for url, sink in added.items():  # started held before the swap (_added_sinks): their ports are free now
+                self._sinks[url] = sink
+                self._carried_gaps.pop(url, None)
+                sink.release()
         if "health" in changed:
             health, window = self.health, new.health.calibration_window
             self._check_changed(_PX_WORDS, health.calibration,
@@ -933,19 +937,33 @@ class Daemon:
         return changed
 
     def _added_sinks(self, new: DaemonConfig, changed: list[str]) -> dict[str, Sink]:
-        """The sinks ``new`` adds, built (not started) for the rig they were last opened for; none when the rig URL
-        changed (opened with the next rig) or no rig has been open.
+        """The sinks ``new`` adds, built for the rig they were last opened for and started held (their workers
+        running, opening nothing until the swap releases them: :meth:`Sink.start`); none when the rig URL changed
+        (opened with the next rig) or no rig has been open. All are built before any starts; one that fails to build
+        or start closes every sink this reload built, before any opened a thing: a refused reload leaves none behind.
 
-        :raises DaemonConfigError: keyed ``sinks[k]``: the real rig id or camera names do not fit that sink.
+        :raises DaemonConfigError: keyed ``sinks[k]``, naming its URL: the real rig id or camera names do not fit
+            that sink, or its worker thread would not start.
         """
         added: dict[str, Sink] = {}
-        if self._sinks_for is not None and "rig.url" not in changed:
-            for url in new.sinks:
-                if url not in self._sinks:
-                    try:
-                        added[url] = self._build_sink(url, self._sinks_for, new)
-                    except FirmwareHostError as e:
-                        raise DaemonConfigError(str(e), key=f"sinks[{new.sinks.index(url)}]") from None
+        if self._sinks_for is None or "rig.url" in changed:
+            return added
+        key = {url: f"sinks[{k}]" for k, url in enumerate(new.sinks)}
+        try:
+            for url in [u for u in new.sinks if u not in self._sinks]:  # all built first: a misfit starts nothing
+                try:
+                    added[url] = self._build_sink(url, self._sinks_for, new)
+                except FirmwareHostError as e:
+                    raise DaemonConfigError(str(e), key=key[url]) from None
+            for url, sink in added.items():
+                try:
+                    sink.start(held=True)
+                except RuntimeError as e:  # no thread to be had (a task limit): the whole reload waits
+                    raise DaemonConfigError(f"{sink.shown}: cannot start its worker: {e}", key=key[url]) from None
+        except BaseException:
+            for sink in added.values():
+                sink.close()  # a held worker wakes and ends, having opened nothing
+            raise
         return added
 
     def _set_fault(self, fault: Fault) -> None:

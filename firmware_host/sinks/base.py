@@ -104,6 +104,7 @@ class Sink(ABC):
         # Queued items are [frame, flags]: flags describe the gap just before that frame.
         self._queue: deque[list] = deque()
         self._thread: Optional[threading.Thread] = None
+        self._held = False  # started held (start(held=True)): the worker opens nothing until release(); _cond guards
         self._closed = False
         self._given_up = False  # close() waited its timeout and returned: a link opening after that is let go
         self._limiter: Optional[RateLimiter] = None
@@ -186,9 +187,16 @@ class Sink(ABC):
         caps = [c for c in (self.options.max_fps, self.link_capacity_fps()) if c is not None]
         return min(caps) if caps else None
 
-    def start(self) -> "Sink":
+    def start(self, *, held: bool = False) -> "Sink":
+        """Start the worker, which opens the link and delivers.
+
+        :param held: the worker waits for :meth:`release` (or ``close()``) before it opens anything: a daemon's reload
+            starts the sinks it adds (the worker thread, which can fail to start) before it commits, and lets them
+            open only once the sinks it removes have let go of their ports, so a refused reload opened nothing.
+        """
         if self._thread is not None:
             return self
+        self._held = held
         cap = self.effective_max_fps()
         self._limiter = RateLimiter(cap)
         if cap is not None and self.options.fps is not None and self.options.fps > cap:
@@ -199,8 +207,18 @@ class Sink(ABC):
                 self.shown, self.options.fps, cap,
             )
         self._thread = threading.Thread(target=self._run, name=f"sink {self.shown}", daemon=True)
-        self._thread.start()
+        try:
+            self._thread.start()
+        except BaseException:  # no thread to be had (a task limit): close() must not join one never started
+            self._thread = None
+            raise
         return self
+
+    def release(self) -> None:
+        """Let a worker started held (``start(held=True)``) open the link; nothing for one that is not held."""
+        with self._cond:
+            self._held = False
+            self._cond.notify_all()
 
     def send(self, frame: JointFrame) -> None:
         """Queue a frame for sending; never blocks, never raises for link problems.
@@ -523,6 +541,8 @@ class Sink(ABC):
         return wrote
 
     def _run(self) -> None:
+        with self._cond:  # started held: nothing is opened before release() (closed meanwhile: nothing ever is)
+            self._cond.wait_for(lambda: not self._held or self._closed)
         backoff = Backoff(self.options.backoff)
         while not (self._closed and not self._queue):
             if not self._connected:

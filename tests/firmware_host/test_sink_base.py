@@ -555,3 +555,38 @@ def test_a_lost_link_is_logged_naming_the_url_once(caplog: pytest.LogCaptureFixt
             sink.close()
     lines = [r.getMessage() for r in sink_records(caplog, logging.WARNING) if "link lost" in r.getMessage()]
     assert lines == ["scripted://: link lost (sendto failed); reconnecting"]
+
+
+def test_a_sink_started_held_opens_nothing_until_released_and_closed_held_never_opens() -> None:
+    """``start(held=True)``: the daemon's reload starts the sinks it adds before it commits (a worker thread may fail
+    to start) and lets them open only once the sinks it removes let go of their ports."""
+    sink = ScriptedSink().start(held=True)
+    sink.send(make_frame(0))
+    assert sink._thread is not None and sink._thread.is_alive()
+    assert sink.connect_calls == 0 and not sink.stats().connected  # (held: nothing can have opened it yet)
+    sink.release()
+    assert sink.wait_connected(10) and sink.wait_drained(10)
+    assert [seq for seq, _ in sink.delivered] == [0]
+    sink.close()
+
+    never = ScriptedSink().start(held=True)
+    never.send(make_frame(0))
+    stats = never.close(timeout=10)
+    assert never._thread is not None and not never._thread.is_alive()
+    assert never.connect_calls == 0 and (stats.connects, stats.connect_failures, stats.dropped_close) == (0, 0, 1)
+
+
+def test_a_sink_whose_worker_cannot_start_closes_cleanly(monkeypatch) -> None:
+    """Thread.start failing (a task limit) left the unstarted thread in place: close() raised "cannot join thread
+    before it is started", and the daemon's refused reload could not close its other sinks behind it."""
+    sink = ScriptedSink()
+
+    def no_thread(thread: threading.Thread) -> None:
+        raise RuntimeError("can't start new thread")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(threading.Thread, "start", no_thread)
+        with pytest.raises(RuntimeError, match="can't start new thread"):
+            sink.start(held=True)
+    stats = sink.close()
+    assert sink.connect_calls == 0 and stats.state == "closed"

@@ -1323,6 +1323,137 @@ def test_a_sink_that_does_not_fit_the_rig_is_refused_before_anything_changes(tmp
         daemon._close_sinks()
 
 
+def test_a_reload_refused_at_its_second_added_sink_closes_the_first(tmp_path, monkeypatch, caplog):
+    """Two sinks added, the second refused as it is built for the rig (its id too long for HELLO): the first, built
+    already, was left behind open to a later start (its closed flag unset). It is closed now, never started (no
+    worker, no socket), the running sinks and config untouched, and the journal's line names the refused URL."""
+    import logging
+
+    from drivers.sim.placement import RigPlacement
+
+    rig = RigPlacement().build(rig_id="a-rig-id-too-long-for-the-hello-message")
+    running, first, misfit = "memory://?rig_id=short", "udp://127.0.0.1:9?rig_id=short", "memory://?status_s=0.06"
+    configs = _Configs()
+    daemon = _idle_daemon(tmp_path, [running], configs, rig)
+    kept, cfg = daemon.sinks[running], daemon.config
+    built: list = []
+    build = daemon._build_sink
+    monkeypatch.setattr(daemon, "_build_sink", lambda *a: built.append(build(*a)) or built[-1])
+    try:
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[running, first, misfit])
+        daemon.request_reload()
+        with caplog.at_level(logging.ERROR, logger="ghnerf.daemon"):
+            assert daemon._maybe_reload(None) == []
+        assert [s.url for s in built] == [first]  # the misfit raised in its build
+        assert built[0]._closed and built[0]._thread is None and built[0]._link._sock is None
+        assert daemon.config is cfg and daemon.sinks == {running: kept} and not kept._closed
+        said = [r.getMessage() for r in caplog.records if "reload refused" in r.getMessage()]
+        assert len(said) == 1 and f"sinks[2]: {misfit}: invalid rig_id=" in said[0], said
+    finally:
+        daemon._close_sinks()
+
+
+def test_a_reload_whose_second_added_sink_cannot_start_closes_the_first_and_changes_nothing(tmp_path, monkeypatch,
+                                                                                          caplog):
+    """The second added sink's worker thread will not start (a task limit): the reload was refused with the swap
+    half done, the config already the new one and the first added sink streaming. Now its sinks start (held, opening
+    nothing) before the swap: the first is closed, its worker ended before it opened a thing, nothing changed."""
+    import logging
+
+    from drivers.sim.placement import RigPlacement
+
+    rig = RigPlacement().build(rig_id="rig")
+    running, first, second = "memory://", "udp://127.0.0.1:9", "memory://?status_s=0.06"
+    configs = _Configs()
+    daemon = _idle_daemon(tmp_path, [running], configs, rig)
+    kept, cfg = daemon.sinks[running], daemon.config
+    built: list = []
+    build = daemon._build_sink
+    monkeypatch.setattr(daemon, "_build_sink", lambda *a: built.append(build(*a)) or built[-1])
+    start_thread = threading.Thread.start
+
+    def no_thread_for_the_second(thread):
+        if thread.name == f"sink {second}":
+            raise RuntimeError("can't start new thread")
+        start_thread(thread)
+
+    monkeypatch.setattr(threading.Thread, "start", no_thread_for_the_second)
+    try:
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[running, first, second])
+        daemon.request_reload()
+        with caplog.at_level(logging.ERROR, logger="ghnerf.daemon"):
+            assert daemon._maybe_reload(None) == []
+        assert daemon.config is cfg and daemon.sinks == {running: kept} and not kept._closed
+        assert [s.url for s in built] == [first, second] and built[1]._closed
+        started = built[0]
+        started._thread.join(10)
+        assert started._closed and not started._thread.is_alive() and started._link._sock is None
+        assert started.stats().connects == started.stats().connect_failures == 0
+        said = [r.getMessage() for r in caplog.records if "reload refused" in r.getMessage()]
+        assert len(said) == 1 and f"sinks[2]: {second}: cannot start its worker: can't start new thread" in said[0]
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[running, first])  # accepted: released, it opens
+        daemon.request_reload()
+        assert daemon._maybe_reload(None) == ["sinks"]
+        assert daemon.sinks[first].wait_connected(10)
+    finally:
+        daemon._close_sinks()
+
+
+def test_a_reload_that_replaces_a_file_sink_by_one_on_the_same_file_opens_it_once_the_old_let_go(tmp_path, caplog):
+    """The added sinks start before the swap, held: the new sink on the file the removed one holds (its options
+    changed) opens only after that one closed, at its first try, with no "written by another sink" warning."""
+    import logging
+
+    from drivers.sim.placement import RigPlacement
+
+    rig = RigPlacement().build(rig_id="rig")
+    old, new = f"file://{tmp_path}/joints.jsonl", f"file://{tmp_path}/joints.jsonl?queue=8"
+    configs = _Configs()
+    daemon = _idle_daemon(tmp_path, [old], configs, rig)
+    held = daemon.sinks[old]
+    try:
+        assert held.wait_connected(10)
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[new])
+        daemon.request_reload()
+        with caplog.at_level(logging.WARNING):
+            assert daemon._maybe_reload(None) == ["sinks"]
+            assert daemon.sinks[new].wait_connected(10)
+        assert held._closed and daemon.sinks[new].stats().connect_failures == 0
+        assert [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING] == []
+    finally:
+        daemon._close_sinks()
+
+
+def test_a_reload_adding_a_sink_that_cannot_connect_yet_is_accepted_and_retries_it(tmp_path, caplog):
+    """Not a refusal, as at start: a serial port not plugged in (or a file:// sink whose folder is missing) is a
+    sink down and retried, warned once naming it, while the sink added beside it streams."""
+    import logging
+
+    from drivers.sim.placement import RigPlacement
+    from tests.firmware_host.joint_stream_helpers import make_frame
+
+    rig = RigPlacement().build(rig_id="rig")
+    running, added, absent = "memory://", "memory://?status_s=0.06", f"serial://{tmp_path}/ttyACM-unplugged"
+    configs = _Configs()
+    daemon = _idle_daemon(tmp_path, [running], configs, rig)
+    try:
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[running, added, absent])
+        daemon.request_reload()
+        with caplog.at_level(logging.WARNING):
+            assert daemon._maybe_reload(None) == ["sinks"]
+            wait_until(lambda: daemon.sinks[absent].stats().connect_failures >= 1, timeout=30,
+                       what="the unplugged port's first try")
+        assert list(daemon.sinks) == [running, added, absent] and daemon.health.reload_failures == 0
+        daemon.sinks[added].send(make_frame(0))
+        assert daemon.sinks[added].wait_drained(10)
+        assert daemon.sinks[added].stats().sent == 1
+        assert daemon.sink_stats()[absent]["last_error"].startswith(f"{absent}: unavailable: cannot open")
+        said = [r.getMessage() for r in caplog.records if "ttyACM-unplugged" in r.getMessage()]
+        assert len(said) == 1 and said[0].startswith(f"{absent}: unavailable"), said
+    finally:
+        daemon._close_sinks()
+
+
 def test_a_reload_onto_a_status_file_that_is_a_folder_is_refused_and_removes_nothing(tmp_path):
     """Until session 75 the reload was accepted: the old status file was removed (a monitor must not read it frozen),
     then every write to the folder failed, leaving no report at all. Refused with the file read, nothing changes."""
@@ -1928,6 +2059,31 @@ def test_a_full_disk_leaves_the_last_status_file_whole_and_is_logged_once(tmp_pa
     monkeypatch.setattr(health.json, "dump", real_dump)
     daemon._tick(force=True)
     assert json.loads((tmp_path / "status.json").read_text())["pairs"]["read"] == 5
+
+
+def test_a_status_file_that_becomes_a_folder_while_running_is_warned_of_once_per_outage(tmp_path, caplog):
+    """Checked, not changed: a status file path made a folder while the daemon runs (by hand, a deploy script) is
+    one warning naming the path, not one per refresh; nothing is written into the folder; the file is written
+    again once the folder is gone, and a second such outage is warned of again, once."""
+    import logging
+
+    status = tmp_path / "status.json"
+    daemon = Daemon(_config({"url": "sim://"}, tmp_path), notifier=SystemdNotifier({}))
+    daemon._tick(force=True)
+    assert status.is_file()
+    with caplog.at_level(logging.WARNING, logger="ghnerf.daemon"):
+        for outage in range(2):
+            status.unlink()
+            status.mkdir()
+            for _ in range(5):
+                daemon.health.pairs_read += 1
+                daemon._tick(force=True)
+            assert list(status.iterdir()) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["status.json"]
+            status.rmdir()
+            daemon._tick(force=True)
+            assert json.loads(status.read_text())["pairs"]["read"] == 5 * (outage + 1)
+    warnings = [r.getMessage() for r in caplog.records if "status file" in r.getMessage()]
+    assert warnings == [f"cannot write the status file {status}: [Errno 21] Is a directory: '{status}'"] * 2
 
 
 def test_a_rig_lost_right_after_each_open_is_backed_off_and_does_not_flood_the_log(sim_url, tmp_path, monkeypatch,
