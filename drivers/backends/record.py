@@ -21,6 +21,9 @@ Recorder options (inner backends never see them, so none may reuse these names):
 * ``lossless``: ``1`` makes the reader wait for a free queue slot instead of
   dropping the frame: for offline recording (e.g. ``record+sim`` on a
   ``ManualClock``, which reads faster than real time), never for a live rig.
+  A ``close()`` from another thread ends that wait: the read raises
+  :class:`~drivers.errors.RigOperationError` ("closed while a read waited"), as
+  every backend's read does that a close lands in, and the frame is not recorded.
 
 Recording never stalls the reader (unless ``lossless=1``): frames go into a
 bounded queue drained by writer threads; when it is full the frame is not
@@ -77,6 +80,10 @@ RECORD_OPTIONS = ("out", "image_format", "jpeg_quality", "write_queue", "writers
 
 #: Written files a writer thread lets pile up before it fsyncs them (bounds the backlog close must fsync).
 SYNC_BATCH = 64
+
+#: Seconds a lossless submit waits for a queue slot before it looks again whether the writer was closed: the
+#: writers stop at close, so a reader left waiting on a full queue then would wait for good.
+SUBMIT_WAIT_SLICE_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -139,6 +146,9 @@ class RecordingWriter:
         self._journal_lock = threading.Lock()
         self._journal = None
         self._threads: list[threading.Thread] = []
+        # Set first thing in close: a submit after it (a read in another thread) is refused, never left waiting
+        # on a queue the stopped writers no longer drain.
+        self._stopping = threading.Event()
         # Payload files written, not fsynced yet (relative paths, under the journal lock): a writer that
         # brings it to SYNC_BATCH takes the batch and fsyncs it, off the reader's path.
         self._unsynced: list[str] = []
@@ -211,7 +221,14 @@ class RecordingWriter:
         return self._submit_dropped + self._writer_dropped
 
     def submit(self, frame: Frame) -> None:
-        """Queue ``frame`` for writing; a full queue or a failed writer drops it, counted (``lossless``: waits)."""
+        """Queue ``frame`` for writing; a full queue or a failed writer drops it, counted (``lossless``: waits).
+
+        Raises:
+            RigOperationError: the writer was closed (from another thread), before or while this waited for a
+                slot: the frame is not recorded, nor counted (no read hands it out).
+        """
+        if self._stopping.is_set():
+            raise self._closed_error()
         if self.error is not None:
             self._submit_dropped += 1
             return
@@ -229,12 +246,34 @@ class RecordingWriter:
         # The writers encode later, and a reader may draw on the image it was handed meanwhile:
         # record what the camera captured, not the annotated picture.
         frame = replace(frame, image=frame.image.copy())
-        try:
-            self._queue.put((frame, row), block=self.options.lossless)
-        except queue.Full:
+        if not self._put((frame, row)):
             self._submit_dropped += 1
             return
         self._per_camera[frame.camera] = n + 1
+
+    def _put(self, item: tuple[Frame, FrameRow]) -> bool:
+        """Queue ``item``; False: the queue is full (not ``lossless``). A lossless wait looks every
+        :data:`SUBMIT_WAIT_SLICE_S` whether close began, and then raises: the writers stop, and the slot it
+        waited for might never come."""
+        if not self.options.lossless:
+            try:
+                self._queue.put_nowait(item)
+            except queue.Full:
+                return False
+            return True
+        while True:
+            try:
+                self._queue.put(item, timeout=SUBMIT_WAIT_SLICE_S)
+                return True
+            except queue.Full:
+                if self._stopping.is_set():
+                    raise self._closed_error() from None
+
+    def _closed_error(self) -> RigOperationError:
+        return RigOperationError(
+            f"recording to {shown(str(self.directory))} closed while a read waited to queue its frame; "
+            "the frame is not recorded"
+        )
 
     def _run(self) -> None:
         while True:
@@ -293,11 +332,14 @@ class RecordingWriter:
                 self._folders.add(path.parent)
 
     def close(self, counters: dict) -> None:
-        """Write what is queued, fsync it (:meth:`_sync`), then finalise the manifest (``complete: true``)."""
+        """Write what is queued, fsync it (:meth:`_sync`), then finalise the manifest (``complete: true``).
+        A submit from another thread after this began raises (:meth:`submit`)."""
+        self._stopping.set()
         for _ in self._threads:
             self._queue.put(None)
         for thread in self._threads:
             thread.join()
+        self._count_left_behind()
         if self._journal is not None:
             try:
                 if self.error is None:
@@ -318,6 +360,21 @@ class RecordingWriter:
         log.info(
             "recording %s closed: %d frames written, %d dropped", self.directory, self.frames_written, self.writes_dropped
         )
+
+    def _count_left_behind(self) -> None:
+        """Frames a submit queued behind the writers' stop marks (it looked just before close began): no writer
+        takes them, so they are counted dropped, and ``frames_written + writes_dropped`` stays every frame."""
+        left = 0
+        while True:
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                break
+            if item is not None:
+                left += 1
+        if left:
+            with self._journal_lock:
+                self._writer_dropped += left
 
     def _sync(self) -> None:
         """fsync the payload files written, their folders and the journal, before ``complete: true`` is written:
@@ -359,6 +416,9 @@ class RecordingRigSource(RigSource):
         self._source_url = source_url
         self._writer: RecordingWriter | None = None
         self._reported_error = False
+        # Set first thing in _close: a read in another thread past its wait raises instead of handing out
+        # (and queueing) a frame of a closed source.
+        self._closing = threading.Event()
 
     @classmethod
     def wrap(cls, inner_url: RigUrl, factory: Callable[..., RigSource], **kwargs) -> "RecordingRigSource":
@@ -418,8 +478,12 @@ class RecordingRigSource(RigSource):
             raise RecordingError(f"recording to {shown(str(writer.directory))} failed: "
                                  f"{writer.error}") from writer.error
         frame = self.inner._read_frame(timeout_s)
-        if frame is not None:
-            writer.submit(frame)
+        if frame is None:
+            return None
+        if self._closing.is_set():
+            raise RigOperationError(f"record+ source closed while a read waited for its frame (recording to "
+                                    f"{shown(str(writer.directory))}); the frame is not recorded")
+        writer.submit(frame)  # raises if the close began meanwhile (lossless: while it waited for a slot)
         return frame
 
     def unreported_failure(self) -> str | None:
@@ -447,6 +511,7 @@ class RecordingRigSource(RigSource):
         return self.inner._pairs_lost()
 
     def _close(self) -> None:
+        self._closing.set()
         try:
             self.inner.close()
         finally:

@@ -678,13 +678,20 @@ class ReplayRigSource(RigSource):
                 return None
             self._wait_until(due)
         self._advance()
-        return self._load(row, shift_ns)
+        frame = self._load(row, shift_ns)
+        if self._closing.is_set():  # closed while the files were read: a closed source hands out no frame
+            raise self._closed_while_reading()
+        return frame
 
     def _wait_until(self, when_ns: int) -> None:
         """Sleeps on the clock until ``when_ns``; a close from another thread meanwhile ends the wait at once."""
         self.clock.wait_until(when_ns, self._closing)
         if self._closing.is_set():
-            raise RigOperationError(f"replay of {shown(str(self.directory))} closed while a read waited for its frame")
+            raise self._closed_while_reading()
+
+    def _closed_while_reading(self) -> RigOperationError:
+        """What a read raises when another thread closes the source under it."""
+        return RigOperationError(f"replay of {shown(str(self.directory))} closed while a read waited for its frame")
 
     def _start_playing(self) -> None:
         """Anchor playback (pacing and re-stamping) at the clock's now: the first frame plays now."""

@@ -510,7 +510,10 @@ class SimRigSource(RigSource):
             elif self.clock.now_ns() - capture.arrival_ns > backlog_ns:  # the backlog is of frames arrived
                 self._overruns[name] += 1
             else:
-                return self._frame(capture)
+                frame = self._frame(capture)
+                if self._closing.is_set():  # closed while the frame was made: a closed source hands out none
+                    raise _closed_while_reading()
+                return frame
 
     def _wait_until(self, when_ns: int, schedule: CaptureSchedule) -> None:
         """Sleeps on the clock until ``when_ns``; a close from another thread meanwhile ends the wait at once."""

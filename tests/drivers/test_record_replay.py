@@ -1886,3 +1886,113 @@ def test_a_recorded_jpeg_cut_short_is_named_cut_short(tmp_path):
     said = f"recording image {path} is corrupt: it is a JPEG cut short"
     with pytest.raises(RigOperationError, match=re.escape(said)):
         load_image(path)
+
+
+def test_a_lossless_read_waiting_for_a_queue_slot_ends_when_another_thread_closes(tmp_path, sim_cache, monkeypatch):
+    """The writers stop at close: a lossless read waiting on a full queue could wait for good (and held the
+    read's thread until the writers were free). It now raises as a read that a close lands in does."""
+    import threading
+
+    real, held = record_module.encode_image, threading.Event()
+
+    def held_until_released(*args):
+        held.wait(60)  # a slow disk: the writer sits on its frame, so the queue stays full
+        return real(*args)
+
+    monkeypatch.setattr(record_module, "encode_image", held_until_released)
+    out = tmp_path / "take"
+    url = f"record+sim://?width=32&height=24&cache={sim_cache}&out={out}&writers=1&write_queue=1&lossless=1"
+    source = open_rig(url, clock=ManualClock())
+    inner_read, handed, third_handed = source.inner._read_frame, [], threading.Event()
+
+    def counting(timeout_s):
+        frame = inner_read(timeout_s)
+        if frame is not None:
+            handed.append(frame)
+            if len(handed) == 3:  # the writer holds the first, the queue the second: the third's submit waits
+                third_handed.set()
+        return frame
+
+    monkeypatch.setattr(source.inner, "_read_frame", counting)
+    ended, reader_done = [], threading.Event()
+
+    def reader():
+        try:
+            while True:
+                source.read(timeout_s=30.0)
+        except Exception as e:  # noqa: BLE001 - the test looks at what it was
+            ended.append(e)
+        finally:
+            reader_done.set()
+
+    reading = threading.Thread(target=reader, daemon=True)
+    closing = threading.Thread(target=source.close, daemon=True)  # waits for the held writer: not this test's point
+    reading.start()
+    try:
+        assert third_handed.wait(30), "the reader never got its third frame"
+        closing.start()
+        ended_while_the_writer_was_held = reader_done.wait(30)
+    finally:
+        held.set()  # the old code's reader, and the close, go on once the writer is free: the suite does not hang
+        if closing.ident is None:  # the reader never got there: close all the same
+            closing.start()
+        closing.join(30)
+        reading.join(30)
+    assert ended_while_the_writer_was_held, "the read still waited for a queue slot after the close"
+    assert len(ended) == 1 and isinstance(ended[0], RigOperationError), ended
+    assert "closed while a read waited" in str(ended[0]) and str(out) in str(ended[0])
+    counters = read_manifest(out).counters
+    assert read_manifest(out).complete and counters["frames_written"] == 2 and counters["writes_dropped"] == 0
+    assert len(journal(out)) == 2  # the third frame, refused, is neither in the take nor counted
+
+
+def test_a_frame_made_as_another_thread_closes_is_neither_handed_out_nor_queued(tmp_path, sim_cache, monkeypatch):
+    # a read past its wait returned the frame of a source closed under it, and queued it for writers that had
+    # stopped (never written, never counted)
+    out = tmp_path / "take"
+    source = open_rig(f"record+sim://?width=32&height=24&cache={sim_cache}&out={out}", clock=ManualClock())
+    source.read(timeout_s=5.0)
+    make = source.inner._read_frame
+
+    def read_then_close(timeout_s):
+        frame = make(timeout_s)
+        source.close()  # as another thread's close would, once the inner source handed the frame
+        return frame
+
+    monkeypatch.setattr(source.inner, "_read_frame", read_then_close)
+    frames_in = sum(source.stats.frames_in.values())
+    with pytest.raises(RigOperationError) as raised:
+        source.read(timeout_s=5.0)
+    assert sum(source.stats.frames_in.values()) == frames_in  # not handed to the pairer
+    assert source._writer._queue.empty()  # nor queued
+    assert str(raised.value).startswith(f"record+ source closed while a read waited for its frame (recording to {out})")
+
+
+def test_a_frame_queued_behind_the_writers_stop_is_counted_dropped(take, tmp_path):
+    """A submit that looked just before close began can queue its frame behind the writers' stop marks: no
+    writer takes it, and it went unwritten and uncounted (frames_written + writes_dropped fell one short)."""
+    from drivers.frames import Frame
+
+    manifest = read_manifest(take[0])
+    manifest.complete, manifest.counters = False, {}
+    writer = record_module.RecordingWriter(tmp_path / "take", manifest, record_module.RecordOptions(
+        out=tmp_path / "take", writers=1))
+    writer.start()
+    cam = manifest.rig.cameras[0]
+    frames = [Frame(cam.name, np.zeros((cam.height, cam.width, 3), np.uint8), 1000 * i, i) for i in range(2)]
+    writer.submit(frames[0])
+    put_stop_mark = writer._queue.put
+
+    def a_submit_lands_behind(item, *args, **kwargs):
+        put_stop_mark(item, *args, **kwargs)
+        if item is None:
+            writer._queue.put = put_stop_mark  # once
+            writer._stopping.clear()  # the submit looked before close began ...
+            writer.submit(frames[1])  # ... and queued its frame after the stop mark
+            writer._stopping.set()
+
+    writer._queue.put = a_submit_lands_behind
+    writer.close({})
+    counters = read_manifest(tmp_path / "take").counters
+    assert (counters["frames_written"], counters["writes_dropped"]) == (1, 1)
+    assert (writer.frames_written, writer.writes_dropped) == (1, 1)

@@ -232,3 +232,23 @@ def test_a_sim_close_between_a_pairs_two_frames_says_closed(sim_cache, monkeypat
     monkeypatch.setattr(source, "_frame", make_then_close)
     with pytest.raises(RigOperationError, match="sim source closed while a read waited for its frame"):
         source.read(timeout_s=1.0)
+
+
+@pytest.mark.parametrize("url, makes", [("sim://?width=40&height=30&cache={cache}", "_frame"),
+                                        ("replay://{take}?speed=recorded", "_load")])
+def test_a_frame_made_as_another_thread_closes_is_not_handed_out(sim_cache, take, monkeypatch, url, makes):
+    # a read past its wait handed the pairer the frame it made while the close landed (a pair of a closed source)
+    source = open_rig(url.format(cache=sim_cache, take=take), clock=ManualClock())
+    source.read(timeout_s=1.0)
+    make = getattr(source, makes)
+
+    def make_then_close(*args):
+        frame = make(*args)
+        source.close()  # as another thread's close would, while the frame is made
+        return frame
+
+    monkeypatch.setattr(source, makes, make_then_close)
+    frames_in = sum(source.stats.frames_in.values())
+    with pytest.raises(RigOperationError, match="closed while a read waited for its frame"):
+        source.read(timeout_s=1.0)
+    assert sum(source.stats.frames_in.values()) == frames_in
