@@ -19,7 +19,7 @@ out) through ``ghcal import`` / ``ghcal export`` (OpenCV FileStorage YAML/XML/JS
 Exit status: 0 on success (warnings are printed, not fatal), 2 for an error the user fixes (the
 message names the file, folder, camera or key); 130 after Ctrl-C, 143 after SIGTERM, each with one line
 (``capture``: 0 when it kept views, as its normal end; 2 when a ``record+`` take recorded with it failed as it
-closed, since session 75).
+closed, since session 75, also where a stop lands after the cameras' close: ``RecordedTake``).
 """
 from __future__ import annotations
 
@@ -49,6 +49,7 @@ from calibration.image_sizes import camera_image_sizes, mixed_sizes_problem
 from calibration.render import SYNTH_BOARD, calibration_views, synth_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, same_file, unwritable_reason
+from ghnerf_runtime.cli.recorded_take import RecordedTake, status_saying_a_failed_take
 from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stderr
 from ghnerf_runtime.cli.sigterm import (closed_with_stops_deferred, exit_status, sigterm_as_interrupt, stop_signal,
                                       stop_signals_deferred, stop_words)
@@ -473,24 +474,9 @@ def every_frame_of_two_videos(url: str) -> str:
 
 def cmd_capture(args: argparse.Namespace) -> int:
     import drivers
-    from drivers.base import log as rig_source_log
-    from drivers.url import redact_url
 
     board = _board(args.board)
-    detector = BoardDetector(board)
     out = Path(args.out)
-    count = 1 if args.floor else args.count
-    kept, ended, last_kept_at = 0, False, -1e9
-    skipped, read_failed = 0, False  # frames the rig could not deliver; one since the last pair
-    last_views: list[BoardView | None] = [None, None]
-    steady_since = 0.0  # when the board came to rest (read only once ``resting`` is set)
-    resting: list[BoardView | None] = [None, None]  # --floor: the views where the board came to rest
-    holding: list[BoardView | None] = [None, None]  # the views where the hand-held board stopped
-    holding_since = 0.0
-    # until the board is first seen, every STALL_NOTE_S: a board file with another marker dictionary finds no
-    # marker at all, and the capture ran its --max-seconds without a word
-    board_seen, mismatch_check_at = False, -math.inf
-    markers_said = False  # the board's markers seen, the board never: said once
     # before the cameras are opened (seconds for an OAK): a folder it cannot write, or another session's views
     _output_folder(out, "the views")
     earlier = earlier_views(out)
@@ -506,6 +492,33 @@ def cmd_capture(args: argparse.Namespace) -> int:
               "than the videos would skip held poses); add policy=latest to play them at their rate",
               file=sys.stderr)
     source = drivers.create_rig_source(url)
+    take = RecordedTake(source, PROG)
+    # a stop landing after the cameras' close, before the take's check or in the summary, was said "the capture did
+    # not finish", 130 or 143, of a take that failed
+    return status_saying_a_failed_take(lambda: _capture_and_summarise(args, board, out, earlier, source, take), take)
+
+
+def _capture_and_summarise(args: argparse.Namespace, board: BoardSpec, out: Path, earlier: Sequence[Path],
+                           source, take: RecordedTake) -> int:
+    """The capture from ``source`` (a ``drivers.RigSource``), opened here and closed however the capture ends: the
+    views kept into ``out``, after the ``earlier`` ones, then its last line; the exit status."""
+    import drivers
+    from drivers.base import log as rig_source_log
+    from drivers.url import redact_url
+
+    detector = BoardDetector(board)
+    count = 1 if args.floor else args.count
+    kept, ended, last_kept_at = 0, False, -1e9
+    skipped, read_failed = 0, False  # frames the rig could not deliver; one since the last pair
+    last_views: list[BoardView | None] = [None, None]
+    steady_since = 0.0  # when the board came to rest (read only once ``resting`` is set)
+    resting: list[BoardView | None] = [None, None]  # --floor: the views where the board came to rest
+    holding: list[BoardView | None] = [None, None]  # the views where the hand-held board stopped
+    holding_since = 0.0
+    # until the board is first seen, every STALL_NOTE_S: a board file with another marker dictionary finds no
+    # marker at all, and the capture ran its --max-seconds without a word
+    board_seen, mismatch_check_at = False, -math.inf
+    markers_said = False  # the board's markers seen, the board never: said once
     shown_url = redact_url(args.url)  # a camera URL may carry a password (rtsp://user:pass@..., token=)
     read_to_its_end = False  # the capture ended without a stop (caught below) or an error on its way out
     stopped: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM: the capture's normal end, said after the close
@@ -660,10 +673,9 @@ def cmd_capture(args: argparse.Namespace) -> int:
         # done only when it is the first stop: one caught above (the views kept said, 0) or an error on its way
         # is the one reported
         late_stop = closed_with_stops_deferred(source.close, then_raise=read_to_its_end)  # the take checked first
-        take_failure = getattr(source, "unreported_failure", lambda: None)()  # a record+ take: complete: false
-        if take_failure is not None and not read_to_its_end and stopped is None:  # said before main says the error
-            print(f"{PROG}: error: {take_failure}", file=sys.stderr)
-    if late_stop is not None and take_failure is None:  # main says it (130, 143); a failed take is said below, 2
+        if not read_to_its_end and stopped is None:  # a record+ take's failure, said before main says the error
+            take.say_failure()
+    if late_stop is not None and take.failure() is None:  # main says it (130, 143); a failed take is said below, 2
         raise late_stop
     if stopped is not None:
         status = _say_stopped(stopped, kept, out, skipped)
@@ -675,8 +687,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
     else:
         print(f"kept {kept} view(s) in {out}{_skipped_note(skipped)}")
         status = 0
-    if take_failure is not None:  # the views are whole, the take recorded with them is not: 0 said both were
-        print(f"{PROG}: error: {take_failure}", file=sys.stderr)
+    if take.say_failure():  # the views are whole, the take recorded with them is not: 0 said both were
         return 2
     return status
 

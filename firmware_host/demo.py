@@ -90,6 +90,7 @@ from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
 from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output
+from ghnerf_runtime.cli.recorded_take import RecordedTake, status_saying_a_failed_take
 from ghnerf_runtime.cli.seconds import positive_seconds
 from ghnerf_runtime.cli.sigterm import (closed_with_stops_deferred, exit_status, sigterm_as_interrupt, stop_signal,
                                       stop_signals_deferred, stop_words)
@@ -245,31 +246,6 @@ def _mpjpe_words(acc: dict) -> str:
         return f"MPJPE not measured: no joint found ({acc['mpjpe_pred_missing']} not found)"
     return (f"MPJPE {acc['mpjpe_mm']:.0f} mm over the {acc['mpjpe_evaluated']} joints found "
             f"({acc['mpjpe_pred_missing']} not found, not scored)")
-
-
-# ------------------------------------------------------------------ record+ take
-@dataclass
-class _Take:
-    """The ``record+`` take of the run's source, as the run closes it (another source has none: it never fails):
-    whether its write failed where no read raised it (a frame still queued at close, its last fsync), said once."""
-
-    source: drivers.RigSource
-    said: bool = False
-
-    def failure(self) -> str | None:
-        """Why the take failed as it closed (its manifest says ``complete: false``); None: it did not, or a read
-        raised it (the run's error said it)."""
-        return getattr(self.source, "unreported_failure", lambda: None)()
-
-    def say_failure(self, prog: str) -> bool:
-        """The take's failure said on stderr, one line, unless it was already; whether the take failed (exit 2)."""
-        failure = self.failure()
-        if failure is not None and not self.said:
-            # a stop landing between the line and its note would have it said twice; the run ends 2 either way
-            with stop_signals_deferred(then_raise=False):
-                print(f"{prog}: error: {failure}", file=sys.stderr)
-                self.said = True
-        return failure is not None
 
 
 # ------------------------------------------------------------------ calibration check
@@ -480,19 +456,14 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     print(f"opening {redact_url(args.url)}"
           + (" (the first open pre-renders the motion loop; later opens use the cache)" if scheme == "sim" else ""))
     source = drivers.create_rig_source(args.url)
-    take = _Take(source)
-    try:
-        return _read_and_summarise(args, prog, cfg, source, sink_url, take)
-    except KeyboardInterrupt:
-        # the source is closed by now (_read_and_summarise's finally): a stop landing after the reading, between the
-        # sink's close and the source's or in the summary, was said "stopped", 130 or 143, of a take that failed
-        if take.say_failure(prog):
-            return 2
-        raise
+    take = RecordedTake(source, prog)
+    # a stop landing after the reading, between the sink's close and the source's or in the summary, was said
+    # "stopped", 130 or 143, of a take that failed
+    return status_saying_a_failed_take(lambda: _read_and_summarise(args, prog, cfg, source, sink_url, take), take)
 
 
 def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfig | None, source: drivers.RigSource,
-                        sink_url: str, take: _Take) -> int:
+                        sink_url: str, take: RecordedTake) -> int:
     """The run on ``source``, opened here and closed however the run ends: the pairs read, estimated and streamed
     to ``sink_url`` for ``--seconds``, then the summary; the exit status."""
     stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
@@ -653,7 +624,7 @@ def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfi
     if rig_failed is not None:
         print(f"{prog}: error: the rig failed after {delivered} pairs: {rig_failed}", file=sys.stderr)
         failed = True
-    if take.say_failure(prog):  # a record+ take: exit 0 said it was whole
+    if take.say_failure():  # a record+ take: exit 0 said it was whole
         failed = True
     if sink_stats.submitted and not sink_stats.sent:  # a sink that never connected: say so in the status too
         print(f"{prog}: error: the sink {redact_url(sink_url)} sent none of the {sink_stats.submitted} frames "

@@ -552,3 +552,80 @@ def test_a_failed_take_is_said_when_a_stop_lands_in_the_close_of_a_capture_that_
         "its manifest says complete: false"]
     assert "kept 1 view(s) in" in captured.out
     assert (out / truth.pair[0].name / "000.png").exists()  # the views are whole: kept
+
+
+class _Escaped(Exception):
+    """SIGTERM's default action, which would end the test run, reached."""
+
+
+def _outer_sigterm(signum, frame):
+    raise _Escaped
+
+
+def _stop_after_the_close(monkeypatch, signum: int) -> None:
+    """A stop lands once the cameras' close is done (its stops held), before the take's check."""
+    real_closed = cli.closed_with_stops_deferred
+
+    def closed_then_stopped(close, **kwargs):
+        late_stop = real_closed(close, **kwargs)
+        os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
+        return late_stop
+
+    monkeypatch.setattr(cli, "closed_with_stops_deferred", closed_then_stopped)
+
+
+def _stop_in_the_last_line(monkeypatch, signum: int) -> None:
+    """A stop lands in the capture's last line (kept..., stopped: kept...), the take closed by then."""
+    real_note = cli._skipped_note
+
+    def stopped_then_noted(skipped):
+        os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
+        return real_note(skipped)
+
+    monkeypatch.setattr(cli, "_skipped_note", stopped_then_noted)
+
+
+@pytest.mark.parametrize("take_fails", [False, True])
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("where", ["after the close", "in the last line"])
+@pytest.mark.parametrize("end", ["count", "ctrl-c"])
+def test_a_failed_take_is_said_when_a_stop_lands_after_the_capture_s_close(truth, one_view, tmp_path, capsys,
+                                                                           monkeypatch, end, where, stop, take_fails):
+    """A Ctrl-C or SIGTERM landing after the cameras' close (between it and the take's check, or in the capture's
+    last line) was raised to main past the take's check: "the capture did not finish", 130 or 143, of a take whose
+    manifest says complete: false. Now a failed take is said (one line, exit 2) wherever the stop lands, whether
+    the capture kept all its views or was stopped; a whole one leaves the stop its own exit status."""
+    import signal
+
+    import drivers
+
+    if take_fails:
+        _fsync_fails(monkeypatch)  # a short take: only the close's fsync runs
+    if end == "ctrl-c":  # the capture stopped: the late stop is a second one
+        monkeypatch.setattr(drivers, "create_rig_source",
+                            _failing_after(drivers.create_rig_source, 2, KeyboardInterrupt()))
+    stop_there = _stop_after_the_close if where == "after the close" else _stop_in_the_last_line
+    stop_there(monkeypatch, signal.Signals[stop])
+    take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
+    previous = signal.signal(signal.SIGTERM, _outer_sigterm)
+    try:
+        rc = cli.main(["capture", "--url", f"record+replay://{take}?speed=free&out={recorded}", "--board",
+                       str(_board_file(tmp_path)), "--out", str(out), "--count", "1" if end == "count" else "5",
+                       "--interval-s", "0", "--still-s", "0"])
+    except (_Escaped, KeyboardInterrupt):
+        pytest.fail("the stop escaped ghcal")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    captured = capsys.readouterr()
+    err = but_the_framing_notes(captured.err).splitlines()
+    if take_fails:
+        assert (rc, err) == (2, [f"ghcal: error: recording to {recorded} failed as it closed: [Errno 28] No space "
+                                 "left on device; its manifest says complete: false"]), captured
+    else:  # not swallowed: the stop is the capture's end
+        words = "SIGTERM" if stop == "SIGTERM" else "Ctrl-C"
+        assert (rc, err) == (128 + signal.Signals[stop], [f"ghcal: stopped ({words}); the capture did not finish"]), \
+            captured
+    assert "kept 1 view(s)" not in captured.out  # the last line, cut short by the stop
+    assert json.loads((recorded / "manifest.json").read_text())["complete"] is not take_fails
+    assert (out / truth.pair[0].name / "000.png").exists()  # the views are whole: kept
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
