@@ -215,6 +215,12 @@ class DaemonStartError(FirmwareHostError):
     """The daemon cannot start and retrying will not help (a model that does not load, a bad sink URL)."""
 
 
+def _worker_refused(sink: Sink, error: RuntimeError) -> str:
+    """Why ``sink`` is refused when its worker thread would not start (``Thread.start``: a task limit), at a rig's
+    open as at a reload: its URL, then Python's reason."""
+    return f"{sink.shown}: cannot start its worker: {error}"
+
+
 def check_sink_urls(urls: Sequence[str], **sink_kwargs: Any) -> None:
     """Build (not start: nothing is opened) the sink of every URL, the rig's camera names stood in for.
 
@@ -717,20 +723,31 @@ class Daemon:
 
     def _open_sinks(self, rig: Rig) -> None:
         """Open every sink for this rig's id and camera names (reopened only when either changes; after a
-        reload with the same rig, only the sinks added are opened and those removed closed)."""
+        reload with the same rig, only the sinks added are opened and those removed closed).
+
+        :raises DaemonStartError: a sink does not fit this rig's id or camera names, or its worker thread would not
+            start (``sinks[k]``, naming its URL); every sink is closed first, those started before it too.
+        """
         key = (rig.rig_id, tuple(c.name for c in rig.pair))
         with self._fault_lock:
             if key != self._sinks_for:
                 self._close_sinks()
             for url in [u for u in self._sinks if u not in self.config.sinks]:
                 self._close_sink(url)
-            for url in self.config.sinks:
-                if url not in self._sinks:
-                    try:
-                        self._start_sink(url, self._build_sink(url, key, self.config))
-                    except FirmwareHostError as e:
-                        self._close_sinks()
-                        raise DaemonStartError(f"sinks: {e}") from None
+            for k, url in enumerate(self.config.sinks):
+                if url in self._sinks:
+                    continue
+                try:
+                    sink = self._build_sink(url, key, self.config)
+                except FirmwareHostError as e:
+                    self._close_sinks()
+                    raise DaemonStartError(f"sinks: {e}") from None
+                try:
+                    self._start_sink(url, sink)
+                except RuntimeError as e:  # no thread to be had (a task limit): a stop (exit 2), not a traceback
+                    sink.close()
+                    self._close_sinks()
+                    raise DaemonStartError(f"sinks[{k}]: {_worker_refused(sink, e)}") from None
             self._sinks_for = key
 
     def _build_sink(self, url: str, key: tuple[str, tuple[str, ...]], config: DaemonConfig) -> Sink:
@@ -878,7 +895,24 @@ class Daemon:
             if estimator is not None and estimator is not self._estimator:  # the new one's worker thread, stopped
                 estimator.close()
             raise
-        # Accepted: swap, touching only what changed (nothing below raises).
+        try:
+            self._swap(new, changed, session, estimator, added, claim)
+        except BaseException:  # (nothing there should raise) a held sink left so would wait for ever, frames queued
+            self._settle_added_sinks(added)
+            raise
+        if self._on_reload is not None:
+            try:
+                self._on_reload(new)
+            except Exception:  # noqa: BLE001 - the reload is applied; a failing hook must not undo or hide it
+                _log.exception("after the reload")
+        return changed
+
+    def _swap(self, new: DaemonConfig, changed: list[str], session: Any, estimator: Optional[Estimator],
+              added: dict[str, Sink], claim: Optional[StatusFileClaim]) -> None:
+        """The accepted reload of :meth:`_reload_checked`, put in force touching only what changed: nothing here
+        should raise (what could fail was done before). ``session`` and ``estimator``: the model and estimator of
+        ``new`` (the running ones when its estimator section did not change); ``added``: the sinks it adds, started
+        held (released here); ``claim``: the claim on a new status file (None: the same file)."""
         old_status_file = self.config.health.status_file
         self.config = new
         if "rig.url" in changed:
@@ -929,12 +963,17 @@ class Daemon:
             self._size_fitted, self._size_mismatches = False, ({}, 0)  # its cameras and rig file are judged afresh
         elif "rig" in changed:
             self._backoff_s = min(max(self._backoff_s, new.rig.reopen_min_s), new.rig.reopen_max_s)
-        if self._on_reload is not None:
-            try:
-                self._on_reload(new)
-            except Exception:  # noqa: BLE001 - the reload is applied; a failing hook must not undo or hide it
-                _log.exception("after the reload")
-        return changed
+
+    def _settle_added_sinks(self, added: dict[str, Sink]) -> None:
+        """After a swap that raised: each sink it added and put in place is released (it is the daemon's, closed
+        with the others), every other one closed: none is left held, its worker waiting for a release that
+        would never come while frames queue in it."""
+        with self._fault_lock:
+            for url, sink in added.items():
+                if self._sinks.get(url) is sink:
+                    sink.release()
+                else:
+                    sink.close()  # a held worker wakes and ends, having opened nothing
 
     def _added_sinks(self, new: DaemonConfig, changed: list[str]) -> dict[str, Sink]:
         """The sinks ``new`` adds, built for the rig they were last opened for and started held (their workers
@@ -959,7 +998,7 @@ class Daemon:
                 try:
                     sink.start(held=True)
                 except RuntimeError as e:  # no thread to be had (a task limit): the whole reload waits
-                    raise DaemonConfigError(f"{sink.shown}: cannot start its worker: {e}", key=key[url]) from None
+                    raise DaemonConfigError(_worker_refused(sink, e), key=key[url]) from None
         except BaseException:
             for sink in added.values():
                 sink.close()  # a held worker wakes and ends, having opened nothing

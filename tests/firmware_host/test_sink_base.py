@@ -590,3 +590,34 @@ def test_a_sink_whose_worker_cannot_start_closes_cleanly(monkeypatch) -> None:
             sink.start(held=True)
     stats = sink.close()
     assert sink.connect_calls == 0 and stats.state == "closed"
+
+
+class _WaitWatchingCondition(threading.Condition):
+    """A sink's condition that says when a thread first waits on it: a held worker waiting for its release."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.waited = threading.Event()
+
+    def wait_for(self, predicate, timeout=None):  # type: ignore[no-untyped-def]
+        self.waited.set()
+        return super().wait_for(predicate, timeout)
+
+
+def test_a_held_sink_closed_while_its_worker_waits_ends_it_and_a_release_after_that_opens_nothing() -> None:
+    """A reload refused after its sinks started held closes them unreleased: the waiting worker must wake and end
+    without opening the link, and a release() coming after the close() must neither open it nor raise."""
+    sink = ScriptedSink()
+    sink._cond = cond = _WaitWatchingCondition()  # before start: the worker waits on this one
+    sink.start(held=True)
+    assert cond.waited.wait(10), "the held worker never waited for its release"
+    sink.send(make_frame(0))
+    stats = sink.close(timeout=10)
+    assert sink._thread is not None and not sink._thread.is_alive(), "a close() left the held worker waiting"
+    sink.release()
+    sink.release()
+    assert sink.connect_calls == 0 and sink.delivered == []
+    after = sink.stats()
+    assert after == stats and (after.state, after.connects, after.dropped_close) == ("closed", 0, 1)
+    with pytest.raises(SinkClosedError):
+        sink.send(make_frame(1))

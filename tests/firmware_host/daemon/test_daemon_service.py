@@ -1424,6 +1424,102 @@ def test_a_reload_that_replaces_a_file_sink_by_one_on_the_same_file_opens_it_onc
         daemon._close_sinks()
 
 
+def _no_worker_thread_for(monkeypatch, url: str) -> None:
+    """``Thread.start`` fails for the worker of the sink of ``url`` (by the thread's name), as at a task limit."""
+    start_thread = threading.Thread.start
+
+    def no_thread_for_that_sink(thread):
+        if thread.name == f"sink {url}":
+            raise RuntimeError("can't start new thread")
+        start_thread(thread)
+
+    monkeypatch.setattr(threading.Thread, "start", no_thread_for_that_sink)
+
+
+def test_a_sink_whose_worker_cannot_start_as_the_rig_opens_stops_the_daemon_naming_it(sim_url, tmp_path,
+                                                                                      monkeypatch):
+    """The second sink's worker thread will not start as the rig opens (a task limit): the RuntimeError was not
+    caught where the sinks' own errors are, and the daemon died of it (a traceback, exit 1: restarted by systemd
+    into the same limit), its status file saying "stopped by RuntimeError: can't start new thread", no sink named.
+    Now it stops as for a sink that does not fit the rig (exit 2), naming the sink, every sink closed first, the
+    one started before it too."""
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _CountingEstimator)
+    first, second = "memory://?status_s=0.05", "udp://127.0.0.1:9"
+    built: list = []
+    build = Daemon._build_sink
+    monkeypatch.setattr(Daemon, "_build_sink", lambda self, *a: built.append(build(self, *a)) or built[-1])
+    _no_worker_thread_for(monkeypatch, second)
+    cfg = _config({"url": sim_url}, tmp_path, sinks=[first, second])
+    with _Running(cfg, tmp_path) as run:
+        run.thread.join(timeout=30)
+        assert not run.thread.is_alive(), "the daemon did not stop"
+    error = run.rc[0]
+    assert isinstance(error, DaemonStartError), repr(error)
+    assert str(error) == f"sinks[1]: {second}: cannot start its worker: can't start new thread"
+    assert [s.url for s in built] == [first, second] and all(s._closed for s in built)
+    started = built[0]
+    started._thread.join(10)
+    assert not started._thread.is_alive() and built[1]._thread is None
+    assert run.daemon.sinks == {} and run.daemon._sinks_for is None
+    report = json.loads((tmp_path / "status.json").read_text())
+    assert report["last_error"] == f"stopped by DaemonStartError: {error}"
+
+
+class _PopRaises(dict):
+    """The carried gaps of a daemon whose swap raises as it places the added sink of ``url``."""
+
+    def __init__(self, url: str) -> None:
+        super().__init__()
+        self.url = url
+
+    def pop(self, key, *default):
+        if key == self.url:
+            raise RuntimeError("a swap that raises")
+        return super().pop(key, *default)
+
+
+@pytest.mark.parametrize("raises_at", ["the removed sink", "the second added sink"])
+def test_a_reload_whose_swap_raises_leaves_no_added_sink_held(tmp_path, monkeypatch, raises_at):
+    """The added sinks start held before the swap, which releases them: a swap that raised (it should not) before
+    it released them left their workers waiting for ever, frames queued in them never sent. Now each added sink the
+    swap put in place is released (it streams), every other one is closed, having opened nothing."""
+    from drivers.sim.placement import RigPlacement
+
+    rig = RigPlacement().build(rig_id="rig")
+    running, first, second = "memory://", "memory://?status_s=0.06", "udp://127.0.0.1:9"
+    configs = _Configs()
+    daemon = _idle_daemon(tmp_path, [running], configs, rig)
+    built: list = []
+    build = daemon._build_sink
+    monkeypatch.setattr(daemon, "_build_sink", lambda *a: built.append(build(*a)) or built[-1])
+    try:
+        with monkeypatch.context() as patch:
+            if raises_at == "the removed sink":  # before any added sink is placed
+                patch.setattr(daemon, "_close_sink", lambda url: (_ for _ in ()).throw(RuntimeError("no close")))
+                configs.next = _config({"url": "sim://"}, tmp_path, sinks=[first, second])
+            else:  # the first added sink placed, not yet released; the second not placed
+                patch.setattr(daemon, "_carried_gaps", _PopRaises(first))
+                configs.next = _config({"url": "sim://"}, tmp_path, sinks=[running, first, second])
+            daemon.request_reload()
+            assert daemon._maybe_reload(None) == [] and daemon.health.reload_failures == 1
+        assert [s.url for s in built] == [first, second]
+        placed = [s for s in built if daemon.sinks.get(s.url) is s]
+        for sink in built:
+            if sink in placed:
+                assert sink.wait_connected(10), f"{sink.url} held"
+            else:
+                sink._thread.join(10)
+                assert not sink._thread.is_alive(), f"{sink.url} held"
+                assert sink._closed and sink.stats().connects == sink.stats().connect_failures == 0
+        assert [s.url for s in placed] == ([] if raises_at == "the removed sink" else [first])
+        assert built[1]._link._sock is None
+    finally:
+        daemon._close_sinks()
+
+
 def test_a_reload_adding_a_sink_that_cannot_connect_yet_is_accepted_and_retries_it(tmp_path, caplog):
     """Not a refusal, as at start: a serial port not plugged in (or a file:// sink whose folder is missing) is a
     sink down and retried, warned once naming it, while the sink added beside it streams."""
