@@ -665,18 +665,26 @@ def cmd_capture(args: argparse.Namespace) -> int:
             print(f"{PROG}: error: {take_failure}", file=sys.stderr)
     if late_stop is not None and take_failure is None:  # main says it (130, 143); a failed take is said below, 2
         raise late_stop
-    if stopped is not None:
-        status = _say_stopped(stopped, kept, out, skipped)
-    elif kept < count:
-        why = ("the stream ended" if ended else "--max-seconds ran out") + ("" if board_seen else
-                                                                          ", and the board was in no image")
-        print(f"{PROG}: kept {kept} of {count} views: {why}{_skipped_note(skipped)}", file=sys.stderr)
-        status = 2 if kept == 0 else 0
-    else:
-        print(f"kept {kept} view(s) in {out}{_skipped_note(skipped)}")
-        status = 0
+    status = 2
+    try:
+        if stopped is not None:
+            status = _say_stopped(stopped, kept, out, skipped)
+        elif kept < count:
+            why = ("the stream ended" if ended else "--max-seconds ran out") + ("" if board_seen else
+                                                                              ", and the board was in no image")
+            print(f"{PROG}: kept {kept} of {count} views: {why}{_skipped_note(skipped)}", file=sys.stderr)
+            status = 2 if kept == 0 else 0
+        else:
+            print(f"kept {kept} view(s) in {out}{_skipped_note(skipped)}")
+            status = 0
+    except KeyboardInterrupt:
+        # a stop landing in these lines, the take closed by now: it went to main past the take's check ("stopped",
+        # 130 or 143, of a take whose manifest says complete: false), as ghnerf-demo's summary did
+        if take_failure is None:
+            raise
     if take_failure is not None:  # the views are whole, the take recorded with them is not: 0 said both were
-        print(f"{PROG}: error: {take_failure}", file=sys.stderr)
+        with stop_signals_deferred(then_raise=False):  # the run ends 2 whatever lands here: the line said whole
+            print(f"{PROG}: error: {take_failure}", file=sys.stderr)
         return 2
     return status
 

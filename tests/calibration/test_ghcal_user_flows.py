@@ -552,3 +552,44 @@ def test_a_failed_take_is_said_when_a_stop_lands_in_the_close_of_a_capture_that_
         "its manifest says complete: false"]
     assert "kept 1 view(s) in" in captured.out
     assert (out / truth.pair[0].name / "000.png").exists()  # the views are whole: kept
+
+
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+def test_a_failed_take_is_said_when_a_stop_lands_in_the_capture_s_last_line(truth, one_view, tmp_path, capsys,
+                                                                           monkeypatch, stop):
+    """A Ctrl-C or SIGTERM landing in the line that ends the capture (``kept 1 view(s) in ...``), the take closed by
+    then, went to main past the take's check: "stopped", 130 or 143, of a take whose manifest says complete:
+    false. Said now, exit 2, as where the stop lands in the close."""
+    import signal
+
+    real_note = cli._skipped_note
+
+    def stopped_in_the_last_line(skipped: int) -> str:
+        os.kill(os.getpid(), signal.Signals[stop])  # its handler runs here, in the main thread, at once
+        return real_note(skipped)
+
+    class Escaped(Exception):
+        pass
+
+    def outer(signum, frame):  # stands for SIGTERM's default action, which would end the test run
+        raise Escaped
+
+    _fsync_fails(monkeypatch)  # a short take: only the close's fsync runs
+    monkeypatch.setattr(cli, "_skipped_note", stopped_in_the_last_line)
+    take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
+    previous = signal.signal(signal.SIGTERM, outer)
+    try:
+        rc = cli.main(["capture", "--url", f"record+replay://{take}?speed=free&out={recorded}", "--board",
+                       str(_board_file(tmp_path)), "--out", str(out), "--count", "1", "--interval-s", "0",
+                       "--still-s", "0"])
+    except (Escaped, KeyboardInterrupt):
+        pytest.fail("the stop escaped ghcal")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    captured = capsys.readouterr()
+    assert rc == 2, captured
+    assert but_the_framing_notes(captured.err).splitlines() == [
+        f"ghcal: error: recording to {recorded} failed as it closed: [Errno 28] No space left on device; "
+        "its manifest says complete: false"]
+    assert json.loads((recorded / "manifest.json").read_text())["complete"] is False
+    assert (out / truth.pair[0].name / "000.png").exists()  # the views are whole: kept
