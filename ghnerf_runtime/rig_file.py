@@ -165,6 +165,7 @@ __all__ = [
     "loads_rig",
     "write_text_atomic",
     "write_bytes_atomic",
+    "utf8_bytes",
     "write_bytes_into",
     "principal_point_problem",
     "focal_length_problem",
@@ -971,12 +972,20 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     Raises:
         RigFileError: the file cannot be written.
     """
+    write_bytes_atomic(path, utf8_bytes(path, text))
+
+
+def utf8_bytes(path: str | os.PathLike, text: str) -> bytes:
+    """``text`` encoded as UTF-8 for a write to ``path``: :func:`write_text_atomic`'s, and a gzipped writer's.
+
+    Raises:
+        RigFileError: the text holds what UTF-8 cannot (a lone surrogate in a name or the metadata).
+    """
     try:
-        data = text.encode("utf-8")
-    except UnicodeEncodeError as e:  # a lone surrogate in a name or the metadata
+        return text.encode("utf-8")
+    except UnicodeEncodeError as e:
         raise RigFileError(f"cannot write file: the text is not UTF-8 ({e.reason} at character {e.start})",
                            path=str(path)) from e
-    write_bytes_atomic(path, data)
 
 
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:

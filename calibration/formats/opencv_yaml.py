@@ -76,7 +76,7 @@ from calibration.formats._frame import KEYS as LEVELLING_KEYS, levelling_metadat
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.rig_file import write_bytes_atomic, write_text_atomic
+from ghnerf_runtime.rig_file import utf8_bytes, write_bytes_atomic
 
 _K_KEYS = ("camera_matrix", "K")
 _D_KEYS = ("distortion_coefficients", "D")
@@ -114,7 +114,7 @@ def _open(path) -> cv2.FileStorage:
         # FileStorage's own words for an empty file: "(-215:Assertion failed) buf in function 'open'"
         if not head.strip() and not p.read_bytes().strip():
             raise fail(path, None, "the file is empty")
-        if not p.name.lower().endswith(".gz"):  # FileStorage reads a gzipped file itself
+        if not gzipped(p):  # FileStorage reads a gzipped file itself
             if problem := not_text_problem(head, "OpenCV FileStorage (YAML, XML or JSON)"):
                 raise fail(path, None, problem)
         if head[:3] == b"\xef\xbb\xbf":  # a byte-order mark (Windows editors): FileStorage refused line 1's syntax
@@ -629,14 +629,9 @@ def write_opencv_text(path: str | os.PathLike, text: str) -> None:
     Raises:
         RigFileError: the file cannot be written.
     """
-    if not gzipped(path):
-        write_text_atomic(path, text)
-        return
-    try:
-        data = text.encode("utf-8")
-    except UnicodeEncodeError as e:  # as write_text_atomic says it
-        raise fail(path, None, f"cannot write file: the text is not UTF-8 ({e.reason} at character {e.start})") from e
-    write_bytes_atomic(path, gzip.compress(data, mtime=0))  # mtime 0: the same rig exports the same bytes
+    data = utf8_bytes(path, text)
+    # mtime 0: the same rig exports the same bytes
+    write_bytes_atomic(path, gzip.compress(data, mtime=0) if gzipped(path) else data)
 
 
 def _check_strings_read_back(text: str, path, expected: dict[str, tuple[Any, str]]) -> None:

@@ -25,9 +25,8 @@ accepted and unused, because the daemon hands every sink the rig's id and camera
 """
 from __future__ import annotations
 
-from typing import Any, Optional
-
 import logging
+from typing import Any, Optional
 
 import numpy as np
 
