@@ -243,12 +243,33 @@ def _notes_until(sock: socket.socket, proc: subprocess.Popen, notes: list[dict[s
     pytest.fail(f"{what}: not seen in {notes}")
 
 
-@needs_model
-def test_runs_under_a_notify_socket_and_stops_on_sigterm(tmp_path):
+@contextlib.contextmanager
+def _under_a_notify_socket(tmp_path: Path, config: Path, *python_args: str, stdout: int = subprocess.PIPE,
+                           **env: str) -> Iterator[tuple[socket.socket, subprocess.Popen]]:
+    """``python *python_args --config config`` (the daemon's module by default) started as systemd starts the
+    service: ``NOTIFY_SOCKET`` names a datagram socket bound here, read with a 1 s timeout (for :func:`_notes_until`),
+    ``env`` added to the environment; stderr piped. On the way out the process is killed (if it still runs) and
+    reaped, and the socket closed."""
     sock_path = tmp_path / "notify.sock"
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    sock.bind(str(sock_path))
-    sock.settimeout(1.0)
+    try:
+        sock.bind(str(sock_path))
+        sock.settimeout(1.0)
+        proc = subprocess.Popen([sys.executable, *(python_args or ("-m", "firmware_host.daemon.cli")),
+                                 "--config", str(config)], stdout=stdout, stderr=subprocess.PIPE, text=True,
+                                cwd=REPO, env={**os.environ, "NOTIFY_SOCKET": str(sock_path), **env})
+        try:
+            yield sock, proc
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+    finally:
+        sock.close()
+
+
+@needs_model
+def test_runs_under_a_notify_socket_and_stops_on_sigterm(tmp_path):
     status = tmp_path / "status.json"
     cache = tmp_path / "sim-cache"
     path = _write(tmp_path, {
@@ -257,25 +278,18 @@ def test_runs_under_a_notify_socket_and_stops_on_sigterm(tmp_path):
         "estimator": {"session": {"model_dir": str(MODELS)}},
         "health": {"status_file": str(status), "status_every_s": 0.2},
     })
-    env = {**os.environ, "NOTIFY_SOCKET": str(sock_path), "WATCHDOG_USEC": "2000000", "JOURNAL_STREAM": "8:1"}
-    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
     notes: list[dict[str, str]] = []
-    try:
+    with _under_a_notify_socket(tmp_path, path, WATCHDOG_USEC="2000000", JOURNAL_STREAM="8:1") as (sock, proc):
         _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("running:") for n in ns)
                      and any("WATCHDOG" in n for n in ns), "a running status and a watchdog ping")
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        while True:
+        while True:  # the notes sent up to its exit
             try:
                 data = sock.recv(4096).decode()
             except (socket.timeout, OSError):
                 break
             notes.append(dict(line.split("=", 1) for line in data.splitlines()))
-        sock.close()
     assert proc.returncode == 0, err
     assert notes[0]["READY"] == "1" and notes[0]["MAINPID"] == str(proc.pid)
     assert "STOPPING" in notes[-1]
@@ -290,10 +304,6 @@ def test_runs_under_a_notify_socket_and_stops_on_sigterm(tmp_path):
 
 @needs_model
 def test_sighup_reloads_the_config_file_and_refuses_a_broken_one(tmp_path):
-    sock_path = tmp_path / "notify.sock"
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    sock.bind(str(sock_path))
-    sock.settimeout(1.0)
     status = tmp_path / "status.json"
     config = {
         "rig": {"url": f"sim://?fps=30&width=320&height=240&cache={tmp_path / 'sim-cache'}"},
@@ -302,11 +312,8 @@ def test_sighup_reloads_the_config_file_and_refuses_a_broken_one(tmp_path):
         "health": {"status_file": str(status), "status_every_s": 0.2},
     }
     path = _write(tmp_path, config)
-    env = {**os.environ, "NOTIFY_SOCKET": str(sock_path), "JOURNAL_STREAM": "8:1"}
-    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
     notes: list[dict[str, str]] = []
-    try:
+    with _under_a_notify_socket(tmp_path, path, JOURNAL_STREAM="8:1") as (sock, proc):
         _notes_until(sock, proc, notes, lambda ns: ns[-1].get("STATUS", "").startswith("running:"), "running")
         # systemctl reload: a second sink and debug logging, applied without a restart.
         _write(tmp_path, {**config, "sinks": config["sinks"] + [f"file://{tmp_path / 'second.jsonl'}"],
@@ -326,10 +333,6 @@ def test_sighup_reloads_the_config_file_and_refuses_a_broken_one(tmp_path):
                      timeout=30)
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        sock.close()
     assert proc.returncode == 0, err
     assert "config reloaded: sinks, log_level" in err
     assert f"reload refused: {path}: " in err and "running on with the config loaded before" in err
@@ -434,22 +437,10 @@ def test_the_start_logs_the_rig_s_note_once_at_the_default_log_level(tmp_path):
     path = _write(tmp_path, {"rig": {"url": "sim://?width=48&height=36&cache=off&distance=1"}, "sinks": ["memory://"],
                              "estimator": {"session": {"model_dir": str(MODELS), "warmup": False}},
                              "health": {"status_every_s": 0.2}})
-    sock_path = tmp_path / "notify.sock"
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    sock.bind(str(sock_path))
-    sock.settimeout(1.0)
-    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO,
-                            env={**os.environ, "NOTIFY_SOCKET": str(sock_path)})
-    try:
+    with _under_a_notify_socket(tmp_path, path, stdout=subprocess.DEVNULL) as (sock, proc):
         _notes_until(sock, proc, [], lambda ns: ns[-1].get("STATUS", "").startswith("running:"), "streaming")
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-        sock.close()
     assert proc.returncode == 0, err[-2000:]
     noted = framing_notes(err)
     assert len(noted) == 1 and "INFO drivers.base: sim:// rig 'sim': a 1.8 m person standing" in noted[0], noted
@@ -515,13 +506,11 @@ def test_the_stop_signal_handler_never_waits_on_the_stop_events_lock(tmp_path, m
             signal.signal(signum, handler)
 
 
-def _daemon_waiting_for_an_absent_rig(tmp_path, *python_args: str):
-    """``python *python_args --config ...`` under a notify socket, on a rig that never appears (it waits in
-    300 s backoffs): ``(socket, process, status file)``."""
-    sock_path = tmp_path / "notify.sock"
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    sock.bind(str(sock_path))
-    sock.settimeout(1.0)
+@contextlib.contextmanager
+def _daemon_waiting_for_an_absent_rig(tmp_path: Path, *python_args: str
+                                      ) -> Iterator[tuple[socket.socket, subprocess.Popen, Path]]:
+    """The daemon (``python *python_args``, its module by default) :func:`_under_a_notify_socket`, on a rig that
+    never appears (it waits in 300 s backoffs): ``(socket, process, status file)``."""
     status = tmp_path / "status.json"
     path = _write(tmp_path, {
         "rig": {"url": f"replay://{tmp_path / 'never'}", "reopen_min_s": 300, "reopen_max_s": 300},
@@ -529,28 +518,21 @@ def _daemon_waiting_for_an_absent_rig(tmp_path, *python_args: str):
         "estimator": {"session": {"model_dir": str(MODELS), "warmup": False}},
         "health": {"status_file": str(status), "status_every_s": 0.2},
     })
-    env = {**os.environ, "NOTIFY_SOCKET": str(sock_path), "JOURNAL_STREAM": "8:1"}
-    proc = subprocess.Popen([sys.executable, *python_args, "--config", str(path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
-    return sock, proc, status
+    with _under_a_notify_socket(tmp_path, path, *python_args, JOURNAL_STREAM="8:1") as (sock, proc):
+        yield sock, proc, status
 
 
 @needs_model
 def test_sigterm_while_waiting_for_the_rig_stops_at_once(tmp_path):
     """The loop waits for an absent rig in short ``stop.wait`` calls (where a signal may land): SIGTERM
     still stops it long before its backoff ends, with the final status written."""
-    sock, proc, status = _daemon_waiting_for_an_absent_rig(tmp_path, "-m", "firmware_host.daemon.cli")
     notes: list[dict[str, str]] = []
-    try:
+    with _daemon_waiting_for_an_absent_rig(tmp_path) as (sock, proc, status):
         _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("waiting") for n in ns),
                      "waiting for the rig")
         time.sleep(0.5)  # a few of its stop.wait calls
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=60)  # not after the 300 s backoff, nor never
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        sock.close()
     assert proc.returncode == 0, err
     assert "SIGTERM received: stopping" in err and "Traceback" not in err
     assert json.loads(status.read_text())["state"] == "stopping"
@@ -560,10 +542,9 @@ def _signalled_until_it_exits(tmp_path, first: signal.Signals | None, repeated: 
     """The daemon, waiting for an absent rig, sent ``first`` once (None: not), then ``repeated`` every millisecond
     until it has exited (60 s at most): how many were repeated, its exit status, its stderr, its status file's
     state."""
-    sock, proc, status = _daemon_waiting_for_an_absent_rig(tmp_path, "-m", "firmware_host.daemon.cli")
     notes: list[dict[str, str]] = []
     sent = 0
-    try:
+    with _daemon_waiting_for_an_absent_rig(tmp_path) as (sock, proc, status):
         _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("waiting") for n in ns),
                      "waiting for the rig")
         if first is not None:
@@ -574,10 +555,6 @@ def _signalled_until_it_exits(tmp_path, first: signal.Signals | None, repeated: 
             sent += 1
             time.sleep(0.001)
         _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        sock.close()
     return sent, proc.returncode, err, json.loads(status.read_text())["state"]
 
 
@@ -823,17 +800,12 @@ sys.exit(cli.main())
 def test_a_sighup_after_the_config_was_read_becomes_a_reload_once_running(tmp_path):
     """The file may have changed after the start read it: the recorded SIGHUP is a reload once the loop
     runs (here at once: the loop waits for an absent rig)."""
-    sock, proc, status = _daemon_waiting_for_an_absent_rig(tmp_path, "-c", _HUP_AFTER_THE_READ)
     notes: list[dict[str, str]] = []
-    try:
+    with _daemon_waiting_for_an_absent_rig(tmp_path, "-c", _HUP_AFTER_THE_READ) as (sock, proc, status):
         _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("waiting") for n in ns),
                      "waiting for the rig")
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        sock.close()
     assert proc.returncode != -signal.SIGHUP, "killed by the SIGHUP"
     assert proc.returncode == 0, err
     assert "SIGHUP received while starting" in err and "config reloaded: nothing changed" in err
