@@ -1108,6 +1108,41 @@ def test_a_run_before_the_camera_s_first_frame_read_is_said_not_counted(webcam, 
     assert stats.camera_gaps["right"] == 0, stats
 
 
+def test_a_close_from_another_thread_as_the_cameras_start_stops_them_and_fails_the_open(webcam):
+    """The close saw a source not yet open and did nothing: open() returned a closed source whose camera threads
+    grabbed on."""
+    closed, grabbing = threading.Event(), threading.Event()
+
+    class FirstGrabHeld(_Webcam):
+        def grab(self) -> bool:
+            if self.target == 1 and not closed.is_set():  # the open waits for its first frame meanwhile
+                grabbing.set()
+                closed.wait(30.0)
+            return super().grab()
+
+    webcam.frames = 400  # delivering on, as a webcam does, until its thread is stopped
+    source = create_rig_source("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=FirstGrabHeld)
+    outcome: list = []
+
+    def open_it() -> None:
+        try:
+            outcome.append(source.open())
+        except Exception as e:  # noqa: BLE001 - handed to the test
+            outcome.append(e)
+
+    opener = threading.Thread(target=open_it, name="test open")
+    opener.start()
+    assert grabbing.wait(30.0)  # the camera threads run: _open made them
+    source.close()
+    closed.set()
+    opener.join(30.0)
+    assert not opener.is_alive()
+    assert len(outcome) == 1 and isinstance(outcome[0], RigInitializationError), outcome
+    assert "OpenCVRigSource closed while it opened" in str(outcome[0])
+    assert source.lingering() == ()  # the threads were stopped and joined (the conftest checks it too)
+    assert all(not cam.grabbing for cam in webcam.made)
+
+
 def test_a_camera_that_delivers_every_frame_logs_nothing(webcam, caplog):
     caplog.set_level(logging.DEBUG, logger="drivers.backends.opencv")
     with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_Flaky) as source:
