@@ -4,6 +4,12 @@ A backend implements :meth:`RigSource._open`, :meth:`RigSource._read_frame` and
 :meth:`RigSource._close` (and, for live sources, :meth:`RigSource._frame_available`).
 The base class owns pairing (:mod:`drivers.pairing`), timeouts, counters,
 iteration and the context manager.
+
+A :meth:`RigSource.close` from another thread while :meth:`RigSource.open` runs cancels that open, whatever the
+backend: once ``_open`` returns, ``open()`` finds the close, releases what ``_open`` made with ``_close`` and raises
+:class:`~drivers.errors.RigInitializationError`. Before, the close skipped ``_close`` for a source not yet open, and
+``open()`` returned a closed source still holding camera threads or a device. Backends whose ``_open`` takes long
+(``sim://``'s pre-render, ``replay://``'s checks) also stop it early.
 """
 from __future__ import annotations
 
@@ -11,12 +17,20 @@ import abc
 import logging
 import math
 import os
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import ClassVar
 
 from drivers.clock import Clock, MonotonicClock
-from drivers.errors import EndOfStream, RigConfigError, RigDisconnectedError, RigOperationError, RigTimeoutError
+from drivers.errors import (
+    EndOfStream,
+    RigConfigError,
+    RigDisconnectedError,
+    RigInitializationError,
+    RigOperationError,
+    RigTimeoutError,
+)
 from drivers.frames import Frame, FramePair
 from drivers.pairing import DropPolicy, FramePairer, PairingConfig, PairingStats
 from drivers.url import RigUrl
@@ -88,6 +102,9 @@ class RigSource(abc.ABC):
         self._pairer: FramePairer | None = None  # built with the rig: it pairs the rig's camera names
         self._is_open = False
         self._closed = False
+        # Held only to change or test _is_open and _closed together in open() and close(), never around a hook:
+        # a close landing as open() finishes is then seen by exactly one of them, which calls _close (once).
+        self._open_state = threading.Lock()
         self._held_error: RigDisconnectedError | EndOfStream | None = None  # see _take_frame
         self._rig_warnings_logged: set[str] | None = None  # see log_rig_warnings_once
         self._rig_file: str | None = None  # see _rig_read_from
@@ -175,17 +192,41 @@ class RigSource(abc.ABC):
         return self._pairer.stats.snapshot()
 
     def open(self) -> "RigSource":
-        if self._closed:
-            raise RigOperationError(f"{type(self).__name__} was closed; open a new source")
-        if not self._is_open:
-            self._open()
-            if self._rig is None:
-                self._close()
-                raise RigOperationError(f"{type(self).__name__}._open() did not set the rig")
-            self._is_open = True
-            if self._rig_built or self._rig_file is not None:
-                self._warn_of_rig()
+        """Start the cameras (``_open``); a second call does nothing.
+
+        Raises:
+            RigOperationError: the source was closed before.
+            RigInitializationError: the backend could not start, or a :meth:`close` from another thread landed
+                while it started: what ``_open`` made is released (``_close``, once) and the source stays closed.
+        """
+        with self._open_state:
+            if self._closed:
+                raise RigOperationError(f"{type(self).__name__} was closed; open a new source")
+            if self._is_open:
+                return self
+        self._open()  # not under the lock: a close() meanwhile must not wait for a pre-render or a device
+        with self._open_state:
+            cancelled = self._closed  # close() saw the source not open and left _close to us
+            if not cancelled and self._rig is not None:
+                self._is_open = True
+        if cancelled:
+            self._release_cancelled_open()
+        if self._rig is None:
+            self._close()
+            raise RigOperationError(f"{type(self).__name__}._open() did not set the rig")
+        if self._rig_built or self._rig_file is not None:
+            self._warn_of_rig()
         return self
+
+    def _release_cancelled_open(self) -> None:
+        """A close from another thread landed while :meth:`_open` ran: release what it made, and refuse the open."""
+        cancelled = RigInitializationError(f"{type(self).__name__} closed while it opened (a close() from another "
+                                           "thread): the open was cancelled")
+        try:
+            self._close()
+        except Exception as e:
+            raise cancelled from e
+        raise cancelled
 
     def _rig_read_from(self, path: str | os.PathLike) -> None:
         """The rig handed in was read from ``path`` with ``load_rig(path, warn=False)``: :meth:`open` logs the
@@ -336,12 +377,18 @@ class RigSource(abc.ABC):
                 return
 
     def close(self) -> None:
-        try:
-            if self._is_open and not self._closed:
-                self._close()
-        finally:  # closed even when closing failed: never opened again (a second device link)
-            self._is_open = False
+        """Release the cameras; a second call does nothing. From another thread while :meth:`open` runs, that open
+        is cancelled: it releases what it made and raises :class:`RigInitializationError`."""
+        with self._open_state:
+            # closed first, even where closing fails: never opened again (a second device link); and an open()
+            # finishing now sees it and releases what it made, this close finding nothing open to release
+            must_close = self._is_open and not self._closed
             self._closed = True
+        try:
+            if must_close:
+                self._close()
+        finally:
+            self._is_open = False
 
     def lingering(self) -> tuple[str, ...]:
         """After :meth:`close`: what of this source is still inside a device call that the close could not

@@ -89,7 +89,9 @@ warning of its own, a flood at 30 fps). The warning comes as the reader takes th
 gap is counted (:mod:`drivers.backends.opencv_lost`), and says whether it is: not where that frame is the camera's
 first the reader took, nor (said at the close) where the close came before the reader took it; a run still going
 when the source is closed is said as the camera's thread ends, "still going at close" (since session 75), not
-counted: no frame follows it. When a video ends, the stream ends
+counted: no frame follows it. The runs whose frame after them the full queue dropped unread (a reader that does not
+read while the camera loses frame after frame) are held as one, "frames A to B in N runs (...)", one warning: they
+were held one each, without bound, and said one warning each. When a video ends, the stream ends
 (:class:`EndOfStream`) once the other camera has delivered past the ended one's last frame: no pair
 can follow, so a longer video is not played out to its end.
 """
@@ -737,6 +739,7 @@ class OpenCVRigSource(RigSource):
                 for k, queued in enumerate(self._queue):
                     if isinstance(queued, Frame) and queued.camera == frame.camera:
                         del self._queue[k]
+                        self._unread_runs.dropped(queued.camera, queued.index)  # its runs held as one: bounded
                         break
                 self._overruns[frame.camera] += 1
             else:

@@ -25,6 +25,10 @@ Recorder options (inner backends never see them, so none may reuse these names):
   :class:`~drivers.errors.RigOperationError` ("closed while a read waited"), as
   every backend's read does that a close lands in, and the frame is not recorded.
 
+A ``close()`` from another thread while ``open()`` runs goes on to the inner source at once, cancelling its open
+(``sim://``'s pre-render stops at its next frame): ``open()`` raises :class:`~drivers.errors.RigInitializationError`
+and no take is started; one that lands after the inner source opened closes it, and the take if one was started.
+
 Recording never stalls the reader (unless ``lossless=1``): frames go into a
 bounded queue drained by writer threads; when it is full the frame is not
 recorded and counted in ``stats.writes_dropped``. Every frame the inner camera delivered is recorded,
@@ -456,6 +460,10 @@ class RecordingRigSource(RigSource):
     def _open(self) -> None:
         self.inner.open()
         try:
+            if self._closing.is_set():  # closed (see close) as the inner source finished opening: no take to start
+                raise RigInitializationError(f"record+ source closed while it opened (a close() from another "
+                                             f"thread): the open was cancelled, no take started in "
+                                             f"{shown(str(self.options.out))}")
             self.pairing = self.inner.pairing  # an inner source may settle its pairing at open (opencv://)
             self._set_rig(self.inner.rig)
             manifest = Manifest(
@@ -509,6 +517,15 @@ class RecordingRigSource(RigSource):
 
     def _pairs_lost(self) -> int:
         return self.inner._pairs_lost()
+
+    def close(self) -> None:
+        """Close; from another thread while :meth:`open` runs, the inner source is closed at once, which cancels
+        its open (the base class closes only a source that is open, so the inner open ran on to its end)."""
+        self._closing.set()
+        try:
+            self.inner.close()
+        finally:
+            super().close()
 
     def _close(self) -> None:
         self._closing.set()

@@ -937,11 +937,15 @@ class _Flaky(_Webcam):
     def __init__(self, target, api) -> None:
         super().__init__(target, api)
         self.left, self.grabs = 200, 0
+        self.failed: list[int] = []  # the grabs of ``failing`` it failed, in order
 
     def grab(self) -> bool:
         self.grabs += 1
         ok = super().grab()
-        return ok and not (self.target == 1 and self.grabs in self.failing)
+        if self.target == 1 and self.grabs in self.failing:
+            self.failed.append(self.grabs)
+            return False
+        return ok
 
     def retrieve(self):
         return (False, None) if self.target == 1 and self.grabs in self.garbled else super().retrieve()
@@ -963,10 +967,10 @@ def _read_until_index(source, index: int) -> list:
     return pairs
 
 
-def _right_camera_after_grabs(webcam, grabs: int) -> _Flaky:
-    """The second camera's stand-in once it has tried ``grabs`` grabs (waited for, 5 s at most)."""
+def _right_camera_after_grabs(webcam, grabs: int, *, wait_s: float = 5.0) -> _Flaky:
+    """The second camera's stand-in once it has tried ``grabs`` grabs (waited for, ``wait_s`` at most)."""
     right = [cam for cam in webcam.made if cam.target == 1][-1]
-    deadline = time.monotonic() + 5.0
+    deadline = time.monotonic() + wait_s
     while right.grabs < grabs and time.monotonic() < deadline:
         time.sleep(0.01)
     assert right.grabs >= grabs, right.grabs
@@ -1106,6 +1110,74 @@ def test_a_run_before_the_camera_s_first_frame_read_is_said_not_counted(webcam, 
         "read: no frame before the gap, so not counted in stats.camera_gaps",
     ]
     assert stats.camera_gaps["right"] == 0, stats
+
+
+class _LongFlaky(_Flaky):
+    """A :class:`_Flaky` that delivers for a minute: a test waits for its grabs on a loaded host."""
+
+    def __init__(self, target, api) -> None:
+        super().__init__(target, api)
+        self.left = 1800
+
+
+def test_runs_whose_next_frames_the_full_queue_dropped_are_held_and_said_as_one(webcam, caplog, monkeypatch):
+    """A reader that did not read while a flaky camera lost frame after frame held every run (nothing bounded them,
+    though the full queue dropped their frames), each said as a warning of its own at the next read: a flood."""
+    caplog.set_level(logging.WARNING, logger="drivers.backends.opencv")
+    monkeypatch.setattr(_Flaky, "failing", set())
+    monkeypatch.setattr(_Flaky, "garbled", set())
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_LongFlaky) as source:
+        _read_until_index(source, 1)  # a frame of the camera read: the gap after it counts
+        right = [cam for cam in webcam.made if cam.target == 1][-1]
+        start = right.grabs + 5
+        # every other grab fails (40 runs of one frame), while nothing is read; the queue holds 4 frames
+        monkeypatch.setattr(_Flaky, "failing", set(range(start, start + 80, 2)))
+        _right_camera_after_grabs(webcam, start + 90, wait_s=60.0)  # the last run's next frame dropped too
+        failed = list(right.failed)
+        source.read(timeout_s=2.0)
+        stats = source.stats
+    assert len(failed) >= 30, failed  # (those a loaded host let pass before the set above are not lost)
+    assert _camera_logs(caplog) == [
+        f"camera 'right' (1) lost frames {failed[0] - 1} to {failed[-1] - 1} in {len(failed)} runs ({len(failed)} "
+        "failed grab(s), tried again; the frames between the runs dropped unread from the full queue): a gap in its "
+        "frame index, counted in stats.camera_gaps",
+    ]
+    assert stats.camera_gaps["right"] >= len(failed), stats
+
+
+def test_a_close_from_another_thread_as_the_cameras_start_stops_them_and_fails_the_open(webcam):
+    """The close saw a source not yet open and did nothing: open() returned a closed source whose camera threads
+    grabbed on."""
+    closed, grabbing = threading.Event(), threading.Event()
+
+    class FirstGrabHeld(_Webcam):
+        def grab(self) -> bool:
+            if self.target == 1 and not closed.is_set():  # the open waits for its first frame meanwhile
+                grabbing.set()
+                closed.wait(30.0)
+            return super().grab()
+
+    webcam.frames = 400  # delivering on, as a webcam does, until its thread is stopped
+    source = create_rig_source("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=FirstGrabHeld)
+    outcome: list = []
+
+    def open_it() -> None:
+        try:
+            outcome.append(source.open())
+        except Exception as e:  # noqa: BLE001 - handed to the test
+            outcome.append(e)
+
+    opener = threading.Thread(target=open_it, name="test open")
+    opener.start()
+    assert grabbing.wait(30.0)  # the camera threads run: _open made them
+    source.close()
+    closed.set()
+    opener.join(30.0)
+    assert not opener.is_alive()
+    assert len(outcome) == 1 and isinstance(outcome[0], RigInitializationError), outcome
+    assert "OpenCVRigSource closed while it opened" in str(outcome[0])
+    assert source.lingering() == ()  # the threads were stopped and joined (the conftest checks it too)
+    assert all(not cam.grabbing for cam in webcam.made)
 
 
 def test_a_camera_that_delivers_every_frame_logs_nothing(webcam, caplog):

@@ -1,0 +1,114 @@
+"""A close() from another thread that lands while open() runs, after the backend's _open has made what it holds:
+the close saw a source not yet open and skipped _close, and open() returned a closed source still holding it (camera
+threads, a device, a loop). Now open() releases it (_close, once) and raises. The record+ wrapper passes such a
+close on to its inner source, whose open it cancels the same way."""
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from drivers import RigInitializationError, RigOperationError
+from drivers.backends.record import RecordingRigSource, RecordOptions
+from drivers.base import RigSource
+from drivers.sim import RigPlacement
+
+WAIT_S = 30.0  # generous: only a hang reaches it
+
+
+class _HeldOpen(RigSource):
+    """``_open`` makes its "device", then waits for ``go_on`` before returning: a close lands in between."""
+
+    scheme = "held"
+
+    def __init__(self) -> None:
+        super().__init__(RigPlacement(width=16, height=16).build("held"))
+        self.in_open = threading.Event()
+        self.go_on = threading.Event()
+        self.device_made = False
+        self.closes = 0
+
+    @classmethod
+    def from_url(cls, url, **kwargs):  # pragma: no cover - built directly
+        raise NotImplementedError
+
+    def _open(self) -> None:
+        self.device_made = True
+        self.in_open.set()
+        assert self.go_on.wait(WAIT_S)
+
+    def _read_frame(self, timeout_s):  # pragma: no cover - never read
+        return None
+
+    def _close(self) -> None:
+        self.closes += 1
+
+
+class _ReleasedByItsClose(_HeldOpen):
+    """Its ``_open`` also goes on once its own close() returned (as sim's pre-render stops at a close): a close a
+    wrapper passes on reaches it."""
+
+    def close(self) -> None:
+        super().close()
+        self.go_on.set()
+
+
+def _open_in_thread(source: RigSource) -> tuple[threading.Thread, list]:
+    """``source.open()`` on a thread of its own; the list gets what it returned or raised."""
+    outcome: list = []
+
+    def run() -> None:
+        try:
+            outcome.append(source.open())
+        except Exception as e:  # noqa: BLE001 - handed to the test
+            outcome.append(e)
+
+    thread = threading.Thread(target=run, name="test open")
+    thread.start()
+    return thread, outcome
+
+
+def test_a_close_landing_as_open_finishes_releases_what_open_made_and_open_raises():
+    source = _HeldOpen()
+    thread, outcome = _open_in_thread(source)
+    assert source.in_open.wait(WAIT_S)
+    source.close()  # returns at once: the source is not open yet
+    source.go_on.set()  # _open returns after the close
+    thread.join(WAIT_S)
+    assert not thread.is_alive()
+    assert source.device_made and source.closes == 1  # released by open(), once
+    assert len(outcome) == 1 and isinstance(outcome[0], RigInitializationError), outcome
+    assert str(outcome[0]) == "_HeldOpen closed while it opened (a close() from another thread): the open was cancelled"
+    assert not source.is_open
+    with pytest.raises(RigOperationError, match="_HeldOpen was closed; open a new source"):
+        source.open()
+    source.close()  # nothing more to release
+    assert source.closes == 1
+
+
+def test_a_close_after_open_finished_releases_once():
+    source = _HeldOpen()
+    source.go_on.set()
+    assert source.open() is source and source.is_open
+    source.close()
+    source.close()
+    assert source.closes == 1 and not source.is_open
+
+
+def test_a_record_wrapper_passes_a_close_during_open_to_its_inner_source(tmp_path):
+    inner = _ReleasedByItsClose()
+    out = tmp_path / "take"
+    source = RecordingRigSource(inner, RecordOptions(out=out))
+    thread, outcome = _open_in_thread(source)
+    assert inner.in_open.wait(WAIT_S)
+    closer = threading.Thread(target=source.close, name="test close")
+    closer.start()
+    closer.join(WAIT_S)
+    inner.go_on.set()  # (already, where the close reached the inner source)
+    thread.join(WAIT_S)
+    assert not thread.is_alive() and not closer.is_alive()
+    assert inner.closes == 1  # what the inner open made is released
+    assert len(outcome) == 1 and isinstance(outcome[0], RigInitializationError), outcome
+    assert "_ReleasedByItsClose closed while it opened" in str(outcome[0])
+    assert not out.exists()  # no take started
+    assert not source.is_open and not inner.is_open
