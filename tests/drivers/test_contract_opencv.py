@@ -66,7 +66,7 @@ def _write_take(folder: Path, sim_cache, frames: int, fps: float) -> tuple[Path,
 @pytest.fixture(scope="module")
 def takes(tmp_path_factory, sim_cache):
     root = tmp_path_factory.mktemp("opencv-contract")
-    return _write_take(root / "take", sim_cache, 40, 30.0), _write_take(root / "slow", sim_cache, 3, 1.0)
+    return _write_take(root / "take", sim_cache, 40, 30.0), _write_take(root / "slow", sim_cache, 3, 0.1)
 
 
 def _url(take, extra: str = "") -> str:
@@ -845,16 +845,28 @@ def test_close_wakes_a_blocked_read(takes, webcam):
     webcam.frames, webcam.hang = 2, threading.Event()
     source = open_rig("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=webcam)
     source.read(timeout_s=5.0)
-    errors = []
-    reader = threading.Thread(
-        target=lambda: errors.append(_raises(lambda: [source.read(timeout_s=10.0) for _ in range(3)])))
+    # closed once the thread's read waits for a frame that is not coming: a thread whose read began after the close
+    # was done (a 0.2 s sleep and close()'s 2 s wait, outrun on a loaded host) was told the source "was closed"
+    waiting, read_frame = threading.Event(), source._read_frame
+
+    def read_frame_noting_the_wait(timeout_s):
+        if not source._queue and all(cam.grabbing and cam.left <= 0 for cam in webcam.made):  # both grabs hung
+            waiting.set()
+        return read_frame(timeout_s)
+
+    source._read_frame = read_frame_noting_the_wait
+    ended = []  # (what the reads raised, when)
+    reader = threading.Thread(target=lambda: ended.append(
+        (_raises(lambda: [source.read(timeout_s=10.0) for _ in range(3)]), time.monotonic())))
     reader.start()
-    time.sleep(0.2)
+    assert waiting.wait(60.0), "the thread's read never came to wait"
     t0 = time.monotonic()
-    source.close()
-    reader.join(timeout=5.0)
-    assert not reader.is_alive() and time.monotonic() - t0 < 5.0
-    assert type(errors[0]) is RigOperationError and "source closed" in str(errors[0])
+    source.close()  # wakes the read, then waits up to 2 s for the hung grabs
+    reader.join(timeout=60.0)
+    assert not reader.is_alive() and len(ended) == 1
+    error, at = ended[0]
+    assert at - t0 < 5.0  # woken by the close, not at the read's 10 s timeout
+    assert type(error) is RigOperationError and "source closed" in str(error)
 
 
 def _raises(call):

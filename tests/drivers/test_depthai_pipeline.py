@@ -560,7 +560,7 @@ def test_a_read_waiting_when_another_thread_closes_says_the_source_closed_not_th
     reader.start()
     time.sleep(0.3)
     source.close()
-    reader.join(timeout=8.0)
+    reader.join(timeout=60.0)  # an unwoken read ends at its 5 s timeout, a RigTimeoutError
     assert not reader.is_alive() and len(errors) == 1
     # the read in flight says so; one the loop began just after the close (a loaded host) says it was closed
     said = str(errors[0])
