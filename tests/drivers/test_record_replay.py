@@ -330,11 +330,11 @@ def test_a_slow_disk_never_stalls_the_reader(tmp_path, sim_cache, monkeypatch):
            "&write_queue=2&writers=1")
     with open_rig(url) as source:  # the real clock: 100 pairs per second
         t0 = time.monotonic()
-        pairs = [source.read(timeout_s=1.0) for _ in range(40)]
+        pairs = [source.read(timeout_s=5.0) for _ in range(40)]
         read_time = time.monotonic() - t0
     stats = source.stats
     assert [p.sequence for p in pairs] == list(range(40))  # the reader kept up with the camera
-    assert read_time < 0.39 + 1.5  # the camera's 0.39 s plus room for a busy machine, far below 4 s
+    assert read_time < 0.39 + 2.5  # the camera's 0.39 s plus room for a loaded 2-core host, below a stall's 4 s
     assert stats.writes_dropped > 20
     assert stats.frames_written + stats.writes_dropped == sum(stats.frames_in.values())
     with open_rig(f"replay://{tmp_path / 'slow'}?speed=free&policy=all") as source:
