@@ -195,11 +195,22 @@ def closed_while_reading(source, read_timeout_s: float) -> tuple[object, float]:
         ended.append((got, time.monotonic()))
 
     thread = threading.Thread(target=reader, daemon=True)
+    # the close waits for the read to be under way: after a fixed sleep, a loaded host's thread could begin its
+    # read once the close was done, and be told the source "was closed", not that a read waiting was ended
+    reading, read_frame = threading.Event(), source._read_frame
+
+    def read_frame_noting_the_read(timeout_s):
+        if threading.current_thread() is thread:
+            reading.set()
+        return read_frame(timeout_s)
+
+    source._read_frame = read_frame_noting_the_read
     thread.start()
-    time.sleep(0.3)  # the reader waits for the next pair, seconds away
+    assert reading.wait(60.0), "the thread's read never began"
+    time.sleep(0.3)  # by now, most likely, waiting for the next pair, seconds away; a close must end it either way
     t0 = time.monotonic()
     source.close()
-    thread.join(30.0)
+    thread.join(60.0)
     assert len(ended) == 1, "the read did not return"
     got, at = ended[0]
     return got, at - t0
