@@ -39,8 +39,8 @@ class RigSourceContract:
     stall_timeout_s = 0.25
     #: real clock (True) or ManualClock (False)
     realtime = False
-    #: wall-clock slack of the timing checks on the real clock: a loaded host delays a thread's wake-up by more
-    #: than the quarter second this was (a device that cannot stall 10 s, at 1 fps, sets a smaller one)
+    #: wall-clock slack of the timing checks on the real clock: a loaded host can delay a thread's wake-up past
+    #: the quarter second this was (a device that cannot stall 10 s, at 1 fps, sets a smaller one)
     slack_s = 2.0
     #: exact ``frames_in``, ``unpaired``, ``camera_gaps``, ``pairs_dropped`` after reading ``n_pairs``
     #: (deterministic backends only; None: the generic bounds alone)
