@@ -20,7 +20,9 @@ def sim_cache(tmp_path_factory):
 def no_leaked_backend_threads():
     """python-can's leak check, for threads: a closed source leaves nothing running."""
     yield
-    deadline = time.monotonic() + 2.0
+    # generous: a thread a close (or a test's teardown) let go needs the CPU to end, seconds on a loaded host;
+    # a leaked one never ends
+    deadline = time.monotonic() + 30.0
     while True:
         leaked = [t.name for t in threading.enumerate() if t.name.startswith(_OUR_THREADS)]
         if not leaked or time.monotonic() > deadline:

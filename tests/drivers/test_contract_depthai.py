@@ -25,7 +25,9 @@ class TestDepthaiHostPipelineContract(RigSourceContract):
 
     @classmethod
     def make_stalling_source(cls):
-        return create_rig_source(f"{HOST_URL}&fps=1", link_factory=HostPipelineLink)
+        # the host pipeline sends a group every 10 s (a device goes no slower than fps=1): a read that waited
+        # for the next one is seconds past the contract's slack
+        return create_rig_source(f"{HOST_URL}&fps=1", link_factory=lambda: HostPipelineLink(fps=0.1))
 
 
 @pytest.mark.hardware

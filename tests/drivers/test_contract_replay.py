@@ -8,15 +8,15 @@ from tests.drivers.contract import RigSourceContract
 def record(out, sim_options: str, cache, pairs: int) -> None:
     with open_rig(f"record+sim://?{sim_options}&cache={cache}&out={out}", clock=ManualClock()) as source:
         for _ in range(pairs):
-            source.read(timeout_s=5.0)
+            source.read(timeout_s=30.0)  # a ManualClock's seconds: the slow take's pairs are 10 s apart
 
 
 @pytest.fixture(scope="module")
 def takes(tmp_path_factory, sim_cache):
-    """A 40-pair take with jitter, offset and drops, and a 0.5 fps take (pairs 2 s apart)."""
+    """A 40-pair take with jitter, offset and drops, and a 0.1 fps take (pairs 10 s apart: the stall)."""
     root = tmp_path_factory.mktemp("replay-contract")
     record(root / "take", "width=160&height=120&jitter_ms=1&offset_ms=2&drop=0.05&seed=2", sim_cache, 40)
-    record(root / "slow", "width=160&height=120&fps=0.5", sim_cache, 3)
+    record(root / "slow", "width=160&height=120&fps=0.1", sim_cache, 3)
     return root / "take", root / "slow"
 
 

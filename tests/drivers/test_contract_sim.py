@@ -46,4 +46,5 @@ class TestSimContractRealClock(RigSourceContract):
 
     @classmethod
     def make_stalling_source(cls):
-        return create_rig_source(f"sim://?width=160&height=120&fps=0.5&cache={cls.cache}")
+        # a pair every 10 s: a read that waited for the next one is seconds past the contract's slack
+        return create_rig_source(f"sim://?width=160&height=120&fps=0.1&cache={cls.cache}")

@@ -233,7 +233,7 @@ def test_unplug_while_reading_raises_rig_disconnected():
         link.unplug()
         with pytest.raises(RigDisconnectedError):
             for _ in range(10):  # the queue may still hold a group or two
-                source.read(timeout_s=1.0)
+                source.read(timeout_s=10.0)  # the closed queue ends it: seconds for a loaded host to get there
 
 
 def test_a_lost_device_is_named_with_its_id_and_the_url():
@@ -243,7 +243,7 @@ def test_a_lost_device_is_named_with_its_id_and_the_url():
         link.unplug()
         with pytest.raises(RigDisconnectedError) as info:
             for _ in range(10):  # the queue may still hold a group or two
-                source.read(timeout_s=1.0)
+                source.read(timeout_s=10.0)
     assert "host-pipeline" in str(info.value) and URL in str(info.value)
 
 
@@ -333,8 +333,14 @@ def test_recording_a_depthai_source_keeps_its_lost_groups_as_dropped_pairs(tmp_p
         assert source.stats.pairs_dropped == 2 and source.stats.camera_gaps == {"left": 0, "right": 0}
 
 
+def _every_ten_seconds() -> HostPipelineLink:
+    """A host pipeline whose groups are 10 s apart: a short read after the first one times out, however late a
+    loaded host returned that first one (at fps=1 the next group came within a 0.2 s read)."""
+    return HostPipelineLink(fps=0.1)
+
+
 def test_no_group_in_time_is_a_timeout():
-    with open_rig(f"{URL}&fps=1", link_factory=HostPipelineLink) as source:
+    with open_rig(f"{URL}&fps=1", link_factory=_every_ten_seconds) as source:
         source.read(timeout_s=3.0)
         with pytest.raises(RigTimeoutError):
             source.read(timeout_s=0.2)
@@ -467,7 +473,7 @@ def test_timeouts_run_on_the_injected_clock():
     from drivers import ManualClock
 
     clock = ManualClock(7_000_000_000)
-    with open_rig(f"{URL}&fps=1", link_factory=HostPipelineLink, clock=clock) as source:
+    with open_rig(f"{URL}&fps=1", link_factory=_every_ten_seconds, clock=clock) as source:
         source.read(timeout_s=3.0)
         t0 = clock.now_ns()
         with pytest.raises(RigTimeoutError):
@@ -560,7 +566,7 @@ def test_a_read_waiting_when_another_thread_closes_says_the_source_closed_not_th
     reader.start()
     time.sleep(0.3)
     source.close()
-    reader.join(timeout=8.0)
+    reader.join(timeout=60.0)  # an unwoken read ends at its 5 s timeout, a RigTimeoutError
     assert not reader.is_alive() and len(errors) == 1
     # the read in flight says so; one the loop began just after the close (a loaded host) says it was closed
     said = str(errors[0])

@@ -217,14 +217,23 @@ def test_the_drain_is_bounded_so_a_flood_cannot_trap_read():
 
 # ----------------------------------------------------------------- depthai://
 def _read_after_a_stall(policy: str):
-    """One pair read 0.4 s (12 groups at 30 fps) after the previous one; the newest index sent before it."""
+    """One pair read 12 groups (0.4 s at 30 fps) after the previous one; the newest index sent before it."""
     link = HostPipelineLink()
     with open_rig(f"{DEPTHAI_URL}&queue=4&policy={policy}", link_factory=lambda: link) as source:
-        source.read(timeout_s=3.0)
-        time.sleep(0.4)  # the host queue now holds its 4 newest groups
+        read = source.read(timeout_s=3.0).frames[0].index
+        # waited for, not slept: a loaded host's camera threads had sent fewer groups than 0.4 s holds
+        deadline = time.monotonic() + 60.0
+        while not (_sent_since(link, read) >= 12 and link.queue.isFull()) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert _sent_since(link, read) >= 12 and link.queue.isFull()  # the host queue holds its 4 newest groups
         newest_sent = max(k for k, _ in list(link.cameras[0].sent))
         pair = source.read(timeout_s=3.0)
         return pair, newest_sent, source.stats
+
+
+def _sent_since(link: HostPipelineLink, index: int) -> int:
+    """Frames both host cameras have sent after frame ``index``."""
+    return min(sum(k > index for k, _ in list(camera.sent)) for camera in link.cameras)
 
 
 def test_depthai_slow_reader_gets_the_newest_group_not_the_oldest_queued():

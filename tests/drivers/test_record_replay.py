@@ -330,11 +330,11 @@ def test_a_slow_disk_never_stalls_the_reader(tmp_path, sim_cache, monkeypatch):
            "&write_queue=2&writers=1")
     with open_rig(url) as source:  # the real clock: 100 pairs per second
         t0 = time.monotonic()
-        pairs = [source.read(timeout_s=1.0) for _ in range(40)]
+        pairs = [source.read(timeout_s=5.0) for _ in range(40)]
         read_time = time.monotonic() - t0
     stats = source.stats
     assert [p.sequence for p in pairs] == list(range(40))  # the reader kept up with the camera
-    assert read_time < 0.39 + 1.5  # the camera's 0.39 s plus room for a busy machine, far below 4 s
+    assert read_time < 0.39 + 2.5  # the camera's 0.39 s plus room for a loaded 2-core host, below a stall's 4 s
     assert stats.writes_dropped > 20
     assert stats.frames_written + stats.writes_dropped == sum(stats.frames_in.values())
     with open_rig(f"replay://{tmp_path / 'slow'}?speed=free&policy=all") as source:
@@ -351,9 +351,11 @@ def test_a_failing_writer_is_reported_once_then_frames_pass_through(tmp_path, si
     out = tmp_path / "full"
     with open_rig(f"record+sim://?width=32&height=24&cache={sim_cache}&out={out}", clock=ManualClock()) as source:
         source.read(timeout_s=1.0)
-        deadline = time.monotonic() + 2
+        # the writer thread meets the error in its own time (a loaded host: seconds); the next read raises it
+        deadline = time.monotonic() + 60
         while source._writer.error is None and time.monotonic() < deadline:
             time.sleep(0.01)
+        assert source._writer.error is not None, "the writer never tried the frame"
         with pytest.raises(RecordingError, match="No space left") as info:
             source.read(timeout_s=1.0)
         assert isinstance(info.value, RigOperationError)  # readers catching the base go on as before
@@ -1044,7 +1046,7 @@ def test_the_writers_fsync_as_they_go_so_the_backlog_stays_bounded(take, tmp_pat
         for i in range(n):
             cam = manifest.rig.cameras[i % 2]
             writer.submit(Frame(cam.name, np.zeros((cam.height, cam.width, 3), np.uint8), 1000 * i, i // 2))
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + 60  # 60 lossless encodes and fsyncs: seconds on a loaded host and disk
         while writer.frames_written < n and writer.error is None and time.monotonic() < deadline:
             time.sleep(0.01)
         assert writer.frames_written == n and writer.error is None
@@ -1074,7 +1076,7 @@ def test_of_two_recorders_started_on_one_empty_folder_only_one_records(take, tmp
     def iterdir(self):
         found = list(real_iterdir(self))
         if self == out:
-            both_looked.wait(timeout=5)
+            both_looked.wait(timeout=60)  # the other thread may start seconds later on a loaded host
         return iter(found)
 
     monkeypatch.setattr(Path, "iterdir", iterdir)
@@ -1095,7 +1097,8 @@ def test_of_two_recorders_started_on_one_empty_folder_only_one_records(take, tmp
     for thread in threads:
         thread.start()
     for thread in threads:
-        thread.join(10)
+        thread.join(120)
+        assert not thread.is_alive(), "a recorder's start did not return"
     errors = [e for e in outcomes.values() if e is not None]
     assert len(outcomes) == 2 and len(errors) == 1
     assert "another recorder" in str(errors[0]) and str(out) in str(errors[0])
