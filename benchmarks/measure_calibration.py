@@ -22,6 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from calibration.board import BoardSpec  # noqa: E402
 from calibration.detect import BoardDetector  # noqa: E402
 from calibration.render import calibration_views, example_rig  # noqa: E402
@@ -47,8 +48,8 @@ def _errors(solved, truth) -> dict[str, float]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0,1,2,3,4")
-    ap.add_argument("--count", type=int, default=15)
-    ap.add_argument("--edge-count", type=int, default=6)
+    ap.add_argument("--count", type=positive_count, default=15)
+    ap.add_argument("--edge-count", type=positive_count, default=6)
     args = ap.parse_args()
     truth = example_rig()
     board = BoardSpec()

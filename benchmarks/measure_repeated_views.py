@@ -27,6 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from calibration.board import BoardSpec  # noqa: E402
 from calibration.detect import BoardDetector, BoardView  # noqa: E402
 from calibration.render import board_poses_both_see, calibration_views, example_rig, render_board  # noqa: E402
@@ -81,9 +82,10 @@ def _nearest_other_px(views: dict[str, BoardView]) -> list[float]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", default="0,1,2")
-    ap.add_argument("--count", type=int, default=15)
-    ap.add_argument("--edge-count", type=int, default=6)
-    ap.add_argument("--same-pose", type=int, default=6, help="poses per seed rendered twice, re-saved and moved")
+    ap.add_argument("--count", type=positive_count, default=15)
+    ap.add_argument("--edge-count", type=positive_count, default=6)
+    ap.add_argument("--same-pose", type=non_negative_count, default=6,
+                    help="poses per seed rendered twice, re-saved and moved")
     args = ap.parse_args(argv)
     rig, board = example_rig(), BoardSpec()
     detector = BoardDetector(board)
