@@ -308,7 +308,7 @@ def print_rig_files(args, session, cfg) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", type=model_folder_option, default="models")
-    ap.add_argument("--precision", default="int8")
+    ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
     ap.add_argument("--sequences", type=positive_count, default=4)
     ap.add_argument("--frames", type=positive_count, default=8)
     ap.add_argument("--distances", default="3", help="the subject's distance ahead, metres, comma-separated (1.5-8); "

@@ -167,7 +167,7 @@ def rigs_to_measure(pitches: list[float], heights: list[float] | None = None, ne
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", type=model_folder_option, default="models")
-    ap.add_argument("--precision", default="int8")
+    ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
     ap.add_argument("--sequences", type=positive_count, default=6)
     ap.add_argument("--frames", type=positive_count, default=10)
     ap.add_argument("--pitches", default="17,10", help="degrees below the horizontal, comma-separated (\"\": the rig "

@@ -112,7 +112,7 @@ def rig_named(name: str) -> Rig:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", type=model_folder_option, default="models")
-    ap.add_argument("--precision", default="int8")
+    ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
     ap.add_argument("--sequences", type=positive_count, default=6)
     ap.add_argument("--frames", type=positive_count, default=10)
     ap.add_argument("--rigs", default="synth,docs/examples/rig.json", help="comma-separated: synth (ghcal synth's "

@@ -118,6 +118,14 @@ def write_take(take: Path, frames: int, width: int, height: int, take_format: st
     write_manifest(take, Manifest(rig, image_format, "benchmarks/time_replay_open.py", "", complete=True))
 
 
+def checkout_folder(text: str) -> Path:
+    """An argparse ``type=`` for ``--baseline``: a checkout of this project. Another folder was a FileNotFoundError
+    traceback from importing its code (here: once the take was written)."""
+    if not (Path(text) / "ghnerf_runtime").is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is not a checkout of this project (no ghnerf_runtime/ in it)")
+    return Path(text)
+
+
 def timed_open(code: Path, take: Path) -> float:
     """Seconds ``code``'s ReplayRigSource took to open ``take``, in a fresh process."""
     env = {**os.environ, "PYTHONPATH": str(code)}
@@ -151,7 +159,8 @@ def main() -> None:
     parser.add_argument("--take", type=Path,
                         help="where the take is kept (default /tmp/ghnerf-replay-open-take, -<format> appended "
                              "for a format other than png)")
-    parser.add_argument("--baseline", type=Path, help="another checkout whose open is timed in turn with this one")
+    parser.add_argument("--baseline", type=checkout_folder,
+                        help="another checkout whose open is timed in turn with this one")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
     default = "/tmp/ghnerf-replay-open-take" + ("" if args.format == "png" else f"-{args.format}")

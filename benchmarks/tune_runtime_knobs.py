@@ -135,7 +135,7 @@ def score(session, cfg: EstimatorConfig, sequences, every: int = 1) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", type=model_folder_option, default="models")
-    ap.add_argument("--precision", default="int8")
+    ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
     ap.add_argument("--sequences", type=positive_count, default=30)
     ap.add_argument("--frames", type=positive_count, default=30)
     ap.add_argument("--only", help="comma list of variant names (default: all)")

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["non_negative_count", "positive_count"]
+__all__ = ["non_negative_count", "positive_count", "seed_list"]
 
 
 def _whole_number(text: str, least: int) -> int:
@@ -27,3 +27,12 @@ def positive_count(text: str) -> int:
 def non_negative_count(text: str) -> int:
     """An argparse ``type=`` for a count where 0 means none (warm-up pairs, ``--limit 0``: all)."""
     return _whole_number(text, 0)
+
+
+def seed_list(text: str) -> list[int]:
+    """An argparse ``type=`` for ``--seeds 0,1,2``: one seed at least, each a whole number >= 0 (``--seeds x`` was
+    int()'s "invalid literal" traceback)."""
+    parts = [part.strip() for part in text.split(",")]
+    if not all(part.isdigit() for part in parts):
+        raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 0, got {text!r}")
+    return [int(part) for part in parts]

@@ -79,7 +79,7 @@ REQUIRED = {
     "tune_proxy_matte": ("--data", "d", "--model", "m", "--joints", "j"),
     "measure_prior_outliers": ("--data", "d"),
     "measure_prior_peak_shape": ("--data", "d"),
-    "time_image_read": ("--baseline", "b"),
+    "time_image_read": ("--baseline", str(BENCH.parent)),
 }
 CASES = [(script, option, "0") for script, (positive, _) in COUNTS.items() for option in positive]
 CASES += [(script, option, "-1") for script, (_, non_negative) in COUNTS.items() for option in non_negative]
