@@ -37,6 +37,8 @@ import onnxruntime as ort
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.bench_runtime_common import SessionTap  # noqa: E402
 from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
@@ -184,11 +186,12 @@ def print_precisions(ms: dict[Variant, list[float]], folder: Path) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--sequences", type=int, default=3)
-    ap.add_argument("--pairs", type=int, default=6, help="pairs per sequence whose inputs are recorded")
-    ap.add_argument("--rounds", type=int, default=15)
-    ap.add_argument("--warmup", type=int, default=2, help="untimed rounds (every session, every call) before them")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--sequences", type=positive_count, default=3)
+    ap.add_argument("--pairs", type=positive_count, default=6, help="pairs per sequence whose inputs are recorded")
+    ap.add_argument("--rounds", type=positive_count, default=15)
+    ap.add_argument("--warmup", type=non_negative_count, default=2,
+                    help="untimed rounds (every session, every call) before them")
     ap.add_argument("--graphs", default="human,encoder,volume,render_rgb,render_heat")
     ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     args = ap.parse_args(argv)

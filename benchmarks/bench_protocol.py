@@ -21,6 +21,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
 
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from firmware_host.protocol import JointFrame, StreamDecoder, encode, joints_message  # noqa: E402
 from firmware_host.sinks.vmc_osc import build_bundle  # noqa: E402
 from firmware_host.sinks.vmc_pose import solve_pose  # noqa: E402
@@ -46,8 +47,8 @@ def _time_per_item(fn, items: list, repeats: int) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--frames", type=int, default=20000)
-    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--frames", type=positive_count, default=20000)
+    ap.add_argument("--repeats", type=positive_count, default=7)
     args = ap.parse_args()
     frames = _frames(args.frames)
     encode_s = _time_per_item(lambda f: encode(joints_message(f, f.capture_time_us + 40_000)), frames, args.repeats)

@@ -25,6 +25,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from ghnerf_runtime.cli.bench import STAGE_GROUPS  # noqa: E402
 from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
@@ -144,12 +146,12 @@ def end_to_end(session: ModelSession, sequences, warmup: int) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
     ap.add_argument("--precision", default="auto", choices=("auto", "fp32", "int8"))
-    ap.add_argument("--repeats", type=int, default=40)
-    ap.add_argument("--sequences", type=int, default=4)
-    ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--warmup", type=int, default=5)
+    ap.add_argument("--repeats", type=positive_count, default=40)
+    ap.add_argument("--sequences", type=positive_count, default=4)
+    ap.add_argument("--frames", type=positive_count, default=30)
+    ap.add_argument("--warmup", type=non_negative_count, default=5)
     ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     ap.add_argument("--skip-graphs", action="store_true")
     ap.add_argument("--skip-end-to-end", action="store_true")

@@ -39,6 +39,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from benchmarks.bench_runtime_common import truth_view  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     BEST_METHOD,
@@ -115,11 +117,11 @@ def psnr_summary(values: list[float | None]) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
     ap.add_argument("--precision", default="auto", choices=("auto", "fp32", "int8"))
     ap.add_argument("--data", default="data/edge128")
     ap.add_argument("--split", default="val")
-    ap.add_argument("--limit", type=int, default=32)
+    ap.add_argument("--limit", type=positive_count, default=32)
     ap.add_argument("--novel", action="store_true", help="also score the colour view at the first source camera")
     args = ap.parse_args(argv)
 

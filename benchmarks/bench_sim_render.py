@@ -17,6 +17,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script without installing
 
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from drivers.sim import RigPlacement, SceneConfig, SimScene  # noqa: E402
 from ghnerf_runtime.geometry import Camera, intrinsics_from_fov, look_at  # noqa: E402
 
@@ -40,7 +41,7 @@ def _view(size: int, k: int) -> Camera:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=60)
+    parser.add_argument("--repeats", type=positive_count, default=60)
     parser.add_argument("--motion", default="walk")
     parser.add_argument("--no-truth", action="store_true", help="render images only")
     args = parser.parse_args()

@@ -20,13 +20,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.seconds import positive_seconds  # noqa: E402
 from drivers import open_rig  # noqa: E402
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--options", default="fps=30&width=640&height=480", help="sim:// query options")
-    parser.add_argument("--seconds", type=float, default=10.0, help="how long to read pairs")
+    parser.add_argument("--seconds", type=positive_seconds, default=10.0, help="how long to read pairs")
     args = parser.parse_args()
 
     with tempfile.TemporaryDirectory(prefix="bench-sim-cache-") as cache:

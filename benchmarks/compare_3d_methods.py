@@ -32,6 +32,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from benchmarks.bench_runtime_common import OracleSession, contract_of, edge128_contract  # noqa: E402
 from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
 from ghnerf_runtime.cli.simdata import (SEQUENCE_CACHE_HELP, load_sequences, percentiles,  # noqa: E402
@@ -74,11 +76,11 @@ def run_method(session, sequences, joints3d: Joints3DConfig, oracle: OracleSessi
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
     ap.add_argument("--oracle", action="store_true", help="perfect model outputs from the truth (no model needed)")
     ap.add_argument("--precision", default="auto", choices=("auto", "fp32", "int8"))
-    ap.add_argument("--sequences", type=int, default=10)
-    ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--sequences", type=positive_count, default=10)
+    ap.add_argument("--frames", type=positive_count, default=30)
     ap.add_argument("--methods", default=",".join(METHODS), help=f"comma list of {list(METHODS)}")
     ap.add_argument("--reprojection-gates", default="",
                     help="comma list of joints3d.max_reprojection_px values: one more `triangulate` row each "

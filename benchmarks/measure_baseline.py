@@ -41,6 +41,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE, depth_per_disparity_px  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig, TrackingConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -305,10 +307,10 @@ def print_rig_files(args, session, cfg) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--precision", default="int8")
-    ap.add_argument("--sequences", type=int, default=4)
-    ap.add_argument("--frames", type=int, default=8)
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
+    ap.add_argument("--sequences", type=positive_count, default=4)
+    ap.add_argument("--frames", type=positive_count, default=8)
     ap.add_argument("--distances", default="3", help="the subject's distance ahead, metres, comma-separated (1.5-8); "
                                                      "the first is the --lifts rig's")
     ap.add_argument("--hfovs", default="80", help="the lens's horizontal field of view, degrees, comma-separated "

@@ -52,6 +52,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from ghnerf_runtime.config import NovelViewConfig  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
@@ -124,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", required=True)
     ap.add_argument("--split", default="val")
-    ap.add_argument("--limit", type=int, default=256)
+    ap.add_argument("--limit", type=non_negative_count, default=256)
     ap.add_argument("--model", required=True, help="the GHNeRF torch checkpoint whose picture and masks are used")
     ap.add_argument("--joints", required=True, help="the device's joints (python -m training.device_joints)")
     ap.add_argument("--scale", type=lambda s: None if s == "fit" else float(s), default=1.0,
@@ -133,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--painter", default=None, metavar="ONNX",
                     help="add the runtime painter's columns (ghnerf_runtime.novel_painter): painter, painter+blend")
     ap.add_argument("--matte", action="store_true", help="add the fog matte's columns and the whole-view PSNRs")
-    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--threads", type=positive_count, default=1)
     args = ap.parse_args(argv)
 
     import torch

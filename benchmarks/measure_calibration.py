@@ -22,6 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import positive_count, seed_list  # noqa: E402
 from calibration.board import BoardSpec  # noqa: E402
 from calibration.detect import BoardDetector  # noqa: E402
 from calibration.render import calibration_views, example_rig  # noqa: E402
@@ -46,9 +47,9 @@ def _errors(solved, truth) -> dict[str, float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="0,1,2,3,4")
-    ap.add_argument("--count", type=int, default=15)
-    ap.add_argument("--edge-count", type=int, default=6)
+    ap.add_argument("--seeds", type=seed_list, default="0,1,2,3,4")
+    ap.add_argument("--count", type=positive_count, default=15)
+    ap.add_argument("--edge-count", type=positive_count, default=6)
     args = ap.parse_args()
     truth = example_rig()
     board = BoardSpec()
@@ -57,7 +58,7 @@ def main() -> None:
     true_pitch = math.degrees(math.asin(float(left.R[2] @ np.array([0.0, 1.0, 0.0]))))
     rows = {"floor view": [], "measured": []}
     print("seed  levelling   focal %  pp px  centre mm  rot deg  baseline mm  rms px (left/right/pair)")
-    for seed in (int(s) for s in args.seeds.split(",")):
+    for seed in args.seeds:
         t0 = time.monotonic()
         images = calibration_views(truth, board, count=args.count, edge_count=args.edge_count, seed=seed)
         views = {cam: {n: v for n, im in per.items() if (v := detector.detect(im)) is not None}

@@ -46,6 +46,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from ghnerf_runtime.body25 import FEET, FLOOR_JOINTS  # noqa: E402
 from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences  # noqa: E402
 from ghnerf_runtime.config import FOOT_STANDING_M, EstimatorConfig, SessionConfig  # noqa: E402
@@ -100,12 +102,12 @@ def rolling_medians(values: list[float], window: int) -> list[float]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--sequences", type=int, default=4)
-    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--sequences", type=positive_count, default=4)
+    ap.add_argument("--frames", type=positive_count, default=10)
     ap.add_argument("--degrees", default="0.25,0.5,1,2", help="comma-separated turns of the second camera")
     ap.add_argument("--axes", default="tilt,pan,roll", help=f"comma-separated, of {list(AXES)}")
-    ap.add_argument("--window", type=int, default=10, help="pairs of the rolling median")
+    ap.add_argument("--window", type=positive_count, default=10, help="pairs of the rolling median")
     ap.add_argument("--max-floor-m", default=str(CALIBRATION_MAX_FLOOR_M),
                     help="the floor check's limit the windows are counted against (health.calibration_max_floor_m); "
                          "comma-separated: a column each")

@@ -65,6 +65,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.empty_rooms import empty_room_pair, scene_with_screen, scene_without_person  # noqa: E402
 from benchmarks.measure_baseline import bench_scene_in, rig_paths  # noqa: E402
 from ghnerf_runtime.cli.simdata import SEED_BASE  # noqa: E402
@@ -367,13 +369,14 @@ def run_moving_room(args, session, base: EstimatorConfig) -> int:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--precision", default="int8")
-    ap.add_argument("--sequences", type=int, default=6)
-    ap.add_argument("--frames", type=int, default=10)
-    ap.add_argument("--rooms", type=int, default=6)
-    ap.add_argument("--pairs", type=int, default=5)
-    ap.add_argument("--walk-in-after", type=int, default=0, help="empty pairs before each sequence's person")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
+    ap.add_argument("--sequences", type=positive_count, default=6)
+    ap.add_argument("--frames", type=positive_count, default=10)
+    ap.add_argument("--rooms", type=positive_count, default=6)
+    ap.add_argument("--pairs", type=positive_count, default=5)
+    ap.add_argument("--walk-in-after", type=non_negative_count, default=0,
+                    help="empty pairs before each sequence's person")
     ap.add_argument("--rest-every", type=int, default=None, help="the resting config's cold_tiles_rest_every "
                     "(default: the runtime's)")
     ap.add_argument("--rigs", default="docs/examples/rig.json", help="rig files, comma-separated")

@@ -45,6 +45,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -191,9 +193,9 @@ def table(session, cfg, sequences, visible, args) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--sequences", type=int, default=10)
-    ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--sequences", type=positive_count, default=10)
+    ap.add_argument("--frames", type=positive_count, default=30)
     ap.add_argument("--outside", default="0,0.1,0.25,0.5", type=lambda s: [float(v) for v in s.split(",") if v],
                     help="shares of the person's box outside camera 0's cut frame")
     ap.add_argument("--edge-crop", default=None, type=lambda s: [v for v in s.split(",") if v],
@@ -204,7 +206,7 @@ def main(argv=None) -> int:
                     help="roi.pad_fade, crop sides (default: the runtime's default)")
     ap.add_argument("--blacken", default=None, choices=("black", "grey", "replicate", "reflect"),
                     help="instead of cutting camera 0's frame, fill its cut columns so (the crops stay as uncut)")
-    ap.add_argument("--training-samples", type=int, default=0,
+    ap.add_argument("--training-samples", type=non_negative_count, default=0,
                     help="also count how the synthetic train split's source crops cross their frame (0: skip)")
     args = ap.parse_args(argv)
     if args.training_samples:

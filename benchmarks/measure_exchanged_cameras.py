@@ -47,6 +47,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from benchmarks.measure_calibration_drift import rolling_medians  # noqa: E402
 from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch  # noqa: E402
 from firmware_host.daemon.config import (CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR,  # noqa: E402
@@ -225,10 +227,10 @@ def sequence_windows_text(verdict: dict, window: int) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--sequences", type=int, default=10)
-    ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--window", type=int, default=30, help="figures per window (health.calibration_window)")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--sequences", type=positive_count, default=10)
+    ap.add_argument("--frames", type=positive_count, default=30)
+    ap.add_argument("--window", type=positive_count, default=30, help="figures per window (health.calibration_window)")
     ap.add_argument("--per-sequence", action="store_true", help="also a line per sequence: its handedness figures' "
                                                                "median, windows and flag as filmed and exchanged")
     ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)

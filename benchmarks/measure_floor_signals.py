@@ -33,6 +33,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from benchmarks.measure_calibration_drift import turned  # noqa: E402
 from ghnerf_runtime.cli.simdata import (HELD_OUT_MOTIONS, SEED_BASE, SEQUENCE_CACHE_HELP,  # noqa: E402
                                         bench_rig_and_scene, load_sequences)
@@ -157,10 +159,10 @@ def signals(install: list[str]) -> dict[str, Callable]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--sequences", type=int, default=30)
-    ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--window", type=int, default=30, help="pairs with a foot per window")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--sequences", type=positive_count, default=30)
+    ap.add_argument("--frames", type=positive_count, default=30)
+    ap.add_argument("--window", type=positive_count, default=30, help="pairs with a foot per window")
     ap.add_argument("--pan-degrees", type=float, default=0.5)
     ap.add_argument("--tilt-degrees", type=float, default=1.0)
     ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)

@@ -30,6 +30,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import (  # noqa: E402
@@ -125,10 +127,10 @@ def person_roi(uv: np.ndarray) -> Roi | None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--sequences", type=int, default=10)
-    ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--pairs-per-sequence", type=int, default=4)
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--sequences", type=positive_count, default=10)
+    ap.add_argument("--frames", type=positive_count, default=30)
+    ap.add_argument("--pairs-per-sequence", type=positive_count, default=4)
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir))
     session = load_session(cfg)

@@ -22,6 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from calibration.common_view import MIN_COMMON_SHARE, common_view_share  # noqa: E402
 from calibration.formats import default_working_volume  # noqa: E402
 from calibration.level import level_rig  # noqa: E402
@@ -62,7 +63,7 @@ def shares_line(name: str, rig: Rig, scale: float = 1.0) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--placements", type=int, default=300, help="random training placements (seeded)")
+    ap.add_argument("--placements", type=positive_count, default=300, help="random training placements (seeded)")
     args = ap.parse_args(argv)
     root = Path(__file__).resolve().parents[1]
     rigs = {"docs/examples/rig.json": load_rig(root / "docs" / "examples" / "rig.json"),

@@ -29,6 +29,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from ghnerf_runtime.body25 import FLIP_INDEX, JOINT_NAMES  # noqa: E402
 from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
@@ -156,9 +158,9 @@ def _on_off(text: str) -> list[bool]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--sequences", type=int, default=10)
-    ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--sequences", type=positive_count, default=10)
+    ap.add_argument("--frames", type=positive_count, default=30)
     ap.add_argument("--precisions", default="int8,fp32")
     ap.add_argument("--flip-tests", default="on,off", type=_on_off)
     ap.add_argument("--mirrored", default="off,on", type=_on_off)

@@ -71,6 +71,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, RoiConfig, SessionConfig  # noqa: E402
 
 FPS = 30.0
@@ -387,10 +389,10 @@ def table(results: dict[tuple[str, str], dict]) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--scenes", type=int, default=12, help="bench scenes (ghnerf-bench runtime's sequences)")
-    ap.add_argument("--first-scene", type=int, default=0, help="the first bench scene's number")
-    ap.add_argument("--frames", type=int, default=3, help="consecutive pairs per scene and pose, at 30 fps")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--scenes", type=positive_count, default=12, help="bench scenes (ghnerf-bench runtime's sequences)")
+    ap.add_argument("--first-scene", type=non_negative_count, default=0, help="the first bench scene's number")
+    ap.add_argument("--frames", type=positive_count, default=3, help="consecutive pairs per scene and pose, at 30 fps")
     ap.add_argument("--poses", default=",".join(POSES), help=f"comma list of {', '.join(POSES)}")
     ap.add_argument("--turned-crops", action="store_true",
                     help="also run the prior with the crops turned with the body (lying across the view: 90 deg, "
@@ -417,9 +419,8 @@ def main(argv=None) -> int:
         bad = [r for r in rolls if r not in ROLLS]
         if bad or not rolls:
             ap.error(f"--rolls: unknown {bad or args.rolls!r}; choose from {', '.join(ROLLS)}")
-        if args.frames < 2 or args.scenes < 1 or args.first_scene < 0:
-            ap.error(f"--rolls needs --frames of at least 2 (got {args.frames}), --scenes at least 1, "
-                     "--first-scene at least 0")
+        if args.frames < 2:
+            ap.error(f"--rolls needs --frames of at least 2, got {args.frames}")
         if args.then is not None or args.turned_crops or args.turn_search:
             ap.error("--rolls runs the search off and on by itself: without --then, --turned-crops, --turn-search")
         if not (math.isfinite(args.far_m) and args.far_m > 0):
@@ -433,8 +434,6 @@ def main(argv=None) -> int:
     bad = [p for p in poses if p not in POSES]
     if bad or not poses:
         ap.error(f"--poses: unknown {bad or args.poses!r}; choose from {', '.join(POSES)}")
-    if args.scenes < 1 or args.frames < 1 or args.first_scene < 0:
-        ap.error("--scenes and --frames must be at least 1, --first-scene at least 0")
     if args.then is not None and args.then not in POSES:
         ap.error(f"--then: unknown {args.then!r}; choose from {', '.join(POSES)}")
     if args.change_at is not None and (args.then is None or not 0 <= args.change_at <= args.frames):

@@ -22,6 +22,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from ghnerf_runtime.cli.simdata import HELD_OUT_BASELINE_M, HELD_OUT_MOTIONS, SEED_BASE  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, RoiConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -46,9 +48,9 @@ def rolled(rig: Rig, degrees: float) -> Rig:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--sequences", type=int, default=6)
-    ap.add_argument("--frames", type=int, default=15)
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--sequences", type=positive_count, default=6)
+    ap.add_argument("--frames", type=positive_count, default=15)
     ap.add_argument("--rolls", default="0,30,90,180", help="comma-separated roll angles, degrees")
     args = ap.parse_args(argv)
     import drivers.sim as sim  # a tool: the runtime library never imports drivers

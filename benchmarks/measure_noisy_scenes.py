@@ -26,6 +26,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.empty_rooms import empty_room_pair  # noqa: E402
 from benchmarks.measure_frame_check import KINDS  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
@@ -73,10 +75,10 @@ def false_alarms(est: Estimator, rooms: int, frame, rng: np.random.Generator) ->
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--sequences", type=int, default=10)
-    ap.add_argument("--frames", type=int, default=10)
-    ap.add_argument("--rooms", type=int, default=16)
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--sequences", type=positive_count, default=10)
+    ap.add_argument("--frames", type=positive_count, default=10)
+    ap.add_argument("--rooms", type=non_negative_count, default=16)
     ap.add_argument("--kinds", default=",".join(DEFAULT_KINDS))
     args = ap.parse_args(argv)
     frames = {kind: frame for kind, _, frame in KINDS}

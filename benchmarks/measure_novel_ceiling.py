@@ -48,6 +48,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from ghnerf_runtime.config import NovelViewConfig  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
@@ -65,10 +66,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default="data/edge128")
     ap.add_argument("--split", default="val")
-    ap.add_argument("--limit", type=int, default=256, help="first N scenes (0: all)")
+    ap.add_argument("--limit", type=non_negative_count, default=256, help="first N scenes (0: all)")
     ap.add_argument("--model", action="append", default=[], metavar="NAME=CKPT",
                     help="a torch checkpoint (last.pt) to score beside the ceiling; repeatable")
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=positive_count, default=2)
     ap.add_argument("--oracles", action="store_true",
                     help="add the oracle columns (ceil:seen, ceil:unseen, fill:affine, fill:exact) and the "
                          "fills (fill:part, fill:relit; with --model, relit@depth)")

@@ -25,6 +25,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     EstimatorConfig,
@@ -38,12 +40,13 @@ from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
     ap.add_argument("--precisions", default="int8,auto")
-    ap.add_argument("--sequences", type=int, default=10)
-    ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--warmup", type=int, default=2, help="pairs of each sequence not counted (cold start)")
-    ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--sequences", type=positive_count, default=10)
+    ap.add_argument("--frames", type=positive_count, default=30)
+    ap.add_argument("--warmup", type=non_negative_count, default=2,
+                    help="pairs of each sequence not counted (cold start)")
+    ap.add_argument("--repeats", type=positive_count, default=1)
     ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     args = ap.parse_args(argv)
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache)

@@ -33,6 +33,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from benchmarks.bench_runtime_common import RenderTap, truth_view  # noqa: E402
 from drivers.sim import random_scene  # noqa: E402
 from ghnerf_runtime.cli.simdata import (HELD_OUT_MOTIONS, SEEN_MOTIONS, SEQUENCE_CACHE_HELP,  # noqa: E402
@@ -45,11 +47,11 @@ from ghnerf_runtime.tracking import track_from_joints  # noqa: E402
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
     ap.add_argument("--precision", default="auto", choices=("auto", "fp32", "int8"))
-    ap.add_argument("--sequences", type=int, default=10)
-    ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--every", type=int, default=6, help="score every N-th pair (all pairs are tracked)")
+    ap.add_argument("--sequences", type=positive_count, default=10)
+    ap.add_argument("--frames", type=positive_count, default=30)
+    ap.add_argument("--every", type=positive_count, default=6, help="score every N-th pair (all pairs are tracked)")
     ap.add_argument("--alphas", default="0,0.5,1", help="comma list: 0 = the first rig camera, 1 = the second")
     ap.add_argument("--strides", default="1,2", help="comma list of novel_view.stride values")
     ap.add_argument("--proxy-blend", default="off",

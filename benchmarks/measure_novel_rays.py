@@ -26,6 +26,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.bench_runtime_common import RenderTap  # noqa: E402
 from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
@@ -45,14 +47,14 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
     ap.add_argument("--precision", default="auto", choices=("auto", "fp32", "int8"))
-    ap.add_argument("--sequences", type=int, default=4)
-    ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--silhouette-stride", type=int, default=4)
+    ap.add_argument("--sequences", type=positive_count, default=4)
+    ap.add_argument("--frames", type=positive_count, default=30)
+    ap.add_argument("--silhouette-stride", type=positive_count, default=4)
     ap.add_argument("--min-diff", type=float, help="silhouette_min_diff (default: the config's)")
     ap.add_argument("--dilate", type=int, help="silhouette_dilate (default: the config's)")
-    ap.add_argument("--interior-stride", type=int, default=0,
+    ap.add_argument("--interior-stride", type=non_negative_count, default=0,
                     help="also render with the interior at this stride (0: not; default)")
     ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)
     ap.add_argument("--config", help="estimator config JSON (ghnerf_runtime.config; the novel view is enabled "

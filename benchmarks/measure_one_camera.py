@@ -35,6 +35,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.empty_rooms import empty_room_pair, scene_without_person  # noqa: E402
 from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, RoiConfig, SessionConfig  # noqa: E402
@@ -82,11 +84,12 @@ def empty_counterpart(seq) -> list:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--precision", default="int8")
-    ap.add_argument("--sequences", type=int, default=8)
-    ap.add_argument("--frames", type=int, default=10)
-    ap.add_argument("--rooms", type=int, default=32, help="empty rooms (scene seeds 1..N), the frame check off")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
+    ap.add_argument("--sequences", type=positive_count, default=8)
+    ap.add_argument("--frames", type=positive_count, default=10)
+    ap.add_argument("--rooms", type=non_negative_count, default=32,
+                    help="empty rooms (scene seeds 1..N), the frame check off")
     ap.add_argument("--turn-search", choices=("on", "off"), default="on",
                     help="roi.turn_search (on: the default, resolved for the model; off: the opt-out)")
     args = ap.parse_args(argv)

@@ -28,6 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from calibration.board import BoardSpec  # noqa: E402
 from calibration.consensus import pair_relative_pose  # noqa: E402
 from calibration.detect import BoardView  # noqa: E402
@@ -106,7 +107,7 @@ def _spread(values: list[float]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--seeds", type=positive_count, default=20)
     args = parser.parse_args()
 
     print("1. each pair's own pose against the truth (10 pairs, 3 unsynchronised)")

@@ -19,6 +19,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script without installing
 
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
+from ghnerf_runtime.cli.seconds import positive_seconds  # noqa: E402
 from drivers.frames import Frame  # noqa: E402
 from drivers.pairing import DropPolicy, FramePairer, PairingConfig  # noqa: E402
 
@@ -82,8 +84,8 @@ def reference(a: np.ndarray, b: np.ndarray, tolerance_ms: float) -> list[int]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=60.0)
-    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--seconds", type=positive_seconds, default=60.0)
+    parser.add_argument("--seeds", type=positive_count, default=5)
     args = parser.parse_args()
     print(f"{'scenario':42s} {'tol ms':>6s} {'method':9s} {'pairs':>6s} {'mean|dt|':>8s} {'max|dt|':>8s} "
           f"{'unpaired a/b':>12s} {'wait ms':>12s}")

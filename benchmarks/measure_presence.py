@@ -33,6 +33,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from benchmarks.empty_rooms import empty_room_pair  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
@@ -72,8 +74,8 @@ def sixth_strongest(result) -> float:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--rooms", type=int, default=8, help="empty textured rooms (scene seeds 1..N)")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--rooms", type=positive_count, default=8, help="empty textured rooms (scene seeds 1..N)")
     ap.add_argument("--flip-test", action="store_true", help="heatmaps.flip_test on (encoder heatmaps)")
     ap.add_argument("--time", action="store_true",
                     help="also time the empty rooms with the defaults, heatmaps.flip_test_skip_below default vs 0")

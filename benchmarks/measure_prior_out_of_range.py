@@ -29,6 +29,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from drivers.sim import random_scene  # noqa: E402
 from ghnerf_runtime.config import Joints3DConfig  # noqa: E402
 from ghnerf_runtime.joints3d import triangulate_joints  # noqa: E402
@@ -74,8 +76,8 @@ def _away(X: np.ndarray, rig) -> np.ndarray:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--model-dir", default="models/ghnerf")
-    ap.add_argument("--scenes", type=int, default=12)
+    ap.add_argument("--model-dir", type=model_folder_option, default="models/ghnerf")
+    ap.add_argument("--scenes", type=positive_count, default=12)
     ap.add_argument("--noise-px", type=float, default=1.0)
     ap.add_argument("--limits", default="0.15,0.25", help="disagreement limits (m) to count the pairs over")
     ap.add_argument("--held-out", metavar="DATA", help="measure the check on DATA's val scenes instead")

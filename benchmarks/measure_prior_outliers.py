@@ -21,6 +21,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count  # noqa: E402
 from ghnerf_runtime.skeleton_prior import (  # noqa: E402
     FILE_NAME, MAX_JOINT_FROM_ROOT_M, META_PREFIX, SkeletonPrior, prior_inputs,
 )
@@ -40,10 +42,10 @@ def _answers(path: Path, arrays: dict) -> np.ndarray:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models/ghnerf")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models/ghnerf")
     ap.add_argument("--data", required=True)
     ap.add_argument("--split", default="train")
-    ap.add_argument("--limit", type=int, default=0, help="scenes (0: all)")
+    ap.add_argument("--limit", type=non_negative_count, default=0, help="scenes (0: all)")
     ap.add_argument("--prior", action="append", default=[], help=f"prior files (default: <model-dir>/{FILE_NAME})")
     args = ap.parse_args(argv)
     from training.skeleton_prior import collect

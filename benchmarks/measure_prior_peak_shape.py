@@ -31,6 +31,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from ghnerf_runtime.body25 import FLIP_INDEX  # noqa: E402
 from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
 from ghnerf_runtime.config import Joints3DConfig  # noqa: E402
@@ -147,16 +149,16 @@ def collect_all(args) -> tuple[dict, dict]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models/ghnerf")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models/ghnerf")
     ap.add_argument("--data", required=True)
     ap.add_argument("--extra-data", action="append", default=[])
     ap.add_argument("--val-split", default="val")
-    ap.add_argument("--limit", type=int, default=0, help="scenes per split (0: all)")
+    ap.add_argument("--limit", type=non_negative_count, default=0, help="scenes per split (0: all)")
     ap.add_argument("--variants", default="base,shape,mass")
-    ap.add_argument("--steps", type=int, default=30000)
-    ap.add_argument("--hidden", type=int, default=768)
+    ap.add_argument("--steps", type=positive_count, default=30000)
+    ap.add_argument("--hidden", type=positive_count, default=768)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=positive_count, default=2)
     ap.add_argument("--cache", help="npz of the collected arrays (written once, then read)")
     args = ap.parse_args(argv)
     variants = args.variants.split(",")

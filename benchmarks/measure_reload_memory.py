@@ -42,6 +42,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count
+
 M_MMAP_THRESHOLD, M_ARENA_MAX = -3, -8  # glibc's malloc.h
 
 
@@ -137,14 +139,15 @@ def slope_line(what: str, mb: dict[int, float], threads: dict[int, int]) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--loads", type=int, default=12, help="model loads after the first")
-    ap.add_argument("--pairs", type=int, default=20, help="pairs estimated on each load's sessions")
+    ap.add_argument("--loads", type=positive_count, default=12, help="model loads after the first")
+    ap.add_argument("--pairs", type=positive_count, default=20, help="pairs estimated on each load's sessions")
     ap.add_argument("--model-dir", default=str(Path(__file__).resolve().parents[1] / "models"))
     ap.add_argument("--no-trim", action="store_true", help="no malloc_trim after a load (gc only)")
     ap.add_argument("--no-gc", action="store_true", help="no gc.collect before the trim")
     ap.add_argument("--same-key", action="store_true", help="keep the loaded sessions (estimator rebuilt only)")
     ap.add_argument("--ort", choices=["no_cpu_arena", "no_mem_pattern", "env_allocator"])
-    ap.add_argument("--arena-max", type=int, default=0, help="mallopt(M_ARENA_MAX, N) first (0: glibc's default)")
+    ap.add_argument("--arena-max", type=non_negative_count, default=0,
+                    help="mallopt(M_ARENA_MAX, N) first (0: glibc's default)")
     ap.add_argument("--mmap-threshold", type=int, default=None,
                     help="mallopt(M_MMAP_THRESHOLD, N) first (default: the daemon's, memory.MMAP_THRESHOLD; 0: glibc's "
                          "own, which rises as mapped blocks are freed, as before the daemon fixed it)")

@@ -27,6 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count, seed_list  # noqa: E402
 from calibration.board import BoardSpec  # noqa: E402
 from calibration.detect import BoardDetector, BoardView  # noqa: E402
 from calibration.render import board_poses_both_see, calibration_views, example_rig, render_board  # noqa: E402
@@ -80,23 +81,25 @@ def _nearest_other_px(views: dict[str, BoardView]) -> list[float]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seeds", default="0,1,2")
-    ap.add_argument("--count", type=int, default=15)
-    ap.add_argument("--edge-count", type=int, default=6)
-    ap.add_argument("--same-pose", type=int, default=6, help="poses per seed rendered twice, re-saved and moved")
+    ap.add_argument("--seeds", type=seed_list, default="0,1,2")
+    ap.add_argument("--count", type=positive_count, default=15)
+    ap.add_argument("--edge-count", type=positive_count, default=6)
+    ap.add_argument("--same-pose", type=non_negative_count, default=6,
+                    help="poses per seed rendered twice, re-saved and moved")
     args = ap.parse_args(argv)
     rig, board = example_rig(), BoardSpec()
     detector = BoardDetector(board)
     same: dict[str, list] = {}
     nearest: list[float] = []
-    for seed in (int(s) for s in args.seeds.split(",")):
+    for seed in args.seeds:
         for key, rows in _same_pose_rows(rig, board, detector, args.same_pose, seed).items():
             same.setdefault(key, []).extend(rows)
         rendered = calibration_views(rig, board, count=args.count, edge_count=args.edge_count, seed=seed)
         for cam, images in rendered.items():
             found = {n: v for n, im in images.items() if n != "floor" and (v := detector.detect(im)) is not None}
             nearest.extend(_nearest_other_px(found))
-    print(f"largest corner distance between two images, px (seeds {args.seeds}, example_rig, default board):")
+    seeds = ",".join(map(str, args.seeds))
+    print(f"largest corner distance between two images, px (seeds {seeds}, example_rig, default board):")
     for key, rows in same.items():
         gaps = np.array([g for g, _ in rows])
         unshared = np.array([u for _, u in rows])

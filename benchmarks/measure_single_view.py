@@ -30,6 +30,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.empty_rooms import empty_room_pair  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, SessionConfig  # noqa: E402
@@ -48,11 +50,12 @@ def bad_frame(kind: str, shape: tuple[int, ...], rng: np.random.Generator) -> np
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--precision", default="int8")
-    ap.add_argument("--sequences", type=int, default=10)
-    ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--rooms", type=int, default=16, help="empty rooms (scene seeds 1..N), each camera bad in turn")
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
+    ap.add_argument("--sequences", type=positive_count, default=10)
+    ap.add_argument("--frames", type=positive_count, default=30)
+    ap.add_argument("--rooms", type=non_negative_count, default=16,
+                    help="empty rooms (scene seeds 1..N), each camera bad in turn")
     ap.add_argument("--bad", default="black", choices=("black", "saturated", "noise"))
     ap.add_argument("--flip-test", action=argparse.BooleanOptionalAction, default=None,
                     help="heatmaps.flip_test (default: the runtime's, on)")

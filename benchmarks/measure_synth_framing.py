@@ -35,6 +35,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.measure_baseline import bench_scene_in, floats, framing_cells, score_cells  # noqa: E402
 from benchmarks.measure_baseline import in_cold_crop_px  # noqa: E402
 from calibration.board import BoardSpec  # noqa: E402
@@ -164,10 +166,10 @@ def rigs_to_measure(pitches: list[float], heights: list[float] | None = None, ne
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--precision", default="int8")
-    ap.add_argument("--sequences", type=int, default=6)
-    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
+    ap.add_argument("--sequences", type=positive_count, default=6)
+    ap.add_argument("--frames", type=positive_count, default=10)
     ap.add_argument("--pitches", default="17,10", help="degrees below the horizontal, comma-separated (\"\": the rig "
                                                        "as it is only)")
     ap.add_argument("--heights", default="", help="camera heights above the floor, metres, comma-separated, each "
@@ -175,7 +177,8 @@ def main(argv=None) -> int:
     ap.add_argument("--near", type=float, help="the aimed rigs' volume from this many metres ahead (default: the "
                                                "rig's own, 2)")
     ap.add_argument("--per-sequence", action="store_true", help="a row per rig and sequence too")
-    ap.add_argument("--floor-seeds", type=int, default=0, help="a row per rig too: of this many seeds, the floor "
+    ap.add_argument("--floor-seeds", type=non_negative_count, default=0,
+                    help="a row per rig too: of this many seeds, the floor "
                                                                "views both cameras read, the default 80 mm board and "
                                                                "ghcal synth's 120 mm one (--sequences 0: this only)")
     ap.add_argument("--save", type=Path, help="write each pitched rig to this folder as synth_pitch_P.json "

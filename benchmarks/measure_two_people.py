@@ -91,6 +91,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # noqa: E402
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS  # noqa: E402
 from ghnerf_runtime.config import PICK_SUBJECT_RULES, SKELETON_PRIOR_MODES, EstimatorConfig, SessionConfig  # noqa: E402
@@ -754,9 +755,9 @@ def scanned(counts: dict, pairs: int) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scenes", type=int, default=8, help="scene pairs (seeds 1..N for the first person)")
-    ap.add_argument("--pairs", type=int, default=10, help="pairs per scene with both people, at 30 fps")
-    ap.add_argument("--alone", type=int, default=3,
+    ap.add_argument("--scenes", type=positive_count, default=8, help="scene pairs (seeds 1..N for the first person)")
+    ap.add_argument("--pairs", type=positive_count, default=10, help="pairs per scene with both people, at 30 fps")
+    ap.add_argument("--alone", type=non_negative_count, default=3,
                     help="second run: pairs of the first person alone before the second joins (0: no second run)")
     ap.add_argument("--pick-subject", default=EstimatorConfig().joints3d.pick_subject, choices=PICK_SUBJECT_RULES,
                     help="joints3d.pick_subject: whom two people without a track report (none: nobody)")
@@ -785,14 +786,14 @@ def main(argv=None) -> int:
                          "triangulation's own error, a flagged pair's pairings unrefined)")
     ap.add_argument("--one-person-model", metavar="DIR",
                     help="instead: what the check costs on one person, this model folder on the bench sequences")
-    ap.add_argument("--sequences", type=int, default=30, help="with --one-person-model: bench sequences")
+    ap.add_argument("--sequences", type=positive_count, default=30, help="with --one-person-model: bench sequences")
     ap.add_argument("--ends", action="store_true",
                     help="with --one-person-model: instead of the bench sequences, one person rendered at the working "
                          "volume's ends and corners (test_model_extremes' places), --scenes seeds of each of "
                          "--motions, --frames pairs each")
     ap.add_argument("--motions", default="wave", metavar="NAMES",
                     help="with --ends: the scenes' motions, comma-separated (drivers.sim.MOTION_NAMES)")
-    ap.add_argument("--frames", type=int, default=10, help="with --one-person-model: pairs per sequence")
+    ap.add_argument("--frames", type=positive_count, default=10, help="with --one-person-model: pairs per sequence")
     ap.add_argument("--calibration", metavar="DEGREES",
                     help="instead: the calibration checks' figures on two people against the subject's alone, the "
                          "rig file's second camera turned by each of these angles (comma-separated, 0: the true "

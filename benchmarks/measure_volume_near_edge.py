@@ -30,6 +30,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from benchmarks.measure_baseline import in_cold_crop_px, run_sequence, score_cells, standing_person_px  # noqa: E402
 from calibration.render import example_rig, synth_rig  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
@@ -109,10 +111,10 @@ def rig_named(name: str) -> Rig:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--precision", default="int8")
-    ap.add_argument("--sequences", type=int, default=6)
-    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
+    ap.add_argument("--sequences", type=positive_count, default=6)
+    ap.add_argument("--frames", type=positive_count, default=10)
     ap.add_argument("--rigs", default="synth,docs/examples/rig.json", help="comma-separated: synth (ghcal synth's "
                                                                            "rig), synth-67 (its session-67 one) or "
                                                                            "rig files")

@@ -25,6 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.seconds import positive_seconds  # noqa: E402
 from firmware_host.daemon import Daemon, daemon_config_from_dict  # noqa: E402
 from firmware_host.daemon.notify import SystemdNotifier  # noqa: E402
 
@@ -40,7 +41,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, default=20.0)
     ap.add_argument("--unplug-every-s", type=float, default=30.0)
-    ap.add_argument("--sample-s", type=float, default=60.0)
+    ap.add_argument("--sample-s", type=positive_seconds, default=60.0)
     ap.add_argument("--reload-every-s", type=float, default=0.0, help="0: never")
     ap.add_argument("--fps", type=float, default=30.0, help="the simulated rig's rate (lower: a light soak)")
     ap.add_argument("--model-dir", default=str(Path(__file__).resolve().parents[1] / "models"))

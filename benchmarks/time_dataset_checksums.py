@@ -25,6 +25,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from ghnerf_runtime.preprocess import Roi  # noqa: E402
 from training.data.cache import (  # noqa: E402
     CHECKSUMS, SHARD_META, ShardedSplit, new_manifest, write_manifest, write_shard,
@@ -72,10 +73,10 @@ def per_sample_ms(root: Path, rounds: int) -> float:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--res", type=int, default=128)
-    p.add_argument("--views", type=int, default=4)
-    p.add_argument("--samples", type=int, default=64)
-    p.add_argument("--rounds", type=int, default=5)
+    p.add_argument("--res", type=positive_count, default=128)
+    p.add_argument("--views", type=positive_count, default=4)
+    p.add_argument("--samples", type=positive_count, default=64)
+    p.add_argument("--rounds", type=positive_count, default=5)
     args = p.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         checked, bare = Path(tmp) / "checked", Path(tmp) / "bare"

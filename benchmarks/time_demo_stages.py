@@ -35,6 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 import drivers  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, load_config  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
@@ -151,17 +152,17 @@ def summarise(timings: list[dict[str, float]]) -> list[tuple[str, int, float, fl
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model-dir", type=Path, default=Path("models"))
-    parser.add_argument("--pairs", type=int, default=DEFAULT_PAIRS, help="pairs to estimate (the demo's 3 s: 91)")
+    parser.add_argument("--pairs", type=positive_count, default=DEFAULT_PAIRS,
+                        help="pairs to estimate (the demo's 3 s: 91)")
     parser.add_argument("--url", default=None,
                         help=f"the rig (default: {SCENE_URL}; with --live the demo's own, {DEMO_URL})")
     parser.add_argument("--live", type=float, default=None, metavar="SECONDS",
                         help="read the rig on the real clock for SECONDS, the newest pair each time, as the demo "
                              "does (--pairs is then unused; the pairs estimated, and so the checksum, vary run to run)")
     parser.add_argument("--config", default=None, help="estimator config, JSON (docs/runtime.md)")
-    parser.add_argument("--profile", type=int, default=0, metavar="N", help="print cProfile's top N functions")
+    parser.add_argument("--profile", type=non_negative_count, default=0, metavar="N",
+                        help="print cProfile's top N functions")
     args = parser.parse_args(argv)
-    if args.pairs < 1:
-        parser.error(f"--pairs must be >= 1, got {args.pairs}")
     if args.live is not None and not (math.isfinite(args.live) and args.live > 0):
         parser.error(f"--live must be a finite number of seconds > 0, got {args.live}")
     if args.url is None:

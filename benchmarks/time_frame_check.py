@@ -20,6 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from ghnerf_runtime.config import FrameCheckConfig  # noqa: E402
 from ghnerf_runtime.estimator import check_crop, crop_statistics  # noqa: E402
 
@@ -46,9 +47,9 @@ def microseconds(call: Callable[[], object], repeats: int, rounds: int) -> float
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--size", type=int, default=128)
-    ap.add_argument("--repeats", type=int, default=2000)
-    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--size", type=positive_count, default=128)
+    ap.add_argument("--repeats", type=positive_count, default=2000)
+    ap.add_argument("--rounds", type=positive_count, default=5)
     args = ap.parse_args(argv)
     cfg = FrameCheckConfig()
     inside = np.zeros((args.size, args.size), bool)

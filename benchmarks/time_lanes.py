@@ -39,6 +39,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
+from ghnerf_runtime.cli.seconds import positive_seconds  # noqa: E402
 from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
 
 SKIP_RECORDS = 2
@@ -239,15 +241,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", default="data/edge128", help="the make model dataset (its train split)")
     ap.add_argument("--model-dir", default=str(ROOT / "models" / "ghnerf"), type=lambda p: str(Path(p).resolve()),
                     help="a model folder for the collection")
-    ap.add_argument("--seconds", type=float, default=60.0, help="length of each measurement")
-    ap.add_argument("--rounds", type=int, default=3,
+    ap.add_argument("--seconds", type=positive_seconds, default=60.0, help="length of each measurement")
+    ap.add_argument("--rounds", type=positive_count, default=3,
                     help="times every measurement runs (every other round in reverse order); the rates are the "
                          "medians (a shared host's speed drifts by a fifth over minutes)")
     ap.add_argument("--json", help="also write the rates and estimates here")
     ap.add_argument("--worker", choices=("prior", "collect"), help=argparse.SUPPRESS)
-    ap.add_argument("--threads", type=int, default=1, help=argparse.SUPPRESS)
-    ap.add_argument("--steps", type=int, default=0, help=argparse.SUPPRESS)
-    ap.add_argument("--scenes", type=int, default=0, help=argparse.SUPPRESS)
+    ap.add_argument("--threads", type=positive_count, default=1, help=argparse.SUPPRESS)
+    ap.add_argument("--steps", type=non_negative_count, default=0, help=argparse.SUPPRESS)
+    ap.add_argument("--scenes", type=non_negative_count, default=0, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker == "prior":
         print(json.dumps(worker_prior(args.threads, args.steps, args.scenes)))
@@ -256,8 +258,6 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(worker_collect(args.threads, args.scenes, args.model_dir, args.data)))
         return 0
     out = ready_output_arg(ap, args.json, "--json") if args.json else None
-    if args.rounds < 1:
-        ap.error(f"--rounds: must be at least 1, got {args.rounds}")
     data = Path(args.data).resolve()  # (the jobs run in the repository)
     if not (data / "dataset.json").is_file():
         ap.error(f"--data {data}: no dataset.json (make it with `python -m training.pipeline --until data`)")

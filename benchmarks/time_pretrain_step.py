@@ -25,6 +25,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 import torch  # noqa: E402
 
 from training.data.targets import TargetConfig  # noqa: E402
@@ -74,9 +75,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", default="data/edge128", help="a dataset folder (default: the one make model makes)")
     ap.add_argument("--input-scales", default="0.5,1.0", help="human.input_scale values (1.0: a 128x128 trunk)")
     ap.add_argument("--precisions", default="fp32,bf16", help="PretrainConfig.precision values")
-    ap.add_argument("--steps", type=int, default=25)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--profile", type=int, default=0, metavar="ROWS",
+    ap.add_argument("--steps", type=positive_count, default=25)
+    ap.add_argument("--threads", type=positive_count, default=2)
+    ap.add_argument("--profile", type=non_negative_count, default=0, metavar="ROWS",
                     help="also print the ROWS costliest operators of each setting (torch.profiler; slows the steps)")
     ap.add_argument("--scenes-per-step", default="2",
                     help="PretrainConfig.scenes_per_step values (the cpu recipe 2, the gpu recipe 4)")

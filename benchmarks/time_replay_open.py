@@ -35,6 +35,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from drivers.backends.recording_format import (  # noqa: E402
     FRAMES, FrameRow, Manifest, encode_image, header_size, load_image, write_manifest,
 )
@@ -117,6 +118,14 @@ def write_take(take: Path, frames: int, width: int, height: int, take_format: st
     write_manifest(take, Manifest(rig, image_format, "benchmarks/time_replay_open.py", "", complete=True))
 
 
+def checkout_folder(text: str) -> Path:
+    """An argparse ``type=`` for ``--baseline``: a checkout of this project. Another folder was a FileNotFoundError
+    traceback from importing its code (here: once the take was written)."""
+    if not (Path(text) / "ghnerf_runtime").is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is not a checkout of this project (no ghnerf_runtime/ in it)")
+    return Path(text)
+
+
 def timed_open(code: Path, take: Path) -> float:
     """Seconds ``code``'s ReplayRigSource took to open ``take``, in a fresh process."""
     env = {**os.environ, "PYTHONPATH": str(code)}
@@ -141,16 +150,17 @@ def timed(action) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--frames", type=int, default=3000, help="frames a camera (default 3000)")
+    parser.add_argument("--frames", type=positive_count, default=3000, help="frames a camera (default 3000)")
     parser.add_argument("--size", default="320x240", help="image size WxH (default 320x240)")
-    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--rounds", type=positive_count, default=5)
     parser.add_argument("--format", choices=sorted(TAKE_FORMATS), default="png",
                         help="png as record+ writes it (default), exif-jpg as a phone writes it, tiff or webp as "
                              "OpenCV writes them")
     parser.add_argument("--take", type=Path,
                         help="where the take is kept (default /tmp/ghnerf-replay-open-take, -<format> appended "
                              "for a format other than png)")
-    parser.add_argument("--baseline", type=Path, help="another checkout whose open is timed in turn with this one")
+    parser.add_argument("--baseline", type=checkout_folder,
+                        help="another checkout whose open is timed in turn with this one")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
     default = "/tmp/ghnerf-replay-open-take" + ("" if args.format == "png" else f"-{args.format}")

@@ -27,6 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 import torch  # noqa: E402
 
 from training.data.targets import TargetConfig  # noqa: E402
@@ -74,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", default="1,2", help="thread counts (the pipeline trains both variants side by "
                                                      "side at one thread each on two cores)")
     ap.add_argument("--precisions", default="fp32,bf16", help="fp32 (what the trainer runs) and/or bf16 (autocast)")
-    ap.add_argument("--steps", type=int, default=20)
+    ap.add_argument("--steps", type=positive_count, default=20)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="train config override after the recipe's (as ghnerf-train --set)")
     args = ap.parse_args(argv)

@@ -24,6 +24,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from ghnerf_runtime.geometry.camera import Camera, look_at  # noqa: E402
 from ghnerf_runtime.geometry.triangulation import (  # noqa: E402
     TwoViewCameras,
@@ -63,8 +64,8 @@ def time_call(fn, calls: int, rounds: int) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--calls", type=int, default=2000, help="calls per round (default 2000)")
-    parser.add_argument("--rounds", type=int, default=5, help="rounds; the median is printed (default 5)")
+    parser.add_argument("--calls", type=positive_count, default=2000, help="calls per round (default 2000)")
+    parser.add_argument("--rounds", type=positive_count, default=5, help="rounds; the median is printed (default 5)")
     args = parser.parse_args(argv)
     if args.calls < 1 or args.rounds < 1:
         parser.error(f"--calls and --rounds must be at least 1, got {args.calls} and {args.rounds}")

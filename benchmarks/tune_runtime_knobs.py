@@ -27,6 +27,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from ghnerf_runtime.cli.simdata import SEED_BASE, Accuracy, load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, config_from_dict, config_to_dict  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -132,12 +134,12 @@ def score(session, cfg: EstimatorConfig, sequences, every: int = 1) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--precision", default="int8")
-    ap.add_argument("--sequences", type=int, default=30)
-    ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
+    ap.add_argument("--sequences", type=positive_count, default=30)
+    ap.add_argument("--frames", type=positive_count, default=30)
     ap.add_argument("--only", help="comma list of variant names (default: all)")
-    ap.add_argument("--every", type=int, default=1,
+    ap.add_argument("--every", type=positive_count, default=1,
                     help="use every n-th pair of each sequence: a camera at 30/n fps (the jitter is then per such "
                          "pair, so compare it only between runs of the same n)")
     args = ap.parse_args(argv)

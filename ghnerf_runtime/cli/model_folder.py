@@ -6,13 +6,14 @@ the user never typed; ``--validate-config`` named the option. ``ghnerf-run``, ``
 """
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from ghnerf_runtime.config import read_json_file
 from ghnerf_runtime.errors import ConfigError, ModelError
 from ghnerf_runtime.path_check import shown
 
-__all__ = ["config_names_model_dir", "model_dir_source", "named_by_source"]
+__all__ = ["config_names_model_dir", "model_dir_source", "model_folder_option", "named_by_source"]
 
 
 def config_names_model_dir(config_path: str | None) -> bool:
@@ -41,3 +42,12 @@ def named_by_source(where: str, e: ModelError, model_dir: str) -> str:
     folder (...)``. A file's error (``e.path`` inside the folder) keeps its path."""
     named = f"{e.path}: " if e.path is not None and Path(e.path) == Path(model_dir) else ""
     return f"{where}: {str(e).removeprefix(named)}"
+
+
+def model_folder_option(text: str) -> str:
+    """An argparse ``type=`` for a benchmark's ``--model-dir``: a folder that is there, refused at parsing (exit 2,
+    the option named). A mistyped folder was a ModelLoadError traceback, in some scripts only once the sequences
+    were rendered. What the folder holds is the session's to check, as it loads."""
+    if not Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not a folder (make model builds ./models)")
+    return text

@@ -1,0 +1,38 @@
+"""Counts on a command line (``--sequences``, ``--frames``, ``--repeats``...): argparse types that refuse what
+no run can use with the option's name and the value, before anything is loaded or rendered. An unchecked
+``type=int`` let ``--frames -5`` or ``--repeats 0`` through to a traceback (numpy's "negative dimensions", an
+empty median, an index out of range) after the model and the sequences were loaded, or to a run of nothing."""
+from __future__ import annotations
+
+import argparse
+
+__all__ = ["non_negative_count", "positive_count", "seed_list"]
+
+
+def _whole_number(text: str, least: int) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = None
+    if value is None or value < least:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= {least}, got {text!r}")
+    return value
+
+
+def positive_count(text: str) -> int:
+    """An argparse ``type=`` for a count of which one at least is needed (sequences, pairs, rounds)."""
+    return _whole_number(text, 1)
+
+
+def non_negative_count(text: str) -> int:
+    """An argparse ``type=`` for a count where 0 means none (warm-up pairs, ``--limit 0``: all)."""
+    return _whole_number(text, 0)
+
+
+def seed_list(text: str) -> list[int]:
+    """An argparse ``type=`` for ``--seeds 0,1,2``: one seed at least, each a whole number >= 0 (``--seeds x`` was
+    int()'s "invalid literal" traceback)."""
+    parts = [part.strip() for part in text.split(",")]
+    if not all(part.isdigit() for part in parts):
+        raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 0, got {text!r}")
+    return [int(part) for part in parts]

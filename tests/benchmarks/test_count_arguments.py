@@ -1,0 +1,158 @@
+"""Every benchmark script refuses a count no run can use (``--frames -5``, ``--repeats 0``) and a ``--model-dir``
+that is no folder as a usage error that names the option and the value (exit 2), at parsing: an unchecked
+``type=int`` let them through to a traceback (numpy's "negative dimensions", an empty median, an index out of
+range) once the model and sequences were loaded, or to a run of nothing; a mistyped model folder was a
+ModelLoadError traceback. ``parse_args`` is stopped once it returns, so no script runs past its parsing here."""
+from __future__ import annotations
+
+import argparse
+import runpy
+import sys
+from pathlib import Path
+
+import pytest
+
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count
+from ghnerf_runtime.cli.model_folder import model_folder_option
+
+BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
+
+#: script -> (options that need 1 at least, options where 0 means none); ``--seconds``-like ones need > 0 s.
+COUNTS = {
+    "bench_graph_threads": (("--sequences", "--pairs", "--rounds"), ("--warmup",)),
+    "bench_protocol": (("--frames", "--repeats"), ()),
+    "bench_runtime_regions": (("--repeats", "--sequences", "--frames"), ("--warmup",)),
+    "bench_runtime_vs_eval": (("--limit",), ()),
+    "bench_sim_render": (("--repeats",), ()),
+    "bench_sim_rig": (("--seconds",), ()),
+    "compare_3d_methods": (("--sequences", "--frames"), ()),
+    "measure_baseline": (("--sequences", "--frames"), ()),
+    "measure_body_proxy": (("--threads",), ("--limit",)),
+    "measure_calibration": (("--count", "--edge-count"), ()),
+    "measure_calibration_drift": (("--sequences", "--frames", "--window"), ()),
+    "measure_cold_tiles": (("--sequences", "--frames", "--rooms", "--pairs"), ("--walk-in-after",)),
+    "measure_edge_padding": (("--sequences", "--frames"), ("--training-samples",)),
+    "measure_exchanged_cameras": (("--sequences", "--frames", "--window"), ()),
+    "measure_floor_signals": (("--sequences", "--frames", "--window"), ()),
+    "measure_foot_spread": (("--sequences", "--frames"), ()),
+    "measure_frame_check": (("--sequences", "--frames", "--pairs-per-sequence"), ()),
+    "measure_import_common_view": (("--placements",), ()),
+    "measure_left_right": (("--sequences", "--frames"), ()),
+    "measure_lying_rendered": (("--scenes", "--frames"), ("--first-scene",)),
+    "measure_mounting": (("--sequences", "--frames"), ()),
+    "measure_noisy_scenes": (("--sequences", "--frames"), ("--rooms",)),
+    "measure_novel_ceiling": (("--threads",), ("--limit",)),
+    "measure_novel_overlap": (("--sequences", "--frames", "--repeats"), ("--warmup",)),
+    "measure_novel_quality": (("--sequences", "--frames", "--every"), ()),
+    "measure_novel_rays": (("--sequences", "--frames", "--silhouette-stride"), ("--interior-stride",)),
+    "measure_one_camera": (("--sequences", "--frames"), ("--rooms",)),
+    "measure_pair_outliers": (("--seeds",), ()),
+    "measure_pairing": (("--seconds", "--seeds"), ()),
+    "measure_presence": (("--rooms",), ()),
+    "measure_prior_out_of_range": (("--scenes",), ()),
+    "measure_prior_outliers": ((), ("--limit",)),
+    "measure_prior_peak_shape": (("--steps", "--hidden", "--threads"), ("--limit",)),
+    "measure_reload_memory": (("--loads", "--pairs"), ("--arena-max",)),
+    "measure_repeated_views": (("--count", "--edge-count"), ("--same-pose",)),
+    "measure_single_view": (("--sequences", "--frames"), ("--rooms",)),
+    "measure_still_pairs": (("--sequences", "--frames", "--every"), ()),
+    "measure_synth_framing": (("--sequences", "--frames"), ("--floor-seeds",)),
+    "measure_two_people": (("--scenes", "--pairs", "--sequences", "--frames"), ("--alone",)),
+    "measure_volume_near_edge": (("--sequences", "--frames"), ()),
+    "soak_daemon": (("--sample-s",), ()),
+    "time_dataset_checksums": (("--res", "--views", "--samples", "--rounds"), ()),
+    "time_demo_stages": (("--pairs",), ("--profile",)),
+    "time_frame_check": (("--size", "--repeats", "--rounds"), ()),
+    "time_image_read": (("--rounds",), ()),
+    "time_lanes": (("--seconds", "--rounds", "--threads"), ("--steps", "--scenes")),
+    "time_pretrain_step": (("--steps", "--threads"), ("--profile",)),
+    "time_replay_open": (("--frames", "--rounds"), ()),
+    "time_scenes": (("--pairs",), ()),
+    "time_train_step": (("--steps",), ()),
+    "time_triangulation": (("--calls", "--rounds"), ()),
+    "tune_proxy_matte": (("--threads",), ("--limit",)),
+    "tune_runtime_knobs": (("--sequences", "--frames", "--every"), ()),
+}
+#: options a script requires whatever else it is given: present, so that only the count can be refused
+REQUIRED = {
+    "measure_body_proxy": ("--data", "d", "--model", "m", "--joints", "j"),
+    "tune_proxy_matte": ("--data", "d", "--model", "m", "--joints", "j"),
+    "measure_prior_outliers": ("--data", "d"),
+    "measure_prior_peak_shape": ("--data", "d"),
+    "time_image_read": ("--baseline", str(BENCH.parent)),
+}
+CASES = [(script, option, "0") for script, (positive, _) in COUNTS.items() for option in positive]
+CASES += [(script, option, "-1") for script, (_, non_negative) in COUNTS.items() for option in non_negative]
+#: the scripts whose --model-dir names the folder the session loads
+MODEL_DIR = ("bench_graph_threads", "bench_runtime_regions", "bench_runtime_vs_eval", "compare_3d_methods",
+             "measure_baseline", "measure_calibration_drift", "measure_cold_tiles", "measure_edge_padding",
+             "measure_exchanged_cameras", "measure_floor_signals", "measure_foot_spread", "measure_frame_check",
+             "measure_left_right", "measure_lying_rendered", "measure_mounting", "measure_noisy_scenes",
+             "measure_novel_overlap", "measure_novel_quality", "measure_novel_rays", "measure_one_camera",
+             "measure_presence", "measure_prior_out_of_range", "measure_prior_outliers", "measure_prior_peak_shape",
+             "measure_single_view", "measure_still_pairs", "measure_synth_framing", "measure_volume_near_edge",
+             "tune_runtime_knobs")
+CASES += [(script, "--model-dir", "no-such-model-folder") for script in MODEL_DIR]
+
+
+class _Parsed(Exception):
+    """Raised once a script's arguments parse: the script never runs."""
+
+
+def _parse_only(monkeypatch) -> None:
+    parse_args = argparse.ArgumentParser.parse_args
+
+    def stop_after_parsing(self, args=None, namespace=None):
+        parse_args(self, args, namespace)
+        raise _Parsed
+
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", stop_after_parsing)
+
+
+@pytest.mark.parametrize("script, option, value", CASES, ids=[f"{s}{o}={v}" for s, o, v in CASES])
+def test_a_count_no_run_can_use_is_a_usage_error(script, option, value, monkeypatch, capsys):
+    _parse_only(monkeypatch)
+    monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py"), *REQUIRED.get(script, ()), option, value])
+    try:
+        runpy.run_path(str(BENCH / f"{script}.py"), run_name="__main__")
+    except ModuleNotFoundError as e:  # torch: the training extra
+        pytest.skip(f"{script} needs {e.name}")
+    except _Parsed:
+        pytest.fail(f"{script} {option} {value} was accepted")
+    except SystemExit as e:
+        assert e.code == 2
+        err = capsys.readouterr().err
+        assert f"argument {option}:" in err and value in err, err
+    else:
+        pytest.fail(f"{script} ran to its end")
+
+
+@pytest.mark.parametrize("script, option, value", [("measure_novel_ceiling", "--limit", "0"),
+                                                    ("bench_graph_threads", "--warmup", "0"),
+                                                    ("bench_protocol", "--frames", "1"),
+                                                    ("measure_one_camera", "--rooms", "0")])  # docs/turn-search.md
+def test_the_least_count_each_option_takes_parses(script, option, value, monkeypatch):
+    _parse_only(monkeypatch)
+    monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py"), option, value])
+    with pytest.raises(_Parsed):
+        runpy.run_path(str(BENCH / f"{script}.py"), run_name="__main__")
+
+
+@pytest.mark.parametrize("text", ["0", "-3", "1.5", "x", ""])
+def test_positive_count_refuses_what_is_not_a_whole_number_above_zero(text):
+    with pytest.raises(argparse.ArgumentTypeError, match=f"must be a whole number >= 1, got {text!r}"):
+        positive_count(text)
+
+
+def test_counts_take_whole_numbers_at_their_least():
+    assert positive_count("1") == 1 and positive_count(" 12 ") == 12
+    assert non_negative_count("0") == 0
+    with pytest.raises(argparse.ArgumentTypeError, match=r">= 0, got '-1'"):
+        non_negative_count("-1")
+
+
+def test_a_model_folder_option_is_a_folder_that_is_there(tmp_path):
+    assert model_folder_option(str(tmp_path)) == str(tmp_path)
+    (tmp_path / "model.onnx").write_bytes(b"")
+    with pytest.raises(argparse.ArgumentTypeError, match="model.onnx is not a folder"):
+        model_folder_option(str(tmp_path / "model.onnx"))
