@@ -839,22 +839,32 @@ def test_loop_refuses_videos_that_turn_out_to_differ_in_length(tmp_path, webcam)
     assert second_error is not None and second_error.__traceback__ is not None  # raised again: a fresh one
 
 
-def test_close_wakes_a_blocked_read(takes, webcam):
+def test_close_wakes_a_blocked_read(takes, webcam, monkeypatch):
     # two frames each, then a grab that hangs; the thread reads what pair is left, then waits. With one frame the
-    # first pair was decided by the disconnect its failed grab was, and the thread's read raised that at once
+    # first pair was decided by the disconnect its failed grab was, and the thread's read raised that at once.
+    # The close comes once the reader waits (not after a sleep): a reader a loaded host started late began its read
+    # after the close, which says "was closed; open a new source", not that it woke a waiting read.
     webcam.frames, webcam.hang = 2, threading.Event()
-    source = open_rig("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=webcam)
+    source = open_rig("opencv://?first=0&second=1&tolerance_ms=40&open_timeout_s=120", capture_factory=webcam)
     source.read(timeout_s=5.0)
+    waiting = threading.Event()
+    stalled_in = source._stalled_in
+
+    def stalled_in_then_waits() -> float:
+        seconds = stalled_in()  # (under the source's lock) no frame queued: the reader waits next, releasing it
+        waiting.set()
+        return seconds
+
+    monkeypatch.setattr(source, "_stalled_in", stalled_in_then_waits)
     errors = []
     reader = threading.Thread(
-        target=lambda: errors.append(_raises(lambda: [source.read(timeout_s=10.0) for _ in range(3)])))
+        target=lambda: errors.append(_raises(lambda: [source.read(timeout_s=60.0) for _ in range(3)])))
     reader.start()
-    time.sleep(0.2)
-    t0 = time.monotonic()
+    assert waiting.wait(30.0), "the reader never waited for a frame"
     source.close()
-    reader.join(timeout=5.0)
-    assert not reader.is_alive() and time.monotonic() - t0 < 5.0
-    assert type(errors[0]) is RigOperationError and "source closed" in str(errors[0])
+    reader.join(timeout=30.0)  # a read the close did not wake waits its 60 s
+    assert not reader.is_alive()
+    assert type(errors[0]) is RigOperationError and str(errors[0]) == "opencv:// source closed", errors
 
 
 def _raises(call):
