@@ -179,8 +179,16 @@ class RigSourceContract:
 
 def closed_while_reading(source, read_timeout_s: float) -> tuple[object, float]:
     """What a read blocked in another thread returned or raised when this thread closed ``source``, and how many
-    seconds after the close it did."""
+    seconds after the close it did. The close comes once the read is in the backend's ``_read_frame`` (not after a
+    sleep): a reader a loaded host started late began its read after the close, which says "was closed; open a
+    new source" at once, not what a waiting read says."""
     ended: list[tuple[object, float]] = []
+    reading = threading.Event()
+    read_frame = source._read_frame
+
+    def reading_then_read_frame(timeout_s: float):
+        reading.set()  # past read()'s check that the source is open: the close lands in the read
+        return read_frame(timeout_s)
 
     def reader():
         try:
@@ -189,12 +197,16 @@ def closed_while_reading(source, read_timeout_s: float) -> tuple[object, float]:
             got = e
         ended.append((got, time.monotonic()))
 
-    thread = threading.Thread(target=reader, daemon=True)
-    thread.start()
-    time.sleep(0.3)  # the reader waits for the next pair, seconds away
-    t0 = time.monotonic()
-    source.close()
-    thread.join(30.0)
+    source._read_frame = reading_then_read_frame
+    try:
+        thread = threading.Thread(target=reader, daemon=True)
+        thread.start()
+        assert reading.wait(30.0), "the reader never reached the backend's read"
+        t0 = time.monotonic()
+        source.close()
+        thread.join(30.0)
+    finally:
+        del source._read_frame
     assert len(ended) == 1, "the read did not return"
     got, at = ended[0]
     return got, at - t0
