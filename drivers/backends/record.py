@@ -458,12 +458,17 @@ class RecordingRigSource(RigSource):
         self.inner.warn_of_built_rig()  # the inner source builds the rig
 
     def _open(self) -> None:
-        self.inner.open()
+        try:
+            self.inner.open()
+        except RigOperationError as e:
+            # closed (see close) before the inner open began, which refused a closed source ("was closed; open a
+            # new source"): this open is the one cancelled. A camera of another size (FrameSizeError) stays as it is.
+            if self._closing.is_set() and not isinstance(e, RigInitializationError):
+                raise self._cancelled_open() from e
+            raise
         try:
             if self._closing.is_set():  # closed (see close) as the inner source finished opening: no take to start
-                raise RigInitializationError(f"record+ source closed while it opened (a close() from another "
-                                             f"thread): the open was cancelled, no take started in "
-                                             f"{shown(str(self.options.out))}")
+                raise self._cancelled_open()
             self.pairing = self.inner.pairing  # an inner source may settle its pairing at open (opencv://)
             self._set_rig(self.inner.rig)
             manifest = Manifest(
@@ -477,6 +482,11 @@ class RecordingRigSource(RigSource):
         except BaseException:
             self.inner.close()
             raise
+
+    def _cancelled_open(self) -> RigInitializationError:
+        """What :meth:`open` raises when a :meth:`close` from another thread landed in it."""
+        return RigInitializationError(f"record+ source closed while it opened (a close() from another thread): the "
+                                      f"open was cancelled, no take started in {shown(str(self.options.out))}")
 
     def _read_frame(self, timeout_s: float) -> Frame | None:
         writer = self._writer
