@@ -977,10 +977,11 @@ def _read_until_index(source, index: int) -> list:
     return pairs
 
 
-def _right_camera_after_grabs(webcam, grabs: int, *, wait_s: float = 5.0) -> _Flaky:
-    """The second camera's stand-in once it has tried ``grabs`` grabs (waited for, ``wait_s`` at most)."""
+def _right_camera_after_grabs(webcam, grabs: int) -> _Flaky:
+    """The second camera's stand-in once it has tried ``grabs`` grabs (waited for, 60 s at most: only a hang reaches
+    it; 5 s was a second or two of a loaded host's margin)."""
     right = [cam for cam in webcam.made if cam.target == 1][-1]
-    deadline = time.monotonic() + wait_s
+    deadline = time.monotonic() + 60.0
     while right.grabs < grabs and time.monotonic() < deadline:
         time.sleep(0.01)
     assert right.grabs >= grabs, right.grabs
@@ -1122,12 +1123,23 @@ def test_a_run_before_the_camera_s_first_frame_read_is_said_not_counted(webcam, 
     assert stats.camera_gaps["right"] == 0, stats
 
 
-class _LongFlaky(_Flaky):
-    """A :class:`_Flaky` that delivers for a minute: a test waits for its grabs on a loaded host."""
+class _LosingEveryOtherGrab(_Flaky):
+    """A :class:`_Flaky` that delivers for a minute (a test waits for its grabs on a loaded host) and, once ``lose``
+    is set, fails every other grab of the second camera's next 80 (40 runs of one frame), counted from the grab it
+    sees the event at, not from a number the test read before a loaded host let the camera grab on."""
+
+    lose: threading.Event | None = None
 
     def __init__(self, target, api) -> None:
         super().__init__(target, api)
         self.left = 1800
+        self.losing_until: int | None = None  # the last of the 80 grabs
+
+    def grab(self) -> bool:
+        if self.target == 1 and self.losing_until is None and self.lose is not None and self.lose.is_set():
+            self.failing = set(range(self.grabs + 1, self.grabs + 80, 2))
+            self.losing_until = self.grabs + 80
+        return super().grab()
 
 
 def test_runs_whose_next_frames_the_full_queue_dropped_are_held_and_said_as_one(webcam, caplog, monkeypatch):
@@ -1136,21 +1148,24 @@ def test_runs_whose_next_frames_the_full_queue_dropped_are_held_and_said_as_one(
     caplog.set_level(logging.WARNING, logger="drivers.backends.opencv")
     monkeypatch.setattr(_Flaky, "failing", set())
     monkeypatch.setattr(_Flaky, "garbled", set())
-    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_LongFlaky) as source:
+    monkeypatch.setattr(_LosingEveryOtherGrab, "lose", threading.Event())
+    url = "opencv://?first=0&second=1&tolerance_ms=30&policy=all"
+    with open_rig(url, capture_factory=_LosingEveryOtherGrab) as source:
         _read_until_index(source, 1)  # a frame of the camera read: the gap after it counts
         right = [cam for cam in webcam.made if cam.target == 1][-1]
-        start = right.grabs + 5
-        # every other grab fails (40 runs of one frame), while nothing is read; the queue holds 4 frames
-        monkeypatch.setattr(_Flaky, "failing", set(range(start, start + 80, 2)))
-        _right_camera_after_grabs(webcam, start + 90, wait_s=60.0)  # the last run's next frame dropped too
+        _LosingEveryOtherGrab.lose.set()  # every other grab fails while nothing is read; the queue holds 4 frames
+        deadline = time.monotonic() + 60.0  # only a hang reaches it
+        # ten good grabs after the last run: its next frame dropped from the full queue too
+        while (right.losing_until is None or right.grabs < right.losing_until + 10) and time.monotonic() < deadline:
+            time.sleep(0.01)
         failed = list(right.failed)
-        source.read(timeout_s=2.0)
+        source.read(timeout_s=30.0)
         stats = source.stats
-    assert len(failed) >= 30, failed  # (those a loaded host let pass before the set above are not lost)
+    assert len(failed) == 40, failed
     assert _camera_logs(caplog) == [
-        f"camera 'right' (1) lost frames {failed[0] - 1} to {failed[-1] - 1} in {len(failed)} runs ({len(failed)} "
-        "failed grab(s), tried again; the frames between the runs dropped unread from the full queue): a gap in its "
-        "frame index, counted in stats.camera_gaps",
+        f"camera 'right' (1) lost frames {failed[0] - 1} to {failed[-1] - 1} in 40 runs (40 failed grab(s), tried "
+        "again; the frames between the runs dropped unread from the full queue): a gap in its frame index, counted "
+        "in stats.camera_gaps",
     ]
     assert stats.camera_gaps["right"] >= len(failed), stats
 
