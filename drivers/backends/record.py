@@ -28,6 +28,8 @@ Recorder options (inner backends never see them, so none may reuse these names):
 A ``close()`` from another thread while ``open()`` runs goes on to the inner source at once, cancelling its open
 (``sim://``'s pre-render stops at its next frame): ``open()`` raises :class:`~drivers.errors.RigInitializationError`
 and no take is started; one that lands after the inner source opened closes it, and the take if one was started.
+After the close, :meth:`~drivers.base.RigSource.lingering` is the inner source's (an ``opencv://`` camera thread still
+in a grab); it was always empty, hiding a device still held.
 
 Recording never stalls the reader (unless ``lossless=1``): frames go into a
 bounded queue drained by writer threads; when it is full the frame is not
@@ -527,6 +529,9 @@ class RecordingRigSource(RigSource):
 
     def _pairs_lost(self) -> int:
         return self.inner._pairs_lost()
+
+    def lingering(self) -> tuple[str, ...]:
+        return self.inner.lingering()  # its cameras' calls; the recorder's writers hold no device
 
     def close(self) -> None:
         """Close; from another thread while :meth:`open` runs, the inner source is closed at once, which cancels

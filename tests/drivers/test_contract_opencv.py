@@ -867,6 +867,17 @@ def test_close_wakes_a_blocked_read(takes, webcam, monkeypatch):
     assert type(errors[0]) is RigOperationError and str(errors[0]) == "opencv:// source closed", errors
 
 
+def test_a_record_wrapper_says_what_of_its_opencv_source_lingers(webcam, tmp_path):
+    # record+ kept the base class's lingering(), always empty: a camera thread of the source it wraps still in a grab
+    # after the close (a device held until the process ends) was hidden behind the recorder
+    webcam.frames, webcam.hang = 2, threading.Event()  # two frames each, then a grab that hangs past close's wait
+    out = tmp_path / "take"
+    source = open_rig(f"record+opencv://?first=0&second=1&tolerance_ms=40&out={out}", capture_factory=webcam)
+    source.read(timeout_s=30.0)
+    source.close()
+    assert source.lingering() == source.inner.lingering() == ("camera 'left' (0)", "camera 'right' (1)")
+
+
 def _raises(call):
     try:
         call()
