@@ -874,6 +874,9 @@ def test_a_record_wrapper_says_what_of_its_opencv_source_lingers(webcam, tmp_pat
     out = tmp_path / "take"
     source = open_rig(f"record+opencv://?first=0&second=1&tolerance_ms=40&out={out}", capture_factory=webcam)
     source.read(timeout_s=30.0)
+    deadline = time.monotonic() + 60.0  # only a hang reaches it
+    while not all(cam.grabbing and cam.left <= 0 for cam in webcam.made) and time.monotonic() < deadline:
+        time.sleep(0.01)  # both cameras in their hung grab: a thread not yet there ends at the close
     source.close()
     assert source.lingering() == source.inner.lingering() == ("camera 'left' (0)", "camera 'right' (1)")
 
