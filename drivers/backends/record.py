@@ -28,6 +28,8 @@ Recorder options (inner backends never see them, so none may reuse these names):
 A ``close()`` from another thread while ``open()`` runs goes on to the inner source at once, cancelling its open
 (``sim://``'s pre-render stops at its next frame): ``open()`` raises :class:`~drivers.errors.RigInitializationError`
 and no take is started; one that lands after the inner source opened closes it, and the take if one was started.
+After the close, :meth:`~drivers.base.RigSource.lingering` is the inner source's (an ``opencv://`` camera thread still
+in a grab); it was always empty, hiding a device still held.
 
 Recording never stalls the reader (unless ``lossless=1``): frames go into a
 bounded queue drained by writer threads; when it is full the frame is not
@@ -458,12 +460,17 @@ class RecordingRigSource(RigSource):
         self.inner.warn_of_built_rig()  # the inner source builds the rig
 
     def _open(self) -> None:
-        self.inner.open()
+        try:
+            self.inner.open()
+        except RigOperationError as e:
+            # closed (see close) before the inner open began, which refused a closed source ("was closed; open a
+            # new source"): this open is the one cancelled. A camera of another size (FrameSizeError) stays as it is.
+            if self._closing.is_set() and not isinstance(e, RigInitializationError):
+                raise self._cancelled_open() from e
+            raise
         try:
             if self._closing.is_set():  # closed (see close) as the inner source finished opening: no take to start
-                raise RigInitializationError(f"record+ source closed while it opened (a close() from another "
-                                             f"thread): the open was cancelled, no take started in "
-                                             f"{shown(str(self.options.out))}")
+                raise self._cancelled_open()
             self.pairing = self.inner.pairing  # an inner source may settle its pairing at open (opencv://)
             self._set_rig(self.inner.rig)
             manifest = Manifest(
@@ -477,6 +484,11 @@ class RecordingRigSource(RigSource):
         except BaseException:
             self.inner.close()
             raise
+
+    def _cancelled_open(self) -> RigInitializationError:
+        """What :meth:`open` raises when a :meth:`close` from another thread landed in it."""
+        return RigInitializationError(f"record+ source closed while it opened (a close() from another thread): the "
+                                      f"open was cancelled, no take started in {shown(str(self.options.out))}")
 
     def _read_frame(self, timeout_s: float) -> Frame | None:
         writer = self._writer
@@ -517,6 +529,9 @@ class RecordingRigSource(RigSource):
 
     def _pairs_lost(self) -> int:
         return self.inner._pairs_lost()
+
+    def lingering(self) -> tuple[str, ...]:
+        return self.inner.lingering()  # its cameras' calls; the recorder's writers hold no device
 
     def close(self) -> None:
         """Close; from another thread while :meth:`open` runs, the inner source is closed at once, which cancels

@@ -184,8 +184,16 @@ class RigSourceContract:
 
 def closed_while_reading(source, read_timeout_s: float) -> tuple[object, float]:
     """What a read blocked in another thread returned or raised when this thread closed ``source``, and how many
-    seconds after the close it did."""
+    seconds after the close it did. The close comes once the read is in the backend's ``_read_frame`` (not after a
+    sleep): a reader a loaded host started late began its read after the close, which says "was closed; open a
+    new source" at once, not what a waiting read says."""
     ended: list[tuple[object, float]] = []
+    reading = threading.Event()
+    read_frame = source._read_frame
+
+    def reading_then_read_frame(timeout_s: float):
+        reading.set()  # past read()'s check that the source is open: the close lands in the read
+        return read_frame(timeout_s)
 
     def reader():
         try:
@@ -194,23 +202,16 @@ def closed_while_reading(source, read_timeout_s: float) -> tuple[object, float]:
             got = e
         ended.append((got, time.monotonic()))
 
-    thread = threading.Thread(target=reader, daemon=True)
-    # the close waits for the read to be under way: after a fixed sleep, a loaded host's thread could begin its
-    # read once the close was done, and be told the source "was closed", not that a read waiting was ended
-    reading, read_frame = threading.Event(), source._read_frame
-
-    def read_frame_noting_the_read(timeout_s):
-        if threading.current_thread() is thread:
-            reading.set()
-        return read_frame(timeout_s)
-
-    source._read_frame = read_frame_noting_the_read
-    thread.start()
-    assert reading.wait(60.0), "the thread's read never began"
-    time.sleep(0.3)  # by now, most likely, waiting for the next pair, seconds away; a close must end it either way
-    t0 = time.monotonic()
-    source.close()
-    thread.join(60.0)
+    source._read_frame = reading_then_read_frame
+    try:
+        thread = threading.Thread(target=reader, daemon=True)
+        thread.start()
+        assert reading.wait(60.0), "the reader never reached the backend's read"
+        t0 = time.monotonic()
+        source.close()
+        thread.join(60.0)
+    finally:
+        del source._read_frame
     assert len(ended) == 1, "the read did not return"
     got, at = ended[0]
     return got, at - t0

@@ -112,3 +112,42 @@ def test_a_record_wrapper_passes_a_close_during_open_to_its_inner_source(tmp_pat
     assert "_ReleasedByItsClose closed while it opened" in str(outcome[0])
     assert not out.exists()  # no take started
     assert not source.is_open and not inner.is_open
+
+
+class _ClosedOnFirstRelease:
+    """Stands in for a source's state lock (``_open_state``): as ``open()`` lets go of it the first time, having
+    found the source neither open nor closed, another thread closes the source, and ``open()`` goes on once that
+    close returned: a close landing before the backend's ``_open`` began."""
+
+    def __init__(self, source: RigSource) -> None:
+        self._lock = threading.Lock()
+        self._source: RigSource | None = source
+
+    def __enter__(self) -> None:
+        self._lock.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self._lock.release()
+        source, self._source = self._source, None
+        if source is not None:
+            closer = threading.Thread(target=source.close, name="test close")
+            closer.start()
+            closer.join(WAIT_S)
+            assert not closer.is_alive()
+
+
+def test_a_record_wrapper_closed_before_its_inner_open_began_cancels_its_open(tmp_path):
+    # the inner source, closed by the wrapper's close, refused its open as a RigOperationError "_HeldOpen was
+    # closed; open a new source": not the cancelled open the docs say, and of a source the caller never closed
+    inner = _HeldOpen()
+    inner.go_on.set()
+    out = tmp_path / "take"
+    source = RecordingRigSource(inner, RecordOptions(out=out))
+    source._open_state = _ClosedOnFirstRelease(source)
+    with pytest.raises(RigInitializationError) as raised:
+        source.open()
+    assert str(raised.value) == (f"record+ source closed while it opened (a close() from another thread): the open "
+                                 f"was cancelled, no take started in {out}")
+    assert not inner.device_made and inner.closes == 0  # the inner open never began
+    assert not out.exists()
+    assert not source.is_open and not inner.is_open

@@ -839,34 +839,46 @@ def test_loop_refuses_videos_that_turn_out_to_differ_in_length(tmp_path, webcam)
     assert second_error is not None and second_error.__traceback__ is not None  # raised again: a fresh one
 
 
-def test_close_wakes_a_blocked_read(takes, webcam):
+def test_close_wakes_a_blocked_read(takes, webcam, monkeypatch):
     # two frames each, then a grab that hangs; the thread reads what pair is left, then waits. With one frame the
-    # first pair was decided by the disconnect its failed grab was, and the thread's read raised that at once
+    # first pair was decided by the disconnect its failed grab was, and the thread's read raised that at once.
+    # The close comes once the reader waits (not after a sleep): a reader a loaded host started late began its read
+    # after the close, which says "was closed; open a new source", not that it woke a waiting read.
     webcam.frames, webcam.hang = 2, threading.Event()
-    source = open_rig("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=webcam)
+    source = open_rig("opencv://?first=0&second=1&tolerance_ms=40&open_timeout_s=120", capture_factory=webcam)
     source.read(timeout_s=5.0)
-    # closed once the thread's read waits for a frame that is not coming: a thread whose read began after the close
-    # was done (a 0.2 s sleep and close()'s 2 s wait, outrun on a loaded host) was told the source "was closed"
-    waiting, read_frame = threading.Event(), source._read_frame
+    waiting = threading.Event()
+    stalled_in = source._stalled_in
 
-    def read_frame_noting_the_wait(timeout_s):
-        if not source._queue and all(cam.grabbing and cam.left <= 0 for cam in webcam.made):  # both grabs hung
-            waiting.set()
-        return read_frame(timeout_s)
+    def stalled_in_then_waits() -> float:
+        seconds = stalled_in()  # (under the source's lock) no frame queued: the reader waits next, releasing it
+        waiting.set()
+        return seconds
 
-    source._read_frame = read_frame_noting_the_wait
-    ended = []  # (what the reads raised, when)
-    reader = threading.Thread(target=lambda: ended.append(
-        (_raises(lambda: [source.read(timeout_s=10.0) for _ in range(3)]), time.monotonic())))
+    monkeypatch.setattr(source, "_stalled_in", stalled_in_then_waits)
+    errors = []
+    reader = threading.Thread(
+        target=lambda: errors.append(_raises(lambda: [source.read(timeout_s=60.0) for _ in range(3)])))
     reader.start()
-    assert waiting.wait(60.0), "the thread's read never came to wait"
-    t0 = time.monotonic()
-    source.close()  # wakes the read, then waits up to 2 s for the hung grabs
-    reader.join(timeout=60.0)
-    assert not reader.is_alive() and len(ended) == 1
-    error, at = ended[0]
-    assert at - t0 < 5.0  # woken by the close, not at the read's 10 s timeout
-    assert type(error) is RigOperationError and "source closed" in str(error)
+    assert waiting.wait(30.0), "the reader never waited for a frame"
+    source.close()
+    reader.join(timeout=30.0)  # a read the close did not wake waits its 60 s
+    assert not reader.is_alive()
+    assert type(errors[0]) is RigOperationError and str(errors[0]) == "opencv:// source closed", errors
+
+
+def test_a_record_wrapper_says_what_of_its_opencv_source_lingers(webcam, tmp_path):
+    # record+ kept the base class's lingering(), always empty: a camera thread of the source it wraps still in a grab
+    # after the close (a device held until the process ends) was hidden behind the recorder
+    webcam.frames, webcam.hang = 2, threading.Event()  # two frames each, then a grab that hangs past close's wait
+    out = tmp_path / "take"
+    source = open_rig(f"record+opencv://?first=0&second=1&tolerance_ms=40&out={out}", capture_factory=webcam)
+    source.read(timeout_s=30.0)
+    deadline = time.monotonic() + 60.0  # only a hang reaches it
+    while not all(cam.grabbing and cam.left <= 0 for cam in webcam.made) and time.monotonic() < deadline:
+        time.sleep(0.01)  # both cameras in their hung grab: a thread not yet there ends at the close
+    source.close()
+    assert source.lingering() == source.inner.lingering() == ("camera 'left' (0)", "camera 'right' (1)")
 
 
 def _raises(call):
@@ -979,10 +991,11 @@ def _read_until_index(source, index: int) -> list:
     return pairs
 
 
-def _right_camera_after_grabs(webcam, grabs: int, *, wait_s: float = 60.0) -> _Flaky:
-    """The second camera's stand-in once it has tried ``grabs`` grabs (waited for, ``wait_s`` at most)."""
+def _right_camera_after_grabs(webcam, grabs: int) -> _Flaky:
+    """The second camera's stand-in once it has tried ``grabs`` grabs (waited for, 60 s at most: only a hang reaches
+    it; 5 s was a second or two of a loaded host's margin)."""
     right = [cam for cam in webcam.made if cam.target == 1][-1]
-    deadline = time.monotonic() + wait_s
+    deadline = time.monotonic() + 60.0
     while right.grabs < grabs and time.monotonic() < deadline:
         time.sleep(0.01)
     assert right.grabs >= grabs, right.grabs
@@ -1124,12 +1137,23 @@ def test_a_run_before_the_camera_s_first_frame_read_is_said_not_counted(webcam, 
     assert stats.camera_gaps["right"] == 0, stats
 
 
-class _LongFlaky(_Flaky):
-    """A :class:`_Flaky` that delivers for a minute: a test waits for its grabs on a loaded host."""
+class _LosingEveryOtherGrab(_Flaky):
+    """A :class:`_Flaky` that delivers for a minute (a test waits for its grabs on a loaded host) and, once ``lose``
+    is set, fails every other grab of the second camera's next 80 (40 runs of one frame), counted from the grab it
+    sees the event at, not from a number the test read before a loaded host let the camera grab on."""
+
+    lose: threading.Event | None = None
 
     def __init__(self, target, api) -> None:
         super().__init__(target, api)
         self.left = 1800
+        self.losing_until: int | None = None  # the last of the 80 grabs
+
+    def grab(self) -> bool:
+        if self.target == 1 and self.losing_until is None and self.lose is not None and self.lose.is_set():
+            self.failing = set(range(self.grabs + 1, self.grabs + 80, 2))
+            self.losing_until = self.grabs + 80
+        return super().grab()
 
 
 def test_runs_whose_next_frames_the_full_queue_dropped_are_held_and_said_as_one(webcam, caplog, monkeypatch):
@@ -1138,21 +1162,24 @@ def test_runs_whose_next_frames_the_full_queue_dropped_are_held_and_said_as_one(
     caplog.set_level(logging.WARNING, logger="drivers.backends.opencv")
     monkeypatch.setattr(_Flaky, "failing", set())
     monkeypatch.setattr(_Flaky, "garbled", set())
-    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=_LongFlaky) as source:
+    monkeypatch.setattr(_LosingEveryOtherGrab, "lose", threading.Event())
+    url = "opencv://?first=0&second=1&tolerance_ms=30&policy=all"
+    with open_rig(url, capture_factory=_LosingEveryOtherGrab) as source:
         _read_until_index(source, 1)  # a frame of the camera read: the gap after it counts
         right = [cam for cam in webcam.made if cam.target == 1][-1]
-        start = right.grabs + 5
-        # every other grab fails (40 runs of one frame), while nothing is read; the queue holds 4 frames
-        monkeypatch.setattr(_Flaky, "failing", set(range(start, start + 80, 2)))
-        _right_camera_after_grabs(webcam, start + 90)  # the last run's next frame dropped too
+        _LosingEveryOtherGrab.lose.set()  # every other grab fails while nothing is read; the queue holds 4 frames
+        deadline = time.monotonic() + 60.0  # only a hang reaches it
+        # ten good grabs after the last run: its next frame dropped from the full queue too
+        while (right.losing_until is None or right.grabs < right.losing_until + 10) and time.monotonic() < deadline:
+            time.sleep(0.01)
         failed = list(right.failed)
-        source.read(timeout_s=2.0)
+        source.read(timeout_s=30.0)
         stats = source.stats
-    assert len(failed) >= 30, failed  # (those a loaded host let pass before the set above are not lost)
+    assert len(failed) == 40, failed
     assert _camera_logs(caplog) == [
-        f"camera 'right' (1) lost frames {failed[0] - 1} to {failed[-1] - 1} in {len(failed)} runs ({len(failed)} "
-        "failed grab(s), tried again; the frames between the runs dropped unread from the full queue): a gap in its "
-        "frame index, counted in stats.camera_gaps",
+        f"camera 'right' (1) lost frames {failed[0] - 1} to {failed[-1] - 1} in 40 runs (40 failed grab(s), tried "
+        "again; the frames between the runs dropped unread from the full queue): a gap in its frame index, counted "
+        "in stats.camera_gaps",
     ]
     assert stats.camera_gaps["right"] >= len(failed), stats
 
