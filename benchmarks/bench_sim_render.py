@@ -18,7 +18,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script without installing
 
 from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
+from drivers.errors import DriverError  # noqa: E402
 from drivers.sim import RigPlacement, SceneConfig, SimScene  # noqa: E402
+from drivers.sim.motions import MOTION_NAMES  # noqa: E402
 from ghnerf_runtime.geometry import Camera, intrinsics_from_fov, look_at  # noqa: E402
 
 
@@ -39,10 +41,26 @@ def _view(size: int, k: int) -> Camera:
     return Camera(f"target{k}", size, size, intrinsics_from_fov(size, size, 45.0), np.zeros(5), R, t)
 
 
+def motion_option(text: str) -> str:
+    """An argparse ``type=`` for ``--motion``: a procedural motion's name, or a ``.bvh`` file the scene loads
+    (``--motion nope`` was the scene config's SimConfigError traceback)."""
+    if not text.lower().endswith(".bvh"):
+        if text not in MOTION_NAMES:
+            raise argparse.ArgumentTypeError(f"unknown motion {text!r}: one of {', '.join(MOTION_NAMES)}, "
+                                             "or a .bvh file")
+        return text
+    try:  # the file is read once more for the run: a small text file, and parsing stays free of state
+        SimScene(SceneConfig(seed=1, motion=text))
+    except DriverError as e:  # no such file, a malformed clip: the message names the file (and line)
+        raise argparse.ArgumentTypeError(str(e)) from None
+    return text
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=positive_count, default=60)
-    parser.add_argument("--motion", default="walk")
+    parser.add_argument("--motion", type=motion_option, default="walk",
+                        help=f"one of {', '.join(MOTION_NAMES)}, or a .bvh file (default walk)")
     parser.add_argument("--no-truth", action="store_true", help="render images only")
     args = parser.parse_args()
     truth = not args.no_truth

@@ -21,12 +21,30 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.seconds import positive_seconds  # noqa: E402
-from drivers import open_rig  # noqa: E402
+from drivers import create_rig_source, open_rig  # noqa: E402
+from drivers.errors import DriverError  # noqa: E402
+from drivers.url import RigUrl  # noqa: E402
+
+
+def sim_options(text: str) -> str:
+    """An argparse ``type=`` for ``--options``: ``sim://`` query options the simulated rig takes, checked as it
+    checks them before it renders (``--options fps=abc`` was the rig URL's RigConfigError traceback). ``cache=`` is
+    this script's own: the first open fills an empty temporary folder, the second reads it."""
+    url = f"sim://?{text}"
+    try:
+        if "cache" in RigUrl.parse(url).options:
+            raise argparse.ArgumentTypeError(f"{text!r}: cache= is this script's own (a fresh temporary folder); "
+                                             "leave it out")
+        create_rig_source(url)  # unopened: nothing rendered, nothing held
+    except DriverError as e:  # the message names the option and its value
+        raise argparse.ArgumentTypeError(str(e)) from None
+    return text
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--options", default="fps=30&width=640&height=480", help="sim:// query options")
+    parser.add_argument("--options", type=sim_options, default="fps=30&width=640&height=480",
+                        help="sim:// query options")
     parser.add_argument("--seconds", type=positive_seconds, default=10.0, help="how long to read pairs")
     args = parser.parse_args()
 

@@ -43,6 +43,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count
+from ghnerf_runtime.cli.model_folder import model_folder_option
 
 M_MMAP_THRESHOLD, M_ARENA_MAX = -3, -8  # glibc's malloc.h
 
@@ -141,7 +142,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--loads", type=positive_count, default=12, help="model loads after the first")
     ap.add_argument("--pairs", type=positive_count, default=20, help="pairs estimated on each load's sessions")
-    ap.add_argument("--model-dir", default=str(Path(__file__).resolve().parents[1] / "models"))
+    ap.add_argument("--model-dir", type=model_folder_option,
+                    default=str(Path(__file__).resolve().parents[1] / "models"))
     ap.add_argument("--no-trim", action="store_true", help="no malloc_trim after a load (gc only)")
     ap.add_argument("--no-gc", action="store_true", help="no gc.collect before the trim")
     ap.add_argument("--same-key", action="store_true", help="keep the loaded sessions (estimator rebuilt only)")

@@ -92,6 +92,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # noqa: E402
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS  # noqa: E402
 from ghnerf_runtime.config import PICK_SUBJECT_RULES, SKELETON_PRIOR_MODES, EstimatorConfig, SessionConfig  # noqa: E402
@@ -777,7 +778,7 @@ def main(argv=None) -> int:
     ap.add_argument("--occlude", action="store_true",
                     help="the oracle: a person's joints behind the other's body in a view show no peak there "
                          "(a camera would not see them; without it every joint shows at full strength)")
-    ap.add_argument("--model-dir", metavar="DIR",
+    ap.add_argument("--model-dir", metavar="DIR", type=model_folder_option,
                     help="a trained model (this folder's, at the runtime's defaults) on the two people rendered "
                          "together, instead of the oracle's heatmaps")
     ap.add_argument("--skeleton-prior", choices=SKELETON_PRIOR_MODES,

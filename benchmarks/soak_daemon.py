@@ -26,6 +26,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.seconds import positive_seconds  # noqa: E402
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from firmware_host.daemon import Daemon, daemon_config_from_dict  # noqa: E402
 from firmware_host.daemon.notify import SystemdNotifier  # noqa: E402
 
@@ -44,7 +45,8 @@ def main() -> None:
     ap.add_argument("--sample-s", type=positive_seconds, default=60.0)
     ap.add_argument("--reload-every-s", type=float, default=0.0, help="0: never")
     ap.add_argument("--fps", type=float, default=30.0, help="the simulated rig's rate (lower: a light soak)")
-    ap.add_argument("--model-dir", default=str(Path(__file__).resolve().parents[1] / "models"))
+    ap.add_argument("--model-dir", type=model_folder_option,
+                    default=str(Path(__file__).resolve().parents[1] / "models"))
     args = ap.parse_args()
     logging.basicConfig(level=logging.ERROR)  # the unplugs' warnings would bury the table
     url = f"sim://?fps={args.fps:g}&seed=0&motion=wave&width=320&height=240&unplug_after_s={args.unplug_every_s}"

@@ -36,6 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 import drivers  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, load_config  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
@@ -151,7 +152,7 @@ def summarise(timings: list[dict[str, float]]) -> list[tuple[str, int, float, fl
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--model-dir", type=Path, default=Path("models"))
+    parser.add_argument("--model-dir", type=model_folder_option, default="models")
     parser.add_argument("--pairs", type=positive_count, default=DEFAULT_PAIRS,
                         help="pairs to estimate (the demo's 3 s: 91)")
     parser.add_argument("--url", default=None,

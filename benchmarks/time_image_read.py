@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.time_replay_open import checkout_folder  # noqa: E402
-from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
+from ghnerf_runtime.cli.counts import image_size, positive_count  # noqa: E402
 from ghnerf_runtime import image_files  # noqa: E402
 
 
@@ -57,10 +57,10 @@ def seconds(reader, path: Path) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--baseline", type=checkout_folder, required=True, help="the checkout whose reader is compared")
-    parser.add_argument("--size", default="640x480")
+    parser.add_argument("--size", type=image_size, default="640x480")
     parser.add_argument("--rounds", type=positive_count, default=400)
     args = parser.parse_args()
-    width, height = (int(v) for v in args.size.split("x"))
+    width, height = args.size
     old_reader, new_reader = load_reader(args.baseline), image_files.read_image_or_none
     image = test_image(width, height)
     with tempfile.TemporaryDirectory() as folder:

@@ -41,6 +41,7 @@ sys.path.insert(0, str(ROOT))
 
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from ghnerf_runtime.cli.seconds import positive_seconds  # noqa: E402
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
 
 SKIP_RECORDS = 2
@@ -239,7 +240,8 @@ def plans(cfg, r: dict[str, float]) -> dict[str, dict[str, float]]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default="data/edge128", help="the make model dataset (its train split)")
-    ap.add_argument("--model-dir", default=str(ROOT / "models" / "ghnerf"), type=lambda p: str(Path(p).resolve()),
+    ap.add_argument("--model-dir", default=str(ROOT / "models" / "ghnerf"),
+                    type=lambda p: str(Path(model_folder_option(p)).resolve()),
                     help="a model folder for the collection")
     ap.add_argument("--seconds", type=positive_seconds, default=60.0, help="length of each measurement")
     ap.add_argument("--rounds", type=positive_count, default=3,

@@ -35,7 +35,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
+from ghnerf_runtime.cli.counts import image_size, positive_count  # noqa: E402
 from drivers.backends.recording_format import (  # noqa: E402
     FRAMES, FrameRow, Manifest, encode_image, header_size, load_image, write_manifest,
 )
@@ -151,7 +151,7 @@ def timed(action) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--frames", type=positive_count, default=3000, help="frames a camera (default 3000)")
-    parser.add_argument("--size", default="320x240", help="image size WxH (default 320x240)")
+    parser.add_argument("--size", type=image_size, default="320x240", help="image size WxH (default 320x240)")
     parser.add_argument("--rounds", type=positive_count, default=5)
     parser.add_argument("--format", choices=sorted(TAKE_FORMATS), default="png",
                         help="png as record+ writes it (default), exif-jpg as a phone writes it, tiff or webp as "
@@ -162,7 +162,7 @@ def main() -> None:
     parser.add_argument("--baseline", type=checkout_folder,
                         help="another checkout whose open is timed in turn with this one")
     args = parser.parse_args()
-    width, height = (int(v) for v in args.size.split("x"))
+    width, height = args.size
     default = "/tmp/ghnerf-replay-open-take" + ("" if args.format == "png" else f"-{args.format}")
     take = (args.take or Path(default)).resolve()
     if not (take / FRAMES).is_file():

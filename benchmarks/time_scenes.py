@@ -32,6 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
+from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 import drivers  # noqa: E402
 import drivers.sim as sim  # noqa: E402
 from benchmarks.empty_rooms import empty_room_pair  # noqa: E402
@@ -92,7 +93,7 @@ def summary_line(scene: str, run: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--model-dir", type=Path, default=Path("models"))
+    parser.add_argument("--model-dir", type=model_folder_option, default="models")
     parser.add_argument("--pairs", type=positive_count, default=60)
     parser.add_argument("--scenes", default=",".join(SCENES), help=f"comma-separated, of {', '.join(SCENES)}")
     parser.add_argument("--novel-view", action="store_true", help="ask a novel view of every pair")

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["non_negative_count", "positive_count", "seed_list"]
+__all__ = ["image_size", "non_negative_count", "positive_count", "seed_list"]
 
 
 def _whole_number(text: str, least: int) -> int:
@@ -36,3 +36,12 @@ def seed_list(text: str) -> list[int]:
     if not all(part.isdigit() for part in parts):
         raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 0, got {text!r}")
     return [int(part) for part in parts]
+
+
+def image_size(text: str) -> tuple[int, int]:
+    """An argparse ``type=`` for ``--size 640x480``: (width, height), each a whole number >= 1 (``--size
+    not-a-size`` was a ValueError traceback from unpacking ``split("x")``, ``--size 0x0`` OpenCV's)."""
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(part.strip().isdecimal() and int(part) >= 1 for part in parts):
+        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT in pixels, each >= 1 (as 640x480), got {text!r}")
+    return int(parts[0]), int(parts[1])

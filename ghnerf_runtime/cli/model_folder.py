@@ -45,9 +45,21 @@ def named_by_source(where: str, e: ModelError, model_dir: str) -> str:
 
 
 def model_folder_option(text: str) -> str:
-    """An argparse ``type=`` for a benchmark's ``--model-dir``: a folder that is there, refused at parsing (exit 2,
-    the option named). A mistyped folder was a ModelLoadError traceback, in some scripts only once the sequences
-    were rendered. What the folder holds is the session's to check, as it loads."""
+    """An argparse ``type=`` for a benchmark's ``--model-dir``: a folder that is there and holds graph files (the
+    folder a session resolves it to, :func:`~ghnerf_runtime.session.resolve_model_dir`, has an ``.onnx`` file),
+    refused at parsing (exit 2, the option named). A mistyped folder, or one holding no model (an empty one, a
+    checkout's root), was a ModelLoadError traceback, in some scripts only once the sequences were rendered. Whether
+    the files make a model the script can run is the session's to check, as it loads."""
+    # local: onnxruntime comes with the session, and parsing --help needs none of it
+    from ghnerf_runtime.session import resolve_model_dir
+
     if not Path(text).is_dir():
         raise argparse.ArgumentTypeError(f"{shown(text)} is not a folder (make model builds ./models)")
+    try:
+        folder = resolve_model_dir(text)
+    except ModelError as e:  # a folder this user may not read; the message names it
+        raise argparse.ArgumentTypeError(str(e)) from None
+    if not any(folder.glob("*.onnx")):
+        raise argparse.ArgumentTypeError(f"{shown(text)} holds no model: no .onnx graph file in it, in its ghnerf/ "
+                                         "subfolder or in a single subfolder (make model builds ./models)")
     return text

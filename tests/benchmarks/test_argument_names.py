@@ -1,7 +1,9 @@
-"""Benchmark options that name something (a precision, seeds, a checkout) refuse what names nothing as a usage
-error (exit 2) that names the option, before anything runs: ``--precision int4`` was the session config's
-traceback once the sequences were rendered, ``--seeds x`` int()'s "invalid literal" traceback, ``--baseline
-/nowhere`` a FileNotFoundError from importing its reader (time_replay_open.py: after writing its take)."""
+"""Benchmark options that name something (a precision, seeds, a checkout, an image size, a motion, sim:// options)
+refuse what names nothing as a usage error (exit 2) that names the option, before anything runs: ``--precision
+int4`` was the session config's traceback once the sequences were rendered, ``--seeds x`` int()'s "invalid literal"
+traceback, ``--baseline /nowhere`` a FileNotFoundError from importing its reader (time_replay_open.py: after writing
+its take), ``--size not-a-size`` a ValueError from unpacking it, ``--motion nope`` the scene config's SimConfigError
+and ``--options fps=abc`` the rig URL's RigConfigError."""
 from __future__ import annotations
 
 import argparse
@@ -10,7 +12,7 @@ import sys
 
 import pytest
 
-from ghnerf_runtime.cli.counts import seed_list
+from ghnerf_runtime.cli.counts import image_size, seed_list
 from tests.benchmarks.test_count_arguments import BENCH, _parse_only, _Parsed
 
 PRECISION = ("measure_baseline", "measure_cold_tiles", "measure_one_camera", "measure_single_view",
@@ -20,9 +22,19 @@ CASES += [(script, ("--seeds", seeds), "--seeds") for script in ("measure_calibr
           for seeds in ("x", "1,,2", "-1")]
 CASES += [("time_image_read", ("--baseline", "no-such-checkout"), "--baseline"),
           ("time_replay_open", ("--baseline", "no-such-checkout"), "--baseline")]
+CASES += [("time_image_read", ("--baseline", str(BENCH.parent), "--size", size), "--size")
+          for size in ("not-a-size", "0x480", "640x")]
+CASES += [("time_replay_open", ("--size", size), "--size") for size in ("not-a-size", "320x240x3")]
+CASES += [("bench_sim_render", ("--motion", motion), "--motion") for motion in ("nope", "no-such-clip.bvh")]
+CASES += [("bench_sim_rig", ("--options", options), "--options")
+          for options in ("fps=abc", "fps=30&colour=red", "cache=/tmp")]
 
 
-@pytest.mark.parametrize("script, args, option", CASES, ids=[f"{s}{' '.join(a)}" for s, a, _ in CASES])
+def _value(args: tuple[str, ...], option: str) -> str:
+    return args[args.index(option) + 1]
+
+
+@pytest.mark.parametrize("script, args, option", CASES, ids=[f"{s} {o} {_value(a, o)}" for s, a, o in CASES])
 def test_a_name_that_names_nothing_is_a_usage_error(script, args, option, monkeypatch, capsys):
     _parse_only(monkeypatch)
     monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py"), *args])
@@ -33,15 +45,28 @@ def test_a_name_that_names_nothing_is_a_usage_error(script, args, option, monkey
             pytest.fail(f"{script} {' '.join(args)} was accepted")
     assert stopped.value.code == 2
     err = capsys.readouterr().err
-    assert option in err and args[1] in err, err
+    assert f"argument {option}:" in err and _value(args, option) in err, err
 
 
-def test_a_baseline_that_is_a_checkout_is_taken(monkeypatch):
-    """A real checkout gets through ``--baseline``'s check: the script goes on to read ``--size``."""
-    monkeypatch.setattr(sys, "argv", [str(BENCH / "time_image_read.py"), "--baseline", str(BENCH.parent),
-                                      "--rounds", "1", "--size", "not-a-size"])
-    with pytest.raises(ValueError):  # --size, parsed after the check: the check let the checkout through
-        runpy.run_path(str(BENCH / "time_image_read.py"), run_name="__main__")
+@pytest.mark.parametrize("script, args", [("time_image_read", ("--baseline", str(BENCH.parent), "--size", "64x48")),
+                                          ("time_replay_open", ("--size", "64x48")),
+                                          ("bench_sim_render", ("--motion", "jumping_jacks")),
+                                          ("bench_sim_rig", ("--options", "fps=15&width=320&height=240")),
+                                          ("bench_sim_render", ()), ("bench_sim_rig", ())],  # their defaults
+                         ids=lambda value: " ".join(value) if isinstance(value, tuple) else value)
+def test_what_names_something_is_taken(script, args, monkeypatch):
+    """A real checkout, size, motion or set of sim:// options gets through the checks (the scripts stopped once
+    their arguments parse)."""
+    _parse_only(monkeypatch)
+    monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py"), *args])
+    with pytest.raises(_Parsed):
+        runpy.run_path(str(BENCH / f"{script}.py"), run_name="__main__")
+
+
+def test_image_size_reads_width_by_height():
+    assert image_size("640x480") == (640, 480) and image_size("64X48") == (64, 48)
+    with pytest.raises(argparse.ArgumentTypeError, match=r"WIDTHxHEIGHT in pixels, each >= 1 .*, got '0x0'"):
+        image_size("0x0")
 
 
 def test_seed_list_reads_comma_separated_seeds():

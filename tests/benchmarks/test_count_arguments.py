@@ -1,8 +1,9 @@
 """Every benchmark script refuses a count no run can use (``--frames -5``, ``--repeats 0``) and a ``--model-dir``
-that is no folder as a usage error that names the option and the value (exit 2), at parsing: an unchecked
-``type=int`` let them through to a traceback (numpy's "negative dimensions", an empty median, an index out of
-range) once the model and sequences were loaded, or to a run of nothing; a mistyped model folder was a
-ModelLoadError traceback. ``parse_args`` is stopped once it returns, so no script runs past its parsing here."""
+that is no folder, or a folder holding no model, as a usage error that names the option and the value (exit 2), at
+parsing: an unchecked ``type=int`` let them through to a traceback (numpy's "negative dimensions", an empty median,
+an index out of range) once the model and sequences were loaded, or to a run of nothing; a mistyped model folder, or
+an empty one, was a ModelLoadError traceback. ``parse_args`` is stopped once it returns, so no script runs past its
+parsing here."""
 from __future__ import annotations
 
 import argparse
@@ -91,8 +92,13 @@ MODEL_DIR = ("bench_graph_threads", "bench_runtime_regions", "bench_runtime_vs_e
              "measure_novel_overlap", "measure_novel_quality", "measure_novel_rays", "measure_one_camera",
              "measure_presence", "measure_prior_out_of_range", "measure_prior_outliers", "measure_prior_peak_shape",
              "measure_single_view", "measure_still_pairs", "measure_synth_framing", "measure_volume_near_edge",
-             "tune_runtime_knobs")
-CASES += [(script, "--model-dir", "no-such-model-folder") for script in MODEL_DIR]
+             "tune_runtime_knobs",
+             # the daemon's (soak, reloads), the demo's stages, the scenes', the lanes' workers', the two people's
+             "measure_reload_memory", "measure_two_people", "soak_daemon", "time_demo_stages", "time_lanes",
+             "time_scenes")
+#: a folder that is there and holds no model: no .onnx in it, in a ghnerf/ subfolder or in a single subfolder
+NO_MODEL = str(BENCH.parent / "tests" / "benchmarks")
+CASES += [(script, "--model-dir", folder) for script in MODEL_DIR for folder in ("no-such-model-folder", NO_MODEL)]
 
 
 class _Parsed(Exception):
@@ -109,7 +115,8 @@ def _parse_only(monkeypatch) -> None:
     monkeypatch.setattr(argparse.ArgumentParser, "parse_args", stop_after_parsing)
 
 
-@pytest.mark.parametrize("script, option, value", CASES, ids=[f"{s}{o}={v}" for s, o, v in CASES])
+@pytest.mark.parametrize("script, option, value", CASES,
+                         ids=[f"{s}{o}={'a-folder-holding-no-model' if v == NO_MODEL else v}" for s, o, v in CASES])
 def test_a_count_no_run_can_use_is_a_usage_error(script, option, value, monkeypatch, capsys):
     _parse_only(monkeypatch)
     monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py"), *REQUIRED.get(script, ()), option, value])
@@ -152,7 +159,24 @@ def test_counts_take_whole_numbers_at_their_least():
 
 
 def test_a_model_folder_option_is_a_folder_that_is_there(tmp_path):
-    assert model_folder_option(str(tmp_path)) == str(tmp_path)
     (tmp_path / "model.onnx").write_bytes(b"")
+    assert model_folder_option(str(tmp_path)) == str(tmp_path)
     with pytest.raises(argparse.ArgumentTypeError, match="model.onnx is not a folder"):
         model_folder_option(str(tmp_path / "model.onnx"))
+
+
+def test_a_model_folder_option_holds_graph_files_where_the_session_looks(tmp_path):
+    """Only the files' presence: the session finds graphs by name or by metadata, and checks what they hold."""
+    with pytest.raises(argparse.ArgumentTypeError, match=f"{tmp_path} holds no model: no .onnx graph file"):
+        model_folder_option(str(tmp_path))
+    (tmp_path / "ghnerf").mkdir()
+    (tmp_path / "ghnerf" / "encoder.onnx").write_bytes(b"")
+    assert model_folder_option(str(tmp_path)) == str(tmp_path)  # its ghnerf/ subfolder
+    shipped = tmp_path / "shipped"
+    (shipped / "baseline").mkdir(parents=True)
+    (shipped / "baseline" / "encoder.onnx").write_bytes(b"")
+    assert model_folder_option(str(shipped)) == str(shipped)  # its one subfolder holding graphs (models/<variant>)
+    (shipped / "other").mkdir()
+    (shipped / "other" / "encoder.onnx").write_bytes(b"")
+    with pytest.raises(argparse.ArgumentTypeError, match="holds no model"):  # two: the session would take neither
+        model_folder_option(str(shipped))
