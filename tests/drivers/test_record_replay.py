@@ -1968,31 +1968,52 @@ def test_a_frame_made_as_another_thread_closes_is_neither_handed_out_nor_queued(
     assert str(raised.value).startswith(f"record+ source closed while a read waited for its frame (recording to {out})")
 
 
-def test_a_frame_queued_behind_the_writers_stop_is_counted_dropped(take, tmp_path):
-    """A submit that looked just before close began can queue its frame behind the writers' stop marks: no
-    writer takes it, and it went unwritten and uncounted (frames_written + writes_dropped fell one short)."""
+@pytest.mark.parametrize("lossless", [False, True])
+def test_a_submit_a_close_overtakes_is_refused_not_queued_behind_the_writers_stop(take, tmp_path, monkeypatch,
+                                                                                 lossless):
+    """A submit that looked before close began and queued its frame (it was copying the image) after the close
+    had stopped the writers: the read handed the frame out, recorded by no one and counted nowhere
+    (frames_written + writes_dropped fell one short of the frames handed out). It is refused now, as a read that a
+    close lands in is."""
+    import threading
+
     from drivers.frames import Frame
 
     manifest = read_manifest(take[0])
     manifest.complete, manifest.counters = False, {}
     writer = record_module.RecordingWriter(tmp_path / "take", manifest, record_module.RecordOptions(
-        out=tmp_path / "take", writers=1))
+        out=tmp_path / "take", writers=1, lossless=lossless))
     writer.start()
     cam = manifest.rig.cameras[0]
     frames = [Frame(cam.name, np.zeros((cam.height, cam.width, 3), np.uint8), 1000 * i, i) for i in range(2)]
     writer.submit(frames[0])
-    put_stop_mark = writer._queue.put
+    copying, closed, real_replace = threading.Event(), threading.Event(), record_module.replace
 
-    def a_submit_lands_behind(item, *args, **kwargs):
-        put_stop_mark(item, *args, **kwargs)
-        if item is None:
-            writer._queue.put = put_stop_mark  # once
-            writer._stopping.clear()  # the submit looked before close began ...
-            writer.submit(frames[1])  # ... and queued its frame after the stop mark
-            writer._stopping.set()
+    def copied_once_the_close_is_done(*args, **kwargs):
+        copying.set()
+        assert closed.wait(30), "the close never came"
+        return real_replace(*args, **kwargs)
 
-    writer._queue.put = a_submit_lands_behind
-    writer.close({})
+    monkeypatch.setattr(record_module, "replace", copied_once_the_close_is_done)
+    outcome: list = []
+
+    def submit() -> None:
+        try:
+            writer.submit(frames[1])
+            outcome.append("queued")
+        except RigOperationError as e:
+            outcome.append(e)
+
+    submitting = threading.Thread(target=submit, daemon=True)
+    submitting.start()
+    try:
+        assert copying.wait(30), "the submit never copied its frame"
+        writer.close({})
+    finally:
+        closed.set()
+        submitting.join(30)
+    assert len(outcome) == 1 and isinstance(outcome[0], RigOperationError), outcome
+    assert "closed while a read waited" in str(outcome[0])
+    assert writer._queue.empty()  # nothing left behind the stop marks
     counters = read_manifest(tmp_path / "take").counters
-    assert (counters["frames_written"], counters["writes_dropped"]) == (1, 1)
-    assert (writer.frames_written, writer.writes_dropped) == (1, 1)
+    assert (counters["frames_written"], counters["writes_dropped"]) == (1, 0)
