@@ -25,6 +25,10 @@ Recorder options (inner backends never see them, so none may reuse these names):
   :class:`~drivers.errors.RigOperationError` ("closed while a read waited"), as
   every backend's read does that a close lands in, and the frame is not recorded.
 
+A ``close()`` from another thread while ``open()`` opens the inner source closes that source too (``sim://``'s
+pre-render and ``replay://``'s checks stop), and ``open()`` raises :class:`~drivers.errors.RigInitializationError`:
+no take is begun.
+
 Recording never stalls the reader (unless ``lossless=1``): frames go into a
 bounded queue drained by writer threads; when it is full the frame is not
 recorded and counted in ``stats.writes_dropped``. Every frame the inner camera delivered is recorded,
@@ -403,8 +407,8 @@ class RecordingRigSource(RigSource):
         self._source_url = source_url
         self._writer: RecordingWriter | None = None
         self._reported_error = False
-        # Set first thing in _close: a read in another thread past its wait raises instead of handing out
-        # (and queueing) a frame of a closed source.
+        # Set first thing in close: a read in another thread past its wait raises instead of handing out
+        # (and queueing) a frame of a closed source; an open in another thread begins no take.
         self._closing = threading.Event()
 
     @classmethod
@@ -443,6 +447,8 @@ class RecordingRigSource(RigSource):
     def _open(self) -> None:
         self.inner.open()
         try:
+            if self._closing.is_set():  # closed as the inner source's open ended: no take is begun
+                raise self._closed_during_open()
             self.pairing = self.inner.pairing  # an inner source may settle its pairing at open (opencv://)
             self._set_rig(self.inner.rig)
             manifest = Manifest(
@@ -456,6 +462,13 @@ class RecordingRigSource(RigSource):
         except BaseException:
             self.inner.close()
             raise
+        if self._closing.is_set():  # closed as the take began: it is closed as any take is (its writers stopped)
+            self._close()
+            raise self._closed_during_open()
+
+    def _closed_during_open(self) -> RigInitializationError:
+        return RigInitializationError(f"record+ source closed while open() opened its inner source (recording to "
+                                      f"{shown(str(self.options.out))}): the open was cancelled")
 
     def _read_frame(self, timeout_s: float) -> Frame | None:
         writer = self._writer
@@ -496,6 +509,18 @@ class RecordingRigSource(RigSource):
 
     def _pairs_lost(self) -> int:
         return self.inner._pairs_lost()
+
+    def close(self) -> None:
+        """Close; from another thread while :meth:`open` opens the inner source, that source is closed too, which
+        cancels its open where it can be (``sim://``'s pre-render, ``replay://``'s checks), and :meth:`open` raises
+        :class:`RigInitializationError`, no take begun (the base class closes only a source that is open: the inner
+        source opened on, the take began, and nothing ever closed either)."""
+        self._closing.set()
+        try:
+            if not self.is_open:
+                self.inner.close()
+        finally:
+            super().close()
 
     def _close(self) -> None:
         self._closing.set()

@@ -5,6 +5,7 @@ import logging
 import os
 import re
 import struct
+import threading
 import time
 import zlib
 from pathlib import Path
@@ -1975,8 +1976,6 @@ def test_a_submit_a_close_overtakes_is_refused_not_queued_behind_the_writers_sto
     had stopped the writers: the read handed the frame out, recorded by no one and counted nowhere
     (frames_written + writes_dropped fell one short of the frames handed out). It is refused now, as a read that a
     close lands in is."""
-    import threading
-
     from drivers.frames import Frame
 
     manifest = read_manifest(take[0])
@@ -2017,3 +2016,102 @@ def test_a_submit_a_close_overtakes_is_refused_not_queued_behind_the_writers_sto
     assert writer._queue.empty()  # nothing left behind the stop marks
     counters = read_manifest(tmp_path / "take").counters
     assert (counters["frames_written"], counters["writes_dropped"]) == (1, 0)
+
+
+def _opened_in_a_thread(source) -> tuple[threading.Thread, list]:
+    """``source.open()`` on a thread of its own; the list gets what the open raised."""
+    failed: list = []
+
+    def open_it() -> None:
+        try:
+            source.open()
+        except Exception as e:  # noqa: BLE001 - what the open raised, for the test's thread
+            failed.append(e)
+
+    opener = threading.Thread(target=open_it, daemon=True)
+    opener.start()
+    return opener, failed
+
+
+def test_a_close_from_another_thread_while_the_inner_sim_pre_renders_cancels_the_open(tmp_path):
+    """record+sim: a close() while open() pre-rendered the inner loop did nothing (the base class closes only an open
+    source, and the recorder did not pass it on): the loop rendered on, the take began, and the source came back
+    open and closed, its inner source and writer threads never closed. The inner pre-render stops now, and the open
+    raises, no take begun."""
+    out = tmp_path / "take"
+    source = create_rig_source(f"record+sim://?width=32&height=24&cache=off&workers=1&out={out}",
+                               clock=ManualClock())
+    rendering, closed, rendered = threading.Event(), threading.Event(), []
+    render = source.inner._render
+
+    def first_frame_held_until_the_close(camera, j, *, together=False):
+        rendered.append((camera, j))
+        rendering.set()
+        assert closed.wait(30)
+        return render(camera, j, together=together)
+
+    source.inner._render = first_frame_held_until_the_close
+    opener, failed = _opened_in_a_thread(source)
+    try:
+        assert rendering.wait(30), "the open never rendered"
+        source.close()
+    finally:
+        closed.set()
+        opener.join(60)
+    assert not opener.is_alive()
+    assert len(failed) == 1 and isinstance(failed[0], RigInitializationError), failed
+    assert "closed" in str(failed[0]), failed
+    assert rendered == [(0, 0)], rendered  # the frame in progress, no other
+    assert (source.is_open, source.inner.is_open, source.inner._loop, source._writer) == (False, False, None, None)
+    assert not out.exists()  # no take begun
+
+
+def test_a_close_as_the_inner_open_ends_begins_no_take_and_one_as_the_take_begins_closes_it(tmp_path, monkeypatch):
+    """A close() landing once the inner source's open is done (nothing left there to cancel): the open raises
+    before the take begins; one landing as the writer starts closes the take it began, its writer threads stopped."""
+    out = tmp_path / "take"
+    source = create_rig_source(f"record+sim://?width=32&height=24&cache=off&workers=1&out={out}",
+                               clock=ManualClock())
+    opened, closed = threading.Event(), threading.Event()
+    inner_open = source.inner.open
+
+    def opened_then_held_until_the_close():
+        inner_open()
+        opened.set()
+        assert closed.wait(30)
+        return source.inner
+
+    monkeypatch.setattr(source.inner, "open", opened_then_held_until_the_close)
+    opener, failed = _opened_in_a_thread(source)
+    try:
+        assert opened.wait(60), "the inner source never opened"
+        source.close()
+    finally:
+        closed.set()
+        opener.join(60)
+    assert len(failed) == 1 and isinstance(failed[0], RigInitializationError), failed
+    assert str(failed[0]).startswith(f"record+ source closed while open() opened its inner source (recording to {out})")
+    assert (source.is_open, source.inner.is_open, source._writer) == (False, False, None) and not out.exists()
+
+    out = tmp_path / "take2"
+    source = create_rig_source(f"record+sim://?width=32&height=24&cache=off&workers=1&out={out}",
+                               clock=ManualClock())
+    started, closed = threading.Event(), threading.Event()
+    real_start = record_module.RecordingWriter.start
+
+    def started_then_held_until_the_close(writer):
+        real_start(writer)
+        started.set()
+        assert closed.wait(30)
+
+    monkeypatch.setattr(record_module.RecordingWriter, "start", started_then_held_until_the_close)
+    opener, failed = _opened_in_a_thread(source)
+    try:
+        assert started.wait(60), "the take never began"
+        source.close()
+    finally:
+        closed.set()
+        opener.join(60)
+    assert len(failed) == 1 and isinstance(failed[0], RigInitializationError), failed
+    assert not source.is_open and not any(t.is_alive() for t in source._writer._threads)
+    assert read_manifest(out).complete and read_manifest(out).counters["frames_written"] == 0
