@@ -672,9 +672,9 @@ def _capture_and_summarise(args: argparse.Namespace, board: BoardSpec, out: Path
         # ran out, a second Ctrl-C pressed after the one that stopped the capture). It is raised once the close is
         # done only when it is the first stop: one caught above (the views kept said, 0) or an error on its way
         # is the one reported
-        late_stop = closed_with_stops_deferred(source.close, then_raise=read_to_its_end)  # the take checked first
-        if not read_to_its_end and stopped is None:  # a record+ take's failure, said before main says the error
-            take.say_failure()
+        # the take checked first; a record+ take's failure is said before main says an error on its way
+        # (status_saying_a_failed_take)
+        late_stop = closed_with_stops_deferred(source.close, then_raise=read_to_its_end)
     if late_stop is not None and take.failure() is None:  # main says it (130, 143); a failed take is said below, 2
         raise late_stop
     if stopped is not None:

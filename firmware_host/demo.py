@@ -34,7 +34,9 @@ reading too: the summary of the pairs before it, then one line, ``error: the rig
 naming the camera, exit status 2 (until session 62 only ``stopping: ...`` among the summary's lines, exit 0: a
 loose cable passed the bring-up's camera check). A recording that ends (``replay://``) is no failure; a
 ``record+`` take whose write failed as it closed is (one line after the summary, exit 2; since session 74), and is said
-(one line, exit 2) even where a stop lands after the sink's close: before the take's close, or in the summary.
+(one line, exit 2) even where a stop lands after the sink's close: before the take's close, or in the summary; a run
+ended by an error (cameras of another size than the rig's, a sink that will not open) says it before the error (it
+went unsaid, the take ``complete: false``).
 
 A ``file://`` ``--sink`` on a file the run reads (the rig URL's ``rig=``, ``bvh=`` or video files, the ``--config``
 file) or on ``OUT/sim_pair.png`` is a usage error before anything is opened, as the daemon refuses its sinks there

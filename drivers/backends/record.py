@@ -155,6 +155,9 @@ class RecordingWriter:
         # Set first thing in close: a submit after it (a read in another thread) is refused, never left waiting
         # on a queue the stopped writers no longer drain.
         self._stopping = threading.Event()
+        # Held by a submit from its look at _stopping to its put, and taken by close once _stopping is set: a frame
+        # is queued ahead of the writers' stop marks (written, or counted dropped) or refused, never left behind them.
+        self._submit_lock = threading.Lock()
         # Payload files written, not fsynced yet (relative paths, under the journal lock): a writer that
         # brings it to SYNC_BATCH takes the batch and fsyncs it, off the reader's path.
         self._unsynced: list[str] = []
@@ -230,8 +233,9 @@ class RecordingWriter:
         """Queue ``frame`` for writing; a full queue or a failed writer drops it, counted (``lossless``: waits).
 
         Raises:
-            RigOperationError: the writer was closed (from another thread), before or while this waited for a
-                slot: the frame is not recorded, nor counted (no read hands it out).
+            RigOperationError: the writer was closed (from another thread) before this queued the frame (as it
+                copied it; lossless: as it waited for a slot): the frame is not recorded, nor counted (no read hands
+                it out).
         """
         if self._stopping.is_set():
             raise self._closed_error()
@@ -258,22 +262,19 @@ class RecordingWriter:
         self._per_camera[frame.camera] = n + 1
 
     def _put(self, item: tuple[Frame, FrameRow]) -> bool:
-        """Queue ``item``; False: the queue is full (not ``lossless``). A lossless wait looks every
-        :data:`SUBMIT_WAIT_SLICE_S` whether close began, and then raises: the writers stop, and the slot it
-        waited for might never come."""
-        if not self.options.lossless:
-            try:
-                self._queue.put_nowait(item)
-            except queue.Full:
-                return False
-            return True
+        """Queue ``item``; False: the queue is full (not ``lossless``). Raises once close began (the frame was
+        copied meanwhile, or a lossless wait looked again after :data:`SUBMIT_WAIT_SLICE_S`): the writers stop, and
+        a frame queued then would sit behind their stop marks, never written nor counted."""
         while True:
-            try:
-                self._queue.put(item, timeout=SUBMIT_WAIT_SLICE_S)
-                return True
-            except queue.Full:
+            with self._submit_lock:
                 if self._stopping.is_set():
-                    raise self._closed_error() from None
+                    raise self._closed_error()
+                try:
+                    self._queue.put(item, block=self.options.lossless, timeout=SUBMIT_WAIT_SLICE_S)
+                    return True
+                except queue.Full:
+                    if not self.options.lossless:
+                        return False
 
     def _closed_error(self) -> RigOperationError:
         return RigOperationError(
@@ -341,11 +342,12 @@ class RecordingWriter:
         """Write what is queued, fsync it (:meth:`_sync`), then finalise the manifest (``complete: true``).
         A submit from another thread after this began raises (:meth:`submit`)."""
         self._stopping.set()
+        with self._submit_lock:
+            pass  # a submit queueing its frame now (it looked before the set) does so ahead of the stop marks
         for _ in self._threads:
             self._queue.put(None)
         for thread in self._threads:
             thread.join()
-        self._count_left_behind()
         if self._journal is not None:
             try:
                 if self.error is None:
@@ -366,21 +368,6 @@ class RecordingWriter:
         log.info(
             "recording %s closed: %d frames written, %d dropped", self.directory, self.frames_written, self.writes_dropped
         )
-
-    def _count_left_behind(self) -> None:
-        """Frames a submit queued behind the writers' stop marks (it looked just before close began): no writer
-        takes them, so they are counted dropped, and ``frames_written + writes_dropped`` stays every frame."""
-        left = 0
-        while True:
-            try:
-                item = self._queue.get_nowait()
-            except queue.Empty:
-                break
-            if item is not None:
-                left += 1
-        if left:
-            with self._journal_lock:
-                self._writer_dropped += left
 
     def _sync(self) -> None:
         """fsync the payload files written, their folders and the journal, before ``complete: true`` is written:
@@ -422,8 +409,8 @@ class RecordingRigSource(RigSource):
         self._source_url = source_url
         self._writer: RecordingWriter | None = None
         self._reported_error = False
-        # Set first thing in _close: a read in another thread past its wait raises instead of handing out
-        # (and queueing) a frame of a closed source.
+        # Set first thing in close: a read in another thread past its wait raises instead of handing out
+        # (and queueing) a frame of a closed source; an open in another thread begins no take.
         self._closing = threading.Event()
 
     @classmethod
@@ -484,7 +471,6 @@ class RecordingRigSource(RigSource):
         except BaseException:
             self.inner.close()
             raise
-
     def _cancelled_open(self) -> RigInitializationError:
         """What :meth:`open` raises when a :meth:`close` from another thread landed in it."""
         return RigInitializationError(f"record+ source closed while it opened (a close() from another thread): the "

@@ -5,7 +5,8 @@ The take's last write (a frame still queued, its last fsync) can fail in the sou
 it: the tool says it, exit 2, after its summary. A stop landing after the close (before the take's check, in the
 summary) was raised past that check: ``stopped``, 130 or 143, of a take whose manifest says ``complete: false``.
 :func:`status_saying_a_failed_take` runs the tool's reading and summary and says the take's failure, exit 2, where
-such a stop escapes them; a whole take leaves the stop its own exit status.
+such a stop escapes them; a whole take leaves the stop its own exit status. An error escaping them (a camera that
+failed, the sink's link) is the tool's to say, exit 2: the take's failure is said before it, not left unsaid.
 """
 from __future__ import annotations
 
@@ -46,10 +47,14 @@ def status_saying_a_failed_take(run: Callable[[], int], take: RecordedTake) -> i
 
     A Ctrl-C or SIGTERM escaping ``run`` came after the close (``run``'s ``finally``): between the close and the
     take's check, or in the summary. It is raised on (the caller says it: 130, 143) unless the take failed, which is
-    said instead, exit 2, as the summary would have."""
+    said instead, exit 2, as the summary would have. An error escaping ``run`` is raised on (the caller says it,
+    exit 2) once the take's failure is said: ``run`` closed the take on the error's way out, and no summary came."""
     try:
         return run()
     except KeyboardInterrupt:
         if take.say_failure():
             return 2
+        raise
+    except Exception:
+        take.say_failure()
         raise

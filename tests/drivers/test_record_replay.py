@@ -5,6 +5,7 @@ import logging
 import os
 import re
 import struct
+import threading
 import time
 import zlib
 from pathlib import Path
@@ -1971,31 +1972,149 @@ def test_a_frame_made_as_another_thread_closes_is_neither_handed_out_nor_queued(
     assert str(raised.value).startswith(f"record+ source closed while a read waited for its frame (recording to {out})")
 
 
-def test_a_frame_queued_behind_the_writers_stop_is_counted_dropped(take, tmp_path):
-    """A submit that looked just before close began can queue its frame behind the writers' stop marks: no
-    writer takes it, and it went unwritten and uncounted (frames_written + writes_dropped fell one short)."""
+@pytest.mark.parametrize("lossless", [False, True])
+def test_a_submit_a_close_overtakes_is_refused_not_queued_behind_the_writers_stop(take, tmp_path, monkeypatch,
+                                                                                 lossless):
+    """A submit that looked before close began and queued its frame (it was copying the image) after the close
+    had stopped the writers: the read handed the frame out, recorded by no one and counted nowhere
+    (frames_written + writes_dropped fell one short of the frames handed out). It is refused now, as a read that a
+    close lands in is."""
     from drivers.frames import Frame
 
     manifest = read_manifest(take[0])
     manifest.complete, manifest.counters = False, {}
     writer = record_module.RecordingWriter(tmp_path / "take", manifest, record_module.RecordOptions(
-        out=tmp_path / "take", writers=1))
+        out=tmp_path / "take", writers=1, lossless=lossless))
     writer.start()
     cam = manifest.rig.cameras[0]
     frames = [Frame(cam.name, np.zeros((cam.height, cam.width, 3), np.uint8), 1000 * i, i) for i in range(2)]
     writer.submit(frames[0])
-    put_stop_mark = writer._queue.put
+    copying, closed, real_replace = threading.Event(), threading.Event(), record_module.replace
 
-    def a_submit_lands_behind(item, *args, **kwargs):
-        put_stop_mark(item, *args, **kwargs)
-        if item is None:
-            writer._queue.put = put_stop_mark  # once
-            writer._stopping.clear()  # the submit looked before close began ...
-            writer.submit(frames[1])  # ... and queued its frame after the stop mark
-            writer._stopping.set()
+    def copied_once_the_close_is_done(*args, **kwargs):
+        copying.set()
+        assert closed.wait(30), "the close never came"
+        return real_replace(*args, **kwargs)
 
-    writer._queue.put = a_submit_lands_behind
-    writer.close({})
+    monkeypatch.setattr(record_module, "replace", copied_once_the_close_is_done)
+    outcome: list = []
+
+    def submit() -> None:
+        try:
+            writer.submit(frames[1])
+            outcome.append("queued")
+        except RigOperationError as e:
+            outcome.append(e)
+
+    submitting = threading.Thread(target=submit, daemon=True)
+    submitting.start()
+    try:
+        assert copying.wait(30), "the submit never copied its frame"
+        writer.close({})
+    finally:
+        closed.set()
+        submitting.join(30)
+    assert len(outcome) == 1 and isinstance(outcome[0], RigOperationError), outcome
+    assert "closed while a read waited" in str(outcome[0])
+    assert writer._queue.empty()  # nothing left behind the stop marks
     counters = read_manifest(tmp_path / "take").counters
-    assert (counters["frames_written"], counters["writes_dropped"]) == (1, 1)
-    assert (writer.frames_written, writer.writes_dropped) == (1, 1)
+    assert (counters["frames_written"], counters["writes_dropped"]) == (1, 0)
+
+
+def _opened_in_a_thread(source) -> tuple[threading.Thread, list]:
+    """``source.open()`` on a thread of its own; the list gets what the open raised."""
+    failed: list = []
+
+    def open_it() -> None:
+        try:
+            source.open()
+        except Exception as e:  # noqa: BLE001 - what the open raised, for the test's thread
+            failed.append(e)
+
+    opener = threading.Thread(target=open_it, daemon=True)
+    opener.start()
+    return opener, failed
+
+
+def test_a_close_from_another_thread_while_the_inner_sim_pre_renders_cancels_the_open(tmp_path):
+    """record+sim: a close() while open() pre-rendered the inner loop did nothing (the base class closes only an open
+    source, and the recorder did not pass it on): the loop rendered on, the take began, and the source came back
+    open and closed, its inner source and writer threads never closed. The inner pre-render stops now, and the open
+    raises, no take begun."""
+    out = tmp_path / "take"
+    source = create_rig_source(f"record+sim://?width=32&height=24&cache=off&workers=1&out={out}",
+                               clock=ManualClock())
+    rendering, closed, rendered = threading.Event(), threading.Event(), []
+    render = source.inner._render
+
+    def first_frame_held_until_the_close(camera, j, *, together=False):
+        rendered.append((camera, j))
+        rendering.set()
+        assert closed.wait(30)
+        return render(camera, j, together=together)
+
+    source.inner._render = first_frame_held_until_the_close
+    opener, failed = _opened_in_a_thread(source)
+    try:
+        assert rendering.wait(30), "the open never rendered"
+        source.close()
+    finally:
+        closed.set()
+        opener.join(60)
+    assert not opener.is_alive()
+    assert len(failed) == 1 and isinstance(failed[0], RigInitializationError), failed
+    assert "closed" in str(failed[0]), failed
+    assert rendered == [(0, 0)], rendered  # the frame in progress, no other
+    assert (source.is_open, source.inner.is_open, source.inner._loop, source._writer) == (False, False, None, None)
+    assert not out.exists()  # no take begun
+
+
+def test_a_close_as_the_inner_open_ends_begins_no_take_and_one_as_the_take_begins_closes_it(tmp_path, monkeypatch):
+    """A close() landing once the inner source's open is done (nothing left there to cancel): the open raises
+    before the take begins; one landing as the writer starts closes the take it began, its writer threads stopped."""
+    out = tmp_path / "take"
+    source = create_rig_source(f"record+sim://?width=32&height=24&cache=off&workers=1&out={out}",
+                               clock=ManualClock())
+    opened, closed = threading.Event(), threading.Event()
+    inner_open = source.inner.open
+
+    def opened_then_held_until_the_close():
+        inner_open()
+        opened.set()
+        assert closed.wait(30)
+        return source.inner
+
+    monkeypatch.setattr(source.inner, "open", opened_then_held_until_the_close)
+    opener, failed = _opened_in_a_thread(source)
+    try:
+        assert opened.wait(60), "the inner source never opened"
+        source.close()
+    finally:
+        closed.set()
+        opener.join(60)
+    assert len(failed) == 1 and isinstance(failed[0], RigInitializationError), failed
+    assert str(failed[0]).startswith("record+ source closed while it opened (a close() from another thread)"), failed
+    assert (source.is_open, source.inner.is_open, source._writer) == (False, False, None) and not out.exists()
+
+    out = tmp_path / "take2"
+    source = create_rig_source(f"record+sim://?width=32&height=24&cache=off&workers=1&out={out}",
+                               clock=ManualClock())
+    started, closed = threading.Event(), threading.Event()
+    real_start = record_module.RecordingWriter.start
+
+    def started_then_held_until_the_close(writer):
+        real_start(writer)
+        started.set()
+        assert closed.wait(30)
+
+    monkeypatch.setattr(record_module.RecordingWriter, "start", started_then_held_until_the_close)
+    opener, failed = _opened_in_a_thread(source)
+    try:
+        assert started.wait(60), "the take never began"
+        source.close()
+    finally:
+        closed.set()
+        opener.join(60)
+    assert len(failed) == 1 and isinstance(failed[0], RigInitializationError), failed
+    assert not source.is_open and not any(t.is_alive() for t in source._writer._threads)
+    assert read_manifest(out).complete and read_manifest(out).counters["frames_written"] == 0

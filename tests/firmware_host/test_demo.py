@@ -1265,6 +1265,27 @@ def test_a_take_that_failed_is_said_when_a_stop_lands_after_the_sink_s_close(tmp
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
 
 
+
+def test_a_take_that_failed_as_a_run_ended_by_an_error_closed_it_is_said_before_the_error(tmp_path, capsys,
+                                                                                        monkeypatch):
+    """A run ended by an error (here one raised as the third pair is streamed) closes the take on the error's way
+    out: a take that failed in that close went unsaid (main said the error alone, the take complete: false), as
+    ghcal capture says it. Now both are said, the take first, exit 2."""
+    import drivers.backends.record as record_module
+
+    monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
+    monkeypatch.setattr(demo, "truth_frame",
+                        _stopping_at_the_third_pair(lambda: drivers.RigOperationError("the rig failed for good")))
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert (rc, captured.err.splitlines()) == (2, [
+        f"{demo.prog_name()}: error: recording to {take} failed as it closed: [Errno 28] No space left on device; "
+        "its manifest says complete: false",
+        f"{demo.prog_name()}: error: the rig failed for good"]), captured.err
+    assert json.loads((take / "manifest.json").read_text())["complete"] is False
+
 _FIRST_STOPS = {  # the stop that ended the reading: (exception, exit status, stderr)
     "Ctrl-C": (KeyboardInterrupt, 0, []),
     "SIGTERM": (lambda: Terminated("SIGTERM"), 143,

@@ -53,3 +53,17 @@ def test_a_stop_escaping_the_run_of_a_whole_take_is_raised_on(capsys, source):
 def test_the_run_s_own_status_is_returned():
     take = RecordedTake(_ClosedTake("recording to t failed as it closed: disk full"), "tool")
     assert status_saying_a_failed_take(lambda: 7, take) == 7
+
+
+@pytest.mark.parametrize("failure", ["recording to t failed as it closed: disk full", None], ids=["failed", "whole"])
+def test_an_error_escaping_the_run_is_raised_on_once_a_failed_take_is_said(capsys, failure):
+    """The run closed the take on the error's way out: its failure went unsaid (ghnerf-demo; the caller says the
+    error alone, exit 2); it is said first now, and the error raised on for the caller to say."""
+    take = RecordedTake(_ClosedTake(failure), "tool")
+
+    def failing_run() -> int:
+        raise OSError("the sink's link failed")
+
+    with pytest.raises(OSError, match="the sink's link failed"):
+        status_saying_a_failed_take(failing_run, take)
+    assert capsys.readouterr().err == ("" if failure is None else f"tool: error: {failure}\n")
