@@ -24,6 +24,7 @@ closed, since session 75, also where a stop lands after the cameras' close: ``Re
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -522,6 +523,10 @@ def _capture_and_summarise(args: argparse.Namespace, board: BoardSpec, out: Path
     shown_url = redact_url(args.url)  # a camera URL may carry a password (rtsp://user:pass@..., token=)
     read_to_its_end = False  # the capture ended without a stop (caught below) or an error on its way out
     stopped: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM: the capture's normal end, said after the close
+    # entered at the first stop, left once the cameras are closed: a second Ctrl-C or SIGTERM landing just before
+    # the close (outside its deferral) skipped it, the take left complete: false, and one just after it ended the
+    # capture "did not finish", 130 or 143, in place of the first stop's views kept (0). Noted and dropped
+    second_stops_dropped = contextlib.ExitStack()
     try:
         # what the open warns and notes of the rig (a take's, a device's calibration, sim://'s) is logged by the
         # source, not the rig file: shown as main shows a loaded rig's, its notes too (Python showed the warnings)
@@ -665,6 +670,7 @@ def _capture_and_summarise(args: argparse.Namespace, board: BoardSpec, out: Path
             print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
         read_to_its_end = True
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (main): said below, once the cameras are closed
+        second_stops_dropped.enter_context(stop_signals_deferred(then_raise=False))
         stopped = e
     finally:
         # a Ctrl-C or SIGTERM that lands in the close waits for it, as ghnerf-demo's does: raised there it tore the
@@ -674,7 +680,8 @@ def _capture_and_summarise(args: argparse.Namespace, board: BoardSpec, out: Path
         # is the one reported
         # the take checked first; a record+ take's failure is said before main says an error on its way
         # (status_saying_a_failed_take)
-        late_stop = closed_with_stops_deferred(source.close, then_raise=read_to_its_end)
+        with second_stops_dropped:
+            late_stop = closed_with_stops_deferred(source.close, then_raise=read_to_its_end)
     if late_stop is not None and take.failure() is None:  # main says it (130, 143); a failed take is said below, 2
         raise late_stop
     if stopped is not None:

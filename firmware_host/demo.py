@@ -50,7 +50,8 @@ Ctrl-C stops the reading and still prints the summary (exit 0); SIGTERM (``timeo
 ``record+`` take is often ended) does the same, a recorder closing its take complete, and exits 143 with one
 line. Either before the first pair (the motion loop's first render, the model load) exits 130 or 143. A ``record+``
 take that fails as it closes (its last fsync: ``complete: false``) ends any run with exit 2 and one error line,
-a stopped one included.
+a stopped one included. A second Ctrl-C or SIGTERM, from the first stop until the take is closed (the sink's close,
+the take's and the lines between them), is dropped: the first stop is the one reported, with its summary.
 
 Without a model in the model folder the demo stops with a one-line error naming the
 folder and the command that builds it. ``--truth-only`` skips the model: the simulator's
@@ -420,10 +421,11 @@ def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
 
 
 @contextlib.contextmanager
-def _closed_on_the_way_out(sink: Sink) -> Iterator[Sink]:
-    """``sink``, closed as the block ends. A run that ends without an error closes it itself (its stop said); one
-    stopped by an error closes it here with the stop signals held: a Ctrl-C or SIGTERM landing in that close (it
-    delivers what it holds queued, up to a second) was raised there in place of the error, its message and exit
+def _closed_on_an_error(sink: Sink) -> Iterator[Sink]:
+    """``sink``, closed here when the block raises. A run that ends without an error closes it itself, its stop
+    said (a second close here, its stops held and raised, raised a second Ctrl-C past the first stop's summary);
+    one stopped by an error closes it here with the stop signals held: a Ctrl-C or SIGTERM landing in that close
+    (it delivers what it holds queued, up to a second) was raised there in place of the error, its message and exit
     status lost. That error is the one reported; a stop noted there is dropped."""
     try:
         yield sink
@@ -431,8 +433,6 @@ def _closed_on_the_way_out(sink: Sink) -> Iterator[Sink]:
         with stop_signals_deferred(then_raise=False):
             sink.close()
         raise
-    with stop_signals_deferred():
-        sink.close()
 
 
 def _run(args: argparse.Namespace, prog: str) -> int:
@@ -471,6 +471,10 @@ def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfi
     stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
     read_to_its_end = False  # the reading ended without an error or a stop on its way out (the close's raise)
     late_stop: KeyboardInterrupt | None = None  # one that landed in the close of a run that read to its end
+    # entered at the first stop, left once the take is closed: a second Ctrl-C or SIGTERM landing between the
+    # closes (outside their own deferrals) was raised there, 130 or 143 without the summary, the take's close
+    # skipped where it landed just before it. Noted and dropped: the first stop is the one reported
+    second_stops_dropped = contextlib.ExitStack()
     try:
         estimator = None
         if cfg is not None:
@@ -504,7 +508,7 @@ def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfi
         if ("rig_id" not in parse_url(sink_url).query and 0 < len(rig_id) <= MAX_RIG_ID_LEN and rig_id.isascii()
                 and rig_id.isprintable()):
             sink_kw["rig_id"] = rig_id
-        with _closed_on_the_way_out(open_sink(sink_url, **sink_kw)) as sink:
+        with _closed_on_an_error(open_sink(sink_url, **sink_kw)) as sink:
             start = time.monotonic()
             deadline = start + args.seconds
             while time.monotonic() < deadline:
@@ -562,6 +566,7 @@ def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfi
                         skews.append(pair.skew_ns / 1e6)
                         last_pair = pair
                 except KeyboardInterrupt as e:  # SIGTERM too (main's sigterm_as_interrupt)
+                    second_stops_dropped.enter_context(stop_signals_deferred(then_raise=False))
                     stopped = e
                     print(f"stopping: {stop_words(e)}")
                     break
@@ -570,7 +575,6 @@ def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfi
             # slow serial link): a second Ctrl-C pressed there cut it short and ended the run without its summary,
             # 130 for a run the first Ctrl-C ended with 0. Raised after the close only when it is the first stop,
             # and only once the take is closed and checked (below): raised here, it went past both
-            # (_closed_on_the_way_out's close then has nothing left to do)
             late_stop = closed_with_stops_deferred(sink.close, then_raise=stopped is None)
         sink_stats = sink.stats()
         stats = source.stats
@@ -585,8 +589,9 @@ def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfi
         # ran out, a second Ctrl-C pressed after the one that stopped the run). A stop that lands there is raised
         # once the take is whole only when it is the first: a stop caught above, or an error on its way, is the one
         # reported (its summary and exit status)
-        late_stop = closed_with_stops_deferred(
-            source.close, then_raise=read_to_its_end and stopped is None and late_stop is None) or late_stop
+        with second_stops_dropped:
+            late_stop = closed_with_stops_deferred(
+                source.close, then_raise=read_to_its_end and stopped is None and late_stop is None) or late_stop
     if late_stop is not None and take.failure() is None:
         raise late_stop  # main says it (130, 143); a failed take is said after the summary, 2
 

@@ -587,14 +587,15 @@ def _stop_in_the_last_line(monkeypatch, signum: int) -> None:
 
 @pytest.mark.parametrize("take_fails", [False, True])
 @pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
-@pytest.mark.parametrize("where", ["after the close", "in the last line"])
-@pytest.mark.parametrize("end", ["count", "ctrl-c"])
+@pytest.mark.parametrize("end, where", [("count", "after the close"), ("count", "in the last line"),
+                                        ("ctrl-c", "in the last line")])
 def test_a_failed_take_is_said_when_a_stop_lands_after_the_capture_s_close(truth, one_view, tmp_path, capsys,
                                                                            monkeypatch, end, where, stop, take_fails):
     """A Ctrl-C or SIGTERM landing after the cameras' close (between it and the take's check, or in the capture's
     last line) was raised to main past the take's check: "the capture did not finish", 130 or 143, of a take whose
     manifest says complete: false. Now a failed take is said (one line, exit 2) wherever the stop lands, whether
-    the capture kept all its views or was stopped; a whole one leaves the stop its own exit status."""
+    the capture kept all its views or was stopped; a whole one leaves the stop its own exit status. (A second stop
+    just after the close of a stopped capture is dropped: the test below.)"""
     import signal
 
     import drivers
@@ -628,4 +629,54 @@ def test_a_failed_take_is_said_when_a_stop_lands_after_the_capture_s_close(truth
     assert "kept 1 view(s)" not in captured.out  # the last line, cut short by the stop
     assert json.loads((recorded / "manifest.json").read_text())["complete"] is not take_fails
     assert (out / truth.pair[0].name / "000.png").exists()  # the views are whole: kept
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
+def _stop_before_the_close(monkeypatch, signum: int) -> None:
+    """A stop lands just before the cameras' close, outside its deferral (its handler runs in the main thread, at
+    once)."""
+    real_closed = cli.closed_with_stops_deferred
+
+    def stopped_then_closed(close, **kwargs):
+        os.kill(os.getpid(), signum)
+        return real_closed(close, **kwargs)
+
+    monkeypatch.setattr(cli, "closed_with_stops_deferred", stopped_then_closed)
+
+
+@pytest.mark.parametrize("take_fails", [False, True])
+@pytest.mark.parametrize("second", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("where", ["before the close", "after the close"])
+def test_a_second_stop_next_to_the_close_of_a_stopped_capture_is_dropped_and_the_first_reported(
+        truth, one_view, tmp_path, capsys, monkeypatch, where, second, take_fails):
+    """Ctrl-C ends a capture that kept a view; a second Ctrl-C or SIGTERM landing just before the cameras' close
+    (outside its deferral) skipped that close, the take left complete: false, and one just after it was raised past
+    the capture's last line: "the capture did not finish", 130 or 143, in place of the first stop's 0. Now both are
+    dropped: the take closed and checked, the views kept said, 0 (a failed take: said, exit 2)."""
+    import signal
+
+    import drivers
+
+    if take_fails:
+        _fsync_fails(monkeypatch)  # a short take: only the close's fsync runs
+    monkeypatch.setattr(drivers, "create_rig_source", _failing_after(drivers.create_rig_source, 2, KeyboardInterrupt()))
+    stop_there = _stop_before_the_close if where == "before the close" else _stop_after_the_close
+    stop_there(monkeypatch, signal.Signals[second])
+    take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
+    previous = signal.signal(signal.SIGTERM, _outer_sigterm)
+    try:
+        rc = cli.main(["capture", "--url", f"record+replay://{take}?speed=free&out={recorded}", "--board",
+                       str(_board_file(tmp_path)), "--out", str(out), "--count", "5", "--interval-s", "0",
+                       "--still-s", "0"])
+    except (_Escaped, KeyboardInterrupt):
+        pytest.fail("the stop escaped ghcal")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    captured = capsys.readouterr()
+    err = but_the_framing_notes(captured.err).splitlines()
+    failed = [f"ghcal: error: recording to {recorded} failed as it closed: [Errno 28] No space left on device; its "
+              "manifest says complete: false"]
+    assert (rc, err) == ((2, failed) if take_fails else (0, [])), captured
+    assert "stopped: kept 1 view(s)" in captured.out  # the first stop's last line
+    assert json.loads((recorded / "manifest.json").read_text())["complete"] is not take_fails
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back

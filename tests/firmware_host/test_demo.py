@@ -1353,6 +1353,77 @@ def test_a_second_ctrl_c_while_a_stopped_run_closes_leaves_the_take_whole_and_th
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
 
 
+def _second_stop_at(monkeypatch, where: str, signum: int) -> list:
+    """A second stop, ``signum``, lands at ``where`` as the stopped run closes its sink and its take: in each of the
+    sink's closes, just after the sink's close, just before the take's (the source's) close or just after it. The
+    list returned counts the stops sent (its handler runs in the main thread, at once)."""
+    from firmware_host.sinks import base
+
+    sent = []
+
+    def stop():
+        sent.append(1)
+        os.kill(os.getpid(), signum)
+
+    if where == "in each of the sink's closes":
+        real_close = base.Sink.close
+
+        def close(self, *args, **kwargs):
+            stop()
+            return real_close(self, *args, **kwargs)
+
+        monkeypatch.setattr(base.Sink, "close", close)
+        return sent
+    real_closed, closes = demo.closed_with_stops_deferred, []
+
+    def closed_with_a_stop(close, **kwargs):  # the sink's close first, the take's second
+        closes.append(1)
+        if (len(closes), where) == (2, "before the take's close"):
+            stop()
+        late_stop = real_closed(close, **kwargs)
+        if (len(closes), where) in ((1, "after the sink's close"), (2, "after the take's close")):
+            stop()
+        return late_stop
+
+    monkeypatch.setattr(demo, "closed_with_stops_deferred", closed_with_a_stop)
+    return sent
+
+
+@pytest.mark.parametrize("take_fails", [False, True])
+@pytest.mark.parametrize("first", sorted(_FIRST_STOPS))
+@pytest.mark.parametrize("where", ["in each of the sink's closes", "after the sink's close", "before the take's close",
+                                   "after the take's close"])
+def test_a_second_stop_between_the_sink_s_close_and_the_take_s_is_dropped_and_the_first_reported(
+        tmp_path, capsys, monkeypatch, where, first, take_fails):
+    """A second stop landing between the sink's close and the take's, outside the closes' own deferrals, was raised
+    there: 130 or 143 without the summary in place of the first stop's 0 or 143; just before the take's close it
+    skipped that close, the take left complete: false. Now it is dropped from the first stop until the take is
+    closed: the take closed and checked, the summary printed, the first stop reported (a failed take: exit 2). The
+    second stop is of the other kind than the first, so the status says which was reported."""
+    import signal
+
+    import drivers.backends.record as record_module
+
+    raise_first, status, err = _FIRST_STOPS[first]
+    if take_fails:
+        monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
+    monkeypatch.setattr(demo, "truth_frame", _stopping_at_the_third_pair(raise_first))
+    sent = _second_stop_at(monkeypatch, where, signal.SIGTERM if first == "Ctrl-C" else signal.SIGINT)
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "20", "--out",
+                                       str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert sent, "no second stop was sent"
+    if take_fails:
+        status, err = 2, [f"{demo.prog_name()}: error: recording to {take} failed as it closed: [Errno 28] No space "
+                          "left on device; its manifest says complete: false"]
+    assert (rc, captured.err.splitlines()) == (status, err), captured.err
+    assert f"stopping: {first}" in captured.out and "the rig delivered" in captured.out  # the summary
+    assert json.loads((take / "manifest.json").read_text())["complete"] is not take_fails
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
 def test_an_error_on_its_way_is_reported_when_a_sigterm_lands_in_the_recorder_s_close(tmp_path, capsys,
                                                                                       monkeypatch):
     """A run that failed closes its take on the way out; a SIGTERM landing in that close (timeout's) was raised
