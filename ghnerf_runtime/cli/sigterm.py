@@ -125,12 +125,41 @@ def _signals_held(signums: tuple[signal.Signals, ...], *, then_raise: bool) -> I
         yield
         return
     noted: list[int] = []
-    previous = {signum: signal.signal(signum, lambda got, _frame: noted.append(got)) for signum in signums}
+    previous = {signum: signal.getsignal(signum) for signum in signums}
+    _install_noting(signums, noted, previous)
     try:
         yield
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+        _put_back(previous)
     if noted and then_raise:  # after the block, not in its finally: an error the block raised is the one reported
         name = signal.Signals(noted[0]).name
         raise Terminated(name) if noted[0] == signal.SIGTERM else KeyboardInterrupt(name)
+
+
+def _install_noting(signums: tuple[signal.Signals, ...], noted: list[int],
+                    previous: dict[signal.Signals, object]) -> None:
+    """Each of ``signums`` noted into ``noted`` from now on. A stop that lands while the handlers go in (SIGTERM
+    after SIGINT's is set, run by its handler before ours) is noted as if it came a moment later and the
+    installing goes on: raised out of here it would skip the block (``closed_with_stops_deferred``'s close) and
+    leave the handlers already set in place. Any other error puts ``previous`` back and is raised."""
+    def note(got: int, _frame: object) -> None:
+        noted.append(got)
+
+    waiting = list(signums)
+    try:
+        while waiting:
+            try:
+                signal.signal(waiting[0], note)
+            except KeyboardInterrupt as e:
+                noted.append(stop_signal(e))
+                continue  # setting a handler twice is harmless: the raise may have come before or after it was set
+            waiting.pop(0)
+    except BaseException:
+        _put_back(previous)
+        raise
+
+
+def _put_back(previous: dict[signal.Signals, object]) -> None:
+    """The handlers in ``previous`` set again; None (a handler not set from Python) as the default."""
+    for signum, handler in previous.items():
+        signal.signal(signum, signal.SIG_DFL if handler is None else handler)

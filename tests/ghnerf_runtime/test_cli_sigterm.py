@@ -172,3 +172,58 @@ def test_a_stop_in_a_close_is_handed_back_once_the_close_is_done():
     assert isinstance(closed_with_stops_deferred(close, then_raise=True), KeyboardInterrupt) and closed == ["whole"]
     assert closed_with_stops_deferred(close, then_raise=False) is None and closed == ["whole", "whole"]
     assert closed_with_stops_deferred(lambda: None, then_raise=True) is None
+
+
+@pytest.fixture
+def handlers_put_back():
+    """A failing test must not leave a noting handler on Ctrl-C for the rest of the run."""
+    before = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    for signum, handler in before.items():
+        signal.signal(signum, handler)
+
+
+@pytest.mark.usefixtures("handlers_put_back")
+@pytest.mark.parametrize("raised_after", [False, True])
+def test_a_sigterm_landing_while_the_handlers_go_in_is_held_and_the_close_still_runs(monkeypatch, raised_after):
+    """SIGTERM after SIGINT's noting handler is set, before SIGTERM's: its handler then (sigterm_as_interrupt's)
+    raises out of the set-up, as signal.signal runs the signals pending before (or the call's return after) it
+    sets one. It must be held like a stop a moment later, the close run, and both handlers put back."""
+    real_signal = signal.signal
+    landed = []
+
+    def signal_with_a_sigterm_landing(signum, handler):
+        if signum == signal.SIGTERM and not landed and handler is not signal.SIG_DFL:
+            landed.append(signum)
+            if raised_after:
+                real_signal(signum, handler)
+            raise Terminated("SIGTERM")  # what sigterm_as_interrupt's handler raises when it runs there
+        return real_signal(signum, handler)
+
+    closed = []
+    with sigterm_as_interrupt():
+        installed_term = signal.getsignal(signal.SIGTERM)
+        monkeypatch.setattr(signal, "signal", signal_with_a_sigterm_landing)
+        stop = closed_with_stops_deferred(lambda: closed.append("whole"), then_raise=True)
+        monkeypatch.undo()
+        assert signal.getsignal(signal.SIGTERM) is installed_term
+    assert landed and closed == ["whole"]
+    assert isinstance(stop, Terminated)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+@pytest.mark.usefixtures("handlers_put_back")
+def test_another_error_while_the_handlers_go_in_puts_the_handlers_back(monkeypatch):
+    real_signal = signal.signal
+
+    def signal_failing_for_sigterm(signum, handler):
+        if signum == signal.SIGTERM:
+            raise OSError("refused")
+        return real_signal(signum, handler)
+
+    monkeypatch.setattr(signal, "signal", signal_failing_for_sigterm)
+    with pytest.raises(OSError):
+        with stop_signals_deferred():
+            pytest.fail("the block ran without its handlers")
+    monkeypatch.undo()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
