@@ -33,7 +33,7 @@ def seed_list(text: str) -> list[int]:
     """An argparse ``type=`` for ``--seeds 0,1,2``: one seed at least, each a whole number >= 0 (``--seeds x`` was
     int()'s "invalid literal" traceback)."""
     parts = [part.strip() for part in text.split(",")]
-    if not all(part.isdigit() for part in parts):
+    if not all(part.isdecimal() for part in parts):  # isdigit() passes "²", which int() refuses
         raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 0, got {text!r}")
     return [int(part) for part in parts]
 

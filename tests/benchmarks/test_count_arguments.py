@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from ghnerf_runtime.cli.counts import non_negative_count, positive_count
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count, seed_list
 from ghnerf_runtime.cli.model_folder import model_folder_option
 
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
@@ -180,3 +180,14 @@ def test_a_model_folder_option_holds_graph_files_where_the_session_looks(tmp_pat
     (shipped / "other" / "encoder.onnx").write_bytes(b"")
     with pytest.raises(argparse.ArgumentTypeError, match="holds no model"):  # two: the session would take neither
         model_folder_option(str(shipped))
+
+
+@pytest.mark.parametrize("text", ["1,²", "x", "1,,2", "-1", ""])
+def test_a_seed_list_refuses_what_is_not_whole_numbers(text):
+    """"²" is a digit to str.isdigit() and no number to int(): it was int()'s ValueError traceback."""
+    with pytest.raises(argparse.ArgumentTypeError, match="comma-separated whole numbers >= 0"):
+        seed_list(text)
+
+
+def test_a_seed_list_takes_whole_numbers():
+    assert seed_list("0, 1,2") == [0, 1, 2]
