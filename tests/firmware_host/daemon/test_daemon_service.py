@@ -1370,14 +1370,7 @@ def test_a_reload_whose_second_added_sink_cannot_start_closes_the_first_and_chan
     built: list = []
     build = daemon._build_sink
     monkeypatch.setattr(daemon, "_build_sink", lambda *a: built.append(build(*a)) or built[-1])
-    start_thread = threading.Thread.start
-
-    def no_thread_for_the_second(thread):
-        if thread.name == f"sink {second}":
-            raise RuntimeError("can't start new thread")
-        start_thread(thread)
-
-    monkeypatch.setattr(threading.Thread, "start", no_thread_for_the_second)
+    _no_worker_thread_for(monkeypatch, second)
     try:
         configs.next = _config({"url": "sim://"}, tmp_path, sinks=[running, first, second])
         daemon.request_reload()
