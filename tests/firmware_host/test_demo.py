@@ -1265,7 +1265,6 @@ def test_a_take_that_failed_is_said_when_a_stop_lands_after_the_sink_s_close(tmp
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
 
 
-
 def test_a_take_that_failed_as_a_run_ended_by_an_error_closed_it_is_said_before_the_error(tmp_path, capsys,
                                                                                         monkeypatch):
     """A run ended by an error (here one raised as the third pair is streamed) closes the take on the error's way
@@ -1285,6 +1284,7 @@ def test_a_take_that_failed_as_a_run_ended_by_an_error_closed_it_is_said_before_
         "its manifest says complete: false",
         f"{demo.prog_name()}: error: the rig failed for good"]), captured.err
     assert json.loads((take / "manifest.json").read_text())["complete"] is False
+
 
 _FIRST_STOPS = {  # the stop that ended the reading: (exception, exit status, stderr)
     "Ctrl-C": (KeyboardInterrupt, 0, []),
