@@ -12,6 +12,7 @@ import logging
 import os
 import socket
 import time
+from types import SimpleNamespace
 
 import pytest
 
@@ -256,7 +257,7 @@ def test_a_datagram_is_not_judged_unrefused_before_its_answer_could_come(monkeyp
     # then a new WARNING at the next frame. A datagram draws no refusal only if none is waiting once its answer
     # had time to come back (REFUSAL_ANSWER_S).
     clock = [100.0]
-    monkeypatch.setattr(udp_sink.time, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(udp_sink, "time", SimpleNamespace(monotonic=lambda: clock[0]))  # this module's clock alone
     caplog.set_level(logging.INFO, logger="firmware_host.sinks.udp_sink")
     refused, sent = errno.ECONNREFUSED, None
     link, sock = _scripted_link([refused, sent,  # a frame's first datagram meets an earlier one's refusal
@@ -281,7 +282,7 @@ def test_a_datagram_is_not_judged_unrefused_before_its_answer_could_come(monkeyp
 def test_a_datagram_that_drew_no_refusal_once_its_answer_could_come_ends_the_refusals(
         monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
     clock = [100.0]
-    monkeypatch.setattr(udp_sink.time, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(udp_sink, "time", SimpleNamespace(monotonic=lambda: clock[0]))  # this module's clock alone
     caplog.set_level(logging.INFO, logger="firmware_host.sinks.udp_sink")
     link, sock = _scripted_link([errno.ECONNREFUSED, None])
     link.send(b"refused before\x00")
