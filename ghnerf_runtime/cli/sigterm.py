@@ -99,13 +99,25 @@ def stop_signals_deferred(*, then_raise: bool = True, only_raising: bool = False
 def closed_with_stops_deferred(close: Callable[[], None], *, then_raise: bool) -> KeyboardInterrupt | None:
     """``close()`` inside :func:`stop_signals_deferred`; the stop it raises once the close is done (``then_raise``)
     is returned, not raised, so that the caller checks what the close left first (a ``record+`` take that failed
-    as it closed is said, exit 2, rather than the stop's 130 or 143: ``ghnerf-demo``, ``ghcal capture``)."""
+    as it closed is said, exit 2, rather than the stop's 130 or 143: ``ghnerf-demo``, ``ghcal capture``).
+
+    A stop landing before the handlers that hold it are in place (as the block is entered) is taken as one in the
+    close: the close is still run, its stops held, and that stop returned when ``then_raise``; returned at once, it
+    skipped the close (a ``record+`` take left ``complete: false``)."""
+    closing = False
     try:
         with stop_signals_deferred(then_raise=then_raise):
+            closing = True
             close()
     except KeyboardInterrupt as e:
-        return e
-    return None
+        if closing:  # raised once the close was done
+            return e
+        early = e
+    else:
+        return None
+    with stop_signals_deferred(then_raise=False):
+        close()
+    return early if then_raise else None
 
 
 def _raises_now(signum: signal.Signals) -> bool:

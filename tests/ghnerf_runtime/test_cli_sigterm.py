@@ -227,3 +227,27 @@ def test_another_error_while_the_handlers_go_in_puts_the_handlers_back(monkeypat
             pytest.fail("the block ran without its handlers")
     monkeypatch.undo()
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+@pytest.mark.usefixtures("handlers_put_back")
+@pytest.mark.parametrize("then_raise", [True, False])
+def test_a_stop_landing_as_the_close_s_handlers_are_entered_still_lets_the_close_run(monkeypatch, then_raise):
+    """A SIGTERM run by sigterm_as_interrupt's handler before the held handlers go in (here as the ones before are
+    read) raised out of the deferral's entry: the stop was returned and the close never ran."""
+    real_getsignal = signal.getsignal
+    landed = []
+
+    def getsignal_with_a_sigterm_landing(signum):
+        if not landed:
+            landed.append(signum)
+            raise Terminated("SIGTERM")  # what sigterm_as_interrupt's handler raises when it runs there
+        return real_getsignal(signum)
+
+    closed = []
+    with sigterm_as_interrupt():
+        monkeypatch.setattr(signal, "getsignal", getsignal_with_a_sigterm_landing)
+        stop = closed_with_stops_deferred(lambda: closed.append("whole"), then_raise=then_raise)
+        monkeypatch.undo()
+    assert landed and closed == ["whole"]
+    assert isinstance(stop, Terminated) if then_raise else stop is None
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
