@@ -9,7 +9,8 @@ A :meth:`RigSource.close` from another thread while :meth:`RigSource.open` runs 
 backend: once ``_open`` returns, ``open()`` finds the close, releases what ``_open`` made with ``_close`` and raises
 :class:`~drivers.errors.RigInitializationError`. Before, the close skipped ``_close`` for a source not yet open, and
 ``open()`` returned a closed source still holding camera threads or a device. Backends whose ``_open`` takes long
-(``sim://``'s pre-render, ``replay://``'s checks) also stop it early.
+(``sim://``'s pre-render, ``replay://``'s checks) also stop it early, in
+:meth:`RigSource._cancel_open`.
 """
 from __future__ import annotations
 
@@ -387,8 +388,15 @@ class RigSource(abc.ABC):
         try:
             if must_close:
                 self._close()
+            else:
+                self._cancel_open()
         finally:
             self._is_open = False
+
+    def _cancel_open(self) -> None:
+        """:meth:`close` of a source not open: an :meth:`open` another thread may be running is to stop early (a
+        pre-render at its next frame) rather than run on to its end, then release what it made (it does, as
+        :meth:`open` says). Runs on the closing thread, so it must not wait for that open. Default: nothing."""
 
     def lingering(self) -> tuple[str, ...]:
         """After :meth:`close`: what of this source is still inside a device call that the close could not

@@ -436,7 +436,7 @@ class _Camera:
                 stamp = max(self._live_stamp(grabbed_ns), self.last_stamp_ns + 1)
             if not src._put(Frame(camera=self.name, image=image, timestamp_ns=stamp, index=self.index),
                             wait_room=self.video and src.pairing.policy is DropPolicy.ALL, lost=self.lost):
-                return  # a frame refused (closed, failed): the thread's end says the run as still going
+                return  # a frame refused (closed, failed): the thread's end says the run, as it ends
             if self.lost.frames:  # the source holds the run now: said as the reader takes this frame
                 self.lost = LostRun()
             self.index += 1

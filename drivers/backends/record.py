@@ -471,6 +471,7 @@ class RecordingRigSource(RigSource):
         except BaseException:
             self.inner.close()
             raise
+
     def _cancelled_open(self) -> RigInitializationError:
         """What :meth:`open` raises when a :meth:`close` from another thread landed in it."""
         return RigInitializationError(f"record+ source closed while it opened (a close() from another thread): the "
@@ -519,14 +520,9 @@ class RecordingRigSource(RigSource):
     def lingering(self) -> tuple[str, ...]:
         return self.inner.lingering()  # its cameras' calls; the recorder's writers hold no device
 
-    def close(self) -> None:
-        """Close; from another thread while :meth:`open` runs, the inner source is closed at once, which cancels
-        its open (the base class closes only a source that is open, so the inner open ran on to its end)."""
-        self._closing.set()
-        try:
-            self.inner.close()
-        finally:
-            super().close()
+    def _cancel_open(self) -> None:
+        self._closing.set()  # no take is begun
+        self.inner.close()  # cancels the inner source's open, as closing it would
 
     def _close(self) -> None:
         self._closing.set()

@@ -96,7 +96,8 @@ log = logging.getLogger(__name__)
 
 #: The slowest ``speed=`` played.
 MIN_SPEED = 0.001
-_Item = TypeVar("_Item")  # what ReplayRigSource._until_closed passes on
+#: What :meth:`ReplayRigSource._until_closed` passes on.
+_Item = TypeVar("_Item")
 
 #: How many of a camera's images of another size than its rig camera's the refusal at open names.
 SIZE_NAMES_SHOWN = 3
@@ -524,7 +525,7 @@ class ReplayRigSource(RigSource):
         self._anchor_ns: int | None = None  # clock time at which the first frame is due (set by the first read)
         self._time_span_ns, self._index_span = self._loop_spans()
         self._unloaded: dict[Frame, tuple[FrameRow, int]] = {}  # frames pushed by _catch_up, image not read yet
-        self._closing = threading.Event()  # set by _close: wakes a read waiting for its frame in another thread
+        self._closing = threading.Event()  # set by close: wakes a read waiting in another thread, stops an open
 
     @classmethod
     def from_url(cls, url: RigUrl, *, clock: Clock | None = None,
@@ -815,11 +816,8 @@ class ReplayRigSource(RigSource):
             raise RigInitializationError(f"recording {shown(str(self.directory))}: closed while open() checked the "
                                          "take's files: the open was cancelled")
 
-    def close(self) -> None:
-        """Close; from another thread while :meth:`open` checks the take's files, that open stops at its next file
-        and raises :class:`RigInitializationError` (the base class closes only a source that is open)."""
-        self._closing.set()
-        super().close()
+    def _cancel_open(self) -> None:
+        self._closing.set()  # the open's checks stop at the next file (_until_closed)
 
     def _close(self) -> None:
         self._closing.set()  # files are opened per frame: nothing else is held

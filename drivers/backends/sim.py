@@ -351,7 +351,7 @@ class SimRigSource(RigSource):
         self._unplug_ns: int | None = None
         self._second_joins_ns: int | None = None
         self._unplugged = False
-        self._closing = threading.Event()  # set by _close: wakes a read waiting for its frame in another thread
+        self._closing = threading.Event()  # set by close: wakes a read waiting in another thread, stops an open
         names = rig.names[:2]
         self._drops = {n: 0 for n in names}
         self._overruns = {n: 0 for n in names}
@@ -549,15 +549,8 @@ class SimRigSource(RigSource):
             joints_3d=shown.joints_3d,
         )
 
-    def close(self) -> None:
-        """Close; from another thread while :meth:`open` pre-renders, that open stops at its next frame and raises
-        :class:`RigInitializationError` (the base class closes only a source that is open, and the pre-render of
-        a loop of minutes ran on to its end)."""
-        self._closing.set()
-        try:
-            super().close()
-        finally:
-            self._drop_loops()  # also where an open() in another thread made them after the close began
+    def _cancel_open(self) -> None:
+        self._closing.set()  # a pre-render stops at its next frame; the open drops its loops and raises
 
     def _close(self) -> None:
         self._closing.set()

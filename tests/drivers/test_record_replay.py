@@ -318,30 +318,35 @@ def test_out_keyword_and_non_empty_directory(tmp_path, sim_cache):
 
 
 def test_a_slow_disk_never_stalls_the_reader(tmp_path, sim_cache, monkeypatch):
-    real_encode = record_module.encode_image
+    # The writer takes no frame at all while the reader reads (a disk far too slow): a reader that waited for it
+    # would never finish its reads. Not timed: a loaded host's scheduler stretched the reads past a time bound.
+    real_encode, released = record_module.encode_image, threading.Event()
 
-    def slow_encode(*args):
-        time.sleep(0.1)  # a disk far too slow for 200 frames/s: a stalled reader would take >= 4 s
+    def held_encode(*args):
+        assert released.wait(60), "the test never released the writer"
         return real_encode(*args)
 
-    monkeypatch.setattr(record_module, "encode_image", slow_encode)
-    # policy=all: every pair is read, so read_time alone says whether the reader kept pace (under
-    # latest, a pair captured while the recorder starts or during a scheduler hiccup would be skipped)
+    monkeypatch.setattr(record_module, "encode_image", held_encode)
     url = (f"record+sim://?width=40&height=30&fps=100&policy=all&cache={sim_cache}&out={tmp_path / 'slow'}"
            "&write_queue=2&writers=1")
-    with open_rig(url) as source:  # the real clock: 100 pairs per second
-        t0 = time.monotonic()
-        pairs = [source.read(timeout_s=5.0) for _ in range(40)]
-        read_time = time.monotonic() - t0
+    source, pairs = open_rig(url, clock=ManualClock()), []
+    reader = threading.Thread(target=lambda: pairs.extend(source.read(timeout_s=5.0) for _ in range(40)), daemon=True)
+    try:
+        reader.start()
+        reader.join(60)  # only a reader stalled on the held writer reaches it
+        assert not reader.is_alive(), "the reader waited for the writer"
+    finally:
+        released.set()
+        reader.join(60)
+        source.close()
     stats = source.stats
-    assert [p.sequence for p in pairs] == list(range(40))  # the reader kept up with the camera
-    assert read_time < 0.39 + 2.5  # the camera's 0.39 s plus room for a loaded 2-core host, below a stall's 4 s
-    assert stats.writes_dropped > 20
-    assert stats.frames_written + stats.writes_dropped == sum(stats.frames_in.values())
+    assert [p.sequence for p in pairs] == list(range(40))
+    # the writer's one frame and the queue's two are written, the others dropped, every one counted
+    assert 0 < stats.frames_written <= 3
+    assert stats.frames_written + stats.writes_dropped == sum(stats.frames_in.values()) >= 80
     with open_rig(f"replay://{tmp_path / 'slow'}?speed=free&policy=all") as source:
         list(source)
         assert sum(source.stats.frames_in.values()) == stats.frames_written
-        assert sum(source.stats.camera_gaps.values()) > 0  # what was not written shows as gaps
 
 
 def test_a_failing_writer_is_reported_once_then_frames_pass_through(tmp_path, sim_cache, monkeypatch):
@@ -366,8 +371,6 @@ def test_a_failing_writer_is_reported_once_then_frames_pass_through(tmp_path, si
 
 def test_after_a_write_error_every_frame_is_written_or_counted(tmp_path, sim_cache, monkeypatch):
     # the failed frame and those drained from the queue after it were counted nowhere (2 + 4 of 20)
-    import threading
-
     real, calls, gate = record_module.encode_image, [0], threading.Event()
 
     def fails_third(*args):
@@ -1065,7 +1068,6 @@ def test_the_writers_fsync_as_they_go_so_the_backlog_stays_bounded(take, tmp_pat
 def test_of_two_recorders_started_on_one_empty_folder_only_one_records(take, tmp_path, monkeypatch):
     """Both find the folder empty; rigs with other camera names made no folder in common: both recorded."""
     import dataclasses
-    import threading
 
     out = tmp_path / "take"
     manifest = read_manifest(take[0])
