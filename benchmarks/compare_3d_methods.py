@@ -32,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.model_folder import checked_model_folder, model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from benchmarks.bench_runtime_common import OracleSession, contract_of, edge128_contract  # noqa: E402
 from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
@@ -76,7 +76,7 @@ def run_method(session, sequences, joints3d: Joints3DConfig, oracle: OracleSessi
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--model-dir", type=model_folder_option, help="default: models (not read with --oracle)")
     ap.add_argument("--oracle", action="store_true", help="perfect model outputs from the truth (no model needed)")
     ap.add_argument("--precision", default="auto", choices=("auto", "fp32", "int8"))
     ap.add_argument("--sequences", type=positive_count, default=10)
@@ -108,6 +108,8 @@ def main(argv=None) -> int:
     sources = [h for h in args.heatmap_sources.split(",") if h]
     if args.oracle and sources != ["rendered"]:
         ap.error("--oracle models rendered heatmaps only")
+    if args.model_dir is None:  # checked only where a model runs: --oracle runs none, a missing folder is fine
+        args.model_dir = "models" if args.oracle else checked_model_folder(ap, "models")
     oracle = None
     if args.oracle:
         try:

@@ -65,7 +65,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.model_folder import checked_model_folder, model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.empty_rooms import empty_room_pair, scene_with_screen, scene_without_person  # noqa: E402
 from benchmarks.measure_baseline import bench_scene_in, rig_paths  # noqa: E402
@@ -369,7 +369,7 @@ def run_moving_room(args, session, base: EstimatorConfig) -> int:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", type=model_folder_option, default="models")
+    ap.add_argument("--model-dir", type=model_folder_option, help="default: models (not read with --wake-margin)")
     ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
     ap.add_argument("--sequences", type=positive_count, default=6)
     ap.add_argument("--frames", type=positive_count, default=10)
@@ -387,6 +387,8 @@ def main(argv=None) -> int:
     ap.add_argument("--moving-room", action="store_true", help="instead: wakes and ms per pair in --sequences "
                     "bench rooms with a screen playing, --pairs pairs each, nobody there")
     args = ap.parse_args(argv)
+    if args.model_dir is None:  # checked only where a model runs: --wake-margin runs none
+        args.model_dir = "models" if args.wake_margin else checked_model_folder(ap, "models")
     base = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision))
     if args.wake_margin:
         return run_wake_margin(args, base)

@@ -29,7 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
+from ghnerf_runtime.cli.model_folder import checked_model_folder  # noqa: E402
 from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 from drivers.sim import random_scene  # noqa: E402
 from ghnerf_runtime.config import Joints3DConfig  # noqa: E402
@@ -76,7 +76,7 @@ def _away(X: np.ndarray, rig) -> np.ndarray:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--model-dir", type=model_folder_option, default="models/ghnerf")
+    ap.add_argument("--model-dir", help="default: models/ghnerf (not read with --prior: checked after parsing)")
     ap.add_argument("--scenes", type=positive_count, default=12)
     ap.add_argument("--noise-px", type=float, default=1.0)
     ap.add_argument("--limits", default="0.15,0.25", help="disagreement limits (m) to count the pairs over")
@@ -86,6 +86,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.prior and args.held_out:
         ap.error("--prior measures poses out of range; --held-out runs the model folder's own prior")
+    if not args.prior:  # checked only where it is read: --prior reads no model folder, given or not
+        args.model_dir = checked_model_folder(ap, args.model_dir or "models/ghnerf")
     try:
         limits = [float(x) for x in args.limits.split(",")]
     except ValueError:

@@ -168,7 +168,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", type=model_folder_option, default="models")
     ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
-    ap.add_argument("--sequences", type=positive_count, default=6)
+    ap.add_argument("--sequences", type=non_negative_count, default=6, help="0: the --floor-seeds table only")
     ap.add_argument("--frames", type=positive_count, default=10)
     ap.add_argument("--pitches", default="17,10", help="degrees below the horizontal, comma-separated (\"\": the rig "
                                                        "as it is only)")

@@ -151,8 +151,9 @@ def _doc(name: str) -> str:
     ("docs/protocol.md", f"no datagram refused for {REFUSAL_QUIET_S:g} s: a receiver"),
     ("docs/protocol.md", f"`REFUSAL_ANSWER_S` ({REFUSAL_ANSWER_S:g} s)"),
     ("docs/protocol.md", f"about {REFUSAL_QUIET_S + REFUSAL_ANSWER_S:g} s (`REFUSAL_QUIET_S` + `REFUSAL_ANSWER_S`)"),
-    ("docs/daemon.md", f"sent {REFUSAL_QUIET_S:g} s after the last one drew none, "
-                       f"about {REFUSAL_QUIET_S + REFUSAL_ANSWER_S:g} s after a receiver starts"),
+    ("docs/daemon.md", f"sent {REFUSAL_QUIET_S:g} s or more after the last refusal drew none, judged by a send "
+                       f"{REFUSAL_ANSWER_S:g} s or more after it: about {REFUSAL_QUIET_S + REFUSAL_ANSWER_S:g} s after "
+                       "a receiver starts"),
     ("docs/geometry.md", f"`MIN_ROW_SHARE` = {_exp(MIN_ROW_SHARE)} of the terms"),
     ("docs/geometry.md", f"`UNDISTORT_POLISH` = {_exp(UNDISTORT_POLISH)}, so"),
     ("docs/geometry.md", f"in {REACH_RIM_POINTS} points (`REACH_RIM_POINTS`)"),

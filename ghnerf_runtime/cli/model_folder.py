@@ -13,7 +13,8 @@ from ghnerf_runtime.config import read_json_file
 from ghnerf_runtime.errors import ConfigError, ModelError
 from ghnerf_runtime.path_check import shown
 
-__all__ = ["config_names_model_dir", "model_dir_source", "model_folder_option", "named_by_source"]
+__all__ = ["checked_model_folder", "config_names_model_dir", "model_dir_source", "model_folder_option",
+           "named_by_source"]
 
 
 def config_names_model_dir(config_path: str | None) -> bool:
@@ -63,3 +64,14 @@ def model_folder_option(text: str) -> str:
         raise argparse.ArgumentTypeError(f"{shown(text)} holds no model: no .onnx graph file in it, in its ghnerf/ "
                                          "subfolder or in a single subfolder (make model builds ./models)")
     return text
+
+
+def checked_model_folder(parser: argparse.ArgumentParser, folder: str) -> str:
+    """``folder``, a benchmark's ``--model-dir`` (its default), checked as :func:`model_folder_option` checks one at
+    parsing (a usage error naming the option, exit 2), by a script that reads it only in some runs, once it knows
+    the run does. Its ``--model-dir`` defaults to None: argparse runs ``type=`` on a string default, which refused
+    the runs that read no model (``--oracle``, ``--prior``, ``--wake-margin``) where the default folder holds none."""
+    try:
+        return model_folder_option(folder)
+    except argparse.ArgumentTypeError as e:
+        parser.error(f"argument --model-dir: {e}")

@@ -57,7 +57,7 @@ COUNTS = {
     "measure_repeated_views": (("--count", "--edge-count"), ("--same-pose",)),
     "measure_single_view": (("--sequences", "--frames"), ("--rooms",)),
     "measure_still_pairs": (("--sequences", "--frames", "--every"), ()),
-    "measure_synth_framing": (("--sequences", "--frames"), ("--floor-seeds",)),
+    "measure_synth_framing": (("--frames",), ("--sequences", "--floor-seeds")),
     "measure_two_people": (("--scenes", "--pairs", "--sequences", "--frames"), ("--alone",)),
     "measure_volume_near_edge": (("--sequences", "--frames"), ()),
     "soak_daemon": (("--sample-s",), ()),
@@ -90,12 +90,12 @@ MODEL_DIR = ("bench_graph_threads", "bench_runtime_regions", "bench_runtime_vs_e
              "measure_exchanged_cameras", "measure_floor_signals", "measure_foot_spread", "measure_frame_check",
              "measure_left_right", "measure_lying_rendered", "measure_mounting", "measure_noisy_scenes",
              "measure_novel_overlap", "measure_novel_quality", "measure_novel_rays", "measure_one_camera",
-             "measure_presence", "measure_prior_out_of_range", "measure_prior_outliers", "measure_prior_peak_shape",
-             "measure_single_view", "measure_still_pairs", "measure_synth_framing", "measure_volume_near_edge",
-             "tune_runtime_knobs",
+             "measure_presence", "measure_prior_outliers", "measure_prior_peak_shape", "measure_single_view",
+             "measure_still_pairs", "measure_synth_framing", "measure_volume_near_edge", "tune_runtime_knobs",
              # the daemon's (soak, reloads), the demo's stages, the scenes', the lanes' workers', the two people's
              "measure_reload_memory", "measure_two_people", "soak_daemon", "time_demo_stages", "time_lanes",
              "time_scenes")
+# (measure_prior_out_of_range checks its --model-dir once parsed, in the runs that read it: below)
 #: a folder that is there and holds no model: no .onnx in it, in a ghnerf/ subfolder or in a single subfolder
 NO_MODEL = str(BENCH.parent / "tests" / "benchmarks")
 CASES += [(script, "--model-dir", folder) for script in MODEL_DIR for folder in ("no-such-model-folder", NO_MODEL)]
@@ -137,7 +137,8 @@ def test_a_count_no_run_can_use_is_a_usage_error(script, option, value, monkeypa
 @pytest.mark.parametrize("script, option, value", [("measure_novel_ceiling", "--limit", "0"),
                                                     ("bench_graph_threads", "--warmup", "0"),
                                                     ("bench_protocol", "--frames", "1"),
-                                                    ("measure_one_camera", "--rooms", "0")])  # docs/turn-search.md
+                                                    ("measure_one_camera", "--rooms", "0"),  # docs/turn-search.md
+                                                    ("measure_synth_framing", "--sequences", "0")])  # docs/rig-file.md
 def test_the_least_count_each_option_takes_parses(script, option, value, monkeypatch):
     _parse_only(monkeypatch)
     monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py"), option, value])
@@ -191,3 +192,43 @@ def test_a_seed_list_refuses_what_is_not_whole_numbers(text):
 
 def test_a_seed_list_takes_whole_numbers():
     assert seed_list("0, 1,2") == [0, 1, 2]
+
+
+#: script -> the arguments of a run that reads no model folder (docs/runtime.md, the scripts' docstrings)
+RUNS_WITHOUT_A_MODEL = {"compare_3d_methods": ("--oracle",),
+                        "measure_prior_out_of_range": ("--prior", "skeleton_prior.onnx"),
+                        "measure_cold_tiles": ("--wake-margin",)}
+
+
+@pytest.mark.parametrize("script", sorted(RUNS_WITHOUT_A_MODEL))
+def test_a_run_that_reads_no_model_is_not_refused_for_the_default_model_folder(script, tmp_path, monkeypatch):
+    """argparse runs ``type=`` on a string default: ``--model-dir``'s check of its default ``models`` refused these
+    runs, which need no model, where there is none (a checkout before ``make model``)."""
+    monkeypatch.chdir(tmp_path)  # no models/ here
+    _parse_only(monkeypatch)
+    monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py"), *RUNS_WITHOUT_A_MODEL[script]])
+    with pytest.raises(_Parsed):
+        runpy.run_path(str(BENCH / f"{script}.py"), run_name="__main__")
+
+
+@pytest.mark.parametrize("script", sorted(RUNS_WITHOUT_A_MODEL))
+def test_a_run_that_reads_a_model_still_refuses_a_default_model_folder_holding_none(script, tmp_path, monkeypatch,
+                                                                                  capsys):
+    monkeypatch.chdir(tmp_path)  # no models/ here
+    monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py")])
+    with pytest.raises(SystemExit) as stopped:
+        runpy.run_path(str(BENCH / f"{script}.py"), run_name="__main__")
+    assert stopped.value.code == 2
+    assert "argument --model-dir: models" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("folder", ["no-such-model-folder", NO_MODEL])
+def test_the_prior_measure_refuses_a_model_folder_it_reads_before_it_measures(folder, monkeypatch, capsys):
+    """measure_prior_out_of_range reads --model-dir only without --prior (a folder given beside --prior is not
+    read: tests/ghnerf_runtime/test_skeleton_prior.py), so it checks it once parsed, before any scene."""
+    script = BENCH / "measure_prior_out_of_range.py"
+    monkeypatch.setattr(sys, "argv", [str(script), "--model-dir", folder])
+    with pytest.raises(SystemExit) as stopped:
+        runpy.run_path(str(script), run_name="__main__")
+    assert stopped.value.code == 2
+    assert f"argument --model-dir: {folder}" in capsys.readouterr().err
