@@ -843,10 +843,15 @@ def test_close_wakes_a_blocked_read(takes, webcam, monkeypatch):
     # two frames each, then a grab that hangs; the thread reads what pair is left, then waits. With one frame the
     # first pair was decided by the disconnect its failed grab was, and the thread's read raised that at once.
     # The close comes once the reader waits (not after a sleep): a reader a loaded host started late began its read
-    # after the close, which says "was closed; open a new source", not that it woke a waiting read.
+    # after the close, which says "was closed; open a new source", not that it woke a waiting read. And the reader
+    # starts once both cameras are in their hung grab: one that first waited for the second pair's frames took that
+    # pair when they came, and a close a loaded host let land just then, between two reads, said the same.
     webcam.frames, webcam.hang = 2, threading.Event()
     source = open_rig("opencv://?first=0&second=1&tolerance_ms=40&open_timeout_s=120", capture_factory=webcam)
     source.read(timeout_s=5.0)
+    deadline = time.monotonic() + 60.0  # only a hang reaches it
+    while not all(cam.grabbing and cam.left <= 0 for cam in webcam.made) and time.monotonic() < deadline:
+        time.sleep(0.01)  # every frame queued: the reader's one wait is for a frame that never comes
     waiting = threading.Event()
     stalled_in = source._stalled_in
 
