@@ -182,6 +182,22 @@ class RigSourceContract:
             source.close()
 
 
+def opened_in_a_thread(source: RigSource) -> tuple[threading.Thread, list]:
+    """``source.open()`` on a thread of its own, for a close from the test's thread to land in; the list gets what
+    the open returned or raised."""
+    outcome: list = []
+
+    def run() -> None:
+        try:
+            outcome.append(source.open())
+        except Exception as e:  # noqa: BLE001 - handed to the test
+            outcome.append(e)
+
+    thread = threading.Thread(target=run, name="test open", daemon=True)
+    thread.start()
+    return thread, outcome
+
+
 def closed_while_reading(source, read_timeout_s: float) -> tuple[object, float]:
     """What a read blocked in another thread returned or raised when this thread closed ``source``, and how many
     seconds after the close it did. The close comes once the read is in the backend's ``_read_frame`` (not after a

@@ -13,6 +13,8 @@ from drivers.backends.record import RecordingRigSource, RecordOptions
 from drivers.base import RigSource
 from drivers.sim import RigPlacement
 
+from tests.drivers.contract import opened_in_a_thread
+
 WAIT_S = 30.0  # generous: only a hang reaches it
 
 
@@ -53,24 +55,9 @@ class _ReleasedByItsClose(_HeldOpen):
         self.go_on.set()
 
 
-def _open_in_thread(source: RigSource) -> tuple[threading.Thread, list]:
-    """``source.open()`` on a thread of its own; the list gets what it returned or raised."""
-    outcome: list = []
-
-    def run() -> None:
-        try:
-            outcome.append(source.open())
-        except Exception as e:  # noqa: BLE001 - handed to the test
-            outcome.append(e)
-
-    thread = threading.Thread(target=run, name="test open")
-    thread.start()
-    return thread, outcome
-
-
 def test_a_close_landing_as_open_finishes_releases_what_open_made_and_open_raises():
     source = _HeldOpen()
-    thread, outcome = _open_in_thread(source)
+    thread, outcome = opened_in_a_thread(source)
     assert source.in_open.wait(WAIT_S)
     source.close()  # returns at once: the source is not open yet
     source.go_on.set()  # _open returns after the close
@@ -99,7 +86,7 @@ def test_a_record_wrapper_passes_a_close_during_open_to_its_inner_source(tmp_pat
     inner = _ReleasedByItsClose()
     out = tmp_path / "take"
     source = RecordingRigSource(inner, RecordOptions(out=out))
-    thread, outcome = _open_in_thread(source)
+    thread, outcome = opened_in_a_thread(source)
     assert inner.in_open.wait(WAIT_S)
     closer = threading.Thread(target=source.close, name="test close")
     closer.start()

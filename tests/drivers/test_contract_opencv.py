@@ -36,7 +36,7 @@ from ghnerf_runtime.geometry.rig import Rig
 from drivers.backends import opencv as opencv_backend
 from drivers.backends.opencv import video_size
 from ghnerf_runtime.rig_file import load_rig, save_rig
-from tests.drivers.contract import RigSourceContract
+from tests.drivers.contract import RigSourceContract, opened_in_a_thread
 from tests.drivers.reopens import warnings_shared_and_alone
 from tests.framing_note import FRAMING_NOTE_WORDS, logged_framing_notes
 from tests.rotated_videos import SIZE as PHONE_SIZE
@@ -1203,16 +1203,7 @@ def test_a_close_from_another_thread_as_the_cameras_start_stops_them_and_fails_t
 
     webcam.frames = 400  # delivering on, as a webcam does, until its thread is stopped
     source = create_rig_source("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=FirstGrabHeld)
-    outcome: list = []
-
-    def open_it() -> None:
-        try:
-            outcome.append(source.open())
-        except Exception as e:  # noqa: BLE001 - handed to the test
-            outcome.append(e)
-
-    opener = threading.Thread(target=open_it, name="test open")
-    opener.start()
+    opener, outcome = opened_in_a_thread(source)
     assert grabbing.wait(30.0)  # the camera threads run: _open made them
     source.close()
     closed.set()

@@ -39,6 +39,7 @@ from drivers.backends.recording_format import (
 )
 from benchmarks import time_replay_open
 from drivers.url import RigUrl
+from tests.drivers.contract import opened_in_a_thread
 from tests.drivers.reopens import warnings_shared_and_alone
 from tests.odd_images import (
     bmp_built,
@@ -2023,21 +2024,6 @@ def test_a_submit_a_close_overtakes_is_refused_not_queued_behind_the_writers_sto
     assert (counters["frames_written"], counters["writes_dropped"]) == (1, 0)
 
 
-def _opened_in_a_thread(source) -> tuple[threading.Thread, list]:
-    """``source.open()`` on a thread of its own; the list gets what the open raised."""
-    failed: list = []
-
-    def open_it() -> None:
-        try:
-            source.open()
-        except Exception as e:  # noqa: BLE001 - what the open raised, for the test's thread
-            failed.append(e)
-
-    opener = threading.Thread(target=open_it, daemon=True)
-    opener.start()
-    return opener, failed
-
-
 def test_a_close_from_another_thread_while_the_inner_sim_pre_renders_cancels_the_open(tmp_path):
     """record+sim: a close() while open() pre-rendered the inner loop did nothing (the base class closes only an open
     source, and the recorder did not pass it on): the loop rendered on, the take began, and the source came back
@@ -2056,7 +2042,7 @@ def test_a_close_from_another_thread_while_the_inner_sim_pre_renders_cancels_the
         return render(camera, j, together=together)
 
     source.inner._render = first_frame_held_until_the_close
-    opener, failed = _opened_in_a_thread(source)
+    opener, failed = opened_in_a_thread(source)
     try:
         assert rendering.wait(30), "the open never rendered"
         source.close()
@@ -2087,7 +2073,7 @@ def test_a_close_as_the_inner_open_ends_begins_no_take_and_one_as_the_take_begin
         return source.inner
 
     monkeypatch.setattr(source.inner, "open", opened_then_held_until_the_close)
-    opener, failed = _opened_in_a_thread(source)
+    opener, failed = opened_in_a_thread(source)
     try:
         assert opened.wait(60), "the inner source never opened"
         source.close()
@@ -2110,7 +2096,7 @@ def test_a_close_as_the_inner_open_ends_begins_no_take_and_one_as_the_take_begin
         assert closed.wait(30)
 
     monkeypatch.setattr(record_module.RecordingWriter, "start", started_then_held_until_the_close)
-    opener, failed = _opened_in_a_thread(source)
+    opener, failed = opened_in_a_thread(source)
     try:
         assert started.wait(60), "the take never began"
         source.close()

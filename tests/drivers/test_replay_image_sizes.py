@@ -28,6 +28,7 @@ from drivers.backends.recording_format import (
     write_manifest,
 )
 from drivers.sim.placement import RigPlacement
+from tests.drivers.contract import opened_in_a_thread
 from tests.exif_images import exif_orientation, jpeg_segment, jpeg_turned, png_turned
 from ghnerf_runtime import image_files
 from tests.odd_images import (
@@ -109,16 +110,7 @@ def test_a_close_from_another_thread_cancels_the_open_measuring_the_take_s_image
 
     monkeypatch.setattr(replay_backend, "image_size", first_image_held_until_the_close)
     source = create_rig_source(f"replay://{take}")
-    failed = []
-
-    def open_it():
-        try:
-            source.open()
-        except Exception as e:  # noqa: BLE001 - what the open raised, for the test's thread
-            failed.append(e)
-
-    opener = threading.Thread(target=open_it, daemon=True)
-    opener.start()
+    opener, failed = opened_in_a_thread(source)
     assert measuring.wait(30)
     source.close()
     closed.set()

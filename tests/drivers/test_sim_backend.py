@@ -8,6 +8,7 @@ import pytest
 from drivers import ManualClock, RigConfigError, RigInitializationError, create_rig_source, open_rig
 from drivers.backends.sim_loop import default_cache_root
 from drivers.sim import SAMPLE_BVH, SceneConfig, SensorModel, SimScene
+from tests.drivers.contract import opened_in_a_thread
 from tests.drivers.reopens import open_sources_sharing_a_logged_set
 from tests.framing_note import logged_edge_notes, logged_framing_notes
 
@@ -365,16 +366,7 @@ def test_a_close_from_another_thread_cancels_the_pre_render_of_open(second):
         return render(camera, j, together=together)
 
     source._render = first_frame_held_until_the_close
-    failed = []
-
-    def open_it():
-        try:
-            source.open()
-        except Exception as e:  # noqa: BLE001 - what the open raised, for the test's thread
-            failed.append(e)
-
-    opener = threading.Thread(target=open_it, daemon=True)
-    opener.start()
+    opener, failed = opened_in_a_thread(source)
     assert rendering.wait(30)
     source.close()
     closed.set()
