@@ -526,25 +526,11 @@ def test_a_failed_take_is_said_when_a_stop_lands_in_the_close_of_a_capture_that_
         source.close = close_under_a_stop
         return source
 
-    class Escaped(Exception):
-        pass
-
-    def outer(signum, frame):  # stands for SIGTERM's default action, which would end the test run
-        raise Escaped
-
     real = drivers.create_rig_source
     _fsync_fails(monkeypatch)  # a short take: only the close's fsync runs
     monkeypatch.setattr(drivers, "create_rig_source", create)
     take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
-    previous = signal.signal(signal.SIGTERM, outer)
-    try:
-        rc = cli.main(["capture", "--url", f"record+replay://{take}?speed=free&out={recorded}", "--board",
-                       str(_board_file(tmp_path)), "--out", str(out), "--count", "1", "--interval-s", "0",
-                       "--still-s", "0"])
-    except (Escaped, KeyboardInterrupt):
-        pytest.fail("the stop escaped ghcal")
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    rc = _captured_through_record(tmp_path, take, recorded, out, count=1)
     captured = capsys.readouterr()
     assert rc == 2, captured
     assert but_the_framing_notes(captured.err).splitlines() == [
@@ -560,6 +546,22 @@ class _Escaped(Exception):
 
 def _outer_sigterm(signum, frame):
     raise _Escaped
+
+
+def _captured_through_record(tmp_path, take: Path, recorded: Path, out: Path, *, count: int) -> int:
+    """``ghcal capture``'s exit status for ``count`` views of ``take`` through ``record+`` into ``recorded``, with
+    SIGTERM's default action stood in for: a stop escaping ghcal fails the test."""
+    import signal
+
+    previous = signal.signal(signal.SIGTERM, _outer_sigterm)
+    try:
+        return cli.main(["capture", "--url", f"record+replay://{take}?speed=free&out={recorded}", "--board",
+                         str(_board_file(tmp_path)), "--out", str(out), "--count", str(count), "--interval-s", "0",
+                         "--still-s", "0"])
+    except (_Escaped, KeyboardInterrupt):
+        pytest.fail("the stop escaped ghcal")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _stop_after_the_close(monkeypatch, signum: int) -> None:
@@ -608,15 +610,7 @@ def test_a_failed_take_is_said_when_a_stop_lands_after_the_capture_s_close(truth
     stop_there = _stop_after_the_close if where == "after the close" else _stop_in_the_last_line
     stop_there(monkeypatch, signal.Signals[stop])
     take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
-    previous = signal.signal(signal.SIGTERM, _outer_sigterm)
-    try:
-        rc = cli.main(["capture", "--url", f"record+replay://{take}?speed=free&out={recorded}", "--board",
-                       str(_board_file(tmp_path)), "--out", str(out), "--count", "1" if end == "count" else "5",
-                       "--interval-s", "0", "--still-s", "0"])
-    except (_Escaped, KeyboardInterrupt):
-        pytest.fail("the stop escaped ghcal")
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    rc = _captured_through_record(tmp_path, take, recorded, out, count=1 if end == "count" else 5)
     captured = capsys.readouterr()
     err = but_the_framing_notes(captured.err).splitlines()
     if take_fails:
@@ -663,15 +657,7 @@ def test_a_second_stop_next_to_the_close_of_a_stopped_capture_is_dropped_and_the
     stop_there = _stop_before_the_close if where == "before the close" else _stop_after_the_close
     stop_there(monkeypatch, signal.Signals[second])
     take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
-    previous = signal.signal(signal.SIGTERM, _outer_sigterm)
-    try:
-        rc = cli.main(["capture", "--url", f"record+replay://{take}?speed=free&out={recorded}", "--board",
-                       str(_board_file(tmp_path)), "--out", str(out), "--count", "5", "--interval-s", "0",
-                       "--still-s", "0"])
-    except (_Escaped, KeyboardInterrupt):
-        pytest.fail("the stop escaped ghcal")
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    rc = _captured_through_record(tmp_path, take, recorded, out, count=5)
     captured = capsys.readouterr()
     err = but_the_framing_notes(captured.err).splitlines()
     failed = [f"ghcal: error: recording to {recorded} failed as it closed: [Errno 28] No space left on device; its "
