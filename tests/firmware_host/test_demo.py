@@ -1174,9 +1174,6 @@ def test_when_a_stop_lands_in_the_sink_s_close_of_a_run_that_read_to_its_end_the
     import drivers.backends.record as record_module
     from firmware_host.sinks import base
 
-    def full_disk(path):
-        raise OSError(28, "No space left on device")
-
     real_close, closed = base.Sink.close, []
 
     def close(self, *args, **kwargs):
@@ -1186,7 +1183,7 @@ def test_when_a_stop_lands_in_the_sink_s_close_of_a_run_that_read_to_its_end_the
         return real_close(self, *args, **kwargs)
 
     if take_fails:
-        monkeypatch.setattr(record_module, "_fsync", full_disk)  # a short take: only the close's fsync runs
+        monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
     monkeypatch.setattr(base.Sink, "close", close)
     take = tmp_path / "take"
     url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"

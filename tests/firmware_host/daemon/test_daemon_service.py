@@ -1337,9 +1337,7 @@ def test_a_reload_refused_at_its_second_added_sink_closes_the_first(tmp_path, mo
     configs = _Configs()
     daemon = _idle_daemon(tmp_path, [running], configs, rig)
     kept, cfg = daemon.sinks[running], daemon.config
-    built: list = []
-    build = daemon._build_sink
-    monkeypatch.setattr(daemon, "_build_sink", lambda *a: built.append(build(*a)) or built[-1])
+    built = _sinks_built_by(daemon, monkeypatch)
     try:
         configs.next = _config({"url": "sim://"}, tmp_path, sinks=[running, first, misfit])
         daemon.request_reload()
@@ -1368,9 +1366,7 @@ def test_a_reload_whose_second_added_sink_cannot_start_closes_the_first_and_chan
     configs = _Configs()
     daemon = _idle_daemon(tmp_path, [running], configs, rig)
     kept, cfg = daemon.sinks[running], daemon.config
-    built: list = []
-    build = daemon._build_sink
-    monkeypatch.setattr(daemon, "_build_sink", lambda *a: built.append(build(*a)) or built[-1])
+    built = _sinks_built_by(daemon, monkeypatch)
     _no_worker_thread_for(monkeypatch, second)
     try:
         configs.next = _config({"url": "sim://"}, tmp_path, sinks=[running, first, second])
@@ -1416,6 +1412,14 @@ def test_a_reload_that_replaces_a_file_sink_by_one_on_the_same_file_opens_it_onc
         assert [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING] == []
     finally:
         daemon._close_sinks()
+
+
+def _sinks_built_by(daemon: Daemon, monkeypatch) -> list:
+    """The sinks ``daemon`` builds from now on, in order, kept as they are built."""
+    built: list = []
+    build = daemon._build_sink
+    monkeypatch.setattr(daemon, "_build_sink", lambda *a: built.append(build(*a)) or built[-1])
+    return built
 
 
 def _no_worker_thread_for(monkeypatch, url: str) -> None:
@@ -1486,9 +1490,7 @@ def test_a_reload_whose_swap_raises_leaves_no_added_sink_held(tmp_path, monkeypa
     running, first, second = "memory://", "memory://?status_s=0.06", "udp://127.0.0.1:9"
     configs = _Configs()
     daemon = _idle_daemon(tmp_path, [running], configs, rig)
-    built: list = []
-    build = daemon._build_sink
-    monkeypatch.setattr(daemon, "_build_sink", lambda *a: built.append(build(*a)) or built[-1])
+    built = _sinks_built_by(daemon, monkeypatch)
     try:
         with monkeypatch.context() as patch:
             if raises_at == "the removed sink":  # before any added sink is placed
