@@ -762,7 +762,7 @@ class Daemon:
         if parsed.scheme == "usb":
             kw["claims"] = self._usb_claims
         sink = sink_class(url).from_url(url, **kw)  # type: ignore[attr-defined]
-        carried = self._carried_gaps.get(url, 0)  # dropped from the dict once the sink starts (_start_sink)
+        carried = self._carried_gaps.get(url, 0)  # dropped from the dict once the sink starts (_place_sink)
         if carried:  # frames the sink it replaces lost at close: its first frame says so, not a silent gap
             sink.carry_gap(carried)
         if url in self._carried_totals and hasattr(sink, "carry_totals"):  # STATUS totals go on, not from zero
@@ -774,9 +774,13 @@ class Daemon:
         return sink
 
     def _start_sink(self, url: str, sink: Sink) -> None:
-        """Start a sink built by :meth:`_build_sink`: only now has the gap it carries been handed on (a build
-        thrown away, by a refused reload, leaves the gap for the next one; a reload's swap hands it on too)."""
-        self._sinks[url] = sink.start()
+        """Start a sink built by :meth:`_build_sink` and make it the daemon's (:meth:`_place_sink`)."""
+        self._place_sink(url, sink.start())
+
+    def _place_sink(self, url: str, sink: Sink) -> None:
+        """``sink``, started, made the daemon's for ``url``: only now has the gap it carries been handed on (a build
+        thrown away, by a refused reload, leaves the gap for the next one)."""
+        self._sinks[url] = sink
         self._carried_gaps.pop(url, None)
 
     def _close_sink(self, url: str) -> None:
@@ -933,8 +937,7 @@ class Daemon:
             if "estimator" in changed:  # the scan for others turned on or off: SOMEONE_ELSE's meaning with it
                 self._announce_scene_flags(announced_scene_flags(new.estimator))
             for url, sink in added.items():  # started held before the swap (_added_sinks): their ports are free now
-                self._sinks[url] = sink
-                self._carried_gaps.pop(url, None)
+                self._place_sink(url, sink)
                 sink.release()
         if "health" in changed:
             health, window = self.health, new.health.calibration_window
