@@ -840,12 +840,12 @@ class Daemon:
         """Read, check and apply the config file again; returns the parts that changed (``_PARTS``).
 
         Everything that can fail is done first, while nothing of the running daemon has changed: the
-        file and its checks, the claim on a new status file (another daemon may write it), the rig URL, the model (loaded again only when the session's settings or
-        graphs change) and the new estimator, built for the open rig, else the rig the estimator was
-        last built for, else a stand-in; the added sinks, built for the rig's id and camera names when
-        one has been open and started held (their workers running, nothing opened: the swap releases them once the
-        removed sinks have let go of their ports). The swap after that cannot fail, so a refusal leaves the daemon
-        as it was.
+        file and its checks, the claim on a new status file (another daemon may write it), the rig URL, the model
+        (loaded again only when the session's settings or graphs change) and the new estimator, built for the open
+        rig, else the rig the estimator was last built for, else a stand-in; the added sinks, built for the rig's
+        id and camera names when one has been open and started held (their workers running, nothing opened: the
+        swap releases them once the removed sinks have let go of their ports). The swap after that cannot fail, so
+        a refusal leaves the daemon as it was.
 
         :raises DaemonConfigError: the reload is refused.
         """
