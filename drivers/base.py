@@ -9,7 +9,7 @@ A :meth:`RigSource.close` from another thread while :meth:`RigSource.open` runs 
 backend: once ``_open`` returns, ``open()`` finds the close, releases what ``_open`` made with ``_close`` and raises
 :class:`~drivers.errors.RigInitializationError`. Before, the close skipped ``_close`` for a source not yet open, and
 ``open()`` returned a closed source still holding camera threads or a device. Backends whose ``_open`` takes long
-(``sim://``'s pre-render, ``replay://``'s checks) also stop it early, in
+(``sim://``'s pre-render, ``replay://``'s checks, ``depthai://``'s device start) also stop it early, in
 :meth:`RigSource._cancel_open`.
 """
 from __future__ import annotations

@@ -118,6 +118,9 @@ class HostPipelineLink:
     def is_running(self) -> bool:
         return self.pipeline is not None and self.pipeline.isRunning()
 
+    def cancel(self) -> None:
+        """Nothing to cut short: start() here is quick, and the source checks for a close once it returns."""
+
     def unplug(self) -> None:
         """Stop the pipeline under the reader, as a lost device does: its queue closes."""
         if self.pipeline is not None:
@@ -175,6 +178,9 @@ class ScriptedLink:
 
     def is_running(self) -> bool:
         return bool(self.groups) or not self.stops
+
+    def cancel(self) -> None:
+        """Nothing to cut short: start() here is quick, and the source checks for a close once it returns."""
 
     def close(self) -> None:
         self.closed += 1

@@ -581,5 +581,5 @@ def test_a_read_in_flight_finding_the_link_closed_says_the_source_closed():
     source = open_rig(f"{URL}&policy=all", link_factory=lambda: link)
     source.read(timeout_s=3.0)
     source.close()
-    with pytest.raises(RigOperationError, match=r"\): source closed while a read waited for its frames$"):
+    with pytest.raises(RigOperationError, match=r"\): source closed while a read waited for its frame$"):
         source._read_frame(1.0)  # where read() was, inside its loop, when the close came

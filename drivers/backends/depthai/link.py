@@ -7,13 +7,15 @@ Tests implement it with a host-only depthai pipeline (tests/drivers), which
 exercises the same Sync stage and message types without hardware.
 
 Links raise depthai's own exceptions, which the source converts at its boundary; only what
-:func:`open_device` finds wrong before it connects (a device in use, ambiguous or absent) is raised as
-our :class:`~drivers.errors.RigInitializationError` already.
+:func:`open_device` finds wrong before it connects (a device in use, ambiguous or absent), and a start
+cut short by :meth:`DeviceLink.cancel`, are raised as our :class:`~drivers.errors.RigInitializationError`
+already.
 """
 from __future__ import annotations
 
 import datetime
 import logging
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
@@ -64,6 +66,11 @@ class DeviceLink(Protocol):
     def is_running(self) -> bool:
         """Whether the device is still connected and its pipeline running (asked after a timeout: a device
         lost without closing the queue would otherwise read as a silent camera)."""
+
+    def cancel(self) -> None:
+        """From another thread while :meth:`start` runs (a close landing during the source's open): ``start`` goes
+        no further than the step it is in, raising. Must not wait for ``start``; harmless once it returned. What
+        ``start`` made is released by :meth:`close`, as after any failed start."""
 
     def close(self) -> None:
         """Stop the pipeline and release the device. Safe to call more than once."""
@@ -246,9 +253,15 @@ class DaiDeviceLink:
         self._device: dai.Device | None = None
         self._pipeline: dai.Pipeline | None = None
         self._queue: dai.MessageQueue | None = None
+        self._cancelled = threading.Event()
 
     def start(self, request: StereoRequest) -> None:
         self._device = self._connect(request)
+        # Connecting (depthai boots the device) is the long step and cannot be interrupted: a cancel during it
+        # stops here, before any camera streams.
+        if self._cancelled.is_set():
+            raise RigInitializationError(f"depthai device {shown(self.device_id())}: start cancelled (a cancel() "
+                                         "from another thread) once connected, before its pipeline was built")
         check_cameras(request, self._device.getDeviceId(), self._device.getConnectedCameraFeatures())
         pipeline = self._pipeline_for(self._device)
         self._pipeline = pipeline
@@ -295,6 +308,9 @@ class DaiDeviceLink:
         if pipeline is None or device is None or not pipeline.isRunning() or device.isClosed():
             return False
         return device.getDeviceState() == dai.DeviceState.RUNNING
+
+    def cancel(self) -> None:
+        self._cancelled.set()
 
     def close(self) -> None:
         pipeline, device = self._pipeline, self._device

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import threading
 from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING
@@ -61,6 +62,11 @@ class DeliveryRate:
         return rate
 
 
+class _ClosedDuringOpen(Exception):
+    """A check in :meth:`DepthaiRigSource._open` found the source closed; the open raises, worded, once the link is
+    closed."""
+
+
 class DepthaiRigSource(RigSource):
     """One OAK device's stereo pair (options: :mod:`drivers.backends.depthai.options`).
 
@@ -97,6 +103,9 @@ class DepthaiRigSource(RigSource):
         self._fixed_rig = rig
         self._link_factory = link_factory
         self._link: DeviceLink | None = None
+        self._starting: DeviceLink | None = None  # the link _open is starting, for a close meanwhile to cancel
+        # Set by close(), also one landing during open(): the open stops at its next step, a read refuses its frame
+        self._closing = threading.Event()
         self._pending: deque[Frame] = deque()
         # Frames the reader holds: the first group's second frame and up to ``queue`` groups taken after it.
         self.drain_limit = 2 * options.queue_size + 2
@@ -134,24 +143,52 @@ class DepthaiRigSource(RigSource):
 
     def _open(self) -> None:
         link = self._link_factory()
+        self._starting = link  # before the first check: a close from now on is seen by a check or by link.cancel()
         try:
-            with depthai_errors(f"starting depthai device {self.options.device_id or '(first found)'}", RigInitializationError):
+            starting = f"starting depthai device {self.options.device_id or '(first found)'}"
+            with depthai_errors(starting, RigInitializationError):
+                self._stop_if_closed()
                 link.start(self._request())
+                self._stop_if_closed()  # closed while the device booted: its EEPROM is not read for nothing
                 rig = self._fixed_rig or self._rig_from_device(link)
+                self._stop_if_closed()
                 # Asked here, guarded: a device lost just after start fails this call too, and the link
                 # must then be closed (open() failing leaves no source to close it later).
                 device_id = link.device_id()
                 device_name = link.device_name()
-        except BaseException:
+        except BaseException as e:
             try:
                 link.close()
-            except Exception as e:  # noqa: BLE001 - the start failure is the error to report
-                log.debug("depthai: closing after a failed start also failed: %s", e)
+            except Exception as closing:  # noqa: BLE001 - the start failure is the error to report
+                log.debug("depthai: closing after a failed start also failed: %s", closing)
+            if isinstance(e, Exception) and self._closing.is_set():  # a check saw the close, or link.cancel() cut in
+                raise self._closed_during_open() from (None if isinstance(e, _ClosedDuringOpen) else e)
             raise
+        finally:
+            self._starting = None
         self._set_rig(rig, built=self._fixed_rig is None)
         self._link = link
         self._device_id = device_id
         self._device_name = device_name
+
+    def _stop_if_closed(self) -> None:
+        if self._closing.is_set():
+            raise _ClosedDuringOpen()
+
+    def _closed_during_open(self) -> RigInitializationError:
+        """What open() raises when another thread closes the source while the device starts."""
+        return RigInitializationError(f"{self._where()}: closed while open() started the device: the open was "
+                                      "cancelled")
+
+    def _closed_while_reading(self) -> RigOperationError:
+        """What a read raises when another thread closes the source under it (worded as sim:// and replay://)."""
+        return RigOperationError(f"{self._where()}: source closed while a read waited for its frame")
+
+    def _cancel_open(self) -> None:
+        self._closing.set()  # first: an open past its link's cancel sees it at its next check
+        link = self._starting
+        if link is not None:
+            link.cancel()  # a start still connecting goes no further than connecting
 
     def _rig_from_device(self, link: DeviceLink) -> Rig:
         o = self.options
@@ -182,11 +219,23 @@ class DepthaiRigSource(RigSource):
         return f"{where}, cameras {names[0]} ({o.left}) and {names[1]} ({o.right})"
 
     def _read_frame(self, timeout_s: float) -> Frame | None:
-        if self._pending:
-            return self._served(self._pending.popleft())
+        try:
+            frame: Frame | None = self._pending.popleft()
+        except IndexError:  # none pending (or a close from another thread emptied them just now)
+            frame = self._read_from_link(timeout_s)
+        if frame is None:
+            return None
+        if self._closing.is_set():  # closed while the read had the frame in hand: a closed source hands out none
+            self._pending.clear()
+            raise self._closed_while_reading()
+        return self._served(frame)
+
+    def _read_from_link(self, timeout_s: float) -> Frame | None:
+        """The first frame of the link's next group, its second (and, under LATEST, the groups queued behind it)
+        left pending; ``None`` after ``timeout_s``."""
         link = self._link
         if link is None:  # read() refuses a source not open: closed by another thread since the read began
-            raise RigOperationError(f"{self._where()}: source closed while a read waited for its frames")
+            raise self._closed_while_reading()
         deadline = self.clock.now_ns() + int(timeout_s * 1e9)
         try:
             with depthai_errors(f"reading from {self._where()}", RigDisconnectedError):
@@ -201,12 +250,12 @@ class DepthaiRigSource(RigSource):
                 first, second = self._frames(group)
         except RigDisconnectedError:
             if self._link is not link:  # closed by another thread meanwhile: no device was lost, nothing to reopen
-                raise RigOperationError(f"{self._where()}: source closed while a read waited for its frames") from None
+                raise self._closed_while_reading() from None
             raise
         self._pending.append(second)
         if self.pairing.policy is DropPolicy.LATEST:
             self._measure_rate([first.timestamp_ns] + self._take_queued_groups(link))
-        return self._served(first)
+        return first
 
     def _measure_rate(self, stamps: list[int]) -> None:
         """Warn once when the device delivers well under the requested fps (a USB2 link, a cable).
@@ -298,6 +347,7 @@ class DepthaiRigSource(RigSource):
         return bool(self._pending)  # frames already taken from the link; the link itself is not polled
 
     def _close(self) -> None:
+        self._closing.set()  # first: a read with a frame in hand refuses it
         link, self._link = self._link, None
         self._pending.clear()
         self._lost_before.clear()
