@@ -58,11 +58,22 @@ class SinkUnavailableError(SinkError):
 
 class SinkWriteError(SinkError):
     """One write failed but the link is still up (endpoint stall, timeout): the frame is dropped. The message names
-    the URL without its passwords; ``url`` keeps it as given."""
+    the URL without its passwords; ``url`` keeps it as given, ``reason`` what went wrong without the URL."""
 
     def __init__(self, url: str, reason: str) -> None:
         self.url = url
-        super().__init__(f"{shown_url(url)}: write failed: {shown(reason)}")  # on one line, as the link's reason
+        self.reason = shown(reason)  # on one line, as the link's reason
+        super().__init__(f"{shown_url(url)}: write failed: {self.reason}")
+
+
+class SinkPartialWriteError(SinkWriteError):
+    """A frame's write failed after part of it went out (a vmc:// frame's first bundle sent, a later one not): the
+    receiver has that part, so the frame counts as ``sent`` and ``partial``, not dropped. ``sent`` and ``total``:
+    the datagrams (or parts) that went out, of how many."""
+
+    def __init__(self, url: str, reason: str, sent: int, total: int) -> None:
+        self.sent, self.total = sent, total
+        super().__init__(url, f"{reason} (after {sent} of the frame's {total} datagrams went out)")
 
 
 class SinkClosedError(SinkError):

@@ -8,7 +8,8 @@ Behaviour written once here:
   away, disconnects and reconnects with exponential backoff;
 - every frame submitted ends up in exactly one counter: ``sent``,
   ``decimated``, ``dropped_queue``, ``dropped_error``, ``dropped_close``, or
-  is still ``queued`` / ``in_flight``.
+  is still ``queued`` / ``in_flight``; ``partial`` counts those of ``sent`` only part of which went out
+  (``SinkPartialWriteError``).
 
 A link that cannot be (re)opened is retried forever; the journal hears of it
 once per outage (a WARNING, again only when the error changes, repeats at
@@ -45,7 +46,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 from drivers.url import shown_url
-from firmware_host.errors import SinkClosedError, SinkUnavailableError, SinkWriteError
+from firmware_host.errors import SinkClosedError, SinkPartialWriteError, SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.constants import Flags
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks.backoff import Backoff
@@ -77,6 +78,9 @@ class SinkStats:
     stalled_s: Optional[float] = None
     """While ``stalled``: seconds since the first write that failed (or the write still in progress) with
     no frame through since; None otherwise."""
+    partial: int = 0
+    """Of ``sent``: frames only part of which went out (a vmc:// frame whose second bundle met a full send
+    buffer: the receiver applied the first one's root and bones, the rest held their last pose)."""
 
     @property
     def dropped(self) -> int:
@@ -110,7 +114,7 @@ class Sink(ABC):
         self._limiter: Optional[RateLimiter] = None
         self._warned_decimation = False
         # Counters, guarded by _cond.
-        self._submitted = self._sent = self._decimated = 0
+        self._submitted = self._sent = self._decimated = self._partial = 0
         self._dropped_queue = self._dropped_error = self._dropped_close = 0
         self._in_flight = 0
         self._connected = False
@@ -154,6 +158,7 @@ class Sink(ABC):
     def _deliver(self, frame: JointFrame, flags: int) -> None:
         """Write one frame.
 
+        :raises SinkPartialWriteError: part of the frame went out, the rest is lost; the link is still up.
         :raises SinkWriteError: the frame is lost but the link is still up.
         :raises SinkUnavailableError: the link went away; the sink reconnects.
         """
@@ -271,6 +276,7 @@ class Sink(ABC):
                 last_error=self._last_error,
                 state=self._state(stalled_s),
                 stalled_s=None if stalled_s is None else round(stalled_s, 3),
+                partial=self._partial,
             )
 
     def _state(self, stalled_s: Optional[float]) -> str:
@@ -557,9 +563,12 @@ class Sink(ABC):
                 continue  # the loop's condition ends the worker once closed and drained
             frame, flags = item
             error: Optional[str] = None
+            partial: Optional[str] = None  # part of the frame went out: sent, and what cut the rest
             started = self._write_started()
             try:
                 self._deliver(frame, flags)
+            except SinkPartialWriteError as e:  # the receiver has part of it: no gap, and the link carries
+                partial = str(e)
             except SinkWriteError as e:
                 error = str(e)
             except SinkUnavailableError as e:
@@ -578,6 +587,9 @@ class Sink(ABC):
                 if error is None:
                     self._sent += 1
                     self._failing_since = None  # the receiver reads: no longer stalled
+                    if partial is not None:
+                        self._partial += 1
+                        self._last_error = partial
                 else:
                     self._dropped_error += 1
                     self._last_error = error

@@ -5,7 +5,8 @@ fragments them): /VMC/Ext/OK, /VMC/Ext/T, Root/Pos (hip position) and
 Bone/Pos (local rotations) solved by ``vmc_pose``. T is seconds since the first frame and never goes back, even
 when the capture stamps do, nor follows one glitched stamp far off (``vmc_time``). VMC has no sequence
 numbers, so receivers cannot count gaps; the sink's own counters (``stats()``)
-report what it decimated or dropped. ``max_fps`` caps the rate (receivers
+report what it decimated or dropped, and as ``partial`` the frames sent whose second bundle was lost (a full send
+buffer): the receiver applied the first. ``max_fps`` caps the rate (receivers
 render at display rate; 60 is plenty). Host names are resolved like udp://
 (IPv4 first, looked up again every ``resolve_s``, default 30, at least 1). ``facing`` (``away``, the default, or
 ``camera``) and ``mirror`` (0, the default, or 1) choose how the avatar shows the person (``vmc_view``).
@@ -30,7 +31,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from firmware_host.errors import SinkConfigError
+from firmware_host.errors import SinkConfigError, SinkPartialWriteError, SinkWriteError
 from firmware_host.protocol.constants import Flags, JointSet
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks.base import Sink
@@ -103,8 +104,16 @@ class VmcSink(Sink):
         if self._has_body25_joints(frame):
             pose = keep_hemisphere(solve_pose(self.view.apply(frame.joints_3d)), self._last_rotations)
         suspect = self.calibration_flag and bool(frame.scene_flags & Flags.CALIBRATION_SUSPECT)
-        for datagram in build_datagrams(pose, t, calibration_suspect=suspect):  # two bundles: one would fragment
-            self._link.send(datagram)
+        datagrams = build_datagrams(pose, t, calibration_suspect=suspect)  # two bundles: one would fragment
+        for sent, datagram in enumerate(datagrams):
+            try:
+                self._link.send(datagram)
+            except SinkWriteError as e:
+                if not sent:
+                    raise  # nothing of the frame went out: dropped
+                # the receiver applied the first bundle (OK, T, the root, the first bones), the bones of the rest
+                # hold their last pose: a frame sent in part, not a lost one (it was counted dropped)
+                raise SinkPartialWriteError(self.url, e.reason, sent, len(datagrams)) from e
 
     def _has_body25_joints(self, frame: JointFrame) -> bool:
         """Whether ``frame`` holds the BODY_25 joints the bones are solved from; a WARNING, once, where not."""

@@ -154,6 +154,50 @@ def test_rotations_keep_their_sign_from_frame_to_frame() -> None:
         assert float(np.dot(a, b)) > 0.99, (a, b)
 
 
+class _BufferFullAt:
+    """A sink's socket whose sends number ``full`` (counted from 0) meet a full send buffer; the rest go out."""
+
+    def __init__(self, sock: socket.socket, full: set[int]) -> None:
+        self._sock, self._full, self._sends = sock, full, 0
+
+    def send(self, datagram: bytes) -> int:
+        n, self._sends = self._sends, self._sends + 1
+        if n in self._full:
+            raise BlockingIOError(11, "Resource temporarily unavailable")
+        return self._sock.send(datagram)
+
+    def close(self) -> None:
+        self._sock.close()
+
+
+def test_a_frame_whose_second_bundle_meets_a_full_buffer_is_sent_in_part_not_dropped() -> None:
+    # The receiver applied the first bundle (OK, T, the root, the first bones) and held the other bones: the frame
+    # was counted dropped as if nothing of it had arrived. It counts as sent, and as partial.
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+    sink = open_sink(f"vmc://127.0.0.1:{rx.getsockname()[1]}?queue=64", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        # frame 0: its second bundle (send 1) meets the full buffer; frame 1 whole; frame 2: its first (send 4)
+        sink._link._sock = _BufferFullAt(sink._link._sock, {1, 4})
+        for seq in range(3):
+            sink.send(make_frame(seq, joints=t_pose_rig(facing_camera=True)))
+        assert sink.wait_drained(5)
+        stats = sink.close()
+        dgrams = queued_datagrams(rx)
+    finally:
+        sink.close()
+        rx.close()
+    assert (stats.sent, stats.dropped_error) == (2, 1), stats  # frame 0 was dropped too: (1, 2)
+    assert stats.partial == 1
+    assert stats.accounted == stats.submitted == 3
+    assert len(dgrams) == 3  # frame 0's first bundle and frame 1's two: frame 2, its first refused, sent none
+    first = _osc_packet(dgrams[0])
+    assert [a for a, _ in first[:3]] == ["/VMC/Ext/OK", "/VMC/Ext/T", "/VMC/Ext/Root/Pos"]
+    assert "socket send buffer full" in (stats.last_error or "")
+
+
 def test_lost_hips_sends_tracking_lost_only() -> None:
     j = t_pose_rig()
     j[J["MidHip"], 3] = 0.0
