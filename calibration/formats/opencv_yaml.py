@@ -54,6 +54,7 @@ import gzip
 import math
 import os
 import re
+import zlib
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -84,11 +85,16 @@ _D_KEYS = ("distortion_coefficients", "D")
 #: coefficients (k1..k4, equidistant) would otherwise be read as the pinhole model's k1 k2 p1 p2.
 _FISHEYE_KEYS = ("fisheye_model", "fisheye")
 
-__all__ = ["format_suffix", "gzipped", "read_opencv_camera", "read_opencv_rig", "write_opencv_camera",
+__all__ = ["format_suffix", "gzip_level_problem", "gzipped", "named_with_gzip_level", "read_opencv_camera", "read_opencv_rig", "write_opencv_camera",
            "write_opencv_rig", "write_opencv_text"]
 
 #: A name ending so is a gzipped file to ``cv2.FileStorage``, which reads and writes it so itself.
 GZIP_SUFFIX = ".gz"
+#: A suffix ``cv2.FileStorage`` reads as gzip at a compression level (persistence.cpp: ``.gz`` and one digit); it
+#: opens the name without the digit.
+_GZIP_LEVEL = re.compile(r"\.gz[0-9]", re.IGNORECASE)
+_GZIP_MAGIC = b"\x1f\x8b"
+_BOM = b"\xef\xbb\xbf"
 
 #: How much of a file is looked at for the marks of one that is not FileStorage text (NULs, UTF-16).
 _SNIFF_BYTES = 4096
@@ -114,18 +120,24 @@ def _open(path) -> cv2.FileStorage:
         # FileStorage's own words for an empty file: "(-215:Assertion failed) buf in function 'open'"
         if not head.strip() and not p.read_bytes().strip():
             raise fail(path, None, "the file is empty")
-        if not gzipped(p):  # FileStorage reads a gzipped file itself
+        # "rig.yml.gz9": FileStorage takes the 9 for a compression level and opens rig.yml.gz, another file (or
+        # none): this one is read here
+        data = _gunzipped(p) if named_with_gzip_level(p) else None
+        if data is not None:
+            head = data[:_SNIFF_BYTES]
+        if not gzipped(p) or data is not None:  # FileStorage reads a gzipped file itself
             if problem := not_text_problem(head, "OpenCV FileStorage (YAML, XML or JSON)"):
                 raise fail(path, None, problem)
-        if head[:3] == b"\xef\xbb\xbf":  # a byte-order mark (Windows editors): FileStorage refused line 1's syntax
-            text = p.read_bytes()[3:].decode("utf-8")
+        bom = len(_BOM) if head.startswith(_BOM) else 0  # Windows editors' mark: FileStorage refused line 1's syntax
+        if bom or data is not None:
+            text = (p.read_bytes() if data is None else data)[bom:].decode("utf-8")
             fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
         else:
             fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
     except OSError as e:
         raise fail(path, None, f"cannot read: {e.strerror or e}") from e
     except UnicodeDecodeError as e:
-        raise fail(path, None, f"not UTF-8 text (byte {e.start + 3}): {e.reason}") from e
+        raise fail(path, None, f"not UTF-8 text (byte {e.start + bom}): {e.reason}") from e
     except (cv2.error, SystemError) as e:
         cause = e.__cause__ or e
         msg = str(cause).split("error: ", 1)[-1].strip()
@@ -601,8 +613,43 @@ _YAML = (cv2.FILE_STORAGE_FORMAT_YAML, "YAML")
 
 
 def gzipped(path) -> bool:
-    """Whether ``path`` names a gzipped FileStorage file (``rig.yml.gz``)."""
-    return Path(path).suffix.lower() == GZIP_SUFFIX
+    """Whether ``path`` names a gzipped FileStorage file (``rig.yml.gz``, or ``rig.yml.gz9``:
+    :func:`named_with_gzip_level`)."""
+    return Path(path).suffix.lower() == GZIP_SUFFIX or named_with_gzip_level(path)
+
+
+def named_with_gzip_level(path) -> bool:
+    """Whether ``path`` ends in ``.gz`` and a digit (``rig.yml.gz9``), which ``cv2.FileStorage`` takes for gzip at
+    that compression level, 0 to 9, opening the name without the digit (``rig.yml.gz``) to read or write it."""
+    return _GZIP_LEVEL.fullmatch(Path(path).suffix) is not None
+
+
+def gzip_level_problem(path) -> str | None:
+    """Why a FileStorage file is not written to ``path`` (None: it may be): a name ending in ``.gz`` and a digit
+    (:func:`named_with_gzip_level`), which no OpenCV program opens, as ``cv2.FileStorage`` takes the digit for a
+    compression level and opens the name without it."""
+    if not named_with_gzip_level(path):
+        return None
+    p = Path(path)
+    meant = p.with_suffix(p.suffix[:-1]).name
+    return (f"OpenCV reads the digit after .gz as a compression level, so it opens {meant} for this name and no "
+            f"OpenCV program could read this file; name it {meant} (written gzipped)")
+
+
+def _gunzipped(path: Path) -> bytes:
+    """The bytes of ``path``, a file named as :func:`named_with_gzip_level` says, unpacked where it is gzip (plain
+    text is taken as it is, as zlib's reader takes it in a ``.gz`` file).
+
+    Raises:
+        RigFileError: naming ``path``: gzip that is cut short or damaged.
+    """
+    data = path.read_bytes()
+    if not data.startswith(_GZIP_MAGIC):
+        return data
+    try:
+        return gzip.decompress(data)
+    except (EOFError, OSError, zlib.error) as e:  # cut short; a bad header (BadGzipFile); a bad stream or CRC
+        raise fail(path, None, f"cannot unpack it as gzip: {e}") from e
 
 
 def format_suffix(path) -> str:
@@ -627,8 +674,10 @@ def write_opencv_text(path: str | os.PathLike, text: str) -> None:
     gzipped where the name ends in ``.gz`` (``rig.yml.gz`` was plain text, which a tool that gunzips it refuses).
 
     Raises:
-        RigFileError: the file cannot be written.
+        RigFileError: the file cannot be written; its name ends in ``.gz`` and a digit (:func:`gzip_level_problem`).
     """
+    if problem := gzip_level_problem(path):
+        raise fail(path, None, problem)
     data = utf8_bytes(path, text)
     # mtime 0: the same rig exports the same bytes
     write_bytes_atomic(path, gzip.compress(data, mtime=0) if gzipped(path) else data)
@@ -696,6 +745,8 @@ def dumps_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
     """The text :func:`write_opencv_rig` writes to ``path`` (its suffix, the one before any ``.gz``, picks YAML, XML
     or JSON; errors name it; :func:`write_opencv_text` writes it, gzipped for ``.gz``), checked
     as it is, nothing written: ``ghcal export`` keeps the file it replaces only once the export can be made."""
+    if problem := gzip_level_problem(path):
+        raise fail(path, None, problem)
     units = check_units(units_to_metres)
     refuse_skew(rig.cameras, f"an OpenCV {_format_name(path)} file")
     fs = _memory_writer(path)
