@@ -85,8 +85,8 @@ _D_KEYS = ("distortion_coefficients", "D")
 #: coefficients (k1..k4, equidistant) would otherwise be read as the pinhole model's k1 k2 p1 p2.
 _FISHEYE_KEYS = ("fisheye_model", "fisheye")
 
-__all__ = ["format_suffix", "gzip_level_problem", "gzipped", "named_with_gzip_level", "read_opencv_camera", "read_opencv_rig", "write_opencv_camera",
-           "write_opencv_rig", "write_opencv_text"]
+__all__ = ["format_suffix", "gzip_level_problem", "gzipped", "named_with_gzip_level", "read_opencv_camera",
+           "read_opencv_rig", "write_opencv_camera", "write_opencv_rig", "write_opencv_text"]
 
 #: A name ending so is a gzipped file to ``cv2.FileStorage``, which reads and writes it so itself.
 GZIP_SUFFIX = ".gz"
