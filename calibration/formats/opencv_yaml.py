@@ -46,7 +46,8 @@ store ``units_to_metres`` and (multi-camera) the working volume in metres
 (``working_volume_min`` / ``working_volume_max``, which OpenCV ignores) and, for a rig in a
 levelled frame, the ``levelled_*`` keys, and replace the file atomically; a name ending in ``.gz``
 (``rig.yml.gz``) is written gzipped, as ``cv2.FileStorage`` writes and reads it, in the format of the
-suffix before it.
+suffix before it. A name ending in ``.gz`` and a digit (``rig.yml.gz9``, OpenCV's gzip at level 9) is read
+from the file named, gunzipped; it is not written, as OpenCV opens ``rig.yml.gz`` for it.
 """
 from __future__ import annotations
 
