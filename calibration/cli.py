@@ -1481,8 +1481,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="metres per unit of the file's translations (0.001: millimetres); required for anipose "
                         "and stereo_calib files, which do not say (an anipose file ghcal export wrote records it)")
     p.add_argument("--extrinsics", type=user_path, help="stereo_calib's extrinsics.yml, when R and T are not in FILE")
-    p.add_argument("--image-size", help="WIDTHxHEIGHT for cameras whose entry states no image size (one that "
-                                        "states another is refused)")
+    p.add_argument("--image-size", help="WIDTHxHEIGHT for cameras whose entry states no image size (the others "
+                                        "keep theirs; where every camera states one, one that states another is "
+                                        "refused)")
     p.add_argument("--camera-height", type=_finite(*CAMERA_HEIGHT_RANGE_M),
                    help="level the rig: the first camera's height above the floor, m (without it the rig keeps "
                         "the file's frame: levelled where the file records a levelling its poses show, as ghcal "

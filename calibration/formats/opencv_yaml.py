@@ -8,7 +8,8 @@ Single camera (OpenCV's calibration sample, ``out_camera_data.yml``), top-level 
     ``distortion_coefficients`` or ``D``    Nx1 / 1xN matrix or sequence, N in 0/4/5/8/12/14 (required)
     ``image_width`` + ``image_height``      integers, or ``image_size`` [w, h] (both: they must agree); else
                                             the ``image_size`` argument (required one way; given beside
-                                            the file's own size, it must agree with it)
+                                            the file's own size, it must agree with it, unless another
+                                            camera of a multi-camera file states none: the argument is its)
     ``R``                                   3x3 matrix or 3-vector Rodrigues (optional, default I)
     ``T``                                   3-vector, file units (optional, default 0)
     ``name``                                string (optional; default the file's stem)
@@ -269,9 +270,10 @@ def _pick(node, keys: Sequence[str], path, field: str, required: bool = True) ->
     return key, value
 
 
-def _image_size(node, path, field: str, image_size) -> tuple[Any, Any, tuple[str, str]]:
+def _image_size(node, path, field: str, image_size, *, checked: bool = True) -> tuple[Any, Any, tuple[str, str]]:
     """Width, height and the keys they came from (for error messages): the file's, else the ``image_size``
-    argument's; both given, they must agree."""
+    argument's; both given, they must agree where ``checked`` (False: the argument is for the file's other
+    cameras, which state none)."""
     pair, size = _width_height(node, path, field), _size_key(node, path, field)
     if pair is not None and size is not None and pair != size:  # image_width won without a word
         raise fail(path, join(field, "image_size"), f"is [{size[0]:.10g}, {size[1]:.10g}], but image_width and "
@@ -283,13 +285,18 @@ def _image_size(node, path, field: str, image_size) -> tuple[Any, Any, tuple[str
                                                          "image_size in the file, or the image_size argument")
         return given[0], given[1], ("image_size argument", "image_size argument")
     (w, h), keys = (pair, ("image_width", "image_height")) if pair is not None else (size, ("image_size",) * 2)
-    if given is not None and (w, h) != given:  # the file's size was taken, the argument dropped without a word
+    if checked and given is not None and (w, h) != given:  # the file's size was taken, the argument dropped unsaid
         key = keys[0] if w != given[0] else keys[1]
         raise fail(path, join(field, key), f"gives the image size {w:.10g}x{h:.10g}, but the image_size argument "
                                            f"(--image-size) is {show(given[0])}x{show(given[1])}: the argument is for "
                                            "files that give none; leave it out to take the file's, or correct the "
                                            "file")
     return w, h, keys
+
+
+def _states_size(node) -> bool:
+    """Whether a camera's map states its image size (any of the keys: one alone is refused when it is read)."""
+    return any(key in _keys(node) for key in ("image_width", "image_height", "image_size"))
 
 
 def _size_argument(path, image_size) -> tuple[Any, Any] | None:
@@ -349,12 +356,13 @@ def _refuse_fisheye(node, path, field: str) -> None:
                                                    "pinhole model; its coefficients mean something else)")
 
 
-def _camera(node, path, field: str, *, default_name: str, image_size, units: float, need_pose: bool) -> Camera:
+def _camera(node, path, field: str, *, default_name: str, image_size, units: float, need_pose: bool,
+            size_checked: bool = True) -> Camera:
     _refuse_fisheye(node, path, field)
     name = _string(node.getNode("name"), path, join(field, "name")) if "name" in _keys(node) else None
     k_key, K = _pick(node, _K_KEYS, path, field)
     d_key, D = _pick(node, _D_KEYS, path, field)
-    w, h, size_keys = _image_size(node, path, field, image_size)
+    w, h, size_keys = _image_size(node, path, field, image_size, checked=size_checked)
     keys = _keys(node)
     if need_pose or "R" in keys or "T" in keys:
         _, R = _pick(node, ("R",), path, field)
@@ -474,8 +482,9 @@ def read_opencv_rig(
     Args:
         path: the YAML file (``intrinsics.yml`` for the stereo_calib layout).
         extrinsics_path: stereo_calib's ``extrinsics.yml`` when ``R``/``T`` are not in ``path``.
-        image_size: ``(width, height)`` for cameras whose entry has no image size; an entry that has one must
-            agree with it (refused, naming both, where the file's was taken and the argument dropped unsaid).
+        image_size: ``(width, height)`` for cameras whose entry has no image size. Where every entry has one,
+            each must agree with it (refused, naming both, where the file's was taken and the argument dropped
+            unsaid); where some entry has none, the argument is theirs and the others keep their own sizes.
         volume: the working volume; default the file's (``working_volume_min`` / ``_max``, our
             writer stores it), else :func:`default_working_volume`.
         rig_id: default the file's ``rig_id``, else the file's stem.
@@ -507,13 +516,16 @@ def read_opencv_rig(
             if not seq.isSeq():
                 raise fail(path, "cameras", "must be a sequence of camera maps")
             cameras, fields = [], []
-            for i in range(seq.size()):
+            nodes = [seq.at(i) for i in range(seq.size())]
+            # a hand-written file where one camera states its size and another does not: the argument is the
+            # second's, not checked against the first's (it was refused where they differed)
+            for_unsized = any(node.isMap() and not _states_size(node) for node in nodes)
+            for i, node in enumerate(nodes):
                 field = f"cameras[{i}]"
-                node = seq.at(i)
                 if not node.isMap():
                     raise fail(path, field, "must be a map of camera keys")
                 cameras.append(_camera(node, path, field, default_name=f"cam{i}", image_size=image_size, units=units,
-                                       need_pose=True))
+                                       need_pose=True, size_checked=not for_unsized))
                 fields.append(field)
             file_rig_id = _string(root.getNode("rig_id"), path, "rig_id") if "rig_id" in keys else None
             levelling = recorded_levelling(path, _levelling_values(root, path))  # ours: the frame was levelled

@@ -6,6 +6,7 @@ import gzip
 import json
 import logging
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -135,6 +136,24 @@ def test_an_export_over_a_gz_file_keeps_it_under_a_name_import_tells_the_format_
     assert kept.read_bytes() == first
     assert cli.main(["import", str(kept), "--out", str(tmp_path / "back.json")]) == 0
     _same_cameras(load_rig(rig_file), load_rig(tmp_path / "back.json"))
+
+
+def test_an_image_size_is_for_the_camera_that_states_none_beside_one_that_states_its_own(rig_file, tmp_path, capsys):
+    """A hand-written file: 'left' states 960x600, 'right' states no size and --image-size gives its 1024x600. It
+    was refused for disagreeing with left's size, which it was not meant for."""
+    foreign = tmp_path / "rig.yml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)]) == 0
+    text = foreign.read_text()
+    right = text.index("name: right")
+    foreign.write_text(text[:right] + re.sub(r"\n *image_(width|height): \d+", "", text[right:], count=2))
+    assert "image_width: 960" in foreign.read_text()  # left's, kept
+    capsys.readouterr()
+    back = tmp_path / "back.json"
+    assert cli.main(["import", str(foreign), "--image-size", "1024x600", "--out", str(back)]) == 0, \
+        capsys.readouterr().err
+    assert [(c.name, c.width, c.height) for c in load_rig(back).cameras] == [("left", 960, 600), ("right", 1024, 600)]
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "none.json")]) == 2  # right's size still needed
+    assert "cameras[1].image_width': missing image size" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("size", ["640x400", "960x400"])
