@@ -126,6 +126,8 @@ def _open(path) -> cv2.FileStorage:
         # none): this one is read here
         data = _gunzipped(p) if named_with_gzip_level(p) else None
         if data is not None:
+            if not data.strip():
+                raise fail(path, None, "the file is empty, gzipped")
             head = data[:_SNIFF_BYTES]
         if not gzipped(p) or data is not None:  # FileStorage reads a gzipped file itself
             if problem := not_text_problem(head, "OpenCV FileStorage (YAML, XML or JSON)"):

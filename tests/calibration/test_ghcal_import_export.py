@@ -110,6 +110,9 @@ def test_a_gz_and_digit_file_of_plain_text_is_read_and_one_of_broken_gzip_is_nam
     err = capsys.readouterr().err
     assert str(foreign) in err and "cannot unpack it as gzip" in err, err
     assert not (tmp_path / "cut.json").exists()
+    foreign.write_bytes(gzip.compress(b"\n"))
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "cut.json")]) != 0
+    assert "the file is empty, gzipped" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("args", [[], ["--format", "opencv"]])
