@@ -948,12 +948,15 @@ FORMAT_SUFFIXES = {".toml": "anipose", ".yml": "opencv", ".yaml": "opencv", ".xm
 
 
 def _format_of(path: Path, given: str | None, flag: str) -> str:
-    """The format of ``path``: ``given``, else its suffix's (the one before ``.gz``: OpenCV's gzipped files)."""
-    from calibration.formats.opencv_yaml import GZIP_SUFFIX, format_suffix, gzipped
+    """The format of ``path``: ``given``, else its suffix's (the one before ``.gz``, or ``.gz`` and a digit:
+    OpenCV's gzipped files). An ``--out`` OpenCV would not open by its name (``rig.yml.gz9``) is refused."""
+    from calibration.formats.opencv_yaml import GZIP_SUFFIX, format_suffix, gzip_level_problem, gzipped
 
+    if flag == "--out" and (problem := gzip_level_problem(path)):
+        raise UsageError(f"{flag} {path}: {problem}")
     fmt = given or FORMAT_SUFFIXES.get(format_suffix(path))
     if fmt is None:
-        suffix = format_suffix(path) + (GZIP_SUFFIX if gzipped(path) else "")
+        suffix = format_suffix(path) + (path.suffix if gzipped(path) else "")
         raise UsageError(f"{flag} {path}: cannot tell the format from the suffix {suffix!r} (one of "
                          f"{', '.join(sorted(FORMAT_SUFFIXES))}, OpenCV's also gzipped as .yml.gz...): pass --format "
                          "opencv or anipose")
@@ -1470,16 +1473,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("import", help="write a rig file from another tool's calibration (OpenCV, anipose)")
     p.add_argument("file", type=user_path, help="OpenCV FileStorage .yml/.yaml/.xml/.json, each also gzipped as "
-                                ".yml.gz... (our multi-camera layout or stereo_calib's intrinsics.yml) or anipose "
-                                "calibration.toml")
+                                ".yml.gz or .yml.gz1-9... (our multi-camera layout or stereo_calib's intrinsics.yml) "
+                                "or anipose calibration.toml")
     p.add_argument("--out", type=user_path, required=True, help="rig file to write (docs/rig-file.md)")
     p.add_argument("--format", choices=("opencv", "anipose"), help="default: from FILE's suffix")
     p.add_argument("--units-to-metres", type=_finite(1e-9, 1e9),
                    help="metres per unit of the file's translations (0.001: millimetres); required for anipose "
                         "and stereo_calib files, which do not say (an anipose file ghcal export wrote records it)")
     p.add_argument("--extrinsics", type=user_path, help="stereo_calib's extrinsics.yml, when R and T are not in FILE")
-    p.add_argument("--image-size", help="WIDTHxHEIGHT for cameras whose entry states no image size (one that "
-                                        "states another is refused)")
+    p.add_argument("--image-size", help="WIDTHxHEIGHT for cameras whose entry states no image size (the others "
+                                        "keep theirs; where every camera states one, one that states another is "
+                                        "refused)")
     p.add_argument("--camera-height", type=_finite(*CAMERA_HEIGHT_RANGE_M),
                    help="level the rig: the first camera's height above the floor, m (without it the rig keeps "
                         "the file's frame: levelled where the file records a levelling its poses show, as ghcal "
@@ -1492,8 +1496,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export", help="write a rig file for another tool (OpenCV FileStorage, anipose)")
     p.add_argument("--rig", type=user_path, required=True)
     p.add_argument("--out", type=user_path, required=True,
-                   help=".yml/.yaml/.xml/.json (OpenCV FileStorage; gzipped with .gz after it: rig.yml.gz) or .toml "
-                        "(anipose)")
+                   help=".yml/.yaml/.xml/.json (OpenCV FileStorage; gzipped with .gz after it: rig.yml.gz, not "
+                        ".gz9, OpenCV's name for rig.yml.gz at level 9) or .toml (anipose)")
     p.add_argument("--format", choices=("opencv", "anipose"), help="default: from --out's suffix")
     p.add_argument("--units-to-metres", type=_finite(1e-9, 1e9),
                    help="metres per unit of the written translations (OpenCV: default 1, recorded in the file; "

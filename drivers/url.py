@@ -5,7 +5,8 @@ afterwards is an unknown option and :meth:`RigUrl.finish` rejects it by name,
 so a typo such as ``sim://?fsp=60`` fails loudly instead of being ignored.
 A ``#`` would start a fragment, which URL parsing drops: it is refused (write ``%23``). So is a tab, CR or LF
 anywhere, which URL parsing removes (write ``%09``, ``%0D``, ``%0A``; since session 73), and any other control
-character (C0, DEL, C1), which reached log and status lines raw (write its %XX escape; since session 74).
+character (C0, DEL, C1), which reached log and status lines raw (write its %XX escape; since session 74), and
+a line or paragraph separator or a bidirectional-text control, which break or reorder the line that shows the URL.
 
 :func:`redact_url` is how a URL is shown (messages, logs, a recording's manifest): without the passwords
 it may carry (a stream URL ``rtsp://user:pass@host/...`` inside an option, a ``token=``).
@@ -235,8 +236,12 @@ def dropped_characters(url: str) -> str | None:
     None where it holds none. The one rule for rig, sink and listen URLs. A tab, CR or LF: ``urlsplit`` drops them,
     so ``replay:///data/ta<TAB>ke`` played ``/data/take`` and ``fps=3<LF>0`` ran at 30 (a value pasted from a file).
     Any other C0 control, DEL or C1 control (U+0080-U+009F; since session 74): kept, it reached log and status lines,
-    where an ESC rewrites a terminal. Printable text that is not ASCII (a UTF-8 folder name) is not refused."""
-    char = next((char for char in url if _is_control(char)), None)
+    where an ESC rewrites a terminal. A line or paragraph separator (U+2028, U+2029) or a bidirectional-text control
+    (:data:`_BIDI_CONTROLS`): kept too, the first broke the line that shows the URL (editors, log viewers), the
+    second showed its characters in another order than the one opened (``replay:///data/<RLO>lmth.take`` showed as
+    ``replay:///data/ekat.html``).
+    Printable text that is not ASCII (a UTF-8 folder name) is not refused."""
+    char = next((char for char in url if is_refused_character(char)), None)
     if char is None:
         return None
     # its place in the URL as messages show it: a password before it is *** there (none where it is in one)
@@ -245,14 +250,28 @@ def dropped_characters(url: str) -> str | None:
     escape = _percent_escape(char)
     if char in _DROPPED:
         return f"holds {_DROPPED[char]}{where}, which URL parsing drops; remove it, or write it as {escape}"
+    if char in _SEPARATORS:
+        return (f"holds {_SEPARATORS[char]} (U+{ord(char):04X}){where}, which logs and editors break the line at; "
+                f"remove it, or write it as {escape}")
+    if char in _BIDI_CONTROLS:
+        return (f"holds a bidirectional-text control (U+{ord(char):04X}){where}, which makes logs and terminals show "
+                f"the characters after it in another order; remove it, or write it as {escape}")
     return (f"holds a control character (U+{ord(char):04X}){where}, which logs and terminals would act on or hide; "
             f"remove it, or write it as {escape}")
 
 
-def _is_control(char: str) -> bool:
-    # C0 controls (tab, CR and LF among them), DEL and the C1 controls: none is text, and an ESC (or a C1 CSI)
-    # starts a terminal's command
-    return char < " " or "\x7f" <= char <= "\x9f"
+#: The line and paragraph separators: no C0/C1 control, yet a line break to editors and log viewers.
+_SEPARATORS = {"\u2028": "a line separator", "\u2029": "a paragraph separator"}
+#: Unicode's bidirectional-text controls (UAX #9): the marks ALM, LRM, RLM, the embeddings and overrides
+#: LRE, RLE, PDF, LRO, RLO, and the isolates LRI, RLI, FSI, PDI. Each reorders how the text after it is shown.
+_BIDI_CONTROLS = frozenset("\u061c\u200e\u200f\u202a\u202b\u202c\u202d\u202e\u2066\u2067\u2068\u2069")
+
+
+def is_refused_character(char: str) -> bool:
+    """Whether :func:`dropped_characters` refuses ``char`` in a URL: a C0 control (tab, CR and LF among them), DEL or
+    a C1 control, none of which is text (an ESC, or a C1 CSI, starts a terminal's command), a line or paragraph
+    separator, or a bidirectional-text control."""
+    return char < " " or "\x7f" <= char <= "\x9f" or char in _SEPARATORS or char in _BIDI_CONTROLS
 
 
 def _percent_escape(char: str) -> str:

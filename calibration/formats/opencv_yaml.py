@@ -8,7 +8,8 @@ Single camera (OpenCV's calibration sample, ``out_camera_data.yml``), top-level 
     ``distortion_coefficients`` or ``D``    Nx1 / 1xN matrix or sequence, N in 0/4/5/8/12/14 (required)
     ``image_width`` + ``image_height``      integers, or ``image_size`` [w, h] (both: they must agree); else
                                             the ``image_size`` argument (required one way; given beside
-                                            the file's own size, it must agree with it)
+                                            the file's own size, it must agree with it, unless another
+                                            camera of a multi-camera file states none: the argument is its)
     ``R``                                   3x3 matrix or 3-vector Rodrigues (optional, default I)
     ``T``                                   3-vector, file units (optional, default 0)
     ``name``                                string (optional; default the file's stem)
@@ -46,7 +47,8 @@ store ``units_to_metres`` and (multi-camera) the working volume in metres
 (``working_volume_min`` / ``working_volume_max``, which OpenCV ignores) and, for a rig in a
 levelled frame, the ``levelled_*`` keys, and replace the file atomically; a name ending in ``.gz``
 (``rig.yml.gz``) is written gzipped, as ``cv2.FileStorage`` writes and reads it, in the format of the
-suffix before it.
+suffix before it. A name ending in ``.gz`` and a digit (``rig.yml.gz9``, OpenCV's gzip at level 9) is read
+from the file named, gunzipped; it is not written, as OpenCV opens ``rig.yml.gz`` for it.
 """
 from __future__ import annotations
 
@@ -54,6 +56,7 @@ import gzip
 import math
 import os
 import re
+import zlib
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -84,11 +87,16 @@ _D_KEYS = ("distortion_coefficients", "D")
 #: coefficients (k1..k4, equidistant) would otherwise be read as the pinhole model's k1 k2 p1 p2.
 _FISHEYE_KEYS = ("fisheye_model", "fisheye")
 
-__all__ = ["format_suffix", "gzipped", "read_opencv_camera", "read_opencv_rig", "write_opencv_camera",
-           "write_opencv_rig", "write_opencv_text"]
+__all__ = ["format_suffix", "gzip_level_problem", "gzipped", "named_with_gzip_level", "read_opencv_camera",
+           "read_opencv_rig", "write_opencv_camera", "write_opencv_rig", "write_opencv_text"]
 
 #: A name ending so is a gzipped file to ``cv2.FileStorage``, which reads and writes it so itself.
 GZIP_SUFFIX = ".gz"
+#: A suffix ``cv2.FileStorage`` reads as gzip at a compression level (persistence.cpp: ``.gz`` and one digit); it
+#: opens the name without the digit.
+_GZIP_LEVEL = re.compile(r"\.gz[0-9]", re.IGNORECASE)
+_GZIP_MAGIC = b"\x1f\x8b"
+_BOM = b"\xef\xbb\xbf"
 
 #: How much of a file is looked at for the marks of one that is not FileStorage text (NULs, UTF-16).
 _SNIFF_BYTES = 4096
@@ -114,18 +122,26 @@ def _open(path) -> cv2.FileStorage:
         # FileStorage's own words for an empty file: "(-215:Assertion failed) buf in function 'open'"
         if not head.strip() and not p.read_bytes().strip():
             raise fail(path, None, "the file is empty")
-        if not gzipped(p):  # FileStorage reads a gzipped file itself
+        # "rig.yml.gz9": FileStorage takes the 9 for a compression level and opens rig.yml.gz, another file (or
+        # none): this one is read here
+        data = _gunzipped(p) if named_with_gzip_level(p) else None
+        if data is not None:
+            if not data.strip():
+                raise fail(path, None, "the file is empty, gzipped")
+            head = data[:_SNIFF_BYTES]
+        if not gzipped(p) or data is not None:  # FileStorage reads a gzipped file itself
             if problem := not_text_problem(head, "OpenCV FileStorage (YAML, XML or JSON)"):
                 raise fail(path, None, problem)
-        if head[:3] == b"\xef\xbb\xbf":  # a byte-order mark (Windows editors): FileStorage refused line 1's syntax
-            text = p.read_bytes()[3:].decode("utf-8")
+        bom = len(_BOM) if head.startswith(_BOM) else 0  # Windows editors' mark: FileStorage refused line 1's syntax
+        if bom or data is not None:
+            text = (p.read_bytes() if data is None else data)[bom:].decode("utf-8")
             fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
         else:
             fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
     except OSError as e:
         raise fail(path, None, f"cannot read: {e.strerror or e}") from e
     except UnicodeDecodeError as e:
-        raise fail(path, None, f"not UTF-8 text (byte {e.start + 3}): {e.reason}") from e
+        raise fail(path, None, f"not UTF-8 text (byte {e.start + bom}): {e.reason}") from e
     except (cv2.error, SystemError) as e:
         cause = e.__cause__ or e
         msg = str(cause).split("error: ", 1)[-1].strip()
@@ -256,9 +272,10 @@ def _pick(node, keys: Sequence[str], path, field: str, required: bool = True) ->
     return key, value
 
 
-def _image_size(node, path, field: str, image_size) -> tuple[Any, Any, tuple[str, str]]:
+def _image_size(node, path, field: str, image_size, *, checked: bool = True) -> tuple[Any, Any, tuple[str, str]]:
     """Width, height and the keys they came from (for error messages): the file's, else the ``image_size``
-    argument's; both given, they must agree."""
+    argument's; both given, they must agree where ``checked`` (False: the argument is for the file's other
+    cameras, which state none)."""
     pair, size = _width_height(node, path, field), _size_key(node, path, field)
     if pair is not None and size is not None and pair != size:  # image_width won without a word
         raise fail(path, join(field, "image_size"), f"is [{size[0]:.10g}, {size[1]:.10g}], but image_width and "
@@ -270,13 +287,18 @@ def _image_size(node, path, field: str, image_size) -> tuple[Any, Any, tuple[str
                                                          "image_size in the file, or the image_size argument")
         return given[0], given[1], ("image_size argument", "image_size argument")
     (w, h), keys = (pair, ("image_width", "image_height")) if pair is not None else (size, ("image_size",) * 2)
-    if given is not None and (w, h) != given:  # the file's size was taken, the argument dropped without a word
+    if checked and given is not None and (w, h) != given:  # the file's size was taken, the argument dropped unsaid
         key = keys[0] if w != given[0] else keys[1]
         raise fail(path, join(field, key), f"gives the image size {w:.10g}x{h:.10g}, but the image_size argument "
                                            f"(--image-size) is {show(given[0])}x{show(given[1])}: the argument is for "
                                            "files that give none; leave it out to take the file's, or correct the "
                                            "file")
     return w, h, keys
+
+
+def _states_size(node) -> bool:
+    """Whether a camera's map states its image size (any of the keys: one alone is refused when it is read)."""
+    return any(key in _keys(node) for key in ("image_width", "image_height", "image_size"))
 
 
 def _size_argument(path, image_size) -> tuple[Any, Any] | None:
@@ -336,12 +358,13 @@ def _refuse_fisheye(node, path, field: str) -> None:
                                                    "pinhole model; its coefficients mean something else)")
 
 
-def _camera(node, path, field: str, *, default_name: str, image_size, units: float, need_pose: bool) -> Camera:
+def _camera(node, path, field: str, *, default_name: str, image_size, units: float, need_pose: bool,
+            size_checked: bool = True) -> Camera:
     _refuse_fisheye(node, path, field)
     name = _string(node.getNode("name"), path, join(field, "name")) if "name" in _keys(node) else None
     k_key, K = _pick(node, _K_KEYS, path, field)
     d_key, D = _pick(node, _D_KEYS, path, field)
-    w, h, size_keys = _image_size(node, path, field, image_size)
+    w, h, size_keys = _image_size(node, path, field, image_size, checked=size_checked)
     keys = _keys(node)
     if need_pose or "R" in keys or "T" in keys:
         _, R = _pick(node, ("R",), path, field)
@@ -461,8 +484,9 @@ def read_opencv_rig(
     Args:
         path: the YAML file (``intrinsics.yml`` for the stereo_calib layout).
         extrinsics_path: stereo_calib's ``extrinsics.yml`` when ``R``/``T`` are not in ``path``.
-        image_size: ``(width, height)`` for cameras whose entry has no image size; an entry that has one must
-            agree with it (refused, naming both, where the file's was taken and the argument dropped unsaid).
+        image_size: ``(width, height)`` for cameras whose entry has no image size. Where every entry has one,
+            each must agree with it (refused, naming both, where the file's was taken and the argument dropped
+            unsaid); where some entry has none, the argument is theirs and the others keep their own sizes.
         volume: the working volume; default the file's (``working_volume_min`` / ``_max``, our
             writer stores it), else :func:`default_working_volume`.
         rig_id: default the file's ``rig_id``, else the file's stem.
@@ -494,13 +518,16 @@ def read_opencv_rig(
             if not seq.isSeq():
                 raise fail(path, "cameras", "must be a sequence of camera maps")
             cameras, fields = [], []
-            for i in range(seq.size()):
+            nodes = [seq.at(i) for i in range(seq.size())]
+            # a hand-written file where one camera states its size and another does not: the argument is the
+            # second's, not checked against the first's (it was refused where they differed)
+            for_unsized = any(node.isMap() and not _states_size(node) for node in nodes)
+            for i, node in enumerate(nodes):
                 field = f"cameras[{i}]"
-                node = seq.at(i)
                 if not node.isMap():
                     raise fail(path, field, "must be a map of camera keys")
                 cameras.append(_camera(node, path, field, default_name=f"cam{i}", image_size=image_size, units=units,
-                                       need_pose=True))
+                                       need_pose=True, size_checked=not for_unsized))
                 fields.append(field)
             file_rig_id = _string(root.getNode("rig_id"), path, "rig_id") if "rig_id" in keys else None
             levelling = recorded_levelling(path, _levelling_values(root, path))  # ours: the frame was levelled
@@ -601,8 +628,43 @@ _YAML = (cv2.FILE_STORAGE_FORMAT_YAML, "YAML")
 
 
 def gzipped(path) -> bool:
-    """Whether ``path`` names a gzipped FileStorage file (``rig.yml.gz``)."""
-    return Path(path).suffix.lower() == GZIP_SUFFIX
+    """Whether ``path`` names a gzipped FileStorage file (``rig.yml.gz``, or ``rig.yml.gz9``:
+    :func:`named_with_gzip_level`)."""
+    return Path(path).suffix.lower() == GZIP_SUFFIX or named_with_gzip_level(path)
+
+
+def named_with_gzip_level(path) -> bool:
+    """Whether ``path`` ends in ``.gz`` and a digit (``rig.yml.gz9``), which ``cv2.FileStorage`` takes for gzip at
+    that compression level, 0 to 9, opening the name without the digit (``rig.yml.gz``) to read or write it."""
+    return _GZIP_LEVEL.fullmatch(Path(path).suffix) is not None
+
+
+def gzip_level_problem(path) -> str | None:
+    """Why a FileStorage file is not written to ``path`` (None: it may be): a name ending in ``.gz`` and a digit
+    (:func:`named_with_gzip_level`), which no OpenCV program opens, as ``cv2.FileStorage`` takes the digit for a
+    compression level and opens the name without it."""
+    if not named_with_gzip_level(path):
+        return None
+    p = Path(path)
+    meant = p.with_suffix(p.suffix[:-1]).name
+    return (f"OpenCV reads the digit after .gz as a compression level, so it opens {meant} for this name and no "
+            f"OpenCV program could read this file; name it {meant} (written gzipped)")
+
+
+def _gunzipped(path: Path) -> bytes:
+    """The bytes of ``path``, a file named as :func:`named_with_gzip_level` says, unpacked where it is gzip (plain
+    text is taken as it is, as zlib's reader takes it in a ``.gz`` file).
+
+    Raises:
+        RigFileError: naming ``path``: gzip that is cut short or damaged.
+    """
+    data = path.read_bytes()
+    if not data.startswith(_GZIP_MAGIC):
+        return data
+    try:
+        return gzip.decompress(data)
+    except (EOFError, OSError, zlib.error) as e:  # cut short; a bad header (BadGzipFile); a bad stream or CRC
+        raise fail(path, None, f"cannot unpack it as gzip: {e}") from e
 
 
 def format_suffix(path) -> str:
@@ -627,8 +689,10 @@ def write_opencv_text(path: str | os.PathLike, text: str) -> None:
     gzipped where the name ends in ``.gz`` (``rig.yml.gz`` was plain text, which a tool that gunzips it refuses).
 
     Raises:
-        RigFileError: the file cannot be written.
+        RigFileError: the file cannot be written; its name ends in ``.gz`` and a digit (:func:`gzip_level_problem`).
     """
+    if problem := gzip_level_problem(path):
+        raise fail(path, None, problem)
     data = utf8_bytes(path, text)
     # mtime 0: the same rig exports the same bytes
     write_bytes_atomic(path, gzip.compress(data, mtime=0) if gzipped(path) else data)
@@ -696,6 +760,8 @@ def dumps_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
     """The text :func:`write_opencv_rig` writes to ``path`` (its suffix, the one before any ``.gz``, picks YAML, XML
     or JSON; errors name it; :func:`write_opencv_text` writes it, gzipped for ``.gz``), checked
     as it is, nothing written: ``ghcal export`` keeps the file it replaces only once the export can be made."""
+    if problem := gzip_level_problem(path):
+        raise fail(path, None, problem)
     units = check_units(units_to_metres)
     refuse_skew(rig.cameras, f"an OpenCV {_format_name(path)} file")
     fs = _memory_writer(path)

@@ -30,7 +30,7 @@ from firmware_host.sinks.usb_sink import ClaimedInterface, claimed_interface, na
 from ghnerf_runtime.cli.output_path import first_clash
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
 from drivers.errors import RigConfigError
-from drivers.url import RigUrl, redact_url, unquote_keeping_bytes, with_kept_bytes_escaped
+from drivers.url import RigUrl, is_refused_character, redact_url, unquote_keeping_bytes, with_kept_bytes_escaped
 from drivers.url_paths import rig_url_from_folder, url_files, url_path_problem
 from drivers.wrappers import RECORD_PREFIX, wrapper_prefixes
 from ghnerf_runtime.config_paths import impossible_path, paths_from_file, values_from_file
@@ -280,7 +280,7 @@ def _refuse_edge_space(key: str, url: str) -> None:
     trailing one became part of the last value (``file:///j.jsonl `` wrote another file, ``fps=30 `` was refused
     as no number). Tabs and line feeds are ``drivers.url.dropped_characters``'."""
     for edge, char in (("starts", url[:1]), ("ends", url[-1:])):
-        if char.isspace() and not (char < " " or "\x7f" <= char <= "\x9f"):  # controls: dropped_characters'
+        if char.isspace() and not is_refused_character(char):  # controls, U+2028/U+2029: dropped_characters'
             _fail(key, f"{edge} with a space, which is no part of the URL; remove it", redact_url(url))
 
 

@@ -99,6 +99,20 @@ def test_a_gz_name_is_written_gzipped_in_the_format_before_it_and_reads_back(rig
         tmp_path / "one.xml.gz", name="side cam")), rig.volume))
 
 
+def test_a_gz_and_digit_name_is_read_from_itself_and_not_written(rig, tmp_path):
+    """cv2.FileStorage takes rig.yml.gz9 for gzip at level 9 and opens rig.yml.gz: read_opencv_rig refused the
+    gzip as a binary file, and write_opencv_rig wrote plain text under the name."""
+    write_opencv_rig(rig, tmp_path / "rig.yml.gz")
+    named = tmp_path / "rig.yml.gz9"
+    named.write_bytes((tmp_path / "rig.yml.gz").read_bytes())
+    write_opencv_rig(Rig(rig.cameras[:2], rig.volume), tmp_path / "rig.yml.gz")  # the file OpenCV would open
+    assert_cameras_close(rig, read_opencv_rig(named))
+    for write in (lambda path: write_opencv_rig(rig, path), lambda path: write_opencv_camera(rig.cameras[0], path)):
+        with pytest.raises(RigFileError, match="opens out.xml.gz for this name"):
+            write(tmp_path / "out.xml.gz0")
+    assert not (tmp_path / "out.xml.gz0").exists()
+
+
 def test_a_principal_point_outside_the_image_is_refused(rig, tmp_path):
     # a stereo_calib file has no image size: the caller's, if of another size, went through
     write_opencv_rig(rig, tmp_path / "rig.yaml")

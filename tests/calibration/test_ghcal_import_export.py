@@ -6,6 +6,7 @@ import gzip
 import json
 import logging
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -77,6 +78,56 @@ def test_an_export_to_a_gz_name_is_gzipped_and_imports_back(rig_file, tmp_path, 
     _same_cameras(load_rig(rig_file), load_rig(back))
 
 
+@pytest.mark.parametrize("name", ["rig.yml.gz9", "rig.xml.gz1", "rig.json.gz5"])
+def test_a_gz_and_digit_name_is_imported_as_gzip_from_the_file_named(rig_file, tmp_path, capsys, name):
+    """OpenCV's FileStorage reads rig.yml.gz9 as gzip (the 9 its compression level); import refused the suffix
+    '.gz9', and with --format opencv had OpenCV open rig.yml.gz, another file, beside it."""
+    foreign = tmp_path / name
+    foreign.write_bytes(gzip.compress(_exported_text(rig_file, tmp_path, name.split(".")[1]), compresslevel=9))
+    other = Rig(tuple(reversed(load_rig(rig_file).cameras)), load_rig(rig_file).volume)  # what OpenCV would open
+    save_rig(other, tmp_path / "other.json")
+    assert cli.main(["export", "--rig", str(tmp_path / "other.json"), "--out", str(foreign.with_suffix(".gz"))]) == 0
+    capsys.readouterr()
+    back = tmp_path / "back.json"
+    assert cli.main(["import", str(foreign), "--out", str(back)]) == 0, capsys.readouterr().err
+    _same_cameras(load_rig(rig_file), load_rig(back))
+
+
+def _exported_text(rig_file: Path, tmp_path: Path, suffix: str) -> bytes:
+    plain = tmp_path / f"plain.{suffix}"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(plain)]) == 0
+    return plain.read_bytes()
+
+
+def test_a_gz_and_digit_file_of_plain_text_is_read_and_one_of_broken_gzip_is_named(rig_file, tmp_path, capsys):
+    foreign = tmp_path / "rig.yml.gz3"
+    foreign.write_bytes(_exported_text(rig_file, tmp_path, "yml"))  # zlib's reader takes plain text in a .gz file
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "back.json")]) == 0
+    _same_cameras(load_rig(rig_file), load_rig(tmp_path / "back.json"))
+    foreign.write_bytes(gzip.compress(_exported_text(rig_file, tmp_path, "yml"))[:-9])  # cut short
+    capsys.readouterr()
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "cut.json")]) != 0
+    err = capsys.readouterr().err
+    assert str(foreign) in err and "cannot unpack it as gzip" in err, err
+    assert not (tmp_path / "cut.json").exists()
+    foreign.write_bytes(gzip.compress(b"\n"))
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "cut.json")]) != 0
+    assert "the file is empty, gzipped" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args", [[], ["--format", "opencv"]])
+def test_an_export_to_a_gz_and_digit_name_is_refused_naming_the_name_opencv_opens(rig_file, tmp_path, capsys, args):
+    """cv2.FileStorage writes rig.yml.gz for the name rig.yml.gz9, and opens rig.yml.gz to read it: a file named
+    rig.yml.gz9 no OpenCV program reads. It was refused as of an unknown suffix, and with --format opencv written
+    as plain text."""
+    out = tmp_path / "rig.yml.gz9"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(out), *args]) == 2
+    err = but_the_framing_notes(capsys.readouterr().err)
+    assert f"--out {out}: OpenCV reads the digit after .gz as a compression level, so it opens rig.yml.gz" in err
+    assert "name it rig.yml.gz (written gzipped)" in err and err.count("\n") == 1, err
+    assert not out.exists()
+
+
 def test_an_export_over_a_gz_file_keeps_it_under_a_name_import_tells_the_format_of(rig_file, tmp_path, capsys):
     # kept as rig.yml.prev.gz (<stem>.prev<suffix>), whose format import could not tell from its name ('.prev')
     foreign = tmp_path / "rig.yml.gz"
@@ -88,6 +139,24 @@ def test_an_export_over_a_gz_file_keeps_it_under_a_name_import_tells_the_format_
     assert kept.read_bytes() == first
     assert cli.main(["import", str(kept), "--out", str(tmp_path / "back.json")]) == 0
     _same_cameras(load_rig(rig_file), load_rig(tmp_path / "back.json"))
+
+
+def test_an_image_size_is_for_the_camera_that_states_none_beside_one_that_states_its_own(rig_file, tmp_path, capsys):
+    """A hand-written file: 'left' states 960x600, 'right' states no size and --image-size gives its 1024x600. It
+    was refused for disagreeing with left's size, which it was not meant for."""
+    foreign = tmp_path / "rig.yml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)]) == 0
+    text = foreign.read_text()
+    right = text.index("name: right")
+    foreign.write_text(text[:right] + re.sub(r"\n *image_(width|height): \d+", "", text[right:], count=2))
+    assert "image_width: 960" in foreign.read_text()  # left's, kept
+    capsys.readouterr()
+    back = tmp_path / "back.json"
+    assert cli.main(["import", str(foreign), "--image-size", "1024x600", "--out", str(back)]) == 0, \
+        capsys.readouterr().err
+    assert [(c.name, c.width, c.height) for c in load_rig(back).cameras] == [("left", 960, 600), ("right", 1024, 600)]
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "none.json")]) == 2  # right's size still needed
+    assert "cameras[1].image_width': missing image size" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("size", ["640x400", "960x400"])

@@ -340,6 +340,25 @@ def test_every_other_control_character_is_refused_naming_its_code_point_and_plac
     assert "\x1b" not in str(info.value)
 
 
+@pytest.mark.parametrize(("url", "said"), [
+    # no C0/C1 control, so taken until now: a separator broke the line that showed the URL, a bidi control showed
+    # its characters in another order than the one opened ("\u202elmth.take" showed as "ekat.html")
+    ("replay:///data/ta\u2028ke", "'replay:///data/ta\\u2028ke': holds a line separator (U+2028) at character 18, "
+                                   "which logs and editors break the line at; remove it, or write it as %E2%80%A8"),
+    ("sim://?fps=30\u2029", "holds a paragraph separator (U+2029) at character 14"),
+    ("replay:///data/\u202elmth.take", "'replay:///data/\\u202elmth.take': holds a bidirectional-text control "
+                                       "(U+202E) at character 16, which makes logs and terminals show the characters "
+                                       "after it in another order; remove it, or write it as %E2%80%AE"),
+    *((f"replay:///data/t{chr(code)}ake", f"holds a bidirectional-text control (U+{code:04X}) at character 17")
+      for code in (0x061C, 0x200E, 0x200F, 0x202A, 0x202B, 0x202C, 0x202D, 0x2066, 0x2067, 0x2068, 0x2069)),
+])
+def test_a_line_separator_or_bidi_control_is_refused_naming_its_code_point_and_place(url, said):
+    with pytest.raises(RigConfigError) as info:
+        create_rig_source(url)
+    assert said in str(info.value) and len(str(info.value).splitlines()) == 1, str(info.value)
+    assert RigUrl.parse("replay:///data/t%E2%80%AEx").target == "/data/t\u202ex"  # written as an escape
+
+
 def test_printable_text_that_is_not_ascii_is_still_taken():
     assert RigUrl.parse("replay:///data/caf\u00e9/\u6f14\u793a\u00a0x").target == "/data/caf\u00e9/\u6f14\u793a\u00a0x"
     assert RigUrl.parse("replay:///data/t%1Bx").target == "/data/t\x1bx"  # written as an escape, as a tab's %09 is

@@ -119,6 +119,10 @@ def test_serial_json_lines_over_a_pty():
     ("udp://127.0.0.1:98\x1b[2J70", "'udp://127.0.0.1:98\\x1b[2J70': holds a control character (U+001B) at "
                                     "character 19, which logs and terminals would act on or hide"),
     ("serial:///dev/null\x85?baud=9600", "'serial:///dev/null\\x85?baud=9600': holds a control character (U+0085)"),
+    # no C0/C1 control, so taken until now: the separator broke the line, the bidi control reordered it
+    ("udp://127.0.0.1:98\u202870", "'udp://127.0.0.1:98\\u202870': holds a line separator (U+2028) at character 19"),
+    ("serial:///dev/null\u202e?baud=9600", "'serial:///dev/null\\u202e?baud=9600': holds a bidirectional-text "
+                                           "control (U+202E) at character 19"),
     # written as %1B: decoded, the device (and pyserial's words quoting it) reached the terminal raw at the open
     ("serial:///dev/ghnerf-none%1B%5B2J?baud=9600", "serial://'/dev/ghnerf-none\\x1b[2J': cannot open: "),
 ])
@@ -126,7 +130,7 @@ def test_bad_urls_are_one_line_exit_2(url, message, capsys):
     assert listen.main([url, "--seconds", "0.1"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("ghnerf-listen: error: ") and message in err and "\n" not in err and "\r" not in err
-    assert "\x1b" not in err and "\x85" not in err
+    assert "\x1b" not in err and "\x85" not in err and "\u2028" not in err and "\u202e" not in err
     assert "s3cret" not in err
 
 

@@ -263,6 +263,23 @@ def test_every_other_control_character_is_refused_as_rig_urls_refuse_it(url: str
     assert str(info.value).startswith(repr(url) + ": invalid url=")  # escaped, on one line
 
 
+@pytest.mark.parametrize(("url", "said"), [
+    # no C0/C1 control, so taken until now: the STATUS line and logs broke at the separator, or showed the bidi
+    # control's path in another order than the file written
+    ("file:///tmp/a\u2028b.jsonl", "holds a line separator (U+2028) at character 14, which logs and editors break "
+                                   "the line at; remove it, or write it as %E2%80%A8"),
+    ("udp://127.0.0.1:9000?x=\u2029", "holds a paragraph separator (U+2029) at character 24"),
+    ("file:///tmp/\u202elmth.jsonl", "holds a bidirectional-text control (U+202E) at character 13"),
+    ("memory://a\u2066b", "holds a bidirectional-text control (U+2066) at character 11"),
+    ("serial:///dev/ttyACM0\u200f", "holds a bidirectional-text control (U+200F) at character 22"),
+])
+def test_a_line_separator_or_bidi_control_is_refused_as_rig_urls_refuse_it(url: str, said: str) -> None:
+    with pytest.raises(SinkConfigError) as info:
+        open_sink(url)
+    assert (info.value.field, info.value.value) == ("url", url) and said in str(info.value), str(info.value)
+    assert str(info.value).startswith(repr(url) + ": invalid url=")  # escaped, on one line
+
+
 @pytest.mark.parametrize("url", ["serial:///dev/ghnerf-no-such-port?baud=921600", "udp://127.0.0.1:9870",
                                  "file:///nonexistent-folder/j.jsonl", "usb://1209:0001?ep=0x01"])
 def test_check_sink_url_passes_a_good_url_opening_nothing(url, monkeypatch) -> None:

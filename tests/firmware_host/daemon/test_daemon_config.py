@@ -13,6 +13,7 @@ import pytest
 
 from firmware_host.daemon.cli import EXAMPLE_CONFIG, check_config
 from ghnerf_runtime.config import config_to_dict
+from firmware_host.daemon.service import check_sink_urls
 from firmware_host.sinks.usb_select import PortPath
 from firmware_host.sinks.usb_sink import claimed_interface
 from tests.firmware_host.fake_usb_backend import FakeBackend, two_boards
@@ -348,6 +349,19 @@ def test_a_status_file_or_file_sink_that_is_a_folder_is_refused_naming_the_key(t
 ])
 def test_a_url_with_a_space_before_or_after_it_is_refused_naming_the_key(change, said):
     assert said + ", which is no part of the URL; remove it" in _error({"sinks": [SINK], **change})
+
+
+@pytest.mark.parametrize("sinks, said", [
+    ([SINK, "file:///tmp/j.jsonl\u2028"], "sinks[1]: 'file:///tmp/j.jsonl\\u2028': invalid url='file:///tmp/j.jsonl"
+                                          "\\u2028': holds a line separator (U+2028) at character 20"),
+    (["\u2029udp://127.0.0.1:9870"], "sinks[0]: '\\u2029udp://127.0.0.1:9870': invalid url="),
+])
+def test_a_url_with_a_line_separator_at_an_end_is_refused_naming_it_not_as_a_space(sinks, said):
+    """U+2028 and U+2029 are whitespace to ``str.isspace``: the sinks' own check names them, as it names a tab."""
+    config = daemon_config_from_dict({"sinks": sinks})
+    with pytest.raises(DaemonConfigError) as e:
+        check_sink_urls(config.sinks)
+    assert said in str(e.value), str(e.value)
 
 
 def test_round_trip_and_example_is_valid():
