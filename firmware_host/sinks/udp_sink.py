@@ -3,7 +3,8 @@
 Each datagram carries one COBS frame with its 0x00 delimiter, so a receiver can
 use the same stream decoder as on serial. UDP has no delivery feedback: losses
 on the network show up only as sequence gaps at the receiver; the sender
-counts what it could not send (full socket buffer, unreachable network). An IPv4
+counts what it could not send (full socket buffer, unreachable network); a frame whose JOINTS went out and whose
+JOINTS_2D then met a full buffer counts as sent and ``partial``: the receiver has its seq, no gap. An IPv4
 broadcast address (``udp://192.168.1.255:9000``) sends to every receiver on the subnet.
 
 The socket is connected to the receiver's address, so the one answer the network gives, an ICMP port (or
@@ -37,7 +38,7 @@ from typing import Any, Optional
 
 from drivers.url import shown_url
 from firmware_host.addresses import ipv4_first
-from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
+from firmware_host.errors import SinkConfigError, SinkPartialWriteError, SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.constants import MsgType
 from firmware_host.protocol.encoder import encode
 from firmware_host.protocol.messages import Message
@@ -327,17 +328,22 @@ class UdpSink(ProtocolSink):
         return self._link.refusing()
 
     def _write_messages(self, messages: list[Message]) -> bool:
+        """One datagram per packet, so that a lost datagram loses one packet. Once the frame's JOINTS went out, a
+        full send buffer cuts only what follows: its JOINTS_2D (:class:`SinkPartialWriteError`: the receiver has
+        the frame's seq and 3D joints, no gap) or the HELLO + STATUS behind it (False: the STATUS is owed)."""
         frame_types = (MsgType.JOINTS, MsgType.JOINTS_2D)
-        for i, m in enumerate(messages):  # one packet per datagram: a lost datagram loses one packet
+        joints_out = bool(messages) and messages[0].header.msg_type == MsgType.JOINTS
+        for i, m in enumerate(messages):
             try:
                 self._link.send(encode(m))
-            except SinkWriteError:
-                if i and m.header.msg_type not in frame_types and all(
-                        p.header.msg_type in frame_types for p in messages[:i]):
-                    # the frame went out, only the HELLO + STATUS behind it met a full buffer: the frame is
-                    # delivered (counting it dropped flagged a gap the receiver never saw); the STATUS is owed
-                    return False
-                raise
+            except SinkWriteError as e:
+                if not (i and joints_out):
+                    raise  # the frame's JOINTS (or an idle HELLO + STATUS) did not go out: not delivered
+                if m.header.msg_type in frame_types:
+                    # counted dropped until now, the next JOINTS flagged DROPPED with no seq missing
+                    frame_packets = sum(1 for p in messages if p.header.msg_type in frame_types)
+                    raise SinkPartialWriteError(self.url, e.reason, i, frame_packets) from e
+                return False  # the frame went out whole, only the HELLO + STATUS behind it did not
         return True
 
     def _write_bytes(self, data: bytes) -> None:

@@ -638,6 +638,74 @@ def test_udp_frame_out_but_status_refused_counts_as_delivered(monkeypatch: pytes
     assert encode(sink._hello(1)) not in sent[3:]
 
 
+def test_udp_frame_out_whose_status_alone_is_refused_counts_as_delivered(monkeypatch: pytest.MonkeyPatch) -> None:
+    # JOINTS and the HELLO behind it went out, only the STATUS met a full send buffer: the frame was counted
+    # dropped (only a refused HELLO let it count as delivered)
+    from firmware_host.errors import SinkWriteError
+    from firmware_host.sinks.udp_sink import UdpSink
+
+    sink = UdpSink.from_url("udp://127.0.0.1:9", clock_us=lambda: 5_000_000)  # never started
+    sent: list[bytes] = []
+
+    def send(datagram: bytes) -> None:
+        if isinstance(messages_of(datagram)[0], Status):
+            raise SinkWriteError(sink.url, "socket send buffer full")
+        sent.append(datagram)
+
+    monkeypatch.setattr(sink._link, "send", send)
+    sink._deliver(make_frame(0), 0)  # with HELLO + STATUS (the first): delivered, the STATUS owed
+    assert [type(m) for d in sent for m in messages_of(d)] == [Joints, Hello]
+    assert sink._status_owed
+
+
+
+def test_udp_frame_whose_2d_joints_meet_a_full_buffer_is_sent_in_part_and_flags_no_gap(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Frame 0's JOINTS goes out, its first JOINTS_2D meets a full send buffer: the listener has seq 0 and its 3D
+    joints, no 2D. Until now the frame counted in dropped_error and frame 1's JOINTS said DROPPED, a gap whose seq
+    the listener had received; now it counts as sent and partial (as vmc://'s second bundle), and no flag lies."""
+    from firmware_host.errors import SinkWriteError
+    from firmware_host.protocol.constants import Flags
+    from firmware_host.sinks.udp_sink import DatagramLink
+
+    real_send = DatagramLink.send
+    refused: list[bytes] = []
+
+    def send(link: DatagramLink, datagram: bytes) -> None:
+        message = messages_of(datagram)[0]
+        if not refused and isinstance(message, Joints2D) and message.header.seq == 0:
+            refused.append(datagram)
+            raise SinkWriteError(link.url, "socket send buffer full")
+        real_send(link, datagram)
+
+    monkeypatch.setattr(DatagramLink, "send", send)
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(5)
+    two_d = {"left": np.full((25, 3), 10.0), "right": np.full((25, 3), 20.0)}
+    sink = open_sink(f"udp://127.0.0.1:{rx.getsockname()[1]}?queue=16&send_2d=1", backoff=FAST_BACKOFF,
+                     cameras=("left", "right"))
+    try:
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0, joints_2d=two_d))
+        sink.send(make_frame(1, joints_2d=two_d))
+        received: list = []
+        while not any(isinstance(m, Joints2D) and (m.header.seq, m.camera) == (1, 1) for m in received):
+            received += messages_of(rx.recv(2048))  # (a timeout raises: frame 1's last packet never came)
+        wait_until(lambda: sink.stats().sent + sink.stats().dropped_error == 2, what="both frames counted")
+        stats = sink.stats()
+    finally:
+        sink.close()
+        rx.close()
+    assert refused
+    assert stats.sent == 2 and stats.partial == 1 and stats.dropped_error == 0
+    assert "socket send buffer full" in (stats.last_error or "")
+    joints = [m for m in received if isinstance(m, Joints)]
+    assert [m.header.seq for m in joints] == [0, 1]
+    assert not joints[1].header.flags & Flags.DROPPED  # no seq is missing: the flag must not say one is
+    assert [(m.header.seq, m.camera) for m in received if isinstance(m, Joints2D)] == [(1, 0), (1, 1)]
+
+
 _RECORD_UNTIL_KILLED = """
 import sys
 from firmware_host.sinks import open_sink

@@ -661,8 +661,9 @@ class _GatedOpens:
 def test_a_stop_during_an_open_does_not_wait_for_it(sim_url, tmp_path, monkeypatch):
     """A stop while the rig reopens ends the daemon without waiting for the open (up to health.open_allowance_s,
     60 s, while systemd SIGKILLs after TimeoutStopSec=20): the sinks are closed with what was sent, STOPPING and the
-    status file's last report written, exit 0. The open, completing later in its abandoned thread, closes its
-    source: no device is left claimed."""
+    status file's last report written, exit 0. The stop closes the source at once, before the open returns (until
+    now the open's thread closed it once the open returned, the device held meanwhile), and the open, completing
+    later in its abandoned thread, releases what it made: no device is left claimed."""
     import firmware_host.daemon.service as service
 
     monkeypatch.setattr(service, "load_session", lambda config: object())
@@ -679,6 +680,7 @@ def test_a_stop_during_an_open_does_not_wait_for_it(sim_url, tmp_path, monkeypat
             run.thread.join(timeout=15)
             assert not run.thread.is_alive(), "the stop waited for the open"
             assert not opens.release.is_set() and run.rc == [0]
+            assert opens.sources[-1]._closed  # closed by the stop, its open still held back
         assert sink.stats().state == "closed"
         joints = [m for m in messages_of(sink.read()) if isinstance(m, Joints)]
         assert joints and len(joints) == sink.stats().sent
