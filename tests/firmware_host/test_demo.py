@@ -1573,3 +1573,28 @@ def test_a_first_stop_just_before_the_take_s_close_of_a_run_that_read_to_its_end
         assert (rc, captured.err.splitlines()) == (128 + signal.Signals[stop],
                                                    [f"{demo.prog_name()}: stopped ({words})"]), captured.err
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+def test_a_stop_just_before_the_take_s_close_of_a_run_an_error_ended_still_closes_the_take(
+        tmp_path, capsys, monkeypatch, stop):
+    """An error ends the reading (one the demo says, exit 2); a Ctrl-C or SIGTERM landing just before the
+    take's close, outside its deferral, was raised past that close: the take left complete: false, the error's line
+    lost to "stopped". Now stops are held from the error to the take's close: the take closed, the error said, 2."""
+    import signal
+
+    def stopped_then_closed(close, **kwargs):  # the take's close: the sink was closed on the error's way out
+        os.kill(os.getpid(), signal.Signals[stop])  # its handler runs here, in the main thread, at once
+        return real_closed(close, **kwargs)
+
+    real_closed = demo.closed_with_stops_deferred
+    monkeypatch.setattr(demo, "truth_frame",
+                        _stopping_at_the_third_pair(lambda: demo.DemoError("the third pair went wrong")))
+    monkeypatch.setattr(demo, "closed_with_stops_deferred", stopped_then_closed)
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "20", "--out",
+                                       str(tmp_path / "out")])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1 and "the third pair went wrong" in err[0], err
+    assert json.loads((take / "manifest.json").read_text())["complete"] is True  # closed
