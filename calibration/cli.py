@@ -19,12 +19,14 @@ out) through ``ghcal import`` / ``ghcal export`` (OpenCV FileStorage YAML/XML/JS
 Exit status: 0 on success (warnings are printed, not fatal), 2 for an error the user fixes (the
 message names the file, folder, camera or key); 130 after Ctrl-C, 143 after SIGTERM, each with one line
 (``capture``: 0 when it kept views, as its normal end; 2 when a ``record+`` take recorded with it failed as it
-closed, since session 75, also where a stop lands after the cameras' close: ``RecordedTake``).
+closed, since session 75, also where a stop lands after the cameras' close: ``RecordedTake``; 2 for an error that
+ended it, also where a stop lands as that error leaves: ``_ErrorLeaving``).
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -53,7 +55,7 @@ from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancesto
 from ghnerf_runtime.cli.recorded_take import RecordedTake, status_saying_a_failed_take
 from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stderr
 from ghnerf_runtime.cli.sigterm import (closed_with_stops_deferred, exit_status, sigterm_as_interrupt, stop_signal,
-                                      stop_signals_deferred, stop_words)
+                                      stop_signals_deferred, stop_signals_noted, stop_words)
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
@@ -494,15 +496,35 @@ def cmd_capture(args: argparse.Namespace) -> int:
               file=sys.stderr)
     source = drivers.create_rig_source(url)
     take = RecordedTake(source, PROG)
-    # a stop landing after the cameras' close, before the take's check or in the summary, was said "the capture did
-    # not finish", 130 or 143, of a take that failed
-    return status_saying_a_failed_take(lambda: _capture_and_summarise(args, board, out, earlier, source, take), take)
+    leaving = _ErrorLeaving()
+    try:
+        # a stop landing after the cameras' close, before the take's check or in the summary, was said "the capture
+        # did not finish", 130 or 143, of a take that failed
+        status = status_saying_a_failed_take(
+            lambda: _capture_and_summarise(args, board, out, earlier, source, take, leaving), take)
+    except KeyboardInterrupt:
+        if leaving.error is None:
+            raise
+    if leaving.error is not None:  # a stop hid it as it left (the cameras' close, the take's line): main says it, 2
+        raise leaving.error
+    return status
+
+
+@dataclasses.dataclass
+class _ErrorLeaving:
+    """The error on its way out of a capture (a camera gone, a folder it cannot write). A Ctrl-C or SIGTERM landing
+    as it left (a second Ctrl-C pressed while the cameras closed) was raised in its place: "stopped; the capture did
+    not finish", 130 or 143, the error's words lost. It is said instead, exit 2: the capture had failed before the
+    stop came, and the error names what failed and which views are kept (capture the rest with --append)."""
+
+    error: Exception | None = None
 
 
 def _capture_and_summarise(args: argparse.Namespace, board: BoardSpec, out: Path, earlier: Sequence[Path],
-                           source, take: RecordedTake) -> int:
+                           source, take: RecordedTake, leaving: _ErrorLeaving) -> int:
     """The capture from ``source`` (a ``drivers.RigSource``), opened here and closed however the capture ends: the
-    views kept into ``out``, after the ``earlier`` ones, then its last line; the exit status."""
+    views kept into ``out``, after the ``earlier`` ones, then its last line; the exit status. An error on its way out
+    is set in ``leaving`` as it leaves the reading."""
     import drivers
     from drivers.base import log as rig_source_log
     from drivers.url import redact_url
@@ -523,10 +545,13 @@ def _capture_and_summarise(args: argparse.Namespace, board: BoardSpec, out: Path
     shown_url = redact_url(args.url)  # a camera URL may carry a password (rtsp://user:pass@..., token=)
     read_to_its_end = False  # the capture ended without a stop (caught below) or an error on its way out
     stopped: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM: the capture's normal end, said after the close
-    # entered at the first stop, left once the cameras are closed: a second Ctrl-C or SIGTERM landing just before
-    # the close (outside its deferral) skipped it, the take left complete: false, and one just after it ended the
-    # capture "did not finish", 130 or 143, in place of the first stop's views kept (0). Noted and dropped
-    second_stops_dropped = contextlib.ExitStack()
+    # the first stop of a capture that read to its end, landing before the close: raised once the take is closed
+    late_stops: list[KeyboardInterrupt] = []
+    # entered as the reading ends (a stop, an error, its end), left once the cameras are closed: a stop landing just
+    # before the close (outside its deferral) skipped it, the take left complete: false. A second Ctrl-C or SIGTERM
+    # just after it ended the capture "did not finish", 130 or 143, in place of the first stop's views kept (0):
+    # noted and dropped; the first stop of a capture that read to its end is noted (late_stops) and raised
+    stops_held = contextlib.ExitStack()
     try:
         # what the open warns and notes of the rig (a take's, a device's calibration, sim://'s) is logged by the
         # source, not the rig file: shown as main shows a loaded rig's, its notes too (Python showed the warnings)
@@ -669,9 +694,17 @@ def _capture_and_summarise(args: argparse.Namespace, board: BoardSpec, out: Path
             last_kept_at = now
             print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
         read_to_its_end = True
+        stops_held.enter_context(stop_signals_noted(late_stops))
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (main): said below, once the cameras are closed
-        second_stops_dropped.enter_context(stop_signals_deferred(then_raise=False))
-        stopped = e
+        stops_held.enter_context(stop_signals_deferred(then_raise=False))
+        if read_to_its_end:  # it landed as the noting above began: the late stop of a capture that kept its views
+            late_stops.append(e)
+        else:
+            stopped = e
+    except Exception as error:  # main says it (exit 2), once the cameras are closed, whatever stop lands meanwhile
+        leaving.error = error
+        stops_held.enter_context(stop_signals_deferred(then_raise=False))
+        raise
     finally:
         # a Ctrl-C or SIGTERM that lands in the close waits for it, as ghnerf-demo's does: raised there it tore the
         # close, a depthai device or a record+ take's manifest left half-closed (timeout's SIGTERM as --max-seconds
@@ -680,8 +713,9 @@ def _capture_and_summarise(args: argparse.Namespace, board: BoardSpec, out: Path
         # is the one reported
         # the take checked first; a record+ take's failure is said before main says an error on its way
         # (status_saying_a_failed_take)
-        with second_stops_dropped:
+        with stops_held:
             late_stop = closed_with_stops_deferred(source.close, then_raise=read_to_its_end)
+        late_stop = next(iter(late_stops), late_stop)  # the first to land
     if late_stop is not None and take.failure() is None:  # main says it (130, 143); a failed take is said below, 2
         raise late_stop
     if stopped is not None:

@@ -96,7 +96,7 @@ from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_
 from ghnerf_runtime.cli.recorded_take import RecordedTake, status_saying_a_failed_take
 from ghnerf_runtime.cli.seconds import positive_seconds
 from ghnerf_runtime.cli.sigterm import (closed_with_stops_deferred, exit_status, sigterm_as_interrupt, stop_signal,
-                                      stop_signals_deferred, stop_words)
+                                      stop_signals_deferred, stop_signals_noted, stop_words)
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
 from ghnerf_runtime.errors import ConfigError, ImageWriteError, ModelError, ModelLoadError
@@ -471,9 +471,13 @@ def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfi
     stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
     read_to_its_end = False  # the reading ended without an error or a stop on its way out (the close's raise)
     late_stop: KeyboardInterrupt | None = None  # one that landed in the close of a run that read to its end
+    late_stops: list[KeyboardInterrupt] = []  # one that landed after the sink's close, before the take's
     # entered at the first stop, left once the take is closed: a second Ctrl-C or SIGTERM landing between the
     # closes (outside their own deferrals) was raised there, 130 or 143 without the summary, the take's close
-    # skipped where it landed just before it. Noted and dropped: the first stop is the one reported
+    # skipped where it landed just before it. Noted and dropped: the first stop is the one reported. Entered too
+    # as the reading ends without a stop: a first stop landing just before the take's close skipped it, the take
+    # left complete: false; noted (late_stops), it is raised once the take is closed and checked. And as an error
+    # leaves: a stop landing there skipped the close (the error is the one reported)
     second_stops_dropped = contextlib.ExitStack()
     try:
         estimator = None
@@ -583,6 +587,10 @@ def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfi
         skipped = stats.pairs_dropped
         delivered += skipped
         read_to_its_end = True
+        second_stops_dropped.enter_context(stop_signals_noted(late_stops))
+    except Exception:
+        second_stops_dropped.enter_context(stop_signals_deferred(then_raise=False))
+        raise
     finally:
         # a Ctrl-C or SIGTERM that lands in the close waits for it: a recorder writes what it holds queued and
         # rewrites its manifest complete: true, which the signal raised there tore (timeout's SIGTERM as --seconds
@@ -590,8 +598,10 @@ def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfi
         # once the take is whole only when it is the first: a stop caught above, or an error on its way, is the one
         # reported (its summary and exit status)
         with second_stops_dropped:
-            late_stop = closed_with_stops_deferred(
-                source.close, then_raise=read_to_its_end and stopped is None and late_stop is None) or late_stop
+            closing_stop = closed_with_stops_deferred(
+                source.close, then_raise=read_to_its_end and stopped is None and late_stop is None)
+        if stopped is None:  # the first stop to land: in the sink's close, after it, in the take's close
+            late_stop = late_stop or next(iter(late_stops), None) or closing_stop
     if late_stop is not None and take.failure() is None:
         raise late_stop  # main says it (130, 143); a failed take is said after the summary, 2
 

@@ -96,6 +96,22 @@ def stop_signals_deferred(*, then_raise: bool = True, only_raising: bool = False
         yield
 
 
+@contextlib.contextmanager
+def stop_signals_noted(stops: list[KeyboardInterrupt]) -> Iterator[None]:
+    """Within the block Ctrl-C and SIGTERM are noted, never raised: each is added to ``stops`` as the
+    :class:`KeyboardInterrupt` (or :class:`Terminated`) it would have raised, once the block has ended, however it
+    ends. For the stretch between a run's reading and its close (``ghnerf-demo``, ``ghcal capture``): a first stop
+    landing there, before the close's own deferral, was raised past the close (a ``record+`` take left
+    ``complete: false``); noted, it is the caller's to raise once the take is closed and checked. Outside the main
+    thread nothing is installed, as for :func:`sigterm_as_interrupt`."""
+    noted: list[int] = []
+    try:
+        with _signals_held((signal.SIGINT, signal.SIGTERM), then_raise=False, noted=noted):
+            yield
+    finally:
+        stops.extend(_stop_raised_by(signum) for signum in noted)
+
+
 def closed_with_stops_deferred(close: Callable[[], None], *, then_raise: bool) -> KeyboardInterrupt | None:
     """``close()`` inside :func:`stop_signals_deferred`; the stop it raises once the close is done (``then_raise``)
     is returned, not raised, so that the caller checks what the close left first (a ``record+`` take that failed
@@ -129,14 +145,15 @@ def _raises_now(signum: signal.Signals) -> bool:
 
 
 @contextlib.contextmanager
-def _signals_held(signums: tuple[signal.Signals, ...], *, then_raise: bool) -> Iterator[None]:
-    """``signums`` noted, not raised, within the block; their handlers before it put back as it ends, however it
-    ends; the first noted raised after a block that ended normally when ``then_raise``. Nothing is installed
-    outside the main thread (:func:`sigterm_as_interrupt`)."""
+def _signals_held(signums: tuple[signal.Signals, ...], *, then_raise: bool,
+                  noted: list[int] | None = None) -> Iterator[None]:
+    """``signums`` noted (into ``noted`` where given), not raised, within the block; their handlers before it put
+    back as it ends, however it ends; the first noted raised after a block that ended normally when ``then_raise``.
+    Nothing is installed outside the main thread (:func:`sigterm_as_interrupt`)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    noted: list[int] = []
+    noted = [] if noted is None else noted
     previous = {signum: signal.getsignal(signum) for signum in signums}
     _install_noting(signums, noted, previous)
     try:
@@ -144,8 +161,13 @@ def _signals_held(signums: tuple[signal.Signals, ...], *, then_raise: bool) -> I
     finally:
         _put_back(previous)
     if noted and then_raise:  # after the block, not in its finally: an error the block raised is the one reported
-        name = signal.Signals(noted[0]).name
-        raise Terminated(name) if noted[0] == signal.SIGTERM else KeyboardInterrupt(name)
+        raise _stop_raised_by(noted[0])
+
+
+def _stop_raised_by(signum: int) -> KeyboardInterrupt:
+    """What ``signum`` raises in a tool: :class:`Terminated` for SIGTERM, :class:`KeyboardInterrupt` for Ctrl-C."""
+    name = signal.Signals(signum).name
+    return Terminated(name) if signum == signal.SIGTERM else KeyboardInterrupt(name)
 
 
 def _install_noting(signums: tuple[signal.Signals, ...], noted: list[int],

@@ -620,7 +620,11 @@ def test_a_failed_take_is_said_when_a_stop_lands_after_the_capture_s_close(truth
         words = "SIGTERM" if stop == "SIGTERM" else "Ctrl-C"
         assert (rc, err) == (128 + signal.Signals[stop], [f"ghcal: stopped ({words}); the capture did not finish"]), \
             captured
-    assert "kept 1 view(s)" not in captured.out  # the last line, cut short by the stop
+    if (end, where, take_fails) == ("count", "after the close", True):
+        # noted with the close (the capture's first stop), as one in the close: the take failed, the last line said
+        assert "kept 1 view(s)" in captured.out
+    else:
+        assert "kept 1 view(s)" not in captured.out  # the last line, cut short by the stop
     assert json.loads((recorded / "manifest.json").read_text())["complete"] is not take_fails
     assert (out / truth.pair[0].name / "000.png").exists()  # the views are whole: kept
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
@@ -665,4 +669,92 @@ def test_a_second_stop_next_to_the_close_of_a_stopped_capture_is_dropped_and_the
     assert (rc, err) == ((2, failed) if take_fails else (0, [])), captured
     assert "stopped: kept 1 view(s)" in captured.out  # the first stop's last line
     assert json.loads((recorded / "manifest.json").read_text())["complete"] is not take_fails
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
+def _stop_as_the_noting_begins(monkeypatch, signum: int) -> None:
+    """A stop lands as a capture that read to its end starts noting stops, before its handlers are in."""
+    real_noted = cli.stop_signals_noted
+
+    def stopped_then_noted(stops):
+        os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
+        return real_noted(stops)
+
+    monkeypatch.setattr(cli, "stop_signals_noted", stopped_then_noted)
+
+
+@pytest.mark.parametrize("take_fails", [False, True])
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("where", ["before the close", "as the noting begins"])
+def test_a_first_stop_just_before_the_close_of_a_capture_that_read_to_its_end_still_closes_the_take(
+        truth, one_view, tmp_path, capsys, monkeypatch, where, stop, take_fails):
+    """A capture kept all its views and no stop had come; a Ctrl-C or SIGTERM (timeout's, as --count is reached)
+    landing in the finally just before the cameras' close (outside its deferral) was raised past the close: the take
+    left complete: false and unchecked. Now the take is closed whatever instant the stop lands, then the stop is
+    the capture's end as one in the close is (130, 143; a failed take said, exit 2)."""
+    import signal
+
+    if take_fails:
+        _fsync_fails(monkeypatch)  # a short take: only the close's fsync runs
+    stop_there = _stop_before_the_close if where == "before the close" else _stop_as_the_noting_begins
+    stop_there(monkeypatch, signal.Signals[stop])
+    take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
+    rc = _captured_through_record(tmp_path, take, recorded, out, count=1)
+    captured = capsys.readouterr()
+    err = but_the_framing_notes(captured.err).splitlines()
+    assert json.loads((recorded / "manifest.json").read_text())["complete"] is not take_fails  # closed
+    if take_fails:
+        assert (rc, err) == (2, [f"ghcal: error: recording to {recorded} failed as it closed: [Errno 28] No space "
+                                 "left on device; its manifest says complete: false"]), captured
+    else:
+        words = "SIGTERM" if stop == "SIGTERM" else "Ctrl-C"
+        assert (rc, err) == (128 + signal.Signals[stop], [f"ghcal: stopped ({words}); the capture did not finish"]), \
+            captured
+    assert (out / truth.pair[0].name / "000.png").exists()  # the views are whole: kept
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
+@pytest.mark.parametrize("take_fails", [False, True])
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("where", ["before the close", "after the close", "as the take's failure is said"])
+def test_a_stop_while_an_error_leaves_the_capture_does_not_hide_the_error(
+        truth, one_view, tmp_path, capsys, monkeypatch, where, stop, take_fails):
+    """A camera gone mid-capture ends it with an error; a Ctrl-C or SIGTERM landing as that error left (a second
+    Ctrl-C pressed while the cameras closed, or a stop just before their close, which it then skipped) was raised
+    in its place: "stopped; the capture did not finish", 130 or 143, the error's words lost. Now the cameras are
+    closed and the error is said, exit 2 (a failed take said before it)."""
+    import signal
+
+    import drivers
+
+    from ghnerf_runtime.cli import recorded_take
+
+    if take_fails:
+        _fsync_fails(monkeypatch)  # a short take: only the close's fsync runs
+    gone = drivers.RigDisconnectedError("camera 'right' vanished (USB reset)")
+    monkeypatch.setattr(drivers, "create_rig_source", _failing_after(drivers.create_rig_source, 2, gone))
+    signum = signal.Signals[stop]
+    if where == "before the close":
+        _stop_before_the_close(monkeypatch, signum)
+    elif where == "after the close":
+        _stop_after_the_close(monkeypatch, signum)
+    else:  # the take's failure said by the tool, on the error's way out to main
+        real_say = recorded_take.RecordedTake.say_failure
+
+        def said_then_stopped(self):
+            failed = real_say(self)
+            os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
+            return failed
+
+        monkeypatch.setattr(recorded_take.RecordedTake, "say_failure", said_then_stopped)
+    take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
+    rc = _captured_through_record(tmp_path, take, recorded, out, count=5)
+    captured = capsys.readouterr()
+    err = but_the_framing_notes(captured.err).splitlines()
+    failed = [f"ghcal: error: recording to {recorded} failed as it closed: [Errno 28] No space left on device; its "
+              "manifest says complete: false"] if take_fails else []
+    assert rc == 2, captured
+    assert err[:-1] == failed, captured
+    assert err[-1].startswith("ghcal: error: ") and "camera 'right' vanished (USB reset)" in err[-1], captured
+    assert json.loads((recorded / "manifest.json").read_text())["complete"] is not take_fails  # closed
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back

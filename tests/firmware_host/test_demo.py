@@ -1517,3 +1517,84 @@ def test_a_take_that_fails_as_a_stopped_run_closes_it_ends_with_status_2_said_on
     assert rc == 2, captured.err
     said = [line for line in captured.err.splitlines() if "failed as it closed" in line]
     assert len(said) == 1 and f"recording to {take} failed as it closed" in said[0], captured.err
+
+
+def _first_stop_before_the_take_s_close(monkeypatch, where: str, signum: int) -> None:
+    """A stop lands after the sink's close of a run that read to its end, before the take's close: as the run
+    starts noting stops, or just before the take's close (both outside the close's deferral)."""
+    if where == "as the noting begins":
+        real_noted = demo.stop_signals_noted
+
+        def stopped_then_noted(stops):
+            os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
+            return real_noted(stops)
+
+        monkeypatch.setattr(demo, "stop_signals_noted", stopped_then_noted)
+        return
+    real_closed, closes = demo.closed_with_stops_deferred, []
+
+    def stopped_then_closed(close, **kwargs):  # the sink's close first, the take's second
+        closes.append(1)
+        if len(closes) == 2:
+            os.kill(os.getpid(), signum)
+        return real_closed(close, **kwargs)
+
+    monkeypatch.setattr(demo, "closed_with_stops_deferred", stopped_then_closed)
+
+
+@pytest.mark.parametrize("take_fails", [False, True])
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("where", ["as the noting begins", "just before the take's close"])
+def test_a_first_stop_just_before_the_take_s_close_of_a_run_that_read_to_its_end_still_closes_the_take(
+        tmp_path, capsys, monkeypatch, where, stop, take_fails):
+    """A run read to its end with no stop before; a Ctrl-C or SIGTERM (timeout's, as --seconds ran out) landing in
+    the finally just before the take's close was raised past that close: the take left complete: false and
+    unchecked. Now the take is closed whatever instant the stop lands, then the stop is the run's end as one in the
+    close is (130, 143; a failed take said after the summary, exit 2)."""
+    import signal
+
+    import drivers.backends.record as record_module
+
+    if take_fails:
+        monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
+    _first_stop_before_the_take_s_close(monkeypatch, where, signal.Signals[stop])
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
+                                       str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert json.loads((take / "manifest.json").read_text())["complete"] is not take_fails  # closed
+    if take_fails:
+        assert rc == 2 and captured.err.splitlines() == [
+            f"{demo.prog_name()}: error: recording to {take} failed as it closed: [Errno 28] No space left on device; "
+            "its manifest says complete: false"], captured.err
+    else:
+        words = "SIGTERM" if stop == "SIGTERM" else "Ctrl-C"
+        assert (rc, captured.err.splitlines()) == (128 + signal.Signals[stop],
+                                                   [f"{demo.prog_name()}: stopped ({words})"]), captured.err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+def test_a_stop_just_before_the_take_s_close_of_a_run_an_error_ended_still_closes_the_take(
+        tmp_path, capsys, monkeypatch, stop):
+    """An error ends the reading (one the demo says, exit 2); a Ctrl-C or SIGTERM landing just before the
+    take's close, outside its deferral, was raised past that close: the take left complete: false, the error's line
+    lost to "stopped". Now stops are held from the error to the take's close: the take closed, the error said, 2."""
+    import signal
+
+    def stopped_then_closed(close, **kwargs):  # the take's close: the sink was closed on the error's way out
+        os.kill(os.getpid(), signal.Signals[stop])  # its handler runs here, in the main thread, at once
+        return real_closed(close, **kwargs)
+
+    real_closed = demo.closed_with_stops_deferred
+    monkeypatch.setattr(demo, "truth_frame",
+                        _stopping_at_the_third_pair(lambda: demo.DemoError("the third pair went wrong")))
+    monkeypatch.setattr(demo, "closed_with_stops_deferred", stopped_then_closed)
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "20", "--out",
+                                       str(tmp_path / "out")])
+    err = capsys.readouterr().err.splitlines()
+    assert rc == 2 and len(err) == 1 and "the third pair went wrong" in err[0], err
+    assert json.loads((take / "manifest.json").read_text())["complete"] is True  # closed

@@ -9,7 +9,7 @@ import time
 import pytest
 
 from ghnerf_runtime.cli.sigterm import Terminated, closed_with_stops_deferred, exit_status, sigterm_as_interrupt, \
-    stop_signal, stop_signals_deferred, stop_words
+    stop_signal, stop_signals_deferred, stop_signals_noted, stop_words
 
 
 def _outer(signum, frame):  # stands for whatever handler the caller had (the default would end pytest)
@@ -251,3 +251,16 @@ def test_a_stop_landing_as_the_close_s_handlers_are_entered_still_lets_the_close
     assert landed and closed == ["whole"]
     assert isinstance(stop, Terminated) if then_raise else stop is None
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+@pytest.mark.usefixtures("handlers_put_back")
+def test_stops_noted_are_handed_over_as_their_stops_and_never_raised():
+    """ghnerf-demo and ghcal capture note a first stop between their reading and the take's close, and raise it
+    once the take is closed and checked."""
+    stops: list[KeyboardInterrupt] = []
+    with sigterm_as_interrupt():
+        with stop_signals_noted(stops):
+            os.kill(os.getpid(), signal.SIGTERM)
+            os.kill(os.getpid(), signal.SIGINT)  # each handler runs here, in the main thread, at once
+        assert [type(stop) for stop in stops] == [Terminated, KeyboardInterrupt]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
