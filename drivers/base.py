@@ -9,8 +9,8 @@ A :meth:`RigSource.close` from another thread while :meth:`RigSource.open` runs 
 backend: once ``_open`` returns, ``open()`` finds the close, releases what ``_open`` made with ``_close`` and raises
 :class:`~drivers.errors.RigInitializationError`. Before, the close skipped ``_close`` for a source not yet open, and
 ``open()`` returned a closed source still holding camera threads or a device. Backends whose ``_open`` takes long
-(``sim://``'s pre-render, ``replay://``'s checks, ``depthai://``'s device start) also stop it early, in
-:meth:`RigSource._cancel_open`.
+(``sim://``'s pre-render, ``replay://``'s checks, ``opencv://``'s wait for the cameras' first frames,
+``depthai://``'s device start) also stop it early, in :meth:`RigSource._cancel_open`.
 """
 from __future__ import annotations
 
@@ -400,7 +400,8 @@ class RigSource(abc.ABC):
 
     def lingering(self) -> tuple[str, ...]:
         """After :meth:`close`: what of this source is still inside a device call that the close could not
-        end (a camera thread in a grab that hangs), by name; empty once all is released. Such a call holds
+        end (a camera thread in a grab that hangs; after a close that cancelled an open, a device the opening thread
+        has not released yet), by name; empty once all is released. Such a call holds
         the device, so no new source can open it, and only a new process frees it (the daemon stops its
         watchdog pings for that: ``docs/daemon.md``). Default: nothing (a backend without threads of its
         own blocks in ``close`` instead)."""

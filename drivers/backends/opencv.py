@@ -94,6 +94,15 @@ read while the camera loses frame after frame) are held as one, "frames A to B i
 were held one each, without bound, and said one warning each. When a video ends, the stream ends
 (:class:`EndOfStream`) once the other camera has delivered past the ended one's last frame: no pair
 can follow, so a longer video is not played out to its end.
+
+Closing from another thread. A :meth:`close` that lands while :meth:`open` runs ends the open's wait for the cameras'
+first frames at once (it waited out ``open_timeout_s``) and no further camera is opened; the open releases, on its own
+thread, what it opened and raises :class:`~drivers.errors.RigInitializationError` ("closed while open() started its
+cameras"). The close does not wait for that: a capture OpenCV is still opening cannot be interrupted (a stream's
+open can take its own timeout), so :meth:`lingering` names each camera the open still holds (opened, being opened,
+its thread in a grab) until it is released; it said nothing. A read the close lands in hands out no frame, not even
+one queued before the close: :class:`RigOperationError` ("closed while a read waited for its frame", as ``sim://``
+and ``replay://`` say).
 """
 from __future__ import annotations
 
@@ -236,6 +245,18 @@ class OpenCVOptions:
         return options
 
 
+def _closed_while_reading() -> RigOperationError:
+    """What a read raises when another thread closes the source under it (sim:// and replay:// say the same)."""
+    return RigOperationError("opencv:// source closed while a read waited for its frame")
+
+
+def _closed_during_open() -> RigInitializationError:
+    """What an open() raises when another thread closes the source while it opens the cameras or waits for their
+    first frames."""
+    return RigInitializationError("opencv:// source closed while open() started its cameras (a close() from another "
+                                  "thread): the open was cancelled")
+
+
 def _same_camera(first: str, second: str) -> bool:
     """Two specs naming one device (an index and its /dev/videoN, a by-id link and its target) or one file."""
     def resolved(spec: str) -> str:
@@ -295,7 +316,14 @@ class _Camera:
         self.last_frame_s = 0.0  # time.monotonic() of its last queued frame, or of its start (under the lock)
         self.v4l2 = False  # a live V4L2 device: its driver stamps frames on the host's monotonic clock
         self.lost = LostRun()  # the frames lost since its last queued frame (its own thread's)
+        self.opening = False  # open() is opening its capture (set under the source's lock: see _open_camera)
         self.thread = threading.Thread(target=self._run, name=f"opencv {name}", daemon=True)
+
+    @property
+    def holds_device(self) -> bool:
+        """Whether the camera still holds its device: being opened, its capture not yet released (by its thread as
+        it ends, or by the close where no thread started), or its thread still running."""
+        return self.opening or self.capture is not None or self.thread.is_alive()
 
     # The capture is opened on the caller's thread (errors are raised from open()), then only the
     # camera's own thread touches it, and releases it when it stops.
@@ -604,6 +632,7 @@ class OpenCVRigSource(RigSource):
         self._delivered: set[str] = set()  # cameras that queued a frame (open() waits for both)
         self._ended: set[str] = set()  # videos that ended
         self._pass_frames: dict[str, list[int]] = {}  # loop: frames in each pass, per video
+        self._open_cancelled = False  # a close() landed before or while open() ran (under the lock)
         self._overruns: dict[str, int] = {}  # per camera: frames dropped from a full queue before the reader took them
         self._unread_runs = UnreadRuns()  # runs of lost frames whose frame after them is queued, not yet read
         self.drain_limit = 2 * options.queue  # what the queues hold: under latest a read takes all of it
@@ -631,9 +660,13 @@ class OpenCVRigSource(RigSource):
     # ------------------------------------------------------------------ hooks
     def _open(self) -> None:
         o = self.options
-        if self._stop.is_set():
-            # A thread of the failed attempt may still be in a grab; it must not feed a new one.
-            raise RigOperationError("opencv://: an open() that failed is final: make a new source (drivers.open_rig)")
+        with self._cond:
+            if self._open_cancelled:  # closed after open() checked, before this began
+                raise _closed_during_open()
+            if self._stop.is_set():
+                # A thread of the failed attempt may still be in a grab; it must not feed a new one.
+                raise RigOperationError("opencv://: an open() that failed is final: make a new source "
+                                        "(drivers.open_rig)")
         if self._fixed_rig is not None:
             sizes = [(c.width, c.height) for c in self._fixed_rig.pair]
             names = [c.name for c in self._fixed_rig.pair]
@@ -646,7 +679,7 @@ class OpenCVRigSource(RigSource):
         self._overruns = {cam.name: 0 for cam in self._cameras}
         try:
             for cam in self._cameras:
-                cam.open()
+                self._open_camera(cam)
             videos = [cam for cam in self._cameras if cam.video]
             mismatch = _pass_mismatch([(cam, cam.frame_count) for cam in videos]) \
                 if o.loop and len(videos) == 2 and all(cam.frame_count for cam in videos) else None
@@ -677,12 +710,30 @@ class OpenCVRigSource(RigSource):
                                      "3D joints", o.hfov_deg)
         self._set_rig(rig, built=self._fixed_rig is None)
 
+    def _open_camera(self, cam: _Camera) -> None:
+        """``cam.open()``, unless a close from another thread cancelled the open. Checked, and the camera marked as
+        opening, under the lock :meth:`_cancel_open` sets the stop under: either the close comes first and nothing
+        more is opened, or :meth:`lingering` asked after the close names the camera until it is released."""
+        with self._cond:
+            if self._stop.is_set():
+                raise _closed_during_open()
+            cam.opening = True
+        try:
+            cam.open()
+        finally:
+            cam.opening = False  # opened (its capture held from here) or failed (released)
+        if self._stop.is_set():  # closed while OpenCV opened it: no thread is started (_open's _close releases it)
+            raise _closed_during_open()
+
     def _first_frames(self) -> list[tuple[int, int]]:
         """Wait for each camera's first frame (kept for the reader); their sizes. A camera that fails or
-        delivers nothing within ``open_timeout_s`` fails the open, naming it."""
+        delivers nothing within ``open_timeout_s`` fails the open, naming it; a close from another thread ends the
+        wait at once (:meth:`_cancel_open`), where it waited out ``open_timeout_s`` before."""
         deadline = time.monotonic() + self.options.open_timeout_s
         with self._cond:
             while True:
+                if self._stop.is_set():
+                    raise _closed_during_open()
                 for item in self._queue:
                     if isinstance(item, FrameSizeError):  # typed: the daemon tells a wrong rig file by it
                         raise type(item)(*item.args) from None
@@ -838,9 +889,11 @@ class OpenCVRigSource(RigSource):
     def _read_frame(self, timeout_s: float) -> Frame | None:
         deadline = time.monotonic() + timeout_s
         with self._cond:
-            while not self._queue:
-                if self._stop.is_set():
-                    raise RigOperationError("opencv:// source closed")
+            while True:
+                if self._stop.is_set():  # set under this lock: a frame queued before the close is not handed out
+                    raise _closed_while_reading()
+                if self._queue:
+                    break
                 stall_s = self._stalled_in()
                 if self._queue:
                     break  # the stall, failed just now
@@ -868,13 +921,25 @@ class OpenCVRigSource(RigSource):
             return bool(self._queue) and isinstance(self._queue[0], Frame)
 
     def lingering(self) -> tuple[str, ...]:
-        if not self._stop.is_set():  # open (or never opened): nothing was left behind yet
-            return ()
-        return tuple(f"camera {cam.name!r} ({cam.shown})" for cam in self._cameras if cam.thread.is_alive())
+        """The cameras still held after the close: a thread in a grab that hangs, and, after a close that cancelled
+        an open, those the opening thread has opened (or is opening) and not yet released."""
+        with self._cond:
+            if not self._stop.is_set():  # open (or never opened): nothing was left behind yet
+                return ()
+            cameras = list(self._cameras)
+        return tuple(f"camera {cam.name!r} ({cam.shown})" for cam in cameras if cam.holds_device)
+
+    def _cancel_open(self) -> None:
+        # Stops what the open waits for, not the open itself: a capture being opened cannot be interrupted, and the
+        # opening thread releases what it opened (_open's _close). lingering() names those cameras meanwhile.
+        with self._cond:
+            self._open_cancelled = True
+            self._stop.set()  # the first-frame wait ends, camera threads stop at their next frame, no camera opens
+            self._cond.notify_all()
 
     def _close(self) -> None:
-        self._stop.set()
-        with self._cond:
+        with self._cond:  # under the lock: a read takes no frame once the close has begun (_read_frame)
+            self._stop.set()
             self._cond.notify_all()
         deadline = time.monotonic() + 2.0
         for cam in self._cameras:

@@ -26,10 +26,11 @@ Recorder options (inner backends never see them, so none may reuse these names):
   every backend's read does that a close lands in, and the frame is not recorded.
 
 A ``close()`` from another thread while ``open()`` runs goes on to the inner source at once, cancelling its open
-(``sim://``'s pre-render stops at its next frame): ``open()`` raises :class:`~drivers.errors.RigInitializationError`
-and no take is started; one that lands after the inner source opened closes it, and the take if one was started.
+(``sim://``'s pre-render stops at its next frame, ``opencv://``'s wait for its first frames ends): ``open()`` raises
+:class:`~drivers.errors.RigInitializationError` and no take is started; one that lands after the inner source opened
+closes it, and the take if one was started.
 After the close, :meth:`~drivers.base.RigSource.lingering` is the inner source's (an ``opencv://`` camera thread still
-in a grab); it was always empty, hiding a device still held.
+in a grab, or a camera its cancelled open has not released yet); it was always empty, hiding a device still held.
 
 Recording never stalls the reader (unless ``lossless=1``): frames go into a
 bounded queue drained by writer threads; when it is full the frame is not

@@ -304,7 +304,7 @@ class _Webcam:
     def __init__(self, target, api) -> None:
         self.target, self.api, self.left = target, api, self.frames
         self.props = {cv2.CAP_PROP_FRAME_WIDTH: SIZE[0], cv2.CAP_PROP_FRAME_HEIGHT: SIZE[1]}
-        self.grabbing = self.released_while_grabbing = False
+        self.grabbing = self.released_while_grabbing = self.released = False
         self.due_s = time.monotonic()  # when its next frame is due, a period on from the last one's due time
         _Webcam.made.append(self)
 
@@ -341,6 +341,7 @@ class _Webcam:
 
     def release(self) -> None:
         self.released_while_grabbing |= self.grabbing
+        self.released = True
 
 
 @pytest.fixture
@@ -869,7 +870,8 @@ def test_close_wakes_a_blocked_read(takes, webcam, monkeypatch):
     source.close()
     reader.join(timeout=30.0)  # a read the close did not wake waits its 60 s
     assert not reader.is_alive()
-    assert type(errors[0]) is RigOperationError and str(errors[0]) == "opencv:// source closed", errors
+    assert type(errors[0]) is RigOperationError, errors
+    assert str(errors[0]) == "opencv:// source closed while a read waited for its frame", errors
 
 
 def test_a_record_wrapper_says_what_of_its_opencv_source_lingers(webcam, tmp_path):
@@ -1210,9 +1212,99 @@ def test_a_close_from_another_thread_as_the_cameras_start_stops_them_and_fails_t
     opener.join(30.0)
     assert not opener.is_alive()
     assert len(outcome) == 1 and isinstance(outcome[0], RigInitializationError), outcome
-    assert "OpenCVRigSource closed while it opened" in str(outcome[0])
+    assert str(outcome[0]) == CANCELLED_OPEN  # the first-frame wait ended by the close
     assert source.lingering() == ()  # the threads were stopped and joined (the conftest checks it too)
     assert all(not cam.grabbing for cam in webcam.made)
+
+
+CANCELLED_OPEN = ("opencv:// source closed while open() started its cameras (a close() from another thread): the open "
+                  "was cancelled")
+
+
+def _until(condition, what: str) -> None:
+    """Wait for ``condition()``, 60 s at most: only a hang reaches that."""
+    deadline = time.monotonic() + 60.0
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert condition(), what
+
+
+@pytest.mark.parametrize("scheme", ["opencv", "record+opencv"])
+def test_a_close_while_open_waits_for_the_first_frames_ends_that_wait_and_says_what_it_still_holds(
+        webcam, tmp_path, scheme):
+    """The open waited out open_timeout_s (600 s here) after the close before it raised, and lingering() asked at
+    once said nothing while its camera threads, in a grab, still held the cameras."""
+    webcam.frames, webcam.hang = 0, threading.Event()  # each first grab hangs until the test lets it go
+    out = tmp_path / "take"
+    url = f"{scheme}://?first=0&second=1&open_timeout_s=600" + (f"&out={out}" if scheme.startswith("record+") else "")
+    source = create_rig_source(url, capture_factory=webcam)
+    opener, outcome = opened_in_a_thread(source)
+    _until(lambda: len(webcam.made) == 2 and all(cam.grabbing for cam in webcam.made), "the cameras never grabbed")
+    source.close()  # returns at once: the open is not waited for
+    assert source.lingering() == ("camera 'left' (0)", "camera 'right' (1)")  # in their grab: still held
+    webcam.hang.set()  # the grabs return; the threads see the stop and release their cameras
+    opener.join(60.0)
+    assert not opener.is_alive(), "the open waited on after the close"
+    assert len(outcome) == 1 and type(outcome[0]) is RigInitializationError, outcome
+    assert str(outcome[0]) == CANCELLED_OPEN
+    _until(lambda: source.lingering() == (), "the cameras were never released")
+    assert all(cam.released and not cam.released_while_grabbing for cam in webcam.made)
+    assert not out.exists() and not source.is_open
+
+
+def test_a_close_while_open_opens_a_camera_opens_no_more_and_releases_what_it_opened(webcam):
+    """The open went on to start both cameras and wait for their frames; lingering() asked after the close said
+    nothing of the camera opened and the one being opened."""
+    opening, go_on = threading.Event(), threading.Event()
+
+    class SlowToOpen(_Webcam):
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            if target == 1:  # the second camera's open is still in OpenCV when the close lands
+                opening.set()
+                assert go_on.wait(60.0)
+
+    source = create_rig_source("opencv://?first=0&second=1&open_timeout_s=600", capture_factory=SlowToOpen)
+    opener, outcome = opened_in_a_thread(source)
+    assert opening.wait(60.0)
+    source.close()
+    assert source.lingering() == ("camera 'left' (0)", "camera 'right' (1)")  # opened, and being opened
+    go_on.set()
+    opener.join(60.0)
+    assert not opener.is_alive(), "the open waited on after the close"
+    assert len(outcome) == 1 and type(outcome[0]) is RigInitializationError, outcome
+    assert str(outcome[0]) == CANCELLED_OPEN
+    assert source.lingering() == ()  # released by the open, on its own thread, before it raised
+    assert len(webcam.made) == 2 and all(cam.released for cam in webcam.made)
+    assert all(cam.left == cam.frames for cam in webcam.made)  # no camera thread started: nothing grabbed
+
+
+def test_frames_queued_before_a_close_that_lands_in_a_read_are_not_handed_out(webcam, monkeypatch):
+    """A read that a close landed in took the frames still queued and handed out their pair: it looked for the close
+    only while nothing was queued (sim://, replay:// and record+ refuse such a frame)."""
+    webcam.frames = 1000  # delivering on until the close stops the threads
+    source = open_rig("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=webcam)
+    _until(lambda: all(cam.left <= cam.frames - 3 for cam in webcam.made), "the cameras never queued three frames")
+    reading, closed = threading.Event(), threading.Event()
+    read_frame = source._read_frame
+
+    def read_frame_once_closed(timeout_s: float):
+        reading.set()  # past read()'s check that the source is open, frames queued: the close lands here
+        assert closed.wait(60.0)
+        return read_frame(timeout_s)
+
+    monkeypatch.setattr(source, "_read_frame", read_frame_once_closed)
+    outcome: list = []
+    reader = threading.Thread(target=lambda: outcome.append(_raises(lambda: source.read(timeout_s=60.0))))
+    reader.start()
+    assert reading.wait(60.0), "the reader never reached the backend's read"
+    source.close()
+    closed.set()
+    reader.join(60.0)
+    assert not reader.is_alive()
+    assert type(outcome[0]) is RigOperationError, outcome
+    assert str(outcome[0]) == "opencv:// source closed while a read waited for its frame"
+    assert sum(source.stats.frames_in.values()) == 0  # no frame of the closed source reached the pairer
 
 
 def test_a_camera_that_delivers_every_frame_logs_nothing(webcam, caplog):
