@@ -12,6 +12,7 @@ from drivers.errors import (
     DriverError,
     EndOfStream,
     FrameSizeError,
+    OpenInProgressError,
     RecordingError,
     RigConfigError,
     RigDisconnectedError,
@@ -25,7 +26,8 @@ from drivers.registry import BACKENDS, create_rig_source, open_rig
 
 __all__ = [
     "BACKENDS", "BackendNotAvailableError", "CameraTruth", "DriverError", "DropPolicy", "EndOfStream",
-    "Frame", "FramePair", "FrameSizeError", "ManualClock", "MonotonicClock", "PairingConfig", "PairingStats",
+    "Frame", "FramePair", "FrameSizeError", "ManualClock", "MonotonicClock", "OpenInProgressError", "PairingConfig",
+    "PairingStats",
     "RecordingError", "RigConfigError", "RigDisconnectedError", "RigInitializationError", "RigOperationError",
     "RigSource", "RigTimeoutError", "create_rig_source", "open_rig", "silent_cameras", "why_no_pair",
 ]

@@ -9,8 +9,11 @@ A :meth:`RigSource.close` from another thread while :meth:`RigSource.open` runs 
 backend: once ``_open`` returns, ``open()`` finds the close, releases what ``_open`` made with ``_close`` and raises
 :class:`~drivers.errors.RigInitializationError`. Before, the close skipped ``_close`` for a source not yet open, and
 ``open()`` returned a closed source still holding camera threads or a device. Backends whose ``_open`` takes long
-(``sim://``'s pre-render, ``replay://``'s checks, ``opencv://``'s wait for the cameras' first frames,
-``depthai://``'s device start) also stop it early, in :meth:`RigSource._cancel_open`.
+(``sim://``'s pre-render and disk cache, ``replay://``'s checks, ``opencv://``'s wait for the cameras' first
+frames, ``depthai://``'s device start) also stop it early, in :meth:`RigSource._cancel_open`. Whatever else ends
+``open()`` once ``_open`` has returned (a Ctrl-C before the source is marked open, a failed rig warning) releases
+what ``_open`` made the same way, the caller having no source to close; and a second ``open()`` while one runs
+raises :class:`~drivers.errors.OpenInProgressError`, not a second ``_open``.
 """
 from __future__ import annotations
 
@@ -26,6 +29,7 @@ from typing import ClassVar
 from drivers.clock import Clock, MonotonicClock
 from drivers.errors import (
     EndOfStream,
+    OpenInProgressError,
     RigConfigError,
     RigDisconnectedError,
     RigInitializationError,
@@ -103,8 +107,10 @@ class RigSource(abc.ABC):
         self._pairer: FramePairer | None = None  # built with the rig: it pairs the rig's camera names
         self._is_open = False
         self._closed = False
-        # Held only to change or test _is_open and _closed together in open() and close(), never around a hook:
-        # a close landing as open() finishes is then seen by exactly one of them, which calls _close (once).
+        self._opening = False  # an open() is between its checks and marking the source open (see open())
+        self._close_claimed = False  # a close() or a failed open() has taken on running _close (once)
+        # Held only to change or test these four flags together in open() and close(), never around a hook: a
+        # close landing as open() finishes is then seen by exactly one of them, which calls _close (once).
         self._open_state = threading.Lock()
         self._held_error: RigDisconnectedError | EndOfStream | None = None  # see _take_frame
         self._rig_warnings_logged: set[str] | None = None  # see log_rig_warnings_once
@@ -197,6 +203,8 @@ class RigSource(abc.ABC):
 
         Raises:
             RigOperationError: the source was closed before.
+            OpenInProgressError: another thread's open() of this source has not finished (a second ``_open``
+                would start a second set of cameras).
             RigInitializationError: the backend could not start, or a :meth:`close` from another thread landed
                 while it started: what ``_open`` made is released (``_close``, once) and the source stays closed.
         """
@@ -205,29 +213,57 @@ class RigSource(abc.ABC):
                 raise RigOperationError(f"{type(self).__name__} was closed; open a new source")
             if self._is_open:
                 return self
-        self._open()  # not under the lock: a close() meanwhile must not wait for a pre-render or a device
+            if self._opening:
+                raise OpenInProgressError(f"{type(self).__name__} is already being opened by another call to "
+                                          "open(); wait for that one (a second would start a second set of "
+                                          "cameras)")
+            self._opening = True
+        try:
+            self._open()  # not under the lock: a close() meanwhile must not wait for a pre-render or a device
+        except BaseException:
+            with self._open_state:
+                self._opening = False
+            raise
+        try:
+            self._mark_open()
+            if self._rig_built or self._rig_file is not None:
+                self._warn_of_rig()
+        except BaseException as failure:
+            # Whatever ended the open after _open returned (a close from another thread, a Ctrl-C, a failed
+            # warning): the caller gets no source to close, so what _open started is released here. The
+            # failure is what the caller sees, a failing _close its cause.
+            try:
+                self._release_failed_open()
+            except Exception as e:
+                raise failure from e
+            raise
+        return self
+
+    def _mark_open(self) -> None:
+        """After ``_open`` returned: the source is open, unless a close landed meanwhile or ``_open`` set no rig
+        (raised, and :meth:`open` releases what ``_open`` made)."""
         with self._open_state:
             cancelled = self._closed  # close() saw the source not open and left _close to us
             if not cancelled and self._rig is not None:
                 self._is_open = True
+                self._opening = False  # a second open() now finds it open; a failed one's release clears it
         if cancelled:
-            self._release_cancelled_open()
+            raise RigInitializationError(f"{type(self).__name__} closed while it opened (a close() from another "
+                                         "thread): the open was cancelled")
         if self._rig is None:
-            self._close()
             raise RigOperationError(f"{type(self).__name__}._open() did not set the rig")
-        if self._rig_built or self._rig_file is not None:
-            self._warn_of_rig()
-        return self
 
-    def _release_cancelled_open(self) -> None:
-        """A close from another thread landed while :meth:`_open` ran: release what it made, and refuse the open."""
-        cancelled = RigInitializationError(f"{type(self).__name__} closed while it opened (a close() from another "
-                                           "thread): the open was cancelled")
-        try:
+    def _release_failed_open(self) -> None:
+        """:meth:`open` failed after ``_open`` returned: ``_close`` (once), unless a close from another thread
+        found the source marked open meanwhile and runs ``_close`` itself. The source is closed after it."""
+        with self._open_state:
+            self._opening = False
+            owed = not self._close_claimed
+            self._close_claimed = True
+            self._is_open = False
+            self._closed = True
+        if owed:
             self._close()
-        except Exception as e:
-            raise cancelled from e
-        raise cancelled
 
     def _rig_read_from(self, path: str | os.PathLike) -> None:
         """The rig handed in was read from ``path`` with ``load_rig(path, warn=False)``: :meth:`open` logs the
@@ -383,7 +419,8 @@ class RigSource(abc.ABC):
         with self._open_state:
             # closed first, even where closing fails: never opened again (a second device link); and an open()
             # finishing now sees it and releases what it made, this close finding nothing open to release
-            must_close = self._is_open and not self._closed
+            must_close = self._is_open and not self._close_claimed
+            self._close_claimed = self._close_claimed or must_close
             self._closed = True
         try:
             if must_close:

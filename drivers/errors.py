@@ -56,3 +56,8 @@ class FrameSizeError(RigInitializationError, RigOperationError):
 
     def __str__(self) -> str:
         return self.message
+
+
+class OpenInProgressError(RigOperationError):
+    """``open()`` was called while another call's open of the same source had not finished: refused, rather than a
+    second start of the backend (a second set of cameras, a second pre-render). The message names the source."""

@@ -62,7 +62,8 @@ Real time: rendering a 640x480 pair can take longer than a 30 fps period on a
 function of (camera, frame index modulo the loop length): ``open()`` renders the
 whole loop (both cameras) with a thread pool, or loads it from the disk cache,
 logging progress, and returns only when every frame is in memory (a ``close()`` from another thread meanwhile
-stops the rendering at its next frame: ``open()`` raises :class:`RigInitializationError` and keeps no loop).
+stops the rendering at its next frame, the cache's load or write at its next chunk, a half-written entry removed,
+never named: ``open()`` raises :class:`RigInitializationError` and keeps no loop).
 After open a frame costs a memory copy, so pairs are delivered at the nominal rate however
 slow the renderer. The price is open time (first run only, with the disk cache)
 and memory: about 2.8 MB per camera frame at 640x480 (image plus truth maps),
@@ -111,7 +112,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.backends.sim_loop import FrameLoop, LoopFrame, default_cache_root
+from drivers.backends.sim_loop import FillCancelled, FrameLoop, LoopFrame, default_cache_root
 from drivers.backends.sim_second import SecondPerson, check_second_person, take_second_person
 from drivers.backends.sim_timing import Capture, CaptureSchedule, TimingModel
 from drivers.base import RigSource
@@ -439,6 +440,9 @@ class SimRigSource(RigSource):
                 self._fill_loop(together)
             if self._closing.is_set():  # closed after the last frame rendered (or as the cache loaded)
                 raise _closed_during_open()
+        except FillCancelled as e:  # a close stopped the render, the cache load or the cache write at its next step
+            self._drop_loops()
+            raise _closed_during_open() from e
         except BaseException:
             self._drop_loops()  # a failed open keeps no loop: hundreds of MB
             raise
@@ -459,11 +463,11 @@ class SimRigSource(RigSource):
             cache_dir = self.options.cache_root / self.cache_key(together)
 
         def render(camera: int, j: int) -> LoopFrame:
-            if self._closing.is_set():  # close() from another thread: the pre-render stops between frames
-                raise _closed_during_open()
             return self._render(camera, j, together=together)
 
-        loop = FrameLoop(render, self.loop_frames, workers=self.options.workers, cache_dir=cache_dir)
+        # stop: a close() from another thread stops the fill at its next frame, checksum chunk or written chunk
+        loop = FrameLoop(render, self.loop_frames, workers=self.options.workers, cache_dir=cache_dir,
+                         stop=self._closing)
         if together or self.options.second is None:
             self._loop = loop
         else:

@@ -16,6 +16,11 @@ an entry, and a power cut cannot leave a named entry whose files hold zeros.
 loaded (one read of the loop, ~3 GB/s): an entry that does not match (written
 by a disk that lied, or damaged since) is rendered again rather than served as
 black frames. Cache problems are logged and never fatal.
+
+A :meth:`FrameLoop.close` (or the owner's ``stop`` event) during :meth:`FrameLoop.fill` stops it at its next
+step, whatever it is doing: the next frame rendered, the next chunk of the cache's checksum check (a loaded entry
+stays, intact), the next chunk written (the half-written temporary entry is removed, never renamed into place):
+``fill`` raises :class:`FillCancelled`.
 """
 from __future__ import annotations
 
@@ -69,6 +74,11 @@ class FillReport:
 RenderFn = Callable[[int, int], LoopFrame]  # (camera position 0/1, loop frame) -> frame
 
 
+class FillCancelled(RigInitializationError):
+    """:meth:`FrameLoop.fill` stopped by a close (its own or its owner's ``stop``); the message says at which
+    step (rendering, the cache load, the cache write)."""
+
+
 def default_cache_root() -> Path:
     """``$XDG_CACHE_HOME/ghnerf-sim``, else ``~/.cache/ghnerf-sim``."""
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
@@ -84,10 +94,12 @@ class FrameLoop:
         cameras: number of cameras (2).
         workers: render threads.
         cache_dir: this loop's cache entry (``root/<key>``), or ``None`` for no disk cache.
+        stop: the owner's event that, once set, stops a fill as :meth:`close` does (only read here): a source's
+            close, set before the loop exists or while it fills.
     """
 
     def __init__(self, render: RenderFn, length: int, *, cameras: int = 2, workers: int = 2,
-                 cache_dir: Path | None = None) -> None:
+                 cache_dir: Path | None = None, stop: threading.Event | None = None) -> None:
         self._render = render
         self.length = length
         self.cameras = cameras
@@ -95,6 +107,7 @@ class FrameLoop:
         self.cache_dir = cache_dir
         self._arrays: dict[str, np.ndarray] = {}
         self._cancel = threading.Event()
+        self._stop = stop
         self._render_time = 0.0
         self._time_lock = threading.Lock()
         self.ready = False
@@ -107,8 +120,8 @@ class FrameLoop:
             progress: called about every 2 s while rendering with (done, total, elapsed seconds).
 
         Raises:
-            RigInitializationError: rendering failed (the renderer's error is the cause)
-                or :meth:`close` was called meanwhile.
+            RigInitializationError: rendering failed (the renderer's error is the cause).
+            FillCancelled: :meth:`close` was called (or ``stop`` set) meanwhile.
         """
         t0 = time.perf_counter()
         if self.cache_dir is not None and self._load():
@@ -122,9 +135,12 @@ class FrameLoop:
         total = self.cameras * self.length
         return FillReport("rendered", total, wall, self._render_time / total)
 
+    def _stop_if_cancelled(self, step: str) -> None:
+        if self._cancel.is_set() or (self._stop is not None and self._stop.is_set()):
+            raise FillCancelled(f"sim loop's {step} cancelled (source closed)")
+
     def _timed_render(self, camera: int, j: int) -> LoopFrame:
-        if self._cancel.is_set():
-            raise RigInitializationError("sim pre-render cancelled (source closed)")
+        self._stop_if_cancelled("pre-render")
         t = time.perf_counter()
         frame = self._render(camera, j)
         with self._time_lock:
@@ -207,7 +223,7 @@ class FrameLoop:
             meta = json.loads(meta_path.read_text())
             if meta.get("layout") != CACHE_LAYOUT or meta.get("shape") != [self.cameras, self.length]:
                 raise ValueError(f"layout/shape mismatch: {meta}")
-            _check_files(self.cache_dir, meta)
+            _check_files(self.cache_dir, meta, lambda: self._stop_if_cancelled(f"load from cache {self.cache_dir}"))
             arrays = {name: np.load(self.cache_dir / f"{name}.npy", mmap_mode="r") for name in _CAMERA_FIELDS}
             for name, array in arrays.items():
                 if array.shape[:2] != (self.cameras, self.length):
@@ -240,7 +256,7 @@ class FrameLoop:
             files = {}
             for name, array in self._arrays.items():
                 with open(tmp / f"{name}.npy", "wb") as f:
-                    summed = _Crc32Writer(f)
+                    summed = _Crc32Writer(f, lambda: self._stop_if_cancelled(f"write to cache {self.cache_dir}"))
                     np.save(summed, array)
                     f.flush()
                     os.fsync(f.fileno())  # on disk before the rename names the entry (else: zeros after a power cut)
@@ -258,25 +274,32 @@ class FrameLoop:
             # A concurrent writer may have won the rename; either way the cache is optional.
             log.warning("sim cache entry %s not stored: %s", self.cache_dir, e)
             shutil.rmtree(tmp, ignore_errors=True)
+        except BaseException:  # cancelled (FillCancelled), a Ctrl-C: the half-written entry is never named
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
 
 
 class _Crc32Writer:
-    """A binary file that np.save writes through, summing what it writes (no second read of the loop)."""
+    """A binary file that np.save writes through, summing what it writes (no second read of the loop).
+    ``before_write`` runs before each chunk (np.save writes one of at most 16 MB at a time): it raises to stop."""
 
-    def __init__(self, file) -> None:
+    def __init__(self, file, before_write: Callable[[], None]) -> None:
         self._file = file
+        self._before_write = before_write
         self.crc = 0
         self.size = 0
 
     def write(self, data) -> int:
+        self._before_write()
         view = memoryview(data).cast("B")
         self.crc = zlib.crc32(view, self.crc)
         self.size += view.nbytes
         return self._file.write(view)
 
 
-def _check_files(entry: Path, meta: dict) -> None:
-    """Raise ValueError naming the first file of ``entry`` whose size or CRC-32 is not what ``meta`` recorded."""
+def _check_files(entry: Path, meta: dict, before_chunk: Callable[[], None]) -> None:
+    """Raise ValueError naming the first file of ``entry`` whose size or CRC-32 is not what ``meta`` recorded.
+    ``before_chunk`` runs before each chunk read: it raises to stop (a close)."""
     files = meta.get("files")
     if not isinstance(files, dict):
         raise ValueError("meta.json lists no file checksums")
@@ -286,7 +309,11 @@ def _check_files(entry: Path, meta: dict) -> None:
             raise ValueError(f"meta.json has no checksum of {name}.npy")
         crc, size = 0, 0
         with open(entry / f"{name}.npy", "rb") as f:
-            while chunk := f.read(_CHUNK):
+            while True:
+                before_chunk()
+                chunk = f.read(_CHUNK)
+                if not chunk:
+                    break
                 crc = zlib.crc32(chunk, crc)
                 size += len(chunk)
         if (size, crc) != (expected.get("bytes"), expected.get("crc32")):

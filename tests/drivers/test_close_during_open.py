@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from drivers import RigInitializationError, RigOperationError
+from drivers import OpenInProgressError, RigInitializationError, RigOperationError
 from drivers.backends.record import RecordingRigSource, RecordOptions
 from drivers.base import RigSource
 from drivers.sim import RigPlacement
@@ -138,3 +138,97 @@ def test_a_record_wrapper_closed_before_its_inner_open_began_cancels_its_open(tm
     assert not inner.device_made and inner.closes == 0  # the inner open never began
     assert not out.exists()
     assert not source.is_open and not inner.is_open
+
+
+class _CountsOpens(_HeldOpen):
+    """Counts its ``_open`` calls; only the first waits for ``go_on`` (a second would start a second device)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.opens = 0
+
+    def _open(self) -> None:
+        self.opens += 1
+        if self.opens == 1:
+            super()._open()
+
+
+def test_a_second_open_while_the_first_runs_is_refused_naming_the_source():
+    # it ran the backend's _open a second time: a second set of cameras, the first never closed
+    source = _CountsOpens()
+    thread, outcome = opened_in_a_thread(source)
+    assert source.in_open.wait(WAIT_S)
+    with pytest.raises(OpenInProgressError, match="_CountsOpens is already being opened by another call to open"):
+        source.open()
+    source.go_on.set()
+    thread.join(WAIT_S)
+    assert not thread.is_alive()
+    assert outcome == [source] and source.is_open and source.opens == 1
+    assert source.open() is source and source.opens == 1  # open already: nothing more to start
+    source.close()
+    assert source.closes == 1
+
+
+class _InterruptedOnSecondEntry:
+    """Stands in for a source's state lock (``_open_state``): the second time ``open()`` takes it, to mark the source
+    open after the backend's ``_open`` returned, a Ctrl-C lands first."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._entries = 0
+
+    def __enter__(self) -> None:
+        self._entries += 1
+        if self._entries == 2:
+            raise KeyboardInterrupt
+        self._lock.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self._lock.release()
+
+
+def _interrupted_as_it_is_marked_open(source: _HeldOpen) -> None:
+    source._open_state = _InterruptedOnSecondEntry()
+
+
+def _interrupted_as_it_warns_of_its_rig(source: _HeldOpen) -> None:
+    def interrupted() -> None:
+        raise KeyboardInterrupt
+
+    source._rig_built = True  # open() warns of a rig the backend built
+    source._warn_of_rig = interrupted
+
+
+@pytest.mark.parametrize("interrupt", [_interrupted_as_it_is_marked_open, _interrupted_as_it_warns_of_its_rig])
+def test_an_interrupt_after_the_backend_opened_releases_what_it_opened(interrupt):
+    # the cameras ran on until the process exited: open() raised, so the caller had no source to close
+    source = _HeldOpen()
+    source.go_on.set()
+    interrupt(source)
+    with pytest.raises(KeyboardInterrupt):
+        source.open()
+    assert source.device_made and source.closes == 1
+    assert not source.is_open
+    source._open_state = threading.Lock()
+    source.close()  # released already: not again
+    assert source.closes == 1
+
+
+def test_a_close_landing_before_a_failed_open_releases_once():
+    """The source was marked open, a close from another thread released it, then open() failed (its rig warning):
+    open() must not run _close a second time."""
+    source = _HeldOpen()
+    source.go_on.set()
+
+    def closed_by_another_thread_then_failing() -> None:
+        closer = threading.Thread(target=source.close, name="test close")
+        closer.start()
+        closer.join(WAIT_S)
+        assert not closer.is_alive()
+        raise RuntimeError("warning failed")
+
+    source._rig_built = True
+    source._warn_of_rig = closed_by_another_thread_then_failing
+    with pytest.raises(RuntimeError, match="warning failed"):
+        source.open()
+    assert source.closes == 1 and not source.is_open
