@@ -363,6 +363,33 @@ def test_the_fp32_files_sha256_an_int8_file_records_decides_before_ids_and_times
             ) in said
 
 
+@pytest.mark.skipif(not (REPO / "models" / "model_card.json").is_file(), reason="no shipped model")
+@pytest.mark.parametrize("variant", ["ghnerf", "baseline"])
+def test_the_shipped_int8_files_record_their_fp32_twins_sha256(variant, tmp_path):
+    """Every shipped ``<graph>.int8.onnx`` but the ghnerf ``human.int8.onnx`` records the sha256 of the
+    ``<graph>.onnx`` beside it (stamped after the export, docs/model.md "Precision"), so its time does not count:
+    copied with the int8 files two days older, each is still taken. ``human.int8.onnx`` is left as exported: the
+    skeleton prior records that file's own sha256 and refuses any other bytes."""
+    from ghnerf_runtime.novel_painter import NovelPainter
+    from ghnerf_runtime.onnx_file import onnx_metadata
+
+    shipped = REPO / "models" / variant
+    folder = tmp_path / variant
+    shutil.copytree(shipped, folder)
+    unstamped = {"human.int8.onnx"} if variant == "ghnerf" else set()
+    for int8 in sorted(folder.glob("*.int8.onnx")):
+        fp32 = int8.with_name(int8.name.replace(".int8", ""))
+        recorded = onnx_metadata(int8, "graph").get("ghnerf.fp32_sha256" if fp32.name != "novel_painter.onnx"
+                                                    else "ghnerf_painter.fp32_sha256")
+        assert recorded == (None if int8.name in unstamped else _sha256(fp32)), int8.name
+        old = fp32.stat().st_mtime - 2 * 86400.0
+        os.utime(int8, (old, old))
+        if fp32.name == "novel_painter.onnx":
+            assert NovelPainter.choose(folder) == int8
+        elif int8.name not in unstamped:
+            assert ModelSession._stale_int8(folder, fp32.stem, int8) is None, int8.name
+
+
 def test_the_session_loads_the_fp32_painter_beside_a_stale_int8_one(tiny_model_dir, tmp_path):
     """``ModelSession.load(novel_painter=True)`` takes the painter ``NovelPainter.choose`` gives: the fp32 file where
     the int8 one records another training (tests/ghnerf_runtime/test_novel_painter.py has the rule)."""
