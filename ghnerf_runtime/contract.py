@@ -92,6 +92,10 @@ IMAGE_FEATURES = ("feat_s1", "feat_s2", "feat_s4")
 #: how to feed them. Files exported before it have none (:func:`weights_id_of`).
 WEIGHTS_ID_KEY = META_PREFIX + "weights_id"
 _WEIGHTS_ID = re.compile(r"[0-9a-f]{64}")
+#: Metadata key of an int8 graph file (``<graph>.int8.onnx``): the sha256 of the bytes of the fp32 file it was
+#: quantized from, which the quantizer records. The stale-int8 check (``ModelSession.load``) compares it with the
+#: ``<graph>.onnx`` beside it before anything else: a rewritten fp32 file shows, whatever the files' times.
+FP32_SHA256_KEY = META_PREFIX + "fp32_sha256"
 
 
 class ContractError(RuntimeErrorBase, ValueError):
@@ -715,7 +719,7 @@ __all__ = [
     "CONTRACT_VERSION", "FRAME_PADDINGS",
     "GRAPH_NAMES", "DEPTH_STATS_CHANNELS", "MAX_DEPTH_M", "MAX_NEAR_FAR_MARGIN_M", "IMAGE_FEATURES",
     "IMAGENET_MEAN", "IMAGENET_STD",
-    "WEIGHTS_ID_KEY", "weights_id_of",
+    "WEIGHTS_ID_KEY", "weights_id_of", "FP32_SHA256_KEY",
     "ContractError", "TensorSpec", "GraphSpec", "LevelSpec", "Normalisation", "ModelContract",
     "source_projections", "source_centers", "target_inputs", "target_projections", "near_far_from_box", "box_reach",
     "ray_grid",

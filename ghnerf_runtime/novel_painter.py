@@ -55,9 +55,12 @@ INPUTS = ("planes", "joints")
 OUTPUT = "rgb"
 #: The largest finite float16: the depth plane is held as float16, as the caches hold it.
 F16_MAX = float(np.finfo(np.float16).max)
+#: The sha256 of the fp32 painter file an int8 one was quantized from (``quantize_painter`` records it): where the
+#: int8 file has it, it alone says whether the fp32 file beside it is that file (``onnx_file.stale_int8_reason``).
+FP32_SHA256_KEY = META_PREFIX + "fp32_sha256"
 #: What ``training.learnt_fill.quantize_painter`` adds to the fp32 file's metadata in the int8 one; the rest is carried
 #: over, so an int8 file whose rest differs from the fp32 painter's was quantized from another painter.
-_INT8_ONLY_KEYS = frozenset({META_PREFIX + "precision", META_PREFIX + "calibration_views"})
+_INT8_ONLY_KEYS = frozenset({META_PREFIX + "precision", META_PREFIX + "calibration_views", FP32_SHA256_KEY})
 #: The training record ``export_painter`` writes (with the net's shape): without it the metadata link nothing.
 _RECORD_KEY = META_PREFIX + "steps"
 
@@ -229,8 +232,9 @@ class NovelPainter:
     def choose(folder: str | Path, precision: str = "auto") -> Path | None:
         """The painter file to load: :meth:`find`'s, or the fp32 one where the int8 file beside it was not
         quantized from it (a folder exported before session 73 keeps the int8 file of the painter an export
-        replaced), with one warning naming both and the command that quantizes it again. Their metadata decide
-        (``quantize_painter`` carries the fp32 file's over), their times where the files record no training."""
+        replaced), with one warning naming both and the command that quantizes it again. The fp32 file's sha256 the
+        int8 file records decides where it has one; else their metadata (``quantize_painter`` carries the fp32
+        file's over), their times where the files record no training."""
         folder = Path(folder)
         path, fp32 = NovelPainter.find(folder, precision), folder / FILE_NAME
         if path is None or path.name != INT8_FILE_NAME or not fp32.is_file():
@@ -239,7 +243,7 @@ class NovelPainter:
             int8_meta, fp32_meta = (onnx_metadata(f, "novel-view painter") for f in (path, fp32))
         except ModelLoadError:  # not ours to judge here: the int8 file is loaded, as before, and names its error
             return path
-        reason = stale_int8_reason(path, fp32, _record_differs(int8_meta, fp32_meta))
+        reason = stale_int8_reason(path, fp32, _record_differs(int8_meta, fp32_meta), int8_meta.get(FP32_SHA256_KEY))
         if reason is None:
             return path
         net = fp32_meta.get(META_PREFIX + "trained_on") or "NET.pt"

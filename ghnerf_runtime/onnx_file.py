@@ -9,6 +9,7 @@ their own whose workers do not spin, or on the global pool once one is installed
 from __future__ import annotations
 
 import functools
+import hashlib
 import logging
 import os
 import re
@@ -63,10 +64,11 @@ _ORT_ERRNO = re.compile(r"system error number (\d+)")
 #: raises as its own naming the graph and file; logged as well, each put a second, raw line in the journal
 #: (ANSI-coloured, with the C++ source location) before the daemon's own.
 ORT_LOG_SEVERITY = 4
-#: Where no recorded link (a weights id, the painter's training record) says whether an int8 file was quantized from
-#: the fp32 file beside it, it was not when it is older than that file by more than this. A margin, not "older": a
-#: copy or a git checkout resets the times in the order it writes the files (encoder.int8.onnx 0.09 s before
-#: encoder.onnx in a checkout of models/), while an export made after training comes minutes after the one before.
+#: Where no recorded link (the fp32 file's sha256, a weights id, the painter's training record) says whether an int8
+#: file was quantized from the fp32 file beside it, it was not when it is older than that file by more than this. A
+#: margin, not "older": a copy or a git checkout resets the times in the order it writes the files (encoder.int8.onnx
+#: 0.09 s before encoder.onnx in a checkout of models/), while an export made after training comes minutes after the
+#: one before.
 STALE_INT8_AGE_S = 600.0
 
 
@@ -179,11 +181,22 @@ def _session(path: Path, threads: int, what: str):
         raise load_failure(e, path, what) from e
 
 
-def stale_int8_reason(int8: Path, fp32: Path, differs: list[str] | None) -> str | None:
+def stale_int8_reason(int8: Path, fp32: Path, differs: list[str] | None,
+                      fp32_sha256: str | None = None) -> str | None:
     """Why the int8 file ``int8`` was not quantized from its fp32 twin ``fp32`` (for a warning), None where it may
-    have been. ``differs``: the recorded links (metadata of the fp32 file an int8 file carries over) that differ
-    between the two, ``[]`` where they agree; None where the files record none, and their times decide
+    have been. ``fp32_sha256``: the sha256 of the fp32 file the quantizer recorded in the int8 one; where given it
+    decides alone (the same bytes: quantized from this file, whatever the times; other bytes: not). Else
+    ``differs``: the recorded links (metadata of the fp32 file an int8 file carries over) that differ between the
+    two, ``[]`` where they agree; None where the files record none, and their times decide
     (:data:`STALE_INT8_AGE_S`)."""
+    if fp32_sha256 is not None:
+        try:
+            with open(fp32, "rb") as fh:
+                actual = hashlib.file_digest(fh, "sha256").hexdigest()
+        except OSError:  # the load that follows names the file it cannot read
+            return None
+        return None if actual == fp32_sha256 else (f"it was quantized from a file of sha256 {fp32_sha256[:12]}..., "
+                                                   f"and {fp32.name} has sha256 {actual[:12]}...")
     if differs is not None:
         return f"its {', '.join(differs)} differ{'s' if len(differs) == 1 else ''} from {fp32.name}'s" if differs \
             else None

@@ -38,8 +38,9 @@ What is checked at load (each failure names the file and what is wrong):
   two files and their ids. Files without one (exported before) are taken as before, beside stamped ones too
   (a warning names them); the painter and the skeleton prior are other networks, checked by their own
   metadata, not by this id;
-* a ``<graph>.int8.onnx`` not quantized from the ``<graph>.onnx`` beside it (it lacks that file's weights id or has
-  another; where the fp32 file has none, it is older by over ``onnx_file.STALE_INT8_AGE_S``) is not run: a folder
+* a ``<graph>.int8.onnx`` not quantized from the ``<graph>.onnx`` beside it (the fp32 file's sha256 it records,
+  ``ghnerf.fp32_sha256``, is another; where it records none, it lacks that file's weights id or has another; where
+  the fp32 file has none either, it is older by over ``onnx_file.STALE_INT8_AGE_S``) is not run: a folder
   exported before session 73 keeps the int8 file of a graph an export replaced. The fp32 file runs, with one warning
   naming both and the command that quantizes again; the painter's int8 file likewise (``NovelPainter.choose``);
 * the resolution and variant match :class:`SessionConfig` when it pins them;
@@ -74,6 +75,7 @@ import onnxruntime as ort
 
 from ghnerf_runtime.config import SessionConfig
 from ghnerf_runtime.contract import (
+    FP32_SHA256_KEY,
     GRAPH_NAMES,
     META_PREFIX,
     WEIGHTS_ID_KEY,
@@ -522,22 +524,24 @@ class ModelSession:
     @staticmethod
     def _stale_int8(folder: Path, graph: str, path: Path) -> tuple[Path, Path, str] | None:
         """``(path, fp32 file, why)`` where ``path`` is ``graph``'s int8 file by name and was not quantized from the
-        fp32 file beside it (:func:`~ghnerf_runtime.onnx_file.stale_int8_reason`): the fp32 file's weights id decides
-        (the quantizer stamps it in the int8 file), their times where it has none. A folder exported before session
-        73 keeps the int8 files of graphs an export replaced, and ``auto`` took them. Judged from the files'
-        metadata before either is opened: onnxruntime loads only the file that runs."""
+        fp32 file beside it (:func:`~ghnerf_runtime.onnx_file.stale_int8_reason`): the sha256 of the fp32 file the
+        quantizer recorded in the int8 one (``ghnerf.fp32_sha256``) decides where it has one; else the fp32 file's
+        weights id (the quantizer stamps it in the int8 file), their times where it has none. A folder exported
+        before session 73 keeps the int8 files of graphs an export replaced, and ``auto`` took them. Judged from the
+        files' metadata before either is opened: onnxruntime loads only the file that runs."""
         fp32 = folder / _file_name(graph, "fp32")
         if path.name != _file_name(graph, "int8") or not fp32.is_file():
             return None
         try:
             fp32_weights = onnx_metadata(fp32, "fp32 graph").get(WEIGHTS_ID_KEY)
-            weights = None if fp32_weights is None else onnx_metadata(path, "graph").get(WEIGHTS_ID_KEY)
+            int8_meta = onnx_metadata(path, "graph")
         except ModelLoadError:  # the int8 file is loaded, as before (and names its own error)
             return None
         # an fp32 file with an id and an int8 one without: quantized before ids, so from another fp32 file (the
         # quantizer copies the id since ids exist); an int8 file with one beside an fp32 file without: the times say
-        differs = None if fp32_weights is None else [] if fp32_weights == weights else ["weights id"]
-        why = stale_int8_reason(path, fp32, differs)
+        differs = None if fp32_weights is None else [] if fp32_weights == int8_meta.get(WEIGHTS_ID_KEY) else [
+            "weights id"]
+        why = stale_int8_reason(path, fp32, differs, int8_meta.get(FP32_SHA256_KEY))
         return None if why is None else (path, fp32, why)
 
     @staticmethod

@@ -70,7 +70,7 @@ from ghnerf_runtime.metrics import capped_psnr, masked_psnr, scorable_images
 from training.evaluate import angle_bins
 from training.fill_features import (MASK_BIT, SEEN_BIT, TRUTH_BIT, FillCacheError, check_held_out, load_cache,
                                     relit_in)
-from training.model_card import strict_json, write_atomic
+from training.model_card import sha256, strict_json, write_atomic
 from training.run_limits import seed_problem
 from training.step_guard import TrainingDiverged, finite_step
 
@@ -499,7 +499,7 @@ def quantize_painter(fp32_path: str | Path, out_path: str | Path, arrays: dict[s
                      views: int = 64) -> Path:
     """Static int8 QDQ of the painter's convolutions (``training.export.quantize``'s default policy, as the
     encoder's), calibrated on a cache's first ``views`` (a training cache: the held-out one scores it); its
-    metadata is the fp32 file's, with the precision."""
+    metadata is the fp32 file's, with the precision and the fp32 file's sha256."""
     import onnx  # noqa: PLC0415
 
     from ghnerf_runtime import novel_painter as rt  # noqa: PLC0415
@@ -512,6 +512,7 @@ def quantize_painter(fp32_path: str | Path, out_path: str | Path, arrays: dict[s
     meta = {p.key: p.value for p in onnx.load(str(fp32_path)).metadata_props}
     meta[rt.META_PREFIX + "precision"] = "int8"
     meta[rt.META_PREFIX + "calibration_views"] = str(len(feeds))
+    meta[rt.FP32_SHA256_KEY] = sha256(fp32_path)  # what the runtime's stale-int8 check compares first
     with tempfile.TemporaryDirectory() as tmp:  # quantized, then stamped: only the stamped file takes the name
         raw = quantize_qdq(fp32_path, Path(tmp) / "painter.int8.onnx", feeds, QuantPolicy(), "novel_painter")
         model = onnx.load(str(raw))

@@ -25,20 +25,21 @@ def sha256(path: str | Path, chunk: int = 1 << 20) -> str:
 
 
 def graph_sha256(path: str | Path) -> str:
-    """The sha256 of the ONNX graph at ``path`` with its weights id left out of the metadata: what the graph
-    computes. The early prior's keypoint graph and the finished export's are the same frozen encoder, but each
-    export stamps the id of the whole model it came from (``training.export.export.weights_id``), so their file
-    hashes differ while their joints do not."""
+    """The sha256 of the ONNX graph at ``path`` with its weights id and the fp32 file's sha256 (an int8 file's) left
+    out of the metadata: what the graph computes. The early prior's keypoint graph and the finished export's are
+    the same frozen encoder, but each export stamps the id of the whole model it came from
+    (``training.export.export.weights_id``), and the int8 file the sha256 of its fp32 file, which holds that id, so
+    their file hashes differ while their joints do not."""
     import onnx  # noqa: PLC0415 (the card itself needs no onnx)
     from google.protobuf.message import DecodeError  # noqa: PLC0415
 
-    from ghnerf_runtime.contract import WEIGHTS_ID_KEY  # noqa: PLC0415
+    from ghnerf_runtime.contract import FP32_SHA256_KEY, WEIGHTS_ID_KEY  # noqa: PLC0415
 
     try:
         m = onnx.load(str(path))
     except (DecodeError, ValueError):  # not a graph: its bytes are all there is to compare
         return sha256(path)
-    kept = [p for p in m.metadata_props if p.key != WEIGHTS_ID_KEY]
+    kept = [p for p in m.metadata_props if p.key not in (WEIGHTS_ID_KEY, FP32_SHA256_KEY)]
     del m.metadata_props[:]
     m.metadata_props.extend(kept)
     return hashlib.sha256(m.SerializeToString(deterministic=True)).hexdigest()

@@ -200,6 +200,34 @@ def test_an_int8_painter_not_quantized_from_the_fp32_one_beside_it_is_not_run(tm
         assert NovelPainter.choose(tmp_path) == chosen
 
 
+def test_the_fp32_painters_sha256_an_int8_painter_records_decides_before_the_record_and_times(tmp_path, caplog):
+    """``quantize_painter`` records the fp32 file's sha256 (``fp32_sha256``): the same bytes beside the int8 file
+    take it, however much older its time and without a training record to compare (the times alone said stale);
+    other bytes give the fp32 file with the same training record and the int8 file the newer, said naming both."""
+    import hashlib
+    import logging
+
+    def sha(path: Path) -> str:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+
+    fp32 = blend_painter(tmp_path / "novel_painter.onnx")
+    int8 = _recorded(blend_painter(tmp_path / "novel_painter.int8.onnx"), age_s=2 * 86400.0, precision="int8",
+                     fp32_sha256=sha(fp32))
+    assert NovelPainter.choose(tmp_path) == int8
+
+    _recorded(blend_painter(fp32), steps="4704")
+    quantized_from = sha(fp32)
+    _recorded(blend_painter(int8), steps="4704", precision="int8", calibration_views="64", fp32_sha256=quantized_from)
+    _recorded(fp32, age_s=3600.0, width="16")  # rewritten since (the record the int8 file carried over differs too)
+    _recorded(blend_painter(int8), steps="4704", precision="int8", calibration_views="64", fp32_sha256=quantized_from,
+              width="16")  # the same record, the newer file
+    with caplog.at_level(logging.WARNING):
+        assert NovelPainter.choose(tmp_path) == fp32
+    [said] = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert (f"novel_painter.int8.onnx is not quantized from novel_painter.onnx (it was quantized from a file of "
+            f"sha256 {quantized_from[:12]}..., and novel_painter.onnx has sha256 {sha(fp32)[:12]}...)") in said
+
+
 def test_the_views_angle_from_the_sources_is_ghnerf_evals(shot):
     joints, sources, _, target, _, _ = shot
     valid = np.ones(25, bool)

@@ -319,6 +319,77 @@ def test_an_int8_file_without_a_weights_id_is_judged_by_its_time(tiny_model_dir,
     assert not _stale_warnings(caplog)
 
 
+def _record_fp32_sha256(int8: Path, digest: str) -> None:
+    """``int8`` with ``digest`` as the fp32 file's sha256 the quantizer records, its time kept."""
+    times = (int8.stat().st_atime, int8.stat().st_mtime)
+    _edit_metadata(int8, lambda p: {**p, "ghnerf.fp32_sha256": digest})
+    os.utime(int8, times)
+
+
+def _sha256(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_the_fp32_files_sha256_an_int8_file_records_decides_before_ids_and_times(tiny_model_dir, tmp_path, caplog):
+    """The quantizer records the sha256 of the fp32 file it quantized (``ghnerf.fp32_sha256``): the same bytes
+    beside it take the int8 file however much older its time (the shipped files record no weights id, and a pull
+    that rewrote only a ``<graph>.onnx`` was judged by times a checkout sets); other bytes give the fp32 file, said
+    naming both, where the weights ids agree and the int8 file is the newer."""
+    import logging
+
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    int8 = _int8_twin(folder, "encoder", None, age_s=2 * 86400.0)  # the times alone say stale
+    _record_fp32_sha256(int8, _sha256(folder / "encoder.onnx"))
+    with caplog.at_level(logging.WARNING):
+        assert _load_encoder(folder).files["encoder"].path.name == "encoder.int8.onnx"
+    assert not _stale_warnings(caplog)
+
+    folder = _copy(tiny_model_dir, tmp_path / "m2")
+    own = ModelSession.load(SessionConfig(model_dir=str(folder), warmup=False), ("encoder",)).weights_id
+    int8 = _int8_twin(folder, "encoder", own, age_s=-3600.0)  # the ids and the times say fresh
+    quantized_from = _sha256(folder / "encoder.onnx")
+    _record_fp32_sha256(int8, quantized_from)
+    now = (folder / "encoder.onnx").stat().st_mtime
+    _edit_metadata(folder / "encoder.onnx", lambda p: {**p, "doc": "rewritten"})  # a later commit's fp32 file
+    os.utime(folder / "encoder.onnx", (now, now))
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        assert _load_encoder(folder, precision="int8").files["encoder"].path.name == "encoder.onnx"
+    [said] = _stale_warnings(caplog)
+    assert (f"encoder.int8.onnx is not quantized from encoder.onnx (it was quantized from a file of sha256 "
+            f"{quantized_from[:12]}..., and encoder.onnx has sha256 {_sha256(folder / 'encoder.onnx')[:12]}...)"
+            ) in said
+
+
+@pytest.mark.skipif(not (REPO / "models" / "model_card.json").is_file(), reason="no shipped model")
+@pytest.mark.parametrize("variant", ["ghnerf", "baseline"])
+def test_the_shipped_int8_files_record_their_fp32_twins_sha256(variant, tmp_path):
+    """Every shipped ``<graph>.int8.onnx`` but the ghnerf ``human.int8.onnx`` records the sha256 of the
+    ``<graph>.onnx`` beside it (stamped after the export, docs/model.md "Precision"), so its time does not count:
+    copied with the int8 files two days older, each is still taken. ``human.int8.onnx`` is left as exported: the
+    skeleton prior records that file's own sha256 and refuses any other bytes."""
+    from ghnerf_runtime.novel_painter import NovelPainter
+    from ghnerf_runtime.onnx_file import onnx_metadata
+
+    shipped = REPO / "models" / variant
+    folder = tmp_path / variant
+    shutil.copytree(shipped, folder)
+    unstamped = {"human.int8.onnx"} if variant == "ghnerf" else set()
+    for int8 in sorted(folder.glob("*.int8.onnx")):
+        fp32 = int8.with_name(int8.name.replace(".int8", ""))
+        recorded = onnx_metadata(int8, "graph").get("ghnerf.fp32_sha256" if fp32.name != "novel_painter.onnx"
+                                                    else "ghnerf_painter.fp32_sha256")
+        assert recorded == (None if int8.name in unstamped else _sha256(fp32)), int8.name
+        old = fp32.stat().st_mtime - 2 * 86400.0
+        os.utime(int8, (old, old))
+        if fp32.name == "novel_painter.onnx":
+            assert NovelPainter.choose(folder) == int8
+        elif int8.name not in unstamped:
+            assert ModelSession._stale_int8(folder, fp32.stem, int8) is None, int8.name
+
+
 def test_the_session_loads_the_fp32_painter_beside_a_stale_int8_one(tiny_model_dir, tmp_path):
     """``ModelSession.load(novel_painter=True)`` takes the painter ``NovelPainter.choose`` gives: the fp32 file where
     the int8 one records another training (tests/ghnerf_runtime/test_novel_painter.py has the rule)."""

@@ -177,6 +177,9 @@ def test_the_export_command_writes_both_graphs_their_figures_and_the_card(tmp_pa
     int8_painter = NovelPainter.load(out.with_suffix(".int8.onnx"))
     assert int8_painter.precision == "int8" and NovelPainter.load(out).precision == "fp32"
     assert NovelPainter.find(out.parent).name == "novel_painter.int8.onnx"
+    # the fp32 file it was quantized from, by its bytes: what the runtime's stale-int8 check compares first
+    from training.model_card import sha256
+    assert int8_painter.meta["ghnerf_painter.fp32_sha256"] == sha256(out)
 
 
 @pytest.mark.parametrize("score_file", ["none", "another run's"])

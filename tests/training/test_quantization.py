@@ -243,6 +243,32 @@ def test_an_int8_file_names_the_quantizer_version_that_made_it(quantized, tmp_pa
     assert card_quantizer_version(folder) == {"render": 1, "render_rgb": 2}
 
 
+def test_an_int8_file_records_the_sha256_of_the_fp32_file_it_was_made_from(quantized, tmp_path):
+    """Every file the quantizer writes, the float copy of ``volume`` too, records the sha256 of the fp32 file's
+    bytes (``ghnerf.fp32_sha256``); the runtime's stale-int8 check compares it with the ``<graph>.onnx`` beside it,
+    so the folder loads at int8 with the int8 files dated two days before the fp32 ones."""
+    import os
+
+    from ghnerf_runtime.config import SessionConfig
+    from ghnerf_runtime.contract import FP32_SHA256_KEY
+    from ghnerf_runtime.session import ModelSession
+    from training.model_card import sha256
+
+    _, fp32, int8 = quantized
+    for graph in GRAPHS:
+        props = {p.key: p.value for p in onnx.load(str(int8[graph])).metadata_props}
+        assert props.get(FP32_SHA256_KEY) == sha256(fp32[graph]), graph
+    folder = tmp_path / "m"
+    folder.mkdir()
+    for graph in GRAPHS:
+        for path in (fp32[graph], int8[graph]):
+            (folder / path.name).write_bytes(path.read_bytes())
+        old = (folder / fp32[graph].name).stat().st_mtime - 2 * 86400.0
+        os.utime(folder / int8[graph].name, (old, old))
+    s = ModelSession.load(SessionConfig(model_dir=str(folder), precision="int8", warmup=False), GRAPHS)
+    assert {g: f.path.name for g, f in s.files.items()} == {g: f"{g}.int8.onnx" for g in GRAPHS}
+
+
 def _render_fp32(model, tmp_path):
     return export_all(model, tmp_path / "fp32", graphs=("render",), inputs=example_inputs(model))["render"]
 

@@ -133,13 +133,14 @@ def test_the_painter_is_not_part_of_the_check(two_exports, tmp_path):
     assert s.novel_painter is not None and s.weights_id == weights_id(model)
 
 
-def test_the_graph_hash_leaves_the_weights_id_out_and_the_adopted_prior_names_the_folders_encoder(tmp_path):
-    # the early prior's keypoint graph and the finished export's are one frozen encoder under two weights ids:
-    # the pipeline compares them without the id, and the prior it adopts must pass the runtime's encoder check
+def test_the_graph_hash_leaves_the_weights_id_and_fp32_sha256_out_and_the_adopted_prior_names_the_encoder(tmp_path):
+    # the early prior's keypoint graph and the finished export's are one frozen encoder under two weights ids, so
+    # int8 files quantized from two fp32 files (ghnerf.fp32_sha256): the pipeline compares them without either, and
+    # the prior it adopts must pass the runtime's encoder check
     import onnx
     from onnx import TensorProto, helper
 
-    from ghnerf_runtime.contract import WEIGHTS_ID_KEY
+    from ghnerf_runtime.contract import FP32_SHA256_KEY, WEIGHTS_ID_KEY
     from ghnerf_runtime.skeleton_prior import META_PREFIX
     from training.model_card import graph_sha256, sha256
     from training.pipeline import prior_for_folder
@@ -149,7 +150,7 @@ def test_the_graph_hash_leaves_the_weights_id_out_and_the_adopted_prior_names_th
         y = helper.make_tensor_value_info("y", TensorProto.FLOAT, [1])
         k = helper.make_tensor("k", TensorProto.FLOAT, [1], [scale])
         m = helper.make_model(helper.make_graph([helper.make_node("Mul", ["x", "k"], ["y"])], "g", [x], [y], [k]))
-        helper.set_model_props(m, {WEIGHTS_ID_KEY: weights, "other": "kept"})
+        helper.set_model_props(m, {WEIGHTS_ID_KEY: weights, FP32_SHA256_KEY: weights[::-1], "other": "kept"})
         onnx.save(m, str(path))
         return path
 

@@ -37,8 +37,9 @@ from onnxruntime.quantization import (
 )
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
-from ghnerf_runtime.contract import weights_id_of
+from ghnerf_runtime.contract import FP32_SHA256_KEY, weights_id_of
 from ghnerf_runtime.session import check_graph_file
+from training.model_card import sha256
 
 log = logging.getLogger(__name__)
 
@@ -159,8 +160,9 @@ def quantize_qdq(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[di
 
 def quantize_graph(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[dict[str, np.ndarray]],
                    policy: QuantPolicy | None, graph: str) -> Path:
-    """Quantize one fp32 graph to QDQ int8 (or copy it when ``policy`` is None) and restamp the contract and the
-    source's weights id (``ghnerf_runtime.contract.WEIGHTS_ID_KEY``: the int8 file is of the same weights).
+    """Quantize one fp32 graph to QDQ int8 (or copy it when ``policy`` is None) and restamp the contract, the
+    source's weights id (``ghnerf_runtime.contract.WEIGHTS_ID_KEY``: the int8 file is of the same weights) and the
+    source file's sha256 (``ghnerf_runtime.contract.FP32_SHA256_KEY``).
 
     Raises:
         ModelLoadError, ModelContractError: the source (or the file written) is not a ``graph`` file the runtime
@@ -180,8 +182,11 @@ def quantize_graph(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[
         shutil.copyfile(fp32_path, out_path)
     else:
         quantize_qdq(fp32_path, out_path, feeds, policy, graph)
-    # a copied float graph is not the quantizer's making: only int8 files name its version
-    made_by = {} if policy is None else {QUANTIZER_VERSION_KEY: str(QUANTIZER_VERSION)}
+    # a copied float graph is not the quantizer's making: only int8 files name its version. Both record the bytes
+    # they were made from: the runtime's stale-int8 check compares them with the fp32 file beside them.
+    made_by = {FP32_SHA256_KEY: sha256(fp32_path)}
+    if policy is not None:
+        made_by[QUANTIZER_VERSION_KEY] = str(QUANTIZER_VERSION)
     stamp_metadata(out_path, contract, graph, precision, weights_id=weights, extra=made_by)
     check_graph_file(out_path, graph, precision)
     log.info("quantized %s -> %s (%s)", graph, out_path, precision)
