@@ -949,11 +949,10 @@ FORMAT_SUFFIXES = {".toml": "anipose", ".yml": "opencv", ".yaml": "opencv", ".xm
 
 def _format_of(path: Path, given: str | None, flag: str) -> str:
     """The format of ``path``: ``given``, else its suffix's (the one before ``.gz``, or ``.gz`` and a digit:
-    OpenCV's gzipped files). An ``--out`` OpenCV would not open by its name (``rig.yml.gz9``) is refused."""
-    from calibration.formats.opencv_yaml import GZIP_SUFFIX, format_suffix, gzip_level_problem, gzipped
+    OpenCV's gzipped files, of any case). An ``--out`` OpenCV would not open by its name (``rig.yml.gz9``,
+    ``rig.yml.GZ``) is refused."""
+    from calibration.formats.opencv_yaml import GZIP_SUFFIX, format_suffix, gzip_name_problem, gzipped
 
-    if flag == "--out" and (problem := gzip_level_problem(path)):
-        raise UsageError(f"{flag} {path}: {problem}")
     fmt = given or FORMAT_SUFFIXES.get(format_suffix(path))
     if fmt is None:
         suffix = format_suffix(path) + (path.suffix if gzipped(path) else "")
@@ -963,6 +962,9 @@ def _format_of(path: Path, given: str | None, flag: str) -> str:
     if fmt == "anipose" and gzipped(path):  # an export wrote plain TOML under the name, an import read gzip as TOML
         raise UsageError(f"{flag} {path}: anipose files are plain TOML, not gzipped ({GZIP_SUFFIX} goes with OpenCV "
                          "FileStorage files only): give a .toml name")
+    # after the format: a rig.toml.GZ is no anipose name at all, not one to spell rig.toml.gz
+    if flag == "--out" and (problem := gzip_name_problem(path)):
+        raise UsageError(f"{flag} {path}: {problem}")
     return fmt
 
 
@@ -1497,7 +1499,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rig", type=user_path, required=True)
     p.add_argument("--out", type=user_path, required=True,
                    help=".yml/.yaml/.xml/.json (OpenCV FileStorage; gzipped with .gz after it: rig.yml.gz, not "
-                        ".gz9, OpenCV's name for rig.yml.gz at level 9) or .toml (anipose)")
+                        ".GZ, which OpenCV reads as plain text, nor .gz9, its name for rig.yml.gz at level 9) or "
+                        ".toml (anipose)")
     p.add_argument("--format", choices=("opencv", "anipose"), help="default: from --out's suffix")
     p.add_argument("--units-to-metres", type=_finite(1e-9, 1e9),
                    help="metres per unit of the written translations (OpenCV: default 1, recorded in the file; "
