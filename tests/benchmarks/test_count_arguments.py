@@ -169,6 +169,17 @@ def test_a_count_in_digits_int_takes_but_a_command_line_does_not_show_is_refused
         image_size(f"{text}x480")
 
 
+def test_a_seed_or_size_past_the_digits_int_reads_is_refused_in_words():
+    """int() refuses more than 4300 digits with a ValueError, which argparse said as "invalid seed_list value"."""
+    long = "1" * 5000
+    with pytest.raises(argparse.ArgumentTypeError, match="comma-separated whole numbers >= 0, got '0,1111"):
+        seed_list(f"0,{long}")
+    with pytest.raises(argparse.ArgumentTypeError, match="WIDTHxHEIGHT in pixels, each >= 1 .*, got '1111"):
+        image_size(f"{long}x480")
+    with pytest.raises(argparse.ArgumentTypeError, match="must be a whole number >= 1, got '1111"):
+        positive_count(long)
+
+
 def test_counts_take_whole_numbers_at_their_least():
     assert positive_count("1") == 1 and positive_count(" 12 ") == 12
     assert non_negative_count("0") == 0
