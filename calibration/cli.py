@@ -51,6 +51,7 @@ from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.image_sizes import camera_image_sizes, mixed_sizes_problem
 from calibration.render import SYNTH_BOARD, calibration_views, synth_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
+from ghnerf_runtime.cli.counts import bounded_count, non_negative_count, positive_count
 from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, same_file, unwritable_reason
 from ghnerf_runtime.cli.recorded_take import RecordedTake, status_saying_a_failed_take
 from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stderr
@@ -983,11 +984,10 @@ FORMAT_SUFFIXES = {".toml": "anipose", ".yml": "opencv", ".yaml": "opencv", ".xm
 
 def _format_of(path: Path, given: str | None, flag: str) -> str:
     """The format of ``path``: ``given``, else its suffix's (the one before ``.gz``, or ``.gz`` and a digit:
-    OpenCV's gzipped files). An ``--out`` OpenCV would not open by its name (``rig.yml.gz9``) is refused."""
-    from calibration.formats.opencv_yaml import GZIP_SUFFIX, format_suffix, gzip_level_problem, gzipped
+    OpenCV's gzipped files, of any case). An ``--out`` OpenCV would not open by its name (``rig.yml.gz9``,
+    ``rig.yml.GZ``) is refused."""
+    from calibration.formats.opencv_yaml import GZIP_SUFFIX, format_suffix, gzip_name_problem, gzipped
 
-    if flag == "--out" and (problem := gzip_level_problem(path)):
-        raise UsageError(f"{flag} {path}: {problem}")
     fmt = given or FORMAT_SUFFIXES.get(format_suffix(path))
     if fmt is None:
         suffix = format_suffix(path) + (path.suffix if gzipped(path) else "")
@@ -997,6 +997,9 @@ def _format_of(path: Path, given: str | None, flag: str) -> str:
     if fmt == "anipose" and gzipped(path):  # an export wrote plain TOML under the name, an import read gzip as TOML
         raise UsageError(f"{flag} {path}: anipose files are plain TOML, not gzipped ({GZIP_SUFFIX} goes with OpenCV "
                          "FileStorage files only): give a .toml name")
+    # after the format: a rig.toml.GZ is no anipose name at all, not one to spell rig.toml.gz
+    if flag == "--out" and (problem := gzip_name_problem(path)):
+        raise UsageError(f"{flag} {path}: {problem}")
     return fmt
 
 
@@ -1348,44 +1351,12 @@ def _exchanged_sizes_evidence(rig, rig_path: str, images: Path) -> str:
 
 
 # ------------------------------------------------------------------ main
-def _whole_number(text: str) -> int:
-    """``text`` as an int, or argparse's usage error saying so (a bare ValueError read "invalid _count value")."""
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-
-
 def _number(text: str) -> float:
     """``text`` as a float, or argparse's usage error saying so (a bare ValueError read "invalid parse value")."""
     try:
         return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-
-
-def _positive_int(text: str) -> int:
-    value = _whole_number(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
-    return value
-
-
-def _count(text: str) -> int:
-    value = _whole_number(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
-    return value
-
-
-def _view_count(lowest: int):
-    """An argparse type: a view count from ``lowest`` to ``MAX_VIEWS``."""
-    def parse(text: str) -> int:
-        value = _whole_number(text)
-        if not lowest <= value <= MAX_VIEWS:
-            raise argparse.ArgumentTypeError(f"must be {lowest} to {MAX_VIEWS} views, got {value}")
-        return value
-    return parse
 
 
 def _finite(lo: float, hi: float):
@@ -1427,7 +1398,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("board", help="write the board to print and its definition")
     p.add_argument("--out", type=user_path, required=True, help="folder for board.png and board.json")
     p.add_argument("--board", type=user_path, help="a board definition to start from (default: 9x6 squares of 80 mm)")
-    p.add_argument("--dpi", type=_positive_int, default=300, help="print resolution (default 300)")
+    p.add_argument("--dpi", type=positive_count, default=300, help="print resolution (default 300)")
     p.add_argument("--force", action="store_true", help="replace a board.json in --out that defines another board")
     p.set_defaults(run=cmd_board)
 
@@ -1439,11 +1410,11 @@ def build_parser() -> argparse.ArgumentParser:
                                                    "calibration.render.SYNTH_BOARD); written to OUT/board.json")
     p.add_argument("--force", action="store_true",
                    help="write into a folder that already holds views, board.json or cameras.json")
-    p.add_argument("--count", type=_view_count(1), default=15,
+    p.add_argument("--count", type=bounded_count(1, MAX_VIEWS), default=15,
                    help=f"views both cameras see (default 15, at most {MAX_VIEWS})")
-    p.add_argument("--edge-count", type=_view_count(0), default=6,
+    p.add_argument("--edge-count", type=bounded_count(0, MAX_VIEWS), default=6,
                    help=f"views per camera in its image corners (default 6, at most {MAX_VIEWS})")
-    p.add_argument("--seed", type=_count, default=0)
+    p.add_argument("--seed", type=non_negative_count, default=0)
     p.set_defaults(run=cmd_synth)
 
     p = sub.add_parser("capture", help="save image pairs in which a camera sees the board (both images)")
@@ -1452,7 +1423,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "still need its measured board.json")
     p.add_argument("--out", type=user_path, required=True, help="folder: one subfolder per camera, and cameras.json, the order "
                                                 "the rig source gives the cameras in (solve keeps it)")
-    p.add_argument("--count", type=_view_count(1), default=20, help=f"views to keep (default 20, at most {MAX_VIEWS})")
+    p.add_argument("--count", type=bounded_count(1, MAX_VIEWS), default=20,
+                   help=f"views to keep (default 20, at most {MAX_VIEWS})")
     p.add_argument("--floor", action="store_true",
                    help="keep one view named 'floor': the board lying still on the floor, seen by both cameras")
     p.add_argument("--steady-s", type=_seconds, default=1.0, help="--floor: how long the board must lie still")
@@ -1531,7 +1503,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rig", type=user_path, required=True)
     p.add_argument("--out", type=user_path, required=True,
                    help=".yml/.yaml/.xml/.json (OpenCV FileStorage; gzipped with .gz after it: rig.yml.gz, not "
-                        ".gz9, OpenCV's name for rig.yml.gz at level 9) or .toml (anipose)")
+                        ".GZ, which OpenCV reads as plain text, nor .gz9, its name for rig.yml.gz at level 9) or "
+                        ".toml (anipose)")
     p.add_argument("--format", choices=("opencv", "anipose"), help="default: from --out's suffix")
     p.add_argument("--units-to-metres", type=_finite(1e-9, 1e9),
                    help="metres per unit of the written translations (OpenCV: default 1, recorded in the file; "

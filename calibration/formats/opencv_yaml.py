@@ -48,7 +48,9 @@ store ``units_to_metres`` and (multi-camera) the working volume in metres
 levelled frame, the ``levelled_*`` keys, and replace the file atomically; a name ending in ``.gz``
 (``rig.yml.gz``) is written gzipped, as ``cv2.FileStorage`` writes and reads it, in the format of the
 suffix before it. A name ending in ``.gz`` and a digit (``rig.yml.gz9``, OpenCV's gzip at level 9) is read
-from the file named, gunzipped; it is not written, as OpenCV opens ``rig.yml.gz`` for it.
+from the file named, gunzipped; it is not written, as OpenCV opens ``rig.yml.gz`` for it. Nor is a ``.gz`` in
+another case (``rig.yml.GZ``): OpenCV gzips only the lower-case name, and reads and writes this one as plain text;
+it is read by its bytes, gzip or plain text.
 """
 from __future__ import annotations
 
@@ -87,10 +89,11 @@ _D_KEYS = ("distortion_coefficients", "D")
 #: coefficients (k1..k4, equidistant) would otherwise be read as the pinhole model's k1 k2 p1 p2.
 _FISHEYE_KEYS = ("fisheye_model", "fisheye")
 
-__all__ = ["format_suffix", "gzip_level_problem", "gzipped", "named_with_gzip_level", "read_opencv_camera",
+__all__ = ["format_suffix", "gzip_name_problem", "gzipped", "named_with_gzip_level", "read_opencv_camera",
            "read_opencv_rig", "write_opencv_camera", "write_opencv_rig", "write_opencv_text"]
 
-#: A name ending so is a gzipped file to ``cv2.FileStorage``, which reads and writes it so itself.
+#: A name ending so is a gzipped file to ``cv2.FileStorage``, which reads and writes it so itself; its test is
+#: case-sensitive (persistence.cpp; cv2 5.0 writes plain text for "rig.yml.GZ" and cannot read gzip under it).
 GZIP_SUFFIX = ".gz"
 #: A suffix ``cv2.FileStorage`` reads as gzip at a compression level (persistence.cpp: ``.gz`` and one digit); it
 #: opens the name without the digit.
@@ -123,8 +126,8 @@ def _open(path) -> cv2.FileStorage:
         if not head.strip() and not p.read_bytes().strip():
             raise fail(path, None, "the file is empty")
         # "rig.yml.gz9": FileStorage takes the 9 for a compression level and opens rig.yml.gz, another file (or
-        # none): this one is read here
-        data = _gunzipped(p) if named_with_gzip_level(p) else None
+        # none); "rig.yml.GZ": it reads gzip as text. Only a lower-case .gz is left to it: these are read here
+        data = _gunzipped(p) if gzipped(p) and p.suffix != GZIP_SUFFIX else None
         if data is not None:
             if not data.strip():
                 raise fail(path, None, "the file is empty, gzipped")
@@ -639,21 +642,27 @@ def named_with_gzip_level(path) -> bool:
     return _GZIP_LEVEL.fullmatch(Path(path).suffix) is not None
 
 
-def gzip_level_problem(path) -> str | None:
-    """Why a FileStorage file is not written to ``path`` (None: it may be): a name ending in ``.gz`` and a digit
-    (:func:`named_with_gzip_level`), which no OpenCV program opens, as ``cv2.FileStorage`` takes the digit for a
-    compression level and opens the name without it."""
-    if not named_with_gzip_level(path):
-        return None
+def gzip_name_problem(path) -> str | None:
+    """Why a FileStorage file is not written to ``path`` (None: it may be): a gzip name no OpenCV program opens as
+    this file: ``.gz`` in another case (``rig.yml.GZ``), which ``cv2.FileStorage`` reads and writes as plain text,
+    or ``.gz`` and a digit (:func:`named_with_gzip_level`), which it takes for a compression level, opening the name
+    without it."""
     p = Path(path)
-    meant = p.with_suffix(p.suffix[:-1]).name
-    return (f"OpenCV reads the digit after .gz as a compression level, so it opens {meant} for this name and no "
-            f"OpenCV program could read this file; name it {meant} (written gzipped)")
+    if not gzipped(p):
+        return None
+    meant = p.with_suffix(GZIP_SUFFIX).name
+    if not p.suffix.startswith(GZIP_SUFFIX):  # .GZ, .Gz, .GZ9: OpenCV's test for gzip is case-sensitive
+        return (f"OpenCV gzips only a lower-case .gz name and reads {p.name} as plain text, so no OpenCV program "
+                f"could read this file; name it {meant} (written gzipped)")
+    if named_with_gzip_level(p):
+        return (f"OpenCV reads the digit after .gz as a compression level, so it opens {meant} for this name and no "
+                f"OpenCV program could read this file; name it {meant} (written gzipped)")
+    return None
 
 
 def _gunzipped(path: Path) -> bytes:
-    """The bytes of ``path``, a file named as :func:`named_with_gzip_level` says, unpacked where it is gzip (plain
-    text is taken as it is, as zlib's reader takes it in a ``.gz`` file).
+    """The bytes of ``path``, a gzip name ``cv2.FileStorage`` does not read as this file (:func:`gzip_name_problem`),
+    unpacked where it is gzip (plain text is taken as it is, as zlib's reader takes it in a ``.gz`` file).
 
     Raises:
         RigFileError: naming ``path``: gzip that is cut short or damaged.
@@ -689,9 +698,10 @@ def write_opencv_text(path: str | os.PathLike, text: str) -> None:
     gzipped where the name ends in ``.gz`` (``rig.yml.gz`` was plain text, which a tool that gunzips it refuses).
 
     Raises:
-        RigFileError: the file cannot be written; its name ends in ``.gz`` and a digit (:func:`gzip_level_problem`).
+        RigFileError: the file cannot be written; its name ends in ``.gz`` and a digit, or in ``.gz`` in another
+            case (:func:`gzip_name_problem`).
     """
-    if problem := gzip_level_problem(path):
+    if problem := gzip_name_problem(path):
         raise fail(path, None, problem)
     data = utf8_bytes(path, text)
     # mtime 0: the same rig exports the same bytes
@@ -760,7 +770,7 @@ def dumps_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
     """The text :func:`write_opencv_rig` writes to ``path`` (its suffix, the one before any ``.gz``, picks YAML, XML
     or JSON; errors name it; :func:`write_opencv_text` writes it, gzipped for ``.gz``), checked
     as it is, nothing written: ``ghcal export`` keeps the file it replaces only once the export can be made."""
-    if problem := gzip_level_problem(path):
+    if problem := gzip_name_problem(path):
         raise fail(path, None, problem)
     units = check_units(units_to_metres)
     refuse_skew(rig.cameras, f"an OpenCV {_format_name(path)} file")

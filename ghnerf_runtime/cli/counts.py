@@ -1,47 +1,72 @@
-"""Counts on a command line (``--sequences``, ``--frames``, ``--repeats``...): argparse types that refuse what
-no run can use with the option's name and the value, before anything is loaded or rendered. An unchecked
-``type=int`` let ``--frames -5`` or ``--repeats 0`` through to a traceback (numpy's "negative dimensions", an
-empty median, an index out of range) after the model and the sequences were loaded, or to a run of nothing."""
+"""Counts on a command line (``--sequences``, ``--frames``, ``--repeats``, ghcal's ``--count``...): argparse types
+that refuse what no run can use with the option's name and the value, before anything is loaded or rendered, in
+one wording for every program (``must be a whole number >= 1, got '0'``). An unchecked ``type=int`` let ``--frames
+-5`` or ``--repeats 0`` through to a traceback (numpy's "negative dimensions", an empty median, an index out of
+range) after the model and the sequences were loaded, or to a run of nothing.
+
+A count is ASCII digits (a sign and spaces around them allowed): ``int()`` also takes other scripts' digits
+(``'٣'``, full-width ``'３'``) and ``'1_000'``, which ran as a count the command line does not show to most readers,
+an input method's slip taken for a number."""
 from __future__ import annotations
 
 import argparse
+import re
 
-__all__ = ["image_size", "non_negative_count", "positive_count", "seed_list"]
+__all__ = ["bounded_count", "image_size", "non_negative_count", "positive_count", "seed_list", "whole_number"]
+
+_SIGNED_DIGITS = re.compile(r"[+-]?[0-9]+")
 
 
-def _whole_number(text: str, least: int) -> int:
+def whole_number(text: str, least: int, most: int | None = None) -> int:
+    """``text`` as a whole number from ``least`` (to ``most``, where given), or argparse's usage error naming the
+    value: ``must be a whole number >= 1, got '0'``, ``must be a whole number from 1 to 100, got '101'``."""
+    stripped = text.strip()
     try:
-        value = int(text)
-    except ValueError:
+        value = int(stripped) if _SIGNED_DIGITS.fullmatch(stripped) else None
+    except ValueError:  # past int()'s 4300 digits
         value = None
-    if value is None or value < least:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= {least}, got {text!r}")
+    if value is None or value < least or (most is not None and value > most):
+        bounds = f">= {least}" if most is None else f"from {least} to {most}"
+        raise argparse.ArgumentTypeError(f"must be a whole number {bounds}, got {text!r}")
     return value
 
 
 def positive_count(text: str) -> int:
     """An argparse ``type=`` for a count of which one at least is needed (sequences, pairs, rounds)."""
-    return _whole_number(text, 1)
+    return whole_number(text, 1)
 
 
 def non_negative_count(text: str) -> int:
     """An argparse ``type=`` for a count where 0 means none (warm-up pairs, ``--limit 0``: all)."""
-    return _whole_number(text, 0)
+    return whole_number(text, 0)
+
+
+def bounded_count(least: int, most: int):
+    """An argparse ``type=`` for a count from ``least`` to ``most`` (ghcal's views: a mistyped ``--count
+    100000000`` rendered until the disk was full)."""
+    def count(text: str) -> int:
+        return whole_number(text, least, most)
+    return count
 
 
 def seed_list(text: str) -> list[int]:
     """An argparse ``type=`` for ``--seeds 0,1,2``: one seed at least, each a whole number >= 0 (``--seeds x`` was
     int()'s "invalid literal" traceback)."""
-    parts = [part.strip() for part in text.split(",")]
-    if not all(part.isdecimal() for part in parts):  # isdigit() passes "²", which int() refuses
-        raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 0, got {text!r}")
-    return [int(part) for part in parts]
+    try:
+        return [whole_number(part, 0) for part in text.split(",")]
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 0, got {text!r}") from None
 
 
 def image_size(text: str) -> tuple[int, int]:
     """An argparse ``type=`` for ``--size 640x480``: (width, height), each a whole number >= 1 (``--size
     not-a-size`` was a ValueError traceback from unpacking ``split("x")``, ``--size 0x0`` OpenCV's)."""
     parts = text.lower().split("x")
-    if len(parts) != 2 or not all(part.strip().isdecimal() and int(part) >= 1 for part in parts):
-        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT in pixels, each >= 1 (as 640x480), got {text!r}")
-    return int(parts[0]), int(parts[1])
+    try:
+        if len(parts) != 2:
+            raise argparse.ArgumentTypeError(text)
+        width, height = (whole_number(part, 1) for part in parts)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT in pixels, each >= 1 (as 640x480), got {text!r}") \
+            from None
+    return width, height

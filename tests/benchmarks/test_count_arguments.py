@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from ghnerf_runtime.cli.counts import non_negative_count, positive_count, seed_list
+from ghnerf_runtime.cli.counts import bounded_count, image_size, non_negative_count, positive_count, seed_list
 from ghnerf_runtime.cli.model_folder import model_folder_option
 
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
@@ -84,6 +84,9 @@ REQUIRED = {
 }
 CASES = [(script, option, "0") for script, (positive, _) in COUNTS.items() for option in positive]
 CASES += [(script, option, "-1") for script, (_, non_negative) in COUNTS.items() for option in non_negative]
+# digits of other scripts, which int() takes: '\u0663' (Arabic-Indic) and '\uff13' (full-width) ran as 3
+CASES += [("measure_calibration", "--seeds", "0,\u0663"), ("measure_pairing", "--seeds", "\uff13"),
+          ("measure_synth_framing", "--sequences", "\u0663")]
 #: the scripts whose --model-dir names the folder the session loads
 MODEL_DIR = ("bench_graph_threads", "bench_runtime_regions", "bench_runtime_vs_eval", "compare_3d_methods",
              "measure_baseline", "measure_calibration_drift", "measure_cold_tiles", "measure_edge_padding",
@@ -150,6 +153,31 @@ def test_the_least_count_each_option_takes_parses(script, option, value, monkeyp
 def test_positive_count_refuses_what_is_not_a_whole_number_above_zero(text):
     with pytest.raises(argparse.ArgumentTypeError, match=f"must be a whole number >= 1, got {text!r}"):
         positive_count(text)
+
+
+@pytest.mark.parametrize("text", ["\u0663", "\uff13", "1\uff12", "1_000"])
+def test_a_count_in_digits_int_takes_but_a_command_line_does_not_show_is_refused(text):
+    """int() reads Arabic-Indic '\u0663' and full-width '\uff13' as 3, and '1_000' as 1000: such a count ran, where
+    '\u00b2' and 'x' were refused. Each is now a count no run can use, in the words of the others."""
+    for parse, least in ((positive_count, 1), (non_negative_count, 0), (bounded_count(0, 10_000), None)):
+        words = f"must be a whole number >= {least}" if least is not None else "must be a whole number from 0 to 10000"
+        with pytest.raises(argparse.ArgumentTypeError, match=f"{words}, got {text!r}"):
+            parse(text)
+    with pytest.raises(argparse.ArgumentTypeError, match=f"comma-separated whole numbers >= 0, got '0,{text}'"):
+        seed_list(f"0,{text}")
+    with pytest.raises(argparse.ArgumentTypeError, match=f"WIDTHxHEIGHT in pixels, each >= 1 .*, got '{text}x480'"):
+        image_size(f"{text}x480")
+
+
+def test_a_seed_or_size_past_the_digits_int_reads_is_refused_in_words():
+    """int() refuses more than 4300 digits with a ValueError, which argparse said as "invalid seed_list value"."""
+    long = "1" * 5000
+    with pytest.raises(argparse.ArgumentTypeError, match="comma-separated whole numbers >= 0, got '0,1111"):
+        seed_list(f"0,{long}")
+    with pytest.raises(argparse.ArgumentTypeError, match="WIDTHxHEIGHT in pixels, each >= 1 .*, got '1111"):
+        image_size(f"{long}x480")
+    with pytest.raises(argparse.ArgumentTypeError, match="must be a whole number >= 1, got '1111"):
+        positive_count(long)
 
 
 def test_counts_take_whole_numbers_at_their_least():

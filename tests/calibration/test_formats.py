@@ -113,6 +113,28 @@ def test_a_gz_and_digit_name_is_read_from_itself_and_not_written(rig, tmp_path):
     assert not (tmp_path / "out.xml.gz0").exists()
 
 
+@pytest.mark.parametrize("name, meant", [("rig.yml.GZ", "rig.yml.gz"), ("one.xml.Gz", "one.xml.gz"),
+                                         ("rig.json.GZ9", "rig.json.gz")])
+def test_a_gz_name_in_another_case_is_read_by_its_bytes_and_not_written(rig, tmp_path, name, meant):
+    """cv2.FileStorage gzips only a lower-case .gz name: it wrote plain text for rig.yml.GZ and could not read the
+    gzip write_opencv_rig put there; read_opencv_rig had OpenCV read that gzip as text ("Invalid character")."""
+    probe = tmp_path / f"probe{Path(name).suffix}"
+    fs = cv2.FileStorage(str(probe), cv2.FILE_STORAGE_WRITE)  # the premise: OpenCV's own writing of such a name
+    fs.write("x", 1)
+    fs.release()
+    assert probe.read_bytes()[:2] != b"\x1f\x8b"
+    path = tmp_path / name
+    for write in (lambda: write_opencv_rig(rig, path), lambda: write_opencv_camera(rig.cameras[0], path)):
+        with pytest.raises(RigFileError, match=f"OpenCV gzips only a lower-case .gz name .* name it {meant} "):
+            write()
+    assert not path.exists()
+    write_opencv_rig(rig, tmp_path / meant)
+    path.write_bytes((tmp_path / meant).read_bytes())  # renamed, gzip under the name: read as gzip
+    assert_cameras_close(rig, read_opencv_rig(path))
+    path.write_bytes(gzip.decompress((tmp_path / meant).read_bytes()))  # as OpenCV writes the name: plain text
+    assert_cameras_close(rig, read_opencv_rig(path))
+
+
 def test_a_principal_point_outside_the_image_is_refused(rig, tmp_path):
     # a stereo_calib file has no image size: the caller's, if of another size, went through
     write_opencv_rig(rig, tmp_path / "rig.yaml")

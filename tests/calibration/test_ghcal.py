@@ -935,7 +935,7 @@ def test_mistyped_options_and_files_are_named(capture, tmp_path, capsys):
     assert "--dpi 100000: the print would be" in capsys.readouterr().err
     with pytest.raises(SystemExit) as e:
         cli.main(["synth", "--out", str(tmp_path / "s"), "--seed", "-1"])
-    assert e.value.code == 2 and "--seed: must be 0 or more" in capsys.readouterr().err
+    assert e.value.code == 2 and "--seed: must be a whole number >= 0, got '-1'" in capsys.readouterr().err
 
 
 def test_a_camera_name_the_stream_cannot_carry_is_refused_before_the_detection(capture, tmp_path, capsys,

@@ -128,6 +128,34 @@ def test_an_export_to_a_gz_and_digit_name_is_refused_naming_the_name_opencv_open
     assert not out.exists()
 
 
+@pytest.mark.parametrize("name, meant", [("rig.yml.GZ", "rig.yml.gz"), ("rig.xml.Gz", "rig.xml.gz"),
+                                         ("rig.json.gZ", "rig.json.gz"), ("rig.yml.GZ9", "rig.yml.gz")])
+@pytest.mark.parametrize("args", [[], ["--format", "opencv"]])
+def test_an_export_to_a_gz_name_in_another_case_is_refused_naming_the_lower_case_name(rig_file, tmp_path, capsys,
+                                                                                      name, meant, args):
+    """cv2.FileStorage gzips only a lower-case .gz name (cv2 5.0 writes plain text for rig.yml.GZ): export wrote
+    gzip under rig.yml.GZ, which OpenCV then read as text and could not parse."""
+    out = tmp_path / name
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(out), *args]) == 2
+    err = but_the_framing_notes(capsys.readouterr().err)
+    assert f"--out {out}: OpenCV gzips only a lower-case .gz name and reads {name} as plain text" in err
+    assert f"name it {meant} (written gzipped)" in err and err.count("\n") == 1, err
+    assert not out.exists()
+
+
+def test_a_gz_name_in_another_case_is_imported_gzip_or_plain_text(rig_file, tmp_path, capsys):
+    """Import reads the bytes of rig.yml.GZ: gzip (a rig.yml.gz renamed, or an old export) was refused as OpenCV's
+    "Invalid character"; plain text (as OpenCV writes the name) was and is read."""
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(tmp_path / "rig.yml.gz")]) == 0
+    foreign = tmp_path / "rig.yml.GZ"
+    for data in ((tmp_path / "rig.yml.gz").read_bytes(), _exported_text(rig_file, tmp_path, "yml")):
+        foreign.write_bytes(data)
+        capsys.readouterr()
+        assert cli.main(["import", str(foreign), "--out", str(tmp_path / "back.json")]) == 0, capsys.readouterr().err
+        _same_cameras(load_rig(rig_file), load_rig(tmp_path / "back.json"))
+        (tmp_path / "back.json").unlink()
+
+
 def test_an_export_over_a_gz_file_keeps_it_under_a_name_import_tells_the_format_of(rig_file, tmp_path, capsys):
     # kept as rig.yml.prev.gz (<stem>.prev<suffix>), whose format import could not tell from its name ('.prev')
     foreign = tmp_path / "rig.yml.gz"
