@@ -32,7 +32,8 @@ from calibration.image_sizes import mixed_views_problem
 from calibration.level import LEVEL_VOLUME, level_rig
 from ghnerf_runtime.geometry.camera import Camera, fold_terms_text, folded_by_tangential
 from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M, Rig, WorkingVolume
-from ghnerf_runtime.rig_file import CAMERA_HEIGHT_RANGE_M, principal_point_problem
+from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, distortion_problem, focal_length_problem,
+                                     principal_point_problem)
 
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
            "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "fold_warning", "MIN_VIEWS", "MAX_PAIR_PX",
@@ -554,6 +555,18 @@ def board_distance_warning(distance_m: float, volume: WorkingVolume, board: Boar
             "its side in metres (80 mm is 0.08)? If it is, check the baseline against a tape measure")
 
 
+def _lens_problem(intr: Intrinsics) -> str | None:
+    """Why the rig file's reader would refuse a solved lens (its principal point, a focal length, a distortion term),
+    said with what to capture; None where it would not. Only the principal point was asked here: a distortion term
+    past the reader's bound was refused as the rig file's field, naming a file not yet written, "a typo"."""
+    advice = "the views do not pin the lens down: add views near and far, tilted, reaching the image's corners"
+    problem = principal_point_problem(intr.K, *intr.image_size, advice=advice)
+    if problem:
+        return problem
+    other = focal_length_problem(intr.K, *intr.image_size) or distortion_problem(intr.dist)
+    return None if other is None else f"{other} Here the solve's: {advice}"
+
+
 def _round_or_none(value: float, digits: int) -> float | None:
     """``value`` rounded, None where it is not finite (the report is JSON: no NaN in it)."""
     return round(value, digits) if math.isfinite(value) else None
@@ -590,8 +603,8 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     The rig's ``metadata["calibration"]`` records the board, the floor view, the board's thickness, the
     lens model and whether its tangential terms were fitted (``tangential``; False holds p1, p2 at 0).
 
-    :raises SolveError: too few views, no levelling given, a floor view neither camera saw, a solved
-        principal point far from the image centre.
+    :raises SolveError: too few views, no levelling given, a floor view neither camera saw, a solved lens the
+        rig file would refuse (a principal point far from the image centre, a distortion term past its bound).
     """
     if (floor_view is None) == (camera_height_m is None):
         raise SolveError("say where the floor is: a floor view (the board lying on the floor) or the first "
@@ -608,8 +621,7 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     intr = {cam: calibrate_intrinsics(board, calib[cam], lens=lens, camera=cam, tangential=tangential)
             for cam in names}
     for cam in names:  # the rig file refuses such a camera: say why here, not when it is read
-        problem = principal_point_problem(intr[cam].K, *intr[cam].image_size, advice=(
-            "the views do not pin the lens down: add views near and far, tilted, reaching the image's corners"))
+        problem = _lens_problem(intr[cam])
         if problem:
             raise SolveError(f"camera {cam!r}: the solved lens model: {problem}")
     # a view dropped from a camera's intrinsics as an outlier is no better for the pair's pose

@@ -74,6 +74,20 @@ def test_the_orientation_spread_is_the_widest_angle_between_two_views_boards():
     assert orientation_spread_deg(turned[:1]) == 0.0
 
 
+def test_a_solved_distortion_the_rig_file_would_refuse_is_refused_as_the_solve_s():
+    # views within 3 degrees of square-on, the second camera 75 mm to the side: the first solved to a focal length
+    # many times too long with k3 near -5000, which the rig file's reader refuses; the solve passed it on, and ghcal
+    # said so as the reader does, naming the rig file not yet written and its field, "a typo, or a calibration
+    # that diverged?"
+    rng = np.random.default_rng(134)
+    tilts = [(rng.uniform(-3, 3), rng.uniform(-3, 3)) for _ in range(12)]
+    views = {"left": _views(tilts, seed=34), "right": _views(tilts, seed=34, t_offset=(-0.075, 0.0, 0.0))}
+    with pytest.raises(SolveError, match=r"^camera 'left': the solved lens model: its distortion coefficient k3 = "
+                                         r"-\d+\.\d+ is beyond any lens's .* Here the solve's: the views do not pin "
+                                         r"the lens down: add views near and far, tilted"):
+        solve_rig(BOARD, views, ("left", "right"), camera_height_m=1.4)
+
+
 def test_a_pair_solved_at_one_point_is_refused_before_any_file():
     # the same images in both folders: the reader would refuse the rig file (cameras[1].t), so the solve does
     tilts = [(a, b) for a in (-30, 0, 30) for b in (-25, 25)]
