@@ -32,13 +32,14 @@ from calibration.image_sizes import mixed_views_problem
 from calibration.level import LEVEL_VOLUME, level_rig
 from ghnerf_runtime.geometry.camera import Camera, fold_terms_text, folded_by_tangential
 from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M, Rig, WorkingVolume
-from ghnerf_runtime.rig_file import CAMERA_HEIGHT_RANGE_M, principal_point_problem
+from ghnerf_runtime.rig_file import (CAMERA_HEIGHT_RANGE_M, distortion_problem, focal_length_problem,
+                                     principal_point_problem)
 
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
            "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "fold_warning", "MIN_VIEWS", "MAX_PAIR_PX",
            "USUAL_PITCH_DEG", "typed_pitch_warning", "BOARD_DISTANCE_SLACK", "median_board_distance_m",
            "board_distance_warning", "SIDE_NAMES", "expected_sides", "sides_warning", "REPEAT_PX", "corner_gaps",
-           "same_pose", "repeated_views"]
+           "same_pose", "repeated_views", "MIN_ORIENTATION_SPREAD_DEG", "orientation_spread_deg"]
 
 #: Lens models: OpenCV flags and what they suit.
 LENS_MODELS = {
@@ -62,6 +63,16 @@ COVERAGE_GRID = (8, 6)
 #: tilted ones give 0.7 %); above the second the report warns.
 MAX_FOCAL_STD_SHARE = 0.10
 WARN_FOCAL_STD_SHARE = 0.02
+#: Fewest degrees between the board's orientations in two of a camera's views (the largest angle between two views'
+#: board normals, as the solve poses them): below it the camera is refused, whatever OpenCV's standard deviation says.
+#: Ten views held square-on, within 3 degrees, of a 500 px lens (tests/calibration/test_degenerate_solves.py) solved
+#: to f 44 px "give or take 0.03 px": the branch where a short focal length and a board held close fit as well as the
+#: truth, where OpenCV's figure says nothing. Such solves spread the orientations over less than this (from 0.8
+#: degrees: the short focal length flattens them); every solve within 10 % of the truth, of views tilted up to 3-30
+#: degrees, over 10.5 or more (benchmarks/measure_orientation_spread.py, 40 seeds of 8 and 15 views per tilt bound).
+#: The other wrong branch, a focal length 2.5-45 times too long, spreads them widely; its distortion terms (4.9e3 and
+#: more) are refused instead, by the rig file.
+MIN_ORIENTATION_SPREAD_DEG = 5.0
 #: The first camera's pitch (degrees below the horizon) usual for a rig filming people; outside it the report
 #: warns (a floor view of a board not lying flat, or a --pitch read from the vertical).
 USUAL_PITCH_DEG = (-15.0, 60.0)
@@ -203,7 +214,7 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
     dropped: list[str] = []
     for attempt in range(2):
         names = sorted(views)
-        rms, K, dist, _, _, std_intrinsics, _, per_view = cv2.calibrateCameraExtended(
+        rms, K, dist, rvecs, _, std_intrinsics, _, per_view = cv2.calibrateCameraExtended(
             [_object_points(board, views[n]) for n in names], [_image_points(views[n]) for n in names],
             size, None, None, flags=_intrinsics_flags(lens, tangential))
         errors = dict(zip(names, np.asarray(per_view, float).reshape(-1)))
@@ -222,12 +233,29 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
                          f"or take {focal_std:.1f} px; at most {MAX_FOCAL_STD_SHARE:.0%} is accepted): the board was "
                          "seen at too few angles. Tilt it 20-45 degrees towards and away from the camera, both ways, "
                          "near and far, and capture again")
+    spread = orientation_spread_deg(rvecs)
+    if not spread >= MIN_ORIENTATION_SPREAD_DEG:
+        raise SolveError(f"camera {camera!r}: the board faced the camera the same way in every view (its "
+                         f"orientations span {spread:.1f} degrees; at least {MIN_ORIENTATION_SPREAD_DEG:g} are "
+                         f"needed), so the views do not determine the focal length (solved to {focal:.1f} px, a figure "
+                         "any other would fit as well). Tilt it 20-45 degrees towards and away from the camera, both "
+                         "ways, near and far, and capture again")
     # OpenCV hands the rational model back as 14 terms, the thin-prism and tilt ones held at 0: the rig
     # file and the report get the 8 it fits (docs/calibration.md), as the other models get their 5
     dist = np.asarray(dist, float).reshape(-1)[:8 if lens == "rational" else 5]
     return Intrinsics(K=np.asarray(K, float), dist=dist, rms_px=float(rms),
                       per_view_px={n: round(float(e), 4) for n, e in errors.items()}, dropped=tuple(dropped),
                       coverage=_coverage(views, size), image_size=size, focal_std_px=focal_std)
+
+
+def orientation_spread_deg(rvecs) -> float:
+    """The largest angle (degrees) between the board's normals in two views, from their board -> camera rotation
+    vectors: how far apart the orientations a camera saw the board in lie (:data:`MIN_ORIENTATION_SPREAD_DEG`)."""
+    normals = np.array([cv2.Rodrigues(np.asarray(r, float).reshape(3))[0][:, 2] for r in rvecs]).reshape(-1, 3)
+    if len(normals) < 2:
+        return 0.0
+    cosines = np.clip(normals @ normals.T, -1.0, 1.0)
+    return float(np.degrees(np.arccos(cosines.min())))
 
 
 def _intrinsics_flags(lens: str, tangential: bool) -> int:
@@ -527,6 +555,18 @@ def board_distance_warning(distance_m: float, volume: WorkingVolume, board: Boar
             "its side in metres (80 mm is 0.08)? If it is, check the baseline against a tape measure")
 
 
+def _lens_problem(intr: Intrinsics) -> str | None:
+    """Why the rig file's reader would refuse a solved lens (its principal point, a focal length, a distortion term),
+    said with what to capture; None where it would not. Only the principal point was asked here: a distortion term
+    past the reader's bound was refused as the rig file's field, naming a file not yet written, "a typo"."""
+    advice = "the views do not pin the lens down: add views near and far, tilted, reaching the image's corners"
+    problem = principal_point_problem(intr.K, *intr.image_size, advice=advice)
+    if problem:
+        return problem
+    other = focal_length_problem(intr.K, *intr.image_size) or distortion_problem(intr.dist)
+    return None if other is None else f"{other} Here the solve's: {advice}"
+
+
 def _round_or_none(value: float, digits: int) -> float | None:
     """``value`` rounded, None where it is not finite (the report is JSON: no NaN in it)."""
     return round(value, digits) if math.isfinite(value) else None
@@ -563,8 +603,8 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     The rig's ``metadata["calibration"]`` records the board, the floor view, the board's thickness, the
     lens model and whether its tangential terms were fitted (``tangential``; False holds p1, p2 at 0).
 
-    :raises SolveError: too few views, no levelling given, a floor view neither camera saw, a solved
-        principal point far from the image centre.
+    :raises SolveError: too few views, no levelling given, a floor view neither camera saw, a solved lens the
+        rig file would refuse (a principal point far from the image centre, a distortion term past its bound).
     """
     if (floor_view is None) == (camera_height_m is None):
         raise SolveError("say where the floor is: a floor view (the board lying on the floor) or the first "
@@ -581,8 +621,7 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     intr = {cam: calibrate_intrinsics(board, calib[cam], lens=lens, camera=cam, tangential=tangential)
             for cam in names}
     for cam in names:  # the rig file refuses such a camera: say why here, not when it is read
-        problem = principal_point_problem(intr[cam].K, *intr[cam].image_size, advice=(
-            "the views do not pin the lens down: add views near and far, tilted, reaching the image's corners"))
+        problem = _lens_problem(intr[cam])
         if problem:
             raise SolveError(f"camera {cam!r}: the solved lens model: {problem}")
     # a view dropped from a camera's intrinsics as an outlier is no better for the pair's pose

@@ -12,7 +12,8 @@ import pytest
 from calibration.board import BoardSpec
 from calibration.detect import MIN_CORNERS, BoardView
 from calibration.errors import BoardError, SolveError
-from calibration.solve import MAX_FOCAL_STD_SHARE, WARN_FOCAL_STD_SHARE, calibrate_intrinsics, solve_rig
+from calibration.solve import (MAX_FOCAL_STD_SHARE, MIN_ORIENTATION_SPREAD_DEG, WARN_FOCAL_STD_SHARE,
+                               calibrate_intrinsics, orientation_spread_deg, solve_rig)
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
@@ -53,6 +54,38 @@ def test_square_on_views_do_not_determine_the_focal_length():
                                          r".* at most 10% is accepted.*Tilt it"):
         calibrate_intrinsics(BOARD, _views([(0, 0)] * 8, seed=4), camera="left")
     assert MAX_FOCAL_STD_SHARE == 0.10
+
+
+def test_views_all_nearly_square_on_are_refused_however_sure_opencv_is():
+    # ten views within 3 degrees of square-on: OpenCV solved them to f 44 px for this 500 px lens, "give or take
+    # 0.03 px", and the camera was accepted without a warning (a short focal length with the board held close fits
+    # them as well as the truth); the board's orientations, as that solve poses them, span under 1 degree
+    rng = np.random.default_rng(100)
+    views = _views([(rng.uniform(-3, 3), rng.uniform(-3, 3)) for _ in range(10)], seed=0)
+    with pytest.raises(SolveError, match=r"camera 'left': the board faced the camera the same way in every view \(its "
+                                         r"orientations span \d\.\d degrees; at least 5 are needed\).*Tilt it"):
+        calibrate_intrinsics(BOARD, views, camera="left")
+    assert MIN_ORIENTATION_SPREAD_DEG == 5.0
+
+
+def test_the_orientation_spread_is_the_widest_angle_between_two_views_boards():
+    turned = [np.radians([0.0, 0.0, 30.0]), np.radians([4.0, 0.0, 0.0]), np.radians([0.0, -3.0, 0.0])]
+    assert orientation_spread_deg(turned) == pytest.approx(5.0, abs=0.01)  # 4 degrees one way, 3 the other
+    assert orientation_spread_deg(turned[:1]) == 0.0
+
+
+def test_a_solved_distortion_the_rig_file_would_refuse_is_refused_as_the_solve_s():
+    # views within 3 degrees of square-on, the second camera 75 mm to the side: the first solved to a focal length
+    # many times too long with k3 near -5000, which the rig file's reader refuses; the solve passed it on, and ghcal
+    # said so as the reader does, naming the rig file not yet written and its field, "a typo, or a calibration
+    # that diverged?"
+    rng = np.random.default_rng(134)
+    tilts = [(rng.uniform(-3, 3), rng.uniform(-3, 3)) for _ in range(12)]
+    views = {"left": _views(tilts, seed=34), "right": _views(tilts, seed=34, t_offset=(-0.075, 0.0, 0.0))}
+    with pytest.raises(SolveError, match=r"^camera 'left': the solved lens model: its distortion coefficient k3 = "
+                                         r"-\d+\.\d+ is beyond any lens's .* Here the solve's: the views do not pin "
+                                         r"the lens down: add views near and far, tilted"):
+        solve_rig(BOARD, views, ("left", "right"), camera_height_m=1.4)
 
 
 def test_a_pair_solved_at_one_point_is_refused_before_any_file():
