@@ -38,6 +38,7 @@ from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
 from ghnerf_runtime.config import Joints3DConfig  # noqa: E402
 from ghnerf_runtime.keypoints import decode_keypoints, model_to_heatmap_pixels  # noqa: E402
 from ghnerf_runtime.skeleton_prior import PriorInputs, _centres, mirror_inputs  # noqa: E402
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
 
 WINDOW = 3
 """Half-width (heatmap cells) of the window described: the training Gaussian (sigma 1.5 cells) lies inside."""
@@ -166,6 +167,10 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unknown variants {unknown}; known: {', '.join(VARIANTS)}")
     if args.cache:  # the collection takes minutes: its file's place is settled first, with the name savez writes
         args.cache = ready_output_arg(ap, args.cache, "--cache", suffix=".npz")
+    if not (args.cache and Path(args.cache).is_file()):  # the splits collect_all reads, before minutes of it
+        for data, split, option in [(args.data, "train", "--data"), (args.data, args.val_split, "--data"),
+                                    *((extra, "train", "--extra-data") for extra in args.extra_data)]:
+            check_dataset_split(ap, data, split, option)
 
     import torch
 

@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 import torch  # noqa: E402
 
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
 from training.data.targets import TargetConfig  # noqa: E402
 from training.data.torch_dataset import MultiViewDataset  # noqa: E402
 from training.model import GHNeRF  # noqa: E402
@@ -82,6 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenes-per-step", default="2",
                     help="PretrainConfig.scenes_per_step values (the cpu recipe 2, the gpu recipe 4)")
     args = ap.parse_args(argv)
+    check_dataset_split(ap, args.data, PretrainConfig.split)
     torch.set_num_threads(args.threads)
     torch.set_flush_denormal(True)
     auto = ("the faster of fp32 and bf16, timed at the start of each pretraining scale" if cpu_has_native_bf16()

@@ -30,25 +30,33 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
 import torch  # noqa: E402
 
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
 from training.data.targets import TargetConfig  # noqa: E402
 from training.data.torch_dataset import MultiViewDataset  # noqa: E402
 from training.model import GHNeRF  # noqa: E402
+from training.model.config import ConfigError  # noqa: E402
 from training.pipeline import RECIPES  # noqa: E402
-from training.train import (apply_overrides, build_config, load_config_file, make_batch,  # noqa: E402
+from training.train import (TrainConfig, apply_overrides, build_config, load_config_file, make_batch,  # noqa: E402
                             seed_everything, train_step)
 
 WARMUP = 3
 CONFIGS = {"ghnerf": "training/train_configs/edge128.json", "baseline": "training/train_configs/edge128_baseline.json"}
 
 
-def time_steps(data: str, variant: str, precision: str, steps: int, sets: list[str] = ()) -> list[float]:
-    """Wall seconds of each of ``steps`` joint-run steps (``WARMUP`` more first, not returned); ``sets`` are
-    ``KEY=VALUE`` train config overrides after the recipe's."""
+def train_config(data: str, variant: str, sets: list[str] = ()) -> TrainConfig:
+    """The ``cpu`` recipe's train config of ``variant`` on ``data``, ``sets`` (``KEY=VALUE``) applied after the
+    recipe's overrides."""
     root = Path(__file__).resolve().parents[1]
     raw = apply_overrides(load_config_file(root / CONFIGS[variant]),
                           [*RECIPES["cpu"].train_overrides, f'data="{data}"', *sets])
     raw.pop("pretrain_human", None)  # the joint run's encoder comes pretrained; here its weights do not matter
-    cfg = build_config(raw)
+    return build_config(raw)
+
+
+def time_steps(data: str, variant: str, precision: str, steps: int, sets: list[str] = ()) -> list[float]:
+    """Wall seconds of each of ``steps`` joint-run steps (``WARMUP`` more first, not returned); ``sets`` are
+    ``KEY=VALUE`` train config overrides after the recipe's."""
+    cfg = train_config(data, variant, sets)
     mcfg = cfg.model_config()
     seed_everything(cfg.seed)
     model = GHNeRF(mcfg).train()
@@ -85,6 +93,12 @@ def main(argv: list[str] | None = None) -> int:
     for p in args.precisions.split(","):
         if p not in ("fp32", "bf16"):
             ap.error(f"--precisions: unknown {p!r}; fp32 or bf16")
+    for v in args.variants.split(","):  # the split the steps read, as the --set overrides leave it
+        try:
+            split = train_config(args.data, v, args.set).split
+        except ConfigError as e:  # a --set the trainer refuses, named
+            ap.error(f"argument --set: {e}")
+        check_dataset_split(ap, args.data, split)
     torch.set_flush_denormal(True)
     print(f"torch {torch.__version__}; bf16 rows are autocast, which the trainer does not run")
     print("| variant | threads | precision | median s/step | p90 s/step | bf16 speed-up |")

@@ -35,6 +35,7 @@ from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
 from ghnerf_runtime.proxy_blend import subject_region  # noqa: E402
 from ghnerf_runtime.proxy_matte import proxy_matte  # noqa: E402
 from training.body_proxy import view_camera  # noqa: E402
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
 
 
 def _floats(text: str) -> list[float]:
@@ -65,6 +66,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="comma list of opacity floors (cleared); 0: the runtime's picture")
     ap.add_argument("--threads", type=positive_count, default=1)
     args = ap.parse_args(argv)
+    check_dataset_split(ap, args.data, args.split)  # before the checkpoint loads
 
     import torch
 
