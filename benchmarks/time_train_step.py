@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count, positive_count_list  # noqa: E402
 import torch  # noqa: E402
 
 from training.cli.dataset_split import check_dataset_split  # noqa: E402
@@ -80,8 +80,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default="data/edge128")
     ap.add_argument("--variants", default="ghnerf,baseline")
-    ap.add_argument("--threads", default="1,2", help="thread counts (the pipeline trains both variants side by "
-                                                     "side at one thread each on two cores)")
+    ap.add_argument("--threads", type=positive_count_list, default="1,2",
+                    help="thread counts (the pipeline trains both variants side by side at one thread each on two "
+                         "cores)")
     ap.add_argument("--precisions", default="fp32,bf16", help="fp32 (what the trainer runs) and/or bf16 (autocast)")
     ap.add_argument("--steps", type=positive_count, default=20)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -104,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     print("| variant | threads | precision | median s/step | p90 s/step | bf16 speed-up |")
     print("|---|---|---|---|---|---|")
     for variant in args.variants.split(","):
-        for threads in (int(n) for n in args.threads.split(",")):
+        for threads in args.threads:
             torch.set_num_threads(threads)
             medians = {}
             for precision in args.precisions.split(","):

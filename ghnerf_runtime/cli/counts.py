@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["image_size", "non_negative_count", "positive_count", "seed_list"]
+__all__ = ["image_size", "non_negative_count", "positive_count", "positive_count_list", "seed_list"]
 
 
 def _whole_number(text: str, least: int) -> int:
@@ -35,6 +35,15 @@ def seed_list(text: str) -> list[int]:
     parts = [part.strip() for part in text.split(",")]
     if not all(part.isdecimal() for part in parts):  # isdigit() passes "²", which int() refuses
         raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 0, got {text!r}")
+    return [int(part) for part in parts]
+
+
+def positive_count_list(text: str) -> list[int]:
+    """An argparse ``type=`` for ``--threads 1,2``: one count at least, each a whole number >= 1 (``--threads x``
+    was int()'s "invalid literal" traceback, ``--threads 0`` torch's once the dataset was read)."""
+    parts = [part.strip() for part in text.split(",")]
+    if not all(part.isdecimal() and int(part) >= 1 for part in parts):
+        raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 1, got {text!r}")
     return [int(part) for part in parts]
 
 

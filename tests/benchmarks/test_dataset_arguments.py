@@ -36,16 +36,6 @@ def test_a_folder_that_is_no_dataset_is_a_usage_error(script, monkeypatch, capsy
     assert f"argument --data: {NO_DATA}/dataset.json: no dataset manifest here" in err, err
 
 
-@pytest.fixture(scope="module")
-def train_only(tmp_path_factory):
-    """A dataset of one training scene and no held-out split."""
-    from training.data.generate import main as generate
-
-    out = tmp_path_factory.mktemp("train_only")
-    assert generate(["--out", str(out), "--train", "1", "--res", "32", "--novel-views", "0", "--workers", "1"]) == 0
-    return out
-
-
 @pytest.mark.parametrize("script, args, option", [
     ("bench_runtime_vs_eval", ("--split", "val"), "--data"),  # its default split
     ("measure_prior_peak_shape", ("--val-split", "val"), "--data"),
