@@ -4,7 +4,8 @@ int4`` was the session config's traceback once the sequences were rendered, ``--
 traceback, ``--baseline /nowhere`` a FileNotFoundError from importing its reader (time_replay_open.py: after writing
 its take), ``--size not-a-size`` a ValueError from unpacking it, ``--motion nope`` the scene config's SimConfigError
 ``--options fps=abc`` the rig URL's RigConfigError, ``--threads x`` (time_train_step.py) int()'s traceback and
-``--input-scales 0.3`` (time_pretrain_step.py) the model config's ConfigError."""
+``--input-scales 0.3`` (time_pretrain_step.py) the model config's ConfigError, and a value the runtime's config
+refuses (``--rest-every 0``, ``--dilate 9``) its ConfigError once the model was loaded."""
 from __future__ import annotations
 
 import argparse
@@ -32,6 +33,10 @@ CASES += [("bench_sim_rig", ("--options", options), "--options")
 CASES += [("time_train_step", ("--threads", threads), "--threads") for threads in ("x", "0", "1,,2")]
 CASES += [("time_pretrain_step", ("--scenes-per-step", count), "--scenes-per-step") for count in ("x", "0")]
 CASES += [("time_pretrain_step", ("--input-scales", "x"), "--input-scales")]
+CASES += [("measure_cold_tiles", ("--rest-every", every), "--rest-every") for every in ("0", "-5", "x")]
+CASES += [("measure_novel_rays", ("--dilate", dilate), "--dilate") for dilate in ("-5", "9")]
+CASES += [("measure_novel_rays", ("--min-diff", diff), "--min-diff") for diff in ("nan", "-1", "x")]
+CASES += [("measure_lying_rendered", ("--turn-search", "--turn-search-every", "0"), "--turn-search-every")]
 #: settings the pretraining's config refuses, checked once parsed (on a dataset that is there)
 SETTINGS = [("--input-scales", "0.3"), ("--input-scales", "0"), ("--precisions", "fp16")]
 
@@ -66,6 +71,18 @@ def test_a_pretraining_setting_its_config_refuses_is_a_usage_error(option, value
     assert stopped.value.code == 2
     err = capsys.readouterr().err
     assert f"argument {option}: " in err and value in err, err
+
+
+def test_a_turn_search_period_without_the_turn_search_is_a_usage_error(monkeypatch, capsys):
+    """measure_lying_rendered.py's ``--turn-search-every`` sets the turn search's rows: without ``--turn-search``
+    (or ``--rolls``) it was ignored, the run measuring no search at all."""
+    from benchmarks import measure_lying_rendered as bench
+
+    monkeypatch.setattr(bench, "measure", lambda *a, **k: pytest.fail("the poses were measured"))
+    with pytest.raises(SystemExit) as stopped:
+        bench.main(["--turn-search-every", "2"])
+    assert stopped.value.code == 2
+    assert "--turn-search-every sets the turn search's rows: give --turn-search or --rolls" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("script, args", [("time_image_read", ("--baseline", str(BENCH.parent), "--size", "64x48")),
