@@ -37,6 +37,7 @@ CASES += [("measure_cold_tiles", ("--rest-every", every), "--rest-every") for ev
 CASES += [("measure_novel_rays", ("--dilate", dilate), "--dilate") for dilate in ("-5", "9")]
 CASES += [("measure_novel_rays", ("--min-diff", diff), "--min-diff") for diff in ("nan", "-1", "x")]
 CASES += [("measure_lying_rendered", ("--turn-search", "--turn-search-every", "0"), "--turn-search-every")]
+CASES += [("measure_exchanged_cameras", ("--only", "-5"), "--only")]  # (-5 rendered a scene of no bench number)
 #: settings the pretraining's config refuses, checked once parsed (on a dataset that is there)
 SETTINGS = [("--input-scales", "0.3"), ("--input-scales", "0"), ("--precisions", "fp16")]
 
