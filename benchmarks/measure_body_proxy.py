@@ -146,9 +146,13 @@ def main(argv: list[str] | None = None) -> int:
     from training.evaluate import TorchRenderer, source_angles_deg
     from training.fill_features import render_views
     from training.train import load_model
+    from training.model.config import ConfigError
 
     torch.set_num_threads(args.threads)
-    renderer = TorchRenderer(load_model(Path(args.model))[0])
+    try:
+        renderer = TorchRenderer(load_model(Path(args.model))[0])
+    except ConfigError as e:  # a missing, damaged or foreign file, named (was a traceback)
+        ap.error(f"argument --model: {e}")
     ds = MultiViewDataset(args.data, split=args.split)
     n = min(args.limit, len(ds)) if args.limit else len(ds)
     device_joints = load_joints(args.joints, n)

@@ -87,12 +87,16 @@ def main(argv: list[str] | None = None) -> int:
     from training.data.torch_dataset import MultiViewDataset
     from training.evaluate import TorchRenderer, angle_bins, source_angles_deg
     from training.train import load_model
+    from training.model.config import ConfigError
 
     torch.set_num_threads(args.threads)
     models = []
     for spec in args.model:
         name, _, path = spec.rpartition("=")
-        model, _ = load_model(Path(path))
+        try:
+            model, _ = load_model(Path(path))
+        except ConfigError as e:  # a missing, damaged or foreign file, named (was a traceback)
+            ap.error(f"argument --model: {e}")
         models.append((name or Path(path).parent.name, TorchRenderer(model)))
     background = models[0][1].background if models else 0.0
     ds = MultiViewDataset(args.data, split=args.split)

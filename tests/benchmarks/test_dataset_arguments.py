@@ -1,6 +1,7 @@
 """The benchmarks that read a cached dataset refuse a ``--data`` (or ``--extra-data``) that is no dataset, or lacks
 the split they read, as a usage error naming the option and the file (exit 2), before a model is loaded or
-trained: it was the reader's DatasetError traceback, in some scripts after the model was loaded."""
+trained: it was the reader's DatasetError traceback, in some scripts after the model was loaded. The scripts that
+score a torch checkpoint on the dataset refuse a ``--model`` they cannot read alike."""
 from __future__ import annotations
 
 import argparse
@@ -53,3 +54,19 @@ def test_a_split_the_script_reads_is_checked(script, args, option, train_only, m
 
 def test_a_dataset_with_the_split_gets_through(train_only):
     check_dataset_split(argparse.ArgumentParser(), train_only, "train")
+
+
+@pytest.mark.parametrize("script, args", [
+    ("measure_body_proxy", ("--model", "no-such.pt", "--joints", "j.npz")),
+    ("tune_proxy_matte", ("--model", "no-such.pt", "--joints", "j.npz")),
+    ("measure_novel_ceiling", ("--model", "a=no-such.pt")),
+])
+def test_a_checkpoint_that_cannot_be_read_is_a_usage_error(script, args, train_only, monkeypatch, capsys):
+    """``--model`` naming no checkpoint was load_model's ConfigError traceback."""
+    argv = [str(BENCH / f"{script}.py"), "--data", str(train_only), "--split", "train", *args]
+    monkeypatch.setattr(sys, "argv", argv)
+    with pytest.raises(SystemExit) as stopped:
+        runpy.run_path(str(BENCH / f"{script}.py"), run_name="__main__")
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err
+    assert "argument --model: no-such.pt: unreadable checkpoint (FileNotFoundError" in err, err
