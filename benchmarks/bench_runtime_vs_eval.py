@@ -41,6 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
 from benchmarks.bench_runtime_common import truth_view  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     BEST_METHOD,
@@ -124,6 +125,7 @@ def main(argv=None) -> int:
     ap.add_argument("--limit", type=positive_count, default=32)
     ap.add_argument("--novel", action="store_true", help="also score the colour view at the first source camera")
     args = ap.parse_args(argv)
+    check_dataset_split(ap, args.data, args.split)  # before the model loads
 
     from drivers.sim import RigPlacement, random_scene
     from training.data.cache import ShardedSplit

@@ -61,6 +61,7 @@ from ghnerf_runtime.body_proxy import proxy_body, proxy_depth  # noqa: E402
 from ghnerf_runtime.proxy_blend import proxy_blend, subject_region  # noqa: E402
 from ghnerf_runtime.proxy_matte import proxy_matte  # noqa: E402
 from training.body_proxy import proxy_scene, view_camera  # noqa: E402
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
 from training.evaluate import angle_bins  # noqa: E402
 from training.unseen_fill import fit_lighting, relit_fill, seen_surface  # noqa: E402
 
@@ -136,6 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--matte", action="store_true", help="add the fog matte's columns and the whole-view PSNRs")
     ap.add_argument("--threads", type=positive_count, default=1)
     args = ap.parse_args(argv)
+    check_dataset_split(ap, args.data, args.split)  # before the checkpoint loads
 
     import torch
 
@@ -144,9 +146,13 @@ def main(argv: list[str] | None = None) -> int:
     from training.evaluate import TorchRenderer, source_angles_deg
     from training.fill_features import render_views
     from training.train import load_model
+    from training.model.config import ConfigError
 
     torch.set_num_threads(args.threads)
-    renderer = TorchRenderer(load_model(Path(args.model))[0])
+    try:
+        renderer = TorchRenderer(load_model(Path(args.model))[0])
+    except ConfigError as e:  # a missing, damaged or foreign file, named (was a traceback)
+        ap.error(f"argument --model: {e}")
     ds = MultiViewDataset(args.data, split=args.split)
     n = min(args.limit, len(ds)) if args.limit else len(ds)
     device_joints = load_joints(args.joints, n)

@@ -65,6 +65,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.config_field import config_field  # noqa: E402
 from ghnerf_runtime.cli.model_folder import checked_model_folder, model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.empty_rooms import empty_room_pair, scene_with_screen, scene_without_person  # noqa: E402
@@ -377,8 +378,8 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", type=positive_count, default=5)
     ap.add_argument("--walk-in-after", type=non_negative_count, default=0,
                     help="empty pairs before each sequence's person")
-    ap.add_argument("--rest-every", type=int, default=None, help="the resting config's cold_tiles_rest_every "
-                    "(default: the runtime's)")
+    ap.add_argument("--rest-every", type=config_field(TrackingConfig, "cold_tiles_rest_every"), default=None,
+                    help="the resting config's cold_tiles_rest_every (default: the runtime's)")
     ap.add_argument("--rigs", default="docs/examples/rig.json", help="rig files, comma-separated")
     ap.add_argument("--walk-in-sweep", action="store_true", help="instead: each person walks in after every count "
                     "of empty pairs in a whole cycle of the rest; pairs until found, median, p90 and max")

@@ -48,7 +48,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
-from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.measure_calibration_drift import rolling_medians  # noqa: E402
 from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, HandednessWatch  # noqa: E402
 from firmware_host.daemon.config import (CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_MIRROR,  # noqa: E402
@@ -237,7 +237,7 @@ def main(argv=None) -> int:
     ap.add_argument("--heading-deg", type=float, help="render afresh, every person turned so (180: back to the rig)")
     ap.add_argument("--rig", choices=RIGS, default="bench", help="render afresh on this rig (module docstring)")
     ap.add_argument("--face-seen", action="store_true", help="count only pairs with the nose and an eye seen")
-    ap.add_argument("--only", type=int, nargs="+", metavar="K", help="render afresh just these bench sequences")
+    ap.add_argument("--only", type=non_negative_count, nargs="+", metavar="K", help="render afresh just these bench sequences")
     ap.add_argument("--pose", choices=POSES, help="render afresh, every body turned so (lying, upside down)")
     ap.add_argument("--second", type=offset_xz, metavar="DX,DZ",
                     help="render afresh with a second person DX m towards the centre line and DZ m further away")

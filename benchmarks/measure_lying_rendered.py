@@ -1,8 +1,8 @@
 """People lying on the floor and upside down, rendered and run through the runtime with the shipped model.
 
     .venv/bin/python benchmarks/measure_lying_rendered.py [--model-dir models] [--scenes 12] [--frames 3]
-        [--first-scene 0] [--poses upright,lying_x,lying_z,upside_down] [--turned-crops] [--turn-search]
-        [--turn-search-every 5] [--then POSE [--change-at N]]
+        [--first-scene 0] [--poses upright,lying_x,lying_z,upside_down] [--turned-crops]
+        [--turn-search [--turn-search-every 5]] [--then POSE [--change-at N]]
     .venv/bin/python benchmarks/measure_lying_rendered.py --rolls roll_down,roll_up,cartwheel [--frames 30]
         [--scenes 12] [--first-scene 0] [--turn-search-every 5] [--far-m 0.3]
 
@@ -71,6 +71,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.config_field import config_field  # noqa: E402
 from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, RoiConfig, SessionConfig  # noqa: E402
@@ -399,7 +400,7 @@ def main(argv=None) -> int:
                          "upside down: 180), what a search over crop rotations could give at best")
     ap.add_argument("--turn-search", action="store_true",
                     help="also run the prior with roi.turn_search on (the runtime's search over crop turns)")
-    ap.add_argument("--turn-search-every", type=int, default=None,
+    ap.add_argument("--turn-search-every", type=config_field(RoiConfig, "turn_search_every"), default=None,
                     help="roi.turn_search_every for --turn-search (default: the config's)")
     ap.add_argument("--then", default=None, help=f"change every body to this pose (one of {', '.join(POSES)}) "
                                                   "at --change-at")
@@ -413,6 +414,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.far_m is not None and args.rolls is None:
         ap.error("--far-m needs --rolls")
+    if args.turn_search_every is not None and not (args.turn_search or args.rolls):  # (was ignored, no word)
+        ap.error("--turn-search-every sets the turn search's rows: give --turn-search or --rolls with it")
     if args.rolls is not None:
         args.far_m = 0.3 if args.far_m is None else args.far_m
         rolls = [r.strip() for r in args.rolls.split(",") if r.strip()]

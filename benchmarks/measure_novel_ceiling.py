@@ -53,6 +53,7 @@ from ghnerf_runtime.config import NovelViewConfig  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
 from training.blend_ceiling import VISIBILITY_TOLERANCE_M, affine_fill, blend_sources  # noqa: E402
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
 from training.fill_features import modelled_scene, render_views  # noqa: E402
 from training.unseen_fill import fit_lighting, part_fill, relit_fill, seen_surface  # noqa: E402
 
@@ -78,6 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--opaque-at", type=float, default=NovelViewConfig().opaque_at,
                     help="the runtime's novel_view.opaque_at for the psnr@opaque_at column (default: the runtime's)")
     args = ap.parse_args(argv)
+    check_dataset_split(ap, args.data, args.split)  # before the --model checkpoints load
     opaque_at = args.opaque_at
 
     import torch
@@ -85,12 +87,16 @@ def main(argv: list[str] | None = None) -> int:
     from training.data.torch_dataset import MultiViewDataset
     from training.evaluate import TorchRenderer, angle_bins, source_angles_deg
     from training.train import load_model
+    from training.model.config import ConfigError
 
     torch.set_num_threads(args.threads)
     models = []
     for spec in args.model:
         name, _, path = spec.rpartition("=")
-        model, _ = load_model(Path(path))
+        try:
+            model, _ = load_model(Path(path))
+        except ConfigError as e:  # a missing, damaged or foreign file, named (was a traceback)
+            ap.error(f"argument --model: {e}")
         models.append((name or Path(path).parent.name, TorchRenderer(model)))
     background = models[0][1].background if models else 0.0
     ds = MultiViewDataset(args.data, split=args.split)

@@ -26,6 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ghnerf_runtime.cli.config_field import config_field  # noqa: E402
 from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.bench_runtime_common import RenderTap  # noqa: E402
@@ -33,6 +34,7 @@ from ghnerf_runtime.cli.simdata import SEQUENCE_CACHE_HELP, load_sequences, perc
 from ghnerf_runtime.config import (  # noqa: E402
     EstimatorConfig,
     HeatmapsConfig,
+    NovelViewConfig,
     load_config,
 )
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -52,8 +54,10 @@ def main(argv=None) -> int:
     ap.add_argument("--sequences", type=positive_count, default=4)
     ap.add_argument("--frames", type=positive_count, default=30)
     ap.add_argument("--silhouette-stride", type=positive_count, default=4)
-    ap.add_argument("--min-diff", type=float, help="silhouette_min_diff (default: the config's)")
-    ap.add_argument("--dilate", type=int, help="silhouette_dilate (default: the config's)")
+    ap.add_argument("--min-diff", type=config_field(NovelViewConfig, "silhouette_min_diff", float),
+                    help="silhouette_min_diff (default: the config's)")
+    ap.add_argument("--dilate", type=config_field(NovelViewConfig, "silhouette_dilate"),
+                    help="silhouette_dilate (default: the config's)")
     ap.add_argument("--interior-stride", type=non_negative_count, default=0,
                     help="also render with the interior at this stride (0: not; default)")
     ap.add_argument("--cache", help=SEQUENCE_CACHE_HELP)

@@ -23,6 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import non_negative_count  # noqa: E402
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
 from ghnerf_runtime.skeleton_prior import (  # noqa: E402
     FILE_NAME, MAX_JOINT_FROM_ROOT_M, META_PREFIX, SkeletonPrior, prior_inputs,
 )
@@ -48,6 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--limit", type=non_negative_count, default=0, help="scenes (0: all)")
     ap.add_argument("--prior", action="append", default=[], help=f"prior files (default: <model-dir>/{FILE_NAME})")
     args = ap.parse_args(argv)
+    check_dataset_split(ap, args.data, args.split)
     from training.skeleton_prior import collect
 
     arrays = collect(args.model_dir, args.data, args.split, args.limit, progress=False)

@@ -23,6 +23,7 @@ these features (docs/training.md, "Heatmap shape as prior evidence").
 from __future__ import annotations
 
 import argparse
+import io
 import sys
 import time
 from pathlib import Path
@@ -38,6 +39,9 @@ from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
 from ghnerf_runtime.config import Joints3DConfig  # noqa: E402
 from ghnerf_runtime.keypoints import decode_keypoints, model_to_heatmap_pixels  # noqa: E402
 from ghnerf_runtime.skeleton_prior import PriorInputs, _centres, mirror_inputs  # noqa: E402
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
+from training.model_card import write_atomic  # noqa: E402
+from training.run_limits import seed_problem  # noqa: E402
 
 WINDOW = 3
 """Half-width (heatmap cells) of the window described: the training Gaussian (sigma 1.5 cells) lies inside."""
@@ -147,6 +151,15 @@ def collect_all(args) -> tuple[dict, dict]:
     return tr, va
 
 
+def save_collection(path: Path, tr: dict, va: dict) -> None:
+    """The collected arrays saved to ``path`` whole or not at all (``write_atomic``): ``np.savez`` to the path
+    itself, stopped halfway (Ctrl-C, a full disk), closed its zip on the arrays written so far, a file the next
+    run read as the collection, with the held-out split missing."""
+    buf = io.BytesIO()
+    np.savez(buf, **{f"tr_{k}": v for k, v in tr.items()}, **{f"va_{k}": v for k, v in va.items()})
+    write_atomic(path, buf.getvalue())
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", type=model_folder_option, default="models/ghnerf")
@@ -161,11 +174,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=positive_count, default=2)
     ap.add_argument("--cache", help="npz of the collected arrays (written once, then read)")
     args = ap.parse_args(argv)
+    if problem := seed_problem(args.seed):  # torch's overflow traceback once the scenes were collected
+        ap.error(f"argument --seed: {problem}")
     variants = args.variants.split(",")
     if unknown := [v for v in variants if v not in VARIANTS]:
         ap.error(f"unknown variants {unknown}; known: {', '.join(VARIANTS)}")
     if args.cache:  # the collection takes minutes: its file's place is settled first, with the name savez writes
         args.cache = ready_output_arg(ap, args.cache, "--cache", suffix=".npz")
+    if not (args.cache and Path(args.cache).is_file()):  # the splits collect_all reads, before minutes of it
+        for data, split, option in [(args.data, "train", "--data"), (args.data, args.val_split, "--data"),
+                                    *((extra, "train", "--extra-data") for extra in args.extra_data)]:
+            check_dataset_split(ap, data, split, option)
 
     import torch
 
@@ -179,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         tr, va = collect_all(args)
         if args.cache:
-            np.savez(args.cache, **{f"tr_{k}": v for k, v in tr.items()}, **{f"va_{k}": v for k, v in va.items()})
+            save_collection(args.cache, tr, va)
     tr_in, tr_truth = inputs_of(tr)
     va_in, _ = inputs_of(va)
     gate = f"{Joints3DConfig().max_prior_error_m:g}"  # the runtime's default gate, one of GATES_M

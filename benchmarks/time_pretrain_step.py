@@ -25,12 +25,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
+from ghnerf_runtime.cli.counts import non_negative_count, positive_count, positive_count_list  # noqa: E402
 import torch  # noqa: E402
 
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
 from training.data.targets import TargetConfig  # noqa: E402
 from training.data.torch_dataset import MultiViewDataset  # noqa: E402
 from training.model import GHNeRF  # noqa: E402
+from training.model.config import ConfigError  # noqa: E402
 from training.pretrain_human import (PretrainConfig, StepBatches, cpu_has_native_bf16,  # noqa: E402
                                      fastest_precision, pretrain_step, resolve_precision)
 from training.train import seed_everything  # noqa: E402
@@ -38,12 +40,20 @@ from training.train import seed_everything  # noqa: E402
 WARMUP = 5
 
 
+def pretrain_config(data: str, scale: float, precision: str, steps: int, scenes_per_step: int) -> PretrainConfig:
+    """The pretraining config of one setting, checked as the pretraining checks it (the trunk's input scale
+    with the model's sizes too): a :class:`ConfigError` names the key."""
+    cfg = PretrainConfig.from_dict({"data": data, "iterations": steps + WARMUP, "precision": precision,
+                                    "scenes_per_step": scenes_per_step, "model": {"human": {"input_scale": scale}}})
+    cfg.model_config().validate()
+    return cfg
+
+
 def time_steps(data: str, scale: float, precision: str, steps: int, scenes_per_step: int = 2,
                profile_rows: int = 0) -> list[float]:
     """Wall seconds of each of ``steps`` pretraining steps (``WARMUP`` more first, not returned). With
     ``profile_rows``, also prints torch.profiler's costliest operators over those steps, by input shape."""
-    cfg = PretrainConfig.from_dict({"data": data, "iterations": steps + WARMUP, "precision": precision,
-                                    "scenes_per_step": scenes_per_step, "model": {"human": {"input_scale": scale}}})
+    cfg = pretrain_config(data, scale, precision, steps, scenes_per_step)
     seed_everything(cfg.seed)
     model = GHNeRF(cfg.model_config()).train()
     model.human.to(memory_format=torch.channels_last)
@@ -70,18 +80,36 @@ def time_steps(data: str, scale: float, precision: str, steps: int, scenes_per_s
     return times
 
 
+def _numbers(text: str) -> list[float]:
+    """An argparse ``type=`` for ``--input-scales 0.5,1.0`` (``x`` was float()'s traceback)."""
+    try:
+        return [float(part) for part in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be comma-separated numbers, got {text!r}") from None
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default="data/edge128", help="a dataset folder (default: the one make model makes)")
-    ap.add_argument("--input-scales", default="0.5,1.0", help="human.input_scale values (1.0: a 128x128 trunk)")
+    ap.add_argument("--input-scales", type=_numbers, default="0.5,1.0",
+                    help="human.input_scale values (1.0: a 128x128 trunk)")
     ap.add_argument("--precisions", default="fp32,bf16", help="PretrainConfig.precision values")
     ap.add_argument("--steps", type=positive_count, default=25)
     ap.add_argument("--threads", type=positive_count, default=2)
     ap.add_argument("--profile", type=non_negative_count, default=0, metavar="ROWS",
                     help="also print the ROWS costliest operators of each setting (torch.profiler; slows the steps)")
-    ap.add_argument("--scenes-per-step", default="2",
+    ap.add_argument("--scenes-per-step", type=positive_count_list, default="2",
                     help="PretrainConfig.scenes_per_step values (the cpu recipe 2, the gpu recipe 4)")
     args = ap.parse_args(argv)
+    check_dataset_split(ap, args.data, PretrainConfig.split)
+    for option, settings in (("--input-scales", [(scale, "fp32", 2) for scale in args.input_scales]),
+                             ("--precisions", [(1.0, p, 2) for p in args.precisions.split(",")]),
+                             ("--scenes-per-step", [(1.0, "fp32", n) for n in args.scenes_per_step])):
+        for scale, precision, per_step in settings:  # each as the pretraining checks it, before minutes of steps
+            try:
+                pretrain_config(args.data, scale, precision, args.steps, per_step)
+            except ConfigError as e:
+                ap.error(f"argument {option}: {e}")
     torch.set_num_threads(args.threads)
     torch.set_flush_denormal(True)
     auto = ("the faster of fp32 and bf16, timed at the start of each pretraining scale" if cpu_has_native_bf16()
@@ -91,8 +119,8 @@ def main(argv: list[str] | None = None) -> int:
     print("| trunk input | scenes per step | precision | median s/step | p90 s/step | median ms/scene | "
           "bf16 speed-up |")
     print("|---|---|---|---|---|---|---|")
-    for scale in (float(s) for s in args.input_scales.split(",")):
-        for per_step in (int(n) for n in args.scenes_per_step.split(",")):
+    for scale in args.input_scales:
+        for per_step in args.scenes_per_step:
             medians = {}
             for precision in args.precisions.split(","):
                 t = np.array(time_steps(args.data, scale, precision, args.steps, per_step, args.profile))

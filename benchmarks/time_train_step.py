@@ -27,28 +27,36 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count, positive_count_list  # noqa: E402
 import torch  # noqa: E402
 
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
 from training.data.targets import TargetConfig  # noqa: E402
 from training.data.torch_dataset import MultiViewDataset  # noqa: E402
 from training.model import GHNeRF  # noqa: E402
+from training.model.config import ConfigError  # noqa: E402
 from training.pipeline import RECIPES  # noqa: E402
-from training.train import (apply_overrides, build_config, load_config_file, make_batch,  # noqa: E402
+from training.train import (TrainConfig, apply_overrides, build_config, load_config_file, make_batch,  # noqa: E402
                             seed_everything, train_step)
 
 WARMUP = 3
 CONFIGS = {"ghnerf": "training/train_configs/edge128.json", "baseline": "training/train_configs/edge128_baseline.json"}
 
 
-def time_steps(data: str, variant: str, precision: str, steps: int, sets: list[str] = ()) -> list[float]:
-    """Wall seconds of each of ``steps`` joint-run steps (``WARMUP`` more first, not returned); ``sets`` are
-    ``KEY=VALUE`` train config overrides after the recipe's."""
+def train_config(data: str, variant: str, sets: list[str] = ()) -> TrainConfig:
+    """The ``cpu`` recipe's train config of ``variant`` on ``data``, ``sets`` (``KEY=VALUE``) applied after the
+    recipe's overrides."""
     root = Path(__file__).resolve().parents[1]
     raw = apply_overrides(load_config_file(root / CONFIGS[variant]),
                           [*RECIPES["cpu"].train_overrides, f'data="{data}"', *sets])
     raw.pop("pretrain_human", None)  # the joint run's encoder comes pretrained; here its weights do not matter
-    cfg = build_config(raw)
+    return build_config(raw)
+
+
+def time_steps(data: str, variant: str, precision: str, steps: int, sets: list[str] = ()) -> list[float]:
+    """Wall seconds of each of ``steps`` joint-run steps (``WARMUP`` more first, not returned); ``sets`` are
+    ``KEY=VALUE`` train config overrides after the recipe's."""
+    cfg = train_config(data, variant, sets)
     mcfg = cfg.model_config()
     seed_everything(cfg.seed)
     model = GHNeRF(mcfg).train()
@@ -72,8 +80,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default="data/edge128")
     ap.add_argument("--variants", default="ghnerf,baseline")
-    ap.add_argument("--threads", default="1,2", help="thread counts (the pipeline trains both variants side by "
-                                                     "side at one thread each on two cores)")
+    ap.add_argument("--threads", type=positive_count_list, default="1,2",
+                    help="thread counts (the pipeline trains both variants side by side at one thread each on two "
+                         "cores)")
     ap.add_argument("--precisions", default="fp32,bf16", help="fp32 (what the trainer runs) and/or bf16 (autocast)")
     ap.add_argument("--steps", type=positive_count, default=20)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -85,12 +94,18 @@ def main(argv: list[str] | None = None) -> int:
     for p in args.precisions.split(","):
         if p not in ("fp32", "bf16"):
             ap.error(f"--precisions: unknown {p!r}; fp32 or bf16")
+    for v in args.variants.split(","):  # the split the steps read, as the --set overrides leave it
+        try:
+            split = train_config(args.data, v, args.set).split
+        except ConfigError as e:  # a --set the trainer refuses, named
+            ap.error(f"argument --set: {e}")
+        check_dataset_split(ap, args.data, split)
     torch.set_flush_denormal(True)
     print(f"torch {torch.__version__}; bf16 rows are autocast, which the trainer does not run")
     print("| variant | threads | precision | median s/step | p90 s/step | bf16 speed-up |")
     print("|---|---|---|---|---|---|")
     for variant in args.variants.split(","):
-        for threads in (int(n) for n in args.threads.split(",")):
+        for threads in args.threads:
             torch.set_num_threads(threads)
             medians = {}
             for precision in args.precisions.split(","):

@@ -35,6 +35,7 @@ from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
 from ghnerf_runtime.proxy_blend import subject_region  # noqa: E402
 from ghnerf_runtime.proxy_matte import proxy_matte  # noqa: E402
 from training.body_proxy import view_camera  # noqa: E402
+from training.cli.dataset_split import check_dataset_split  # noqa: E402
 
 
 def _floats(text: str) -> list[float]:
@@ -65,6 +66,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="comma list of opacity floors (cleared); 0: the runtime's picture")
     ap.add_argument("--threads", type=positive_count, default=1)
     args = ap.parse_args(argv)
+    check_dataset_split(ap, args.data, args.split)  # before the checkpoint loads
 
     import torch
 
@@ -73,9 +75,13 @@ def main(argv: list[str] | None = None) -> int:
     from training.fill_features import render_views
     from training.evaluate import TorchRenderer
     from training.train import load_model
+    from training.model.config import ConfigError
 
     torch.set_num_threads(args.threads)
-    renderer = TorchRenderer(load_model(Path(args.model))[0])
+    try:
+        renderer = TorchRenderer(load_model(Path(args.model))[0])
+    except ConfigError as e:  # a missing, damaged or foreign file, named (was a traceback)
+        ap.error(f"argument --model: {e}")
     ds = MultiViewDataset(args.data, split=args.split)
     n = min(args.limit, len(ds)) if args.limit else len(ds)
     joints, found = load_joints(args.joints, n), load_found(args.joints, n)

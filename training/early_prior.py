@@ -72,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from training import skeleton_prior as sp
-    from training.model_card import graph_sha256, sha256
+    from training.model_card import graph_sha256, sha256, write_atomic
     from training.pipeline import early_prior_current
 
     job_path = Path(args.job)
@@ -93,10 +93,10 @@ def main(argv: list[str] | None = None) -> int:
     request = {**job["request"], "keypoints": {name: graph_sha256(p) for name, p in graphs.items()}}
     if sp.main(job["prior_argv"]) != 0:
         return 1
-    (folder / REQUEST_FILE).write_text(json.dumps({"request": request, "prior": str(prior),
-                                                   "prior_sha256": sha256(prior),
-                                                   "human_sha256": sha256(human)},
-                                                  indent=1) + "\n")
+    # whole or not at all: half a request (a full disk, a stop) was read as no early prior, minutes retrained
+    write_atomic(folder / REQUEST_FILE, json.dumps({"request": request, "prior": str(prior),
+                                                    "prior_sha256": sha256(prior), "human_sha256": sha256(human)},
+                                                   indent=1) + "\n")
     print(f"early prior: {prior} (keypoint graphs {', '.join(graphs)})", file=sys.stderr)
     return 0
 

@@ -663,17 +663,18 @@ def score_human(path: str | Path, data: str | Path, split: str = "val", scenes: 
 
 
 def main(argv: list[str] | None = None) -> int:
-    from training.cli.pretrain_human import build_parser  # noqa: PLC0415
+    from training.cli.pretrain_human import build_parser, parse_args  # noqa: PLC0415
 
     ap = build_parser()
-    args = ap.parse_args(argv)
+    args = parse_args(argv)
     from training.data.errors import DataError
 
     if args.score:
         if args.threads:
             torch.set_num_threads(args.threads)
         try:
-            print(strict_json(score_human(args.score, args.data or "data/edge128", args.split, args.scenes)))
+            print(strict_json(score_human(args.score, args.data or "data/edge128", args.split or "val",
+                                          args.scenes or 0)))
         except (ConfigError, DataError) as e:  # the file, or a missing dataset or split (was a traceback)
             print(f"error: {e}", file=sys.stderr)
             return 2

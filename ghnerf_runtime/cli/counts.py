@@ -12,7 +12,8 @@ from __future__ import annotations
 import argparse
 import re
 
-__all__ = ["bounded_count", "image_size", "non_negative_count", "positive_count", "seed_list", "whole_number"]
+__all__ = ["bounded_count", "image_size", "non_negative_count", "positive_count", "positive_count_list", "seed_list",
+           "whole_number"]
 
 _SIGNED_DIGITS = re.compile(r"[+-]?[0-9]+")
 
@@ -56,6 +57,15 @@ def seed_list(text: str) -> list[int]:
         return [whole_number(part, 0) for part in text.split(",")]
     except argparse.ArgumentTypeError:
         raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 0, got {text!r}") from None
+
+
+def positive_count_list(text: str) -> list[int]:
+    """An argparse ``type=`` for ``--threads 1,2``: one count at least, each a whole number >= 1 (``--threads x``
+    was int()'s "invalid literal" traceback, ``--threads 0`` torch's once the dataset was read)."""
+    try:
+        return [whole_number(part, 1) for part in text.split(",")]
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 1, got {text!r}") from None
 
 
 def image_size(text: str) -> tuple[int, int]:

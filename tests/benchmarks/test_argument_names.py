@@ -3,7 +3,9 @@ refuse what names nothing as a usage error (exit 2) that names the option, befor
 int4`` was the session config's traceback once the sequences were rendered, ``--seeds x`` int()'s "invalid literal"
 traceback, ``--baseline /nowhere`` a FileNotFoundError from importing its reader (time_replay_open.py: after writing
 its take), ``--size not-a-size`` a ValueError from unpacking it, ``--motion nope`` the scene config's SimConfigError
-and ``--options fps=abc`` the rig URL's RigConfigError."""
+``--options fps=abc`` the rig URL's RigConfigError, ``--threads x`` (time_train_step.py) int()'s traceback and
+``--input-scales 0.3`` (time_pretrain_step.py) the model config's ConfigError, and a value the runtime's config
+refuses (``--rest-every 0``, ``--dilate 9``) its ConfigError once the model was loaded."""
 from __future__ import annotations
 
 import argparse
@@ -28,6 +30,16 @@ CASES += [("time_replay_open", ("--size", size), "--size") for size in ("not-a-s
 CASES += [("bench_sim_render", ("--motion", motion), "--motion") for motion in ("nope", "no-such-clip.bvh")]
 CASES += [("bench_sim_rig", ("--options", options), "--options")
           for options in ("fps=abc", "fps=30&colour=red", "cache=/tmp")]
+CASES += [("time_train_step", ("--threads", threads), "--threads") for threads in ("x", "0", "1,,2")]
+CASES += [("time_pretrain_step", ("--scenes-per-step", count), "--scenes-per-step") for count in ("x", "0")]
+CASES += [("time_pretrain_step", ("--input-scales", "x"), "--input-scales")]
+CASES += [("measure_cold_tiles", ("--rest-every", every), "--rest-every") for every in ("0", "-5", "x")]
+CASES += [("measure_novel_rays", ("--dilate", dilate), "--dilate") for dilate in ("-5", "9")]
+CASES += [("measure_novel_rays", ("--min-diff", diff), "--min-diff") for diff in ("nan", "-1", "x")]
+CASES += [("measure_lying_rendered", ("--turn-search", "--turn-search-every", "0"), "--turn-search-every")]
+CASES += [("measure_exchanged_cameras", ("--only", "-5"), "--only")]  # (-5 rendered a scene of no bench number)
+#: settings the pretraining's config refuses, checked once parsed (on a dataset that is there)
+SETTINGS = [("--input-scales", "0.3"), ("--input-scales", "0"), ("--precisions", "fp16")]
 
 
 def _value(args: tuple[str, ...], option: str) -> str:
@@ -46,6 +58,32 @@ def test_a_name_that_names_nothing_is_a_usage_error(script, args, option, monkey
     assert stopped.value.code == 2
     err = capsys.readouterr().err
     assert f"argument {option}:" in err and _value(args, option) in err, err
+
+
+@pytest.mark.parametrize("option, value", SETTINGS, ids=[" ".join(setting) for setting in SETTINGS])
+def test_a_pretraining_setting_its_config_refuses_is_a_usage_error(option, value, train_only, monkeypatch, capsys):
+    """time_pretrain_step.py checks each setting as the pretraining does before it times any: ``--input-scales
+    0.3`` (a trunk input of 38.4 px) and ``--precisions fp16`` were ConfigError tracebacks after the steps of the
+    settings before them had run."""
+    script = BENCH / "time_pretrain_step.py"
+    monkeypatch.setattr(sys, "argv", [str(script), "--data", str(train_only), option, value])
+    with pytest.raises(SystemExit) as stopped:
+        runpy.run_path(str(script), run_name="__main__")
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument {option}: " in err and value in err, err
+
+
+def test_a_turn_search_period_without_the_turn_search_is_a_usage_error(monkeypatch, capsys):
+    """measure_lying_rendered.py's ``--turn-search-every`` sets the turn search's rows: without ``--turn-search``
+    (or ``--rolls``) it was ignored, the run measuring no search at all."""
+    from benchmarks import measure_lying_rendered as bench
+
+    monkeypatch.setattr(bench, "measure", lambda *a, **k: pytest.fail("the poses were measured"))
+    with pytest.raises(SystemExit) as stopped:
+        bench.main(["--turn-search-every", "2"])
+    assert stopped.value.code == 2
+    assert "--turn-search-every sets the turn search's rows: give --turn-search or --rolls" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("script, args", [("time_image_read", ("--baseline", str(BENCH.parent), "--size", "64x48")),

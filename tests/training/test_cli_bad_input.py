@@ -75,6 +75,29 @@ def test_pretraining_out_that_is_a_file_and_score_inputs_are_named(data64, tmp_p
     assert not (tmp_path / "p").exists()
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["--split", "train"], "--split: read only with --score HUMAN_PT; the pretraining's split is its config's"),
+    (["--scenes", "4", "--split", "val"], "--split, --scenes: read only with --score HUMAN_PT"),
+    (["--score", "PT", "--iterations", "10"], "--iterations: not read with --score HUMAN_PT, which only scores it"),
+    (["--score", "PT", "--out", "RUN", "--resume"], "--out, --resume: not read with --score HUMAN_PT"),
+    (["--score", "PT", "--set", "lr=1"], "--set: not read with --score HUMAN_PT"),
+])
+def test_an_option_of_the_other_pretraining_mode_is_refused_before_the_work(argv, words, tmp_path, capsys,
+                                                                              monkeypatch):
+    """``--out RUN --split train`` pretrained on the config's split (``--split`` is --score's), and ``--score
+    HUMAN_PT --iterations 10`` scored the file and trained nothing, each without a word."""
+    from training import pretrain_human
+
+    monkeypatch.setattr(pretrain_human, "pretrain", lambda *a, **k: pytest.fail("the pretraining ran"))
+    monkeypatch.setattr(pretrain_human, "score_human", lambda *a, **k: pytest.fail("the file was scored"))
+    argv = [str(tmp_path / a) if a in ("PT", "RUN") else a for a in argv]
+    if "--score" not in argv:
+        argv = ["--out", str(tmp_path / "run"), *argv]
+    rc, err = run(pretrain_human.main, argv, capsys)
+    assert rc == 2 and words in one_error_line(err)
+    assert not (tmp_path / "run").exists() and not (tmp_path / "RUN").exists()
+
+
 def test_pretraining_score_of_a_missing_dataset_is_one_line(data64, tmp_path, capsys):
     from training.pretrain_human import main
 

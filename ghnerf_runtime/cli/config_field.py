@@ -1,0 +1,30 @@
+"""A benchmark option that sets one field of a runtime config (``--rest-every`` sets
+``TrackingConfig.cold_tiles_rest_every``), checked at parsing by the config's own validation: a value the config
+refuses was its ConfigError traceback once the model was loaded, in some scripts once the sequences were rendered.
+"""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from typing import Any
+
+from ghnerf_runtime.errors import ConfigError
+
+__all__ = ["config_field"]
+
+
+def config_field(config_class: type, field: str, parse: Callable[[str], Any] = int) -> Callable[[str], Any]:
+    """An argparse ``type=`` for a value of ``config_class``'s ``field``: read with ``parse``, then refused, with
+    the config's message (which names the field and the range), when ``config_class(field=value)`` is."""
+    def checked(text: str) -> Any:
+        try:
+            value = parse(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{config_class.__name__}.{field}: not a number, got {text!r}") from None
+        try:
+            config_class(**{field: value})
+        except ConfigError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+        return value
+
+    return checked
