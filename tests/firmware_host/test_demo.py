@@ -1598,3 +1598,40 @@ def test_a_stop_just_before_the_take_s_close_of_a_run_an_error_ended_still_close
     err = capsys.readouterr().err.splitlines()
     assert rc == 2 and len(err) == 1 and "the third pair went wrong" in err[0], err
     assert json.loads((take / "manifest.json").read_text())["complete"] is True  # closed
+
+
+@pytest.mark.parametrize("take_fails", [False, True])
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+def test_a_stop_after_the_take_s_close_of_a_run_an_error_ended_does_not_hide_the_error(
+        tmp_path, capsys, monkeypatch, stop, take_fails):
+    """An error ends the reading (one the demo says, exit 2); a Ctrl-C or SIGTERM landing once the take is closed,
+    as the error leaves (a failed take's line said on its way), was raised in the error's place: "stopped", 130 or
+    143, the error's line lost. Now the error is said, exit 2 (a failed take said before it), as ghcal capture's."""
+    import signal
+
+    import drivers.backends.record as record_module
+
+    from ghnerf_runtime.cli import recorded_take
+
+    real_say = recorded_take.RecordedTake.say_failure
+
+    def said_then_stopped(self):  # on the error's way out to main, the take closed
+        failed = real_say(self)
+        os.kill(os.getpid(), signal.Signals[stop])  # its handler runs here, in the main thread, at once
+        return failed
+
+    if take_fails:
+        monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
+    monkeypatch.setattr(recorded_take.RecordedTake, "say_failure", said_then_stopped)
+    monkeypatch.setattr(demo, "truth_frame",
+                        _stopping_at_the_third_pair(lambda: demo.DemoError("the third pair went wrong")))
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "20", "--out",
+                                       str(tmp_path / "out")])
+    err = capsys.readouterr().err.splitlines()
+    failed = [f"{demo.prog_name()}: error: recording to {take} failed as it closed: [Errno 28] No space left on "
+              "device; its manifest says complete: false"] if take_fails else []
+    assert (rc, err) == (2, failed + [f"{demo.prog_name()}: error: the third pair went wrong"]), err
+    assert json.loads((take / "manifest.json").read_text())["complete"] is not take_fails  # closed
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
