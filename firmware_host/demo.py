@@ -592,6 +592,13 @@ def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfi
         delivered += skipped
         read_to_its_end = True
         second_stops_dropped.enter_context(stop_signals_noted(late_stops))
+    except KeyboardInterrupt as e:
+        if not read_to_its_end:  # before the pairs (the open, the model load): main says it
+            raise
+        # it landed as the noting above began: the late stop of a run that read to its end, as ghcal capture's.
+        # Raised on from here, it skipped the summary of a run whose take failed (said, exit 2)
+        second_stops_dropped.enter_context(stop_signals_deferred(then_raise=False))
+        late_stops.append(e)
     except Exception as error:  # main says it (exit 2), once the take is closed, whatever stop lands meanwhile
         leaving.held(error, second_stops_dropped)
         raise

@@ -1550,7 +1550,8 @@ def test_a_first_stop_just_before_the_take_s_close_of_a_run_that_read_to_its_end
     """A run read to its end with no stop before; a Ctrl-C or SIGTERM (timeout's, as --seconds ran out) landing in
     the finally just before the take's close was raised past that close: the take left complete: false and
     unchecked. Now the take is closed whatever instant the stop lands, then the stop is the run's end as one in the
-    close is (130, 143; a failed take said after the summary, exit 2)."""
+    close is (130, 143; a failed take said after the summary, exit 2: the summary was skipped where the stop landed
+    as the noting began)."""
     import signal
 
     import drivers.backends.record as record_module
@@ -1564,6 +1565,7 @@ def test_a_first_stop_just_before_the_take_s_close_of_a_run_that_read_to_its_end
                                        str(tmp_path / "out")])
     captured = capsys.readouterr()
     assert json.loads((take / "manifest.json").read_text())["complete"] is not take_fails  # closed
+    assert ("the rig delivered" in captured.out) is take_fails, captured.out  # the summary: a failed take's only
     if take_fails:
         assert rc == 2 and captured.err.splitlines() == [
             f"{demo.prog_name()}: error: recording to {take} failed as it closed: [Errno 28] No space left on device; "
