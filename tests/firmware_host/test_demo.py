@@ -1637,3 +1637,30 @@ def test_a_stop_after_the_take_s_close_of_a_run_an_error_ended_does_not_hide_the
     assert (rc, err) == (2, failed + [f"{demo.prog_name()}: error: the third pair went wrong"]), err
     assert json.loads((take / "manifest.json").read_text())["complete"] is not take_fails  # closed
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
+def test_a_ctrl_c_the_demo_was_started_to_ignore_does_not_stop_it(tmp_path, capsys, monkeypatch):
+    """A script's background job (``ghnerf-demo ... &``) starts with Ctrl-C ignored, and the script's own Ctrl-C
+    reaches it too. One landing in a pair's send (held there, so that the pair goes out whole) was raised after it:
+    "stopping: Ctrl-C", the run cut short. Now it stays ignored: the run reads on to its --seconds."""
+    import signal
+
+    real_frame, frames = demo.truth_frame, []
+
+    def ctrl_c_then_frame(*args, **kwargs):  # in the send's hold
+        if not frames:
+            os.kill(os.getpid(), signal.SIGINT)  # its handler runs here, in the main thread, at once
+        frames.append(1)
+        return real_frame(*args, **kwargs)
+
+    monkeypatch.setattr(demo, "truth_frame", ctrl_c_then_frame)
+    url = f"sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}"
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
+                                           str(tmp_path / "out")])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    out = capsys.readouterr().out
+    assert frames and rc == 0, out
+    assert "stopping: Ctrl-C" not in out and "the rig delivered" in out, out
