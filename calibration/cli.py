@@ -20,13 +20,12 @@ Exit status: 0 on success (warnings are printed, not fatal), 2 for an error the 
 message names the file, folder, camera or key); 130 after Ctrl-C, 143 after SIGTERM, each with one line
 (``capture``: 0 when it kept views, as its normal end; 2 when a ``record+`` take recorded with it failed as it
 closed, since session 75, also where a stop lands after the cameras' close: ``RecordedTake``; 2 for an error that
-ended it, also where a stop lands as that error leaves: ``_ErrorLeaving``).
+ended it, also where a stop lands as that error leaves: ``error_leaving``).
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import json
 import math
 import os
@@ -52,6 +51,7 @@ from calibration.image_sizes import camera_image_sizes, mixed_sizes_problem
 from calibration.render import SYNTH_BOARD, calibration_views, synth_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.counts import bounded_count, non_negative_count, positive_count
+from ghnerf_runtime.cli.error_leaving import ErrorLeaving, status_keeping_the_error
 from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, same_file, unwritable_reason
 from ghnerf_runtime.cli.recorded_take import RecordedTake, status_saying_a_failed_take
 from ghnerf_runtime.cli.rig_messages import log_on_stderr, rig_messages_on_stderr
@@ -497,35 +497,17 @@ def cmd_capture(args: argparse.Namespace) -> int:
               file=sys.stderr)
     source = drivers.create_rig_source(url)
     take = RecordedTake(source, PROG)
-    leaving = _ErrorLeaving()
-    try:
-        # a stop landing after the cameras' close, before the take's check or in the summary, was said "the capture
-        # did not finish", 130 or 143, of a take that failed
-        status = status_saying_a_failed_take(
-            lambda: _capture_and_summarise(args, board, out, earlier, source, take, leaving), take)
-    except KeyboardInterrupt:
-        if leaving.error is None:
-            raise
-    if leaving.error is not None:  # a stop hid it as it left (the cameras' close, the take's line): main says it, 2
-        raise leaving.error
-    return status
-
-
-@dataclasses.dataclass
-class _ErrorLeaving:
-    """The error on its way out of a capture (a camera gone, a folder it cannot write). A Ctrl-C or SIGTERM landing
-    as it left (a second Ctrl-C pressed while the cameras closed) was raised in its place: "stopped; the capture did
-    not finish", 130 or 143, the error's words lost. It is said instead, exit 2: the capture had failed before the
-    stop came, and the error names what failed and which views are kept (capture the rest with --append)."""
-
-    error: Exception | None = None
+    # a stop landing after the cameras' close, before the take's check or in the summary, was said "the capture did
+    # not finish", 130 or 143, of a take that failed; one landing as an error left, in the error's place
+    return status_keeping_the_error(lambda leaving: status_saying_a_failed_take(
+        lambda: _capture_and_summarise(args, board, out, earlier, source, take, leaving), take))
 
 
 def _capture_and_summarise(args: argparse.Namespace, board: BoardSpec, out: Path, earlier: Sequence[Path],
-                           source, take: RecordedTake, leaving: _ErrorLeaving) -> int:
+                           source, take: RecordedTake, leaving: ErrorLeaving) -> int:
     """The capture from ``source`` (a ``drivers.RigSource``), opened here and closed however the capture ends: the
     views kept into ``out``, after the ``earlier`` ones, then its last line; the exit status. An error on its way out
-    is set in ``leaving`` as it leaves the reading."""
+    is noted in ``leaving`` as it leaves the reading."""
     import drivers
     from drivers.base import log as rig_source_log
     from drivers.url import redact_url
@@ -703,8 +685,7 @@ def _capture_and_summarise(args: argparse.Namespace, board: BoardSpec, out: Path
         else:
             stopped = e
     except Exception as error:  # main says it (exit 2), once the cameras are closed, whatever stop lands meanwhile
-        leaving.error = error
-        stops_held.enter_context(stop_signals_deferred(then_raise=False))
+        leaving.held(error, stops_held)
         raise
     finally:
         # a Ctrl-C or SIGTERM that lands in the close waits for it, as ghnerf-demo's does: raised there it tore the

@@ -91,6 +91,7 @@ from firmware_host.sinks.file_sink import FileSink
 from firmware_host.sinks.registry import STAND_IN_CAMERAS
 from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
+from ghnerf_runtime.cli.error_leaving import ErrorLeaving, status_keeping_the_error
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
 from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output
 from ghnerf_runtime.cli.recorded_take import RecordedTake, status_saying_a_failed_take
@@ -460,14 +461,17 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     source = drivers.create_rig_source(args.url)
     take = RecordedTake(source, prog)
     # a stop landing after the reading, between the sink's close and the source's or in the summary, was said
-    # "stopped", 130 or 143, of a take that failed
-    return status_saying_a_failed_take(lambda: _read_and_summarise(args, prog, cfg, source, sink_url, take), take)
+    # "stopped", 130 or 143, of a take that failed; one landing as an error left, after the take's close, in the
+    # error's place
+    return status_keeping_the_error(lambda leaving: status_saying_a_failed_take(
+        lambda: _read_and_summarise(args, prog, cfg, source, sink_url, take, leaving), take))
 
 
 def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfig | None, source: drivers.RigSource,
-                        sink_url: str, take: RecordedTake) -> int:
+                        sink_url: str, take: RecordedTake, leaving: ErrorLeaving) -> int:
     """The run on ``source``, opened here and closed however the run ends: the pairs read, estimated and streamed
-    to ``sink_url`` for ``--seconds``, then the summary; the exit status."""
+    to ``sink_url`` for ``--seconds``, then the summary; the exit status. An error on its way out is noted in
+    ``leaving`` as it leaves the reading."""
     stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
     read_to_its_end = False  # the reading ended without an error or a stop on its way out (the close's raise)
     late_stop: KeyboardInterrupt | None = None  # one that landed in the close of a run that read to its end
@@ -588,8 +592,15 @@ def _read_and_summarise(args: argparse.Namespace, prog: str, cfg: EstimatorConfi
         delivered += skipped
         read_to_its_end = True
         second_stops_dropped.enter_context(stop_signals_noted(late_stops))
-    except Exception:
+    except KeyboardInterrupt as e:
+        if not read_to_its_end:  # before the pairs (the open, the model load): main says it
+            raise
+        # it landed as the noting above began: the late stop of a run that read to its end, as ghcal capture's.
+        # Raised on from here, it skipped the summary of a run whose take failed (said, exit 2)
         second_stops_dropped.enter_context(stop_signals_deferred(then_raise=False))
+        late_stops.append(e)
+    except Exception as error:  # main says it (exit 2), once the take is closed, whatever stop lands meanwhile
+        leaving.held(error, second_stops_dropped)
         raise
     finally:
         # a Ctrl-C or SIGTERM that lands in the close waits for it: a recorder writes what it holds queued and

@@ -80,7 +80,8 @@ def stop_signals_deferred(*, then_raise: bool = True, only_raising: bool = False
     """Within the block Ctrl-C (SIGINT) and SIGTERM are noted, not raised, so that what must finish is written
     whole: the outputs a stopped run closes when the user presses Ctrl-C again (a second Ctrl-C landing in
     ``ghnerf-run``'s write of its ``.json`` list lost every pair of it), a recorder's close rewriting its manifest
-    ``complete: true``. The handlers before it are put back as it ends, however it ends.
+    ``complete: true``. The handlers before it are put back as it ends, however it ends. A signal ignored before
+    the block (``SIG_IGN``) is not noted: it stays ignored.
 
     ``then_raise``: the first signal noted is raised once the block has ended normally (:class:`KeyboardInterrupt`
     or :class:`Terminated`); pass False where the block runs while a stop or an error is already on its way, which
@@ -102,8 +103,9 @@ def stop_signals_noted(stops: list[KeyboardInterrupt]) -> Iterator[None]:
     :class:`KeyboardInterrupt` (or :class:`Terminated`) it would have raised, once the block has ended, however it
     ends. For the stretch between a run's reading and its close (``ghnerf-demo``, ``ghcal capture``): a first stop
     landing there, before the close's own deferral, was raised past the close (a ``record+`` take left
-    ``complete: false``); noted, it is the caller's to raise once the take is closed and checked. Outside the main
-    thread nothing is installed, as for :func:`sigterm_as_interrupt`."""
+    ``complete: false``); noted, it is the caller's to raise once the take is closed and checked. One ignored before
+    the block is not noted (:func:`stop_signals_deferred`). Outside the main thread nothing is installed, as for
+    :func:`sigterm_as_interrupt`."""
     noted: list[int] = []
     try:
         with _signals_held((signal.SIGINT, signal.SIGTERM), then_raise=False, noted=noted):
@@ -177,7 +179,10 @@ def _install_noting(signums: tuple[signal.Signals, ...], noted: list[int],
     installing goes on: raised out of here it would skip the block (``closed_with_stops_deferred``'s close) and
     leave the handlers already set in place. Any other error puts ``previous`` back and is raised."""
     def note(got: int, _frame: object) -> None:
-        noted.append(got)
+        # one ignored before (a script's background job: ``ghnerf-demo ... &``) stays ignored: noted, it was raised
+        # after the block, the Ctrl-C meant for the script ending the tool (130)
+        if previous.get(got) is not signal.SIG_IGN:
+            noted.append(got)
 
     waiting = list(signums)
     try:

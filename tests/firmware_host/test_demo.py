@@ -1550,7 +1550,8 @@ def test_a_first_stop_just_before_the_take_s_close_of_a_run_that_read_to_its_end
     """A run read to its end with no stop before; a Ctrl-C or SIGTERM (timeout's, as --seconds ran out) landing in
     the finally just before the take's close was raised past that close: the take left complete: false and
     unchecked. Now the take is closed whatever instant the stop lands, then the stop is the run's end as one in the
-    close is (130, 143; a failed take said after the summary, exit 2)."""
+    close is (130, 143; a failed take said after the summary, exit 2: the summary was skipped where the stop landed
+    as the noting began)."""
     import signal
 
     import drivers.backends.record as record_module
@@ -1564,6 +1565,7 @@ def test_a_first_stop_just_before_the_take_s_close_of_a_run_that_read_to_its_end
                                        str(tmp_path / "out")])
     captured = capsys.readouterr()
     assert json.loads((take / "manifest.json").read_text())["complete"] is not take_fails  # closed
+    assert ("the rig delivered" in captured.out) is take_fails, captured.out  # the summary: a failed take's only
     if take_fails:
         assert rc == 2 and captured.err.splitlines() == [
             f"{demo.prog_name()}: error: recording to {take} failed as it closed: [Errno 28] No space left on device; "
@@ -1598,3 +1600,67 @@ def test_a_stop_just_before_the_take_s_close_of_a_run_an_error_ended_still_close
     err = capsys.readouterr().err.splitlines()
     assert rc == 2 and len(err) == 1 and "the third pair went wrong" in err[0], err
     assert json.loads((take / "manifest.json").read_text())["complete"] is True  # closed
+
+
+@pytest.mark.parametrize("take_fails", [False, True])
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM"])
+def test_a_stop_after_the_take_s_close_of_a_run_an_error_ended_does_not_hide_the_error(
+        tmp_path, capsys, monkeypatch, stop, take_fails):
+    """An error ends the reading (one the demo says, exit 2); a Ctrl-C or SIGTERM landing once the take is closed,
+    as the error leaves (a failed take's line said on its way), was raised in the error's place: "stopped", 130 or
+    143, the error's line lost. Now the error is said, exit 2 (a failed take said before it), as ghcal capture's."""
+    import signal
+
+    import drivers.backends.record as record_module
+
+    from ghnerf_runtime.cli import recorded_take
+
+    real_say = recorded_take.RecordedTake.say_failure
+
+    def said_then_stopped(self):  # on the error's way out to main, the take closed
+        failed = real_say(self)
+        os.kill(os.getpid(), signal.Signals[stop])  # its handler runs here, in the main thread, at once
+        return failed
+
+    if take_fails:
+        monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
+    monkeypatch.setattr(recorded_take.RecordedTake, "say_failure", said_then_stopped)
+    monkeypatch.setattr(demo, "truth_frame",
+                        _stopping_at_the_third_pair(lambda: demo.DemoError("the third pair went wrong")))
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "20", "--out",
+                                       str(tmp_path / "out")])
+    err = capsys.readouterr().err.splitlines()
+    failed = [f"{demo.prog_name()}: error: recording to {take} failed as it closed: [Errno 28] No space left on "
+              "device; its manifest says complete: false"] if take_fails else []
+    assert (rc, err) == (2, failed + [f"{demo.prog_name()}: error: the third pair went wrong"]), err
+    assert json.loads((take / "manifest.json").read_text())["complete"] is not take_fails  # closed
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
+def test_a_ctrl_c_the_demo_was_started_to_ignore_does_not_stop_it(tmp_path, capsys, monkeypatch):
+    """A script's background job (``ghnerf-demo ... &``) starts with Ctrl-C ignored, and the script's own Ctrl-C
+    reaches it too. One landing in a pair's send (held there, so that the pair goes out whole) was raised after it:
+    "stopping: Ctrl-C", the run cut short. Now it stays ignored: the run reads on to its --seconds."""
+    import signal
+
+    real_frame, frames = demo.truth_frame, []
+
+    def ctrl_c_then_frame(*args, **kwargs):  # in the send's hold
+        if not frames:
+            os.kill(os.getpid(), signal.SIGINT)  # its handler runs here, in the main thread, at once
+        frames.append(1)
+        return real_frame(*args, **kwargs)
+
+    monkeypatch.setattr(demo, "truth_frame", ctrl_c_then_frame)
+    url = f"sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}"
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
+                                           str(tmp_path / "out")])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    out = capsys.readouterr().out
+    assert frames and rc == 0, out
+    assert "stopping: Ctrl-C" not in out and "the rig delivered" in out, out

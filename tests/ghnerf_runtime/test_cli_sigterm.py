@@ -264,3 +264,22 @@ def test_stops_noted_are_handed_over_as_their_stops_and_never_raised():
             os.kill(os.getpid(), signal.SIGINT)  # each handler runs here, in the main thread, at once
         assert [type(stop) for stop in stops] == [Terminated, KeyboardInterrupt]
         assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+
+
+@pytest.mark.usefixtures("handlers_put_back")
+def test_a_ctrl_c_ignored_before_stays_ignored_through_every_hold():
+    """A tool started with Ctrl-C ignored (a script's background job, ``ghnerf-demo ... &``, which the script's own
+    Ctrl-C reaches too) goes on past it. One landing in a hold (the sink's or the take's close, the stretch from the
+    reading to the close) was noted and raised after it: the run ended 130, its summary skipped."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    stops: list[KeyboardInterrupt] = []
+    try:
+        with stop_signals_deferred():
+            os.kill(os.getpid(), signal.SIGINT)  # its handler runs here, in the main thread, at once
+        returned = closed_with_stops_deferred(lambda: os.kill(os.getpid(), signal.SIGINT), then_raise=True)
+        with stop_signals_noted(stops):
+            os.kill(os.getpid(), signal.SIGINT)
+    except KeyboardInterrupt:
+        pytest.fail("an ignored Ctrl-C was raised after the hold")
+    assert returned is None and stops == []
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN  # put back
