@@ -25,9 +25,9 @@ from drivers.pairing import DropPolicy, PairingConfig, PairingStats, silent_came
 from drivers.registry import BACKENDS, create_rig_source, open_rig
 
 __all__ = [
-    "BACKENDS", "BackendNotAvailableError", "CameraTruth", "DriverError", "DropPolicy", "EndOfStream",
-    "Frame", "FramePair", "FrameSizeError", "ManualClock", "MonotonicClock", "OpenInProgressError", "PairingConfig",
-    "PairingStats",
-    "RecordingError", "RigConfigError", "RigDisconnectedError", "RigInitializationError", "RigOperationError",
-    "RigSource", "RigTimeoutError", "create_rig_source", "open_rig", "silent_cameras", "why_no_pair",
+    "BACKENDS", "BackendNotAvailableError", "CameraTruth", "DriverError", "DropPolicy", "EndOfStream", "Frame",
+    "FramePair", "FrameSizeError", "ManualClock", "MonotonicClock", "OpenInProgressError", "PairingConfig",
+    "PairingStats", "RecordingError", "RigConfigError", "RigDisconnectedError", "RigInitializationError",
+    "RigOperationError", "RigSource", "RigTimeoutError", "create_rig_source", "open_rig", "silent_cameras",
+    "why_no_pair",
 ]

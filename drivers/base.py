@@ -134,7 +134,8 @@ class RigSource(abc.ABC):
 
     @abc.abstractmethod
     def _open(self) -> None:
-        """Start the cameras. Raise :class:`RigInitializationError` on failure."""
+        """Start the cameras. Raise :class:`RigInitializationError` on failure, having released what was started:
+        :meth:`_close` follows only an ``_open`` that returned."""
 
     @abc.abstractmethod
     def _read_frame(self, timeout_s: float) -> Frame | None:
@@ -147,7 +148,8 @@ class RigSource(abc.ABC):
 
     @abc.abstractmethod
     def _close(self) -> None:
-        """Release the cameras. Called once."""
+        """Release the cameras. Called at most once, by :meth:`close` or by an :meth:`open` that failed or was
+        cancelled after ``_open`` returned."""
 
     def _frame_available(self) -> bool:
         """Whether :meth:`_read_frame` can return a frame now, without waiting.
@@ -199,7 +201,8 @@ class RigSource(abc.ABC):
         return self._pairer.stats.snapshot()
 
     def open(self) -> "RigSource":
-        """Start the cameras (``_open``); a second call does nothing.
+        """Start the cameras (``_open``); a call once the source is open does nothing (one while another thread's
+        open runs raises, below).
 
         Raises:
             RigOperationError: the source was closed before.

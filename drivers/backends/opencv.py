@@ -252,9 +252,8 @@ def _closed_while_reading() -> RigOperationError:
 
 def _closed_during_open() -> RigInitializationError:
     """What an open() raises when another thread closes the source while it opens the cameras or waits for their
-    first frames."""
-    return RigInitializationError("opencv:// source closed while open() started its cameras (a close() from another "
-                                  "thread): the open was cancelled")
+    first frames (worded as sim://, replay:// and depthai:// word theirs)."""
+    return RigInitializationError("opencv:// source closed while open() started its cameras: the open was cancelled")
 
 
 def _same_camera(first: str, second: str) -> bool:

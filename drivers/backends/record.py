@@ -30,7 +30,8 @@ A ``close()`` from another thread while ``open()`` runs goes on to the inner sou
 :class:`~drivers.errors.RigInitializationError` and no take is started; one that lands after the inner source opened
 closes it, and the take if one was started.
 After the close, :meth:`~drivers.base.RigSource.lingering` is the inner source's (an ``opencv://`` camera thread still
-in a grab, or a camera its cancelled open has not released yet); it was always empty, hiding a device still held.
+in a grab, or a camera or ``depthai://`` device its cancelled open has not released yet); it was always empty, hiding
+a device still held.
 
 Recording never stalls the reader (unless ``lossless=1``): frames go into a
 bounded queue drained by writer threads; when it is full the frame is not

@@ -96,6 +96,7 @@ def test_a_close_while_a_link_starts_stops_the_open_before_the_eeprom_is_read_an
     thread, outcome = opened_in_a_thread(source)
     assert link.starting.wait(WAIT_S)
     closed_on_a_thread(source)
+    assert source.lingering() == (WHERE,)  # the open still holds the device it is starting
     link.go_on.set()
     thread.join(WAIT_S)
     assert not thread.is_alive()
@@ -103,8 +104,27 @@ def test_a_close_while_a_link_starts_stops_the_open_before_the_eeprom_is_read_an
     assert link.closed == 1 and not source.is_open
     assert len(outcome) == 1 and isinstance(outcome[0], RigInitializationError), outcome
     assert str(outcome[0]) == CANCELLED
+    assert source.lingering() == ()
     source.close()
     assert link.closed == 1  # released once, by the cancelled open
+
+
+def test_a_record_wrapper_closed_while_its_depthai_source_starts_says_the_device_is_still_held(tmp_path):
+    """lingering() said nothing while the cancelled open still held the device it was starting (depthai's connect
+    cannot be cut short), though the close had returned: the base class's, empty, for a source without threads."""
+    link = _HeldStart()
+    out = tmp_path / "take"
+    source = create_rig_source(f"record+{URL}&out={out}", link_factory=lambda: link)
+    thread, outcome = opened_in_a_thread(source)
+    assert link.starting.wait(WAIT_S)
+    closed_on_a_thread(source)
+    assert source.lingering() == source.inner.lingering() == (WHERE,)
+    link.go_on.set()
+    thread.join(WAIT_S)
+    assert not thread.is_alive()
+    assert len(outcome) == 1 and str(outcome[0]) == CANCELLED, outcome
+    assert source.lingering() == () and link.closed == 1
+    assert not out.exists()
 
 
 class _GroupInHand(ScriptedLink):

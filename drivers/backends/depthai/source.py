@@ -104,6 +104,9 @@ class DepthaiRigSource(RigSource):
         self._link_factory = link_factory
         self._link: DeviceLink | None = None
         self._starting: DeviceLink | None = None  # the link _open is starting, for a close meanwhile to cancel
+        # The link _open made, until it is closed (by _open as it fails, or by _close): lingering() after a close
+        # that cancelled the open names the device while the opening thread still holds it
+        self._unreleased: DeviceLink | None = None
         # Set by close(), also one landing during open(): the open stops at its next step, a read refuses its frame
         self._closing = threading.Event()
         self._pending: deque[Frame] = deque()
@@ -143,6 +146,7 @@ class DepthaiRigSource(RigSource):
 
     def _open(self) -> None:
         link = self._link_factory()
+        self._unreleased = link
         self._starting = link  # before the first check: a close from now on is seen by a check or by link.cancel()
         try:
             starting = f"starting depthai device {self.options.device_id or '(first found)'}"
@@ -161,6 +165,8 @@ class DepthaiRigSource(RigSource):
                 link.close()
             except Exception as closing:  # noqa: BLE001 - the start failure is the error to report
                 log.debug("depthai: closing after a failed start also failed: %s", closing)
+            finally:
+                self._unreleased = None
             if isinstance(e, Exception) and self._closing.is_set():  # a check saw the close, or link.cancel() cut in
                 raise self._closed_during_open() from (None if isinstance(e, _ClosedDuringOpen) else e)
             raise
@@ -351,6 +357,17 @@ class DepthaiRigSource(RigSource):
         link, self._link = self._link, None
         self._pending.clear()
         self._lost_before.clear()
-        if link is not None:
-            with depthai_errors(f"closing {self._where()}", RigOperationError):
-                link.close()
+        try:
+            if link is not None:
+                with depthai_errors(f"closing {self._where()}", RigOperationError):
+                    link.close()
+        finally:
+            self._unreleased = None
+
+    def lingering(self) -> tuple[str, ...]:
+        """After a close that cancelled an open: the device, while the opening thread still holds it (depthai's
+        connect, which boots it, cannot be cut short: the open closes the device once that returns). Empty once it
+        is closed, and after any other close, which closes the device itself before it returns."""
+        if self._closing.is_set() and self._unreleased is not None:
+            return (self._where(),)
+        return ()
