@@ -67,13 +67,13 @@ class SinkWriteError(SinkError):
 
 
 class SinkPartialWriteError(SinkWriteError):
-    """A frame's write failed after part of it went out (a vmc:// frame's first bundle sent, a later one not): the
-    receiver has that part, so the frame counts as ``sent`` and ``partial``, not dropped. ``sent`` and ``total``:
-    the datagrams (or parts) that went out, of how many."""
+    """A frame's write failed after part of it went out (a vmc:// frame's first bundle sent, a later one not; a
+    frame's JOINTS out, a JOINTS_2D not): the receiver has that part, so the frame counts as ``sent`` and
+    ``partial``, not dropped. ``sent`` and ``total``: the ``parts`` (datagrams, packets) that went out, of how many."""
 
-    def __init__(self, url: str, reason: str, sent: int, total: int) -> None:
+    def __init__(self, url: str, reason: str, sent: int, total: int, parts: str = "datagrams") -> None:
         self.sent, self.total = sent, total
-        super().__init__(url, f"{reason} (after {sent} of the frame's {total} datagrams went out)")
+        super().__init__(url, f"{reason} (after {sent} of the frame's {total} {parts} went out)")
 
 
 class SinkClosedError(SinkError):

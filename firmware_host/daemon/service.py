@@ -486,7 +486,7 @@ class Daemon:
                     source.log_rig_warnings_once(self._rig_warnings_logged)
                     if not open_unless_stopped(source, stop):
                         _log.info("stopped while the rig was opening: not waiting for the open")
-                        return None  # (closed already, which cancels the open still running in its thread)
+                        return None  # (closed by open_unless_stopped, which cancels the open)
                     if stop.is_set():  # opened just as the stop came: no estimator or sinks built for it
                         self._close_rig(source)
                         return None

@@ -23,9 +23,10 @@ its loss is a WARNING, and so is its failed open.
 
 A link that is open but whose receiver stopped reading (every write times out,
 a buffer stays full) is ``stalled`` rather than ``up`` once no frame has got
-through for ``options.stall_s`` since a write first failed, or once one write
+through whole for ``options.stall_s`` since a write first failed (in whole or in part: a vmc:// sink whose every
+second bundle met a full buffer read ``up`` while half the avatar's bones never moved), or once one write
 has been in progress that long; ``stalled_s`` says for how long. The first frame
-that gets through makes it ``up`` again, and so does an idle write that does
+that gets through whole makes it ``up`` again, and so does an idle write that does
 (``_on_idle`` says it wrote: a STATUS while no frame comes, the rig down). The
 journal hears of a stall once (a WARNING) and of its end once (INFO). So is a
 link whose writes go out but whose receiver's side says nothing takes them (a
@@ -72,7 +73,7 @@ class SinkStats:
     disconnects: int
     last_error: Optional[str]
     state: str = "connecting"
-    """``connecting`` (not tried yet), ``up``, ``stalled`` (up, but no frame got through for ``stall_s``:
+    """``connecting`` (not tried yet), ``up``, ``stalled`` (up, but no frame got through whole for ``stall_s``:
     the receiver stopped reading; ``connected`` stays true), ``down`` (the link was lost or the last connect
     failed; ``last_error`` says why) or ``closed``."""
     stalled_s: Optional[float] = None
@@ -470,8 +471,9 @@ class Sink(ABC):
             else:
                 return
         if what == "warn":
-            _log.warning("%s: stalled: no frame got through for %.1f s, the receiver is not reading (%s); frames "
-                         "are dropped and counted until a write gets through", self.shown, stalled_s, error)
+            _log.warning("%s: stalled: no frame got through whole for %.1f s, the receiver is not reading (%s); "
+                         "frames are dropped, or sent in part, and counted until a write gets through", self.shown,
+                         stalled_s, error)
         else:
             _log.info("%s: %s get through again after a stall", self.shown, what_got_through)
 
@@ -586,10 +588,12 @@ class Sink(ABC):
                 self._keep_refusal_as_last_error()
                 if error is None:
                     self._sent += 1
-                    self._failing_since = None  # the receiver reads: no longer stalled
-                    if partial is not None:
+                    if partial is None:
+                        self._failing_since = None  # the receiver reads: no longer stalled
+                    else:  # the rest met a full buffer: until a frame goes out whole, a stall counts on
                         self._partial += 1
                         self._last_error = partial
+                        self._write_failed(started)
                 else:
                     self._dropped_error += 1
                     self._last_error = error
@@ -598,7 +602,7 @@ class Sink(ABC):
                     self._error_flags |= Flags.DROPPED | (flags & Flags.DECIMATED)
                 self._in_flight = 0
                 self._cond.notify_all()
-            if error is None:
+            if error is None:  # in part too: the link carries, it does not flap
                 self._got_through(backoff)
-            self._log_stall(failed=error is not None)
+            self._log_stall(failed=error is not None or partial is not None)
         self._release()

@@ -30,18 +30,19 @@ logrotate's ``copytruncate``: every write is O_APPEND, so it lands at the end of
 from __future__ import annotations
 
 import errno
+import itertools
 import json
 import os
 import stat
 from typing import Any, Optional
 
-from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
+from firmware_host.errors import SinkConfigError, SinkUnavailableError
 from firmware_host.protocol.messages import Message
 from firmware_host.service_unit import read_only_hint  # the sandbox's EROFS: what to do
 from firmware_host.sinks.fd_write import write_within
 from firmware_host.sinks.file_claim import FileTaken, claim_file
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
-from firmware_host.sinks.protocol_sink import ProtocolSink, frame_messages
+from firmware_host.sinks.protocol_sink import ProtocolSink, judge_cut_write
 from firmware_host.sinks.url import SinkUrl, int_in, parse_url, unquote_part
 from ghnerf_runtime.path_check import path_problem, shown
 
@@ -126,7 +127,8 @@ class FileSink(ProtocolSink):
 
     def _write_messages(self, messages: list[Message]) -> bool:
         """One write of the messages' lines. False: the frame's lines went out but the HELLO + STATUS behind
-        them did not (a pipe that stopped taking them); that STATUS is owed (ProtocolSink)."""
+        them did not (a pipe that stopped taking them); that STATUS is owed (ProtocolSink). Raises as
+        :func:`~firmware_host.sinks.protocol_sink.judge_cut_write` when the frame's own lines were cut."""
         lines = [(json.dumps(m.to_json(), separators=(",", ":")) + "\n").encode("utf-8") for m in messages]
         lead = b"\n" if self._cut_line else b""
         data = lead + b"".join(lines)
@@ -136,10 +138,11 @@ class FileSink(ProtocolSink):
             return True
         if written:  # the reader holds part of a line unless the cut fell just after a newline
             self._cut_line = data[written - 1:written] != b"\n"
-        if written < len(lead) + sum(len(line) for line in lines[:frame_messages(messages)]):
-            raise SinkWriteError(self.url, f"write timed out after {self.write_timeout_s * 1000:.0f} ms "
-                                           f"({written} of {len(data)} bytes out; the reader is not reading)")
-        return False
+        reason = (f"write timed out after {self.write_timeout_s * 1000:.0f} ms ({written} of {len(data)} bytes out; "
+                  "the reader is not reading)")
+        # a line is out with its newline; the JOINTS line out and a JOINTS_2D line not: the frame is sent in part
+        line_ends = [len(lead) + end for end in itertools.accumulate(map(len, lines))]
+        return judge_cut_write(self.url, reason, messages, line_ends, written)
 
     def _check_still_at_path(self) -> None:
         """The open regular file must still be the one at ``path``: written past its removal, lines land in an

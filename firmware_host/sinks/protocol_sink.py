@@ -12,7 +12,7 @@ from abc import abstractmethod
 from dataclasses import replace
 from typing import Optional
 
-from firmware_host.errors import EncodeError, SinkConfigError
+from firmware_host.errors import EncodeError, SinkConfigError, SinkPartialWriteError, SinkWriteError
 from firmware_host.protocol.constants import (
     PROTOCOL_VERSION,
     NO_FRAME_SEQ,
@@ -36,11 +36,35 @@ _log = logging.getLogger(__name__)
 STATUS_RETRY_S = 0.1
 
 
+def frame_packets(messages: list[Message]) -> int:
+    """How many of ``messages`` lead as a frame's own packets (its JOINTS, then its JOINTS_2D); 0 in a write
+    without a frame (an idle or first HELLO + STATUS)."""
+    frame_types = (MsgType.JOINTS, MsgType.JOINTS_2D)
+    return sum(1 for _ in itertools.takewhile(lambda m: m.header.msg_type in frame_types, messages))
+
+
 def frame_messages(messages: list[Message]) -> int:
     """How many of ``messages`` must go out for a write to count as delivered: its leading frame packets (JOINTS,
     JOINTS_2D; a HELLO + STATUS behind them may be cut and owed), or all of them in a write without a frame."""
-    frame_types = (MsgType.JOINTS, MsgType.JOINTS_2D)
-    return sum(1 for _ in itertools.takewhile(lambda m: m.header.msg_type in frame_types, messages)) or len(messages)
+    return frame_packets(messages) or len(messages)
+
+
+def judge_cut_write(url: str, reason: str, messages: list[Message], packet_ends: list[int], written: int) -> bool:
+    """What a stream write of ``messages`` (serial, a pipe) cut short after ``written`` bytes delivered: message i
+    is out once ``written`` reaches ``packet_ends[i]``. Returns False where the frame's packets all went out (only
+    a trailing HELLO + STATUS was cut: that STATUS is owed).
+
+    :raises SinkPartialWriteError: the frame's JOINTS went out, not all its JOINTS_2D: the receiver has the frame's
+        seq and 3D joints (counted dropped until now, and the next frame's DROPPED named a gap with no seq missing).
+    :raises SinkWriteError: not even the JOINTS went out (or a write without a frame was cut).
+    """
+    needed = frame_messages(messages)
+    out = sum(1 for end in packet_ends[:needed] if written >= end)
+    if out == needed:
+        return False
+    if out and frame_packets(messages):
+        raise SinkPartialWriteError(url, reason, out, needed, "packets")
+    raise SinkWriteError(url, reason)
 
 
 class ProtocolSink(Sink):
@@ -49,7 +73,8 @@ class ProtocolSink(Sink):
         self._joint_set = int(JointSet.BODY_25)
         self._last_seq = NO_FRAME_SEQ
         # None until a frame is sent: a capture time of 0 (a test clock, a synthetic recording replayed with
-        # keep_time=1 whose clock starts at 0) is a real one, and as the "no frame yet" mark its STATUS said capture now, latency 0.
+        # keep_time=1 whose clock starts at 0) is a real one, and as the "no frame yet" mark its STATUS said
+        # capture now, latency 0.
         self._last_capture_us: Optional[int] = None
         self._resync = True
         self._fault = int(Fault.OK)
@@ -255,9 +280,10 @@ class ProtocolSink(Sink):
 
     @staticmethod
     def _link_fault(prev: SinkStats, s: SinkStats) -> int:
-        """The sink's own fault for the interval, the most severe first: frames lost to the link, then to a full
-        queue, then skipped on purpose (a deliberate ``max_fps`` must not hide the other two)."""
-        if s.dropped_error > prev.dropped_error or s.disconnects > prev.disconnects:
+        """The sink's own fault for the interval, the most severe first: frames lost to the link (in whole or in
+        part: a frame sent in part, counted sent, left STATUS saying OK), then to a full queue, then skipped on
+        purpose (a deliberate ``max_fps`` must not hide the other two)."""
+        if s.dropped_error > prev.dropped_error or s.disconnects > prev.disconnects or s.partial > prev.partial:
             return int(Fault.LINK_ERRORS)
         if s.dropped_queue > prev.dropped_queue:
             return int(Fault.QUEUE_OVERFLOW)

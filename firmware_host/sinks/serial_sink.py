@@ -23,6 +23,7 @@ tty's ``closing_wait`` (30 s), past the unit's ``TimeoutStopSec``.
 from __future__ import annotations
 
 import errno
+import itertools
 import logging
 import os
 import termios
@@ -37,7 +38,7 @@ from firmware_host.protocol.messages import Message
 from firmware_host.sinks.file_claim import holder_pid, holder_text
 from firmware_host.sinks.fd_write import write_within
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
-from firmware_host.sinks.protocol_sink import ProtocolSink, frame_messages
+from firmware_host.sinks.protocol_sink import ProtocolSink, judge_cut_write
 from firmware_host.sinks.rate import serial_capacity_fps
 from firmware_host.sinks.url import SinkUrl, int_in, parse_url, unquote_part
 from ghnerf_runtime.path_check import path_problem
@@ -120,16 +121,20 @@ class SerialSink(ProtocolSink):
 
     def _write_messages(self, messages: list[Message]) -> bool:
         packets = [encode(m) for m in messages]
-        return self._write_framed(b"".join(packets), _frame_bytes(messages, packets))
+        return self._write_framed(b"".join(packets), messages, list(itertools.accumulate(map(len, packets))))
 
     def _write_bytes(self, data: bytes) -> None:
         # ProtocolSink's hook (framed packets, bounds unknown): the whole of ``data`` is the frame.
-        self._write_framed(data, len(data) - 1)
+        self._write_framed(data, None, [len(data)])
 
-    def _write_framed(self, data: bytes, needed: int) -> bool:
-        """Write framed packets; ``needed``: how many bytes of ``data`` must go out for the write to count
-        as delivered. A write cut short sets ``_resync``: the next write's leading 0x00 ends the cut frame.
-        Returns whether all of ``data`` went out."""
+    def _write_framed(self, data: bytes, messages: Optional[list[Message]], packet_ends: list[int]) -> bool:
+        """Write the framed packets of ``messages`` (None: one frame whose bounds are unknown), ``packet_ends``
+        where each ends in ``data``. A write cut short sets ``_resync``: the next write's leading 0x00 ends the cut
+        frame. Returns whether all of ``data`` went out (False: a trailing HELLO + STATUS was cut, the STATUS owed).
+
+        :raises SinkPartialWriteError: a frame's JOINTS went out, a JOINTS_2D behind it did not.
+        :raises SinkWriteError: the frame (or a write without one) did not go out.
+        """
         lead = b"\x00" if self._resync else b""  # ends a frame a timeout cut short
         data = lead + data
         written = self._write_within(data, self.write_timeout_s)
@@ -138,11 +143,15 @@ class SerialSink(ProtocolSink):
             return True
         if written:
             self._resync = True  # the receiver holds part of a frame: the next write's 0x00 ends it
-        if written < len(lead) + needed:
-            raise SinkWriteError(self.url, f"write timed out after {self.write_timeout_s * 1000:.0f} ms "
-                                           f"({written} of {len(data)} bytes out; the peer is not reading)")
-        # Only a trailing HELLO + STATUS was cut: the frame itself is out; the STATUS is owed (ProtocolSink).
-        return False
+        reason = (f"write timed out after {self.write_timeout_s * 1000:.0f} ms ({written} of {len(data)} bytes out; "
+                  "the peer is not reading)")
+        # a packet is out once all but its 0x00 is: the next write's leading delimiter supplies that
+        ends = [len(lead) + end - 1 for end in packet_ends]
+        if messages is None:
+            if written < ends[-1]:
+                raise SinkWriteError(self.url, reason)
+            return False
+        return judge_cut_write(self.url, reason, messages, ends, written)
 
     def _write_within(self, data: bytes, timeout_s: float) -> int:
         """Write ``data`` as far as the port takes it within ``timeout_s``; returns the bytes written.
@@ -194,10 +203,3 @@ def _drain_then_discard(ser: serial.Serial, drain_s: float) -> bool:
     except (serial.SerialException, OSError, termios.error):
         pass  # the port is gone (EIO): the kernel has already dropped its queue
     return True
-
-
-def _frame_bytes(messages: list[Message], packets: list[bytes]) -> int:
-    """Bytes that must be out for a write to count as delivered: the frame's own packets (JOINTS,
-    JOINTS_2D; all of them for a HELLO + STATUS write), less the last 0x00, which the next write's
-    leading delimiter supplies."""
-    return sum(len(p) for p in packets[:frame_messages(messages)]) - 1

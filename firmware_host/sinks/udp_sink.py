@@ -39,11 +39,10 @@ from typing import Any, Optional
 from drivers.url import shown_url
 from firmware_host.addresses import ipv4_first
 from firmware_host.errors import SinkConfigError, SinkPartialWriteError, SinkUnavailableError, SinkWriteError
-from firmware_host.protocol.constants import MsgType
 from firmware_host.protocol.encoder import encode
 from firmware_host.protocol.messages import Message
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
-from firmware_host.sinks.protocol_sink import ProtocolSink
+from firmware_host.sinks.protocol_sink import ProtocolSink, frame_packets
 from firmware_host.sinks.url import SinkUrl, host_port, parse_url, positive_float
 
 _log = logging.getLogger(__name__)
@@ -282,6 +281,22 @@ class DatagramLink:
         refusal = self._refusal
         return reason if refusal is None else f"{reason}; {refusal[2]}"
 
+    def send_in_turn(self, datagrams: list[bytes]) -> None:
+        """Send one frame's ``datagrams`` in turn (vmc://'s two bundles, udp://'s JOINTS and JOINTS_2D).
+
+        :raises SinkPartialWriteError: one after the first met a full send buffer: the receiver has the first ones,
+            so the frame is sent in part, not lost (the rest is not sent later: the next frame supersedes it).
+        :raises SinkWriteError: the first one did: nothing of the frame went out.
+        :raises SinkUnavailableError: as :meth:`send` (the link is reopened; the frame counts as dropped).
+        """
+        for sent, datagram in enumerate(datagrams):
+            try:
+                self.send(datagram)
+            except SinkWriteError as e:
+                if not sent:
+                    raise
+                raise SinkPartialWriteError(self.url, e.reason, sent, len(datagrams)) from e
+
     def send(self, datagram: bytes) -> None:
         if self._sock is None:
             raise SinkUnavailableError(self.url, "socket not open")
@@ -331,18 +346,15 @@ class UdpSink(ProtocolSink):
         """One datagram per packet, so that a lost datagram loses one packet. Once the frame's JOINTS went out, a
         full send buffer cuts only what follows: its JOINTS_2D (:class:`SinkPartialWriteError`: the receiver has
         the frame's seq and 3D joints, no gap) or the HELLO + STATUS behind it (False: the STATUS is owed)."""
-        frame_types = (MsgType.JOINTS, MsgType.JOINTS_2D)
-        joints_out = bool(messages) and messages[0].header.msg_type == MsgType.JOINTS
-        for i, m in enumerate(messages):
+        n_frame = frame_packets(messages)
+        # a JOINTS_2D cut: counted dropped until this review, the next JOINTS flagged DROPPED with no seq missing
+        self._link.send_in_turn([encode(m) for m in messages[:n_frame]])
+        for m in messages[n_frame:]:
             try:
                 self._link.send(encode(m))
-            except SinkWriteError as e:
-                if not (i and joints_out):
-                    raise  # the frame's JOINTS (or an idle HELLO + STATUS) did not go out: not delivered
-                if m.header.msg_type in frame_types:
-                    # counted dropped until now, the next JOINTS flagged DROPPED with no seq missing
-                    frame_packets = sum(1 for p in messages if p.header.msg_type in frame_types)
-                    raise SinkPartialWriteError(self.url, e.reason, i, frame_packets) from e
+            except SinkWriteError:
+                if not n_frame:
+                    raise  # an idle (or first) HELLO + STATUS: not written
                 return False  # the frame went out whole, only the HELLO + STATUS behind it did not
         return True
 

@@ -31,7 +31,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from firmware_host.errors import SinkConfigError, SinkPartialWriteError, SinkWriteError
+from firmware_host.errors import SinkConfigError
 from firmware_host.protocol.constants import Flags, JointSet
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks.base import Sink
@@ -104,16 +104,9 @@ class VmcSink(Sink):
         if self._has_body25_joints(frame):
             pose = keep_hemisphere(solve_pose(self.view.apply(frame.joints_3d)), self._last_rotations)
         suspect = self.calibration_flag and bool(frame.scene_flags & Flags.CALIBRATION_SUSPECT)
-        datagrams = build_datagrams(pose, t, calibration_suspect=suspect)  # two bundles: one would fragment
-        for sent, datagram in enumerate(datagrams):
-            try:
-                self._link.send(datagram)
-            except SinkWriteError as e:
-                if not sent:
-                    raise  # nothing of the frame went out: dropped
-                # the receiver applied the first bundle (OK, T, the root, the first bones), the bones of the rest
-                # hold their last pose: a frame sent in part, not a lost one (it was counted dropped)
-                raise SinkPartialWriteError(self.url, e.reason, sent, len(datagrams)) from e
+        # two bundles, one would fragment; the second cut: the receiver applied the first (OK, T, the root, the first
+        # bones), the rest hold their last pose: a frame sent in part, not a lost one (it was counted dropped)
+        self._link.send_in_turn(build_datagrams(pose, t, calibration_suspect=suspect))
 
     def _has_body25_joints(self, frame: JointFrame) -> bool:
         """Whether ``frame`` holds the BODY_25 joints the bones are solved from; a WARNING, once, where not."""

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware_host.errors import SinkClosedError, SinkUnavailableError, SinkWriteError
+from firmware_host.errors import SinkClosedError, SinkPartialWriteError, SinkUnavailableError, SinkWriteError
 from firmware_host.protocol import Flags, JointFrame
 from firmware_host.sinks import Sink, SinkOptions
 from firmware_host.sinks.backoff import Backoff, BackoffPolicy
@@ -400,6 +400,28 @@ def test_a_link_that_drops_every_frame_reads_stalled_until_one_gets_through(capl
                        what="the stall's end logged")
         finally:
             sink.close()
+
+
+def test_a_link_that_sends_every_frame_in_part_reads_stalled_until_one_goes_out_whole() -> None:
+    """A frame sent in part (a vmc:// frame whose second bundle met a full send buffer) counted as a frame through:
+    a sink whose every frame went out in part read ``up`` while the avatar's other bones never moved. It starts (and
+    does not end) a stall now, still counted sent and partial; the first frame out whole ends it."""
+    sink = ScriptedSink(queue=1, stall_s=0.1).start()
+    try:
+        wait_until(lambda: sink.stats().connected, what="connected")
+        sink.fail_next.append(SinkPartialWriteError("scripted://", "socket send buffer full", 1, 2))
+        sink.send(make_frame(0))
+        assert sink.wait_drained(5)
+        wait_until(lambda: sink.stats().state == "stalled", what="stalled after a frame sent in part")
+        s = sink.stats()
+        assert (s.sent, s.partial, s.dropped, s.accounted) == (1, 1, 0, 1)
+        assert "socket send buffer full (after 1 of the frame's 2" in (s.last_error or "")
+        sink.send(make_frame(1))  # out whole: the receiver has all of it
+        assert sink.wait_drained(5)
+        s = sink.stats()
+        assert (s.state, s.stalled_s, s.sent, s.partial) == ("up", None, 2, 1)
+    finally:
+        sink.close()
 
 
 def test_a_link_that_fails_now_and_then_is_not_stalled() -> None:

@@ -272,6 +272,28 @@ def test_what_a_cut_write_counts_as_delivered(monkeypatch: pytest.MonkeyPatch, s
     assert sink._resync  # either way the next write starts with 0x00
 
 
+def test_a_write_cut_in_its_2d_joints_sends_the_frame_in_part(monkeypatch: pytest.MonkeyPatch) -> None:
+    """send_2d=1: the JOINTS packet out, the first JOINTS_2D cut. The receiver decodes the frame's seq and 3D joints
+    (the next write's 0x00 ends the cut packet): it was counted dropped, and the next frame said DROPPED with no
+    seq missing. Now the frame is sent in part (SinkPartialWriteError), as udp:// sends it."""
+    import numpy as np
+
+    from firmware_host.errors import SinkPartialWriteError
+    from firmware_host.protocol.encoder import encode
+    from firmware_host.protocol.from_frame import joints2d_messages, joints_message
+    from firmware_host.sinks.serial_sink import SerialSink
+
+    sink = SerialSink.from_url("serial:///dev/ttyGHNERF-unused?baud=921600&send_2d=1&cameras=left,right")
+    sink._resync = False
+    frame = make_frame(0, joints_2d={"left": np.full((25, 3), 10.0), "right": np.full((25, 3), 20.0)})
+    messages = [joints_message(frame, 1, 0), *joints2d_messages(frame, 1, ("left", "right"), 0)]
+    assert len(messages) == 3
+    monkeypatch.setattr(sink, "_write_within", lambda data, timeout_s: len(encode(messages[0])) + 4)
+    with pytest.raises(SinkPartialWriteError, match=r"timed out .*\(after 1 of the frame's 3 packets went out\)"):
+        sink._write_messages(messages)
+    assert sink._resync  # the next write's 0x00 ends the cut JOINTS_2D
+
+
 def test_a_status_cut_off_a_delivered_frame_is_owed_by_the_next(monkeypatch: pytest.MonkeyPatch) -> None:
     # the frame counted as out, so the STATUS behind it counted as out too: its latched fault was lost
     from firmware_host.protocol import Fault, Status

@@ -264,6 +264,50 @@ def test_file_sink_ends_a_line_a_failed_write_cut_short(tmp_path: Path, monkeypa
     assert types == ["HELLO", "STATUS", "JOINTS", "cut", "HELLO", "STATUS", "JOINTS"]
 
 
+def test_file_sink_write_cut_in_its_2d_joints_sends_the_frame_in_part(tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """A pipe's reader that stops taking lines in frame 0's first JOINTS_2D line (send_2d=1) has its JOINTS line:
+    frame 0 was counted dropped, and frame 1's JOINTS said DROPPED with no seq missing. Now it counts as sent and
+    partial, as a udp:// frame whose JOINTS_2D met a full buffer. (A regular file stands in for the pipe: the
+    write is cut as a timeout cuts it, without an error.)"""
+    from firmware_host.protocol.constants import Flags
+    from firmware_host.sinks import file_sink
+
+    real = file_sink.write_within
+    cuts: list[int] = []
+
+    def write_within(fd: int, data: bytes, timeout_s: float) -> int:
+        if cuts or b'"type":"JOINTS"' not in data[:data.index(b"\n")]:
+            return real(fd, data, timeout_s)
+        cuts.append(data.index(b"\n") + 6)  # the JOINTS line and 5 bytes of the first JOINTS_2D line
+        return real(fd, data[:cuts[0]], timeout_s)
+
+    monkeypatch.setattr(file_sink, "write_within", write_within)
+    path = tmp_path / "joints.jsonl"
+    two_d = {"left": np.full((25, 3), 10.0), "right": np.full((25, 3), 20.0)}
+    sink = open_sink(path.as_uri() + "?status_s=3600&send_2d=1", backoff=FAST_BACKOFF, cameras=("left", "right"))
+    try:
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0, joints_2d=two_d))
+        sink.send(make_frame(1, joints_2d=two_d))
+        assert sink.wait_drained(5)
+        stats = sink.stats()
+    finally:
+        sink.close()
+    assert cuts
+    assert (stats.sent, stats.partial, stats.dropped_error) == (2, 1, 0), stats
+    assert "(after 1 of the frame's 3 packets went out)" in (stats.last_error or "")
+    records = []
+    for line in path.read_text().splitlines():
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            records.append({"type": "cut"})
+    assert [r["type"] for r in records] == ["HELLO", "STATUS", "JOINTS", "cut", "JOINTS", "JOINTS_2D", "JOINTS_2D"]
+    assert [r["seq"] for r in records if r["type"] == "JOINTS"] == [0, 1]
+    assert not records[4]["flags"] & Flags.DROPPED  # no seq is missing: the flag must not say one is
+
+
 def test_file_sink_writes_at_the_start_of_a_file_truncated_under_it(tmp_path: Path) -> None:
     # logrotate's copytruncate, as docs/protocol.md advises: no hole of NULs before the next line
     path = tmp_path / "joints.jsonl"
@@ -704,6 +748,22 @@ def test_udp_frame_whose_2d_joints_meet_a_full_buffer_is_sent_in_part_and_flags_
     assert [m.header.seq for m in joints] == [0, 1]
     assert not joints[1].header.flags & Flags.DROPPED  # no seq is missing: the flag must not say one is
     assert [(m.header.seq, m.camera) for m in received if isinstance(m, Joints2D)] == [(1, 0), (1, 1)]
+
+
+def test_a_frame_sent_in_part_is_a_link_error_in_status() -> None:
+    """Counted dropped, a frame sent in part made its interval's STATUS say LINK_ERRORS; counted sent and partial,
+    it left STATUS saying OK while the listener lost the frame's JOINTS_2D: fault 3 again, with no field changed."""
+    from dataclasses import replace
+
+    from firmware_host.sinks.base import SinkStats
+    from firmware_host.sinks.protocol_sink import ProtocolSink
+
+    before = SinkStats(submitted=1, sent=1, decimated=0, dropped_queue=0, dropped_error=0, dropped_close=0,
+                       queued=0, in_flight=0, connected=True, connects=1, connect_failures=0, disconnects=0,
+                       last_error=None, state="up")
+    after = replace(before, submitted=2, sent=2, partial=1)
+    assert ProtocolSink._link_fault(before, after) == Fault.LINK_ERRORS
+    assert ProtocolSink._link_fault(after, replace(after, submitted=3, sent=3)) == Fault.OK  # the next interval
 
 
 _RECORD_UNTIL_KILLED = """

@@ -71,6 +71,27 @@ def test_a_stop_abandons_the_open_and_closes_the_source_before_the_open_returns(
     assert source.returned.is_set() and source.closes == 1
 
 
+class _CloseFails(_SlowSource):
+    def close(self) -> None:
+        super().close()
+        raise drivers.RigOperationError("device half booted")
+
+
+def test_a_stop_whose_close_fails_still_returns_stopped(caplog: pytest.LogCaptureFixture):
+    """The stop's close of a source still opening may fail (a device half booted): the stop goes on, the daemon
+    exits as after any stop, and the failure is a WARNING, not an exception out of the wait."""
+    source, stop = _CloseFails(), threading.Event()
+    stopper = threading.Thread(target=lambda: (source.entered.wait(WAIT_S), stop.set()), daemon=True)
+    stopper.start()
+    try:
+        with caplog.at_level("WARNING", logger="ghnerf.daemon"):
+            assert open_unless_stopped(source, stop) is False
+    finally:
+        source.release.set()
+    assert source.closes == 1
+    assert any("device half booted" in r.getMessage() for r in caplog.records)
+
+
 class _CancelledByItsClose(RigSource):
     """A source whose ``_open`` holds its "device" until :meth:`_cancel_open` (a close during the open) lets it go
     on: an OAK's boot, which depthai:// cuts short at its next step."""
