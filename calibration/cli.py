@@ -50,6 +50,8 @@ from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.image_sizes import camera_image_sizes, mixed_sizes_problem
 from calibration.render import SYNTH_BOARD, calibration_views, synth_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
+from calibration.synth_views import (image_digest, images_not_written, read_synth_views, remove_earlier_views,
+                                     write_synth_views)
 from ghnerf_runtime.cli.counts import bounded_count, non_negative_count, positive_count
 from ghnerf_runtime.cli.error_leaving import ErrorLeaving, status_keeping_the_error
 from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, same_file, unwritable_reason
@@ -344,13 +346,16 @@ def cmd_synth(args: argparse.Namespace) -> int:
     texts = {out / TRUTH_RIG_FILE: checked_rig_text(rig, out / TRUTH_RIG_FILE),
              out / BOARD_FILE: json.dumps(board.to_dict(), indent=2) + "\n"}
     unchanged = _unchanged_inputs(texts, {"--rig": args.rig, "--board": args.board})
+    earlier = read_synth_views(out) if args.force else {}  # a record that does not read stops before the rendering
     t0 = time.monotonic()
     views = calibration_views(rig, board, count=args.count, edge_count=args.edge_count, seed=args.seed)
+    written: dict[str, dict[str, str]] = {}
     for camera, images in views.items():
         (out / camera).mkdir(parents=True, exist_ok=True)
-        for name, image in images.items():
-            if not cv2.imwrite(str(out / camera / f"{name}.png"), image):
-                raise UsageError(f"{out / camera / name}.png: cannot write the image")
+        written[camera] = {f"{name}.png": _write_png(out / camera / f"{name}.png", image)
+                           for name, image in images.items()}
+    removed = remove_earlier_views(out, earlier, written)  # the earlier run's views beyond this one's: not mixed in
+    write_synth_views(out, written)
     for path, text in texts.items():
         if path not in unchanged:
             write_text_atomic(path, text)
@@ -358,9 +363,33 @@ def cmd_synth(args: argparse.Namespace) -> int:
         log_warnings_and_notes(rig, out / TRUTH_RIG_FILE)
     write_camera_order(out, [cam.name for cam in rig.pair], replace=True)
     total = len(next(iter(views.values())))
+    gone = f"; removed {len(removed)} images of the earlier ghcal synth run" if removed else ""
     print(f"rendered {total} image pairs (a floor view among them) of rig {rig.rig_id!r} into {out} in "
-          f"{time.monotonic() - t0:.1f} s; its rig: {out / TRUTH_RIG_FILE}, board: {out / BOARD_FILE}")
+          f"{time.monotonic() - t0:.1f} s; its rig: {out / TRUTH_RIG_FILE}, board: {out / BOARD_FILE}{gone}")
+    left = images_not_written(out, [cam.name for cam in rig.pair], written)
+    if left:
+        print(f"warning: {len(left)} images there are not this run's and were left ({_first_few(left)}): ghcal solve "
+              f"on {out} reads them with its views; remove them, or render into a new folder", file=sys.stderr)
     return 0
+
+
+def _write_png(path: Path, image: np.ndarray) -> str:
+    """Write ``image`` as the PNG ``path``; returns the SHA-256 of its bytes (``synth_views.json`` records it)."""
+    ok, encoded = cv2.imencode(".png", image)
+    if not ok:
+        raise UsageError(f"{path}: cannot encode the image")
+    data = encoded.tobytes()
+    try:
+        path.write_bytes(data)
+    except OSError as e:
+        raise UsageError(f"{path}: cannot write the image ({e.strerror or e})") from e
+    return image_digest(data)
+
+
+def _first_few(paths: Sequence[Path], shown: int = 3) -> str:
+    """``paths`` named, the first ``shown`` of them, and how many more."""
+    words = ", ".join(str(p) for p in paths[:shown])
+    return words if len(paths) <= shown else f"{words} and {len(paths) - shown} more"
 
 
 def _unchanged_inputs(texts: Mapping[Path, str], inputs: Mapping[str, str | None]) -> set[Path]:
@@ -1390,7 +1419,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--board", type=user_path, help="the board to render (default: 9x6 squares of 120 mm, "
                                                    "calibration.render.SYNTH_BOARD); written to OUT/board.json")
     p.add_argument("--force", action="store_true",
-                   help="write into a folder that already holds views, board.json or cameras.json")
+                   help="write into a folder that already holds views, board.json or cameras.json; the earlier "
+                        "synth run's images that this one does not write again are removed (synth_views.json "
+                        "lists them), no other file")
     p.add_argument("--count", type=bounded_count(1, MAX_VIEWS), default=15,
                    help=f"views both cameras see (default 15, at most {MAX_VIEWS})")
     p.add_argument("--edge-count", type=bounded_count(0, MAX_VIEWS), default=6,

@@ -111,7 +111,10 @@ class Sink(ABC):
         self._thread: Optional[threading.Thread] = None
         self._held = False  # started held (start(held=True)): the worker opens nothing until release(); _cond guards
         self._closed = False
-        self._given_up = False  # close() waited its timeout and returned: a link opening after that is let go
+        self._given_up = False  # close() waited its timeout and gave up: a link opening after that is let go
+        # The worker is writing a new link's announcement (HELLO + STATUS): close() giving up waits for it to end,
+        # so none goes out after close() returned. _cond guards both.
+        self._announcing = False
         self._limiter: Optional[RateLimiter] = None
         self._warned_decimation = False
         # Counters, guarded by _cond.
@@ -331,7 +334,8 @@ class Sink(ABC):
 
         Frames still queued after ``timeout`` are counted as ``dropped_close``. A link still opening then (a slow
         name lookup) is let go once open, unannounced: no HELLO from a closed sink; an open that fails then is neither
-        logged nor counted.
+        logged nor counted. A link's HELLO + STATUS being written then is waited for (at most the link's write
+        timeout): none goes out after close() returned.
         """
         with self._cond:
             if self._closed:
@@ -347,6 +351,7 @@ class Sink(ABC):
                 self._error_flags |= Flags.DROPPED | (flags & Flags.DECIMATED)
             self._queue.clear()
             self._given_up = True
+            self._wait_for_announcement()
         if self._thread is None or not self._thread.is_alive():
             self._release()
         return self.stats()
@@ -384,10 +389,9 @@ class Sink(ABC):
         try:
             self._connect()
             opened = True
-            if self._given_up:  # close() returned while the link opened (a slow lookup): a closed sink says nothing
+            if not self._announce():  # close() gave up while it opened (a slow lookup): a closed sink says nothing
                 self._disconnect()
                 return
-            self._on_connected()
         except SinkWriteError as e:  # e.g. HELLO hit a stalled endpoint: the link itself is up
             write_error = str(e)
         except Exception as e:  # SinkUnavailableError, or a backend bug: retry later either way
@@ -411,6 +415,28 @@ class Sink(ABC):
             self._cond.notify_all()
         if was_down:  # the backoff is reset once a write gets through (_got_through): a link that flaps backs off
             _log.log(logging.DEBUG if quiet else logging.INFO, "%s: connected again", self.shown)
+
+    def _announce(self) -> bool:
+        """``_on_connected`` on a link just opened, unless close() gave up on the sink: False then, nothing written.
+        The check and the announcement are one step to close(): it waits for one under way, and none starts after it
+        gave up (checked without the lock, a HELLO could go out just after close() returned)."""
+        with self._cond:
+            if self._given_up:
+                return False
+            self._announcing = True
+        try:
+            self._on_connected()
+        finally:
+            with self._cond:
+                self._announcing = False
+                self._cond.notify_all()
+        return True
+
+    def _wait_for_announcement(self) -> None:
+        """close(), giving up: a new link's HELLO + STATUS being written goes out whole before close() returns (the
+        link's write timeout bounds it); a HELLO after close() read as a restart beside the sink replacing this one.
+        Call with _cond held."""
+        self._cond.wait_for(lambda: not self._announcing)
 
     def _connect_failed(self, e: Exception, retry_s: float) -> None:
         """Count a failed connect; log it once per outage and per new error, not on every retry

@@ -202,3 +202,70 @@ def _copy(path, tmp_path):
     copy.parent.mkdir()
     copy.write_bytes(path.read_bytes())
     return copy
+
+
+def _views_of_count(rig, board, *, count, edge_count, seed, **kwargs):
+    """``calibration_views`` stood in for: ``count`` views and the floor view per camera, each image its seed's and
+    its name's (no rendering)."""
+    import numpy as np
+
+    names = [f"{k:03d}" for k in range(count)] + ["floor"]
+    return {cam.name: {name: np.full((8, 8), (seed * 31 + k) % 256, np.uint8) for k, name in enumerate(names)}
+            for cam in rig.pair}
+
+
+def test_synth_force_takes_back_the_earlier_runs_views_and_nothing_else(tmp_path, capsys, monkeypatch):
+    # before: synth --force with a smaller --count left the earlier run's 003 and 004 beside the new views, and
+    # ghcal solve on the folder used views of two runs without a word
+    monkeypatch.setattr(cli, "calibration_views", _views_of_count)
+    out = tmp_path / "synth"
+    assert cli.main(["synth", "--out", str(out), "--count", "5", "--seed", "1"]) == 0
+    (out / "left" / "004.png").write_bytes(b"a real view copied in under synth's name")  # not synth's bytes now
+    (out / "left" / "100.png").write_bytes(b"a real view")  # never synth's
+    (out / "left" / "notes.txt").write_text("not an image")
+    capsys.readouterr()
+    assert cli.main(["synth", "--out", str(out), "--count", "2", "--seed", "2", "--force"]) == 0
+    captured = capsys.readouterr()
+    assert sorted(p.name for p in (out / "right").iterdir()) == ["000.png", "001.png", "floor.png"]
+    assert sorted(p.name for p in (out / "left").iterdir()) == ["000.png", "001.png", "004.png", "100.png",
+                                                                "floor.png", "notes.txt"]
+    assert "removed 5 images of the earlier ghcal synth run" in captured.out, captured.out
+    assert (f"warning: 2 images there are not this run's and were left ({out / 'left' / '004.png'}, "
+            f"{out / 'left' / '100.png'}): ghcal solve on {out} reads them") in captured.err, captured.err
+    assert cli.main(["synth", "--out", str(out), "--count", "2", "--seed", "2", "--force"]) == 0  # the same again
+    assert "removed" not in capsys.readouterr().out
+
+
+def test_synth_force_takes_back_the_folders_of_cameras_the_rig_no_longer_has(tmp_path, capsys, monkeypatch):
+    import dataclasses
+
+    from calibration.render import synth_rig
+
+    monkeypatch.setattr(cli, "calibration_views", _views_of_count)
+    out = tmp_path / "synth"
+    assert cli.main(["synth", "--out", str(out), "--count", "2"]) == 0
+    rig = synth_rig()
+    renamed = dataclasses.replace(rig, cameras=tuple(dataclasses.replace(c, name=f"cam{k}")
+                                                     for k, c in enumerate(rig.cameras)))
+    monkeypatch.setattr(cli, "synth_rig", lambda: renamed)
+    assert cli.main(["synth", "--out", str(out), "--count", "2", "--force"]) == 0
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ["cam0", "cam1"]  # left/ and right/ emptied: gone
+
+
+@pytest.mark.parametrize("text, words", [
+    ("{not json", "cannot read the record of ghcal synth's images"),
+    ('{"cameras": {"left": {"../../elsewhere.png": "00"}}}', "camera 'left': not a map of image file names"),
+    ('{"cameras": {"../x": {}}}', "cannot be a folder name"),
+    ('{"views": {}}', "not a record of ghcal synth's images"),
+])
+def test_synth_force_refuses_a_record_of_its_views_that_does_not_read_before_rendering(tmp_path, capsys, monkeypatch,
+                                                                                        text, words):
+    monkeypatch.setattr(cli, "calibration_views", _views_of_count)
+    out = tmp_path / "synth"
+    assert cli.main(["synth", "--out", str(out), "--count", "2"]) == 0
+    (out / "synth_views.json").write_text(text)
+    monkeypatch.setattr(cli, "calibration_views", _not_rendered)
+    capsys.readouterr()
+    assert cli.main(["synth", "--out", str(out), "--count", "1", "--force"]) == 2
+    err = capsys.readouterr().err
+    assert f"{out / 'synth_views.json'}" in err and words in err and "remove it" in err, err

@@ -149,6 +149,55 @@ def test_a_sink_closed_while_its_link_opens_says_nothing_when_the_open_fails(
     assert sink.released == 0  # never opened: nothing to let go
 
 
+class HeldAnnouncement(MemorySink):
+    """A link opened at once whose HELLO + STATUS waits for ``hold`` (a slow write); ``settled`` is set once close()
+    waits for that announcement (the hook) or returned (the closer, below)."""
+
+    def __init__(self) -> None:
+        super().__init__("memory://held", 1 << 20, SinkOptions())
+        self.announcing = threading.Event()  # the worker passed the closed-check, its HELLO not written yet
+        self.hold = threading.Event()
+        self.settled = threading.Event()
+
+    def _on_connected(self) -> None:
+        self.announcing.set()
+        assert self.hold.wait(30.0)
+        super()._on_connected()
+
+    def _wait_for_announcement(self) -> None:
+        self.settled.set()
+        super()._wait_for_announcement()
+
+
+def test_a_hello_being_written_when_close_gives_up_goes_out_before_close_returns() -> None:
+    # before: the worker checked whether close() had given up, unlocked, just before its HELLO; a close() giving up
+    # right after that check returned, and the HELLO + STATUS went out after it, beside the sink replacing this one
+    sink = HeldAnnouncement().start()
+    assert sink.announcing.wait(30.0)
+    returned = threading.Event()
+    written_at_return: list[bytes] = []
+
+    def closer() -> None:
+        sink.close(timeout=0.05)
+        written_at_return.append(sink.read())
+        returned.set()
+        sink.settled.set()
+
+    thread = threading.Thread(target=closer)
+    thread.start()
+    assert sink.settled.wait(30.0)
+    returned_while_held = returned.is_set()
+    sink.hold.set()
+    thread.join(30.0)
+    assert not thread.is_alive()
+    assert not returned_while_held  # close() waited for the HELLO under way
+    assert sink._thread is not None
+    sink._thread.join(30.0)
+    assert not sink._thread.is_alive()
+    assert written_at_return[0] != b"" and sink.read() == b""  # all of it out before close() returned, none after
+    assert sink.stats().state == "closed"
+
+
 def test_a_link_that_opens_within_close_s_timeout_still_gets_the_queued_frames() -> None:
     # close() delivers what is queued if the link comes up in time: only one opened after it returned is let go
     sink = SlowToOpen().start()
