@@ -1328,13 +1328,20 @@ def _refuse_sizes_unlike_the_rig(rig: Rig, rig_path: str,
                                  f"{cam.width}x{cam.height}")
 
 
+def _scale_figure(report: Mapping) -> str:
+    """A check report's scale as said beside its reprojection: None where no two neighbouring corners were measured,
+    which :func:`check_failures` lets through (``:.4f`` of it was a TypeError)."""
+    return "not measured" if report.get("scale") is None else f"{report['scale']:.4f}"
+
+
 def _exchanged_words(report: dict, images: Path, names: Sequence[str]) -> str:
     """What to do where the rig fits the views with its two cameras' images exchanged (:func:`exchanged_fit`)."""
     a, b = names
     return (f"It fits them with the two cameras' images exchanged (reprojection {report['reprojection_px_rms']:.3f} "
-            f"px rms, scale {report['scale']:.4f}): {images / a} holds the images of camera {b!r}, and {images / b} "
-            f"those of {a!r}. Exchange the two folders' images (a tool that named the cameras the other way round), then "
-            "check again; solved from them as they are, the rig would give each camera the other's lens and pose")
+            f"px rms, scale {_scale_figure(report)}): {images / a} holds the images of camera {b!r}, and "
+            f"{images / b} those of {a!r}. Exchange the two folders' images (a tool that named the cameras the other "
+            "way round), then check again; solved from them as they are, the rig would give each camera the other's "
+            "lens and pose")
 
 
 def _exchanged_sizes_words(rig, rig_path: str, board: BoardSpec, views: dict, images: Path, limits: CheckLimits,
@@ -1343,8 +1350,8 @@ def _exchanged_sizes_words(rig, rig_path: str, board: BoardSpec, views: dict, im
     sizes as the evidence, and whether the rig fits the views exchanged (within ``limits``)."""
     report = exchanged_report(rig, board, views, board_thickness_m=thickness, floor_view=floor_view)
     reasons = check_failures(report, limits) if report["pairs"] else ["no pair to measure"]
-    scale = "not measured" if report.get("scale") is None else f"{report['scale']:.4f}"
-    fit = (f"exchanged, the rig fits them (reprojection {report['reprojection_px_rms']:.3f} px rms, scale {scale})"
+    fit = (f"exchanged, the rig fits them (reprojection {report['reprojection_px_rms']:.3f} px rms, scale "
+           f"{_scale_figure(report)})"
            if not reasons else
            f"exchanged, the rig does not fit them either ({'; '.join(reasons)}): calibrate again once they are")
     return (f"{_exchanged_sizes_evidence(rig, rig_path, images)}; {fit}. Exchange the two folders' images (a tool "

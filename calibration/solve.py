@@ -18,6 +18,7 @@ The report (:attr:`RigSolution.report`) carries every figure a user needs to jud
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
@@ -69,9 +70,10 @@ WARN_FOCAL_STD_SHARE = 0.02
 #: to f 44 px "give or take 0.03 px": the branch where a short focal length and a board held close fit as well as the
 #: truth, where OpenCV's figure says nothing. Such solves spread the orientations over less than this (from 0.8
 #: degrees: the short focal length flattens them); every solve within 10 % of the truth, of views tilted up to 3-30
-#: degrees, over 10.5 or more (benchmarks/measure_orientation_spread.py, 40 seeds of 8 and 15 views per tilt bound).
-#: The other wrong branch, a focal length 2.5-45 times too long, spreads them widely; its distortion terms (4.9e3 and
-#: more) are refused instead, by the rig file.
+#: degrees, over 10.5 or more (benchmarks/measure_orientation_spread.py, 40 seeds of 8 and 15 views per tilt bound;
+#: tilted about one axis only, --one-axis, over 15.2). The other wrong branch, a focal length 2.5-45 times too long,
+#: spreads them widely; its distortion terms (4.9e3 and more) are refused instead, at the rig file's bound
+#: (:func:`_lens_problem`).
 MIN_ORIENTATION_SPREAD_DEG = 5.0
 #: The first camera's pitch (degrees below the horizon) usual for a rig filming people; outside it the report
 #: warns (a floor view of a board not lying flat, or a --pitch read from the vertical).
@@ -199,7 +201,8 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
     exactly 0 (OpenCV's ``CALIB_ZERO_TANGENT_DIST``), for views whose fitted p1/p2 fold the lens model inside
     the image (:func:`fold_warning`).
 
-    :raises SolveError: fewer than :data:`MIN_VIEWS` views, mixed image sizes, an unknown lens model.
+    :raises SolveError: fewer than :data:`MIN_VIEWS` views, mixed image sizes, an unknown lens model, views OpenCV
+        cannot solve (too few corners in all, a view of under 4), views that do not determine the focal length.
     """
     if lens not in LENS_MODELS:
         raise SolveError(f"lens model {lens!r} is not one of {sorted(LENS_MODELS)}")
@@ -214,9 +217,14 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
     dropped: list[str] = []
     for attempt in range(2):
         names = sorted(views)
-        rms, K, dist, rvecs, _, std_intrinsics, _, per_view = cv2.calibrateCameraExtended(
-            [_object_points(board, views[n]) for n in names], [_image_points(views[n]) for n in names],
-            size, None, None, flags=_intrinsics_flags(lens, tangential))
+        try:
+            rms, K, dist, rvecs, _, std_intrinsics, _, per_view = cv2.calibrateCameraExtended(
+                [_object_points(board, views[n]) for n in names], [_image_points(views[n]) for n in names],
+                size, None, None, flags=_intrinsics_flags(lens, tangential))
+        except cv2.error as e:  # too few corners in all, a view of under 4 or of one row: a library caller's views
+            raise SolveError(f"camera {camera!r}: OpenCV cannot solve the lens from {len(names)} views of "
+                             f"{sum(len(views[n]) for n in names)} corners in all ({_opencv_words(e)}): each view "
+                             f"needs {MIN_CORNERS} corners at least, not all in one row") from e
         errors = dict(zip(names, np.asarray(per_view, float).reshape(-1)))
         median = float(np.median(list(errors.values())))
         outliers = [n for n, e in errors.items() if e > max(OUTLIER_FACTOR * median, 1.0)]
@@ -246,6 +254,12 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
     return Intrinsics(K=np.asarray(K, float), dist=dist, rms_px=float(rms),
                       per_view_px={n: round(float(e), 4) for n, e in errors.items()}, dropped=tuple(dropped),
                       coverage=_coverage(views, size), image_size=size, focal_std_px=focal_std)
+
+
+def _opencv_words(error: cv2.error) -> str:
+    """OpenCV's own reason in ``error``, without its version, source line, error code and function."""
+    words = str(error).split("error: ", 1)[-1].strip()
+    return re.sub(r"^\(-?\d+:[^)]*\)\s*|\s*in function '[^']*'$", "", words)
 
 
 def orientation_spread_deg(rvecs) -> float:
@@ -560,11 +574,9 @@ def _lens_problem(intr: Intrinsics) -> str | None:
     said with what to capture; None where it would not. Only the principal point was asked here: a distortion term
     past the reader's bound was refused as the rig file's field, naming a file not yet written, "a typo"."""
     advice = "the views do not pin the lens down: add views near and far, tilted, reaching the image's corners"
-    problem = principal_point_problem(intr.K, *intr.image_size, advice=advice)
-    if problem:
-        return problem
-    other = focal_length_problem(intr.K, *intr.image_size) or distortion_problem(intr.dist)
-    return None if other is None else f"{other} Here the solve's: {advice}"
+    return (principal_point_problem(intr.K, *intr.image_size, advice=advice)
+            or focal_length_problem(intr.K, *intr.image_size, advice=advice)
+            or distortion_problem(intr.dist, advice=advice))
 
 
 def _round_or_none(value: float, digits: int) -> float | None:
@@ -604,7 +616,8 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     lens model and whether its tangential terms were fitted (``tangential``; False holds p1, p2 at 0).
 
     :raises SolveError: too few views, no levelling given, a floor view neither camera saw, a solved lens the
-        rig file would refuse (a principal point far from the image centre, a distortion term past its bound).
+        rig file would refuse (a principal point far from the image centre, a focal length or distortion term past
+        its bound).
     """
     if (floor_view is None) == (camera_height_m is None):
         raise SolveError("say where the floor is: a floor view (the board lying on the floor) or the first "

@@ -294,9 +294,10 @@ def principal_point_problem(K: Any, width: int, height: int, *, advice: str = _R
             + advice)
 
 
-def focal_length_problem(K: Any, width: int, height: int) -> str | None:
-    """Why ``K``'s focal lengths are not a lens's for a ``width`` x ``height`` image (``FOCAL_RANGE``); None when
-    they are."""
+def focal_length_problem(K: Any, width: int, height: int, *,
+                         advice: str = "a typo, or a focal length in other units?") -> str | None:
+    """Why ``K``'s focal lengths are not a lens's for a ``width`` x ``height`` image (``FOCAL_RANGE``; ending in
+    ``advice``); None when they are."""
     K = np.asarray(K, dtype=np.float64)
     side = float(max(width, height))
     low, high = FOCAL_RANGE[0] * side, FOCAL_RANGE[1] * side
@@ -305,7 +306,7 @@ def focal_length_problem(K: Any, width: int, height: int) -> str | None:
             fov = math.degrees(2.0 * math.atan(side / (2.0 * f))) if f > 0 else float("nan")
             return (f"its focal length {name} = {past_bound(f, low if f < low else high, 6)} px is outside "
                     f"{low:g}-{high:g} px ({FOCAL_RANGE[0]:g}-{FOCAL_RANGE[1]:g} times the {width}x{height} image's "
-                    f"longer side; a {fov:.3g}-degree view): a typo, or a focal length in other units?")
+                    f"longer side; a {fov:.3g}-degree view): " + advice)
     return None
 
 
@@ -322,14 +323,14 @@ def skew_problem(K: Any) -> str | None:
             "OpenCV): a typo, or a matrix in another layout?")
 
 
-def distortion_problem(dist: Any) -> str | None:
+def distortion_problem(dist: Any, *, advice: str = "a typo, or a calibration that diverged?") -> str | None:
     """Why OpenCV coefficients ``dist`` are not a real lens's (one beyond ``MAX_DISTORTION`` in magnitude, or not
-    finite), naming the first such coefficient; None when they are."""
+    finite), naming the first such coefficient and ending in ``advice``; None when they are."""
     d = np.asarray(dist, dtype=np.float64).reshape(-1)
     for name, value in zip(DISTORTION_NAMES, d.tolist()):
         if not abs(value) <= MAX_DISTORTION:  # NaN too
             return (f"its distortion coefficient {name} = {value!r} is beyond any lens's (|coefficient| at most "
-                    f"{MAX_DISTORTION:g}): a typo, or a calibration that diverged?")
+                    f"{MAX_DISTORTION:g}): " + advice)
     return None
 
 

@@ -497,6 +497,18 @@ def test_check_names_the_exchanged_folders_instead_of_calibrating_again(level_ri
     assert _check_cli(level_rig, level_views, tmp_path, monkeypatch)[0] == 0
 
 
+def test_check_names_the_exchanged_folders_where_no_scale_was_measured(level_rig, level_views, tmp_path, capsys,
+                                                                        monkeypatch):
+    # no two neighbouring corners found: the report's scale is None, which check_failures lets through; the
+    # exchanged folders' words formatted it with :.4f, a TypeError traceback in place of the advice
+    real = cli.exchanged_fit
+    monkeypatch.setattr(cli, "exchanged_fit", lambda *args, **kwargs: {**real(*args, **kwargs), "scale": None})
+    rc, images = _check_cli(level_rig, _exchanged(level_views), tmp_path, monkeypatch)
+    err = capsys.readouterr().err
+    assert rc == 1 and "images exchanged (reprojection 0.000 px rms, scale not measured): " in err, err
+    assert f"{images / 'left'} holds the images of camera 'right'" in err
+
+
 @pytest.fixture(scope="module")
 def sized_rig(level_rig) -> Rig:
     """``level_rig`` with its right camera at 640x400 (the same field of view)."""
