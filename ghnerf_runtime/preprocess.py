@@ -213,10 +213,15 @@ def _square_roi(lo: np.ndarray, hi: np.ndarray, camera: Camera, min_size: int = 
     return _square(0.5 * (lo + hi), float(np.max(hi - lo)), min_size)
 
 
+def _square_size(side: float, min_size: int = 1) -> int:
+    """The side in whole pixels of :func:`_square`'s square for a box of ``side`` pixels."""
+    # +1: integer rounding of the corner may shift the window by up to half a pixel each way.
+    return max(int(math.ceil(side)) + 1, int(min_size), 1)
+
+
 def _square(centre: np.ndarray, side: float, min_size: int = 1) -> Roi:
     """The integer square of at least ``side`` (and ``min_size``) pixels around ``centre``."""
-    # +1: integer rounding of the corner may shift the window by up to half a pixel each way.
-    size = max(int(math.ceil(side)) + 1, int(min_size), 1)
+    size = _square_size(side, min_size)
     x0, y0 = (int(math.floor(c - (size - 1) / 2 + 0.5)) for c in centre)
     return Roi(x0, y0, size)
 
@@ -250,8 +255,9 @@ def _roi_of_points(uv: np.ndarray, camera: Camera, *, margin_frac: float = 0.0, 
     side = float(np.max(hi - lo)) * (1 + 2 * margin_frac)
     centre = turn.T @ (0.5 * (lo + hi))
     if edge_crop == "shift":
-        # the rotated square's axis-aligned half-extent; moved inward only as far as the image allows
-        half = 0.5 * side * np.abs(turn).sum(axis=1)
+        # the rotated square's axis-aligned half-extent, of the square made (min_size and the rounding's pixel
+        # too: sized from the box alone, a small person's square grown to min_size still left the frame)
+        half = 0.5 * _square_size(side, min_size) * np.abs(turn).sum(axis=1)
         room_lo, room_hi = img_lo + half, img_hi - half
         centre = np.where(room_lo <= room_hi, np.clip(centre, room_lo, np.maximum(room_lo, room_hi)),
                           0.5 * (img_lo + img_hi))

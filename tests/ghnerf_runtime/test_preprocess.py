@@ -625,6 +625,24 @@ def test_a_box_past_the_frame_edge_is_cropped_as_the_policy_says(roll):
     assert rois["centre"].x0 <= rois["clip"].x0 < rois["shift"].x0
 
 
+@pytest.mark.parametrize("roll", [0.0, 30.0])
+@pytest.mark.parametrize("corner", [(0, 0), (639, 0), (0, 479), (639, 479)], ids=str)
+def test_a_small_person_at_the_frame_corner_is_shifted_inside_whole(roll, corner):
+    """``shift`` with a box smaller than ``min_size`` (a far person, 30 px tall, at a corner of the frame): the
+    square grown to ``min_size`` is the one moved inside. It was moved as the box's own small square, then grown
+    about that centre: half of the 64 px crop past the frame, the black (or faded) band ``shift`` is chosen to
+    avoid."""
+    cam = make_camera(dist=np.zeros(5))
+    lo, hi = undistorted_image_bounds(cam)
+    inward = np.sign(np.array([320.0, 240.0]) - corner)
+    body = np.array(corner, np.float64) + inward * np.array([[2.0, 2.0], [10.0, 30.0], [6.0, 16.0]])
+    roi = roi_from_joints(cam, body, np.ones(3), 0.125, 64, roll_deg=roll, edge_crop="shift")
+    assert roi.size >= 64
+    half = np.abs(preprocess.image_rotation(roll)).sum(axis=1) * roi.size / 2  # the turned square's half-extent
+    mid = np.array([roi.x0, roi.y0]) + (roi.size - 1) / 2
+    assert np.all(mid - half >= lo - 0.5) and np.all(mid + half <= hi + 0.5), (roi, lo, hi)
+
+
 def test_the_edge_crop_policy_is_checked():
     with pytest.raises(GeometryError, match="edge_crop"):
         roi_from_joints(make_camera(), _body_px(320.0), np.ones(14), edge_crop="pad")
