@@ -7,6 +7,10 @@ PYTHON ?= python3.11
 VENV ?= .venv
 PY := $(VENV)/bin/python
 PIP := $(PY) -m pip
+# pip (26 on) passes on what the build backend warns of for a local folder, and setuptools warns on every editable
+# install: "Editable installation ... Please be careful with folders in your working directory with the same name as
+# your package". Here those folders are the packages themselves, so that note alone is filtered out, by its text.
+PIP_EDITABLE := PYTHONWARNINGS="ignore:Editable installation" $(PIP)
 # Stamps record which dependency set is installed; they are rebuilt when the pins change.
 RUNTIME_STAMP := $(VENV)/.stamp-runtime
 DEV_STAMP := $(VENV)/.stamp-dev
@@ -18,11 +22,11 @@ $(PY):
 	$(PIP) install --quiet --upgrade "pip>=24" wheel "setuptools>=77"
 
 $(RUNTIME_STAMP): $(PY) pyproject.toml constraints.txt
-	$(PIP) install --quiet -c constraints.txt -e .
+	$(PIP_EDITABLE) install --quiet -c constraints.txt -e .
 	touch $@
 
 $(DEV_STAMP): $(RUNTIME_STAMP) pyproject.toml constraints.txt
-	$(PIP) install --quiet -c constraints.txt -e ".[dev,training]"
+	$(PIP_EDITABLE) install --quiet -c constraints.txt -e ".[dev,training]"
 	touch $@
 
 venv: $(RUNTIME_STAMP)

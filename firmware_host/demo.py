@@ -239,6 +239,8 @@ class _Tally:
                      f"(not found = wrong)")
         if np.isfinite(acc.get("jitter_mm", float("nan"))):
             text += f"; jitter {acc['jitter_mm']:.1f} mm per pair^2"
+        elif "jitter_mm" in acc:  # a host too slow for the rig skips every other pair: the figure was left out unsaid
+            text += "; jitter not measured: no joint found in three pairs in a row (a skipped pair breaks the chain)"
         lines.append(text)
         return lines
 
