@@ -706,7 +706,7 @@ def test_udp_frame_out_whose_status_alone_is_refused_counts_as_delivered(monkeyp
 def test_udp_frame_whose_2d_joints_meet_a_full_buffer_is_sent_in_part_and_flags_no_gap(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """Frame 0's JOINTS goes out, its first JOINTS_2D meets a full send buffer: the listener has seq 0 and its 3D
-    joints, no 2D. Until now the frame counted in dropped_error and frame 1's JOINTS said DROPPED, a gap whose seq
+    joints, no 2D. Before, the frame counted in dropped_error and frame 1's JOINTS said DROPPED, a gap whose seq
     the listener had received; now it counts as sent and partial (as vmc://'s second bundle), and no flag lies."""
     from firmware_host.errors import SinkWriteError
     from firmware_host.protocol.constants import Flags
