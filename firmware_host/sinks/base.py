@@ -97,6 +97,9 @@ class Sink(ABC):
     """A joint-stream output. Create with ``open_sink(url)`` (which also starts it)."""
 
     scheme: str = ""
+    #: Longest close() waits, once it gave up, for a new link's HELLO + STATUS being written (its links' writes time
+    #: out well within it by default; ``write_timeout_ms`` and ``timeout_ms`` go to 60 s, past a service's stop).
+    announcement_wait_s: float = 2.0
 
     def __init__(self, url: str, options: SinkOptions) -> None:
         self.url = url
@@ -334,8 +337,8 @@ class Sink(ABC):
 
         Frames still queued after ``timeout`` are counted as ``dropped_close``. A link still opening then (a slow
         name lookup) is let go once open, unannounced: no HELLO from a closed sink; an open that fails then is neither
-        logged nor counted. A link's HELLO + STATUS being written then is waited for (at most the link's write
-        timeout): none goes out after close() returned.
+        logged nor counted. A link's HELLO + STATUS being written then is waited for, at most
+        :attr:`announcement_wait_s` (a WARNING where it runs past that, as it may go out after close() returned).
         """
         with self._cond:
             if self._closed:
@@ -433,10 +436,13 @@ class Sink(ABC):
         return True
 
     def _wait_for_announcement(self) -> None:
-        """close(), giving up: a new link's HELLO + STATUS being written goes out whole before close() returns (the
-        link's write timeout bounds it); a HELLO after close() read as a restart beside the sink replacing this one.
-        Call with _cond held."""
-        self._cond.wait_for(lambda: not self._announcing)
+        """close(), giving up: a new link's HELLO + STATUS being written goes out whole before close() returns; a
+        HELLO after close() read as a restart beside the sink replacing this one. Waited for at most
+        :attr:`announcement_wait_s`: a write held longer (a serial or file write timeout of up to 60 s, a backend
+        whose write hangs) held close(), and a daemon's stop, with no limit. Call with _cond held."""
+        if not self._cond.wait_for(lambda: not self._announcing, self.announcement_wait_s):
+            _log.warning("%s: closed while its HELLO + STATUS was still being written after %.1f s: it may go out "
+                         "after the close", self.shown, self.announcement_wait_s)
 
     def _connect_failed(self, e: Exception, retry_s: float) -> None:
         """Count a failed connect; log it once per outage and per new error, not on every retry

@@ -55,7 +55,7 @@ def judge_cut_write(url: str, reason: str, messages: list[Message], packet_ends:
     a trailing HELLO + STATUS was cut: that STATUS is owed).
 
     :raises SinkPartialWriteError: the frame's JOINTS went out, not all its JOINTS_2D: the receiver has the frame's
-        seq and 3D joints (counted dropped until now, and the next frame's DROPPED named a gap with no seq missing).
+        seq and 3D joints (counted dropped before, and the next frame's DROPPED named a gap with no seq missing).
     :raises SinkWriteError: not even the JOINTS went out (or a write without a frame was cut).
     """
     needed = frame_messages(messages)

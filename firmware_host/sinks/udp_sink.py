@@ -347,7 +347,8 @@ class UdpSink(ProtocolSink):
         full send buffer cuts only what follows: its JOINTS_2D (:class:`SinkPartialWriteError`: the receiver has
         the frame's seq and 3D joints, no gap) or the HELLO + STATUS behind it (False: the STATUS is owed)."""
         n_frame = frame_packets(messages)
-        # a JOINTS_2D cut: counted dropped until this review, the next JOINTS flagged DROPPED with no seq missing
+        # a JOINTS_2D cut is a frame sent in part (counted dropped before: the next JOINTS flagged DROPPED, no seq
+        # missing)
         self._link.send_in_turn([encode(m) for m in messages[:n_frame]])
         for m in messages[n_frame:]:
             try:

@@ -341,7 +341,7 @@ def test_every_other_control_character_is_refused_naming_its_code_point_and_plac
 
 
 @pytest.mark.parametrize(("url", "said"), [
-    # no C0/C1 control, so taken until now: a separator broke the line that showed the URL, a bidi control showed
+    # no C0/C1 control, so taken before: a separator broke the line that showed the URL, a bidi control showed
     # its characters in another order than the one opened ("\u202elmth.take" showed as "ekat.html")
     ("replay:///data/ta\u2028ke", "'replay:///data/ta\\u2028ke': holds a line separator (U+2028) at character 18, "
                                    "which logs and editors break the line at; remove it, or write it as %E2%80%A8"),

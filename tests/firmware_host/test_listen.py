@@ -119,7 +119,7 @@ def test_serial_json_lines_over_a_pty():
     ("udp://127.0.0.1:98\x1b[2J70", "'udp://127.0.0.1:98\\x1b[2J70': holds a control character (U+001B) at "
                                     "character 19, which logs and terminals would act on or hide"),
     ("serial:///dev/null\x85?baud=9600", "'serial:///dev/null\\x85?baud=9600': holds a control character (U+0085)"),
-    # no C0/C1 control, so taken until now: the separator broke the line, the bidi control reordered it
+    # no C0/C1 control, so taken before: the separator broke the line, the bidi control reordered it
     ("udp://127.0.0.1:98\u202870", "'udp://127.0.0.1:98\\u202870': holds a line separator (U+2028) at character 19"),
     ("serial:///dev/null\u202e?baud=9600", "'serial:///dev/null\\u202e?baud=9600': holds a bidirectional-text "
                                            "control (U+202E) at character 19"),

@@ -408,16 +408,16 @@ def test_a_link_that_sends_every_frame_in_part_reads_stalled_until_one_goes_out_
     does not end) a stall now, still counted sent and partial; the first frame out whole ends it."""
     sink = ScriptedSink(queue=1, stall_s=0.1).start()
     try:
-        wait_until(lambda: sink.stats().connected, what="connected")
+        wait_until(lambda: sink.stats().connected, timeout=30, what="connected")
         sink.fail_next.append(SinkPartialWriteError("scripted://", "socket send buffer full", 1, 2))
         sink.send(make_frame(0))
-        assert sink.wait_drained(5)
-        wait_until(lambda: sink.stats().state == "stalled", what="stalled after a frame sent in part")
+        assert sink.wait_drained(30)
+        wait_until(lambda: sink.stats().state == "stalled", timeout=30, what="stalled after a frame sent in part")
         s = sink.stats()
         assert (s.sent, s.partial, s.dropped, s.accounted) == (1, 1, 0, 1)
         assert "socket send buffer full (after 1 of the frame's 2" in (s.last_error or "")
         sink.send(make_frame(1))  # out whole: the receiver has all of it
-        assert sink.wait_drained(5)
+        assert sink.wait_drained(30)
         s = sink.stats()
         assert (s.state, s.stalled_s, s.sent, s.partial) == ("up", None, 2, 1)
     finally:

@@ -155,6 +155,7 @@ class HeldAnnouncement(MemorySink):
 
     def __init__(self) -> None:
         super().__init__("memory://held", 1 << 20, SinkOptions())
+        self.announcement_wait_s = 60.0  # close() waits for the held HELLO however loaded the host
         self.announcing = threading.Event()  # the worker passed the closed-check, its HELLO not written yet
         self.hold = threading.Event()
         self.settled = threading.Event()
@@ -196,6 +197,29 @@ def test_a_hello_being_written_when_close_gives_up_goes_out_before_close_returns
     assert not sink._thread.is_alive()
     assert written_at_return[0] != b"" and sink.read() == b""  # all of it out before close() returned, none after
     assert sink.stats().state == "closed"
+
+
+def test_a_hello_held_past_the_announcement_wait_does_not_hold_close(caplog: pytest.LogCaptureFixture) -> None:
+    # before: close() waited for a HELLO + STATUS being written with no limit: a write held up to its 60 s
+    # write_timeout_ms (or a backend's write that hangs) held close(), and the daemon's stop, past TimeoutStopSec
+    sink = HeldAnnouncement()
+    sink.announcement_wait_s = 0.2
+    sink.start()
+    assert sink.announcing.wait(30.0)
+    closer = threading.Thread(target=sink.close, kwargs={"timeout": 0.05}, daemon=True)
+    try:
+        with caplog.at_level(logging.WARNING, logger="firmware_host.sinks.base"):
+            closer.start()
+            closer.join(30.0)
+            returned_while_held = not closer.is_alive()
+    finally:
+        sink.hold.set()  # the held HELLO goes out now, whatever the outcome
+    closer.join(30.0)
+    assert returned_while_held
+    assert "closed while its HELLO + STATUS was still being written after 0.2 s" in caplog.text
+    assert sink._thread is not None
+    sink._thread.join(30.0)
+    assert not sink._thread.is_alive()
 
 
 def test_a_link_that_opens_within_close_s_timeout_still_gets_the_queued_frames() -> None:

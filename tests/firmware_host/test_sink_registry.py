@@ -264,7 +264,7 @@ def test_every_other_control_character_is_refused_as_rig_urls_refuse_it(url: str
 
 
 @pytest.mark.parametrize(("url", "said"), [
-    # no C0/C1 control, so taken until now: the STATUS line and logs broke at the separator, or showed the bidi
+    # no C0/C1 control, so taken before: the STATUS line and logs broke at the separator, or showed the bidi
     # control's path in another order than the file written
     ("file:///tmp/a\u2028b.jsonl", "holds a line separator (U+2028) at character 14, which logs and editors break "
                                    "the line at; remove it, or write it as %E2%80%A8"),

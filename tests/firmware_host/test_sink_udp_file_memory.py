@@ -287,10 +287,10 @@ def test_file_sink_write_cut_in_its_2d_joints_sends_the_frame_in_part(tmp_path: 
     two_d = {"left": np.full((25, 3), 10.0), "right": np.full((25, 3), 20.0)}
     sink = open_sink(path.as_uri() + "?status_s=3600&send_2d=1", backoff=FAST_BACKOFF, cameras=("left", "right"))
     try:
-        assert sink.wait_connected(5)
+        assert sink.wait_connected(30)
         sink.send(make_frame(0, joints_2d=two_d))
         sink.send(make_frame(1, joints_2d=two_d))
-        assert sink.wait_drained(5)
+        assert sink.wait_drained(30)
         stats = sink.stats()
     finally:
         sink.close()
@@ -706,7 +706,7 @@ def test_udp_frame_out_whose_status_alone_is_refused_counts_as_delivered(monkeyp
 def test_udp_frame_whose_2d_joints_meet_a_full_buffer_is_sent_in_part_and_flags_no_gap(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """Frame 0's JOINTS goes out, its first JOINTS_2D meets a full send buffer: the listener has seq 0 and its 3D
-    joints, no 2D. Until now the frame counted in dropped_error and frame 1's JOINTS said DROPPED, a gap whose seq
+    joints, no 2D. Before, the frame counted in dropped_error and frame 1's JOINTS said DROPPED, a gap whose seq
     the listener had received; now it counts as sent and partial (as vmc://'s second bundle), and no flag lies."""
     from firmware_host.errors import SinkWriteError
     from firmware_host.protocol.constants import Flags
@@ -725,18 +725,18 @@ def test_udp_frame_whose_2d_joints_meet_a_full_buffer_is_sent_in_part_and_flags_
     monkeypatch.setattr(DatagramLink, "send", send)
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
-    rx.settimeout(5)
+    rx.settimeout(30)
     two_d = {"left": np.full((25, 3), 10.0), "right": np.full((25, 3), 20.0)}
     sink = open_sink(f"udp://127.0.0.1:{rx.getsockname()[1]}?queue=16&send_2d=1", backoff=FAST_BACKOFF,
                      cameras=("left", "right"))
     try:
-        assert sink.wait_connected(5)
+        assert sink.wait_connected(30)
         sink.send(make_frame(0, joints_2d=two_d))
         sink.send(make_frame(1, joints_2d=two_d))
         received: list = []
         while not any(isinstance(m, Joints2D) and (m.header.seq, m.camera) == (1, 1) for m in received):
             received += messages_of(rx.recv(2048))  # (a timeout raises: frame 1's last packet never came)
-        wait_until(lambda: sink.stats().sent + sink.stats().dropped_error == 2, what="both frames counted")
+        wait_until(lambda: sink.stats().sent + sink.stats().dropped_error == 2, timeout=30, what="both frames counted")
         stats = sink.stats()
     finally:
         sink.close()

@@ -54,7 +54,7 @@ def test_an_open_that_fails_first_raises_its_error():
 
 @pytest.mark.parametrize("error", [None, drivers.RigInitializationError("device gone")])
 def test_a_stop_abandons_the_open_and_closes_the_source_before_the_open_returns(error):
-    """Until now the source was closed by the open's thread once the open returned (an OAK's: up to
+    """Before, the source was closed by the open's thread once the open returned (an OAK's: up to
     health.open_allowance_s later), its cameras held meanwhile; the stop now closes it at once, which cancels the
     open (drivers.base), and the open's thread closes nothing more."""
     source, stop = _SlowSource(error), threading.Event()
