@@ -53,19 +53,20 @@ def bounded_count(least: int, most: int):
 def seed_list(text: str) -> list[int]:
     """An argparse ``type=`` for ``--seeds 0,1,2``: one seed at least, each a whole number >= 0 (``--seeds x`` was
     int()'s "invalid literal" traceback)."""
-    try:
-        return [whole_number(part, 0) for part in text.split(",")]
-    except argparse.ArgumentTypeError:
-        raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 0, got {text!r}") from None
+    return _whole_number_list(text, 0)
 
 
 def positive_count_list(text: str) -> list[int]:
     """An argparse ``type=`` for ``--threads 1,2``: one count at least, each a whole number >= 1 (``--threads x``
     was int()'s "invalid literal" traceback, ``--threads 0`` torch's once the dataset was read)."""
+    return _whole_number_list(text, 1)
+
+
+def _whole_number_list(text: str, least: int) -> list[int]:
     try:
-        return [whole_number(part, 1) for part in text.split(",")]
+        return [whole_number(part, least) for part in text.split(",")]
     except argparse.ArgumentTypeError:
-        raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= 1, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"must be comma-separated whole numbers >= {least}, got {text!r}") from None
 
 
 def image_size(text: str) -> tuple[int, int]:
