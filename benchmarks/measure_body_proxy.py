@@ -183,7 +183,8 @@ def main(argv: list[str] | None = None) -> int:
         guided = {}
         if args.guided:
             nov = np.flatnonzero(~np.asarray(scene["tgt_is_source"], bool))
-            for name, guide in (("proxy", dev["tgt_depth"]), ("truth", np.where(scene["tgt_masks"], scene["tgt_depth"], 0.0))):
+            truth_depth = np.where(scene["tgt_masks"], scene["tgt_depth"], 0.0)
+            for name, guide in (("proxy", dev["tgt_depth"]), ("truth", truth_depth)):
                 g_rgb, g_acc, _ = guided_render(renderer.model, scene, nov, guide)
                 guided.update({(name, int(t)): (g_rgb[k], g_acc[k]) for k, t in enumerate(nov)})
         for t in range(V):
@@ -270,7 +271,8 @@ def main(argv: list[str] | None = None) -> int:
     for label, keep in groups:
         sel = [r for r, k in zip(rows, keep) if k]
         if sel:
-            print(f"| {label} | {len(sel)} | " + " | ".join(f"{np.nanmean([r[c] for r in sel]):.2f}" for c in cols) + " |")
+            means = (f"{np.nanmean([r[c] for r in sel]):.2f}" for c in cols)
+            print(f"| {label} | {len(sel)} | " + " | ".join(means) + " |")
     return 0
 
 

@@ -56,7 +56,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--split", default="val_seen_motions")
     ap.add_argument("--limit", type=non_negative_count, default=128)
     ap.add_argument("--model", required=True, help="the GHNeRF torch checkpoint whose picture is matted")
-    ap.add_argument("--joints", required=True, help="the device's joints of the split (python -m training.device_joints)")
+    ap.add_argument("--joints", required=True,
+                    help="the device's joints of the split (python -m training.device_joints)")
     ap.add_argument("--margins", type=number_list, default=[0.04, 0.06, 0.08, 0.10, 0.12])
     ap.add_argument("--feathers", type=number_list, default=[0.0, 0.10, 0.15, 0.20])
     ap.add_argument("--clear-below", type=number_list, default=[0.0],
