@@ -5,20 +5,13 @@ refuses was its ConfigError traceback once the model was loaded, in some scripts
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Callable
 from typing import Any
 
-from ghnerf_runtime.cli.counts import whole_number
+from ghnerf_runtime.cli.counts import ascii_integer
 from ghnerf_runtime.errors import ConfigError
 
-__all__ = ["ascii_integer", "config_field"]
-
-
-def ascii_integer(text: str) -> int:
-    """A whole number in ASCII digits, of any sign (:func:`~ghnerf_runtime.cli.counts.whole_number`'s reading):
-    ``int()`` also reads other scripts' digits (``'\u0663'``) and ``'1_0'``."""
-    return whole_number(text, -sys.maxsize - 1)
+__all__ = ["config_field"]
 
 
 def config_field(config_class: type, field: str,
