@@ -43,6 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
+from ghnerf_runtime.cli.numbers import finite_number  # noqa: E402
 from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE, depth_per_disparity_px  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig, TrackingConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -161,18 +162,20 @@ def floats(text: str) -> list[float]:
 
 def finite_float(text: str) -> float:
     """``--rig-lift``: a finite number of metres."""
-    value = float(text)
-    if not np.isfinite(value):
-        raise argparse.ArgumentTypeError(f"a finite number of metres, got {text!r}")
-    return value
+    try:
+        return finite_number(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"a finite number of metres, got {text!r}") from None
 
 
 def bound_m(text: str) -> float:
     """``--good-find-mm``: a number, inf allowed, not nan."""
-    value = float(text)
-    if np.isnan(value):
-        raise argparse.ArgumentTypeError(f"a number (inf allowed), got {text!r}")
-    return value
+    if text.strip() == "inf":
+        return float("inf")
+    try:
+        return finite_number(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"a number (inf allowed), got {text!r}") from None
 
 
 def max_foot_m(text: str) -> float:

@@ -53,6 +53,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
+from ghnerf_runtime.cli.numbers import number_or  # noqa: E402
 from ghnerf_runtime.config import NovelViewConfig  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
@@ -129,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--limit", type=non_negative_count, default=256)
     ap.add_argument("--model", required=True, help="the GHNeRF torch checkpoint whose picture and masks are used")
     ap.add_argument("--joints", required=True, help="the device's joints (python -m training.device_joints)")
-    ap.add_argument("--scale", type=lambda s: None if s == "fit" else float(s), default=1.0,
+    ap.add_argument("--scale", type=number_or("fit"), default=1.0,
                     help="the device proxy's girth scale, or 'fit' to fit it to the model's masks (default: 1)")
     ap.add_argument("--guided", action="store_true", help="add the guided:proxy and guided:truth columns")
     ap.add_argument("--painter", default=None, metavar="ONNX",
@@ -182,7 +183,8 @@ def main(argv: list[str] | None = None) -> int:
         guided = {}
         if args.guided:
             nov = np.flatnonzero(~np.asarray(scene["tgt_is_source"], bool))
-            for name, guide in (("proxy", dev["tgt_depth"]), ("truth", np.where(scene["tgt_masks"], scene["tgt_depth"], 0.0))):
+            truth_depth = np.where(scene["tgt_masks"], scene["tgt_depth"], 0.0)
+            for name, guide in (("proxy", dev["tgt_depth"]), ("truth", truth_depth)):
                 g_rgb, g_acc, _ = guided_render(renderer.model, scene, nov, guide)
                 guided.update({(name, int(t)): (g_rgb[k], g_acc[k]) for k, t in enumerate(nov)})
         for t in range(V):
@@ -269,7 +271,8 @@ def main(argv: list[str] | None = None) -> int:
     for label, keep in groups:
         sel = [r for r, k in zip(rows, keep) if k]
         if sel:
-            print(f"| {label} | {len(sel)} | " + " | ".join(f"{np.nanmean([r[c] for r in sel]):.2f}" for c in cols) + " |")
+            means = (f"{np.nanmean([r[c] for r in sel]):.2f}" for c in cols)
+            print(f"| {label} | {len(sel)} | " + " | ".join(means) + " |")
     return 0
 
 

@@ -47,6 +47,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
+from ghnerf_runtime.cli.numbers import number_list  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -196,7 +197,7 @@ def main(argv=None) -> int:
     ap.add_argument("--model-dir", type=model_folder_option, default="models")
     ap.add_argument("--sequences", type=positive_count, default=10)
     ap.add_argument("--frames", type=positive_count, default=30)
-    ap.add_argument("--outside", default="0,0.1,0.25,0.5", type=lambda s: [float(v) for v in s.split(",") if v],
+    ap.add_argument("--outside", default="0,0.1,0.25,0.5", type=number_list,
                     help="shares of the person's box outside camera 0's cut frame")
     ap.add_argument("--edge-crop", default=None, type=lambda s: [v for v in s.split(",") if v],
                     help="roi.edge_crop policies to run, comma-separated (default: the runtime's default only)")

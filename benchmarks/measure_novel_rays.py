@@ -27,6 +27,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.config_field import config_field  # noqa: E402
+from ghnerf_runtime.cli.numbers import finite_number  # noqa: E402
 from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
 from benchmarks.bench_runtime_common import RenderTap  # noqa: E402
@@ -54,7 +55,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sequences", type=positive_count, default=4)
     ap.add_argument("--frames", type=positive_count, default=30)
     ap.add_argument("--silhouette-stride", type=positive_count, default=4)
-    ap.add_argument("--min-diff", type=config_field(NovelViewConfig, "silhouette_min_diff", float),
+    ap.add_argument("--min-diff", type=config_field(NovelViewConfig, "silhouette_min_diff", finite_number),
                     help="silhouette_min_diff (default: the config's)")
     ap.add_argument("--dilate", type=config_field(NovelViewConfig, "silhouette_dilate"),
                     help="silhouette_dilate (default: the config's)")

@@ -165,7 +165,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--model-dir", type=model_folder_option, default="models/ghnerf")
     ap.add_argument("--data", required=True)
     ap.add_argument("--extra-data", action="append", default=[])
-    ap.add_argument("--val-split", default="val")
+    ap.add_argument("--val-split", default="val", help="the held-out split scored (not train, which the prior "
+                                                       "is fitted on)")
     ap.add_argument("--limit", type=non_negative_count, default=0, help="scenes per split (0: all)")
     ap.add_argument("--variants", default="base,shape,mass")
     ap.add_argument("--steps", type=positive_count, default=30000)
@@ -176,14 +177,18 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if problem := seed_problem(args.seed):  # torch's overflow traceback once the scenes were collected
         ap.error(f"argument --seed: {problem}")
+    if args.val_split == "train":  # as training.skeleton_prior refuses it: the prior is fitted on train's scenes
+        ap.error("argument --val-split: 'train' is the split the prior is fitted on: the held-out figures would be "
+                 "training figures (val or val_seen_motions)")
     variants = args.variants.split(",")
     if unknown := [v for v in variants if v not in VARIANTS]:
         ap.error(f"unknown variants {unknown}; known: {', '.join(VARIANTS)}")
     if args.cache:  # the collection takes minutes: its file's place is settled first, with the name savez writes
         args.cache = ready_output_arg(ap, args.cache, "--cache", suffix=".npz")
     if not (args.cache and Path(args.cache).is_file()):  # the splits collect_all reads, before minutes of it
-        for data, split, option in [(args.data, "train", "--data"), (args.data, args.val_split, "--data"),
-                                    *((extra, "train", "--extra-data") for extra in args.extra_data)]:
+        for data, split, option in [(args.data, "train", "--data"),
+                                    *((extra, "train", "--extra-data") for extra in args.extra_data),
+                                    (args.data, args.val_split, "--data")]:
             check_dataset_split(ap, data, split, option)
 
     import torch

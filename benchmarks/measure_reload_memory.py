@@ -42,10 +42,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.cli.counts import non_negative_count, positive_count
+from ghnerf_runtime.cli.counts import bounded_count, non_negative_count, positive_count
 from ghnerf_runtime.cli.model_folder import model_folder_option
 
 M_MMAP_THRESHOLD, M_ARENA_MAX = -3, -8  # glibc's malloc.h
+#: The upper limit of M_MMAP_THRESHOLD on 64 bits (man mallopt: DEFAULT_MMAP_THRESHOLD_MAX). Below 0 is no size:
+#: glibc reads -5 as a size_t near 2**64 (glibc 2.36 took it, returning 1), so the run measured no mapped blocks.
+MMAP_THRESHOLD_MAX = 32 << 20
 
 
 def rss_mb() -> float:
@@ -150,9 +153,10 @@ def main() -> None:
     ap.add_argument("--ort", choices=["no_cpu_arena", "no_mem_pattern", "env_allocator"])
     ap.add_argument("--arena-max", type=non_negative_count, default=0,
                     help="mallopt(M_ARENA_MAX, N) first (0: glibc's default)")
-    ap.add_argument("--mmap-threshold", type=int, default=None,
-                    help="mallopt(M_MMAP_THRESHOLD, N) first (default: the daemon's, memory.MMAP_THRESHOLD; 0: glibc's "
-                         "own, which rises as mapped blocks are freed, as before the daemon fixed it)")
+    ap.add_argument("--mmap-threshold", type=bounded_count(0, MMAP_THRESHOLD_MAX), default=None,
+                    help="mallopt(M_MMAP_THRESHOLD, N) first, N bytes up to 32 MiB (default: the daemon's, "
+                         "memory.MMAP_THRESHOLD; 0: glibc's own, which rises as mapped blocks are freed, as before the "
+                         "daemon fixed it)")
     ap.add_argument("--main-thread", action="store_true",
                     help="load and estimate in the main thread, as ghnerf-daemon (default: in a thread of its own, "
                          "as soak_daemon.py runs the daemon)")

@@ -26,6 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count, positive_count_list  # noqa: E402
+from ghnerf_runtime.cli.numbers import number_list  # noqa: E402
 import torch  # noqa: E402
 
 from training.cli.dataset_split import check_dataset_split  # noqa: E402
@@ -80,18 +81,10 @@ def time_steps(data: str, scale: float, precision: str, steps: int, scenes_per_s
     return times
 
 
-def _numbers(text: str) -> list[float]:
-    """An argparse ``type=`` for ``--input-scales 0.5,1.0`` (``x`` was float()'s traceback)."""
-    try:
-        return [float(part) for part in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be comma-separated numbers, got {text!r}") from None
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default="data/edge128", help="a dataset folder (default: the one make model makes)")
-    ap.add_argument("--input-scales", type=_numbers, default="0.5,1.0",
+    ap.add_argument("--input-scales", type=number_list, default="0.5,1.0",
                     help="human.input_scale values (1.0: a 128x128 trunk)")
     ap.add_argument("--precisions", default="fp32,bf16", help="PretrainConfig.precision values")
     ap.add_argument("--steps", type=positive_count, default=25)

@@ -28,6 +28,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
+from ghnerf_runtime.cli.numbers import number_list  # noqa: E402
 from ghnerf_runtime.body_proxy import proxy_body, proxy_depth  # noqa: E402
 from ghnerf_runtime.config import NovelViewConfig  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
@@ -36,10 +37,6 @@ from ghnerf_runtime.proxy_blend import subject_region  # noqa: E402
 from ghnerf_runtime.proxy_matte import proxy_matte  # noqa: E402
 from training.body_proxy import view_camera  # noqa: E402
 from training.cli.dataset_split import check_dataset_split  # noqa: E402
-
-
-def _floats(text: str) -> list[float]:
-    return [float(v) for v in text.split(",")]
 
 
 def cleared(rgb: np.ndarray, acc: np.ndarray, background: float, opaque_at: float, clear_below: float) -> np.ndarray:
@@ -59,10 +56,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--split", default="val_seen_motions")
     ap.add_argument("--limit", type=non_negative_count, default=128)
     ap.add_argument("--model", required=True, help="the GHNeRF torch checkpoint whose picture is matted")
-    ap.add_argument("--joints", required=True, help="the device's joints of the split (python -m training.device_joints)")
-    ap.add_argument("--margins", type=_floats, default=[0.04, 0.06, 0.08, 0.10, 0.12])
-    ap.add_argument("--feathers", type=_floats, default=[0.0, 0.10, 0.15, 0.20])
-    ap.add_argument("--clear-below", type=_floats, default=[0.0],
+    ap.add_argument("--joints", required=True,
+                    help="the device's joints of the split (python -m training.device_joints)")
+    ap.add_argument("--margins", type=number_list, default=[0.04, 0.06, 0.08, 0.10, 0.12])
+    ap.add_argument("--feathers", type=number_list, default=[0.0, 0.10, 0.15, 0.20])
+    ap.add_argument("--clear-below", type=number_list, default=[0.0],
                     help="comma list of opacity floors (cleared); 0: the runtime's picture")
     ap.add_argument("--threads", type=positive_count, default=1)
     args = ap.parse_args(argv)

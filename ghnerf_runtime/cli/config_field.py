@@ -8,18 +8,21 @@ import argparse
 from collections.abc import Callable
 from typing import Any
 
+from ghnerf_runtime.cli.counts import ascii_integer
 from ghnerf_runtime.errors import ConfigError
 
 __all__ = ["config_field"]
 
 
-def config_field(config_class: type, field: str, parse: Callable[[str], Any] = int) -> Callable[[str], Any]:
-    """An argparse ``type=`` for a value of ``config_class``'s ``field``: read with ``parse``, then refused, with
-    the config's message (which names the field and the range), when ``config_class(field=value)`` is."""
+def config_field(config_class: type, field: str,
+                 parse: Callable[[str], Any] = ascii_integer) -> Callable[[str], Any]:
+    """An argparse ``type=`` for a value of ``config_class``'s ``field``: read with ``parse`` (a ValueError or
+    argparse's error: not a number), then refused, with the config's message (which names the field and the
+    range), when ``config_class(field=value)`` is."""
     def checked(text: str) -> Any:
         try:
             value = parse(text)
-        except ValueError:
+        except (ValueError, argparse.ArgumentTypeError):
             raise argparse.ArgumentTypeError(f"{config_class.__name__}.{field}: not a number, got {text!r}") from None
         try:
             config_class(**{field: value})

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 
-__all__ = ["bounded_count", "image_size", "non_negative_count", "positive_count", "positive_count_list", "seed_list",
-           "whole_number"]
+__all__ = ["ascii_integer", "bounded_count", "image_size", "non_negative_count", "positive_count",
+           "positive_count_list", "seed_list", "whole_number"]
 
 _SIGNED_DIGITS = re.compile(r"[+-]?[0-9]+")
 
@@ -30,6 +31,15 @@ def whole_number(text: str, least: int, most: int | None = None) -> int:
         bounds = f">= {least}" if most is None else f"from {least} to {most}"
         raise argparse.ArgumentTypeError(f"must be a whole number {bounds}, got {text!r}")
     return value
+
+
+def ascii_integer(text: str) -> int:
+    """A whole number of any sign in ASCII digits (:func:`whole_number`'s reading, for a caller with its own bounds
+    and words: ``config_field``, ``training.cli.at_least``), or ValueError (argparse's kind) naming the value."""
+    try:
+        return whole_number(text, -sys.maxsize - 1)
+    except argparse.ArgumentTypeError:
+        raise ValueError(f"not a whole number, got {text!r}") from None
 
 
 def positive_count(text: str) -> int:

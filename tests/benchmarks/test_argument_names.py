@@ -35,7 +35,10 @@ CASES += [("time_pretrain_step", ("--scenes-per-step", count), "--scenes-per-ste
 CASES += [("time_pretrain_step", ("--input-scales", "x"), "--input-scales")]
 CASES += [("measure_cold_tiles", ("--rest-every", every), "--rest-every") for every in ("0", "-5", "x")]
 CASES += [("measure_novel_rays", ("--dilate", dilate), "--dilate") for dilate in ("-5", "9")]
-CASES += [("measure_novel_rays", ("--min-diff", diff), "--min-diff") for diff in ("nan", "-1", "x")]
+CASES += [("measure_novel_rays", ("--min-diff", diff), "--min-diff") for diff in ("nan", "-1", "x", "\u0663")]
+# digits of other scripts, which int() and float() read as 3: a config field in ASCII digits, as a count
+CASES += [("measure_cold_tiles", ("--rest-every", "\u0663"), "--rest-every"),
+          ("measure_novel_rays", ("--dilate", "1_0"), "--dilate")]
 CASES += [("measure_lying_rendered", ("--turn-search", "--turn-search-every", "0"), "--turn-search-every")]
 CASES += [("measure_exchanged_cameras", ("--only", "-5"), "--only")]  # (-5 rendered a scene of no bench number)
 #: settings the pretraining's config refuses, checked once parsed (on a dataset that is there)

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from ghnerf_runtime.cli.counts import bounded_count, image_size, non_negative_count, positive_count, seed_list
+from ghnerf_runtime.cli.counts import (bounded_count, image_size, non_negative_count, positive_count,
+                                       positive_count_list, seed_list)
 from ghnerf_runtime.cli.model_folder import model_folder_option
 
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
@@ -53,7 +54,7 @@ COUNTS = {
     "measure_prior_out_of_range": (("--scenes",), ()),
     "measure_prior_outliers": ((), ("--limit",)),
     "measure_prior_peak_shape": (("--steps", "--hidden", "--threads"), ("--limit",)),
-    "measure_reload_memory": (("--loads", "--pairs"), ("--arena-max",)),
+    "measure_reload_memory": (("--loads", "--pairs"), ("--arena-max", "--mmap-threshold")),
     "measure_repeated_views": (("--count", "--edge-count"), ("--same-pose",)),
     "measure_single_view": (("--sequences", "--frames"), ("--rooms",)),
     "measure_still_pairs": (("--sequences", "--frames", "--every"), ()),
@@ -86,7 +87,10 @@ CASES = [(script, option, "0") for script, (positive, _) in COUNTS.items() for o
 CASES += [(script, option, "-1") for script, (_, non_negative) in COUNTS.items() for option in non_negative]
 # digits of other scripts, which int() takes: '\u0663' (Arabic-Indic) and '\uff13' (full-width) ran as 3
 CASES += [("measure_calibration", "--seeds", "0,\u0663"), ("measure_pairing", "--seeds", "\uff13"),
-          ("measure_synth_framing", "--sequences", "\u0663")]
+          ("measure_synth_framing", "--sequences", "\u0663"), ("time_train_step", "--threads", "1,\u0663"),
+          ("time_pretrain_step", "--scenes-per-step", "\uff12")]
+# mallopt's threshold: -5 reached glibc as a size_t near 2**64 (no block mapped), past 32 MiB man mallopt's limit
+CASES += [("measure_reload_memory", "--mmap-threshold", value) for value in ("-5", str((32 << 20) + 1))]
 #: the scripts whose --model-dir names the folder the session loads
 MODEL_DIR = ("bench_graph_threads", "bench_runtime_regions", "bench_runtime_vs_eval", "compare_3d_methods",
              "measure_baseline", "measure_calibration_drift", "measure_cold_tiles", "measure_edge_padding",
@@ -165,6 +169,8 @@ def test_a_count_in_digits_int_takes_but_a_command_line_does_not_show_is_refused
             parse(text)
     with pytest.raises(argparse.ArgumentTypeError, match=f"comma-separated whole numbers >= 0, got '0,{text}'"):
         seed_list(f"0,{text}")
+    with pytest.raises(argparse.ArgumentTypeError, match=f"comma-separated whole numbers >= 1, got '1,{text}'"):
+        positive_count_list(f"1,{text}")
     with pytest.raises(argparse.ArgumentTypeError, match=f"WIDTHxHEIGHT in pixels, each >= 1 .*, got '{text}x480'"):
         image_size(f"{text}x480")
 

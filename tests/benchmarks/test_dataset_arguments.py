@@ -40,7 +40,7 @@ def test_a_folder_that_is_no_dataset_is_a_usage_error(script, monkeypatch, capsy
 @pytest.mark.parametrize("script, args, option", [
     ("bench_runtime_vs_eval", ("--split", "val"), "--data"),  # its default split
     ("measure_prior_peak_shape", ("--val-split", "val"), "--data"),
-    ("measure_prior_peak_shape", ("--val-split", "train", "--extra-data", NO_DATA), "--extra-data"),
+    ("measure_prior_peak_shape", ("--extra-data", NO_DATA), "--extra-data"),  # before --data's held-out split
     ("time_train_step", ("--variants", "ghnerf", "--set", 'split="val"'), "--data"),  # the split --set leaves
 ])
 def test_a_split_the_script_reads_is_checked(script, args, option, train_only, monkeypatch, capsys):

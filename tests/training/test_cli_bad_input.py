@@ -3,6 +3,7 @@ folder in use, an out-of-range number. Each ends with exit status 2 and an error
 a traceback, and before anything is written (each of these was a traceback or an exit past the first minutes)."""
 from __future__ import annotations
 
+import argparse
 import os
 from pathlib import Path
 
@@ -271,3 +272,18 @@ def test_generate_without_a_scene_count_is_a_usage_error_that_writes_nothing(tmp
     assert e.value.code == 2 and "nothing to generate: give a scene count, --train, --val or --val-seen-motions" \
         in capsys.readouterr().err
     assert not (tmp_path / "data").exists()
+
+
+@pytest.mark.parametrize("text", ["\u0663", "\uff13", "1_000", "1\uff12"])
+def test_a_training_tools_whole_number_is_in_ascii_digits(text, capsys):
+    """``at_least`` read with int(), which takes Arabic-Indic '\u0663' and full-width '\uff13' as 3 and '1_000' as
+    1000: ``--iterations \u0663`` pretrained three steps. It is refused as 'x' is, naming the option and the value."""
+    from training.cli import at_least
+    from training.cli.pretrain_human import parse_args
+
+    with pytest.raises(argparse.ArgumentTypeError, match=f"expected an integer, got {text!r}"):
+        at_least(0)(text)
+    with pytest.raises(SystemExit) as stopped:
+        parse_args(["--out", "run", "--iterations", text])
+    assert stopped.value.code == 2
+    assert f"argument --iterations: expected an integer, got {text!r}" in capsys.readouterr().err

@@ -16,6 +16,8 @@ import importlib.util
 from collections.abc import Callable
 from pathlib import Path
 
+from ghnerf_runtime.cli.counts import ascii_integer
+
 
 def doc_of(module: str) -> str:
     """The docstring of ``module``, read from its source without importing it (the tool's own help text)."""
@@ -29,7 +31,7 @@ def at_least(minimum: int) -> Callable[[str], int]:
     """An argparse ``type``: an integer of at least ``minimum`` (argparse names the option with the message)."""
     def parse(text: str) -> int:
         try:
-            value = int(text)
+            value = ascii_integer(text)  # int() also took '\u0663' and '1_0'
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
         if value < minimum:
