@@ -237,7 +237,8 @@ def main(argv=None) -> int:
     ap.add_argument("--heading-deg", type=float, help="render afresh, every person turned so (180: back to the rig)")
     ap.add_argument("--rig", choices=RIGS, default="bench", help="render afresh on this rig (module docstring)")
     ap.add_argument("--face-seen", action="store_true", help="count only pairs with the nose and an eye seen")
-    ap.add_argument("--only", type=non_negative_count, nargs="+", metavar="K", help="render afresh just these bench sequences")
+    ap.add_argument("--only", type=non_negative_count, nargs="+", metavar="K",
+                    help="render afresh just these bench sequences")
     ap.add_argument("--pose", choices=POSES, help="render afresh, every body turned so (lying, upside down)")
     ap.add_argument("--second", type=offset_xz, metavar="DX,DZ",
                     help="render afresh with a second person DX m towards the centre line and DZ m further away")
