@@ -52,7 +52,7 @@ from calibration.render import SYNTH_BOARD, calibration_views, synth_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, REPEAT_PX, repeated_views, solve_rig, typed_pitch_warning
 from calibration.synth_views import (image_digest, images_not_written, read_synth_views, remove_earlier_views,
                                      write_synth_views)
-from ghnerf_runtime.cli.counts import bounded_count, non_negative_count, positive_count
+from ghnerf_runtime.cli.counts import bounded_count, image_size, non_negative_count, positive_count
 from ghnerf_runtime.cli.error_leaving import ErrorLeaving, status_keeping_the_error
 from ghnerf_runtime.cli.output_path import dangling_link_words, existing_ancestor, same_file, unwritable_reason
 from ghnerf_runtime.cli.recorded_take import RecordedTake, status_saying_a_failed_take
@@ -1013,18 +1013,6 @@ def _format_of(path: Path, given: str | None, flag: str) -> str:
     return fmt
 
 
-def _image_size(text: str | None) -> tuple[int, int] | None:
-    if text is None:
-        return None
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-        if w < 1 or h < 1:
-            raise ValueError
-    except ValueError:
-        raise UsageError(f"--image-size must be WIDTHxHEIGHT in pixels, e.g. 1280x720, got {text!r}") from None
-    return w, h
-
-
 def _output_path(text: str | Path, flag: str, what: str) -> Path:
     """A file a command will write: its folder must exist and take a new file, and it must not be a folder
     or a file made read-only. Checked before the work: a solve found it out only when writing, after it."""
@@ -1152,7 +1140,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         rig = read_anipose_toml(source, units_to_metres=units, volume=None if
                                 args.camera_height is not None else volume, rig_id=args.rig_id)
     else:
-        rig = read_opencv_rig(source, extrinsics_path=args.extrinsics, image_size=_image_size(args.image_size),
+        rig = read_opencv_rig(source, extrinsics_path=args.extrinsics, image_size=args.image_size,
                               volume=None if args.camera_height is not None else volume, rig_id=args.rig_id,
                               units_to_metres=args.units_to_metres)
     for cam in rig.pair:  # the joint stream announces them
@@ -1506,9 +1494,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="metres per unit of the file's translations (0.001: millimetres); required for anipose "
                         "and stereo_calib files, which do not say (an anipose file ghcal export wrote records it)")
     p.add_argument("--extrinsics", type=user_path, help="stereo_calib's extrinsics.yml, when R and T are not in FILE")
-    p.add_argument("--image-size", help="WIDTHxHEIGHT for cameras whose entry states no image size (the others "
-                                        "keep theirs; where every camera states one, one that states another is "
-                                        "refused)")
+    # counts.image_size, as the other tools' --size: int() took '1_280' and other scripts' digits ('\u0663')
+    p.add_argument("--image-size", type=image_size,
+                   help="WIDTHxHEIGHT for cameras whose entry states no image size (the others keep theirs; where "
+                        "every camera states one, one that states another is refused)")
     p.add_argument("--camera-height", type=_finite(*CAMERA_HEIGHT_RANGE_M),
                    help="level the rig: the first camera's height above the floor, m (without it the rig keeps "
                         "the file's frame: levelled where the file records a levelling its poses show, as ghcal "

@@ -51,7 +51,11 @@ Ctrl-C stops the reading and still prints the summary (exit 0); SIGTERM (``timeo
 line. Either before the first pair (the motion loop's first render, the model load) exits 130 or 143. A ``record+``
 take that fails as it closes (its last fsync: ``complete: false``) ends any run with exit 2 and one error line,
 a stopped one included. A second Ctrl-C or SIGTERM, from the first stop until the take is closed (the sink's close,
-the take's and the lines between them), is dropped: the first stop is the one reported, with its summary.
+the take's and the lines between them), is dropped: the first stop is the one reported, with its summary. The first
+stop of a run that read to its end, landing between the sink's close and the take's, waits for the take's close and
+check, then ends the run as one in that close does (130 or 143; a failed take: exit 2). One landing as an error
+leaves the run, before or after the take's close, is dropped: the error is said, exit 2
+(``ghnerf_runtime.cli.error_leaving``).
 
 Without a model in the model folder the demo stops with a one-line error naming the
 folder and the command that builds it. ``--truth-only`` skips the model: the simulator's

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from collections.abc import Callable
 
 __all__ = ["ascii_integer", "bounded_count", "image_size", "non_negative_count", "positive_count",
            "positive_count_list", "seed_list", "whole_number"]
@@ -52,7 +53,7 @@ def non_negative_count(text: str) -> int:
     return whole_number(text, 0)
 
 
-def bounded_count(least: int, most: int):
+def bounded_count(least: int, most: int) -> Callable[[str], int]:
     """An argparse ``type=`` for a count from ``least`` to ``most`` (ghcal's views: a mistyped ``--count
     100000000`` rendered until the disk was full)."""
     def count(text: str) -> int:

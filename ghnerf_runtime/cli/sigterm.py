@@ -11,6 +11,8 @@ exit status (128 + the signal's number: 130, 143, the shell's figures) and the m
 :func:`stop_signals_deferred`, the one helper for work that must finish, holds both back over it (a second Ctrl-C
 pressed while a stopped run writes its outputs: ``ghnerf-run``'s files, ``ghnerf-demo``'s sink and take, ``ghcal
 capture``'s cameras; with ``only_raising``, a training checkpoint and a ZJU split's swap).
+:func:`stop_signals_noted` holds them over the stretch from ``ghnerf-demo``'s or ``ghcal capture``'s reading to its
+take's close, handing each stop to the caller to raise once the take is closed and checked.
 
 The daemon does not use it: a handler that raises can land anywhere in its loop, inside a lock its threads share
 (``firmware_host.daemon.cli._StopOnSignal`` says why), and it must close its sinks in order and tell systemd it

@@ -296,7 +296,7 @@ def test_a_levelling_recorded_in_part_is_named(rig_file, tmp_path, capsys, suffi
     (["import", "{toml}", "--out", "{out}", "--units-to-metres", "1", "--pitch", "10"], ["--camera-height"]),
     (["import", "{toml}", "--out", "{dir}", "--units-to-metres", "1"], ["is a folder"]),
     (["import", "{toml}", "--out", "{toml}", "--units-to-metres", "1"], ["is the file being imported"]),
-    (["import", "{toml}", "--out", "{out}", "--units-to-metres", "1", "--image-size", "640"], ["go with OpenCV"]),
+    (["import", "{toml}", "--out", "{out}", "--units-to-metres", "1", "--image-size", "640x480"], ["go with OpenCV"]),
     (["import", "{dir}/none.yml", "--out", "{out}"], ["none.yml", "no such file"]),
     # gzip is OpenCV's: an anipose export to c.toml.gz was refused as of an unknown suffix '.gz'
     (["export", "--rig", "{rig}", "--out", "{dir}/c.toml.gz", "--units-to-metres", "1"], ["plain TOML", ".toml name"]),

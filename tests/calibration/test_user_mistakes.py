@@ -272,10 +272,17 @@ def test_a_number_that_is_not_one_is_said_so(argv, said, capsys):
      "argument --dpi: must be a whole number >= 1, got '\uff13\uff10\uff10'"),
     (["synth", "--out", "s", "--count", "1\uff15"],
      "argument --count: must be a whole number from 1 to 100, got '1\uff15'"),
+    # import's own parser, not counts.image_size, read these: 1_280x720 and \u0663\u0662\u0660x240 imported as 1280x720
+    # and 320x240
+    (["import", "c.yml", "--out", "r.json", "--image-size", "1_280x720"],
+     "argument --image-size: must be WIDTHxHEIGHT in pixels, each >= 1 (as 640x480), got '1_280x720'"),
+    (["import", "c.yml", "--out", "r.json", "--image-size", "\u0663\u0662\u0660x240"],
+     "argument --image-size: must be WIDTHxHEIGHT in pixels, each >= 1 (as 640x480), got '\u0663\u0662\u0660x240'"),
 ])
 def test_a_count_in_digits_of_another_script_is_refused_as_other_bad_counts(argv, said, capsys):
     """int() takes Arabic-Indic '\u0663' and full-width '\uff13' for 3: ghcal synth --seed \u0663 ran seed 3 and
-    --dpi \uff13\uff10\uff10 printed at 300 dpi, a value the command line shows to few readers."""
+    --dpi \uff13\uff10\uff10 printed at 300 dpi, a value the command line shows to few readers; import's
+    --image-size is parsed as every tool's WIDTHxHEIGHT."""
     with pytest.raises(SystemExit) as e:
         cli.build_parser().parse_args(argv)
     assert e.value.code == 2 and said in capsys.readouterr().err

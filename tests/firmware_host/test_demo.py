@@ -38,6 +38,12 @@ def sim_url(tmp_path_factory) -> str:
     return f"{demo.DEFAULT_URL}&cache={cache}"
 
 
+def _small_take(tmp_path: Path) -> tuple[Path, str]:
+    """A take's folder under ``tmp_path`` and the ``record+`` URL of a small simulated rig recording into it."""
+    take = tmp_path / "take"
+    return take, f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+
+
 def _joints_rows(path: Path) -> list[dict]:
     return [m for m in map(json.loads, path.read_text().splitlines()) if m["type"] == "JOINTS"]
 
@@ -998,8 +1004,7 @@ def test_a_take_that_cannot_be_written_ends_the_run_and_is_not_counted_as_a_skip
     import drivers.backends.record as record_module
 
     monkeypatch.setattr(record_module, "encode_image", _full_disk)
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc = demo.main(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
     captured = capsys.readouterr()
     assert rc == 2, captured.out
@@ -1016,8 +1021,7 @@ def test_a_take_that_cannot_be_made_durable_at_close_ends_the_run_with_status_2(
     import drivers.backends.record as record_module
 
     monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc = demo.main(["--truth-only", "--url", url, "--seconds", "0.3", "--out", str(tmp_path / "out")])
     captured = capsys.readouterr()
     assert rc == 2, captured.err
@@ -1049,8 +1053,7 @@ def test_sigterm_ends_a_recording_run_with_a_complete_take_its_summary_and_143(t
     import subprocess
     import sys
 
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     proc = subprocess.Popen([sys.executable, "-c", _SLOW_RECORDER_DEMO, "--truth-only", "--url", url,
                              "--seconds", "120", "--out", str(tmp_path / "out")], cwd=REPO,
                             env={**os.environ, "PYTHONPATH": str(REPO)}, stdout=subprocess.PIPE,
@@ -1120,8 +1123,7 @@ def _stop_in_the_recorder_s_close(monkeypatch, signum: int) -> None:
     real_close = record.RecordingWriter.close
 
     def close(self, counters):
-        os.kill(os.getpid(), signum)
-        time.sleep(0.5)  # the signal's Python handler runs here, in the main thread, before the take is closed
+        os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once: before the take's close
         real_close(self, counters)
 
     monkeypatch.setattr(record.RecordingWriter, "close", close)
@@ -1152,8 +1154,7 @@ def test_a_sigterm_in_the_recorder_s_close_waits_for_the_take_to_be_complete(tmp
     import signal
 
     _stop_in_the_recorder_s_close(monkeypatch, signal.SIGTERM)
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
                                        str(tmp_path / "out")])
     assert rc == 143 and capsys.readouterr().err.splitlines() == [f"{demo.prog_name()}: stopped (SIGTERM)"]
@@ -1174,8 +1175,7 @@ def test_a_take_that_fails_as_it_closes_is_said_when_a_stop_lands_in_the_close_o
 
     monkeypatch.setattr(record, "_fsync", _full_disk)  # a short take: only the close's fsync runs
     _stop_in_the_recorder_s_close(monkeypatch, signal.Signals[stop])
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
                                        str(tmp_path / "out")])
     captured = capsys.readouterr()
@@ -1210,8 +1210,7 @@ def test_when_a_stop_lands_in_the_sink_s_close_of_a_run_that_read_to_its_end_the
     if take_fails:
         monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
     monkeypatch.setattr(base.Sink, "close", close)
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
                                        str(tmp_path / "out")])
     captured = capsys.readouterr()
@@ -1270,8 +1269,7 @@ def test_a_take_that_failed_is_said_when_a_stop_lands_after_the_sink_s_close(tmp
         monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
     stop_there = _stop_after_the_sink_s_close if where == "between the closes" else _stop_in_the_summary
     stop_there(monkeypatch, signal.Signals[stop])
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
                                        str(tmp_path / "out")])
     captured = capsys.readouterr()
@@ -1297,8 +1295,7 @@ def test_a_take_that_failed_as_a_run_ended_by_an_error_closed_it_is_said_before_
     monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
     monkeypatch.setattr(demo, "truth_frame",
                         _stopping_at_the_third_pair(lambda: drivers.RigOperationError("the rig failed for good")))
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
     captured = capsys.readouterr()
     assert (rc, captured.err.splitlines()) == (2, [
@@ -1361,8 +1358,7 @@ def test_a_second_ctrl_c_while_a_stopped_run_closes_leaves_the_take_whole_and_th
         monkeypatch.setattr(record.RecordingWriter, "close", pressed_again_in(record.RecordingWriter.close))
     else:
         monkeypatch.setattr(base.Sink, "close", pressed_again_in(base.Sink.close))
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
     captured = capsys.readouterr()
     assert pressed == [1]
@@ -1431,8 +1427,7 @@ def test_a_second_stop_between_the_sink_s_close_and_the_take_s_is_dropped_and_th
         monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
     monkeypatch.setattr(demo, "truth_frame", _stopping_at_the_third_pair(raise_first))
     sent = _second_stop_at(monkeypatch, where, signal.SIGTERM if first == "Ctrl-C" else signal.SIGINT)
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "20", "--out",
                                        str(tmp_path / "out")])
     captured = capsys.readouterr()
@@ -1457,8 +1452,7 @@ def test_an_error_on_its_way_is_reported_when_a_sigterm_lands_in_the_recorder_s_
 
     _stop_in_the_recorder_s_close(monkeypatch, signal.SIGTERM)
     monkeypatch.setattr(demo, "truth_frame", failed)
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "20", "--out",
                                        str(tmp_path / "out")])
     assert rc == 2 and capsys.readouterr().err.splitlines() == [
@@ -1535,8 +1529,7 @@ def test_a_take_that_fails_as_a_stopped_run_closes_it_ends_with_status_2_said_on
 
     monkeypatch.setattr(record_module, "_fsync", _full_disk)
     monkeypatch.setattr(demo, "truth_frame", stopped_at_the_third_pair)
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
     captured = capsys.readouterr()
     assert rc == 2, captured.err
@@ -1584,8 +1577,7 @@ def test_a_first_stop_just_before_the_take_s_close_of_a_run_that_read_to_its_end
     if take_fails:
         monkeypatch.setattr(record_module, "_fsync", _full_disk)  # a short take: only the close's fsync runs
     _first_stop_before_the_take_s_close(monkeypatch, where, signal.Signals[stop])
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "0.3", "--out",
                                        str(tmp_path / "out")])
     captured = capsys.readouterr()
@@ -1618,8 +1610,7 @@ def test_a_stop_just_before_the_take_s_close_of_a_run_an_error_ended_still_close
     monkeypatch.setattr(demo, "truth_frame",
                         _stopping_at_the_third_pair(lambda: demo.DemoError("the third pair went wrong")))
     monkeypatch.setattr(demo, "closed_with_stops_deferred", stopped_then_closed)
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "20", "--out",
                                        str(tmp_path / "out")])
     err = capsys.readouterr().err.splitlines()
@@ -1652,8 +1643,7 @@ def test_a_stop_after_the_take_s_close_of_a_run_an_error_ended_does_not_hide_the
     monkeypatch.setattr(recorded_take.RecordedTake, "say_failure", said_then_stopped)
     monkeypatch.setattr(demo, "truth_frame",
                         _stopping_at_the_third_pair(lambda: demo.DemoError("the third pair went wrong")))
-    take = tmp_path / "take"
-    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    take, url = _small_take(tmp_path)
     rc, _ = _main_under_outer_sigterm(["--truth-only", "--url", url, "--seconds", "20", "--out",
                                        str(tmp_path / "out")])
     err = capsys.readouterr().err.splitlines()
