@@ -48,6 +48,7 @@ COUNTS = {
     "measure_novel_quality": (("--sequences", "--frames", "--every"), ()),
     "measure_novel_rays": (("--sequences", "--frames", "--silhouette-stride"), ("--interior-stride",)),
     "measure_one_camera": (("--sequences", "--frames"), ("--rooms",)),
+    "measure_orientation_spread": (("--seeds", "--views"), ()),
     "measure_pair_outliers": (("--seeds",), ()),
     "measure_pairing": (("--seconds", "--seeds"), ()),
     "measure_presence": (("--rooms",), ()),
