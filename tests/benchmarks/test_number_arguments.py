@@ -28,7 +28,10 @@ CASES = [("tune_proxy_matte", "--margins", "x", "must be comma-separated numbers
          ("measure_baseline", "--distances", "x", "must be comma-separated numbers"),
          ("measure_baseline", "--baselines", "0.1,nan", "must be comma-separated numbers"),
          ("measure_baseline", "--lifts", "0,\u0663", "must be comma-separated numbers"),
-         ("measure_orientation_spread", "--tilts", "3,x", "must be comma-separated numbers")]
+         ("measure_orientation_spread", "--tilts", "3,x", "must be comma-separated numbers"),
+         ("measure_synth_framing", "--pitches", "17,x", "must be comma-separated numbers"),
+         ("measure_synth_framing", "--heights", "nan", "must be comma-separated numbers"),
+         ("measure_synth_framing", "--near", "\u0663", "must be a number")]
 
 
 @pytest.mark.parametrize("script, option, value, words", CASES, ids=[f"{s}{o}={v}" for s, o, v, _ in CASES])
