@@ -43,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import positive_count  # noqa: E402
-from ghnerf_runtime.cli.numbers import finite_number  # noqa: E402
+from ghnerf_runtime.cli.numbers import finite_number, number_list, optional_number_list  # noqa: E402
 from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEED_BASE, depth_per_disparity_px  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig, TrackingConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
@@ -155,11 +155,6 @@ def in_cold_crop_px(rig: Rig, image_px: Sequence[float], model_px: int) -> float
     return min(h * model_px / roi_from_volume(cam, rig.volume).size for cam, h in zip(rig.pair, image_px))
 
 
-def floats(text: str) -> list[float]:
-    """A comma-separated list of numbers ("" is none)."""
-    return [float(v) for v in text.split(",") if v.strip()]
-
-
 def finite_float(text: str) -> float:
     """``--rig-lift``: a finite number of metres."""
     try:
@@ -196,12 +191,12 @@ def baseline_rows(args) -> list[tuple[float, float, float]]:
     """(distance m, lens hfov degrees, baseline m) per row of the first table: every ``--distances`` x ``--hfovs`` x
     ``--baselines``, or x ``--angles`` (each turned into the baseline giving that angle there) where given."""
     rows = []
-    for distance in floats(args.distances):
-        for hfov in floats(args.hfovs):
+    for distance in args.distances:
+        for hfov in args.hfovs:
             if args.angles:
-                rows.extend((distance, hfov, baseline_for_angle(a, distance, hfov)) for a in floats(args.angles))
+                rows.extend((distance, hfov, baseline_for_angle(a, distance, hfov)) for a in args.angles)
             else:
-                rows.extend((distance, hfov, b) for b in floats(args.baselines))
+                rows.extend((distance, hfov, b) for b in args.baselines)
     return rows
 
 
@@ -314,18 +309,21 @@ def main(argv=None) -> int:
     ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
     ap.add_argument("--sequences", type=positive_count, default=4)
     ap.add_argument("--frames", type=positive_count, default=8)
-    ap.add_argument("--distances", default="3", help="the subject's distance ahead, metres, comma-separated (1.5-8); "
-                                                     "the first is the --lifts rig's")
-    ap.add_argument("--hfovs", default="80", help="the lens's horizontal field of view, degrees, comma-separated "
-                                                  "(20-150; the simulator's default 80)")
-    ap.add_argument("--baselines", default="0.02,0.03,0.04,0.06,0.1,0.2,0.6", help="metres, comma-separated")
-    ap.add_argument("--angles", default="", help="instead of --baselines: the pair's angle at the working volume's "
-                                                 "centre, degrees, comma-separated (each distance and lens its own "
-                                                 "baselines)")
+    ap.add_argument("--distances", type=number_list, default="3",
+                    help="the subject's distance ahead, metres, comma-separated (1.5-8); the first is the --lifts "
+                         "rig's")
+    ap.add_argument("--hfovs", type=number_list, default="80",
+                    help="the lens's horizontal field of view, degrees, comma-separated (20-150; the simulator's "
+                         "default 80)")
+    ap.add_argument("--baselines", type=optional_number_list, default="0.02,0.03,0.04,0.06,0.1,0.2,0.6",
+                    help="metres, comma-separated (\"\": none)")
+    ap.add_argument("--angles", type=optional_number_list, default="",
+                    help="instead of --baselines: the pair's angle at the working volume's centre, degrees, "
+                         "comma-separated (each distance and lens its own baselines)")
     ap.add_argument("--rigs", default="", help="rig files whose own pair films the same people (drawn in each file's "
                                                "working volume), comma-separated: one row each (\"\": none)")
-    ap.add_argument("--lifts", default="0,1,3,50", help="metres the default rig's frame is moved up, comma-separated "
-                                                        "(\"\": no such table)")
+    ap.add_argument("--lifts", type=optional_number_list, default="0,1,3,50",
+                    help="metres the default rig's frame is moved up, comma-separated (\"\": no such table)")
     ap.add_argument("--tile-finds", action="store_true", help="after the --rigs table, a row per pair whose cold "
                                                                "tile search found someone (kept or refused)")
     ap.add_argument("--rig-lift", type=finite_float, default=0.0,
@@ -353,13 +351,12 @@ def main(argv=None) -> int:
               f"{pair_angle_deg(rig, rig.volume.center):.2f} | {depth_per_disparity_px(rig, distance):.3f} | "
               f"{framing_cells(rig, session.contract.width)} | {score_cells(runs)} |", flush=True)
     print_rig_files(args, session, cfg)
-    lifts = floats(args.lifts)
-    if not lifts:
+    if not args.lifts:
         return 0
     print("\n| frame moved up, m | cameras above the floor y = 0, m | MPJPE mm | joints found | pairs with no joint |")
     print("|---|---|---|---|---|")
-    rig = rig_with_baseline(default_baseline_m(), floats(args.distances)[0])
-    for lift in lifts:
+    rig = rig_with_baseline(default_baseline_m(), args.distances[0])
+    for lift in args.lifts:
         runs = [run_sequence(session, cfg, rig, k, args.frames, lift_m=lift) for k in range(args.sequences)]
         print(f"| {lift:g} | {-lifted(rig, lift).cameras[0].center[1]:.2f} | {score_cells(runs)} |", flush=True)
     return 0

@@ -30,6 +30,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from calibration.board import BoardSpec  # noqa: E402
+from ghnerf_runtime.cli.counts import positive_count, positive_count_list  # noqa: E402
+from ghnerf_runtime.cli.numbers import number_list  # noqa: E402
 from calibration.solve import (MAX_FOCAL_STD_SHARE, MIN_ORIENTATION_SPREAD_DEG,  # noqa: E402
                                orientation_spread_deg)
 
@@ -59,14 +61,14 @@ def _views(rng: np.random.Generator, count: int, tilt_deg: float, one_axis: bool
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=40)
-    parser.add_argument("--views", default="8,15")
-    parser.add_argument("--tilts", default="3,5,8,12,20,30")
+    parser.add_argument("--seeds", type=positive_count, default=40)
+    parser.add_argument("--views", type=positive_count_list, default="8,15")
+    parser.add_argument("--tilts", type=number_list, default="3,5,8,12,20,30")
     parser.add_argument("--one-axis", action="store_true", help="tilt the board about the horizontal axis only")
     args = parser.parse_args()
     obj = BOARD.corners_m().astype(np.float32).reshape(-1, 1, 3)
-    for tilt in (float(t) for t in args.tilts.split(",")):
-        for count in (int(v) for v in args.views.split(",")):
+    for tilt in args.tilts:
+        for count in args.views:
             refused, near, far, passed = 0, [], [], []  # passed: (focal ratio, std share, largest |distortion|)
             for seed in range(args.seeds):
                 views = _views(np.random.default_rng(seed), count, tilt, args.one_axis)

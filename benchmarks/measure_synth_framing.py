@@ -37,7 +37,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.model_folder import model_folder_option  # noqa: E402
 from ghnerf_runtime.cli.counts import non_negative_count, positive_count  # noqa: E402
-from benchmarks.measure_baseline import bench_scene_in, floats, framing_cells, score_cells  # noqa: E402
+from ghnerf_runtime.cli.numbers import finite_number, optional_number_list  # noqa: E402
+from benchmarks.measure_baseline import bench_scene_in, framing_cells, score_cells  # noqa: E402
 from benchmarks.measure_baseline import in_cold_crop_px  # noqa: E402
 from calibration.board import BoardSpec  # noqa: E402
 from calibration.detect import BoardDetector  # noqa: E402
@@ -170,12 +171,13 @@ def main(argv=None) -> int:
     ap.add_argument("--precision", default="int8", choices=("auto", "fp32", "int8"))
     ap.add_argument("--sequences", type=non_negative_count, default=6, help="0: the --floor-seeds table only")
     ap.add_argument("--frames", type=positive_count, default=10)
-    ap.add_argument("--pitches", default="17,10", help="degrees below the horizontal, comma-separated (\"\": the rig "
-                                                       "as it is only)")
-    ap.add_argument("--heights", default="", help="camera heights above the floor, metres, comma-separated, each "
-                                                  "crossed with --pitches (\"\": the rig's own)")
-    ap.add_argument("--near", type=float, help="the aimed rigs' volume from this many metres ahead (default: the "
-                                               "rig's own, 2)")
+    ap.add_argument("--pitches", type=optional_number_list, default="17,10",
+                    help="degrees below the horizontal, comma-separated (\"\": the rig as it is only)")
+    ap.add_argument("--heights", type=optional_number_list, default="",
+                    help="camera heights above the floor, metres, comma-separated, each crossed with --pitches "
+                         "(\"\": the rig's own)")
+    ap.add_argument("--near", type=finite_number,
+                    help="the aimed rigs' volume from this many metres ahead (default: the rig's own, 2)")
     ap.add_argument("--per-sequence", action="store_true", help="a row per rig and sequence too")
     ap.add_argument("--floor-seeds", type=non_negative_count, default=0,
                     help="a row per rig too: of this many seeds, the floor "
@@ -186,7 +188,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision))
     session = load_session(cfg)
-    rigs = rigs_to_measure(floats(args.pitches), floats(args.heights), args.near)
+    rigs = rigs_to_measure(args.pitches, args.heights, args.near)
     if args.save:
         args.save.mkdir(parents=True, exist_ok=True)
         for rig in rigs[2:]:

@@ -40,7 +40,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from ghnerf_runtime.cli.counts import ascii_integer
 from ghnerf_runtime.cli.model_folder import model_dir_source, named_by_source
+from ghnerf_runtime.cli.numbers import finite_number
 from ghnerf_runtime.cli.output_path import OutputPathError, existing_ancestor, model_file_clash, ready_output
 from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig
 from ghnerf_runtime.errors import ConfigError, ModelLoadError, RuntimeErrorBase
@@ -520,18 +522,18 @@ def _on_off_list(text: str) -> list[bool]:
 
 
 def _seconds_list(text: str) -> list[float]:
-    try:
-        values = [float(p) for p in text.split(",") if p]
-    except ValueError:
+    try:  # ASCII and finite: float() took '\u0663' and '1_0' as numbers
+        values = [finite_number(p) for p in text.split(",") if p]
+    except argparse.ArgumentTypeError:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a comma list of seconds") from None
-    if any(not (math.isfinite(v) and v >= 0) for v in values):
+    if any(v < 0 for v in values):
         raise argparse.ArgumentTypeError(f"{text!r}: seconds must be finite and 0 or more")
     return _refuse_repeats(values, text)
 
 
 def _int_list(text: str) -> list[int]:
-    try:
-        values = [int(p) for p in text.split(",") if p]
+    try:  # ASCII digits: int() took '\u0662' as 2
+        values = [ascii_integer(p) for p in text.split(",") if p]
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a comma list of integers") from None
     return _refuse_repeats(values, text)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import re
-import sys
 from collections.abc import Callable
 
 __all__ = ["ascii_integer", "bounded_count", "image_size", "non_negative_count", "positive_count",
@@ -23,11 +22,7 @@ _SIGNED_DIGITS = re.compile(r"[+-]?[0-9]+")
 def whole_number(text: str, least: int, most: int | None = None) -> int:
     """``text`` as a whole number from ``least`` (to ``most``, where given), or argparse's usage error naming the
     value: ``must be a whole number >= 1, got '0'``, ``must be a whole number from 1 to 100, got '101'``."""
-    stripped = text.strip()
-    try:
-        value = int(stripped) if _SIGNED_DIGITS.fullmatch(stripped) else None
-    except ValueError:  # past int()'s 4300 digits
-        value = None
+    value = _ascii_digits(text)
     if value is None or value < least or (most is not None and value > most):
         bounds = f">= {least}" if most is None else f"from {least} to {most}"
         raise argparse.ArgumentTypeError(f"must be a whole number {bounds}, got {text!r}")
@@ -35,12 +30,24 @@ def whole_number(text: str, least: int, most: int | None = None) -> int:
 
 
 def ascii_integer(text: str) -> int:
-    """A whole number of any sign in ASCII digits (:func:`whole_number`'s reading, for a caller with its own bounds
-    and words: ``config_field``, ``training.cli.at_least``), or ValueError (argparse's kind) naming the value."""
+    """A whole number of any sign and size in ASCII digits (:func:`whole_number`'s reading, for a caller with its
+    own bounds and words: ``config_field``, ``training.cli.at_least``), or ValueError (argparse's kind) naming the
+    value."""
+    value = _ascii_digits(text)
+    if value is None:
+        raise ValueError(f"not a whole number, got {text!r}")
+    return value
+
+
+def _ascii_digits(text: str) -> int | None:
+    """``text`` (a sign and spaces around allowed) as an int where it is ASCII digits, else None."""
+    stripped = text.strip()
+    if not _SIGNED_DIGITS.fullmatch(stripped):
+        return None
     try:
-        return whole_number(text, -sys.maxsize - 1)
-    except argparse.ArgumentTypeError:
-        raise ValueError(f"not a whole number, got {text!r}") from None
+        return int(stripped)
+    except ValueError:  # past int()'s 4300 digits
+        return None
 
 
 def positive_count(text: str) -> int:

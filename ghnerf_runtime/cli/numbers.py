@@ -13,7 +13,7 @@ import math
 import re
 from collections.abc import Callable
 
-__all__ = ["finite_number", "number_list", "number_or"]
+__all__ = ["finite_number", "number_list", "number_or", "optional_number_list"]
 
 _DECIMAL = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 
@@ -33,6 +33,11 @@ def number_list(text: str) -> list[float]:
         return [finite_number(part) for part in text.split(",")]
     except argparse.ArgumentTypeError:
         raise argparse.ArgumentTypeError(f"must be comma-separated numbers, got {text!r}") from None
+
+
+def optional_number_list(text: str) -> list[float]:
+    """:func:`number_list`, where an empty value (``--angles ''``, the default of an option that is off) is none."""
+    return [] if not text.strip() else number_list(text)
 
 
 def number_or(word: str) -> Callable[[str], float | None]:

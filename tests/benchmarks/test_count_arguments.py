@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from ghnerf_runtime.cli.counts import (bounded_count, image_size, non_negative_count, positive_count,
+from ghnerf_runtime.cli.counts import (ascii_integer, bounded_count, image_size, non_negative_count, positive_count,
                                        positive_count_list, seed_list)
 from ghnerf_runtime.cli.model_folder import model_folder_option
 
@@ -48,6 +48,7 @@ COUNTS = {
     "measure_novel_quality": (("--sequences", "--frames", "--every"), ()),
     "measure_novel_rays": (("--sequences", "--frames", "--silhouette-stride"), ("--interior-stride",)),
     "measure_one_camera": (("--sequences", "--frames"), ("--rooms",)),
+    "measure_orientation_spread": (("--seeds", "--views"), ()),
     "measure_pair_outliers": (("--seeds",), ()),
     "measure_pairing": (("--seconds", "--seeds"), ()),
     "measure_presence": (("--rooms",), ()),
@@ -191,6 +192,16 @@ def test_counts_take_whole_numbers_at_their_least():
     assert non_negative_count("0") == 0
     with pytest.raises(argparse.ArgumentTypeError, match=r">= 0, got '-1'"):
         non_negative_count("-1")
+
+
+def test_an_ascii_integer_is_a_whole_number_of_any_sign_and_size():
+    """The reading behind ``config_field`` and ``training.cli.at_least``, which say their own bounds: below -2**63 it
+    was refused as "not a whole number" (it was ``whole_number``'s with that least), so ``--rest-every`` of such a
+    value was said as no number rather than in the config's words."""
+    assert ascii_integer(" -12 ") == -12 and ascii_integer(str(-2 ** 70)) == -2 ** 70
+    for text in ("\u0663", "1_0", "x", "1.5", ""):
+        with pytest.raises(ValueError, match=f"not a whole number, got {text!r}"):
+            ascii_integer(text)
 
 
 def test_a_model_folder_option_is_a_folder_that_is_there(tmp_path):

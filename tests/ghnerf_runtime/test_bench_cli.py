@@ -228,10 +228,18 @@ def test_scan_every_s_takes_a_comma_list_of_seconds_and_labels_its_rows(capsys):
     args = bench.build_parser().parse_args(["runtime", "--scan-every-s", "0,1"])
     assert args.scan_every_s == [0.0, 1.0]
     assert bench.build_parser().parse_args(["runtime"]).scan_every_s is None
-    for bad in ("-1", "nan", "x"):
+    for bad in ("-1", "nan", "x", "inf", "\u0663", "1_0"):  # float() took the last two as 3 and 10
         with pytest.raises(SystemExit):
             bench.build_parser().parse_args(["runtime", "--scan-every-s", bad])
-        assert "--scan-every-s" in capsys.readouterr().err
+        assert f"--scan-every-s: {bad!r}: " in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("bad", ["x", "\u0662", "0,\uff12", "1_0", "1.5"])
+def test_novel_interior_strides_are_ascii_whole_numbers(bad, capsys):
+    """int() took other scripts' digits ('\u0662', full-width '\uff12') and '1_0' as strides."""
+    with pytest.raises(SystemExit):
+        bench.build_parser().parse_args(["runtime", "--novel-interior-strides", bad])
+    assert f"--novel-interior-strides: {bad!r}: expected a comma list of integers" in capsys.readouterr().err
     assert "scan" in bench.STAGE_GROUPS["encoders"]
 
 

@@ -11,7 +11,8 @@ def test_a_finite_number_above_zero_is_taken():
     assert positive_seconds("1.5") == 1.5 and positive_seconds("30") == 30.0
 
 
-@pytest.mark.parametrize("text", ["-1", "0", "nan", "inf", "soon", ""])
+# float() took the last three (other scripts' digits, '1_0') as 3, 3 and 10 seconds
+@pytest.mark.parametrize("text", ["-1", "0", "nan", "inf", "soon", "", "\u0663", "\uff13", "1_0"])
 def test_anything_else_is_refused_with_the_value_named(text):
     with pytest.raises(argparse.ArgumentTypeError, match=f"must be a finite number of seconds > 0, got {text!r}"):
         positive_seconds(text)

@@ -12,7 +12,7 @@ torch = pytest.importorskip("torch")
 
 from ghnerf_runtime.errors import ModelContractError, ModelLoadError  # noqa: E402
 from ghnerf_runtime.novel_painter import NovelPainter, PainterPlanes, painter_planes  # noqa: E402
-from training.body_proxy import proxy_body, proxy_scene, view_camera  # noqa: E402
+from training.body_proxy import proxy_scene, view_camera  # noqa: E402
 from training.fill_features import stack, view_features  # noqa: E402
 from training.learnt_fill import (FillNet, FillNetConfig, FillTrainConfig, PainterGraph, export_painter,  # noqa: E402
                                   main, painter_planes_of, save_net, to_device)
