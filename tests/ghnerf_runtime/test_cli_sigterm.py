@@ -11,6 +11,8 @@ import pytest
 from ghnerf_runtime.cli.sigterm import Terminated, closed_with_stops_deferred, exit_status, sigterm_as_interrupt, \
     stop_signal, stop_signals_deferred, stop_signals_noted, stop_words
 
+WAIT_S = 30.0  # generous: only a hang reaches it (the worker's thread waits its turn on a loaded host)
+
 
 def _outer(signum, frame):  # stands for whatever handler the caller had (the default would end pytest)
     raise AssertionError("SIGTERM reached the handler outside the block")
@@ -66,10 +68,11 @@ def test_nothing_is_installed_outside_the_main_thread():
     try:
         thread = threading.Thread(target=worker)
         thread.start()
-        thread.join(10)
+        thread.join(WAIT_S)
         after = signal.getsignal(signal.SIGTERM)
     finally:
         signal.signal(signal.SIGTERM, previous)
+    assert not thread.is_alive(), f"the worker did not finish in {WAIT_S} s"
     assert not errors and seen == [_outer] and after is _outer
 
 
