@@ -24,14 +24,22 @@ Recorder options (inner backends never see them, so none may reuse these names):
   A ``close()`` from another thread ends that wait: the read raises
   :class:`~drivers.errors.RigOperationError` ("closed while a read waited"), as
   every backend's read does that a close lands in, and the frame is not recorded.
+  A close past ``close_timeout_s`` loses what was still queued, ``lossless`` or not.
+* ``close_timeout_s``: seconds ``close()`` waits for the writers to finish the queue, fsync the take and rewrite
+  its manifest (default 10; the manifest gets at least :data:`MANIFEST_WAIT_FLOOR_S`; a slow disk behind a long
+  ``write_queue`` may need more). Past it (a dead disk: a USB stick pulled, an NFS mount gone) close stops waiting:
+  the take is left ``complete: false`` with ``close_timed_out_s`` in its counters,
+  :meth:`RecordingRigSource.unreported_failure` says "the take's last frames were not written: the disk stopped
+  answering", and the writer threads still stuck in a write are left behind (daemon threads), named by
+  :meth:`~drivers.base.RigSource.lingering`.
 
 A ``close()`` from another thread while ``open()`` runs goes on to the inner source at once, cancelling its open
 (``sim://``'s pre-render stops at its next frame, ``opencv://``'s wait for its first frames ends): ``open()`` raises
 :class:`~drivers.errors.RigInitializationError` and no take is started; one that lands after the inner source opened
 closes it, and the take if one was started.
 After the close, :meth:`~drivers.base.RigSource.lingering` is the inner source's (an ``opencv://`` camera thread still
-in a grab, or a camera or ``depthai://`` device its cancelled open has not released yet); it was always empty, hiding
-a device still held.
+in a grab, or a camera or ``depthai://`` device its cancelled open has not released yet; it was always empty, hiding
+a device still held), then the recorder's threads a close past ``close_timeout_s`` left in a write.
 
 Recording never stalls the reader (unless ``lossless=1``): frames go into a
 bounded queue drained by writer threads; when it is full the frame is not
@@ -57,6 +65,7 @@ import logging
 import os
 import queue
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -64,6 +73,7 @@ from urllib.parse import quote, urlencode
 
 from drivers.base import RigSource
 from drivers.backends.recording_format import (
+    CLOSE_TIMED_OUT,
     IMAGE_FORMATS,
     FRAMES,
     FrameRow,
@@ -84,7 +94,7 @@ from ghnerf_runtime.rig_file import principal_point_problem
 log = logging.getLogger(__name__)
 
 #: Options the recorder consumes from the URL.
-RECORD_OPTIONS = ("out", "image_format", "jpeg_quality", "write_queue", "writers", "lossless")
+RECORD_OPTIONS = ("out", "image_format", "jpeg_quality", "write_queue", "writers", "lossless", "close_timeout_s")
 
 #: Written files a writer thread lets pile up before it fsyncs them (bounds the backlog close must fsync).
 SYNC_BATCH = 64
@@ -92,6 +102,11 @@ SYNC_BATCH = 64
 #: Seconds a lossless submit waits for a queue slot before it looks again whether the writer was closed: the
 #: writers stop at close, so a reader left waiting on a full queue then would wait for good.
 SUBMIT_WAIT_SLICE_S = 0.05
+
+#: Seconds the manifest's last rewrite is given at least, where the writers took (nearly) all of ``close_timeout_s``:
+#: a slow disk that did write the take still gets its ``complete: true``. Keeps a close with the default 10 s within
+#: the daemon unit's ``TimeoutStopSec=20``.
+MANIFEST_WAIT_FLOOR_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -104,6 +119,7 @@ class RecordOptions:
     write_queue: int = 64
     writers: int = 2
     lossless: bool = False
+    close_timeout_s: float = 10.0
 
     @classmethod
     def take_from(cls, url: RigUrl, out: str | Path | None = None) -> "RecordOptions":
@@ -119,6 +135,7 @@ class RecordOptions:
             write_queue=url.take_int("write_queue", 64, lo=1, hi=10_000),
             writers=url.take_int("writers", 2, lo=1, hi=16),
             lossless=url.take_bool("lossless", False),
+            close_timeout_s=url.take_float("close_timeout_s", 10.0, lo=0.001, hi=86_400.0),
         )
 
 
@@ -164,6 +181,11 @@ class RecordingWriter:
         # brings it to SYNC_BATCH takes the batch and fsyncs it, off the reader's path.
         self._unsynced: list[str] = []
         self._folders: set[Path] = set()  # folders of the files fsynced, for close (a few: one per camera and kind)
+        self._submitted = 0  # frames queued (by the reader thread): what a close past its deadline left unwritten
+        # Set by a close that stopped waiting (close_timeout_s): why the take's end is missing. Kept apart from
+        # `error`, which a stuck writer may still set when its write finally fails.
+        self.close_timed_out: RecordingError | None = None
+        self._close_threads: list[threading.Thread] = []  # the close's own helpers, for lingering()
 
     def start(self) -> None:
         # replay reads the manifest's rig with rig_from_dict: refuse a rig it would refuse, before any file is made
@@ -261,6 +283,7 @@ class RecordingWriter:
         if not self._put((frame, row)):
             self._submit_dropped += 1
             return
+        self._submitted += 1
         self._per_camera[frame.camera] = n + 1
 
     def _put(self, item: tuple[Frame, FrameRow]) -> bool:
@@ -342,10 +365,61 @@ class RecordingWriter:
 
     def close(self, counters: dict) -> None:
         """Write what is queued, fsync it (:meth:`_sync`), then finalise the manifest (``complete: true``).
-        A submit from another thread after this began raises (:meth:`submit`)."""
+        A submit from another thread after this began raises (:meth:`submit`).
+
+        Its waits (the writers', the fsyncs', the manifest's) end within ``close_timeout_s`` from its start (the
+        manifest's gets at least :data:`MANIFEST_WAIT_FLOOR_S`): a disk that stops answering leaves its writer
+        threads blocked in a write for good, and a close waiting on them held every stop of the program. Past it
+        the take stays ``complete: false``, :attr:`close_timed_out` says why, and the stuck threads are left behind
+        (:meth:`lingering`)."""
         self._stopping.set()
         with self._submit_lock:
             pass  # a submit queueing its frame now (it looked before the set) does so ahead of the stop marks
+        deadline = time.monotonic() + self.options.close_timeout_s
+        if not self._in_thread("rig-recorder-close", self._finish, self.options.close_timeout_s):
+            unwritten = self._submitted - self.frames_written - self._writer_dropped  # a snapshot: writers may go on
+            self.close_timed_out = RecordingError(
+                f"the take's last frames were not written: the disk stopped answering ({unwritten} frame(s) still "
+                f"queued or in a write after close_timeout_s={self.options.close_timeout_s:g}; the threads left in "
+                f"it: {', '.join(self._threads_in_a_write())})"
+            )
+            log.error("recording to %s: %s", self.directory, self.close_timed_out)
+        self.manifest.complete = self.error is None and self.close_timed_out is None
+        self.manifest.counters = dict(counters, frames_written=self.frames_written, writes_dropped=self.writes_dropped)
+        if self.close_timed_out is not None:
+            self.manifest.counters[CLOSE_TIMED_OUT] = self.options.close_timeout_s
+        failure: list[BaseException] = []
+        manifest_wait = max(deadline - time.monotonic(), min(MANIFEST_WAIT_FLOOR_S, self.options.close_timeout_s))
+        if not self._in_thread("rig-recorder-manifest", lambda: self._write_manifest(failure), manifest_wait):
+            log.error("recording to %s: the manifest's last rewrite did not finish within close_timeout_s=%g; it "
+                      "says complete: false", self.directory, self.options.close_timeout_s)
+            self.close_timed_out = self.close_timed_out or RecordingError(
+                f"the take's manifest was not rewritten: the disk stopped answering (close_timeout_s="
+                f"{self.options.close_timeout_s:g}); it says complete: false"
+            )
+        if failure:
+            raise failure[0]
+        log.info("recording %s closed: %d frames written, %d dropped", self.directory, self.frames_written,
+                 self.writes_dropped)
+
+    def _in_thread(self, name: str, work: Callable[[], None], wait_s: float) -> bool:
+        """Run ``work`` in a daemon thread, waiting ``wait_s`` for it; False: it is still running (left behind,
+        named by :meth:`lingering`)."""
+        thread = threading.Thread(target=work, name=name, daemon=True)
+        self._close_threads.append(thread)
+        thread.start()
+        thread.join(wait_s)
+        return not thread.is_alive()
+
+    def _write_manifest(self, failure: list[BaseException]) -> None:
+        try:
+            write_manifest(self.directory, self.manifest)
+        except BaseException as e:  # noqa: BLE001 - raised from close, in the caller's thread
+            failure.append(e)
+
+    def _finish(self) -> None:
+        """The close's writing (in its own thread): the writers' stop marks (a blocking put: the queue may be full
+        of frames a stuck writer never takes), their end, the take's fsyncs."""
         for _ in self._threads:
             self._queue.put(None)
         for thread in self._threads:
@@ -364,12 +438,16 @@ class RecordingWriter:
                     # still rewrite the manifest with the counters
                     log.error("recording to %s: cannot close %s: %s", self.directory, FRAMES, e)
                     self.error = self.error or e
-        self.manifest.complete = self.error is None
-        self.manifest.counters = dict(counters, frames_written=self.frames_written, writes_dropped=self.writes_dropped)
-        write_manifest(self.directory, self.manifest)
-        log.info(
-            "recording %s closed: %d frames written, %d dropped", self.directory, self.frames_written, self.writes_dropped
-        )
+
+    def lingering(self) -> tuple[str, ...]:
+        """The recorder's threads still in a write after a close that stopped waiting for them (a dead disk);
+        empty once they are out of it, and after a close that did not give up."""
+        if self.close_timed_out is None:
+            return ()
+        return tuple(f"{name} (writing to {shown(str(self.directory))})" for name in self._threads_in_a_write())
+
+    def _threads_in_a_write(self) -> tuple[str, ...]:
+        return tuple(t.name for t in (*self._threads, *self._close_threads) if t.is_alive())
 
     def _sync(self) -> None:
         """fsync the payload files written, their folders and the journal, before ``complete: true`` is written:
@@ -496,10 +574,13 @@ class RecordingRigSource(RigSource):
         return frame
 
     def unreported_failure(self) -> str | None:
-        """The take's write error that no ``read()`` raised (a frame still queued at close, the take's last fsync),
-        for a caller to report once the source is closed: the take's manifest says ``complete: false``. ``None``
-        where the take has no error, or a read raised it as :class:`RecordingError`."""
+        """The take's write error that no ``read()`` raised (a frame still queued at close, the take's last fsync,
+        a close past ``close_timeout_s``), for a caller to report once the source is closed: the take's manifest says
+        ``complete: false``. ``None`` where the take has no error, or a read raised it as :class:`RecordingError`."""
         writer = self._writer
+        if writer is not None and writer.close_timed_out is not None:  # whatever a read raised before: it is new
+            return (f"recording to {shown(str(writer.directory))} failed as it closed: {writer.close_timed_out}; its "
+                    f"manifest says complete: false")
         if writer is None or writer.error is None or self._reported_error:
             return None
         return (f"recording to {shown(str(writer.directory))} failed as it closed: {writer.error}; its manifest says "
@@ -520,7 +601,8 @@ class RecordingRigSource(RigSource):
         return self.inner._pairs_lost()
 
     def lingering(self) -> tuple[str, ...]:
-        return self.inner.lingering()  # its cameras' calls; the recorder's writers hold no device
+        # its cameras' calls, then the writers a close past close_timeout_s left in a write (a dead disk)
+        return self.inner.lingering() + (self._writer.lingering() if self._writer is not None else ())
 
     def _cancel_open(self) -> None:
         self._closing.set()  # no take is begun

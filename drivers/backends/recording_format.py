@@ -110,6 +110,21 @@ class Manifest:
         }
 
 
+#: The counter a close that stopped waiting for a dead disk leaves in the manifest: its ``close_timeout_s``.
+CLOSE_TIMED_OUT = "close_timed_out_s"
+
+
+def why_not_closed(manifest: Manifest) -> str:
+    """What a take not closed cleanly says of why, as a clause (empty where its manifest does not say)."""
+    timeout = manifest.counters.get(CLOSE_TIMED_OUT)
+    if timeout is None:
+        return ""
+    said = "the take's last frames were not written: the disk stopped answering"
+    if isinstance(timeout, (int, float)) and not isinstance(timeout, bool):  # counters are another tool's to edit
+        return f" ({said}, its close gave up after close_timeout_s={timeout:g})"
+    return f" ({said})"
+
+
 def _safe(name: str) -> bool:
     return bool(_SAFE_NAME.match(name)) and name not in (".", "..")
 

@@ -76,6 +76,7 @@ from drivers.backends.recording_format import (
     load_truth,
     read_manifest,
     read_rows,
+    why_not_closed,
 )
 from drivers.base import RigSource
 from drivers.clock import Clock
@@ -548,7 +549,8 @@ class ReplayRigSource(RigSource):
                 log.warning("recording %s: dropped %d journal row(s) whose files are missing, empty or cut short "
                             "(written after the last flush before the take was cut short), first: %s line %d "
                             "(image %s)", directory, len(broken), directory / FRAMES, first.line, first.image)
-            log.warning("recording %s was not closed cleanly; playing the %d frames it holds", directory, len(rows))
+            log.warning("recording %s was not closed cleanly%s; playing the %d frames it holds", directory,
+                        why_not_closed(manifest), len(rows))
         source = cls(
             directory, manifest, rows, speed=speed, loop=loop, keep_time=keep_time,
             pairing=pairing or options.config(), clock=clock,

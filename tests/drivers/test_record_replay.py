@@ -38,6 +38,7 @@ from drivers.backends.recording_format import (
     read_manifest,
 )
 from benchmarks import time_replay_open
+from ghnerf_runtime.cli.recorded_take import RecordedTake
 from drivers.url import RigUrl
 from tests.drivers.contract import opened_in_a_thread
 from tests.drivers.reopens import warnings_shared_and_alone
@@ -448,6 +449,80 @@ def test_a_journal_the_full_disk_cannot_take_still_closes_with_the_counters(tmp_
     manifest = read_manifest(out)
     assert manifest.complete is False
     assert manifest.counters["writes_dropped"] == source.stats.writes_dropped == sum(source.stats.frames_in.values())
+
+
+def test_a_close_whose_disk_stops_answering_gives_up_after_close_timeout_s(tmp_path, sim_cache, monkeypatch, caplog):
+    """A writer stuck in a write for good (a USB stick pulled, an NFS mount gone): close joined it with no timeout,
+    so the close of a record+ source, and every stop held while it ran, hung for good. Not timed: the close only has
+    to return while the write is still blocked."""
+    real, calls, entered, released = record_module.encode_image, [0], threading.Event(), threading.Event()
+
+    def dead_disk_from_the_third_frame(*args):
+        calls[0] += 1
+        if calls[0] >= 3:
+            entered.set()
+            released.wait(120)  # the disk answers only once the test is done
+        return real(*args)
+
+    monkeypatch.setattr(record_module, "encode_image", dead_disk_from_the_third_frame)
+    out = tmp_path / "dead"
+    url = f"record+sim://?width=32&height=24&cache={sim_cache}&out={out}&writers=1&lossless=1&close_timeout_s=0.2"
+    source = open_rig(url, clock=ManualClock())
+    closer = threading.Thread(target=source.close, name="test-closer", daemon=True)
+    try:
+        source.read(timeout_s=5.0)  # a pair: the two frames written
+        source.read(timeout_s=5.0)  # the third frame's write never ends; the fourth, queued behind it, is lost
+        assert entered.wait(60), "the writer never reached the third frame"
+        closer.start()
+        closer.join(60)  # the old close waited on the stuck writer for good
+        assert not closer.is_alive(), "close waited for a writer stuck in a write"
+        manifest = read_manifest(out)
+        assert manifest.complete is False
+        assert manifest.counters["close_timed_out_s"] == 0.2
+        assert manifest.counters["frames_written"] == 2 == len(journal(out))
+        failure = RecordedTake(source, "prog").failure()  # what ghnerf-demo and ghcal capture say, exit 2
+        assert failure and "the take's last frames were not written: the disk stopped answering" in failure
+        assert any(name.startswith("rig-recorder-0 ") for name in source.lingering()), source.lingering()
+        with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"):
+            with open_rig(f"replay://{out}?speed=free&policy=all") as replay:
+                list(replay)
+                assert sum(replay.stats.frames_in.values()) == 2
+        assert "the disk stopped answering" in caplog.text
+    finally:
+        released.set()
+        closer.join(60) if closer.is_alive() else None
+    deadline = time.monotonic() + 60  # the writer, released, ends; no longer lingering
+    while source.lingering() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert source.lingering() == ()
+
+
+def test_a_close_whose_last_fsync_never_returns_gives_up_after_close_timeout_s(tmp_path, sim_cache, monkeypatch):
+    """The writers finished, the disk died before the take's fsyncs at close: the close gives up there too."""
+    entered, released = threading.Event(), threading.Event()
+
+    def dead_disk(path):
+        entered.set()
+        released.wait(120)
+
+    out = tmp_path / "dead"
+    url = f"record+sim://?width=32&height=24&cache={sim_cache}&out={out}&writers=1&lossless=1&close_timeout_s=0.2"
+    source = open_rig(url, clock=ManualClock())
+    closer = threading.Thread(target=source.close, name="test-closer", daemon=True)
+    try:
+        source.read(timeout_s=5.0)
+        monkeypatch.setattr(record_module, "_fsync", dead_disk)
+        closer.start()
+        closer.join(60)
+        assert not closer.is_alive(), "close waited for an fsync stuck for good"
+        assert entered.is_set()
+        manifest = read_manifest(out)
+        assert manifest.complete is False and manifest.counters["close_timed_out_s"] == 0.2
+        assert "the disk stopped answering" in source.unreported_failure()
+        assert any(name.startswith("rig-recorder-close ") for name in source.lingering()), source.lingering()
+    finally:
+        released.set()
+        closer.join(60) if closer.is_alive() else None
 
 
 # ----------------------------------------------------------------- broken takes
