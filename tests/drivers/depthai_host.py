@@ -74,6 +74,21 @@ class CameraNode(dai.node.ThreadedHostNode):
             k += 1
 
 
+def join_stopped(pipeline: dai.Pipeline, cameras: list[CameraNode]) -> None:
+    """Wait, after ``pipeline.stop()``, for every node's thread to end, the GIL released.
+
+    stop() only signals. The pipeline's destructor joins the node threads while holding the GIL, and a node that
+    needs the GIL to finish deadlocked it: these Python cameras, and the Sync node letting go of frames they made
+    (its thread waits for the GIL in depthai's bindings; seen at load ~10, the run hung in a fixture's teardown).
+    The cameras are waited for first, generously: on a starved machine (a niced CI beside a training run) one took
+    over 2 s to notice the stop. ``pipeline.wait()`` then joins them all, the Sync node's thread too.
+    """
+    for camera in cameras:
+        if not camera.finished.wait(60.0):
+            raise RuntimeError("a host camera node did not stop within 60 s of pipeline.stop()")
+    pipeline.wait()
+
+
 class HostPipelineLink:
     """:class:`~drivers.backends.depthai.link.DeviceLink` on a host-only pipeline (see module docstring)."""
 
@@ -128,15 +143,11 @@ class HostPipelineLink:
 
     def close(self) -> None:
         self.closed += 1
-        if self.pipeline is not None and self.pipeline.isRunning():
+        if self.pipeline is None:
+            return
+        if self.pipeline.isRunning():
             self.pipeline.stop()
-        # stop() only signals. The pipeline's destructor joins the node threads while holding
-        # the GIL, and these Python nodes need the GIL to finish: wait for them here. Generously: on a
-        # starved machine (a niced CI beside a training run) a node took over 2 s to notice the stop, and
-        # the destructor then deadlocked the test run.
-        for camera in self.cameras:
-            if not camera.finished.wait(60.0):
-                raise RuntimeError("a host camera node did not stop within 60 s of pipeline.stop()")
+        join_stopped(self.pipeline, self.cameras)
 
 
 def image_group(indices: tuple[int, int], size: tuple[int, int], fps: float = 30.0) -> dai.MessageGroup:
@@ -293,7 +304,4 @@ class HostBackedPipeline(StandIn):
         self.real.stop()
         if not self.started:
             return
-        # As HostPipelineLink.close: the host nodes need the GIL to finish, the pipeline's destructor holds it.
-        for node in self.sources:
-            if not node.finished.wait(60.0):
-                raise RuntimeError("a host camera node did not stop within 60 s of pipeline.stop()")
+        join_stopped(self.real, self.sources)  # as HostPipelineLink.close: the destructor must find no thread to join

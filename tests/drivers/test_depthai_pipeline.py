@@ -138,6 +138,33 @@ def test_sync_stage_never_emits_pairs_further_apart_than_the_threshold(link):
     assert link.next_group(0.4) is None
 
 
+def test_a_host_pipeline_closed_then_dropped_ends_whatever_its_sync_node_still_holds():
+    """The pipeline's destructor joins its node threads holding the GIL; the Sync node's thread, letting go of frames
+    the Python cameras made, waits for the GIL: a fixture's teardown hung the test run at load ~10 (2 to 20 cycles
+    of these on a loaded host). ``HostPipelineLink.close`` joins them first, the GIL released. In a process of its
+    own, so that a hang fails this test instead of stopping the run."""
+    code = textwrap.dedent(
+        """
+        from tests.drivers.depthai_host import HostPipelineLink
+        from tests.drivers.test_depthai_pipeline import request
+
+        for cycle in range(40):
+            link = HostPipelineLink(offset_ms=12.0)  # past the tolerance: the Sync node drops what it gets
+            link.start(request(tolerance_ms=5.0))
+            link.next_group(0.05)
+            link.close()
+            link = None  # the pipeline's destructor runs here
+        print("40 cycles")
+        """
+    )
+    try:
+        result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                                cwd=Path(__file__).resolve().parents[2])
+    except subprocess.TimeoutExpired as e:
+        pytest.fail(f"a host pipeline's destructor hung: {e.stdout!r}")
+    assert "40 cycles" in result.stdout, result.stdout + result.stderr
+
+
 def test_closed_queue_becomes_rig_disconnected_with_the_cause(link):
     link.start(request())
     assert link.next_group(2.0) is not None

@@ -33,10 +33,13 @@ def _closed_port() -> int:
 
 
 def _send_for(sink, seconds: float, first_seq: int) -> int:
-    """Frames every 10 ms for ``seconds``; returns the next seq."""
+    """Frames every 10 ms for ``seconds``, each written (or failed) before the next: a worker a loaded host held
+    up found the sink's queue of 4 full, its oldest frame dropped (``dropped_queue``), where each frame's own
+    write is what these tests count. Returns the next seq."""
     seq, end = first_seq, time.monotonic() + seconds
     while time.monotonic() < end:
         sink.send(make_frame(seq))
+        assert sink.wait_drained(5), f"frame {seq} still queued after 5 s"
         seq += 1
         time.sleep(0.01)
     return seq
