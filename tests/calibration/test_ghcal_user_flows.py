@@ -19,6 +19,7 @@ from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import save_rig
 from tests.calibration.test_ghcal import _write_recording
 from tests.framing_note import but_the_framing_notes
+from tests.stops import stop_around
 
 BOARD = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
 
@@ -566,25 +567,12 @@ def _captured_through_record(tmp_path, take: Path, recorded: Path, out: Path, *,
 
 def _stop_after_the_close(monkeypatch, signum: int) -> None:
     """A stop lands once the cameras' close is done (its stops held), before the take's check."""
-    real_closed = cli.closed_with_stops_deferred
-
-    def closed_then_stopped(close, **kwargs):
-        late_stop = real_closed(close, **kwargs)
-        os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
-        return late_stop
-
-    monkeypatch.setattr(cli, "closed_with_stops_deferred", closed_then_stopped)
+    stop_around(monkeypatch, cli, "closed_with_stops_deferred", signum, after=True)
 
 
 def _stop_in_the_last_line(monkeypatch, signum: int) -> None:
     """A stop lands in the capture's last line (kept..., stopped: kept...), the take closed by then."""
-    real_note = cli._skipped_note
-
-    def stopped_then_noted(skipped):
-        os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
-        return real_note(skipped)
-
-    monkeypatch.setattr(cli, "_skipped_note", stopped_then_noted)
+    stop_around(monkeypatch, cli, "_skipped_note", signum)
 
 
 @pytest.mark.parametrize("take_fails", [False, True])
@@ -631,15 +619,8 @@ def test_a_failed_take_is_said_when_a_stop_lands_after_the_capture_s_close(truth
 
 
 def _stop_before_the_close(monkeypatch, signum: int) -> None:
-    """A stop lands just before the cameras' close, outside its deferral (its handler runs in the main thread, at
-    once)."""
-    real_closed = cli.closed_with_stops_deferred
-
-    def stopped_then_closed(close, **kwargs):
-        os.kill(os.getpid(), signum)
-        return real_closed(close, **kwargs)
-
-    monkeypatch.setattr(cli, "closed_with_stops_deferred", stopped_then_closed)
+    """A stop lands just before the cameras' close, outside its deferral."""
+    stop_around(monkeypatch, cli, "closed_with_stops_deferred", signum)
 
 
 @pytest.mark.parametrize("take_fails", [False, True])
@@ -674,13 +655,7 @@ def test_a_second_stop_next_to_the_close_of_a_stopped_capture_is_dropped_and_the
 
 def _stop_as_the_noting_begins(monkeypatch, signum: int) -> None:
     """A stop lands as a capture that read to its end starts noting stops, before its handlers are in."""
-    real_noted = cli.stop_signals_noted
-
-    def stopped_then_noted(stops):
-        os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
-        return real_noted(stops)
-
-    monkeypatch.setattr(cli, "stop_signals_noted", stopped_then_noted)
+    stop_around(monkeypatch, cli, "stop_signals_noted", signum)
 
 
 @pytest.mark.parametrize("take_fails", [False, True])
@@ -739,14 +714,7 @@ def test_a_stop_while_an_error_leaves_the_capture_does_not_hide_the_error(
     elif where == "after the close":
         _stop_after_the_close(monkeypatch, signum)
     else:  # the take's failure said by the tool, on the error's way out to main
-        real_say = recorded_take.RecordedTake.say_failure
-
-        def said_then_stopped(self):
-            failed = real_say(self)
-            os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
-            return failed
-
-        monkeypatch.setattr(recorded_take.RecordedTake, "say_failure", said_then_stopped)
+        stop_around(monkeypatch, recorded_take.RecordedTake, "say_failure", signum, after=True)
     take, recorded, out = _take(tmp_path / "take", truth, one_view), tmp_path / "recorded", tmp_path / "capture"
     rc = _captured_through_record(tmp_path, take, recorded, out, count=5)
     captured = capsys.readouterr()

@@ -24,6 +24,7 @@ from ghnerf_runtime import rig_file
 from ghnerf_runtime.cli.sigterm import Terminated
 from ghnerf_runtime.estimator import Estimator
 from tests.firmware_host.joint_stream_helpers import record_take
+from tests.stops import stop_around
 
 REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"
@@ -1120,13 +1121,7 @@ def _stop_in_the_recorder_s_close(monkeypatch, signum: int) -> None:
     """The recorder's close sends ``signum`` to this process before it closes the take (a stop landing there)."""
     from drivers.backends import record
 
-    real_close = record.RecordingWriter.close
-
-    def close(self, counters):
-        os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once: before the take's close
-        real_close(self, counters)
-
-    monkeypatch.setattr(record.RecordingWriter, "close", close)
+    stop_around(monkeypatch, record.RecordingWriter, "close", signum)
 
 
 def test_sigterm_before_the_first_pair_exits_143_with_one_line_and_restores_the_handler(tmp_path, capsys,
@@ -1229,27 +1224,12 @@ def test_when_a_stop_lands_in_the_sink_s_close_of_a_run_that_read_to_its_end_the
 
 def _stop_after_the_sink_s_close(monkeypatch, signum: int) -> None:
     """A stop lands in the lines between the sink's close (its stops held) and the source's (the take's)."""
-    real_closed, closes = demo.closed_with_stops_deferred, []
-
-    def closed_then_stopped(close, **kwargs):
-        late_stop = real_closed(close, **kwargs)
-        closes.append(1)
-        if len(closes) == 1:  # the sink's, the first: its handler runs here, in the main thread, at once
-            os.kill(os.getpid(), signum)
-        return late_stop
-
-    monkeypatch.setattr(demo, "closed_with_stops_deferred", closed_then_stopped)
+    stop_around(monkeypatch, demo, "closed_with_stops_deferred", signum, after=True, on_call=1)
 
 
 def _stop_in_the_summary(monkeypatch, signum: int) -> None:
     """A stop lands in the summary, the take closed by then: as the last pair's picture is written."""
-    real_write = demo._write_picture
-
-    def stopped_then_written(*args, **kwargs):
-        os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
-        return real_write(*args, **kwargs)
-
-    monkeypatch.setattr(demo, "_write_picture", stopped_then_written)
+    stop_around(monkeypatch, demo, "_write_picture", signum)
 
 
 @pytest.mark.parametrize("take_fails", [False, True])
@@ -1541,23 +1521,9 @@ def _first_stop_before_the_take_s_close(monkeypatch, where: str, signum: int) ->
     """A stop lands after the sink's close of a run that read to its end, before the take's close: as the run
     starts noting stops, or just before the take's close (both outside the close's deferral)."""
     if where == "as the noting begins":
-        real_noted = demo.stop_signals_noted
-
-        def stopped_then_noted(stops):
-            os.kill(os.getpid(), signum)  # its handler runs here, in the main thread, at once
-            return real_noted(stops)
-
-        monkeypatch.setattr(demo, "stop_signals_noted", stopped_then_noted)
-        return
-    real_closed, closes = demo.closed_with_stops_deferred, []
-
-    def stopped_then_closed(close, **kwargs):  # the sink's close first, the take's second
-        closes.append(1)
-        if len(closes) == 2:
-            os.kill(os.getpid(), signum)
-        return real_closed(close, **kwargs)
-
-    monkeypatch.setattr(demo, "closed_with_stops_deferred", stopped_then_closed)
+        stop_around(monkeypatch, demo, "stop_signals_noted", signum)
+    else:  # the sink's close first, the take's second
+        stop_around(monkeypatch, demo, "closed_with_stops_deferred", signum, on_call=2)
 
 
 @pytest.mark.parametrize("take_fails", [False, True])
