@@ -123,6 +123,22 @@ def _parse_only(monkeypatch) -> None:
     monkeypatch.setattr(argparse.ArgumentParser, "parse_args", stop_after_parsing)
 
 
+def usage_error(monkeypatch, capsys, script: str, *args: str) -> str:
+    """``benchmarks/<script>.py args`` refused as a usage error (exit 2) before it runs: its stderr. A script
+    whose arguments parse fails the test where :func:`_parse_only` is on; one that needs torch is skipped."""
+    path = BENCH / f"{script}.py"
+    monkeypatch.setattr(sys, "argv", [str(path), *args])
+    with pytest.raises(SystemExit) as stopped:
+        try:
+            runpy.run_path(str(path), run_name="__main__")
+        except ModuleNotFoundError as e:  # torch: the training extra
+            pytest.skip(f"{script} needs {e.name}")
+        except _Parsed:
+            pytest.fail(f"{script} {' '.join(args)} was accepted")
+    assert stopped.value.code == 2
+    return capsys.readouterr().err
+
+
 @pytest.mark.parametrize("script, option, value", CASES,
                          ids=[f"{s}{o}={'a-folder-holding-no-model' if v == NO_MODEL else v}" for s, o, v in CASES])
 def test_a_count_no_run_can_use_is_a_usage_error(script, option, value, monkeypatch, capsys):
@@ -260,20 +276,12 @@ def test_a_run_that_reads_no_model_is_not_refused_for_the_default_model_folder(s
 def test_a_run_that_reads_a_model_still_refuses_a_default_model_folder_holding_none(script, tmp_path, monkeypatch,
                                                                                   capsys):
     monkeypatch.chdir(tmp_path)  # no models/ here
-    monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py")])
-    with pytest.raises(SystemExit) as stopped:
-        runpy.run_path(str(BENCH / f"{script}.py"), run_name="__main__")
-    assert stopped.value.code == 2
-    assert "argument --model-dir: models" in capsys.readouterr().err
+    assert "argument --model-dir: models" in usage_error(monkeypatch, capsys, script)
 
 
 @pytest.mark.parametrize("folder", ["no-such-model-folder", NO_MODEL])
 def test_the_prior_measure_refuses_a_model_folder_it_reads_before_it_measures(folder, monkeypatch, capsys):
     """measure_prior_out_of_range reads --model-dir only without --prior (a folder given beside --prior is not
     read: tests/ghnerf_runtime/test_skeleton_prior.py), so it checks it once parsed, before any scene."""
-    script = BENCH / "measure_prior_out_of_range.py"
-    monkeypatch.setattr(sys, "argv", [str(script), "--model-dir", folder])
-    with pytest.raises(SystemExit) as stopped:
-        runpy.run_path(str(script), run_name="__main__")
-    assert stopped.value.code == 2
-    assert f"argument --model-dir: {folder}" in capsys.readouterr().err
+    err = usage_error(monkeypatch, capsys, "measure_prior_out_of_range", "--model-dir", folder)
+    assert f"argument --model-dir: {folder}" in err

@@ -5,12 +5,10 @@ score a torch checkpoint on the dataset refuse a ``--model`` they cannot read al
 from __future__ import annotations
 
 import argparse
-import runpy
-import sys
 
 import pytest
 
-from tests.benchmarks.test_count_arguments import BENCH
+from tests.benchmarks.test_count_arguments import usage_error
 from training.cli.dataset_split import check_dataset_split
 
 NO_DATA = "no-such-dataset"
@@ -29,11 +27,7 @@ CASES = {
 
 @pytest.mark.parametrize("script", sorted(CASES))
 def test_a_folder_that_is_no_dataset_is_a_usage_error(script, monkeypatch, capsys):
-    monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py"), *CASES[script]])
-    with pytest.raises(SystemExit) as stopped:
-        runpy.run_path(str(BENCH / f"{script}.py"), run_name="__main__")
-    assert stopped.value.code == 2
-    err = capsys.readouterr().err
+    err = usage_error(monkeypatch, capsys, script, *CASES[script])
     assert f"argument --data: {NO_DATA}/dataset.json: no dataset manifest here" in err, err
 
 
@@ -44,11 +38,7 @@ def test_a_folder_that_is_no_dataset_is_a_usage_error(script, monkeypatch, capsy
     ("time_train_step", ("--variants", "ghnerf", "--set", 'split="val"'), "--data"),  # the split --set leaves
 ])
 def test_a_split_the_script_reads_is_checked(script, args, option, train_only, monkeypatch, capsys):
-    monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py"), "--data", str(train_only), *args])
-    with pytest.raises(SystemExit) as stopped:
-        runpy.run_path(str(BENCH / f"{script}.py"), run_name="__main__")
-    assert stopped.value.code == 2
-    err = capsys.readouterr().err
+    err = usage_error(monkeypatch, capsys, script, "--data", str(train_only), *args)
     assert f"argument {option}: " in err and ("has no split 'val'" in err or NO_DATA in err), err
 
 
@@ -63,10 +53,5 @@ def test_a_dataset_with_the_split_gets_through(train_only):
 ])
 def test_a_checkpoint_that_cannot_be_read_is_a_usage_error(script, args, train_only, monkeypatch, capsys):
     """``--model`` naming no checkpoint was load_model's ConfigError traceback."""
-    argv = [str(BENCH / f"{script}.py"), "--data", str(train_only), "--split", "train", *args]
-    monkeypatch.setattr(sys, "argv", argv)
-    with pytest.raises(SystemExit) as stopped:
-        runpy.run_path(str(BENCH / f"{script}.py"), run_name="__main__")
-    assert stopped.value.code == 2
-    err = capsys.readouterr().err
+    err = usage_error(monkeypatch, capsys, script, "--data", str(train_only), "--split", "train", *args)
     assert "argument --model: no-such.pt: unreadable checkpoint (FileNotFoundError" in err, err

@@ -12,7 +12,7 @@ import sys
 import pytest
 
 from ghnerf_runtime.cli.numbers import finite_number, number_list, number_or, optional_number_list
-from tests.benchmarks.test_count_arguments import BENCH, REQUIRED, _parse_only, _Parsed
+from tests.benchmarks.test_count_arguments import BENCH, REQUIRED, _parse_only, _Parsed, usage_error
 
 #: (script, option, value, the words said): lists say "comma-separated numbers"
 CASES = [("tune_proxy_matte", "--margins", "x", "must be comma-separated numbers"),
@@ -37,16 +37,7 @@ CASES = [("tune_proxy_matte", "--margins", "x", "must be comma-separated numbers
 @pytest.mark.parametrize("script, option, value, words", CASES, ids=[f"{s}{o}={v}" for s, o, v, _ in CASES])
 def test_a_number_option_refuses_what_is_no_number_in_words(script, option, value, words, monkeypatch, capsys):
     _parse_only(monkeypatch)
-    monkeypatch.setattr(sys, "argv", [str(BENCH / f"{script}.py"), *REQUIRED.get(script, ()), f"{option}={value}"])
-    with pytest.raises(SystemExit) as stopped:
-        try:
-            runpy.run_path(str(BENCH / f"{script}.py"), run_name="__main__")
-        except ModuleNotFoundError as e:  # torch: the training extra
-            pytest.skip(f"{script} needs {e.name}")
-        except _Parsed:
-            pytest.fail(f"{script} {option} {value} was accepted")
-    assert stopped.value.code == 2
-    err = capsys.readouterr().err
+    err = usage_error(monkeypatch, capsys, script, *REQUIRED.get(script, ()), f"{option}={value}")
     assert f"argument {option}: {words}, got {value!r}" in err, err
 
 
