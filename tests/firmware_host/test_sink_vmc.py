@@ -1,6 +1,7 @@
 """vmc:// on 127.0.0.1, decoded by the small OSC parser below (not the library that encodes it)."""
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import logging
 import math
@@ -68,14 +69,27 @@ def _osc_packet(b: bytes) -> list[Msg]:
     return out
 
 
+@contextlib.contextmanager
+def _vmc_sink(query: str = ""):
+    """A vmc:// sink (``query`` added to its URL) sending to a loopback receiver with room for every datagram;
+    both closed on the way out."""
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        rx.bind(("127.0.0.1", 0))
+        rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        sink = open_sink(f"vmc://127.0.0.1:{rx.getsockname()[1]}?queue=64{query}", backoff=FAST_BACKOFF)
+        try:
+            yield sink, rx
+        finally:
+            sink.close()
+    finally:
+        rx.close()
+
+
 def _receive(frames: list, query: str = "") -> tuple[list[list[Msg]], list[bytes]]:
     """Send ``frames`` through a vmc:// sink (``query`` added to its URL); returns the messages of each frame
     (a frame starts at /VMC/Ext/OK) and the datagrams as they came."""
-    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx.bind(("127.0.0.1", 0))
-    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-    sink = open_sink(f"vmc://127.0.0.1:{rx.getsockname()[1]}?queue=64{query}", backoff=FAST_BACKOFF)
-    try:
+    with _vmc_sink(query) as (sink, rx):
         assert sink.wait_connected(5)
         for f in frames:
             sink.send(f)
@@ -83,9 +97,6 @@ def _receive(frames: list, query: str = "") -> tuple[list[list[Msg]], list[bytes
         stats = sink.close()
         # loopback queues a datagram on the receiver within sendto: all of them are here now
         dgrams = queued_datagrams(rx)
-    finally:
-        sink.close()
-        rx.close()
     assert stats.sent == len(frames)
     per_frame: list[list[Msg]] = []
     for d in dgrams:
@@ -173,11 +184,7 @@ class _BufferFullAt:
 def test_a_frame_whose_second_bundle_meets_a_full_buffer_is_sent_in_part_not_dropped() -> None:
     # The receiver applied the first bundle (OK, T, the root, the first bones) and held the other bones: the frame
     # was counted dropped as if nothing of it had arrived. It counts as sent, and as partial.
-    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx.bind(("127.0.0.1", 0))
-    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-    sink = open_sink(f"vmc://127.0.0.1:{rx.getsockname()[1]}?queue=64", backoff=FAST_BACKOFF)
-    try:
+    with _vmc_sink() as (sink, rx):
         assert sink.wait_connected(30)
         # frame 0: its second bundle (send 1) meets the full buffer; frame 1 whole; frame 2: its first (send 4)
         sink._link._sock = _BufferFullAt(sink._link._sock, {1, 4})
@@ -186,9 +193,6 @@ def test_a_frame_whose_second_bundle_meets_a_full_buffer_is_sent_in_part_not_dro
         assert sink.wait_drained(30)
         stats = sink.close()
         dgrams = queued_datagrams(rx)
-    finally:
-        sink.close()
-        rx.close()
     assert (stats.sent, stats.dropped_error) == (2, 1), stats  # frame 0 was dropped too: (1, 2)
     assert stats.partial == 1
     assert stats.accounted == stats.submitted == 3
